@@ -1,0 +1,409 @@
+//! The stepping loop shared by every explicit scheme: segments between discontinuities,
+//! direction, step-size control, step budget, and one interpolant per accepted step.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::OdeError;
+use crate::interpolant::Interpolant;
+use crate::options::{Integrator, Scheme};
+use crate::signal::Side;
+
+/// A first-order system dx/dt = f(t, x) on a flat state vector: the level the integrators
+/// work at. [`System`](crate::System)s are turned into an `Rhs` with or without their
+/// sensitivities by this crate; implement it directly for anything else.
+pub trait Rhs {
+    /// Length of x.
+    fn dim(&self) -> usize;
+    /// dx = f(t, x); at a discontinuity of the inputs, the limit from `side`.
+    fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]);
+    /// A readable name of component i, for error messages.
+    fn describe(&self, i: usize) -> String {
+        format!("component {i}")
+    }
+}
+
+/// Work done by one or more integrations: the counts to compare methods by.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Counts {
+    /// Accepted steps.
+    pub steps: u64,
+    /// Rejected steps.
+    pub rejected_steps: u64,
+    /// Evaluations of the (possibly augmented) right-hand side f(t, x).
+    pub rhs_evaluations: u64,
+    /// Integrations started.
+    pub integrations: u64,
+}
+
+impl std::ops::AddAssign for Counts {
+    fn add_assign(&mut self, o: Self) {
+        self.steps += o.steps;
+        self.rejected_steps += o.rejected_steps;
+        self.rhs_evaluations += o.rhs_evaluations;
+        self.integrations += o.integrations;
+    }
+}
+
+// Dormand & Prince (1980), coefficients as in Hairer, Nørsett & Wanner, Solving ODE I, Table 5.2.
+const C2: f64 = 1.0 / 5.0;
+const C3: f64 = 3.0 / 10.0;
+const C4: f64 = 4.0 / 5.0;
+const C5: f64 = 8.0 / 9.0;
+const A21: f64 = 1.0 / 5.0;
+const A31: f64 = 3.0 / 40.0;
+const A32: f64 = 9.0 / 40.0;
+const A41: f64 = 44.0 / 45.0;
+const A42: f64 = -56.0 / 15.0;
+const A43: f64 = 32.0 / 9.0;
+const A51: f64 = 19372.0 / 6561.0;
+const A52: f64 = -25360.0 / 2187.0;
+const A53: f64 = 64448.0 / 6561.0;
+const A54: f64 = -212.0 / 729.0;
+const A61: f64 = 9017.0 / 3168.0;
+const A62: f64 = -355.0 / 33.0;
+const A63: f64 = 46732.0 / 5247.0;
+const A64: f64 = 49.0 / 176.0;
+const A65: f64 = -5103.0 / 18656.0;
+const A71: f64 = 35.0 / 384.0;
+const A73: f64 = 500.0 / 1113.0;
+const A74: f64 = 125.0 / 192.0;
+const A75: f64 = -2187.0 / 6784.0;
+const A76: f64 = 11.0 / 84.0;
+// Error estimate: difference of the 5th- and 4th-order solutions.
+const E1: f64 = 71.0 / 57600.0;
+const E3: f64 = -71.0 / 16695.0;
+const E4: f64 = 71.0 / 1920.0;
+const E5: f64 = -17253.0 / 339200.0;
+const E6: f64 = 22.0 / 525.0;
+const E7: f64 = -1.0 / 40.0;
+// Dense output of order 4 (Hairer's DOPRI5 code, CONTD5).
+const D1: f64 = -12715105075.0 / 11282082432.0;
+const D3: f64 = 87487479700.0 / 32700410799.0;
+const D4: f64 = -10690763975.0 / 1880347072.0;
+const D5: f64 = 701980252875.0 / 199316789632.0;
+const D6: f64 = -1453857185.0 / 822651844.0;
+const D7: f64 = 69997945.0 / 29380423.0;
+
+// Step-size controller (Hairer's DOPRI5 defaults): PI control with β = 0.04.
+const SAFETY: f64 = 0.9;
+const BETA: f64 = 0.04;
+const EXPONENT: f64 = 0.2 - BETA * 0.75;
+const MIN_FACTOR: f64 = 0.2;
+const MAX_FACTOR: f64 = 10.0;
+
+/// Preallocated stage vectors: nothing is allocated inside the step loop.
+struct Work {
+    k: [Vec<f64>; 7],
+    tmp: Vec<f64>,
+    x: Vec<f64>,
+    x_new: Vec<f64>,
+    interpolant: Interpolant,
+}
+
+impl Work {
+    fn new(n: usize) -> Self {
+        Self {
+            k: std::array::from_fn(|_| vec![0.0; n]),
+            tmp: vec![0.0; n],
+            x: vec![0.0; n],
+            x_new: vec![0.0; n],
+            interpolant: Interpolant::new(n),
+        }
+    }
+}
+
+/// Which one-sided limit a stage at time s in the segment between a and b takes: the one
+/// from inside the segment, since discontinuities lie only on segment ends.
+fn side_in(a: f64, b: f64, s: f64) -> Side {
+    let (lo, hi) = (a.min(b), a.max(b));
+    if s - lo <= hi - s { Side::After } else { Side::Before }
+}
+
+struct Stepper<'r, R: Rhs> {
+    rhs: &'r mut R,
+    cfg: Integrator,
+    counts: Counts,
+    /// Start and end of the current segment, in the direction of integration.
+    seg: (f64, f64),
+}
+
+impl<R: Rhs> Stepper<'_, R> {
+    fn f(&mut self, t: f64, x: &[f64], dx: &mut [f64]) {
+        self.counts.rhs_evaluations += 1;
+        let side = side_in(self.seg.0, self.seg.1, t);
+        self.rhs.eval(t, side, x, dx);
+    }
+
+    /// One DOPRI5 step from (t, w.x) with k[0] = f(t, x). Leaves the solution in w.x_new,
+    /// f(t + h, x_new) in k[6], and returns the error norm.
+    fn dopri5(&mut self, w: &mut Work, t: f64, h: f64) -> f64 {
+        let n = w.x.len();
+        let [k1, k2, k3, k4, k5, k6, k7] = &mut w.k;
+        let (x, tmp, xn) = (&w.x, &mut w.tmp, &mut w.x_new);
+        for i in 0..n {
+            tmp[i] = x[i] + h * A21 * k1[i];
+        }
+        self.f(t + C2 * h, tmp, k2);
+        for i in 0..n {
+            tmp[i] = x[i] + h * (A31 * k1[i] + A32 * k2[i]);
+        }
+        self.f(t + C3 * h, tmp, k3);
+        for i in 0..n {
+            tmp[i] = x[i] + h * (A41 * k1[i] + A42 * k2[i] + A43 * k3[i]);
+        }
+        self.f(t + C4 * h, tmp, k4);
+        for i in 0..n {
+            tmp[i] = x[i] + h * (A51 * k1[i] + A52 * k2[i] + A53 * k3[i] + A54 * k4[i]);
+        }
+        self.f(t + C5 * h, tmp, k5);
+        for i in 0..n {
+            tmp[i] =
+                x[i] + h * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
+        }
+        self.f(t + h, tmp, k6);
+        for i in 0..n {
+            xn[i] =
+                x[i] + h * (A71 * k1[i] + A73 * k3[i] + A74 * k4[i] + A75 * k5[i] + A76 * k6[i]);
+        }
+        self.f(t + h, xn, k7);
+        let (rtol, atol) = (self.cfg.rtol, self.cfg.atol);
+        let mut sum = 0.0;
+        for i in 0..n {
+            let e =
+                h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
+            let sk = atol + rtol * x[i].abs().max(xn[i].abs());
+            sum += (e / sk) * (e / sk);
+        }
+        (sum / n as f64).sqrt()
+    }
+
+    /// One classical RK4 step; f(t + h, x_new) in k[6] for the Hermite dense output.
+    fn rk4(&mut self, w: &mut Work, t: f64, h: f64) {
+        let n = w.x.len();
+        let [k1, k2, k3, k4, _, _, k7] = &mut w.k;
+        let (x, tmp, xn) = (&w.x, &mut w.tmp, &mut w.x_new);
+        for i in 0..n {
+            tmp[i] = x[i] + 0.5 * h * k1[i];
+        }
+        self.f(t + 0.5 * h, tmp, k2);
+        for i in 0..n {
+            tmp[i] = x[i] + 0.5 * h * k2[i];
+        }
+        self.f(t + 0.5 * h, tmp, k3);
+        for i in 0..n {
+            tmp[i] = x[i] + h * k3[i];
+        }
+        self.f(t + h, tmp, k4);
+        for i in 0..n {
+            xn[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        }
+        self.f(t + h, xn, k7);
+    }
+
+    /// Fills the interpolant of the step just taken from (t, x) to (t + h, x_new).
+    fn dense(&self, w: &mut Work, t: f64, h: f64) {
+        let [r1, r2, r3, r4, r5] = w.interpolant.coefficients_mut();
+        let (x, xn, k) = (&w.x, &w.x_new, &w.k);
+        for i in 0..x.len() {
+            r1[i] = x[i];
+            r2[i] = xn[i] - x[i];
+            r3[i] = h * k[0][i] - r2[i];
+            r4[i] = r2[i] - h * k[6][i] - r3[i];
+            r5[i] = match self.cfg.scheme {
+                Scheme::Dopri5 => {
+                    h * (D1 * k[0][i]
+                        + D3 * k[2][i]
+                        + D4 * k[3][i]
+                        + D5 * k[4][i]
+                        + D6 * k[5][i]
+                        + D7 * k[6][i])
+                }
+                Scheme::Rk4 => 0.0,
+            };
+        }
+        w.interpolant.set_span(t, h);
+    }
+
+    /// Hairer's starting step size for a given direction.
+    fn initial_step(&mut self, w: &mut Work, t: f64, dir: f64) -> f64 {
+        let n = w.x.len() as f64;
+        let (rtol, atol) = (self.cfg.rtol, self.cfg.atol);
+        let (mut dnf, mut dny) = (0.0, 0.0);
+        for (x, f) in w.x.iter().zip(&w.k[0]) {
+            let sk = atol + rtol * x.abs();
+            dnf += (f / sk) * (f / sk);
+            dny += (x / sk) * (x / sk);
+        }
+        let (dnf, dny) = ((dnf / n).sqrt(), (dny / n).sqrt());
+        let mut h = if dnf <= 1e-5 || dny <= 1e-5 { 1e-6 } else { 0.01 * dny / dnf };
+        h = h.min(self.cfg.max_step);
+        for i in 0..w.x.len() {
+            w.tmp[i] = w.x[i] + dir * h * w.k[0][i];
+        }
+        self.f(t + dir * h, &w.tmp, &mut w.k[1]);
+        let mut der2 = 0.0;
+        for i in 0..w.x.len() {
+            let sk = atol + rtol * w.x[i].abs();
+            der2 += ((w.k[1][i] - w.k[0][i]) / sk).powi(2);
+        }
+        let der2 = (der2 / n).sqrt() / h;
+        let der12 = der2.abs().max(dnf);
+        let h1 = if der12 <= 1e-15 { (h * 1e-3).max(1e-6) } else { (0.01 / der12).powf(0.2) };
+        (100.0 * h).min(h1).min(self.cfg.max_step)
+    }
+}
+
+/// Integrates dx/dt = f(t, x) from (t0, x0) to t_end (either direction), stopping exactly on
+/// every time in `stops` strictly between them, and calls `on_step` with the interpolant of
+/// each accepted step, in the order they are taken. Returns the work done and x(t_end).
+pub fn integrate<R: Rhs>(
+    cfg: &Integrator,
+    rhs: &mut R,
+    (t0, x0): (f64, &[f64]),
+    t_end: f64,
+    stops: &[f64],
+    mut on_step: impl FnMut(&Interpolant),
+) -> Result<(Counts, Vec<f64>), OdeError> {
+    let n = rhs.dim();
+    if x0.len() != n {
+        return Err(OdeError::Dimension { what: "initial state", actual: x0.len(), expected: n });
+    }
+    cfg.validate().map_err(|what| OdeError::InvalidInput { what, value: f64::NAN })?;
+    for (what, v) in [("t0", t0), ("t_end", t_end)] {
+        if !v.is_finite() {
+            return Err(OdeError::InvalidInput { what: what.into(), value: v });
+        }
+    }
+    if let Some(i) = x0.iter().position(|v| !v.is_finite()) {
+        return Err(OdeError::NonFinite { t: t0, what: format!("initial {}", rhs.describe(i)) });
+    }
+    let mut work = Work::new(n);
+    work.x.copy_from_slice(x0);
+    let mut st = Stepper {
+        rhs,
+        cfg: *cfg,
+        counts: Counts { integrations: 1, ..Counts::default() },
+        seg: (t0, t_end),
+    };
+    if t_end - t0 == 0.0 {
+        return Ok((st.counts, x0.to_vec()));
+    }
+    let dir = (t_end - t0).signum();
+    // Segment ends in the direction of integration; stops too close to a segment end to
+    // take a step in between are merged with it.
+    let resolution = |t: f64| 64.0 * f64::EPSILON * t.abs().max(1.0);
+    let mut ends: Vec<f64> = stops
+        .iter()
+        .copied()
+        .filter(|&s| (s - t0) * dir > resolution(t0) && (t_end - s) * dir > resolution(t_end))
+        .collect();
+    if dir < 0.0 {
+        ends.reverse();
+    }
+    ends.push(t_end);
+
+    let mut t = t0;
+    let mut h = cfg.initial_step.unwrap_or(0.0).abs();
+    let mut fac_old: f64 = 1e-4;
+    for &seg_end in &ends {
+        st.seg = (t, seg_end);
+        st.f(t, &work.x, &mut work.k[0]);
+
+        if let Some(fixed) = cfg.fixed_step {
+            let length = seg_end - t;
+            let count = ((length.abs() / fixed) - 1e-9).ceil().max(1.0) as usize;
+            let hs = length / count as f64;
+            for i in 0..count {
+                if (st.counts.steps + st.counts.rejected_steps) as usize >= cfg.max_steps {
+                    return Err(OdeError::TooManySteps { t, t_end, steps: cfg.max_steps });
+                }
+                let t_next = if i + 1 == count { seg_end } else { t + hs };
+                match cfg.scheme {
+                    Scheme::Dopri5 => {
+                        st.dopri5(&mut work, t, t_next - t);
+                    }
+                    Scheme::Rk4 => st.rk4(&mut work, t, t_next - t),
+                }
+                accept(&mut st, &mut work, t, t_next, &mut on_step)?;
+                t = t_next;
+            }
+            continue;
+        }
+
+        if h == 0.0 {
+            h = st.initial_step(&mut work, t, dir);
+        }
+        let mut last_rejected = false;
+        // The component that was NaN or infinite in the last rejected trial step, if any:
+        // when the step size then underflows, that is the reason to report.
+        let mut non_finite: Option<usize> = None;
+        let mut reached = false;
+        while !reached {
+            if (st.counts.steps + st.counts.rejected_steps) as usize >= cfg.max_steps {
+                return Err(OdeError::TooManySteps { t, t_end, steps: cfg.max_steps });
+            }
+            let remaining = seg_end - t;
+            let mut hs = h.min(cfg.max_step);
+            let lands = hs * 1.01 >= remaining.abs();
+            if lands {
+                hs = remaining.abs();
+            }
+            if hs <= resolution(t) {
+                return Err(match non_finite {
+                    Some(i) => OdeError::NonFinite { t, what: st.rhs.describe(i) },
+                    None => OdeError::StepSizeTooSmall { t, h: hs * dir },
+                });
+            }
+            let t_next = if lands { seg_end } else { t + dir * hs };
+            let err = st.dopri5(&mut work, t, t_next - t);
+            if !err.is_finite() {
+                // The trial step left the region where f is defined: retry much shorter.
+                st.counts.rejected_steps += 1;
+                h = hs * MIN_FACTOR;
+                last_rejected = true;
+                non_finite = work.x_new.iter().chain(&work.k[6]).position(|v| !v.is_finite());
+                non_finite = non_finite.map(|i| i % n).or(Some(0));
+                continue;
+            }
+            non_finite = None;
+            let fac11 = err.powf(EXPONENT);
+            if err <= 1.0 {
+                accept(&mut st, &mut work, t, t_next, &mut on_step)?;
+                t = t_next;
+                reached = lands;
+                let fac =
+                    (fac11 / fac_old.powf(BETA) / SAFETY).clamp(1.0 / MAX_FACTOR, 1.0 / MIN_FACTOR);
+                fac_old = err.max(1e-4);
+                h = hs / fac;
+                if last_rejected {
+                    h = h.min(hs);
+                }
+                last_rejected = false;
+            } else {
+                st.counts.rejected_steps += 1;
+                h = hs / (fac11 / SAFETY).min(1.0 / MIN_FACTOR);
+                last_rejected = true;
+            }
+        }
+    }
+    Ok((st.counts, work.x))
+}
+
+/// Accepts the step from t to t_next held in `work`: interpolant, callback, advance.
+fn accept<R: Rhs>(
+    st: &mut Stepper<'_, R>,
+    work: &mut Work,
+    t: f64,
+    t_next: f64,
+    on_step: &mut impl FnMut(&Interpolant),
+) -> Result<(), OdeError> {
+    if let Some(i) = work.x_new.iter().position(|v| !v.is_finite()) {
+        return Err(OdeError::NonFinite { t, what: st.rhs.describe(i) });
+    }
+    st.counts.steps += 1;
+    st.dense(work, t, t_next - t);
+    on_step(&work.interpolant);
+    std::mem::swap(&mut work.x, &mut work.x_new);
+    work.k.swap(0, 6);
+    Ok(())
+}

@@ -1,0 +1,118 @@
+//! Errors of the ODE crate. Each variant carries the data needed to act on it.
+
+use thiserror::Error;
+
+/// Why an integration stopped before reaching its end.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum OdeError {
+    /// The step size fell below what the floating-point resolution of t allows: the solution
+    /// is singular near t, or the problem is too stiff for the method.
+    #[error("step size underflow at t = {t}: step {h:e} is below the resolution of t")]
+    StepSizeTooSmall {
+        /// Where the integration stopped.
+        t: f64,
+        /// The step size that was rejected.
+        h: f64,
+    },
+    /// A state or sensitivity became NaN or infinite.
+    #[error("{what} became non-finite at t = {t}")]
+    NonFinite {
+        /// Where the integration stopped (the start of the step that produced the value).
+        t: f64,
+        /// Which quantity: "state y", "sensitivity ∂y/∂g", or "component 7" at the raw level.
+        what: String,
+    },
+    /// The step budget was used up.
+    #[error("too many steps: {steps} steps taken by t = {t} without reaching {t_end}")]
+    TooManySteps {
+        /// Where the integration stopped.
+        t: f64,
+        /// The end it was heading for.
+        t_end: f64,
+        /// Steps taken (the budget).
+        steps: usize,
+    },
+    /// Requested output times must be non-decreasing.
+    #[error("output times out of order: t[{index}] = {time} comes after {previous}")]
+    TimesOutOfOrder {
+        /// Position of the offending time.
+        index: usize,
+        /// The time before it.
+        previous: f64,
+        /// The offending time.
+        time: f64,
+    },
+    /// A time, initial value or parameter is NaN or infinite before integrating.
+    #[error("invalid input: {what} is {value}")]
+    InvalidInput {
+        /// What was invalid.
+        what: String,
+        /// Its value.
+        value: f64,
+    },
+    /// The initial state has the wrong length.
+    #[error("dimension mismatch: {what} has length {actual}, expected {expected}")]
+    Dimension {
+        /// Which vector.
+        what: &'static str,
+        /// Its length.
+        actual: usize,
+        /// The length the system requires.
+        expected: usize,
+    },
+}
+
+/// Invalid names in a [`Signature`](crate::Signature).
+#[derive(Clone, Debug, Error, PartialEq, Eq)]
+pub enum SignatureError {
+    /// A system needs at least one state.
+    #[error("a system needs at least one state")]
+    NoStates,
+    /// Empty names are not allowed.
+    #[error("empty name")]
+    EmptyName,
+    /// Names are unique across states, parameters, inputs and outputs.
+    #[error("name `{name}` is used twice")]
+    Duplicate {
+        /// The repeated name.
+        name: String,
+    },
+    /// `t` is the time variable.
+    #[error("name `{name}` is reserved for time")]
+    Reserved {
+        /// The reserved name.
+        name: String,
+    },
+}
+
+/// Invalid samples of a [`Signal`](crate::Signal).
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum SignalError {
+    /// Times and values differ in length.
+    #[error("{times} sample times but {values} values")]
+    LengthMismatch {
+        /// Number of times.
+        times: usize,
+        /// Number of values.
+        values: usize,
+    },
+    /// A signal needs at least one sample.
+    #[error("a signal needs at least one sample")]
+    Empty,
+    /// A time or value is NaN or infinite.
+    #[error("sample {index} is not a finite number")]
+    NonFinite {
+        /// Index of the sample.
+        index: usize,
+    },
+    /// Sample times must strictly increase.
+    #[error("sample times must increase: t[{index}] = {time} after {previous}")]
+    NotIncreasing {
+        /// Index of the offending sample.
+        index: usize,
+        /// The time before it.
+        previous: f64,
+        /// The offending time.
+        time: f64,
+    },
+}

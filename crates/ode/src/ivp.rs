@@ -1,0 +1,491 @@
+//! Initial-value problems of a [`System`]: the solution and its forward sensitivities
+//! (Goodman 1966, eq. 6–7) at given times, on both sides of the initial time.
+
+use nalgebra::{DMatrix, DMatrixView};
+use num_dual::Dual64;
+
+use crate::driver::{Counts, Rhs, integrate};
+use crate::error::OdeError;
+use crate::interpolant::{DenseSolution, Interpolant};
+use crate::options::Integrator;
+use crate::signal::Side;
+use crate::system::{Observable, System};
+
+/// What one sensitivity column is a derivative with respect to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Wrt {
+    /// The initial value y_i(t0) of state i: S(t0) = e_i, dS/dt = J_y S.
+    InitialValue(usize),
+    /// Parameter α_k: S(t0) = 0, dS/dt = J_y S + ∂g/∂α_k (Goodman's eq. 4 treats it as a
+    /// state with zero derivative; the forcing term is the same thing written out).
+    Parameter(usize),
+}
+
+/// An initial-value problem: a system, the initial time t0, the state y(t0) and the
+/// parameters. The solution may be asked for at times before and after t0.
+#[derive(Clone, Copy, Debug)]
+pub struct Ivp<'a, S> {
+    /// The model.
+    pub system: &'a S,
+    /// Time of the initial values.
+    pub t0: f64,
+    /// y(t0).
+    pub y0: &'a [f64],
+    /// Parameter values α.
+    pub p: &'a [f64],
+}
+
+/// The state at a list of times.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trajectory {
+    times: Vec<f64>,
+    n: usize,
+    values: Vec<f64>,
+    counts: Counts,
+}
+
+impl Trajectory {
+    /// The times asked for.
+    pub fn times(&self) -> &[f64] {
+        &self.times
+    }
+    /// y(t_m).
+    pub fn state(&self, m: usize) -> &[f64] {
+        &self.values[m * self.n..(m + 1) * self.n]
+    }
+    /// The work done.
+    pub fn counts(&self) -> Counts {
+        self.counts
+    }
+}
+
+/// The state y(t_m) and the sensitivity matrix S(t_m) = ∂y/∂z (n × k) at a list of times.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensitivityTrajectory {
+    times: Vec<f64>,
+    n: usize,
+    k: usize,
+    /// Per time: y (n) followed by S column by column (n·k).
+    data: Vec<f64>,
+    counts: Counts,
+}
+
+impl SensitivityTrajectory {
+    /// The times asked for.
+    pub fn times(&self) -> &[f64] {
+        &self.times
+    }
+    /// Number of sensitivity columns k.
+    pub fn n_columns(&self) -> usize {
+        self.k
+    }
+    fn block(&self, m: usize) -> &[f64] {
+        let w = self.n * (1 + self.k);
+        &self.data[m * w..(m + 1) * w]
+    }
+    /// y(t_m).
+    pub fn state(&self, m: usize) -> &[f64] {
+        &self.block(m)[..self.n]
+    }
+    /// S(t_m), n × k, column j = ∂y/∂z_j.
+    pub fn sensitivity(&self, m: usize) -> DMatrixView<'_, f64> {
+        DMatrixView::from_slice(&self.block(m)[self.n..], self.n, self.k)
+    }
+    /// S(t_m) as a flat column-major slice.
+    pub fn sensitivity_slice(&self, m: usize) -> &[f64] {
+        &self.block(m)[self.n..]
+    }
+    /// The work done.
+    pub fn counts(&self) -> Counts {
+        self.counts
+    }
+}
+
+/// The model alone as a flat right-hand side.
+pub struct ModelRhs<'a, S> {
+    sys: &'a S,
+    p: &'a [f64],
+    u: Vec<f64>,
+}
+
+impl<'a, S: System> ModelRhs<'a, S> {
+    /// The right-hand side of `sys` at parameters `p`.
+    pub fn new(sys: &'a S, p: &'a [f64]) -> Self {
+        Self { sys, p, u: vec![0.0; sys.signature().n_inputs()] }
+    }
+}
+
+impl<S: System> Rhs for ModelRhs<'_, S> {
+    fn dim(&self) -> usize {
+        self.sys.signature().n_states()
+    }
+    fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {
+        self.sys.input_values(t, side, &mut self.u);
+        self.sys.rhs(t, x, self.p, &self.u, dx);
+    }
+    fn describe(&self, i: usize) -> String {
+        format!("state {}", self.sys.signature().states()[i])
+    }
+}
+
+/// The model together with its variational equations dS/dt = J_y S + J_α (for parameter
+/// columns), on x = [y; S column by column]. Each column's right-hand side is one evaluation
+/// of the model with dual numbers seeded by that column, so no Jacobian is formed; systems
+/// with hand-written Jacobians use them instead.
+pub struct SensitivityRhs<'a, S> {
+    sys: &'a S,
+    p: &'a [f64],
+    wrt: &'a [Wrt],
+    u: Vec<f64>,
+    yd: Vec<Dual64>,
+    pd: Vec<Dual64>,
+    dyd: Vec<Dual64>,
+    jy: DMatrix<f64>,
+    jp: DMatrix<f64>,
+}
+
+impl<'a, S: System> SensitivityRhs<'a, S> {
+    /// The augmented right-hand side of `sys` at parameters `p`, columns `wrt`.
+    pub fn new(sys: &'a S, p: &'a [f64], wrt: &'a [Wrt]) -> Self {
+        let sig = sys.signature();
+        let (n, np) = (sig.n_states(), sig.n_parameters());
+        // Jacobian storage only for systems that supply them by hand.
+        let (jn, jnp) = if sys.analytic_jacobians() { (n, np) } else { (0, 0) };
+        Self {
+            sys,
+            p,
+            wrt,
+            u: vec![0.0; sig.n_inputs()],
+            yd: vec![Dual64::from_re(0.0); n],
+            pd: p.iter().map(|&v| Dual64::from_re(v)).collect(),
+            dyd: vec![Dual64::from_re(0.0); n],
+            jy: DMatrix::zeros(jn, jn),
+            jp: DMatrix::zeros(jn, jnp),
+        }
+    }
+
+    /// The initial augmented state [y0; S(t0)] for these columns.
+    pub fn initial_state(&self, y0: &[f64]) -> Vec<f64> {
+        let n = y0.len();
+        let mut x = vec![0.0; n * (1 + self.wrt.len())];
+        x[..n].copy_from_slice(y0);
+        for (j, w) in self.wrt.iter().enumerate() {
+            if let Wrt::InitialValue(i) = *w {
+                x[n + j * n + i] = 1.0;
+            }
+        }
+        x
+    }
+}
+
+impl<S: System> Rhs for SensitivityRhs<'_, S> {
+    fn dim(&self) -> usize {
+        self.sys.signature().n_states() * (1 + self.wrt.len())
+    }
+
+    fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {
+        let n = self.yd.len();
+        self.sys.input_values(t, side, &mut self.u);
+        let (y, s) = x.split_at(n);
+        let (dy, ds) = dx.split_at_mut(n);
+        if self.wrt.is_empty() {
+            self.sys.rhs(t, y, self.p, &self.u, dy);
+            return;
+        }
+        if self.sys.analytic_jacobians() {
+            self.sys.rhs(t, y, self.p, &self.u, dy);
+            self.sys.jacobians(t, y, self.p, &self.u, &mut self.jy, &mut self.jp);
+            for (j, w) in self.wrt.iter().enumerate() {
+                let col = &s[j * n..(j + 1) * n];
+                for i in 0..n {
+                    let mut v = (0..n).map(|l| self.jy[(i, l)] * col[l]).sum::<f64>();
+                    if let Wrt::Parameter(k) = *w {
+                        v += self.jp[(i, k)];
+                    }
+                    ds[j * n + i] = v;
+                }
+            }
+            return;
+        }
+        for (j, w) in self.wrt.iter().enumerate() {
+            let col = &s[j * n..(j + 1) * n];
+            for i in 0..n {
+                self.yd[i] = Dual64::new(y[i], col[i]);
+            }
+            if let Wrt::Parameter(k) = *w {
+                self.pd[k].eps = 1.0;
+            }
+            self.sys.rhs(t, &self.yd, &self.pd, &self.u, &mut self.dyd);
+            if let Wrt::Parameter(k) = *w {
+                self.pd[k].eps = 0.0;
+            }
+            for i in 0..n {
+                ds[j * n + i] = self.dyd[i].eps;
+            }
+            if j == 0 {
+                for (d, v) in dy.iter_mut().zip(&self.dyd) {
+                    *d = v.re;
+                }
+            }
+        }
+    }
+
+    fn describe(&self, i: usize) -> String {
+        let sig = self.sys.signature();
+        let n = sig.n_states();
+        if i < n {
+            return format!("state {}", sig.states()[i]);
+        }
+        let (j, row) = ((i - n) / n, (i - n) % n);
+        format!("sensitivity ∂{}/∂{}", sig.states()[row], wrt_name(sig, self.wrt[j]))
+    }
+}
+
+/// The name of a sensitivity column: a parameter's name, or `y(t0)` for an initial value.
+pub fn wrt_name(sig: &crate::Signature, wrt: Wrt) -> String {
+    match wrt {
+        Wrt::InitialValue(i) => format!("{}(t0)", sig.states()[i]),
+        Wrt::Parameter(k) => sig.parameters()[k].clone(),
+    }
+}
+
+impl<'a, S: System> Ivp<'a, S> {
+    /// The problem y' = g(t, y, α, u(t)), y(t0) = y0.
+    pub fn new(system: &'a S, t0: f64, y0: &'a [f64], p: &'a [f64]) -> Self {
+        Self { system, t0, y0, p }
+    }
+
+    fn check(&self) -> Result<(), OdeError> {
+        let sig = self.system.signature();
+        if self.y0.len() != sig.n_states() {
+            return Err(OdeError::Dimension {
+                what: "initial state",
+                actual: self.y0.len(),
+                expected: sig.n_states(),
+            });
+        }
+        if self.p.len() != sig.n_parameters() {
+            return Err(OdeError::Dimension {
+                what: "parameter vector",
+                actual: self.p.len(),
+                expected: sig.n_parameters(),
+            });
+        }
+        if let Some(k) = self.p.iter().position(|v| !v.is_finite()) {
+            return Err(OdeError::InvalidInput {
+                what: format!("parameter {}", sig.parameters()[k]),
+                value: self.p[k],
+            });
+        }
+        Ok(())
+    }
+
+    /// The state at `times` (non-decreasing; any side of t0).
+    pub fn solve(&self, integrator: &Integrator, times: &[f64]) -> Result<Trajectory, OdeError> {
+        self.check()?;
+        let n = self.y0.len();
+        let mut rhs = ModelRhs::new(self.system, self.p);
+        let mut values = vec![0.0; times.len() * n];
+        let counts =
+            sample(integrator, &mut rhs, self.t0, self.y0, times, self.stops(), &mut values)?;
+        Ok(Trajectory { times: times.to_vec(), n, values, counts })
+    }
+
+    /// The state and the sensitivities ∂y/∂z for the columns `wrt` at `times`.
+    pub fn solve_sensitivities(
+        &self,
+        integrator: &Integrator,
+        wrt: &[Wrt],
+        times: &[f64],
+    ) -> Result<SensitivityTrajectory, OdeError> {
+        self.check()?;
+        check_wrt(self.system, wrt)?;
+        let n = self.y0.len();
+        let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
+        let x0 = rhs.initial_state(self.y0);
+        let mut data = vec![0.0; times.len() * x0.len()];
+        let counts = sample(integrator, &mut rhs, self.t0, &x0, times, self.stops(), &mut data)?;
+        Ok(SensitivityTrajectory { times: times.to_vec(), n, k: wrt.len(), data, counts })
+    }
+
+    /// Integrates the state and the sensitivities `wrt` from t0 to `t_hi` and from t0 back to
+    /// `t_lo`, handing every accepted step's interpolant of [y; S] to `on_step` (forward steps
+    /// first).
+    pub fn integrate_steps(
+        &self,
+        integrator: &Integrator,
+        wrt: &[Wrt],
+        (t_lo, t_hi): (f64, f64),
+        mut on_step: impl FnMut(&Interpolant),
+    ) -> Result<Counts, OdeError> {
+        self.check()?;
+        check_wrt(self.system, wrt)?;
+        let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
+        let x0 = rhs.initial_state(self.y0);
+        let stops = self.stops();
+        let mut counts = Counts::default();
+        if t_hi > self.t0 {
+            counts += integrate(integrator, &mut rhs, (self.t0, &x0), t_hi, stops, &mut on_step)?.0;
+        }
+        if t_lo < self.t0 {
+            counts += integrate(integrator, &mut rhs, (self.t0, &x0), t_lo, stops, &mut on_step)?.0;
+        }
+        Ok(counts)
+    }
+
+    /// The whole solution (with the sensitivities `wrt`, possibly none) on [t_lo, t_hi] as a
+    /// function of time.
+    pub fn dense(
+        &self,
+        integrator: &Integrator,
+        wrt: &[Wrt],
+        span: (f64, f64),
+    ) -> Result<(DenseSolution, Counts), OdeError> {
+        let mut solution = DenseSolution::new();
+        let counts = self.integrate_steps(integrator, wrt, span, |s| solution.push(s))?;
+        solution.finish();
+        Ok((solution, counts))
+    }
+
+    fn stops(&self) -> &'a [f64] {
+        self.system.discontinuities()
+    }
+}
+
+fn check_wrt<S: System>(sys: &S, wrt: &[Wrt]) -> Result<(), OdeError> {
+    let sig = sys.signature();
+    for w in wrt {
+        let (ok, what) = match *w {
+            Wrt::InitialValue(i) => (i < sig.n_states(), "initial-value column"),
+            Wrt::Parameter(k) => (k < sig.n_parameters(), "parameter column"),
+        };
+        if !ok {
+            return Err(OdeError::InvalidInput { what: format!("{what} {w:?}"), value: f64::NAN });
+        }
+    }
+    Ok(())
+}
+
+/// Checks that times are finite and non-decreasing.
+pub fn check_times(times: &[f64]) -> Result<(), OdeError> {
+    if let Some(i) = times.iter().position(|t| !t.is_finite()) {
+        return Err(OdeError::InvalidInput { what: format!("output time {i}"), value: times[i] });
+    }
+    if let Some(i) = times.windows(2).position(|w| w[1] < w[0]) {
+        return Err(OdeError::TimesOutOfOrder {
+            index: i + 1,
+            previous: times[i],
+            time: times[i + 1],
+        });
+    }
+    Ok(())
+}
+
+/// Integrates from (t0, x0) forward to the last time after t0 and backward to the first time
+/// before it, writing x(t_m) into row m of `out` (rows of length `x0.len()`).
+pub(crate) fn sample<R: Rhs>(
+    integrator: &Integrator,
+    rhs: &mut R,
+    t0: f64,
+    x0: &[f64],
+    times: &[f64],
+    stops: &[f64],
+    out: &mut [f64],
+) -> Result<Counts, OdeError> {
+    check_times(times)?;
+    let w = x0.len();
+    let mut counts = Counts::default();
+    let before = times.partition_point(|&t| t < t0);
+    let at = times.partition_point(|&t| t <= t0);
+    for m in before..at {
+        out[m * w..(m + 1) * w].copy_from_slice(x0);
+    }
+    if at < times.len() {
+        let mut next = at;
+        let t_last = times[times.len() - 1];
+        counts += integrate(integrator, rhs, (t0, x0), t_last, stops, |s| {
+            while next < times.len() && times[next] <= s.t_end() {
+                s.eval(times[next], &mut out[next * w..(next + 1) * w]);
+                next += 1;
+            }
+        })?
+        .0;
+    }
+    if before > 0 {
+        let mut next = before;
+        counts += integrate(integrator, rhs, (t0, x0), times[0], stops, |s| {
+            while next > 0 && times[next - 1] >= s.t_end() {
+                next -= 1;
+                s.eval(times[next], &mut out[next * w..(next + 1) * w]);
+            }
+        })?
+        .0;
+    }
+    Ok(counts)
+}
+
+/// Values and gradients of observables: h_o(t, y, α, u) and ∂h_o/∂z = ∂h_o/∂y S + ∂h_o/∂α
+/// (parameter columns), exact by dual numbers for outputs that are not states.
+pub struct ObservableGradient<'a, S> {
+    sys: &'a S,
+    p: &'a [f64],
+    wrt: &'a [Wrt],
+    u: Vec<f64>,
+    yf: Vec<f64>,
+    hf: Vec<f64>,
+    yd: Vec<Dual64>,
+    pd: Vec<Dual64>,
+    hd: Vec<Dual64>,
+}
+
+impl<'a, S: System> ObservableGradient<'a, S> {
+    /// For `sys` at parameters `p`, sensitivity columns `wrt`.
+    pub fn new(sys: &'a S, p: &'a [f64], wrt: &'a [Wrt]) -> Self {
+        let sig = sys.signature();
+        let (n, no) = (sig.n_states(), sig.outputs().len());
+        Self {
+            sys,
+            p,
+            wrt,
+            u: vec![0.0; sig.n_inputs()],
+            yf: vec![0.0; n],
+            hf: vec![0.0; no],
+            yd: vec![Dual64::from_re(0.0); n],
+            pd: p.iter().map(|&v| Dual64::from_re(v)).collect(),
+            hd: vec![Dual64::from_re(0.0); no],
+        }
+    }
+
+    /// The value of `obs` at (t, y) and its gradient row ∂h/∂z in `grad` (length k), given
+    /// S(t) column-major in `s`.
+    pub fn eval(&mut self, t: f64, y: &[f64], s: &[f64], obs: Observable, grad: &mut [f64]) -> f64 {
+        let n = y.len();
+        match obs {
+            Observable::State(i) => {
+                for (j, g) in grad.iter_mut().enumerate() {
+                    *g = s[j * n + i];
+                }
+                y[i]
+            }
+            Observable::Output(o) => {
+                self.sys.input_values(t, Side::After, &mut self.u);
+                self.yf.copy_from_slice(y);
+                self.sys.outputs(t, &self.yf, self.p, &self.u, &mut self.hf);
+                for (j, w) in self.wrt.iter().enumerate() {
+                    for i in 0..n {
+                        self.yd[i] = Dual64::new(y[i], s[j * n + i]);
+                    }
+                    if let Wrt::Parameter(k) = *w {
+                        self.pd[k].eps = 1.0;
+                    }
+                    self.sys.outputs(t, &self.yd, &self.pd, &self.u, &mut self.hd);
+                    if let Wrt::Parameter(k) = *w {
+                        self.pd[k].eps = 0.0;
+                    }
+                    grad[j] = self.hd[o].eps;
+                }
+                self.hf[o]
+            }
+        }
+    }
+}

@@ -1,0 +1,99 @@
+//! Integrator choice and tolerances.
+
+use serde::{Deserialize, Serialize};
+
+/// The integration scheme.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Scheme {
+    /// Dormand–Prince 5(4) (Hairer's DOPRI5): adaptive, error-controlled, dense output of
+    /// order 4. With a fixed step it runs without error control (for order studies).
+    #[default]
+    Dopri5,
+    /// Classical fourth-order Runge–Kutta with a fixed step; cubic Hermite dense output.
+    Rk4,
+}
+
+/// How to integrate: scheme, tolerances and limits. Plain data with documented defaults.
+///
+/// Error control (DOPRI5): a step is accepted when
+/// sqrt(mean_i (e_i / (atol + rtol·max(|x_i|, |x̂_i|)))²) ≤ 1 over every integrated component,
+/// the sensitivities included.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Integrator {
+    /// The scheme (default DOPRI5).
+    pub scheme: Scheme,
+    /// Relative tolerance (default 1e-8).
+    pub rtol: f64,
+    /// Absolute tolerance (default 1e-10).
+    pub atol: f64,
+    /// A fixed step size: required for RK4; for DOPRI5 it switches error control off.
+    pub fixed_step: Option<f64>,
+    /// Largest step size allowed (default unlimited).
+    pub max_step: f64,
+    /// First trial step size (default: Hairer's estimate).
+    pub initial_step: Option<f64>,
+    /// Step budget for one integration, accepted and rejected steps together (default 100 000).
+    pub max_steps: usize,
+}
+
+impl Default for Integrator {
+    fn default() -> Self {
+        Self {
+            scheme: Scheme::Dopri5,
+            rtol: 1e-8,
+            atol: 1e-10,
+            fixed_step: None,
+            max_step: f64::INFINITY,
+            initial_step: None,
+            max_steps: 100_000,
+        }
+    }
+}
+
+impl Integrator {
+    /// DOPRI5 with the given tolerances.
+    pub fn dopri5(rtol: f64, atol: f64) -> Self {
+        Self { rtol, atol, ..Self::default() }
+    }
+
+    /// RK4 with a fixed step h.
+    pub fn rk4(h: f64) -> Self {
+        Self { scheme: Scheme::Rk4, fixed_step: Some(h), ..Self::default() }
+    }
+
+    /// The same integrator with another step budget.
+    pub fn with_max_steps(self, max_steps: usize) -> Self {
+        Self { max_steps, ..self }
+    }
+
+    /// The same integrator with a fixed step (no error control).
+    pub fn with_fixed_step(self, h: f64) -> Self {
+        Self { fixed_step: Some(h), ..self }
+    }
+
+    /// Checks the settings; returns a description of the first problem found.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.rtol > 0.0 && self.rtol.is_finite()) {
+            return Err(format!("rtol must be positive, got {}", self.rtol));
+        }
+        if !(self.atol >= 0.0 && self.atol.is_finite()) {
+            return Err(format!("atol must be non-negative, got {}", self.atol));
+        }
+        if let Some(h) = self.fixed_step
+            && !(h > 0.0 && h.is_finite())
+        {
+            return Err(format!("the fixed step must be positive, got {h}"));
+        }
+        if self.scheme == Scheme::Rk4 && self.fixed_step.is_none() {
+            return Err("RK4 needs a fixed step".into());
+        }
+        if self.max_step.is_nan() || self.max_step <= 0.0 {
+            return Err(format!("max_step must be positive, got {}", self.max_step));
+        }
+        if self.max_steps == 0 {
+            return Err("max_steps must be at least 1".into());
+        }
+        Ok(())
+    }
+}

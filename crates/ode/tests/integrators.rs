@@ -1,0 +1,239 @@
+//! Integrators against closed forms: accuracy, dense output, direction, order of
+//! convergence, discontinuities, and the errors that replace panics.
+
+mod common;
+
+use common::{Decay, FallingBody, Oscillator};
+use sysid_ode::testing::{assert_close, assert_close_abs};
+use sysid_ode::{
+    Inputs, Integrator, Ivp, OdeError, Scalar, Side, Signal, Signature, System, integrate,
+};
+
+/// Tight tolerances for closed-form checks; the claim is 1e-9 relative.
+fn tight() -> Integrator {
+    Integrator::dopri5(1e-12, 1e-14)
+}
+
+#[test]
+fn exponential_decay_matches_closed_form() {
+    let sys = Decay::new();
+    let times: Vec<f64> = (0..=20).map(|i| 0.5 * i as f64).collect();
+    let sol = Ivp::new(&sys, 0.0, &[3.0], &[0.7]).solve(&tight(), &times).unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        assert_close(sol.state(m)[0], Decay::exact(3.0, 0.7, t).0, 1e-9);
+    }
+}
+
+#[test]
+fn harmonic_oscillator_matches_closed_form() {
+    let sys = Oscillator::new(false);
+    let times: Vec<f64> = (1..=40).map(|i| 0.25 * i as f64).collect();
+    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.5], &[2.0]).solve(&tight(), &times).unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        let (x, v, _, _) = Oscillator::exact(1.0, 0.5, 2.0, t);
+        // Relative to the amplitude: x and v pass through zero.
+        assert_close_abs(sol.state(m)[0], x, 1e-9 * 1.03);
+        assert_close_abs(sol.state(m)[1], v, 1e-9 * 2.07);
+    }
+}
+
+#[test]
+fn falling_body_is_exact() {
+    // A quadratic: DOPRI5 integrates it without truncation error.
+    let sys = FallingBody::new();
+    let times = [0.0, 1.0, 2.0, 3.0, 10.0];
+    let sol = Ivp::new(&sys, 0.0, &[1.0, -2.0], &[32.0]).solve(&tight(), &times).unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        assert_close_abs(sol.state(m)[0], 1.0 - 2.0 * t + 16.0 * t * t, 1e-12 * 1600.0);
+        assert_close_abs(sol.state(m)[1], -2.0 + 32.0 * t, 1e-12 * 320.0);
+    }
+}
+
+#[test]
+fn dense_output_between_steps_matches_closed_form() {
+    // 2000 output times against far fewer steps: the values come from the interpolant.
+    let sys = Oscillator::new(false);
+    let times: Vec<f64> = (0..2000).map(|i| 0.005 * i as f64 + 0.0013).collect();
+    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0])
+        .solve(&Integrator::dopri5(1e-10, 1e-12), &times)
+        .unwrap();
+    assert!(sol.counts().steps < 400, "{} steps", sol.counts().steps);
+    let mut worst: f64 = 0.0;
+    for (m, &t) in times.iter().enumerate() {
+        let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, t);
+        worst = worst.max((sol.state(m)[0] - x).abs()).max((sol.state(m)[1] - v).abs());
+    }
+    // The order-4 interpolant keeps the error at the level of the tolerance.
+    assert!(worst < 1e-9, "worst dense-output error {worst:e}");
+}
+
+#[test]
+fn backward_and_two_sided_integration() {
+    let sys = Decay::new();
+    // Initial value given at t0 = 2, data on both sides.
+    let times = [-1.0, 0.0, 1.5, 2.0, 2.0, 3.0, 6.0];
+    let sol = Ivp::new(&sys, 2.0, &[1.5], &[0.4]).solve(&tight(), &times).unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        assert_close(sol.state(m)[0], Decay::exact(1.5, 0.4, t - 2.0).0, 1e-9);
+    }
+    let back = Ivp::new(&sys, 2.0, &[1.5], &[0.4]).solve(&tight(), &[0.0]).unwrap();
+    assert_close(back.state(0)[0], 1.5 * (0.8f64).exp(), 1e-9);
+}
+
+/// Observed order p from errors at steps h and h/2: p = log2(e(h) / e(h/2)).
+fn observed_orders(integrator: impl Fn(f64) -> Integrator, steps: &[f64]) -> Vec<f64> {
+    let sys = Oscillator::new(false);
+    let errors: Vec<f64> = steps
+        .iter()
+        .map(|&h| {
+            let sol =
+                Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0]).solve(&integrator(h), &[10.0]).unwrap();
+            let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, 10.0);
+            ((sol.state(0)[0] - x).powi(2) + (sol.state(0)[1] - v).powi(2)).sqrt()
+        })
+        .collect();
+    errors.windows(2).map(|e| (e[0] / e[1]).log2()).collect()
+}
+
+#[test]
+fn rk4_converges_with_order_four() {
+    let orders = observed_orders(Integrator::rk4, &[0.2, 0.1, 0.05, 0.025]);
+    for p in orders {
+        assert!((p - 4.0).abs() < 0.1, "observed order {p}");
+    }
+}
+
+#[test]
+fn dopri5_converges_with_order_five() {
+    let orders =
+        observed_orders(|h| Integrator::default().with_fixed_step(h), &[0.4, 0.2, 0.1, 0.05]);
+    for p in orders {
+        assert!((p - 5.0).abs() < 0.15, "observed order {p}");
+    }
+}
+
+/// x' = u(t) with a piecewise-constant input (a doublet).
+struct Integrator1 {
+    sig: Signature,
+    inputs: Inputs,
+}
+impl System for Integrator1 {
+    fn signature(&self) -> &Signature {
+        &self.sig
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, _y: &[T], _p: &[T], u: &[f64], dy: &mut [T]) {
+        dy[0] = T::from(u[0]);
+    }
+    fn input_values(&self, t: f64, side: Side, u: &mut [f64]) {
+        self.inputs.eval(t, side, u);
+    }
+    fn discontinuities(&self) -> &[f64] {
+        self.inputs.jumps()
+    }
+}
+
+#[test]
+fn steps_stop_on_input_discontinuities() {
+    let doublet = Signal::steps(0.0, &[(1.0, 1.0), (2.0, -1.0), (3.0, 0.0)]).unwrap();
+    let sys = Integrator1 {
+        sig: Signature::new(&["x"], &[]).with_inputs(&["u"]),
+        inputs: Inputs::new(vec![doublet]),
+    };
+    let exact = |t: f64| (t - 1.0).clamp(0.0, 1.0) - (t - 2.0).clamp(0.0, 1.0);
+    let times = [0.5, 1.0, 1.7, 2.0, 2.5, 3.0, 5.0];
+    for integrator in [Integrator::dopri5(1e-8, 1e-10), Integrator::rk4(0.3)] {
+        let sol = Ivp::new(&sys, 0.0, &[0.0], &[]).solve(&integrator, &times).unwrap();
+        for (m, &t) in times.iter().enumerate() {
+            // Exact up to rounding: every step lies inside a piece where u is constant.
+            assert_close_abs(sol.state(m)[0], exact(t), 1e-14);
+        }
+        // Backward across the same jumps from t0 = 5.
+        let back = Ivp::new(&sys, 5.0, &[0.0], &[]).solve(&integrator, &[0.0, 1.5, 2.5]).unwrap();
+        assert_close_abs(back.state(0)[0], 0.0, 1e-14);
+        // x(t) = x(5) − ∫_t^5 u = exact(t) − exact(5).
+        assert_close_abs(back.state(1)[0], exact(1.5), 1e-14);
+        assert_close_abs(back.state(2)[0], exact(2.5), 1e-14);
+    }
+}
+
+/// y' = y²: y = 1/(1 − t) blows up at t = 1.
+struct BlowUp(Signature);
+impl System for BlowUp {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], _p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = y[0] * y[0];
+    }
+}
+
+/// y' = −√y: y = (1 − t/2)² reaches 0 at t = 2, beyond which √y is NaN.
+struct SqrtDecay(Signature);
+impl System for SqrtDecay {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], _p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = -y[0].sqrt();
+    }
+}
+
+#[test]
+fn finite_time_blow_up_is_a_step_size_error_at_the_singularity() {
+    let sys = BlowUp(Signature::new(&["y"], &[]));
+    let err = Ivp::new(&sys, 0.0, &[1.0], &[]).solve(&tight(), &[2.0]).unwrap_err();
+    match err {
+        OdeError::StepSizeTooSmall { t, .. } => assert!((t - 1.0).abs() < 1e-6, "t = {t}"),
+        other => panic!("unexpected {other:?}"),
+    }
+}
+
+#[test]
+fn non_finite_values_are_reported_with_the_time() {
+    let sys = SqrtDecay(Signature::new(&["y"], &[]));
+    let err = Ivp::new(&sys, 0.0, &[1.0], &[]).solve(&tight(), &[3.0]).unwrap_err();
+    match &err {
+        OdeError::NonFinite { t, what } => {
+            assert!((t - 2.0).abs() < 1e-3, "t = {t}");
+            assert_eq!(what, "state y");
+        }
+        other => panic!("unexpected {other:?}"),
+    }
+    assert!(err.to_string().starts_with("state y became non-finite at t = 2.0"), "{err}");
+    // With a fixed step the NaN is accepted into the state and reported the same way.
+    let err = Ivp::new(&sys, 0.0, &[1.0], &[]).solve(&Integrator::rk4(0.3), &[3.0]).unwrap_err();
+    assert!(matches!(err, OdeError::NonFinite { .. }), "{err:?}");
+}
+
+#[test]
+fn step_budget_and_bad_requests_are_errors() {
+    let sys = Oscillator::new(false);
+    let ivp = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0]);
+    let err = ivp.solve(&tight().with_max_steps(10), &[100.0]).unwrap_err();
+    assert!(matches!(err, OdeError::TooManySteps { steps: 10, .. }), "{err:?}");
+    let err = ivp.solve(&tight(), &[0.0, 2.0, 1.0]).unwrap_err();
+    assert_eq!(err, OdeError::TimesOutOfOrder { index: 2, previous: 2.0, time: 1.0 });
+    let err = ivp.solve(&tight(), &[f64::NAN]).unwrap_err();
+    assert!(matches!(err, OdeError::InvalidInput { .. }), "{err:?}");
+    let err = Ivp::new(&sys, 0.0, &[1.0], &[1.0]).solve(&tight(), &[1.0]).unwrap_err();
+    assert!(matches!(err, OdeError::Dimension { expected: 2, actual: 1, .. }), "{err:?}");
+    let err =
+        Ivp::new(&sys, 0.0, &[1.0, 0.0], &[f64::INFINITY]).solve(&tight(), &[1.0]).unwrap_err();
+    assert_eq!(err.to_string(), "invalid input: parameter w is inf");
+    let err = ivp.solve(&Integrator { rtol: -1.0, ..tight() }, &[1.0]).unwrap_err();
+    assert!(err.to_string().contains("rtol must be positive"), "{err}");
+}
+
+#[test]
+fn raw_integrate_reports_work_and_final_state() {
+    let sys = Decay::new();
+    let mut rhs = sysid_ode::ModelRhs::new(&sys, &[1.0]);
+    let mut steps = 0;
+    let (counts, end) =
+        integrate(&tight(), &mut rhs, (0.0, &[1.0]), 1.0, &[], |_| steps += 1).unwrap();
+    assert_close(end[0], (-1.0f64).exp(), 1e-10);
+    assert_eq!(counts.steps, steps);
+    assert_eq!(counts.integrations, 1);
+    // Six new stages per step (FSAL), the first evaluation, and two for the starting step.
+    assert_eq!(counts.rhs_evaluations, 6 * (counts.steps + counts.rejected_steps) + 2);
+}
