@@ -1,1 +1,24 @@
+//! # sysid
+//!
+//! Identify dynamic systems: the unknown parameters and initial values of an ODE model that
+//! fit measurements best in the least-squares sense, with their uncertainty, by the classical
+//! methods side by side.
+//!
+//! This facade re-exports the workspace crates, each usable on its own:
+//! * [`ode`] (`sysid-ode`): systems, integrators, forward sensitivities, quadratures;
+//! * [`core`] (`sysid-core`): problems, unknowns, data, estimates, the `Method` trait;
+//! * [`goodman`] (`sysid-goodman`): Goodman's 1966 Newton iteration;
+//! * [`systems`] (`sysid-systems`): the benchmark catalogue.
+#![warn(missing_docs)]
 
+pub use sysid_core as core;
+pub use sysid_goodman as goodman;
+pub use sysid_ode as ode;
+pub use sysid_systems as systems;
+
+/// The names most programs need.
+pub mod prelude {
+    pub use sysid_core::{Data, Estimate, Method, Problem, Termination, Unknown};
+    pub use sysid_goodman::{Goodman, GoodmanOptions};
+    pub use sysid_ode::{Integrator, Scalar, Signature, System};
+}

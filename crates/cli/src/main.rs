@@ -1,0 +1,96 @@
+//! `sysid`: identify dynamic systems and compare the classical methods.
+//!
+//! Exit codes: 0 success, 1 the method did not converge (its report is still printed),
+//! 2 bad input (one line on stderr, nothing on stdout).
+
+mod fit;
+mod methods;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+/// sysid identifies dynamic systems: it finds the unknown parameters and initial values of
+/// an ODE model that fit measurements best in the least-squares sense (ε = Σ w r², no factor
+/// ½), says how sure it is, and compares the classical methods that do it.
+#[derive(Parser, Debug)]
+#[command(name = "sysid", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Identify the unknowns of a catalogue system and print the estimates with standard
+    /// errors, the cost and the iteration history.
+    Fit(fit::FitArgs),
+    /// List the built-in benchmark systems, one line each.
+    Systems,
+}
+
+/// Output format of reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum Format {
+    /// A readable table.
+    #[default]
+    Table,
+    /// The JSON object documented in DESIGN.md.
+    Json,
+}
+
+/// What a command ends with: success, or a method that did not converge.
+pub enum Outcome {
+    /// Exit 0.
+    Success,
+    /// Exit 1.
+    NotConverged,
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+                let _ = e.print();
+                return ExitCode::SUCCESS;
+            }
+            if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand {
+                let _ = e.print();
+                return ExitCode::from(2);
+            }
+            eprintln!("{}", one_line(&e.render().to_string()));
+            return ExitCode::from(2);
+        }
+    };
+    let result = match cli.command {
+        Command::Fit(args) => fit::run(&args),
+        Command::Systems => {
+            for (name, summary) in sysid_systems::summaries() {
+                println!("{name:<26} {summary}");
+            }
+            Ok(Outcome::Success)
+        }
+    };
+    match result {
+        Ok(Outcome::Success) => ExitCode::SUCCESS,
+        Ok(Outcome::NotConverged) => ExitCode::from(1),
+        Err(e) => {
+            eprintln!("error: {}", one_line(&format!("{e:#}")));
+            ExitCode::from(2)
+        }
+    }
+}
+
+/// Folds a multi-line message (clap's usage errors) into one line.
+fn one_line(message: &str) -> String {
+    message
+        .lines()
+        .map(str::trim)
+        .filter(|l| {
+            !l.is_empty() && !l.starts_with("Usage:") && !l.starts_with("For more information")
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}

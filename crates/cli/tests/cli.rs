@@ -1,0 +1,127 @@
+//! The `sysid` binary as a user runs it: output, the JSON contract, exit codes, errors.
+
+use std::process::{Command, Output};
+
+fn sysid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sysid")).args(args).output().expect("the binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).expect("utf-8 output")
+}
+
+#[test]
+fn fit_prints_the_papers_answer() {
+    let out = sysid(&["fit", "--system", "falling-body"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    for line in
+        ["-0.2500000000", "32.50000000", "iterations   1", "converged", "cost ε       1.250000000"]
+    {
+        assert!(stdout.contains(line), "missing `{line}` in\n{stdout}");
+    }
+    assert!(out.stderr.is_empty());
+}
+
+#[test]
+fn json_follows_the_contract() {
+    let out =
+        sysid(&["fit", "--system", "falling-body", "--method", "goodman", "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0));
+    let stdout = text(&out.stdout);
+    let json: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    // The contract keys, in the contract's order, before any extension.
+    let keys = [
+        "system",
+        "method",
+        "converged",
+        "iterations",
+        "cost",
+        "estimates",
+        "std_errors",
+        "history",
+        "elapsed_ms",
+    ];
+    let positions: Vec<usize> =
+        keys.iter().map(|k| stdout.find(&format!("\"{k}\"")).unwrap()).collect();
+    assert!(positions.windows(2).all(|p| p[0] < p[1]), "key order {positions:?}");
+    assert_eq!(json["system"], "falling-body");
+    assert_eq!(json["method"], "goodman");
+    assert_eq!(json["converged"], true);
+    assert_eq!(json["iterations"], 1);
+    let close =
+        |v: &serde_json::Value, e: f64| (v.as_f64().unwrap() - e).abs() <= 1e-10 * e.abs().max(1.0);
+    assert!(close(&json["cost"], 1.25));
+    // Estimates keyed by name in the order of the unknowns (checked in the text: a parsed
+    // map forgets the order).
+    let estimates =
+        &stdout[stdout.find("\"estimates\"").unwrap()..stdout.find("\"std_errors\"").unwrap()];
+    let order: Vec<usize> =
+        ["\"y\"", "\"v\"", "\"g\""].iter().map(|k| estimates.find(k).unwrap()).collect();
+    assert!(order.windows(2).all(|p| p[0] < p[1]), "{estimates}");
+    assert!(close(&json["estimates"]["y"], -0.25) && close(&json["estimates"]["v"], -0.25));
+    assert!(close(&json["estimates"]["g"], 32.5));
+    assert!(json["std_errors"]["g"].as_f64().unwrap() > 0.0);
+    let history = json["history"].as_array().unwrap();
+    assert_eq!(history.len(), 2);
+    assert_eq!(history[0]["iteration"], 0);
+    assert!(close(&history[0]["cost"], 3.0));
+    assert!(history[0]["step_norm"].is_null());
+    assert!(history[1]["step_norm"].as_f64().unwrap() > 0.0);
+    assert!(json["elapsed_ms"].as_f64().unwrap() >= 0.0);
+}
+
+#[test]
+fn not_converging_exits_1_with_the_report() {
+    let out =
+        sysid(&["fit", "--system", "falling-body", "--max-iterations", "0", "--format", "json"]);
+    assert_eq!(out.status.code(), Some(1));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["converged"], false);
+    assert_eq!(json["iterations"], 0);
+}
+
+#[test]
+fn bad_input_exits_2_with_one_line() {
+    for (args, needle) in [
+        (&["fit", "--system", "nope"][..], "unknown system `nope` (systems: falling-body"),
+        (
+            &["fit", "--system", "falling-body", "--method", "nope"][..],
+            "unknown method `nope` (methods: goodman",
+        ),
+        (&["fit", "--system", "falling-body", "--format", "xml"][..], "invalid value 'xml'"),
+        (&["fit"][..], "--system"),
+        (&["frobnicate"][..], "unrecognized subcommand"),
+        (&["fit", "--system", "falling-body", "--rtol", "-1"][..], "rtol must be positive"),
+    ] {
+        let out = sysid(args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(out.stdout.is_empty(), "{args:?} printed to stdout");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(stderr.contains(needle), "{args:?}: {stderr}");
+        assert!(stderr.starts_with("error: "), "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn systems_lists_the_catalogue() {
+    let out = sysid(&["systems"]);
+    assert_eq!(out.status.code(), Some(0));
+    let stdout = text(&out.stdout);
+    assert!(stdout.lines().any(|l| l.starts_with("falling-body ")));
+    assert!(stdout.lines().any(|l| l.starts_with("falling-body-continuous ")));
+}
+
+#[test]
+fn every_command_has_help() {
+    for args in [&["--help"][..], &["fit", "--help"], &["systems", "--help"], &["help", "fit"]] {
+        let out = sysid(args);
+        assert_eq!(out.status.code(), Some(0), "{args:?}");
+        assert!(text(&out.stdout).contains("Usage: sysid"), "{args:?}");
+    }
+    let help = text(&sysid(&["fit", "--help"]).stdout);
+    for option in ["--system", "--method", "--format", "--seed", "--max-iterations", "--rtol"] {
+        assert!(help.contains(option), "fit --help lacks {option}");
+    }
+}

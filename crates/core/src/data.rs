@@ -1,0 +1,126 @@
+//! Measurements: discrete samples of states or outputs (Goodman 1966, eq. 2, 32) or a
+//! continuous record (eq. 16–17), each measured quantity with its weight w_o = 1/σ_o².
+
+use std::sync::Arc;
+
+/// Measured values of one quantity.
+#[derive(Clone)]
+pub enum Samples {
+    /// Values at times (strictly increasing). In a continuous record they are joined by
+    /// straight lines.
+    Points {
+        /// Sample times.
+        times: Vec<f64>,
+        /// Measured values b_{o,m}.
+        values: Vec<f64>,
+    },
+    /// A record known as a function of time (continuous data only).
+    Function(Arc<dyn Fn(f64) -> f64 + Send + Sync>),
+}
+
+impl std::fmt::Debug for Samples {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Samples::Points { times, .. } => write!(f, "Points({} samples)", times.len()),
+            Samples::Function(_) => write!(f, "Function"),
+        }
+    }
+}
+
+/// The measurements of one quantity: a state or output, its weight and its samples.
+#[derive(Clone, Debug)]
+pub struct Series {
+    /// A state or output name.
+    pub name: String,
+    /// Weight w_o of the series (eq. 32: the reciprocal of the noise variance).
+    pub weight: f64,
+    /// The measured values.
+    pub samples: Samples,
+}
+
+/// Whether the data are samples or a continuous record.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Record {
+    /// Samples at discrete times: ε = Σ_o w_o Σ_m r_{o,m}² (eq. 3, 32).
+    Discrete,
+    /// A continuous record over [t_lo, t_hi]: ε = Σ_o w_o ∫ r_o² dt (eq. 17).
+    Continuous {
+        /// Start of the record.
+        t_lo: f64,
+        /// End of the record.
+        t_hi: f64,
+    },
+}
+
+/// The measurements of a problem.
+#[derive(Clone, Debug)]
+pub struct Data {
+    /// Discrete or continuous.
+    pub record: Record,
+    /// One entry per measured quantity.
+    pub series: Vec<Series>,
+}
+
+impl Data {
+    /// Discrete data; add series with [`series`](Self::series).
+    pub fn discrete() -> Self {
+        Self { record: Record::Discrete, series: Vec::new() }
+    }
+
+    /// A continuous record over [t_lo, t_hi]; add series with [`series`](Self::series) (joined
+    /// by straight lines) or [`function`](Self::function).
+    pub fn continuous(t_lo: f64, t_hi: f64) -> Self {
+        Self { record: Record::Continuous { t_lo, t_hi }, series: Vec::new() }
+    }
+
+    /// Adds samples of `name` with weight 1.
+    pub fn series(self, name: &str, times: &[f64], values: &[f64]) -> Self {
+        self.weighted_series(name, 1.0, times, values)
+    }
+
+    /// Adds samples of `name` with weight w.
+    pub fn weighted_series(
+        mut self,
+        name: &str,
+        weight: f64,
+        times: &[f64],
+        values: &[f64],
+    ) -> Self {
+        self.series.push(Series {
+            name: name.into(),
+            weight,
+            samples: Samples::Points { times: times.to_vec(), values: values.to_vec() },
+        });
+        self
+    }
+
+    /// Adds a record of `name` given as a function of time, with weight w.
+    pub fn function(
+        mut self,
+        name: &str,
+        weight: f64,
+        b: impl Fn(f64) -> f64 + Send + Sync + 'static,
+    ) -> Self {
+        self.series.push(Series {
+            name: name.into(),
+            weight,
+            samples: Samples::Function(Arc::new(b)),
+        });
+        self
+    }
+
+    /// Number of measured values: all samples of discrete data, the samples inside the span of
+    /// a continuous record; `None` when a record is a function.
+    pub fn n_observations(&self) -> Option<usize> {
+        self.series
+            .iter()
+            .map(|s| match (&s.samples, self.record) {
+                (Samples::Points { values, .. }, Record::Discrete) => Some(values.len()),
+                (Samples::Points { times, .. }, Record::Continuous { t_lo, t_hi }) => {
+                    Some(times.iter().filter(|t| (t_lo..=t_hi).contains(*t)).count())
+                }
+                (Samples::Function(_), _) => None,
+            })
+            .sum()
+    }
+}

@@ -1,0 +1,111 @@
+//! Errors for misuse and bad input. A method that does not converge is not an error: see
+//! [`Termination`](crate::Termination).
+
+use thiserror::Error;
+
+/// An identification problem that cannot be set up as given.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum ProblemError {
+    /// A known value or unknown names nothing in the system.
+    #[error(
+        "`{name}` is not a state or parameter of the system (states: {states}; parameters: {parameters})"
+    )]
+    UnknownName {
+        /// The name given.
+        name: String,
+        /// The system's states, comma-separated.
+        states: String,
+        /// The system's parameters, comma-separated.
+        parameters: String,
+    },
+    /// A name was given a value or made unknown more than once.
+    #[error("`{name}` is given twice (as {first} and as {second})")]
+    SpecifiedTwice {
+        /// The name.
+        name: String,
+        /// How it was given first ("known", "unknown").
+        first: &'static str,
+        /// How it was given again.
+        second: &'static str,
+    },
+    /// A state's initial value or a parameter is neither known nor unknown.
+    #[error("{kind} `{name}` is neither known nor unknown: give it a value or make it an unknown")]
+    NotSpecified {
+        /// "state" or "parameter".
+        kind: &'static str,
+        /// Its name.
+        name: String,
+    },
+    /// A number that must be finite (and maybe positive) is not.
+    #[error("invalid value for {what}: {value}")]
+    InvalidValue {
+        /// What it is.
+        what: String,
+        /// The value.
+        value: f64,
+    },
+    /// Bounds or scale of an unknown are inconsistent.
+    #[error("unknown `{name}`: {message}")]
+    InvalidUnknown {
+        /// The unknown.
+        name: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// There is nothing to identify.
+    #[error("no unknowns: name at least one parameter or initial value to identify")]
+    NoUnknowns,
+    /// No data were given.
+    #[error("no measurements: give at least one measured series or record")]
+    NoData,
+    /// A measured series names something that is neither a state nor an output.
+    #[error(
+        "measured series `{name}` is not a state or output of the system (observable: {observable})"
+    )]
+    UnknownSeries {
+        /// The series name.
+        name: String,
+        /// The observable names, comma-separated.
+        observable: String,
+    },
+    /// A series is malformed.
+    #[error("measured series `{name}`: {message}")]
+    InvalidSeries {
+        /// The series.
+        name: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// Fewer data than unknowns: the unknowns cannot all be determined.
+    #[error(
+        "{observations} data points for {unknowns} unknowns: need at least as many data as unknowns"
+    )]
+    TooFewData {
+        /// Number of measured values.
+        observations: usize,
+        /// Number of unknowns.
+        unknowns: usize,
+    },
+    /// The integrator settings are invalid.
+    #[error("integrator: {0}")]
+    Integrator(String),
+}
+
+/// Misuse of a method: a start of the wrong length, data the method cannot handle.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum FitError {
+    /// The starting point has the wrong length or a non-finite entry.
+    #[error("invalid start: {0}")]
+    InvalidStart(String),
+    /// The method does not support this kind of problem.
+    #[error("{method} does not support {what}")]
+    Unsupported {
+        /// The method.
+        method: String,
+        /// What it cannot do.
+        what: String,
+    },
+    /// The method's options are invalid.
+    #[error("invalid options: {0}")]
+    InvalidOptions(String),
+}

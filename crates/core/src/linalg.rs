@@ -1,0 +1,151 @@
+//! The symmetric normal equations A δ = −U (Goodman 1966, eq. 14): solved by Cholesky
+//! (faer) after Jacobi scaling, with the conditioning and, when A is singular, the unknowns
+//! its null space involves.
+//!
+//! Jacobi scaling: Â = D^{-1/2} A D^{-1/2} with D = diag(A) has a unit diagonal and does not
+//! depend on the units of the unknowns, so its condition number measures identifiability
+//! rather than scaling. It is the condition number sysid reports.
+
+use faer::linalg::solvers::Solve;
+use faer::{MatMut, MatRef, Side};
+use nalgebra::{DMatrix, DVector};
+
+/// A normal matrix that cannot be solved: the unknowns with these indices cannot be told
+/// apart by the data (or do not influence it at all).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Singular {
+    /// Indices of the unknowns involved in the (near) null space, in problem order.
+    pub unknowns: Vec<usize>,
+    /// Condition number of the scaled matrix (infinite when exactly singular).
+    pub condition: f64,
+}
+
+/// A factorised, well-conditioned normal matrix.
+pub struct NormalFactor {
+    /// D^{-1/2}.
+    inv_sqrt_diag: Vec<f64>,
+    llt: faer::linalg::solvers::Llt<f64>,
+    condition: f64,
+}
+
+/// Share of a null vector's largest component above which an unknown is named as involved.
+const INVOLVED: f64 = 0.1;
+
+impl NormalFactor {
+    /// Factorises A, or reports it singular when the condition number of the scaled matrix
+    /// exceeds `max_condition`.
+    pub fn new(a: &DMatrix<f64>, max_condition: f64) -> Result<Self, Singular> {
+        let k = a.nrows();
+        let diag: Vec<f64> = (0..k).map(|i| a[(i, i)]).collect();
+        let dead: Vec<usize> =
+            (0..k).filter(|&i| !(diag[i] > 0.0 && diag[i].is_finite())).collect();
+        if !dead.is_empty() || a.iter().any(|v| !v.is_finite()) {
+            return Err(Singular { unknowns: dead, condition: f64::INFINITY });
+        }
+        let inv_sqrt_diag: Vec<f64> = diag.iter().map(|d| 1.0 / d.sqrt()).collect();
+        let scaled =
+            faer::Mat::from_fn(k, k, |i, j| a[(i, j)] * inv_sqrt_diag[i] * inv_sqrt_diag[j]);
+        let eigen = scaled
+            .self_adjoint_eigen(Side::Lower)
+            .map_err(|_| Singular { unknowns: (0..k).collect(), condition: f64::INFINITY })?;
+        let s = eigen.S().column_vector();
+        let (lo, hi) = (s[0], s[k - 1]);
+        let condition = if lo > 0.0 { hi / lo } else { f64::INFINITY };
+        if condition > max_condition {
+            // Every eigenvector whose eigenvalue is below the threshold spans the null space.
+            let u = eigen.U();
+            let mut weight = vec![0.0f64; k];
+            for c in (0..k).take_while(|&c| s[c] * max_condition < hi) {
+                let col = u.col(c);
+                let top = (0..k).map(|i| col[i].abs()).fold(0.0, f64::max);
+                for (i, w) in weight.iter_mut().enumerate() {
+                    if col[i].abs() >= INVOLVED * top {
+                        *w = w.max(col[i].abs() / top);
+                    }
+                }
+            }
+            let unknowns: Vec<usize> = (0..k).filter(|&i| weight[i] > 0.0).collect();
+            return Err(Singular { unknowns, condition });
+        }
+        let llt = scaled
+            .llt(Side::Lower)
+            .map_err(|_| Singular { unknowns: (0..k).collect(), condition: f64::INFINITY })?;
+        Ok(Self { inv_sqrt_diag, llt, condition })
+    }
+
+    /// Condition number of the scaled normal matrix.
+    pub fn condition(&self) -> f64 {
+        self.condition
+    }
+
+    /// Solves A x = b.
+    pub fn solve(&self, b: &DVector<f64>) -> DVector<f64> {
+        let d = &self.inv_sqrt_diag;
+        let mut x = DVector::from_fn(b.len(), |i, _| b[i] * d[i]);
+        let k = x.len();
+        self.llt.solve_in_place(MatMut::from_column_major_slice_mut(x.as_mut_slice(), k, 1));
+        x.iter_mut().zip(d).for_each(|(v, d)| *v *= d);
+        x
+    }
+
+    /// A⁻¹, by solving against the identity.
+    pub fn inverse(&self) -> DMatrix<f64> {
+        let k = self.inv_sqrt_diag.len();
+        let d = &self.inv_sqrt_diag;
+        let mut x = DMatrix::from_fn(k, k, |i, j| if i == j { d[i] } else { 0.0 });
+        self.llt.solve_in_place(MatMut::from_column_major_slice_mut(x.as_mut_slice(), k, k));
+        DMatrix::from_fn(k, k, |i, j| x[(i, j)] * d[i])
+    }
+}
+
+/// A view of a nalgebra matrix as a faer matrix (both column-major and contiguous).
+pub fn as_faer(a: &DMatrix<f64>) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(a.as_slice(), a.nrows(), a.ncols())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sysid_ode::testing::assert_close;
+
+    #[test]
+    fn solves_goodmans_table_three_system() {
+        // Goodman 1966, Section IV: A δc = −U* with U* = (−1, −4, −6).
+        let a = DMatrix::from_row_slice(3, 3, &[4.0, 6.0, 7.0, 6.0, 14.0, 18.0, 7.0, 18.0, 24.5]);
+        let f = NormalFactor::new(&a, 1e12).unwrap();
+        let step = f.solve(&DVector::from_vec(vec![1.0, 4.0, 6.0]));
+        for (s, e) in step.iter().zip([-0.25, -0.25, 0.5]) {
+            assert_close(*s, e, 1e-13);
+        }
+        let inv = f.inverse();
+        let id = &a * &inv;
+        for i in 0..3 {
+            for j in 0..3 {
+                assert!((id[(i, j)] - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn names_the_unknowns_of_the_null_space() {
+        // Unknowns 1 and 2 enter only through their sum; unknown 0 is independent.
+        let j = DMatrix::from_row_slice(3, 3, &[1.0, 2.0, 2.0, 0.5, 1.0, 1.0, 2.0, 0.0, 0.0]);
+        let a = j.transpose() * j;
+        let err = NormalFactor::new(&a, 1e12).err().unwrap();
+        assert_eq!(err.unknowns, vec![1, 2]);
+        assert!(err.condition > 1e12);
+        // An unknown without influence.
+        let a = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 0.0]);
+        assert_eq!(NormalFactor::new(&a, 1e12).err().unwrap().unknowns, vec![1]);
+    }
+
+    #[test]
+    fn condition_is_independent_of_units() {
+        let a = DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 2.0]);
+        let s = DMatrix::from_diagonal(&DVector::from_vec(vec![1e6, 1e-6]));
+        let c1 = NormalFactor::new(&a, 1e12).unwrap().condition();
+        let c2 = NormalFactor::new(&(&s * &a * &s), 1e12).unwrap().condition();
+        assert_close(c1, 3.0, 1e-14);
+        assert_close(c2, 3.0, 1e-12);
+    }
+}

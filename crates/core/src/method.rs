@@ -1,0 +1,48 @@
+//! The interface every identification method implements, so that studies, reports and the
+//! command line treat them alike.
+
+use sysid_ode::System;
+
+use crate::error::FitError;
+use crate::estimate::Estimate;
+use crate::problem::Problem;
+
+/// An identification method: from a problem and a starting point to an [`Estimate`].
+///
+/// `Err` is for misuse (a start of the wrong length, data the method cannot handle); a run
+/// that does not converge returns `Ok` with its [`Termination`](crate::Termination).
+///
+/// The trait is generic over the system so that the right-hand side is compiled into each
+/// method (no dynamic dispatch in the integrator); for a given system type it is
+/// object-safe: `Vec<Box<dyn Method<S>>>` holds any mix of methods.
+pub trait Method<S: System> {
+    /// The method's name as the command line spells it.
+    fn name(&self) -> &str;
+
+    /// Fits from `start` (values of the unknowns, in the problem's order).
+    fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError>;
+
+    /// Fits from the problem's starting guesses.
+    fn fit(&self, problem: &Problem<S>) -> Result<Estimate, FitError> {
+        self.fit_from(problem, &problem.guesses())
+    }
+}
+
+/// Checks a starting point against a problem and returns its coordinates.
+pub fn start_coordinates<S: System>(
+    problem: &Problem<S>,
+    start: &[f64],
+) -> Result<Vec<f64>, FitError> {
+    let k = problem.unknowns().len();
+    if start.len() != k {
+        return Err(FitError::InvalidStart(format!("{} values for {k} unknowns", start.len())));
+    }
+    for (u, &v) in problem.unknowns().list().iter().zip(start) {
+        if !v.is_finite() || (u.log && v <= 0.0) {
+            return Err(FitError::InvalidStart(format!("`{}` = {v}", u.name)));
+        }
+    }
+    let mut z = problem.unknowns().coordinates(start);
+    problem.unknowns().project(&mut z);
+    Ok(z)
+}

@@ -1,0 +1,639 @@
+//! The identification problem: a model, what is known, what is unknown, and the data. It
+//! knows nothing of methods; it evaluates the least-squares quantities every method needs.
+
+use std::time::Instant;
+
+use nalgebra::{DMatrix, DVector};
+use sysid_ode::{
+    Counts, Integrator, Interpolation, Ivp, Observable, ObservableGradient, OdeError, Record,
+    RecordedOutput, Signal, System, Wrt,
+};
+
+use crate::data::{Data, Record as Kind, Samples};
+use crate::error::ProblemError;
+use crate::estimate::{Estimate, Iteration, Termination};
+use crate::linalg::NormalFactor;
+use crate::unknowns::{Unknown, Unknowns};
+
+/// Default relative accuracy of the quadratures of a continuous record.
+pub const QUADRATURE_RTOL: f64 = 1e-10;
+
+/// A system, its known initial values and parameters, the unknowns with their starting
+/// guesses, the measurements, and how to integrate.
+///
+/// Build one with [`Problem::builder`]; every state needs its initial value either known or
+/// unknown, and every parameter likewise.
+#[derive(Clone, Debug)]
+pub struct Problem<S> {
+    system: S,
+    t0: f64,
+    initial: Vec<f64>,
+    parameters: Vec<f64>,
+    unknowns: Unknowns,
+    data: Data,
+    plan: Plan,
+    integrator: Integrator,
+    quadrature_rtol: f64,
+}
+
+/// The measurements resolved against the system.
+#[derive(Clone, Debug)]
+enum Plan {
+    Discrete {
+        /// All sample times, sorted, without repeats.
+        times: Vec<f64>,
+        series: Vec<PlannedSeries>,
+    },
+    Continuous {
+        span: (f64, f64),
+        outputs: Vec<RecordedOutput>,
+    },
+}
+
+#[derive(Clone, Debug)]
+struct PlannedSeries {
+    observable: Observable,
+    sqrt_weight: f64,
+    /// (index into the sorted times, measured value).
+    samples: Vec<(usize, f64)>,
+}
+
+/// Residuals and Jacobian of a discrete problem, each row scaled by √w_o so that
+/// ε = ‖r‖², U = Jᵀr and A = JᵀJ.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WeightedResiduals {
+    /// √w_o (h_o(y(t_m)) − b_{o,m}), series after series, in time order within a series.
+    pub r: DVector<f64>,
+    /// ∂r/∂z.
+    pub jacobian: DMatrix<f64>,
+}
+
+/// The record of a method's run, handed to [`Problem::estimate`].
+#[derive(Clone, Debug)]
+pub struct Run {
+    /// Number of updates of the unknowns.
+    pub iterations: usize,
+    /// Why the method stopped.
+    pub termination: Termination,
+    /// One row per iterate.
+    pub history: Vec<Iteration>,
+    /// When the fit started.
+    pub started: Instant,
+    /// Work of all integrations.
+    pub counts: Counts,
+}
+
+/// Everything one integration with sensitivities tells about the unknowns z.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Linearization {
+    /// Where it was evaluated (coordinates).
+    pub z: Vec<f64>,
+    /// ε.
+    pub cost: f64,
+    /// U (Goodman eq. 12, continuous eq. 22): half the gradient of ε.
+    pub gradient: DVector<f64>,
+    /// A (eq. 15, continuous eq. 24): the Gauss–Newton normal matrix.
+    pub normal: DMatrix<f64>,
+    /// The weighted residuals and their Jacobian (discrete data only).
+    pub residuals: Option<WeightedResiduals>,
+    /// Work done.
+    pub counts: Counts,
+}
+
+impl<S: System> Problem<S> {
+    /// Starts building a problem for `system`.
+    pub fn builder(system: S) -> ProblemBuilder<S> {
+        ProblemBuilder {
+            system,
+            t0: 0.0,
+            values: Vec::new(),
+            unknowns: Vec::new(),
+            data: None,
+            integrator: Integrator::default(),
+            quadrature_rtol: QUADRATURE_RTOL,
+        }
+    }
+
+    /// The model.
+    pub fn system(&self) -> &S {
+        &self.system
+    }
+    /// Time of the initial values.
+    pub fn t0(&self) -> f64 {
+        self.t0
+    }
+    /// The unknowns.
+    pub fn unknowns(&self) -> &Unknowns {
+        &self.unknowns
+    }
+    /// Names of the unknowns.
+    pub fn names(&self) -> Vec<String> {
+        self.unknowns.names()
+    }
+    /// The starting guesses (values).
+    pub fn guesses(&self) -> Vec<f64> {
+        self.unknowns.guesses()
+    }
+    /// The measurements.
+    pub fn data(&self) -> &Data {
+        &self.data
+    }
+    /// Whether the data are a continuous record.
+    pub fn is_continuous(&self) -> bool {
+        matches!(self.plan, Plan::Continuous { .. })
+    }
+    /// The integrator.
+    pub fn integrator(&self) -> &Integrator {
+        &self.integrator
+    }
+    /// Number of measured values (None for a record given as a function).
+    pub fn n_observations(&self) -> Option<usize> {
+        self.data.n_observations()
+    }
+
+    /// The same problem with another integrator.
+    pub fn with_integrator(mut self, integrator: Integrator) -> Result<Self, ProblemError> {
+        integrator.validate().map_err(ProblemError::Integrator)?;
+        self.integrator = integrator;
+        Ok(self)
+    }
+
+    /// The same problem with other measurements (of the same kind of quantities).
+    pub fn with_data(mut self, data: Data) -> Result<Self, ProblemError> {
+        self.plan = plan(&self.system, &data, self.unknowns.len())?;
+        self.data = data;
+        Ok(self)
+    }
+
+    /// y(t0) and α at coordinates z.
+    pub fn point(&self, z: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let (mut y0, mut p) = (self.initial.clone(), self.parameters.clone());
+        for ((u, w), &zi) in self.unknowns.list().iter().zip(self.unknowns.wrt()).zip(z) {
+            match *w {
+                Wrt::InitialValue(i) => y0[i] = u.value(zi),
+                Wrt::Parameter(k) => p[k] = u.value(zi),
+            }
+        }
+        (y0, p)
+    }
+
+    /// Integrates the model and its sensitivities at z and forms ε, U and A.
+    pub fn linearize(&self, z: &[f64]) -> Result<Linearization, OdeError> {
+        let (y0, p) = self.point(z);
+        let ivp = Ivp::new(&self.system, self.t0, &y0, &p);
+        let wrt = self.unknowns.wrt();
+        let k = wrt.len();
+        // d value / d z for each unknown: the chain rule of log-scale unknowns.
+        let scale: Vec<f64> =
+            self.unknowns.list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect();
+        match &self.plan {
+            Plan::Discrete { times, series } => {
+                let sol = ivp.solve_sensitivities(&self.integrator, wrt, times)?;
+                let rows: usize = series.iter().map(|s| s.samples.len()).sum();
+                let mut r = DVector::zeros(rows);
+                let mut jac = DMatrix::zeros(rows, k);
+                let mut og = ObservableGradient::new(&self.system, &p, wrt);
+                let mut grad = vec![0.0; k];
+                let mut row = 0;
+                for s in series {
+                    for &(m, b) in &s.samples {
+                        let t = times[m];
+                        let h = og.eval(
+                            t,
+                            sol.state(m),
+                            sol.sensitivity_slice(m),
+                            s.observable,
+                            &mut grad,
+                        );
+                        r[row] = s.sqrt_weight * (h - b);
+                        for j in 0..k {
+                            jac[(row, j)] = s.sqrt_weight * grad[j] * scale[j];
+                        }
+                        row += 1;
+                    }
+                }
+                check_finite(&r, &jac, times)?;
+                Ok(Linearization {
+                    z: z.to_vec(),
+                    cost: r.norm_squared(),
+                    gradient: jac.tr_mul(&r),
+                    normal: jac.tr_mul(&jac),
+                    residuals: Some(WeightedResiduals { r, jacobian: jac }),
+                    counts: sol.counts(),
+                })
+            }
+            Plan::Continuous { span, outputs } => {
+                let q = ivp.least_squares_integrals(
+                    &self.integrator,
+                    wrt,
+                    outputs,
+                    *span,
+                    self.quadrature_rtol,
+                )?;
+                let gradient = DVector::from_fn(k, |i, _| q.gradient[i] * scale[i]);
+                let normal = DMatrix::from_fn(k, k, |i, j| q.normal[(i, j)] * scale[i] * scale[j]);
+                if !q.cost.is_finite()
+                    || normal.iter().chain(gradient.iter()).any(|v| !v.is_finite())
+                {
+                    return Err(OdeError::NonFinite {
+                        t: span.0,
+                        what: "the least-squares integrals".into(),
+                    });
+                }
+                Ok(Linearization {
+                    z: z.to_vec(),
+                    cost: q.cost,
+                    gradient,
+                    normal,
+                    residuals: None,
+                    counts: q.counts,
+                })
+            }
+        }
+    }
+
+    /// ε at z, without sensitivities.
+    pub fn cost(&self, z: &[f64]) -> Result<(f64, Counts), OdeError> {
+        match &self.plan {
+            Plan::Discrete { .. } => {
+                let (r, counts) = self.residuals(z)?;
+                Ok((r.norm_squared(), counts))
+            }
+            Plan::Continuous { span, outputs } => {
+                let (y0, p) = self.point(z);
+                let q = Ivp::new(&self.system, self.t0, &y0, &p).least_squares_integrals(
+                    &self.integrator,
+                    &[],
+                    outputs,
+                    *span,
+                    self.quadrature_rtol,
+                )?;
+                if !q.cost.is_finite() {
+                    return Err(OdeError::NonFinite { t: span.0, what: "the cost".into() });
+                }
+                Ok((q.cost, q.counts))
+            }
+        }
+    }
+
+    /// The weighted residual vector at z, without sensitivities (discrete data; a continuous
+    /// record has no residual vector and gives an empty one).
+    pub fn residuals(&self, z: &[f64]) -> Result<(DVector<f64>, Counts), OdeError> {
+        let Plan::Discrete { times, series } = &self.plan else {
+            return Ok((DVector::zeros(0), Counts::default()));
+        };
+        let (y0, p) = self.point(z);
+        let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve(&self.integrator, times)?;
+        let mut og = ObservableGradient::new(&self.system, &p, &[]);
+        let rows: usize = series.iter().map(|s| s.samples.len()).sum();
+        let mut r = DVector::zeros(rows);
+        let mut row = 0;
+        for s in series {
+            for &(m, b) in &s.samples {
+                let h = og.eval(times[m], sol.state(m), &[], s.observable, &mut []);
+                r[row] = s.sqrt_weight * (h - b);
+                row += 1;
+            }
+        }
+        if let Some(i) = r.iter().position(|v| !v.is_finite()) {
+            return Err(OdeError::NonFinite { t: times[0], what: format!("residual {i}") });
+        }
+        Ok((r, sol.counts()))
+    }
+
+    /// The report of a finished fit at coordinates z: values, and standard errors and
+    /// covariance from `last`, the linearization at z (None when the model could not be
+    /// integrated there; the cost is then NaN, printed as null).
+    pub fn estimate(
+        &self,
+        method: &str,
+        z: &[f64],
+        last: Option<&Linearization>,
+        run: Run,
+    ) -> Estimate {
+        let covariance = last.and_then(|l| self.covariance(l));
+        let std_errors =
+            covariance.as_ref().map(|c| (0..c.nrows()).map(|i| c[(i, i)].sqrt()).collect());
+        Estimate {
+            method: method.to_string(),
+            names: self.names(),
+            values: self.unknowns.values(z),
+            std_errors,
+            covariance,
+            cost: last.map_or(f64::NAN, |l| l.cost),
+            iterations: run.iterations,
+            termination: run.termination,
+            history: run.history,
+            elapsed: run.started.elapsed(),
+            counts: run.counts,
+        }
+    }
+
+    /// Covariance of the estimates (as values) from the normal matrix at the estimate, scaled
+    /// by the residual variance s² = ε / (N − k):  Cov = s² A⁻¹, transformed to values by the
+    /// delta method. `None` when there are no more data than unknowns (no residual variance),
+    /// for a record given as a function (no count N), or when A is singular.
+    pub fn covariance(&self, lin: &Linearization) -> Option<DMatrix<f64>> {
+        let k = self.unknowns.len();
+        let n = self.n_observations()?;
+        if n <= k {
+            return None;
+        }
+        let s2 = lin.cost / (n - k) as f64;
+        let inverse = NormalFactor::new(&lin.normal, f64::INFINITY).ok()?.inverse();
+        let scale: Vec<f64> =
+            self.unknowns.list().iter().zip(&lin.z).map(|(u, &z)| u.scale(z)).collect();
+        Some(DMatrix::from_fn(k, k, |i, j| s2 * inverse[(i, j)] * scale[i] * scale[j]))
+    }
+}
+
+fn check_finite(r: &DVector<f64>, jac: &DMatrix<f64>, times: &[f64]) -> Result<(), OdeError> {
+    if let Some(i) = r.iter().position(|v| !v.is_finite()) {
+        return Err(OdeError::NonFinite {
+            t: times.first().copied().unwrap_or(0.0),
+            what: format!("residual {i}"),
+        });
+    }
+    if jac.iter().any(|v| !v.is_finite()) {
+        return Err(OdeError::NonFinite {
+            t: times.first().copied().unwrap_or(0.0),
+            what: "the residual Jacobian".into(),
+        });
+    }
+    Ok(())
+}
+
+/// Builder of a [`Problem`].
+pub struct ProblemBuilder<S> {
+    system: S,
+    t0: f64,
+    /// Known initial values and parameters, in the order given.
+    values: Vec<(String, f64)>,
+    unknowns: Vec<Unknown>,
+    data: Option<Data>,
+    integrator: Integrator,
+    quadrature_rtol: f64,
+}
+
+impl<S: System> ProblemBuilder<S> {
+    /// Time of the initial values (default 0). Data may lie on both sides.
+    pub fn t0(mut self, t0: f64) -> Self {
+        self.t0 = t0;
+        self
+    }
+    /// A known initial value (state name) or parameter value.
+    pub fn known(mut self, name: &str, value: f64) -> Self {
+        self.values.push((name.into(), value));
+        self
+    }
+    /// Known values for several names.
+    pub fn knowns(mut self, values: &[(&str, f64)]) -> Self {
+        self.values.extend(values.iter().map(|(n, v)| (n.to_string(), *v)));
+        self
+    }
+    /// An unknown initial value (state name) or parameter, with its starting guess.
+    pub fn unknown(self, name: &str, guess: f64) -> Self {
+        self.unknown_with(Unknown::new(name, guess))
+    }
+    /// An unknown with bounds or a log scale.
+    pub fn unknown_with(mut self, unknown: Unknown) -> Self {
+        self.unknowns.push(unknown);
+        self
+    }
+    /// The measurements.
+    pub fn data(mut self, data: Data) -> Self {
+        self.data = Some(data);
+        self
+    }
+    /// How to integrate (default: DOPRI5, rtol 1e-8, atol 1e-10).
+    pub fn integrator(mut self, integrator: Integrator) -> Self {
+        self.integrator = integrator;
+        self
+    }
+    /// Relative accuracy of the quadratures of a continuous record (default 1e-10).
+    pub fn quadrature_rtol(mut self, rtol: f64) -> Self {
+        self.quadrature_rtol = rtol;
+        self
+    }
+
+    /// Checks everything and builds the problem.
+    pub fn build(self) -> Result<Problem<S>, ProblemError> {
+        let sig = self.system.signature();
+        if !self.t0.is_finite() {
+            return Err(ProblemError::InvalidValue { what: "t0".into(), value: self.t0 });
+        }
+        self.integrator.validate().map_err(ProblemError::Integrator)?;
+        if !(self.quadrature_rtol > 0.0 && self.quadrature_rtol < 1.0) {
+            return Err(ProblemError::InvalidValue {
+                what: "quadrature rtol".into(),
+                value: self.quadrature_rtol,
+            });
+        }
+        let (n, np) = (sig.n_states(), sig.n_parameters());
+        let mut initial = vec![f64::NAN; n];
+        let mut parameters = vec![f64::NAN; np];
+        let mut given: Vec<Option<&'static str>> = vec![None; n + np];
+        let resolve = |name: &str| -> Result<Wrt, ProblemError> {
+            sig.state(name)
+                .map(Wrt::InitialValue)
+                .or_else(|| sig.parameter(name).map(Wrt::Parameter))
+                .ok_or_else(|| ProblemError::UnknownName {
+                    name: name.into(),
+                    states: sig.states().join(", "),
+                    parameters: sig.parameters().join(", "),
+                })
+        };
+        let slot = |w: Wrt| match w {
+            Wrt::InitialValue(i) => i,
+            Wrt::Parameter(k) => n + k,
+        };
+        let mark = |given: &mut Vec<Option<&'static str>>,
+                    name: &str,
+                    w: Wrt,
+                    how: &'static str| {
+            if let Some(first) = given[slot(w)] {
+                return Err(ProblemError::SpecifiedTwice { name: name.into(), first, second: how });
+            }
+            given[slot(w)] = Some(how);
+            Ok(())
+        };
+        for (name, value) in &self.values {
+            let w = resolve(name)?;
+            mark(&mut given, name, w, "known")?;
+            if !value.is_finite() {
+                return Err(ProblemError::InvalidValue {
+                    what: format!("known `{name}`"),
+                    value: *value,
+                });
+            }
+            match w {
+                Wrt::InitialValue(i) => initial[i] = *value,
+                Wrt::Parameter(k) => parameters[k] = *value,
+            }
+        }
+        let mut wrt = Vec::with_capacity(self.unknowns.len());
+        for u in &self.unknowns {
+            let w = resolve(&u.name)?;
+            mark(&mut given, &u.name, w, "unknown")?;
+            u.validate().map_err(|message| ProblemError::InvalidUnknown {
+                name: u.name.clone(),
+                message,
+            })?;
+            match w {
+                Wrt::InitialValue(i) => initial[i] = u.guess,
+                Wrt::Parameter(k) => parameters[k] = u.guess,
+            }
+            wrt.push(w);
+        }
+        for (i, g) in given.iter().enumerate() {
+            if g.is_none() {
+                let (kind, name) = if i < n {
+                    ("state", &sig.states()[i])
+                } else {
+                    ("parameter", &sig.parameters()[i - n])
+                };
+                return Err(ProblemError::NotSpecified { kind, name: name.clone() });
+            }
+        }
+        if self.unknowns.is_empty() {
+            return Err(ProblemError::NoUnknowns);
+        }
+        let data = self.data.ok_or(ProblemError::NoData)?;
+        let plan = plan(&self.system, &data, self.unknowns.len())?;
+        Ok(Problem {
+            t0: self.t0,
+            initial,
+            parameters,
+            unknowns: Unknowns::new(self.unknowns, wrt),
+            data,
+            plan,
+            integrator: self.integrator,
+            quadrature_rtol: self.quadrature_rtol,
+            system: self.system,
+        })
+    }
+}
+
+/// Resolves and checks the measurements.
+fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemError> {
+    let sig = system.signature();
+    if data.series.is_empty() {
+        return Err(ProblemError::NoData);
+    }
+    let mut seen = std::collections::HashSet::new();
+    let mut resolved = Vec::with_capacity(data.series.len());
+    for s in &data.series {
+        let invalid =
+            |message: String| ProblemError::InvalidSeries { name: s.name.clone(), message };
+        let observable = sig.observable(&s.name).ok_or_else(|| ProblemError::UnknownSeries {
+            name: s.name.clone(),
+            observable: sig
+                .states()
+                .iter()
+                .chain(sig.outputs())
+                .cloned()
+                .collect::<Vec<_>>()
+                .join(", "),
+        })?;
+        if !seen.insert(&s.name) {
+            return Err(invalid("given twice".into()));
+        }
+        if !(s.weight > 0.0 && s.weight.is_finite()) {
+            return Err(invalid(format!(
+                "the weight must be positive and finite, got {}",
+                s.weight
+            )));
+        }
+        if let Samples::Points { times, values } = &s.samples {
+            if times.len() != values.len() {
+                return Err(invalid(format!("{} times but {} values", times.len(), values.len())));
+            }
+            if times.is_empty() {
+                return Err(invalid("no samples".into()));
+            }
+            if let Some(i) = times.iter().position(|t| !t.is_finite()) {
+                return Err(invalid(format!("time {i} is {}", times[i])));
+            }
+            if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                return Err(invalid(format!("value at t = {} is {}", times[i], values[i])));
+            }
+            if let Some(i) = times.windows(2).position(|w| w[1] <= w[0]) {
+                return Err(invalid(format!(
+                    "times must increase: {} follows {}",
+                    times[i + 1],
+                    times[i]
+                )));
+            }
+        }
+        resolved.push(observable);
+    }
+    match data.record {
+        Kind::Discrete => {
+            let mut times: Vec<f64> = Vec::new();
+            for s in &data.series {
+                match &s.samples {
+                    Samples::Points { times: t, .. } => times.extend(t),
+                    Samples::Function(_) => {
+                        return Err(ProblemError::InvalidSeries {
+                            name: s.name.clone(),
+                            message: "a record given as a function needs continuous data".into(),
+                        });
+                    }
+                }
+            }
+            times.sort_by(f64::total_cmp);
+            times.dedup();
+            let series = data
+                .series
+                .iter()
+                .zip(resolved)
+                .map(|(s, observable)| {
+                    let Samples::Points { times: t, values } = &s.samples else { unreachable!() };
+                    let samples = t
+                        .iter()
+                        .zip(values)
+                        .map(|(ti, &v)| (times.partition_point(|x| x < ti), v))
+                        .collect();
+                    PlannedSeries { observable, sqrt_weight: s.weight.sqrt(), samples }
+                })
+                .collect();
+            let observations = data.n_observations().unwrap_or(0);
+            if observations < k {
+                return Err(ProblemError::TooFewData { observations, unknowns: k });
+            }
+            Ok(Plan::Discrete { times, series })
+        }
+        Kind::Continuous { t_lo, t_hi } => {
+            if !(t_lo.is_finite() && t_hi.is_finite() && t_lo < t_hi) {
+                return Err(ProblemError::InvalidValue {
+                    what: format!("record span [{t_lo}, {t_hi}]"),
+                    value: t_hi - t_lo,
+                });
+            }
+            let outputs = data
+                .series
+                .iter()
+                .zip(resolved)
+                .map(|(s, observable)| {
+                    let record = match &s.samples {
+                        Samples::Points { times, values } => Record::Samples(
+                            Signal::new(times.clone(), values.clone(), Interpolation::Linear)
+                                .map_err(|e| ProblemError::InvalidSeries {
+                                    name: s.name.clone(),
+                                    message: e.to_string(),
+                                })?,
+                        ),
+                        Samples::Function(f) => Record::Function(f.clone()),
+                    };
+                    Ok(RecordedOutput { observable, weight: s.weight, record })
+                })
+                .collect::<Result<Vec<_>, ProblemError>>()?;
+            if let Some(observations) = data.n_observations()
+                && observations < k
+            {
+                return Err(ProblemError::TooFewData { observations, unknowns: k });
+            }
+            Ok(Plan::Continuous { span: (t_lo, t_hi), outputs })
+        }
+    }
+}

@@ -1,0 +1,190 @@
+//! Numeric CSV tables: a header row, time in the first column, one column per quantity.
+//! Empty cells are missing values. Every error names the file, the line and the column.
+
+use std::fmt;
+use std::path::Path;
+
+/// A CSV table read into columns.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Table {
+    source: String,
+    headers: Vec<String>,
+    time: Vec<f64>,
+    /// Columns after the time column; `None` for an empty cell.
+    columns: Vec<Vec<Option<f64>>>,
+}
+
+/// A table that cannot be read, located as precisely as possible.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TableError {
+    /// The file (or a description of the text).
+    pub source: String,
+    /// 1-based line number, if the error is on a line.
+    pub line: Option<u64>,
+    /// The column, if the error is in one.
+    pub column: Option<String>,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for TableError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.source)?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+        }
+        if let Some(column) = &self.column {
+            write!(f, ": column `{column}`")?;
+        }
+        write!(f, ": {}", self.message)
+    }
+}
+
+impl std::error::Error for TableError {}
+
+impl Table {
+    /// Reads a CSV file.
+    pub fn read(path: &Path) -> Result<Self, TableError> {
+        let source = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| TableError {
+            source: source.clone(),
+            line: None,
+            column: None,
+            message: e.to_string(),
+        })?;
+        Self::parse(&text, &source)
+    }
+
+    /// Parses CSV text; `source` names it in errors.
+    pub fn parse(text: &str, source: &str) -> Result<Self, TableError> {
+        let err = |line: Option<u64>, column: Option<&str>, message: String| TableError {
+            source: source.to_string(),
+            line,
+            column: column.map(str::to_string),
+            message,
+        };
+        let mut reader =
+            csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(text.as_bytes());
+        let headers: Vec<String> = reader
+            .headers()
+            .map_err(|e| err(Some(1), None, e.to_string()))?
+            .iter()
+            .map(str::to_string)
+            .collect();
+        if headers.is_empty() || headers.iter().all(String::is_empty) {
+            return Err(err(Some(1), None, "no header row".into()));
+        }
+        for (i, h) in headers.iter().enumerate() {
+            if h.is_empty() {
+                return Err(err(Some(1), None, format!("column {} has no name", i + 1)));
+            }
+            if headers[..i].contains(h) {
+                return Err(err(Some(1), Some(h), "the name is used twice".into()));
+            }
+        }
+        let mut time = Vec::new();
+        let mut columns = vec![Vec::new(); headers.len() - 1];
+        for record in reader.records() {
+            let record = record.map_err(|e| {
+                let line = e.position().map(|p| p.line());
+                err(line, None, e.to_string().split(": ").last().unwrap_or_default().to_string())
+            })?;
+            let line = record.position().map(|p| p.line());
+            if record.iter().all(str::is_empty) {
+                continue;
+            }
+            for (c, cell) in record.iter().enumerate() {
+                let value = if cell.is_empty() {
+                    None
+                } else {
+                    let v: f64 = cell.parse().map_err(|_| {
+                        err(line, Some(&headers[c]), format!("`{cell}` is not a number"))
+                    })?;
+                    if !v.is_finite() {
+                        return Err(err(
+                            line,
+                            Some(&headers[c]),
+                            format!("`{cell}` is not a finite number"),
+                        ));
+                    }
+                    Some(v)
+                };
+                if c == 0 {
+                    let t = value.ok_or_else(|| {
+                        err(line, Some(&headers[0]), "the time is missing".into())
+                    })?;
+                    if let Some(&previous) = time.last()
+                        && t <= previous
+                    {
+                        let what = if t < previous { "goes back" } else { "is repeated" };
+                        return Err(err(
+                            line,
+                            Some(&headers[0]),
+                            format!("time {t} {what} (previous {previous})"),
+                        ));
+                    }
+                    time.push(t);
+                } else {
+                    columns[c - 1].push(value);
+                }
+            }
+        }
+        if time.is_empty() {
+            return Err(err(None, None, "no data rows".into()));
+        }
+        Ok(Self { source: source.to_string(), headers, time, columns })
+    }
+
+    /// Where the table came from.
+    pub fn source(&self) -> &str {
+        &self.source
+    }
+    /// The header of the time column.
+    pub fn time_name(&self) -> &str {
+        &self.headers[0]
+    }
+    /// The times (first column).
+    pub fn time(&self) -> &[f64] {
+        &self.time
+    }
+    /// Names of the columns after the time column.
+    pub fn names(&self) -> &[String] {
+        &self.headers[1..]
+    }
+    /// A column by name (after the time column); `None` cells are missing.
+    pub fn column(&self, name: &str) -> Option<&[Option<f64>]> {
+        self.names().iter().position(|h| h == name).map(|i| self.columns[i].as_slice())
+    }
+    /// The present samples of a column as (times, values).
+    pub fn samples(&self, name: &str) -> Option<(Vec<f64>, Vec<f64>)> {
+        let col = self.column(name)?;
+        Some(self.time.iter().zip(col).filter_map(|(&t, v)| v.map(|v| (t, v))).unzip())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_columns_with_missing_cells() {
+        let t = Table::parse("t, y, v\n0, 1.5, \n1, , 2e-1\n2, 3, 4\n", "mem").unwrap();
+        assert_eq!(t.names(), ["y", "v"]);
+        assert_eq!(t.samples("y").unwrap(), (vec![0.0, 2.0], vec![1.5, 3.0]));
+        assert_eq!(t.samples("v").unwrap(), (vec![1.0, 2.0], vec![0.2, 4.0]));
+        assert_eq!(t.column("z"), None);
+    }
+
+    #[test]
+    fn errors_name_file_line_and_column() {
+        let e = |text: &str| Table::parse(text, "data.csv").unwrap_err().to_string();
+        assert_eq!(e("t,y\n0,1\n1,abc\n"), "data.csv:3: column `y`: `abc` is not a number");
+        assert_eq!(e("t,y\n0,1\n1,NaN\n"), "data.csv:3: column `y`: `NaN` is not a finite number");
+        assert_eq!(e("t,y\n0,1\n0,2\n"), "data.csv:3: column `t`: time 0 is repeated (previous 0)");
+        assert_eq!(e("t,y\n1,1\n0,2\n"), "data.csv:3: column `t`: time 0 goes back (previous 1)");
+        assert_eq!(e("t,y\n0,1\n,2\n"), "data.csv:3: column `t`: the time is missing");
+        assert_eq!(e("t,y,y\n0,1,2\n"), "data.csv:1: column `y`: the name is used twice");
+        assert_eq!(e("t,y\n"), "data.csv: no data rows");
+        assert!(e("t,y\n0,1\n1,2,3\n").starts_with("data.csv:3: "), "{}", e("t,y\n0,1\n1,2,3\n"));
+    }
+}

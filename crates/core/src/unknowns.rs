@@ -1,0 +1,172 @@
+//! The unknowns z: chosen initial values and parameters, with starting guesses, optional
+//! bounds and an optional logarithmic scale.
+
+use serde::{Deserialize, Serialize};
+use sysid_ode::Wrt;
+
+/// One quantity to identify: a parameter, or the initial value of a state (named after the
+/// state).
+///
+/// On a log scale (`log = true`) the method works with ln(value), which keeps the value
+/// positive and makes relative changes uniform; estimates and standard errors are reported
+/// as values (the standard error by the delta method, value · σ(ln value)).
+///
+/// Bounds are enforced by projection (active-set projected Newton): an unknown on a bound
+/// that the descent direction would push past is held there while the others are solved for,
+/// and every update is clipped to [min, max] (on the log scale: to [ln min, ln max]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Unknown {
+    /// A parameter's name, or a state's name for its initial value.
+    pub name: String,
+    /// The starting guess (as a value, also on a log scale).
+    pub guess: f64,
+    /// Lower bound, if any.
+    pub min: Option<f64>,
+    /// Upper bound, if any.
+    pub max: Option<f64>,
+    /// Estimate ln(value) instead of the value.
+    pub log: bool,
+}
+
+impl Unknown {
+    /// An unbounded unknown on a linear scale.
+    pub fn new(name: impl Into<String>, guess: f64) -> Self {
+        Self { name: name.into(), guess, min: None, max: None, log: false }
+    }
+    /// With a lower bound.
+    pub fn min(self, min: f64) -> Self {
+        Self { min: Some(min), ..self }
+    }
+    /// With an upper bound.
+    pub fn max(self, max: f64) -> Self {
+        Self { max: Some(max), ..self }
+    }
+    /// On a logarithmic scale.
+    pub fn log(self) -> Self {
+        Self { log: true, ..self }
+    }
+
+    /// The coordinate z of a value.
+    pub fn coordinate(&self, value: f64) -> f64 {
+        if self.log { value.ln() } else { value }
+    }
+    /// The value of a coordinate z.
+    pub fn value(&self, z: f64) -> f64 {
+        if self.log { z.exp() } else { z }
+    }
+    /// d value / d z: 1, or the value itself on a log scale.
+    pub fn scale(&self, z: f64) -> f64 {
+        if self.log { z.exp() } else { 1.0 }
+    }
+    /// The bounds in coordinates.
+    pub fn coordinate_bounds(&self) -> (f64, f64) {
+        let lo = self.min.map_or(f64::NEG_INFINITY, |v| if self.log { v.ln() } else { v });
+        let hi = self.max.map_or(f64::INFINITY, |v| if self.log { v.ln() } else { v });
+        (lo, hi)
+    }
+
+    /// Checks guess, bounds and scale; returns a message for the first problem.
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        if !self.guess.is_finite() {
+            return Err(format!("the guess {} is not a finite number", self.guess));
+        }
+        for (what, b) in [("min", self.min), ("max", self.max)] {
+            if let Some(v) = b
+                && v.is_nan()
+            {
+                return Err(format!("{what} is not a number"));
+            }
+        }
+        if self.log {
+            if self.guess <= 0.0 {
+                return Err(format!(
+                    "a log-scale unknown needs a positive guess, got {}",
+                    self.guess
+                ));
+            }
+            if let Some(m) = self.min
+                && m <= 0.0
+            {
+                return Err(format!("a log-scale unknown needs a positive min, got {m}"));
+            }
+        }
+        let (lo, hi) = (self.min.unwrap_or(f64::NEG_INFINITY), self.max.unwrap_or(f64::INFINITY));
+        if lo >= hi {
+            return Err(format!("min {lo} is not below max {hi}"));
+        }
+        if !(lo..=hi).contains(&self.guess) {
+            return Err(format!("the guess {} lies outside [{lo}, {hi}]", self.guess));
+        }
+        Ok(())
+    }
+}
+
+/// The unknowns of a problem, in order, each resolved to a sensitivity column.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unknowns {
+    list: Vec<Unknown>,
+    wrt: Vec<Wrt>,
+}
+
+impl Unknowns {
+    pub(crate) fn new(list: Vec<Unknown>, wrt: Vec<Wrt>) -> Self {
+        Self { list, wrt }
+    }
+    /// Number of unknowns k.
+    pub fn len(&self) -> usize {
+        self.list.len()
+    }
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.list.is_empty()
+    }
+    /// The unknowns in order.
+    pub fn list(&self) -> &[Unknown] {
+        &self.list
+    }
+    /// Their names in order.
+    pub fn names(&self) -> Vec<String> {
+        self.list.iter().map(|u| u.name.clone()).collect()
+    }
+    /// The sensitivity column of each unknown.
+    pub fn wrt(&self) -> &[Wrt] {
+        &self.wrt
+    }
+    /// The starting guesses, as values.
+    pub fn guesses(&self) -> Vec<f64> {
+        self.list.iter().map(|u| u.guess).collect()
+    }
+    /// Coordinates z of values.
+    pub fn coordinates(&self, values: &[f64]) -> Vec<f64> {
+        self.list.iter().zip(values).map(|(u, &v)| u.coordinate(v)).collect()
+    }
+    /// Values of coordinates z.
+    pub fn values(&self, z: &[f64]) -> Vec<f64> {
+        self.list.iter().zip(z).map(|(u, &z)| u.value(z)).collect()
+    }
+    /// Which unknowns are held at a bound: those on a bound that the descent direction −U
+    /// (U = half the gradient of ε) would push past. Newton-type methods solve for the others
+    /// only (the active-set projected Newton method).
+    pub fn active(&self, z: &[f64], gradient: &[f64]) -> Vec<bool> {
+        self.list
+            .iter()
+            .zip(z.iter().zip(gradient))
+            .map(|(u, (&zi, &g))| {
+                let (lo, hi) = u.coordinate_bounds();
+                (zi <= lo && g > 0.0) || (zi >= hi && g < 0.0)
+            })
+            .collect()
+    }
+
+    /// Clips coordinates to the bounds; returns whether any was clipped.
+    pub fn project(&self, z: &mut [f64]) -> bool {
+        let mut clipped = false;
+        for (u, zi) in self.list.iter().zip(z.iter_mut()) {
+            let (lo, hi) = u.coordinate_bounds();
+            let c = zi.clamp(lo, hi);
+            clipped |= *zi < lo || *zi > hi;
+            *zi = c;
+        }
+        clipped
+    }
+}

@@ -1,0 +1,163 @@
+//! Setting up problems: every mistake is an error that names what is wrong.
+
+use sysid_core::{Data, Problem, ProblemError, Unknown};
+use sysid_ode::testing::assert_close;
+use sysid_ode::{Scalar, Signature, System};
+
+#[derive(Clone, Debug)]
+struct Fall(Signature);
+impl System for Fall {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = y[1];
+        dy[1] = p[0];
+    }
+}
+
+fn fall() -> Fall {
+    Fall(Signature::new(&["y", "v"], &["g"]))
+}
+
+fn table() -> Data {
+    Data::discrete().series("y", &[0.0, 1.0, 2.0, 3.0], &[0.0, 15.0, 65.0, 145.0])
+}
+
+fn error(
+    f: impl FnOnce(sysid_core::ProblemBuilder<Fall>) -> sysid_core::ProblemBuilder<Fall>,
+) -> String {
+    let b = Problem::builder(fall()).data(table());
+    f(b).build().unwrap_err().to_string()
+}
+
+#[test]
+fn names_and_specification_errors() {
+    assert_eq!(
+        error(|b| b.unknown("y", 0.0).unknown("v", 0.0).unknown("h", 1.0)),
+        "`h` is not a state or parameter of the system (states: y, v; parameters: g)"
+    );
+    assert_eq!(
+        error(|b| b.unknown("y", 0.0).known("v", 0.0).unknown("v", 1.0).known("g", 32.0)),
+        "`v` is given twice (as known and as unknown)"
+    );
+    assert_eq!(
+        error(|b| b.unknown("y", 0.0).unknown("g", 32.0)),
+        "state `v` is neither known nor unknown: give it a value or make it an unknown"
+    );
+    assert_eq!(
+        error(|b| b.unknown("y", 0.0).known("v", 0.0)),
+        "parameter `g` is neither known nor unknown: give it a value or make it an unknown"
+    );
+    assert_eq!(
+        error(|b| b.known("y", 0.0).known("v", 0.0).known("g", 1.0)),
+        "no unknowns: name at least one parameter or initial value to identify"
+    );
+    assert_eq!(
+        error(|b| b.known("y", f64::NAN).known("v", 0.0).unknown("g", 1.0)),
+        "invalid value for known `y`: NaN"
+    );
+}
+
+#[test]
+fn unknown_errors() {
+    let e = |u: Unknown| error(|b| b.known("y", 0.0).known("v", 0.0).unknown_with(u));
+    assert_eq!(
+        e(Unknown::new("g", 1.0).log().min(-1.0)),
+        "unknown `g`: a log-scale unknown needs a positive min, got -1"
+    );
+    assert_eq!(
+        e(Unknown::new("g", -1.0).log()),
+        "unknown `g`: a log-scale unknown needs a positive guess, got -1"
+    );
+    assert_eq!(
+        e(Unknown::new("g", 1.0).min(2.0).max(1.0)),
+        "unknown `g`: min 2 is not below max 1"
+    );
+    assert_eq!(
+        e(Unknown::new("g", 5.0).max(1.0)),
+        "unknown `g`: the guess 5 lies outside [-inf, 1]"
+    );
+    assert_eq!(
+        e(Unknown::new("g", f64::INFINITY)),
+        "unknown `g`: the guess inf is not a finite number"
+    );
+}
+
+#[test]
+fn data_errors() {
+    let e = |data: Data| {
+        Problem::builder(fall())
+            .unknown("y", 0.0)
+            .unknown("v", 0.0)
+            .unknown("g", 1.0)
+            .data(data)
+            .build()
+            .unwrap_err()
+    };
+    assert_eq!(
+        e(Data::discrete().series("z", &[0.0], &[1.0])).to_string(),
+        "measured series `z` is not a state or output of the system (observable: y, v)"
+    );
+    assert_eq!(
+        e(Data::discrete().series("y", &[0.0, 1.0, 1.0, 2.0], &[0.0; 4])).to_string(),
+        "measured series `y`: times must increase: 1 follows 1"
+    );
+    assert_eq!(
+        e(Data::discrete().series("y", &[0.0, 1.0, 2.0], &[0.0, f64::NAN, 1.0])).to_string(),
+        "measured series `y`: value at t = 1 is NaN"
+    );
+    assert_eq!(
+        e(Data::discrete().weighted_series("y", -1.0, &[0.0, 1.0, 2.0], &[0.0; 3])).to_string(),
+        "measured series `y`: the weight must be positive and finite, got -1"
+    );
+    assert_eq!(
+        e(Data::discrete().series("y", &[0.0, 1.0], &[0.0, 1.0])),
+        ProblemError::TooFewData { observations: 2, unknowns: 3 }
+    );
+    assert_eq!(
+        e(Data::discrete()).to_string(),
+        "no measurements: give at least one measured series or record"
+    );
+    assert_eq!(
+        e(Data::discrete().function("y", 1.0, |t| t)).to_string(),
+        "measured series `y`: a record given as a function needs continuous data"
+    );
+    assert_eq!(
+        e(Data::continuous(1.0, 0.0).function("y", 1.0, |t| t)).to_string(),
+        "invalid value for record span [1, 0]: -1"
+    );
+}
+
+#[test]
+fn coordinates_points_and_costs() {
+    let problem = Problem::builder(fall())
+        .t0(1.0)
+        .known("y", 0.5)
+        .unknown("v", 2.0)
+        .unknown_with(Unknown::new("g", 30.0).log())
+        .data(table())
+        .build()
+        .unwrap();
+    let z = problem.unknowns().coordinates(&[2.0, 30.0]);
+    assert_close(z[1], 30f64.ln(), 1e-15);
+    let (y0, p) = problem.point(&z);
+    assert_eq!(y0.len(), 2);
+    assert_close(y0[0], 0.5, 0.0);
+    assert_close(y0[1], 2.0, 0.0);
+    assert_close(p[0], 30.0, 1e-15);
+    // ε at z: y = 0.5 + 2 (t − 1) + 15 (t − 1)², from t0 = 1 on both sides.
+    let cost: f64 = [0.0f64, 1.0, 2.0, 3.0]
+        .iter()
+        .zip([0.0, 15.0, 65.0, 145.0])
+        .map(|(t, b)| (0.5 + 2.0 * (t - 1.0) + 15.0 * (t - 1.0).powi(2) - b).powi(2))
+        .sum();
+    let (c, _) = problem.cost(&z).unwrap();
+    assert_close(c, cost, 1e-12);
+    let lin = problem.linearize(&z).unwrap();
+    assert_close(lin.cost, cost, 1e-12);
+    // The chain rule of the log scale: ∂y/∂ln g = g ∂y/∂g = g (t − 1)² / 2.
+    let jac = &lin.residuals.as_ref().unwrap().jacobian;
+    assert_close(jac[(3, 1)], 30.0 * 4.0 / 2.0, 1e-12);
+    assert_close(jac[(0, 1)], 30.0 / 2.0, 1e-12);
+}

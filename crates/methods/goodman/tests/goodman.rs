@@ -1,0 +1,278 @@
+//! Goodman's method beyond the paper's example: convergence rate, termination reasons,
+//! initial time inside the data, outputs, scales and bounds.
+
+use sysid_core::{Data, FitError, Method, Problem, Termination, Unknown};
+use sysid_goodman::{Goodman, GoodmanOptions};
+use sysid_ode::testing::assert_close;
+use sysid_ode::{Integrator, Ivp, Scalar, Signature, System};
+use sysid_systems::VanDerPol;
+
+fn tight() -> Integrator {
+    Integrator::dopri5(1e-12, 1e-14)
+}
+
+/// Exact measurements of `observed` states of `sys` at `times`.
+fn exact_data<S: System>(
+    sys: &S,
+    t0: f64,
+    y0: &[f64],
+    p: &[f64],
+    times: &[f64],
+    observed: &[usize],
+) -> Data {
+    let sol = Ivp::new(sys, t0, y0, p).solve(&tight(), times).unwrap();
+    observed.iter().fold(Data::discrete(), |data, &i| {
+        let values: Vec<f64> = (0..times.len()).map(|m| sol.state(m)[i]).collect();
+        data.series(&sys.signature().states()[i], times, &values)
+    })
+}
+
+fn vdp_problem(start: [f64; 3]) -> Problem<VanDerPol> {
+    let sys = VanDerPol::default();
+    let times: Vec<f64> = (0..=50).map(|i| 0.2 * i as f64).collect();
+    let data = exact_data(&sys, 0.0, &[2.0, 0.0], &[1.0], &times, &[0]);
+    Problem::builder(sys)
+        .unknown("mu", start[0])
+        .unknown("x", start[1])
+        .unknown("v", start[2])
+        .data(data)
+        .integrator(tight())
+        .build()
+        .unwrap()
+}
+
+#[test]
+fn converges_quadratically_on_a_zero_residual_problem() {
+    let problem = vdp_problem([1.2, 1.9, 0.1]);
+    let estimate = Goodman::default().fit(&problem).unwrap();
+    assert!(estimate.converged(), "{}", estimate.termination);
+    for (v, truth) in estimate.values.iter().zip([1.0, 2.0, 0.0]) {
+        assert!((v - truth).abs() < 1e-9, "{:?}", estimate.values);
+    }
+    let errors: Vec<f64> = estimate
+        .history
+        .iter()
+        .map(|h| {
+            h.values.iter().zip([1.0, 2.0, 0.0]).map(|(v, t)| (v - t).powi(2)).sum::<f64>().sqrt()
+        })
+        .collect();
+    // ‖e_{k+1}‖ / ‖e_k‖² stays bounded while the error is above the integration noise.
+    let ratios: Vec<f64> =
+        errors.windows(2).filter(|e| e[0] > 1e-6).map(|e| e[1] / (e[0] * e[0])).collect();
+    assert!(ratios.len() >= 3, "errors {errors:?}");
+    assert!(ratios.iter().all(|&r| r < 5.0), "ratios {ratios:?} (errors {errors:?})");
+    assert!(estimate.cost < 1e-20, "{}", estimate.cost);
+}
+
+#[test]
+fn iteration_limit_is_a_result_not_an_error() {
+    let problem = vdp_problem([1.5, 1.5, 0.5]);
+    let estimate =
+        Goodman::new(GoodmanOptions::default().with_max_iterations(1)).fit(&problem).unwrap();
+    assert_eq!(estimate.termination, Termination::MaxIterations);
+    assert_eq!(estimate.iterations, 1);
+    assert!(!estimate.converged());
+    assert_eq!(estimate.history.len(), 2);
+}
+
+/// x' = −(a + b) x: only a + b influences the data.
+#[derive(Clone)]
+struct TwoRates(Signature);
+impl System for TwoRates {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = -(p[0] + p[1]) * y[0];
+    }
+}
+
+#[test]
+fn singular_normal_matrix_names_the_unknowns() {
+    let sys = TwoRates(Signature::new(&["x"], &["a", "b", "c"]));
+    let times = [0.5, 1.0, 2.0, 3.0];
+    let data = exact_data(&sys, 0.0, &[1.0], &[0.3, 0.4, 0.0], &times, &[0]);
+    // c does not appear in the model; a and b only through their sum.
+    let problem = Problem::builder(sys.clone())
+        .known("x", 1.0)
+        .known("c", 0.0)
+        .unknown("a", 0.2)
+        .unknown("b", 0.2)
+        .data(data.clone())
+        .build()
+        .unwrap();
+    let estimate = Goodman::default().fit(&problem).unwrap();
+    match &estimate.termination {
+        Termination::SingularNormalMatrix { unknowns, condition } => {
+            assert_eq!(unknowns, &["a", "b"]);
+            assert!(*condition > 1e12);
+        }
+        other => panic!("unexpected {other}"),
+    }
+    assert!(estimate.termination.to_string().contains("cannot tell apart a, b"));
+    assert!(estimate.values.iter().all(|v| v.is_finite()));
+
+    let problem = Problem::builder(sys)
+        .known("x", 1.0)
+        .known("a", 0.3)
+        .unknown("b", 0.2)
+        .unknown("c", 1.0)
+        .data(data)
+        .build()
+        .unwrap();
+    let estimate = Goodman::default().fit(&problem).unwrap();
+    assert!(
+        matches!(&estimate.termination, Termination::SingularNormalMatrix { unknowns, .. } if unknowns == &["c"]),
+        "{}",
+        estimate.termination
+    );
+}
+
+/// x' = p x²: x = 1/(1 − p t) blows up at t = 1/p.
+#[derive(Clone)]
+struct Riccati(Signature);
+impl System for Riccati {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = p[0] * y[0] * y[0];
+    }
+}
+
+#[test]
+fn integration_failure_reports_where() {
+    let sys = Riccati(Signature::new(&["x"], &["p"]));
+    let times = [0.5, 1.0, 1.5, 2.0];
+    let data = exact_data(&sys, 0.0, &[1.0], &[0.2], &times, &[0]);
+    // From p = 1 the model blows up at t = 1, inside the data.
+    let problem =
+        Problem::builder(sys).known("x", 1.0).unknown("p", 1.0).data(data).build().unwrap();
+    let estimate = Goodman::default().fit(&problem).unwrap();
+    match &estimate.termination {
+        Termination::IntegrationFailed { message } => {
+            assert!(message.contains("at t = 0.99") || message.contains("at t = 1"), "{message}");
+        }
+        other => panic!("unexpected {other}"),
+    }
+    assert!(estimate.cost.is_nan(), "no cost where the model cannot be integrated");
+    assert_eq!(estimate.iterations, 0);
+}
+
+/// x' = −k x.
+#[derive(Clone)]
+struct Decay(Signature);
+impl System for Decay {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = -p[0] * y[0];
+    }
+}
+
+fn decay_problem(t0: f64, k: Unknown) -> Problem<Decay> {
+    let sys = Decay(Signature::new(&["x"], &["k"]));
+    let times = [0.0, 0.5, 1.0, 2.0, 3.0, 4.0];
+    let data = exact_data(&sys, 0.0, &[2.0], &[0.8], &times, &[0]);
+    let x0 = 2.0 * (-0.8 * t0).exp();
+    Problem::builder(sys)
+        .t0(t0)
+        .unknown("x", x0 * 1.1)
+        .unknown_with(k)
+        .data(data)
+        .integrator(tight())
+        .build()
+        .unwrap()
+}
+
+#[test]
+fn initial_time_inside_the_data() {
+    // x(t0 = 2) and k from data on [0, 4]: integration runs both ways from t0.
+    let estimate = Goodman::default().fit(&decay_problem(2.0, Unknown::new("k", 0.6))).unwrap();
+    assert!(estimate.converged(), "{}", estimate.termination);
+    assert_close(estimate.value("x").unwrap(), 2.0 * (-1.6f64).exp(), 1e-9);
+    assert_close(estimate.value("k").unwrap(), 0.8, 1e-9);
+}
+
+#[test]
+fn log_scale_reports_values_and_bounds_hold() {
+    let estimate =
+        Goodman::default().fit(&decay_problem(0.0, Unknown::new("k", 0.3).log())).unwrap();
+    assert!(estimate.converged(), "{}", estimate.termination);
+    assert_close(estimate.value("k").unwrap(), 0.8, 1e-9);
+
+    // With k ≥ 1 the best fit lies on the bound; every iterate respects it.
+    let estimate =
+        Goodman::default().fit(&decay_problem(0.0, Unknown::new("k", 1.3).min(1.0))).unwrap();
+    assert!(estimate.converged(), "{}", estimate.termination);
+    assert!(estimate.history.iter().all(|h| h.values[1] >= 1.0));
+    assert_close(estimate.value("k").unwrap(), 1.0, 0.0);
+    // With k held at 1 the model is linear in x(0): x = Σ b_m e^{−t_m} / Σ e^{−2 t_m}.
+    let times = [0.0, 0.5, 1.0, 2.0, 3.0, 4.0];
+    let b = |t: f64| 2.0 * (-0.8 * t).exp();
+    let x0 = times.iter().map(|&t| b(t) * (-t).exp()).sum::<f64>()
+        / times.iter().map(|&t| (-2.0 * t).exp()).sum::<f64>();
+    assert_close(estimate.value("x").unwrap(), x0, 1e-9);
+}
+
+#[test]
+fn step_halving_keeps_the_cost_from_rising() {
+    // From k = 4 the full Newton step on an exponential overshoots far past the answer.
+    let plain = Goodman::default().fit(&decay_problem(0.0, Unknown::new("k", 4.0))).unwrap();
+    let rises = plain.history.windows(2).any(|h| h[1].cost > h[0].cost);
+    let halving = Goodman::new(GoodmanOptions::default().with_step_halving(true))
+        .fit(&decay_problem(0.0, Unknown::new("k", 4.0)))
+        .unwrap();
+    assert!(halving.converged(), "{}", halving.termination);
+    assert_close(halving.value("k").unwrap(), 0.8, 1e-9);
+    assert!(halving.history.windows(2).all(|h| h[1].cost <= h[0].cost));
+    assert!(rises || !plain.converged(), "the example should show what halving is for");
+}
+
+/// Lotka–Volterra measured only through the total x + y, an output function.
+#[derive(Clone)]
+struct Lv(Signature);
+impl System for Lv {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = p[0] * y[0] - p[1] * y[0] * y[1];
+        dy[1] = p[3] * y[0] * y[1] - p[2] * y[1];
+    }
+    fn outputs<T: Scalar>(&self, _t: f64, y: &[T], _p: &[T], _u: &[f64], h: &mut [T]) {
+        h[0] = y[0] + y[1];
+    }
+}
+
+#[test]
+fn measured_outputs_that_are_not_states() {
+    let sys = Lv(Signature::new(&["x", "y"], &["a", "b", "g", "d"]).with_outputs(&["total"]));
+    let times: Vec<f64> = (1..=40).map(|i| 0.25 * i as f64).collect();
+    let sol =
+        Ivp::new(&sys, 0.0, &[1.0, 1.0], &[1.5, 1.0, 3.0, 1.0]).solve(&tight(), &times).unwrap();
+    let total: Vec<f64> = (0..times.len()).map(|m| sol.state(m)[0] + sol.state(m)[1]).collect();
+    let problem = Problem::builder(sys)
+        .knowns(&[("x", 1.0), ("y", 1.0), ("b", 1.0), ("d", 1.0)])
+        .unknown("a", 1.4)
+        .unknown("g", 3.2)
+        .data(Data::discrete().series("total", &times, &total))
+        .integrator(tight())
+        .build()
+        .unwrap();
+    let estimate = Goodman::default().fit(&problem).unwrap();
+    assert!(estimate.converged(), "{}", estimate.termination);
+    assert_close(estimate.value("a").unwrap(), 1.5, 1e-9);
+    assert_close(estimate.value("g").unwrap(), 3.0, 1e-9);
+}
+
+#[test]
+fn misuse_is_an_error() {
+    let problem = decay_problem(0.0, Unknown::new("k", 0.5));
+    let method = Goodman::default();
+    assert!(matches!(method.fit_from(&problem, &[1.0]), Err(FitError::InvalidStart(_))));
+    assert!(matches!(method.fit_from(&problem, &[1.0, f64::NAN]), Err(FitError::InvalidStart(_))));
+    let bad = Goodman::new(GoodmanOptions { step_tolerance: -1.0, ..GoodmanOptions::default() });
+    assert!(matches!(bad.fit(&problem), Err(FitError::InvalidOptions(_))));
+}
