@@ -1,8 +1,6 @@
-//! # sysid
+#![doc = include_str!("../README.md")]
 //!
-//! Identify dynamic systems: the unknown parameters and initial values of an ODE model that
-//! fit measurements best in the least-squares sense, with their uncertainty, by the classical
-//! methods side by side.
+//! ## This crate
 //!
 //! This facade re-exports the workspace crates, each usable on its own:
 //! * [`ode`] (`sysid-ode`): systems, integrators, forward sensitivities, quadratures;

@@ -90,9 +90,10 @@ where
         "unknown", "estimate", "std. error", expected_label
     );
     for (i, name) in e.names.iter().enumerate() {
-        let se = e.std_errors.as_ref().map_or("—".to_string(), |s| format!("{:.4e}", s[i]));
+        let se = e.std_errors.as_ref().map_or("—".to_string(), |s| significant(s[i], 5));
         let expected = case.expected(name).map_or(String::new(), |v| format!("{v}"));
-        out += &format!("  {name:<10} {:>24} {se:>14} {expected:>24}\n", significant(e.values[i]));
+        out +=
+            &format!("  {name:<10} {:>24} {se:>14} {expected:>24}\n", significant(e.values[i], 10));
     }
     out += "\n";
     out += &format!("  termination  {}\n", e.termination);
@@ -101,7 +102,7 @@ where
         .reference
         .as_ref()
         .map_or(String::new(), |r| format!("   (reference {}, {})", r.cost, r.source));
-    out += &format!("  cost ε       {}{reference_cost}\n", significant(e.cost));
+    out += &format!("  cost ε       {}{reference_cost}\n", significant(e.cost, 10));
     out += &format!(
         "  work         {} integrations, {} steps ({} rejected), {} right-hand-side evaluations, {:.3} ms\n\n",
         e.counts.integrations,
@@ -120,24 +121,25 @@ where
         out += &format!(
             "  {:>9} {:>24} {:>12.3e} {step:>12} {cond:>12}\n",
             h.iteration,
-            significant(h.cost),
+            significant(h.cost, 10),
             h.gradient_norm
         );
     }
     out
 }
 
-/// Ten significant digits: enough to compare with published values, short enough to read.
-/// (JSON output keeps every digit.)
-fn significant(v: f64) -> String {
+/// `digits` significant digits: ten are enough to compare estimates with published values
+/// and short enough to read (JSON output keeps every digit).
+fn significant(v: f64, digits: usize) -> String {
     let a = v.abs();
     if !v.is_finite() {
         return format!("{v}");
     }
     if a == 0.0 || (1e-3..1e7).contains(&a) {
-        let before = if a < 1.0 { 1 } else { a.log10().floor() as usize + 1 };
-        format!("{v:.*}", 10usize.saturating_sub(before).max(if a < 1.0 { 10 } else { 0 }))
+        let before = a.log10().floor() as i64 + 1;
+        let decimals = if a == 0.0 { digits - 1 } else { (digits as i64 - before).max(0) as usize };
+        format!("{v:.decimals$}")
     } else {
-        format!("{v:.9e}")
+        format!("{v:.*e}", digits - 1)
     }
 }

@@ -1,0 +1,55 @@
+//! The step loop of a sensitivity integration allocates nothing: the number of heap
+#![allow(unsafe_code)] // a counting global allocator is the only way to observe allocations
+//! allocations of an integration does not grow with its number of steps.
+
+use std::alloc::{GlobalAlloc, Layout, System as Heap};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use sysid_ode::{Integrator, Ivp, Scalar, Signature, System, Wrt};
+
+struct Counting;
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { Heap.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { Heap.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+struct VanDerPol(Signature);
+impl System for VanDerPol {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = y[1];
+        dy[1] = -y[0] + p[0] * (-(y[0] * y[0]) + 1.0) * y[1];
+    }
+}
+
+#[test]
+fn allocations_do_not_grow_with_the_number_of_steps() {
+    let sys = VanDerPol(Signature::new(&["x", "v"], &["mu"]));
+    let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
+    let ivp = Ivp::new(&sys, 0.0, &[2.0, 0.0], &[1.0]);
+    let integrator = Integrator::dopri5(1e-8, 1e-10);
+    let run = |t_end: f64| {
+        let before = ALLOCATIONS.load(Ordering::Relaxed);
+        let sol = ivp.solve_sensitivities(&integrator, &wrt, &[t_end]).unwrap();
+        (ALLOCATIONS.load(Ordering::Relaxed) - before, sol.counts().steps)
+    };
+    let (short, short_steps) = run(2.0);
+    let (long, long_steps) = run(200.0);
+    assert!(long_steps > 20 * short_steps, "{short_steps} vs {long_steps} steps");
+    assert_eq!(
+        short, long,
+        "allocations: {short} for {short_steps} steps, {long} for {long_steps}"
+    );
+}
