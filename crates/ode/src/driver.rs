@@ -268,7 +268,7 @@ pub fn integrate<R: Rhs>(
     if x0.len() != n {
         return Err(OdeError::Dimension { what: "initial state", actual: x0.len(), expected: n });
     }
-    cfg.validate().map_err(|what| OdeError::InvalidInput { what, value: f64::NAN })?;
+    cfg.validate().map_err(OdeError::InvalidSetup)?;
     for (what, v) in [("t0", t0), ("t_end", t_end)] {
         if !v.is_finite() {
             return Err(OdeError::InvalidInput { what: what.into(), value: v });
@@ -348,7 +348,8 @@ pub fn integrate<R: Rhs>(
             if lands {
                 hs = remaining.abs();
             }
-            if hs <= resolution(t) {
+            // Hairer's test: the step no longer changes t in floating point.
+            if hs <= 16.0 * f64::EPSILON * t.abs() || hs < f64::MIN_POSITIVE {
                 return Err(match non_finite {
                     Some(i) => OdeError::NonFinite { t, what: st.rhs.describe(i) },
                     None => OdeError::StepSizeTooSmall { t, h: hs * dir },

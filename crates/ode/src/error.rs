@@ -50,6 +50,9 @@ pub enum OdeError {
         /// Its value.
         value: f64,
     },
+    /// Invalid integrator settings or sensitivity columns.
+    #[error("{0}")]
+    InvalidSetup(String),
     /// The initial state has the wrong length.
     #[error("dimension mismatch: {what} has length {actual}, expected {expected}")]
     Dimension {

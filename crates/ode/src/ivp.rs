@@ -360,7 +360,7 @@ fn check_wrt<S: System>(sys: &S, wrt: &[Wrt]) -> Result<(), OdeError> {
             Wrt::Parameter(k) => (k < sig.n_parameters(), "parameter column"),
         };
         if !ok {
-            return Err(OdeError::InvalidInput { what: format!("{what} {w:?}"), value: f64::NAN });
+            return Err(OdeError::InvalidSetup(format!("{what} {w:?} is out of range")));
         }
     }
     Ok(())

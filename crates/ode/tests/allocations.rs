@@ -5,7 +5,10 @@
 use std::alloc::{GlobalAlloc, Layout, System as Heap};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use sysid_ode::{Integrator, Ivp, Scalar, Signature, System, Wrt};
+mod common;
+
+use common::VanDerPol;
+use sysid_ode::{Integrator, Ivp, Wrt};
 
 struct Counting;
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
@@ -23,20 +26,9 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-struct VanDerPol(Signature);
-impl System for VanDerPol {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = y[1];
-        dy[1] = -y[0] + p[0] * (-(y[0] * y[0]) + 1.0) * y[1];
-    }
-}
-
 #[test]
 fn allocations_do_not_grow_with_the_number_of_steps() {
-    let sys = VanDerPol(Signature::new(&["x", "v"], &["mu"]));
+    let sys = VanDerPol::new();
     let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
     let ivp = Ivp::new(&sys, 0.0, &[2.0, 0.0], &[1.0]);
     let integrator = Integrator::dopri5(1e-8, 1e-10);

@@ -237,3 +237,14 @@ fn raw_integrate_reports_work_and_final_state() {
     // Six new stages per step (FSAL), the first evaluation, and two for the starting step.
     assert_eq!(counts.rhs_evaluations, 6 * (counts.steps + counts.rejected_steps) + 2);
 }
+
+#[test]
+fn tiny_time_scales_are_not_mistaken_for_underflow() {
+    // Steps of about 1e-15 near t = 0: only a step that no longer changes t is too small.
+    let sys = Decay::new();
+    let times = [1e-13, 3e-13, 5e-13];
+    let sol = Ivp::new(&sys, 0.0, &[1.0], &[1e13]).solve(&tight(), &times).unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        assert_close(sol.state(m)[0], Decay::exact(1.0, 1e13, t).0, 1e-9);
+    }
+}

@@ -65,6 +65,33 @@ fn hand_written_jacobians_give_the_same_sensitivities() {
     }
 }
 
+/// Central differences (y(z + δ) − y(z − δ)) / 2δ of the state at `times`, per column.
+fn central_differences<S: System>(
+    sys: &S,
+    integrator: &Integrator,
+    (y0, p): (&[f64], &[f64]),
+    wrt: &[Wrt],
+    times: &[f64],
+    delta: f64,
+) -> Vec<Vec<[f64; 2]>> {
+    wrt.iter()
+        .map(|w| {
+            let solve = |s: f64| {
+                let (mut y, mut q) = (y0.to_vec(), p.to_vec());
+                match *w {
+                    Wrt::InitialValue(i) => y[i] += s,
+                    Wrt::Parameter(k) => q[k] += s,
+                }
+                Ivp::new(sys, 0.0, &y, &q).solve(integrator, times).unwrap()
+            };
+            let (plus, minus) = (solve(delta), solve(-delta));
+            (0..times.len())
+                .map(|m| [0, 1].map(|i| (plus.state(m)[i] - minus.state(m)[i]) / (2.0 * delta)))
+                .collect()
+        })
+        .collect()
+}
+
 /// With a fixed step the computed sensitivities are the exact derivatives of the computed
 /// solution (the RK scheme commutes with linearisation), so central differences of the
 /// solution agree with them to the difference error O(δ²) plus rounding O(ε/δ).
@@ -76,20 +103,10 @@ fn van_der_pol_sensitivities_match_central_differences() {
     let (y0, p) = ([2.0, 0.0], [1.0]);
     let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
     let sol = Ivp::new(&sys, 0.0, &y0, &p).solve_sensitivities(&integrator, &wrt, &times).unwrap();
-    let delta = 1e-6;
-    for (j, w) in wrt.iter().enumerate() {
-        let shifted = |s: f64| {
-            let (mut y, mut q) = (y0, p);
-            match *w {
-                Wrt::InitialValue(i) => y[i] += s,
-                Wrt::Parameter(k) => q[k] += s,
-            }
-            Ivp::new(&sys, 0.0, &y, &q).solve(&integrator, &times).unwrap()
-        };
-        let (plus, minus) = (shifted(delta), shifted(-delta));
-        for m in 0..times.len() {
-            for i in 0..2 {
-                let fd = (plus.state(m)[i] - minus.state(m)[i]) / (2.0 * delta);
+    let fd = central_differences(&sys, &integrator, (&y0, &p), &wrt, &times, 1e-6);
+    for (j, column) in fd.iter().enumerate() {
+        for (m, at) in column.iter().enumerate() {
+            for (i, &fd) in at.iter().enumerate() {
                 let s = sol.sensitivity(m)[(i, j)];
                 assert_close_abs(s, fd, 1e-7 * (1.0 + s.abs()));
             }
@@ -106,22 +123,13 @@ fn adaptive_sensitivities_match_central_differences() {
     let times = [1.0, 4.0, 10.0];
     let wrt: Vec<Wrt> = (0..4).map(Wrt::Parameter).chain([Wrt::InitialValue(1)]).collect();
     let sol = Ivp::new(&sys, 0.0, &y0, &p).solve_sensitivities(&tight(), &wrt, &times).unwrap();
-    let delta = 1e-5;
-    for (j, w) in wrt.iter().enumerate() {
-        let shifted = |s: f64| {
-            let (mut y, mut q) = (y0, p);
-            match *w {
-                Wrt::InitialValue(i) => y[i] += s,
-                Wrt::Parameter(k) => q[k] += s,
-            }
-            Ivp::new(&sys, 0.0, &y, &q).solve(&Integrator::dopri5(1e-13, 1e-15), &times).unwrap()
-        };
-        let (plus, minus) = (shifted(delta), shifted(-delta));
-        for m in 0..times.len() {
-            for i in 0..2 {
-                let fd = (plus.state(m)[i] - minus.state(m)[i]) / (2.0 * delta);
+    let reference = Integrator::dopri5(1e-13, 1e-15);
+    let fd = central_differences(&sys, &reference, (&y0, &p), &wrt, &times, 1e-5);
+    for (j, column) in fd.iter().enumerate() {
+        for (m, at) in column.iter().enumerate() {
+            for (i, &fd) in at.iter().enumerate() {
                 let s = sol.sensitivity(m)[(i, j)];
-                // Difference error ~δ² |y'''| and integration noise ~1e-13/δ.
+                // Difference error ~δ² |y‴| and integration noise ~1e-13/δ.
                 assert_close_abs(s, fd, 1e-6 * (1.0 + s.abs()));
             }
         }
