@@ -86,6 +86,9 @@ pub enum ProblemError {
         /// Number of unknowns.
         unknowns: usize,
     },
+    /// Synthetic data could not be simulated.
+    #[error("could not simulate the data: {0}")]
+    Simulation(String),
     /// The integrator settings are invalid.
     #[error("integrator: {0}")]
     Integrator(String),

@@ -39,27 +39,52 @@ pub struct Problem<S> {
 /// The measurements resolved against the system.
 #[derive(Clone, Debug)]
 enum Plan {
-    Discrete {
-        /// All sample times, sorted, without repeats.
-        times: Vec<f64>,
-        series: Vec<PlannedSeries>,
-    },
+    Discrete(Sampled),
     Continuous {
         span: (f64, f64),
         outputs: Vec<RecordedOutput>,
+        /// The record discretised for least-squares solvers that need a residual vector.
+        nodes: Sampled,
     },
+}
+
+/// Measured values at discrete times, each with the square root of its weight: discrete data
+/// (weight w_o), or a record at quadrature nodes (weight w_o times the node's weight).
+#[derive(Clone, Debug)]
+struct Sampled {
+    /// All times, sorted, without repeats.
+    times: Vec<f64>,
+    series: Vec<PlannedSeries>,
 }
 
 #[derive(Clone, Debug)]
 struct PlannedSeries {
     observable: Observable,
-    sqrt_weight: f64,
-    /// (index into the sorted times, measured value).
-    samples: Vec<(usize, f64)>,
+    samples: Vec<Sample>,
 }
 
-/// Residuals and Jacobian of a discrete problem, each row scaled by √w_o so that
-/// ε = ‖r‖², U = Jᵀr and A = JᵀJ.
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    /// Index into the sorted times.
+    index: usize,
+    value: f64,
+    sqrt_weight: f64,
+}
+
+/// Panels per record span of a record given as a function, in its residual form.
+pub const RESIDUAL_PANELS: usize = 256;
+
+// Gauss–Legendre, 4 points on [−1, 1].
+const GL4: [(f64, f64); 4] = [
+    (-0.861_136_311_594_052_6, 0.347_854_845_137_453_9),
+    (-0.339_981_043_584_856_3, 0.652_145_154_862_546_1),
+    (0.339_981_043_584_856_3, 0.652_145_154_862_546_1),
+    (0.861_136_311_594_052_6, 0.347_854_845_137_453_9),
+];
+
+/// Residuals and Jacobian, each row scaled by the square root of its weight so that
+/// ε = ‖r‖², U = Jᵀr and A = JᵀJ. For a continuous record the rows are the record at
+/// Gauss–Legendre nodes (see [`Problem::residuals_and_jacobian`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct WeightedResiduals {
     /// √w_o (h_o(y(t_m)) − b_{o,m}), series after series, in time order within a series.
@@ -177,121 +202,149 @@ impl<S: System> Problem<S> {
         (y0, p)
     }
 
-    /// Integrates the model and its sensitivities at z and forms ε, U and A.
+    /// d value / d z for each unknown at z: the chain rule of log-scale unknowns.
+    fn chain(&self, z: &[f64]) -> Vec<f64> {
+        self.unknowns.list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect()
+    }
+
+    /// Integrates the model and its sensitivities at z and forms ε, U and A: sums over the
+    /// samples of discrete data (Goodman's eq. 12, 15), integrals over a continuous record
+    /// accumulated during the integration (eq. 22, 24).
     pub fn linearize(&self, z: &[f64]) -> Result<Linearization, OdeError> {
-        let (y0, p) = self.point(z);
-        let ivp = Ivp::new(&self.system, self.t0, &y0, &p);
-        let wrt = self.unknowns.wrt();
-        let k = wrt.len();
-        // d value / d z for each unknown: the chain rule of log-scale unknowns.
-        let scale: Vec<f64> =
-            self.unknowns.list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect();
-        match &self.plan {
-            Plan::Discrete { times, series } => {
-                let sol = ivp.solve_sensitivities(&self.integrator, wrt, times)?;
-                let rows: usize = series.iter().map(|s| s.samples.len()).sum();
-                let mut r = DVector::zeros(rows);
-                let mut jac = DMatrix::zeros(rows, k);
-                let mut og = ObservableGradient::new(&self.system, &p, wrt);
-                let mut grad = vec![0.0; k];
-                let mut row = 0;
-                for s in series {
-                    for &(m, b) in &s.samples {
-                        let t = times[m];
-                        let h = og.eval(
-                            t,
-                            sol.state(m),
-                            sol.sensitivity_slice(m),
-                            s.observable,
-                            &mut grad,
-                        );
-                        r[row] = s.sqrt_weight * (h - b);
-                        for j in 0..k {
-                            jac[(row, j)] = s.sqrt_weight * grad[j] * scale[j];
-                        }
-                        row += 1;
-                    }
-                }
-                check_finite(&r, &jac, times)?;
-                Ok(Linearization {
-                    z: z.to_vec(),
-                    cost: r.norm_squared(),
-                    gradient: jac.tr_mul(&r),
-                    normal: jac.tr_mul(&jac),
-                    residuals: Some(WeightedResiduals { r, jacobian: jac }),
-                    counts: sol.counts(),
-                })
-            }
-            Plan::Continuous { span, outputs } => {
-                let q = ivp.least_squares_integrals(
-                    &self.integrator,
-                    wrt,
-                    outputs,
-                    *span,
-                    self.quadrature_rtol,
-                )?;
-                let gradient = DVector::from_fn(k, |i, _| q.gradient[i] * scale[i]);
-                let normal = DMatrix::from_fn(k, k, |i, j| q.normal[(i, j)] * scale[i] * scale[j]);
-                if !q.cost.is_finite()
-                    || normal.iter().chain(gradient.iter()).any(|v| !v.is_finite())
-                {
-                    return Err(OdeError::NonFinite {
-                        t: span.0,
-                        what: "the least-squares integrals".into(),
-                    });
-                }
-                Ok(Linearization {
-                    z: z.to_vec(),
-                    cost: q.cost,
-                    gradient,
-                    normal,
-                    residuals: None,
-                    counts: q.counts,
-                })
-            }
-        }
-    }
-
-    /// ε at z, without sensitivities.
-    pub fn cost(&self, z: &[f64]) -> Result<(f64, Counts), OdeError> {
-        match &self.plan {
-            Plan::Discrete { .. } => {
-                let (r, counts) = self.residuals(z)?;
-                Ok((r.norm_squared(), counts))
-            }
-            Plan::Continuous { span, outputs } => {
-                let (y0, p) = self.point(z);
-                let q = Ivp::new(&self.system, self.t0, &y0, &p).least_squares_integrals(
-                    &self.integrator,
-                    &[],
-                    outputs,
-                    *span,
-                    self.quadrature_rtol,
-                )?;
-                if !q.cost.is_finite() {
-                    return Err(OdeError::NonFinite { t: span.0, what: "the cost".into() });
-                }
-                Ok((q.cost, q.counts))
-            }
-        }
-    }
-
-    /// The weighted residual vector at z, without sensitivities (discrete data; a continuous
-    /// record has no residual vector and gives an empty one).
-    pub fn residuals(&self, z: &[f64]) -> Result<(DVector<f64>, Counts), OdeError> {
-        let Plan::Discrete { times, series } = &self.plan else {
-            return Ok((DVector::zeros(0), Counts::default()));
+        let (span, outputs) = match &self.plan {
+            Plan::Discrete(sampled) => return self.linearize_sampled(sampled, z),
+            Plan::Continuous { span, outputs, .. } => (*span, outputs),
         };
         let (y0, p) = self.point(z);
+        let wrt = self.unknowns.wrt();
+        let k = wrt.len();
+        let q = Ivp::new(&self.system, self.t0, &y0, &p).least_squares_integrals(
+            &self.integrator,
+            wrt,
+            outputs,
+            span,
+            self.quadrature_rtol,
+        )?;
+        let scale = self.chain(z);
+        let gradient = DVector::from_fn(k, |i, _| q.gradient[i] * scale[i]);
+        let normal = DMatrix::from_fn(k, k, |i, j| q.normal[(i, j)] * scale[i] * scale[j]);
+        if !q.cost.is_finite() || normal.iter().chain(gradient.iter()).any(|v| !v.is_finite()) {
+            return Err(OdeError::NonFinite {
+                t: span.0,
+                what: "the least-squares integrals".into(),
+            });
+        }
+        Ok(Linearization {
+            z: z.to_vec(),
+            cost: q.cost,
+            gradient,
+            normal,
+            residuals: None,
+            counts: q.counts,
+        })
+    }
+
+    /// The weighted residuals and their Jacobian at z, from one integration with
+    /// sensitivities: what a general least-squares solver works with. Discrete data give
+    /// one row per sample. A continuous record gives one row per node of a composite
+    /// Gauss–Legendre rule (4 nodes per panel; panels between the samples of a sampled
+    /// record, [`RESIDUAL_PANELS`] panels over the span for a record given as a function), so
+    /// that ‖r‖² is the quadrature of ε.
+    pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, OdeError> {
+        self.linearize_sampled(self.sampled(), z)
+    }
+
+    fn sampled(&self) -> &Sampled {
+        match &self.plan {
+            Plan::Discrete(sampled) => sampled,
+            Plan::Continuous { nodes, .. } => nodes,
+        }
+    }
+
+    fn linearize_sampled(&self, plan: &Sampled, z: &[f64]) -> Result<Linearization, OdeError> {
+        let (y0, p) = self.point(z);
+        let wrt = self.unknowns.wrt();
+        let k = wrt.len();
+        let scale = self.chain(z);
+        let times = &plan.times;
+        let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve_sensitivities(
+            &self.integrator,
+            wrt,
+            times,
+        )?;
+        let rows: usize = plan.series.iter().map(|s| s.samples.len()).sum();
+        let mut r = DVector::zeros(rows);
+        let mut jac = DMatrix::zeros(rows, k);
+        let mut og = ObservableGradient::new(&self.system, &p, wrt);
+        let mut grad = vec![0.0; k];
+        let mut row = 0;
+        for s in &plan.series {
+            for sample in &s.samples {
+                let m = sample.index;
+                let h = og.eval(
+                    times[m],
+                    sol.state(m),
+                    sol.sensitivity_slice(m),
+                    s.observable,
+                    &mut grad,
+                );
+                r[row] = sample.sqrt_weight * (h - sample.value);
+                for j in 0..k {
+                    jac[(row, j)] = sample.sqrt_weight * grad[j] * scale[j];
+                }
+                row += 1;
+            }
+        }
+        check_finite(&r, &jac, times)?;
+        Ok(Linearization {
+            z: z.to_vec(),
+            cost: r.norm_squared(),
+            gradient: jac.tr_mul(&r),
+            normal: jac.tr_mul(&jac),
+            residuals: Some(WeightedResiduals { r, jacobian: jac }),
+            counts: sol.counts(),
+        })
+    }
+
+    /// ε at z, without sensitivities (the integral itself for a continuous record).
+    pub fn cost(&self, z: &[f64]) -> Result<(f64, Counts), OdeError> {
+        let (span, outputs) = match &self.plan {
+            Plan::Discrete(_) => {
+                let (r, counts) = self.residuals(z)?;
+                return Ok((r.norm_squared(), counts));
+            }
+            Plan::Continuous { span, outputs, .. } => (*span, outputs),
+        };
+        let (y0, p) = self.point(z);
+        let q = Ivp::new(&self.system, self.t0, &y0, &p).least_squares_integrals(
+            &self.integrator,
+            &[],
+            outputs,
+            span,
+            self.quadrature_rtol,
+        )?;
+        if !q.cost.is_finite() {
+            return Err(OdeError::NonFinite { t: span.0, what: "the cost".into() });
+        }
+        Ok((q.cost, q.counts))
+    }
+
+    /// The weighted residual vector at z, without sensitivities: the rows of
+    /// [`residuals_and_jacobian`](Self::residuals_and_jacobian).
+    pub fn residuals(&self, z: &[f64]) -> Result<(DVector<f64>, Counts), OdeError> {
+        let plan = self.sampled();
+        let (y0, p) = self.point(z);
+        let times = &plan.times;
         let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve(&self.integrator, times)?;
         let mut og = ObservableGradient::new(&self.system, &p, &[]);
-        let rows: usize = series.iter().map(|s| s.samples.len()).sum();
+        let rows: usize = plan.series.iter().map(|s| s.samples.len()).sum();
         let mut r = DVector::zeros(rows);
         let mut row = 0;
-        for s in series {
-            for &(m, b) in &s.samples {
+        for s in &plan.series {
+            for sample in &s.samples {
+                let m = sample.index;
                 let h = og.eval(times[m], sol.state(m), &[], s.observable, &mut []);
-                r[row] = s.sqrt_weight * (h - b);
+                r[row] = sample.sqrt_weight * (h - sample.value);
                 row += 1;
             }
         }
@@ -569,10 +622,13 @@ fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemErr
     }
     match data.record {
         Kind::Discrete => {
-            let mut times: Vec<f64> = Vec::new();
+            let mut points = Vec::with_capacity(data.series.len());
             for s in &data.series {
                 match &s.samples {
-                    Samples::Points { times: t, .. } => times.extend(t),
+                    Samples::Points { times, values } => {
+                        let w = s.weight.sqrt();
+                        points.push(times.iter().zip(values).map(|(&t, &v)| (t, v, w)).collect());
+                    }
                     Samples::Function(_) => {
                         return Err(ProblemError::InvalidSeries {
                             name: s.name.clone(),
@@ -581,27 +637,11 @@ fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemErr
                     }
                 }
             }
-            times.sort_by(f64::total_cmp);
-            times.dedup();
-            let series = data
-                .series
-                .iter()
-                .zip(resolved)
-                .map(|(s, observable)| {
-                    let Samples::Points { times: t, values } = &s.samples else { unreachable!() };
-                    let samples = t
-                        .iter()
-                        .zip(values)
-                        .map(|(ti, &v)| (times.partition_point(|x| x < ti), v))
-                        .collect();
-                    PlannedSeries { observable, sqrt_weight: s.weight.sqrt(), samples }
-                })
-                .collect();
             let observations = data.n_observations().unwrap_or(0);
             if observations < k {
                 return Err(ProblemError::TooFewData { observations, unknowns: k });
             }
-            Ok(Plan::Discrete { times, series })
+            Ok(Plan::Discrete(gather(&resolved, points)))
         }
         Kind::Continuous { t_lo, t_hi } => {
             if !(t_lo.is_finite() && t_hi.is_finite() && t_lo < t_hi) {
@@ -613,8 +653,8 @@ fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemErr
             let outputs = data
                 .series
                 .iter()
-                .zip(resolved)
-                .map(|(s, observable)| {
+                .zip(&resolved)
+                .map(|(s, &observable)| {
                     let record = match &s.samples {
                         Samples::Points { times, values } => Record::Samples(
                             Signal::new(times.clone(), values.clone(), Interpolation::Linear)
@@ -633,7 +673,55 @@ fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemErr
             {
                 return Err(ProblemError::TooFewData { observations, unknowns: k });
             }
-            Ok(Plan::Continuous { span: (t_lo, t_hi), outputs })
+            let points = outputs.iter().map(|o| record_nodes(o, (t_lo, t_hi))).collect();
+            let nodes = gather(&resolved, points);
+            Ok(Plan::Continuous { span: (t_lo, t_hi), outputs, nodes })
         }
     }
+}
+
+/// Gathers per-series (time, value, √weight) points on one sorted time grid.
+fn gather(observables: &[Observable], points: Vec<Vec<(f64, f64, f64)>>) -> Sampled {
+    let mut times: Vec<f64> = points.iter().flatten().map(|p| p.0).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let series = observables
+        .iter()
+        .zip(points)
+        .map(|(&observable, pts)| PlannedSeries {
+            observable,
+            samples: pts
+                .into_iter()
+                .map(|(t, value, sqrt_weight)| Sample {
+                    index: times.partition_point(|x| *x < t),
+                    value,
+                    sqrt_weight,
+                })
+                .collect(),
+        })
+        .collect();
+    Sampled { times, series }
+}
+
+/// A record as residual rows: b at the nodes of a composite 4-point Gauss–Legendre rule,
+/// each with the square root of w_o times its quadrature weight.
+fn record_nodes(output: &RecordedOutput, (t_lo, t_hi): (f64, f64)) -> Vec<(f64, f64, f64)> {
+    let mut breaks = vec![t_lo];
+    match &output.record {
+        Record::Samples(s) => breaks.extend(s.times().iter().filter(|&&t| t > t_lo && t < t_hi)),
+        Record::Function(_) => {
+            let h = (t_hi - t_lo) / RESIDUAL_PANELS as f64;
+            breaks.extend((1..RESIDUAL_PANELS).map(|i| t_lo + h * i as f64));
+        }
+    }
+    breaks.push(t_hi);
+    let mut nodes = Vec::with_capacity(4 * breaks.len());
+    for panel in breaks.windows(2) {
+        let (c, r) = (0.5 * (panel[0] + panel[1]), 0.5 * (panel[1] - panel[0]));
+        for (x, w) in GL4 {
+            let t = c + r * x;
+            nodes.push((t, output.record.value(t), (output.weight * w * r).sqrt()));
+        }
+    }
+    nodes
 }

@@ -161,3 +161,36 @@ fn coordinates_points_and_costs() {
     assert_close(jac[(3, 1)], 30.0 * 4.0 / 2.0, 1e-12);
     assert_close(jac[(0, 1)], 30.0 / 2.0, 1e-12);
 }
+
+#[test]
+fn residual_form_of_a_record_matches_its_integrals() {
+    // ‖r‖², Jᵀr and JᵀJ at the Gauss–Legendre nodes against the adaptive quadratures.
+    let record = |t: f64| 16.25 * t * t - 0.25 * t - 0.25 + 0.5 * (5.0 * t).sin();
+    let times: Vec<f64> = (0..=60).map(|i| 0.05 * i as f64).collect();
+    let values: Vec<f64> = times.iter().map(|&t| record(t)).collect();
+    for data in [
+        Data::continuous(0.0, 3.0).function("y", 2.0, record),
+        Data::continuous(0.0, 3.0).weighted_series("y", 2.0, &times, &values),
+    ] {
+        let problem = Problem::builder(fall())
+            .t0(1.0)
+            .unknown("y", 0.3)
+            .unknown("v", -0.5)
+            .unknown_with(Unknown::new("g", 31.0).log())
+            .data(data)
+            .build()
+            .unwrap();
+        let z = problem.unknowns().coordinates(&[0.3, -0.5, 31.0]);
+        let integral = problem.linearize(&z).unwrap();
+        let nodes = problem.residuals_and_jacobian(&z).unwrap();
+        assert_close(nodes.cost, integral.cost, 1e-12);
+        assert_close(problem.residuals(&z).unwrap().0.norm_squared(), integral.cost, 1e-12);
+        assert_close(problem.cost(&z).unwrap().0, integral.cost, 1e-12);
+        for (a, b) in nodes.gradient.iter().zip(integral.gradient.iter()) {
+            assert_close(*a, *b, 1e-11);
+        }
+        for (a, b) in nodes.normal.iter().zip(integral.normal.iter()) {
+            assert_close(*a, *b, 1e-11);
+        }
+    }
+}

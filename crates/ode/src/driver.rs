@@ -200,8 +200,9 @@ impl<R: Rhs> Stepper<'_, R> {
         self.f(t + h, xn, k7);
     }
 
-    /// Fills the interpolant of the step just taken from (t, x) to (t + h, x_new).
-    fn dense(&self, w: &mut Work, t: f64, h: f64) {
+    /// Fills the interpolant of the step just taken from (t, x) to (t_next, x_new).
+    fn dense(&self, w: &mut Work, t: f64, t_next: f64) {
+        let h = t_next - t;
         let [r1, r2, r3, r4, r5] = w.interpolant.coefficients_mut();
         let (x, xn, k) = (&w.x, &w.x_new, &w.k);
         for i in 0..x.len() {
@@ -221,7 +222,7 @@ impl<R: Rhs> Stepper<'_, R> {
                 Scheme::Rk4 => 0.0,
             };
         }
-        w.interpolant.set_span(t, h);
+        w.interpolant.set_span(t, t_next);
     }
 
     /// Hairer's starting step size for a given direction.
@@ -402,7 +403,7 @@ fn accept<R: Rhs>(
         return Err(OdeError::NonFinite { t, what: st.rhs.describe(i) });
     }
     st.counts.steps += 1;
-    st.dense(work, t, t_next - t);
+    st.dense(work, t, t_next);
     on_step(&work.interpolant);
     std::mem::swap(&mut work.x, &mut work.x_new);
     work.k.swap(0, 6);

@@ -10,6 +10,8 @@
 #[derive(Clone, Debug, PartialEq)]
 pub struct Interpolant {
     t: f64,
+    /// The exact end of the step (t + h may differ from it in the last bit).
+    t_end: f64,
     h: f64,
     dim: usize,
     /// r₁..r₅, each of length `dim`, stored one after another.
@@ -18,12 +20,13 @@ pub struct Interpolant {
 
 impl Interpolant {
     pub(crate) fn new(dim: usize) -> Self {
-        Self { t: 0.0, h: 0.0, dim, coefficients: vec![0.0; 5 * dim] }
+        Self { t: 0.0, t_end: 0.0, h: 0.0, dim, coefficients: vec![0.0; 5 * dim] }
     }
 
-    pub(crate) fn set_span(&mut self, t: f64, h: f64) {
+    pub(crate) fn set_span(&mut self, t: f64, t_end: f64) {
         self.t = t;
-        self.h = h;
+        self.t_end = t_end;
+        self.h = t_end - t;
     }
 
     pub(crate) fn coefficients_mut(&mut self) -> [&mut [f64]; 5] {
@@ -38,9 +41,9 @@ impl Interpolant {
     pub fn t_start(&self) -> f64 {
         self.t
     }
-    /// Where the step ends.
+    /// Where the step ends, exactly (a segment end or output time it landed on).
     pub fn t_end(&self) -> f64 {
-        self.t + self.h
+        self.t_end
     }
     /// The signed step size.
     pub fn h(&self) -> f64 {
@@ -52,7 +55,7 @@ impl Interpolant {
     }
     /// The smaller and the larger end of the step.
     pub fn bounds(&self) -> (f64, f64) {
-        let (a, b) = (self.t, self.t + self.h);
+        let (a, b) = (self.t, self.t_end);
         if a <= b { (a, b) } else { (b, a) }
     }
 

@@ -403,23 +403,30 @@ pub(crate) fn sample<R: Rhs>(
     if at < times.len() {
         let mut next = at;
         let t_last = times[times.len() - 1];
-        counts += integrate(integrator, rhs, (t0, x0), t_last, stops, |s| {
+        let (c, x_end) = integrate(integrator, rhs, (t0, x0), t_last, stops, |s| {
             while next < times.len() && times[next] <= s.t_end() {
                 s.eval(times[next], &mut out[next * w..(next + 1) * w]);
                 next += 1;
             }
-        })?
-        .0;
+        })?;
+        counts += c;
+        // Only times equal to the end can remain: the integration stops exactly on it.
+        for m in next..times.len() {
+            out[m * w..(m + 1) * w].copy_from_slice(&x_end);
+        }
     }
     if before > 0 {
         let mut next = before;
-        counts += integrate(integrator, rhs, (t0, x0), times[0], stops, |s| {
+        let (c, x_end) = integrate(integrator, rhs, (t0, x0), times[0], stops, |s| {
             while next > 0 && times[next - 1] >= s.t_end() {
                 next -= 1;
                 s.eval(times[next], &mut out[next * w..(next + 1) * w]);
             }
-        })?
-        .0;
+        })?;
+        counts += c;
+        for m in 0..next {
+            out[m * w..(m + 1) * w].copy_from_slice(&x_end);
+        }
     }
     Ok(counts)
 }

@@ -248,3 +248,26 @@ fn tiny_time_scales_are_not_mistaken_for_underflow() {
         assert_close(sol.state(m)[0], Decay::exact(1.0, 1e13, t).0, 1e-9);
     }
 }
+
+#[test]
+fn every_output_time_is_filled_even_when_t_plus_h_rounds_past_it() {
+    // The configuration that exposed it: 4-point Gauss–Legendre nodes on 256 panels of [0, 3]
+    // around t0 = 1, where the backward pass ends on the first node and t + h misses it by
+    // one ulp. Each row must hold the solution, including the last of each direction.
+    let sys = FallingBody::new();
+    let h = 3.0 / 256.0;
+    let nodes = [
+        -0.861_136_311_594_052_6,
+        -0.339_981_043_584_856_3,
+        0.339_981_043_584_856_3,
+        0.861_136_311_594_052_6,
+    ];
+    let times: Vec<f64> =
+        (0..256).flat_map(|i| nodes.map(|x| h * (i as f64 + 0.5) + 0.5 * h * x)).collect();
+    let sol =
+        Ivp::new(&sys, 1.0, &[0.3, -0.5], &[31.0]).solve(&Integrator::default(), &times).unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        let exact = 0.3 - 0.5 * (t - 1.0) + 15.5 * (t - 1.0) * (t - 1.0);
+        assert_close_abs(sol.state(m)[0], exact, 1e-12);
+    }
+}

@@ -1,7 +1,10 @@
 //! A catalogue entry: a model with its data, unknowns, start and reference answer.
 
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
 use sysid_core::{Data, Problem, ProblemError, Unknown};
-use sysid_ode::{Integrator, System};
+use sysid_ode::{Integrator, Ivp, OdeError, System};
 
 /// A published or exact answer a fit must reproduce, with the tolerance that applies.
 #[derive(Clone, Debug, PartialEq)]
@@ -14,6 +17,29 @@ pub struct Reference {
     pub tolerance: f64,
     /// Where the answer comes from.
     pub source: &'static str,
+}
+
+/// Gaussian measurement noise on one measured state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Noise {
+    /// The measured state.
+    pub name: &'static str,
+    /// Standard deviation σ; the series gets the weight 1/σ² (Goodman's eq. 32).
+    pub sigma: f64,
+}
+
+/// Where a case's data come from.
+#[derive(Clone, Debug)]
+pub enum DataSource {
+    /// Fixed data: a published table or record.
+    Fixed(fn() -> Data),
+    /// The truth simulated at `times` (DOPRI5, rtol 1e-12) plus seeded Gaussian noise.
+    Synthetic {
+        /// Measurement times.
+        times: Vec<f64>,
+        /// The measured states and their noise.
+        noise: Vec<Noise>,
+    },
 }
 
 /// A benchmark system: everything needed to pose its identification problem.
@@ -32,22 +58,76 @@ pub struct Case<S> {
     pub unknowns: Vec<Unknown>,
     /// The integrator the problem uses.
     pub integrator: Integrator,
-    /// The data for a seed (fixed data ignore it).
-    pub data: fn(u64) -> Data,
+    /// The data.
+    pub data: DataSource,
     /// The true values of the unknowns, where the data are synthetic.
     pub truth: Vec<(&'static str, f64)>,
     /// The answer to reproduce, where one is known.
     pub reference: Option<Reference>,
 }
 
+/// The integrator that simulates the truth: far tighter than any fit uses.
+pub fn truth_integrator() -> Integrator {
+    Integrator::dopri5(1e-12, 1e-14)
+}
+
 impl<S: System + Clone> Case<S> {
+    /// The data for `seed`: the same on every machine (ChaCha8 seeded by `seed`, noise drawn
+    /// series after series, in time order).
+    pub fn data(&self, seed: u64) -> Result<Data, OdeError> {
+        match &self.data {
+            DataSource::Fixed(data) => Ok(data()),
+            DataSource::Synthetic { times, noise } => {
+                let (y0, p) = self.true_point();
+                let sol =
+                    Ivp::new(&self.system, self.t0, &y0, &p).solve(&truth_integrator(), times)?;
+                let mut rng = ChaCha8Rng::seed_from_u64(seed);
+                let sig = self.system.signature();
+                let mut data = Data::discrete();
+                for n in noise {
+                    let i = sig.state(n.name).expect("noise on a state of the system");
+                    let normal = Normal::new(0.0, n.sigma).expect("a positive sigma");
+                    let values: Vec<f64> = (0..times.len())
+                        .map(|m| sol.state(m)[i] + normal.sample(&mut rng))
+                        .collect();
+                    data = data.weighted_series(n.name, 1.0 / (n.sigma * n.sigma), times, &values);
+                }
+                Ok(data)
+            }
+        }
+    }
+
+    /// y(t0) and α at the truth: known values, and the truth (or the reference answer) for the
+    /// unknowns.
+    pub fn true_point(&self) -> (Vec<f64>, Vec<f64>) {
+        let sig = self.system.signature();
+        let value = |name: &str| {
+            self.known
+                .iter()
+                .chain(&self.truth)
+                .find(|(n, _)| *n == name)
+                .map(|p| p.1)
+                .or_else(|| {
+                    self.reference
+                        .as_ref()
+                        .and_then(|r| r.values.iter().find(|(n, _)| *n == name).map(|p| p.1))
+                })
+                .unwrap_or_else(|| panic!("{}: no true value for `{name}`", self.name))
+        };
+        (
+            sig.states().iter().map(|s| value(s)).collect(),
+            sig.parameters().iter().map(|s| value(s)).collect(),
+        )
+    }
+
     /// The identification problem on the data for `seed`, from the default start.
     pub fn problem(&self, seed: u64) -> Result<Problem<S>, ProblemError> {
+        let data = self.data(seed).map_err(|e| ProblemError::Simulation(e.to_string()))?;
         let mut builder = Problem::builder(self.system.clone())
             .t0(self.t0)
             .knowns(&self.known)
             .integrator(self.integrator)
-            .data((self.data)(seed));
+            .data(data);
         for u in &self.unknowns {
             builder = builder.unknown_with(u.clone());
         }
@@ -59,4 +139,15 @@ impl<S: System + Clone> Case<S> {
         let find = |list: &[(&str, f64)]| list.iter().find(|(n, _)| *n == name).map(|p| p.1);
         self.reference.as_ref().and_then(|r| find(&r.values)).or_else(|| find(&self.truth))
     }
+
+    /// The expected values of all unknowns in order, if every one is known.
+    pub fn expected_values(&self) -> Option<Vec<f64>> {
+        self.unknowns.iter().map(|u| self.expected(&u.name)).collect()
+    }
+}
+
+/// `count` evenly spaced times from `start` with step `step` (computed by multiplication, so
+/// they are exact multiples of the step).
+pub fn grid(start: f64, step: f64, count: usize) -> Vec<f64> {
+    (0..count).map(|i| start + step * i as f64).collect()
 }

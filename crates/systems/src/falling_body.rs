@@ -4,7 +4,7 @@
 use sysid_core::{Data, Unknown};
 use sysid_ode::{Integrator, Scalar, Signature, System};
 
-use crate::case::{Case, Reference};
+use crate::case::{Case, DataSource, Reference};
 
 /// y' = v, v' = g: states y (position) and v (velocity), parameter g.
 #[derive(Clone, Debug)]
@@ -44,7 +44,7 @@ pub fn falling_body() -> Case<FallingBody> {
         known: vec![],
         unknowns: paper_start(),
         integrator: Integrator::default(),
-        data: |_| Data::discrete().series("y", &TABLE_I.0, &TABLE_I.1),
+        data: DataSource::Fixed(|| Data::discrete().series("y", &TABLE_I.0, &TABLE_I.1)),
         truth: vec![],
         reference: Some(Reference {
             values: vec![("y", -0.25), ("v", -0.25), ("g", 32.5)],
@@ -73,7 +73,9 @@ pub fn falling_body_continuous() -> Case<FallingBody> {
         known: vec![],
         unknowns: paper_start(),
         integrator: Integrator::default(),
-        data: |_| Data::continuous(0.0, 3.0).function("y", 1.0, continuous_record),
+        data: DataSource::Fixed(|| {
+            Data::continuous(0.0, 3.0).function("y", 1.0, continuous_record)
+        }),
         truth: vec![],
         reference: Some(Reference {
             values: vec![

@@ -5,10 +5,19 @@
 //! fit must reproduce. Tests, benchmarks, studies and the command line all use this
 //! catalogue.
 //!
-//! | name | what |
-//! |---|---|
-//! | `falling-body` | Goodman 1966, Section IV, Table I: answer (−0.25, −0.25, 32.5), ε = 1.25 |
-//! | `falling-body-continuous` | the continuous case on [0, 3] |
+//! | name | model | measured | unknowns from |
+//! |---|---|---|---|
+//! | `falling-body` | y' = v, v' = g | y at t = 0..3, Goodman's Table I | (0, 0, 32); answer (−0.25, −0.25, 32.5), ε = 1.25 |
+//! | `falling-body-continuous` | same | record 16.25t² − 0.25t − 0.25 + 0.5 sin 5t on [0, 3] | (0, 0, 32) |
+//! | `van-der-pol` | x' = v, v' = −x + μ(1−x²)v | x every 0.2 on [0, 20], σ = 0.05 | μ, x, v from (1.5, 1.5, 0.5) |
+//! | `lotka-volterra` | x' = ax − bxy, y' = dxy − gy | x, y every 0.1 on [0, 10], σ = 0.1 | a, b, g, d from (1.2, 0.8, 2.5, 0.8) |
+//! | `fitzhugh-nagumo` | V' = c(V − V³/3 + R), R' = −(V − a + bR)/c | V, R every 0.05 on [0, 20], σ = 0.05 | a, b, c from (0.3, 0.3, 2.5) |
+//! | `short-period` | α' = Zα α + q + Zδ δe, q' = Mα α + Mq q + Mδ δe | α (σ = 0.002), q (σ = 0.005) every 0.05 on [0, 10] | from (−1, −3, −1, −0.1, −6) |
+//! | `van-der-pol-three-point` | van der Pol, t0 = 4 | x at t = 4, 6, 8 (no noise) | x, v, μ from (−1.5, 0.3, 1.5); ε = 0 |
+//!
+//! Synthetic data are the truth integrated with rtol 1e-12 plus Gaussian noise drawn from
+//! ChaCha8 seeded by the seed, series after series: the same data on every machine; each
+//! noisy series is weighted by 1/σ² (Goodman's eq. 32).
 //!
 //! A caller that works with any system implements [`Visit`] and calls [`visit`] with a name:
 //!
@@ -28,10 +37,16 @@
 
 mod case;
 pub mod falling_body;
-mod van_der_pol;
+pub mod fitzhugh_nagumo;
+pub mod lotka_volterra;
+pub mod short_period;
+pub mod van_der_pol;
 
-pub use case::{Case, Reference};
+pub use case::{Case, DataSource, Noise, Reference, grid, truth_integrator};
 pub use falling_body::FallingBody;
+pub use fitzhugh_nagumo::FitzHughNagumo;
+pub use lotka_volterra::LotkaVolterra;
+pub use short_period::ShortPeriod;
 pub use van_der_pol::VanDerPol;
 
 use sysid_ode::System;
@@ -62,6 +77,11 @@ macro_rules! catalogue {
 catalogue! {
     "falling-body" => falling_body::falling_body,
     "falling-body-continuous" => falling_body::falling_body_continuous,
+    "van-der-pol" => van_der_pol::van_der_pol,
+    "lotka-volterra" => lotka_volterra::lotka_volterra,
+    "fitzhugh-nagumo" => fitzhugh_nagumo::fitzhugh_nagumo,
+    "short-period" => short_period::short_period,
+    "van-der-pol-three-point" => van_der_pol::van_der_pol_three_point,
 }
 
 /// The one-line summary of each catalogue system, in catalogue order.
