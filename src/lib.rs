@@ -6,10 +6,12 @@
 //! * [`ode`] (`sysid-ode`): systems, integrators, forward sensitivities, quadratures;
 //! * [`core`] (`sysid-core`): problems, unknowns, data, estimates, the `Method` trait;
 //! * [`goodman`] (`sysid-goodman`): Goodman's 1966 Newton iteration;
+//! * [`gauss_newton`] (`sysid-gauss-newton`): the Gauss–Newton baseline on argmin;
 //! * [`systems`] (`sysid-systems`): the benchmark catalogue.
 #![warn(missing_docs)]
 
 pub use sysid_core as core;
+pub use sysid_gauss_newton as gauss_newton;
 pub use sysid_goodman as goodman;
 pub use sysid_ode as ode;
 pub use sysid_systems as systems;
@@ -17,6 +19,7 @@ pub use sysid_systems as systems;
 /// The names most programs need.
 pub mod prelude {
     pub use sysid_core::{Data, Estimate, Method, Problem, Termination, Unknown};
+    pub use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions};
     pub use sysid_goodman::{Goodman, GoodmanOptions};
     pub use sysid_ode::{Integrator, Scalar, Signature, System};
 }

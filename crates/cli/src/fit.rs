@@ -6,6 +6,7 @@ use sysid_core::Estimate;
 use sysid_ode::System;
 use sysid_systems::{Case, Visit};
 
+use crate::format::significant;
 use crate::methods::{Common, METHODS, method};
 use crate::{Format, Outcome};
 
@@ -15,7 +16,7 @@ pub struct FitArgs {
     /// The catalogue system to identify (`sysid systems` lists them).
     #[arg(long, value_name = "NAME")]
     system: String,
-    /// The method: goodman, goodman-halving.
+    /// The method: goodman, goodman-halving, gauss-newton, gauss-newton-ls, gauss-newton-fd.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]
     method: String,
     /// Output format.
@@ -126,20 +127,4 @@ where
         );
     }
     out
-}
-
-/// `digits` significant digits: ten are enough to compare estimates with published values
-/// and short enough to read (JSON output keeps every digit).
-fn significant(v: f64, digits: usize) -> String {
-    let a = v.abs();
-    if !v.is_finite() {
-        return format!("{v}");
-    }
-    if a == 0.0 || (1e-3..1e7).contains(&a) {
-        let before = a.log10().floor() as i64 + 1;
-        let decimals = if a == 0.0 { digits - 1 } else { (digits as i64 - before).max(0) as usize };
-        format!("{v:.decimals$}")
-    } else {
-        format!("{v:.*e}", digits - 1)
-    }
 }

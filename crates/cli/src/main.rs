@@ -3,8 +3,11 @@
 //! Exit codes: 0 success, 1 the method did not converge (its report is still printed),
 //! 2 bad input (one line on stderr, nothing on stdout).
 
+mod compare;
 mod fit;
+mod format;
 mod methods;
+mod simulate;
 
 use std::process::ExitCode;
 
@@ -25,6 +28,11 @@ enum Command {
     /// Identify the unknowns of a catalogue system and print the estimates with standard
     /// errors, the cost and the iteration history.
     Fit(fit::FitArgs),
+    /// Run several methods on the same data from the same start and print them side by
+    /// side: convergence, iterations, cost, time, and each estimate next to the truth.
+    Compare(compare::CompareArgs),
+    /// Write the data of a catalogue system as CSV (header row, time first).
+    Simulate(simulate::SimulateArgs),
     /// List the built-in benchmark systems, one line each.
     Systems,
 }
@@ -66,6 +74,8 @@ fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Fit(args) => fit::run(&args),
+        Command::Compare(args) => compare::run(&args),
+        Command::Simulate(args) => simulate::run(&args),
         Command::Systems => {
             for (name, summary) in sysid_systems::summaries() {
                 println!("{name:<26} {summary}");

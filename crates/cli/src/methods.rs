@@ -1,14 +1,23 @@
 //! The methods the command line offers, by name.
 
 use sysid_core::Method;
+use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
 use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_ode::System;
 
-/// Method names and what they are.
+/// Method names and what they are, in the order tables list them.
 pub const METHODS: &[(&str, &str)] = &[
     ("goodman", "Goodman 1966: Newton iteration on the initial values, full steps"),
     ("goodman-halving", "Goodman 1966 with step halving while the cost rises"),
+    ("gauss-newton", "argmin Gauss–Newton, full steps, Jacobian from sensitivities"),
+    ("gauss-newton-ls", "argmin Gauss–Newton with Armijo line search, Jacobian from sensitivities"),
+    ("gauss-newton-fd", "argmin Gauss–Newton with line search, forward-difference Jacobian"),
 ];
+
+/// The methods `compare` runs by default.
+pub fn default_methods() -> Vec<&'static str> {
+    METHODS.iter().map(|m| m.0).collect()
+}
 
 /// Options shared by every method, from the command line.
 #[derive(Clone, Copy, Debug, Default)]
@@ -20,15 +29,44 @@ pub struct Common {
 /// The method called `name`.
 pub fn method<S: System>(name: &str, common: Common) -> anyhow::Result<Box<dyn Method<S>>> {
     let mut goodman = GoodmanOptions::default();
+    let mut gn = GaussNewtonOptions::default();
     if let Some(m) = common.max_iterations {
         goodman.max_iterations = m;
+        gn.max_iterations = m as u64;
     }
-    match name {
-        "goodman" => Ok(Box::new(Goodman::new(goodman))),
-        "goodman-halving" => Ok(Box::new(Goodman::new(goodman.with_step_halving(true)))),
+    Ok(match name {
+        "goodman" => Box::new(Goodman::new(goodman)),
+        "goodman-halving" => Box::new(Goodman::new(goodman.with_step_halving(true))),
+        "gauss-newton" => Box::new(GaussNewton::new(gn)),
+        "gauss-newton-ls" => {
+            Box::new(GaussNewton::new(GaussNewtonOptions { line_search: true, ..gn }))
+        }
+        "gauss-newton-fd" => Box::new(GaussNewton::new(GaussNewtonOptions {
+            line_search: true,
+            jacobian: JacobianSource::FiniteDifferences,
+            ..gn
+        })),
         _ => anyhow::bail!(
             "unknown method `{name}` (methods: {})",
             METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")
         ),
+    })
+}
+
+/// Checks a comma-separated list of method names.
+pub fn parse_list(list: &str) -> anyhow::Result<Vec<String>> {
+    let names: Vec<String> =
+        list.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect();
+    if names.is_empty() {
+        anyhow::bail!("no methods given");
     }
+    for n in &names {
+        if !METHODS.iter().any(|m| m.0 == n) {
+            anyhow::bail!(
+                "unknown method `{n}` (methods: {})",
+                METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")
+            );
+        }
+    }
+    Ok(names)
 }

@@ -28,8 +28,13 @@ pub enum Termination {
         /// The integrator's message, with the time it failed.
         message: String,
     },
-    /// Step halving could not reduce the cost.
+    /// Step halving (or a line search) could not reduce the cost.
     NoDescent,
+    /// The optimisation library stopped with an error of its own.
+    SolverFailed {
+        /// Its message.
+        message: String,
+    },
 }
 
 /// Which convergence test was met.
@@ -41,6 +46,8 @@ pub enum Convergence {
     Gradient,
     /// The model passes through every data point (ε = 0).
     ExactFit,
+    /// The change of the cost between iterations fell below the tolerance (argmin's rule).
+    CostChange,
 }
 
 impl Termination {
@@ -71,7 +78,11 @@ impl fmt::Display for Termination {
             Termination::IntegrationFailed { message } => {
                 write!(f, "integration failed: {message}")
             }
-            Termination::NoDescent => write!(f, "not converged: step halving found no descent"),
+            Termination::NoDescent => write!(f, "not converged: no step reduced the cost"),
+            Termination::SolverFailed { message } => write!(f, "solver error: {message}"),
+            Termination::Converged(Convergence::CostChange) => {
+                write!(f, "converged: cost change below tolerance")
+            }
         }
     }
 }

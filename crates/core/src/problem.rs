@@ -329,6 +329,11 @@ impl<S: System> Problem<S> {
         Ok((q.cost, q.counts))
     }
 
+    /// Number of rows of [`residuals`](Self::residuals).
+    pub fn n_residuals(&self) -> usize {
+        self.sampled().series.iter().map(|s| s.samples.len()).sum()
+    }
+
     /// The weighted residual vector at z, without sensitivities: the rows of
     /// [`residuals_and_jacobian`](Self::residuals_and_jacobian).
     pub fn residuals(&self, z: &[f64]) -> Result<(DVector<f64>, Counts), OdeError> {

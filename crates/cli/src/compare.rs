@@ -1,0 +1,151 @@
+//! `sysid compare`: every chosen method on the same data from the same start.
+
+use anyhow::{Context, anyhow};
+use clap::Args;
+use sysid_core::Estimate;
+use sysid_ode::System;
+use sysid_systems::{Case, Visit};
+
+use crate::format::significant;
+use crate::methods::{Common, default_methods, method, parse_list};
+use crate::{Format, Outcome};
+
+/// Arguments of `sysid compare`.
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    /// The catalogue system (`sysid systems` lists them).
+    #[arg(long, value_name = "NAME", required_unless_present = "all", conflicts_with = "all")]
+    system: Option<String>,
+    /// Every catalogue system, one table each.
+    #[arg(long)]
+    all: bool,
+    /// Comma-separated methods (default: all of them).
+    #[arg(long, value_name = "A,B,C")]
+    methods: Option<String>,
+    /// Seed of the synthetic data.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output format: tables, or a JSON list of fit objects.
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    format: Format,
+    /// Most updates of the unknowns, for every method.
+    #[arg(long, value_name = "N")]
+    max_iterations: Option<usize>,
+}
+
+/// One method's outcome on one system.
+pub struct Row {
+    method: String,
+    result: Result<Estimate, String>,
+}
+
+/// Runs `sysid compare`.
+pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
+    let methods = match &args.methods {
+        Some(list) => parse_list(list)?,
+        None => default_methods().into_iter().map(String::from).collect(),
+    };
+    let systems: Vec<String> = match (&args.system, args.all) {
+        (Some(name), _) => vec![name.clone()],
+        (None, _) => sysid_systems::NAMES.iter().map(|s| s.to_string()).collect(),
+    };
+    let mut json = Vec::new();
+    let mut tables = Vec::new();
+    for system in &systems {
+        let visit = CompareCase {
+            methods: &methods,
+            seed: args.seed,
+            common: Common { max_iterations: args.max_iterations },
+        };
+        let (table, records) = sysid_systems::visit(system, visit).ok_or_else(|| {
+            anyhow!("unknown system `{system}` (systems: {})", sysid_systems::NAMES.join(", "))
+        })??;
+        tables.push(table);
+        json.extend(records);
+    }
+    match args.format {
+        Format::Json => println!("{}", serde_json::to_string_pretty(&json)?),
+        Format::Table => print!("{}", tables.join("\n")),
+    }
+    Ok(Outcome::Success)
+}
+
+struct CompareCase<'a> {
+    methods: &'a [String],
+    seed: u64,
+    common: Common,
+}
+
+impl Visit for CompareCase<'_> {
+    type Output = anyhow::Result<(String, Vec<serde_json::Value>)>;
+
+    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
+        let problem = case.problem(self.seed).with_context(|| format!("system {}", case.name))?;
+        let mut rows = Vec::with_capacity(self.methods.len());
+        for name in self.methods {
+            let m = method::<S>(name, self.common)?;
+            rows.push(Row {
+                method: name.clone(),
+                result: m.fit(&problem).map_err(|e| e.to_string()),
+            });
+        }
+        let json = rows
+            .iter()
+            .map(|row| match &row.result {
+                Ok(e) => serde_json::to_value(e.record(case.name)).expect("serialisable"),
+                Err(message) => serde_json::json!({
+                    "system": case.name, "method": row.method, "converged": false, "error": message,
+                }),
+            })
+            .collect();
+        Ok((table(&case, &rows), json))
+    }
+}
+
+/// One table: a row per method, the estimates under their unknowns with the truth or
+/// reference in the header.
+fn table<S: System + Clone>(case: &Case<S>, rows: &[Row]) -> String {
+    let mut out = format!("{}: {}\n", case.name, case.summary);
+    let unknowns: Vec<String> = case.unknowns.iter().map(|u| u.name.clone()).collect();
+    let label = if case.reference.is_some() { "reference" } else { "truth" };
+    let mut header = format!(
+        "  {:<16} {:>5} {:>5} {:>18} {:>10}",
+        "method", "conv", "iter", "cost ε", "time ms"
+    );
+    for name in &unknowns {
+        header += &format!(" {:>16}", name);
+    }
+    out += &header;
+    out += "\n";
+    let mut expected = format!("  {:<16} {:>5} {:>5} {:>18} {:>10}", label, "", "", "", "");
+    for name in &unknowns {
+        expected +=
+            &format!(" {:>16}", case.expected(name).map_or(String::new(), |v| significant(v, 8)));
+    }
+    out += &expected;
+    out += "\n";
+    for row in rows {
+        match &row.result {
+            Ok(e) => {
+                let mut line = format!(
+                    "  {:<16} {:>5} {:>5} {:>18} {:>10.3}",
+                    row.method,
+                    if e.converged() { "yes" } else { "no" },
+                    e.iterations,
+                    significant(e.cost, 10),
+                    e.elapsed.as_secs_f64() * 1e3
+                );
+                for v in &e.values {
+                    line += &format!(" {:>16}", significant(*v, 8));
+                }
+                out += &line;
+                out += "\n";
+                if !e.converged() {
+                    out += &format!("  {:<16} └ {}\n", "", e.termination);
+                }
+            }
+            Err(message) => out += &format!("  {:<16} error: {message}\n", row.method),
+        }
+    }
+    out
+}
