@@ -1,23 +1,57 @@
-//! Time to fit, per catalogue system and method, from the default start: `fit/<system>/<method>`.
+//! Time to fit, per catalogue system and method, from the default start on the default
+//! data (seed 1): `fit/<system>/<method>`. Problems are built outside the timed loop.
 
 use std::hint::black_box;
+use std::time::Duration;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{
+    BenchmarkGroup, Criterion, criterion_group, criterion_main, measurement::WallTime,
+};
 use sysid::core::Method;
-use sysid::goodman::Goodman;
-use sysid::systems::falling_body;
+use sysid::gauss_newton::GaussNewton;
+use sysid::goodman::{Goodman, GoodmanOptions};
+use sysid::ode::System;
+use sysid::systems::{self, Case, Visit};
+
+/// Every method of the comparison, by its command-line name.
+fn methods<S: System>() -> Vec<(&'static str, Box<dyn Method<S>>)> {
+    vec![
+        ("goodman", Box::new(Goodman::default())),
+        (
+            "goodman-halving",
+            Box::new(Goodman::new(GoodmanOptions::default().with_step_halving(true))),
+        ),
+        ("gauss-newton", Box::new(GaussNewton::plain())),
+        ("gauss-newton-ls", Box::new(GaussNewton::line_search())),
+        ("gauss-newton-fd", Box::new(GaussNewton::finite_differences())),
+    ]
+}
+
+struct Bench<'g, 'c> {
+    group: &'g mut BenchmarkGroup<'c, WallTime>,
+}
+
+impl Visit for Bench<'_, '_> {
+    type Output = ();
+    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) {
+        let problem = case.problem(1).expect("catalogue problems build");
+        for (name, method) in methods::<S>() {
+            self.group.bench_function(format!("{}/{name}", case.name), |b| {
+                b.iter(|| method.fit(black_box(&problem)).expect("valid problem"))
+            });
+        }
+    }
+}
 
 fn fit(c: &mut Criterion) {
     let mut group = c.benchmark_group("fit");
-    let problem = falling_body::falling_body().problem(1).unwrap();
-    let goodman = Goodman::default();
-    group.bench_function("falling-body/goodman", |b| {
-        b.iter(|| {
-            let estimate = goodman.fit(black_box(&problem)).unwrap();
-            assert!(estimate.converged());
-            estimate
-        })
-    });
+    group
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2))
+        .sample_size(20);
+    for name in systems::NAMES {
+        systems::visit(name, Bench { group: &mut group });
+    }
     group.finish();
 }
 

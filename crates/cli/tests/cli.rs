@@ -115,7 +115,14 @@ fn systems_lists_the_catalogue() {
 
 #[test]
 fn every_command_has_help() {
-    for args in [&["--help"][..], &["fit", "--help"], &["systems", "--help"], &["help", "fit"]] {
+    for args in [
+        &["--help"][..],
+        &["fit", "--help"],
+        &["compare", "--help"],
+        &["simulate", "--help"],
+        &["systems", "--help"],
+        &["help", "fit"],
+    ] {
         let out = sysid(args);
         assert_eq!(out.status.code(), Some(0), "{args:?}");
         assert!(text(&out.stdout).contains("Usage: sysid"), "{args:?}");
@@ -124,4 +131,70 @@ fn every_command_has_help() {
     for option in ["--system", "--method", "--format", "--seed", "--max-iterations", "--rtol"] {
         assert!(help.contains(option), "fit --help lacks {option}");
     }
+}
+
+#[test]
+fn compare_lists_every_method_as_json() {
+    let out = sysid(&["compare", "--system", "van-der-pol", "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let fits = json.as_array().unwrap();
+    let methods: Vec<&str> = fits.iter().map(|f| f["method"].as_str().unwrap()).collect();
+    assert_eq!(
+        methods,
+        ["goodman", "goodman-halving", "gauss-newton", "gauss-newton-ls", "gauss-newton-fd"]
+    );
+    for f in fits {
+        assert_eq!(f["system"], "van-der-pol");
+        assert_eq!(f["converged"], true, "{f}");
+        assert!(f["estimates"]["mu"].as_f64().is_some());
+    }
+}
+
+#[test]
+fn compare_prints_a_table_per_system() {
+    let out =
+        sysid(&["compare", "--system", "short-period", "--methods", "goodman,gauss-newton-ls"]);
+    assert_eq!(out.status.code(), Some(0));
+    let stdout = text(&out.stdout);
+    assert!(
+        stdout.contains("truth") && stdout.contains("-1.2000000") && stdout.contains("Md"),
+        "{stdout}"
+    );
+    assert_eq!(stdout.lines().filter(|l| l.trim_start().starts_with("goodman ")).count(), 1);
+    for (args, needle) in [
+        (&["compare"][..], "--system"),
+        (
+            &["compare", "--system", "short-period", "--methods", "goodman,nope"][..],
+            "unknown method `nope`",
+        ),
+        (&["compare", "--all", "--system", "short-period"][..], "cannot be used with"),
+    ] {
+        let out = sysid(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(text(&out.stderr).contains(needle), "{args:?}: {}", text(&out.stderr));
+        assert_eq!(text(&out.stderr).trim_end().lines().count(), 1);
+    }
+}
+
+#[test]
+fn simulate_writes_reproducible_csv() {
+    let a = text(&sysid(&["simulate", "--system", "van-der-pol", "--seed", "3"]).stdout);
+    let b = text(&sysid(&["simulate", "--system", "van-der-pol", "--seed", "3"]).stdout);
+    let c = text(&sysid(&["simulate", "--system", "van-der-pol", "--seed", "4"]).stdout);
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+    let lines: Vec<&str> = a.lines().collect();
+    assert_eq!(lines[0], "t,x");
+    assert_eq!(lines.len(), 1 + 101);
+    assert!(lines[1].starts_with("0,"));
+    let dir = std::env::temp_dir().join(format!("sysid-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("sp.csv");
+    let out = sysid(&["simulate", "--system", "short-period", "--out", file.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(0));
+    let written = std::fs::read_to_string(&file).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(written.starts_with("t,alpha,q\n"));
+    assert_eq!(written.lines().count(), 1 + 201);
 }

@@ -139,33 +139,40 @@ impl<R: Rhs> Stepper<'_, R> {
     fn dopri5(&mut self, w: &mut Work, t: f64, h: f64) -> f64 {
         let n = w.x.len();
         let [k1, k2, k3, k4, k5, k6, k7] = &mut w.k;
-        let (x, tmp, xn) = (&w.x, &mut w.tmp, &mut w.x_new);
+        // Slices of one length: the loops below run without bounds checks.
+        let (x, tmp, xn) = (&w.x[..n], &mut w.tmp[..n], &mut w.x_new[..n]);
         for i in 0..n {
-            tmp[i] = x[i] + h * A21 * k1[i];
+            tmp[i] = x[i] + h * A21 * k1[..n][i];
         }
         self.f(t + C2 * h, tmp, k2);
+        let (k1, k2) = (&k1[..n], &k2[..n]);
         for i in 0..n {
             tmp[i] = x[i] + h * (A31 * k1[i] + A32 * k2[i]);
         }
         self.f(t + C3 * h, tmp, k3);
+        let k3 = &k3[..n];
         for i in 0..n {
             tmp[i] = x[i] + h * (A41 * k1[i] + A42 * k2[i] + A43 * k3[i]);
         }
         self.f(t + C4 * h, tmp, k4);
+        let k4 = &k4[..n];
         for i in 0..n {
             tmp[i] = x[i] + h * (A51 * k1[i] + A52 * k2[i] + A53 * k3[i] + A54 * k4[i]);
         }
         self.f(t + C5 * h, tmp, k5);
+        let k5 = &k5[..n];
         for i in 0..n {
             tmp[i] =
                 x[i] + h * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
         }
         self.f(t + h, tmp, k6);
+        let k6 = &k6[..n];
         for i in 0..n {
             xn[i] =
                 x[i] + h * (A71 * k1[i] + A73 * k3[i] + A74 * k4[i] + A75 * k5[i] + A76 * k6[i]);
         }
         self.f(t + h, xn, k7);
+        let k7 = &k7[..n];
         let (rtol, atol) = (self.cfg.rtol, self.cfg.atol);
         let mut sum = 0.0;
         for i in 0..n {
@@ -204,20 +211,25 @@ impl<R: Rhs> Stepper<'_, R> {
     fn dense(&self, w: &mut Work, t: f64, t_next: f64) {
         let h = t_next - t;
         let [r1, r2, r3, r4, r5] = w.interpolant.coefficients_mut();
-        let (x, xn, k) = (&w.x, &w.x_new, &w.k);
-        for i in 0..x.len() {
+        let n = w.x.len();
+        let (x, xn, k) = (&w.x[..n], &w.x_new[..n], &w.k);
+        let (r1, r2, r3, r4, r5) =
+            (&mut r1[..n], &mut r2[..n], &mut r3[..n], &mut r4[..n], &mut r5[..n]);
+        let (k1, k3, k4, k5, k6, k7) =
+            (&k[0][..n], &k[2][..n], &k[3][..n], &k[4][..n], &k[5][..n], &k[6][..n]);
+        for i in 0..n {
             r1[i] = x[i];
             r2[i] = xn[i] - x[i];
-            r3[i] = h * k[0][i] - r2[i];
-            r4[i] = r2[i] - h * k[6][i] - r3[i];
+            r3[i] = h * k1[i] - r2[i];
+            r4[i] = r2[i] - h * k7[i] - r3[i];
             r5[i] = match self.cfg.scheme {
                 Scheme::Dopri5 => {
-                    h * (D1 * k[0][i]
-                        + D3 * k[2][i]
-                        + D4 * k[3][i]
-                        + D5 * k[4][i]
-                        + D6 * k[5][i]
-                        + D7 * k[6][i])
+                    h * (D1 * k1[i]
+                        + D3 * k3[i]
+                        + D4 * k4[i]
+                        + D5 * k5[i]
+                        + D6 * k6[i]
+                        + D7 * k7[i])
                 }
                 Scheme::Rk4 => 0.0,
             };
@@ -305,7 +317,8 @@ pub fn integrate<R: Rhs>(
 
     let mut t = t0;
     let mut h = cfg.initial_step.unwrap_or(0.0).abs();
-    let mut fac_old: f64 = 1e-4;
+    // ln of the previous accepted error (Hairer's facold, at least 1e-4).
+    let mut ln_err_old: f64 = 1e-4f64.ln();
     for &seg_end in &ends {
         st.seg = (t, seg_end);
         st.f(t, &work.x, &mut work.k[0]);
@@ -368,14 +381,15 @@ pub fn integrate<R: Rhs>(
                 continue;
             }
             non_finite = None;
-            let fac11 = err.powf(EXPONENT);
+            // PI control: h_new = h · SAFETY / (err^EXPONENT / err_old^BETA), as one exp.
+            let ln_err = err.max(f64::MIN_POSITIVE).ln();
             if err <= 1.0 {
                 accept(&mut st, &mut work, t, t_next, &mut on_step)?;
                 t = t_next;
                 reached = lands;
-                let fac =
-                    (fac11 / fac_old.powf(BETA) / SAFETY).clamp(1.0 / MAX_FACTOR, 1.0 / MIN_FACTOR);
-                fac_old = err.max(1e-4);
+                let fac = ((EXPONENT * ln_err - BETA * ln_err_old).exp() / SAFETY)
+                    .clamp(1.0 / MAX_FACTOR, 1.0 / MIN_FACTOR);
+                ln_err_old = ln_err.max(1e-4f64.ln());
                 h = hs / fac;
                 if last_rejected {
                     h = h.min(hs);
@@ -383,7 +397,7 @@ pub fn integrate<R: Rhs>(
                 last_rejected = false;
             } else {
                 st.counts.rejected_steps += 1;
-                h = hs / (fac11 / SAFETY).min(1.0 / MIN_FACTOR);
+                h = hs / ((EXPONENT * ln_err).exp() / SAFETY).min(1.0 / MIN_FACTOR);
                 last_rejected = true;
             }
         }

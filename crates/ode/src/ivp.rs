@@ -1,8 +1,8 @@
 //! Initial-value problems of a [`System`]: the solution and its forward sensitivities
 //! (Goodman 1966, eq. 6–7) at given times, on both sides of the initial time.
 
-use nalgebra::{DMatrix, DMatrixView};
-use num_dual::Dual64;
+use nalgebra::{Const, DMatrix, DMatrixView, Dyn, SVector, U1};
+use num_dual::{Derivative, Dual64, DualSVec64};
 
 use crate::driver::{Counts, Rhs, integrate};
 use crate::error::OdeError;
@@ -60,12 +60,16 @@ impl Trajectory {
 }
 
 /// The state y(t_m) and the sensitivity matrix S(t_m) = ∂y/∂z (n × k) at a list of times.
+///
+/// Layout (also of the integrated state x = [y; S]): S is stored row by row, row i holding
+/// ∂y_i/∂z_1 … ∂y_i/∂z_k, so the k sensitivities of one state, which seed one dual-number
+/// evaluation together, are contiguous.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SensitivityTrajectory {
     times: Vec<f64>,
     n: usize,
     k: usize,
-    /// Per time: y (n) followed by S column by column (n·k).
+    /// Per time: y (n) followed by S row by row (n·k).
     data: Vec<f64>,
     counts: Counts,
 }
@@ -88,10 +92,10 @@ impl SensitivityTrajectory {
         &self.block(m)[..self.n]
     }
     /// S(t_m), n × k, column j = ∂y/∂z_j.
-    pub fn sensitivity(&self, m: usize) -> DMatrixView<'_, f64> {
-        DMatrixView::from_slice(&self.block(m)[self.n..], self.n, self.k)
+    pub fn sensitivity(&self, m: usize) -> DMatrixView<'_, f64, Dyn, Dyn> {
+        DMatrixView::from_slice_with_strides(&self.block(m)[self.n..], self.n, self.k, self.k, 1)
     }
-    /// S(t_m) as a flat column-major slice.
+    /// S(t_m) as a flat slice, row by row.
     pub fn sensitivity_slice(&self, m: usize) -> &[f64] {
         &self.block(m)[self.n..]
     }
@@ -129,36 +133,129 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
 }
 
 /// The model together with its variational equations dS/dt = J_y S + J_α (for parameter
-/// columns), on x = [y; S column by column]. Each column's right-hand side is one evaluation
-/// of the model with dual numbers seeded by that column, so no Jacobian is formed; systems
-/// with hand-written Jacobians use them instead.
+/// columns), on x = [y; S column by column]. The columns' right-hand sides come from
+/// evaluations of the model with vector dual numbers seeded by the columns, W columns per
+/// evaluation (W = k up to 8, then chunks of 8): J_y S + J_α without forming a Jacobian and
+/// without allocating. Systems with hand-written Jacobians use them instead.
 pub struct SensitivityRhs<'a, S> {
     sys: &'a S,
     p: &'a [f64],
     wrt: &'a [Wrt],
     u: Vec<f64>,
-    yd: Vec<Dual64>,
-    pd: Vec<Dual64>,
-    dyd: Vec<Dual64>,
+    duals: Duals,
     jy: DMatrix<f64>,
     jp: DMatrix<f64>,
 }
+
+/// Dual-number work space of one chunk width (a const generic, chosen at run time).
+struct Chunked<const W: usize> {
+    /// Number of sensitivity columns k.
+    k: usize,
+    yd: Vec<DualSVec64<W>>,
+    dyd: Vec<DualSVec64<W>>,
+    /// Per chunk: the parameters, seeded with the chunk's parameter columns (constant
+    /// during an integration).
+    pd: Vec<Vec<DualSVec64<W>>>,
+}
+
+impl<const W: usize> Chunked<W> {
+    fn new(n: usize, p: &[f64], wrt: &[Wrt]) -> Self {
+        let zero = DualSVec64::<W>::from_re(0.0);
+        let pd = wrt
+            .chunks(W)
+            .map(|chunk| {
+                (0..p.len())
+                    .map(|k| {
+                        let mut seed = SVector::<f64, W>::zeros();
+                        for (j, w) in chunk.iter().enumerate() {
+                            if *w == Wrt::Parameter(k) {
+                                seed[j] = 1.0;
+                            }
+                        }
+                        DualSVec64::new(p[k], Derivative::some(seed))
+                    })
+                    .collect()
+            })
+            .collect();
+        Self { k: wrt.len(), yd: vec![zero; n], dyd: vec![zero; n], pd }
+    }
+
+    /// dy and dS for every column, W columns per model evaluation.
+    fn eval<S: System>(&mut self, sys: &S, t: f64, u: &[f64], x: &[f64], dx: &mut [f64]) {
+        let (n, k) = (self.yd.len(), self.k);
+        let (y, s) = x.split_at(n);
+        let (dy, ds) = dx.split_at_mut(n);
+        for (c, pd) in self.pd.iter().enumerate() {
+            let first = c * W;
+            let width = W.min(k - first);
+            // Copies of compile-time length for a full chunk (the usual case): no memcpy call.
+            let full = width == W;
+            for (i, yd) in self.yd.iter_mut().enumerate() {
+                let at = i * k + first;
+                let seed = if full {
+                    let row: [f64; W] = s[at..at + W].try_into().expect("a full chunk");
+                    SVector::from(row)
+                } else {
+                    SVector::from_fn(|j, _| if j < width { s[at + j] } else { 0.0 })
+                };
+                *yd = DualSVec64::new(y[i], Derivative::some(seed));
+            }
+            sys.rhs(t, &self.yd, pd, u, &mut self.dyd);
+            for (i, d) in self.dyd.iter().enumerate() {
+                let eps = d.eps.unwrap_generic(Const::<W>, U1);
+                let at = i * k + first;
+                if full {
+                    let out: &mut [f64; W] =
+                        (&mut ds[at..at + W]).try_into().expect("a full chunk");
+                    *out = eps.into();
+                } else {
+                    ds[at..at + width].copy_from_slice(&eps.as_slice()[..width]);
+                }
+                if c == 0 {
+                    dy[i] = d.re;
+                }
+            }
+        }
+    }
+}
+
+macro_rules! duals {
+    ($($w:literal => $variant:ident),*) => {
+        enum Duals { None, $($variant(Chunked<$w>)),* }
+
+        impl Duals {
+            fn new(n: usize, p: &[f64], wrt: &[Wrt]) -> Self {
+                match wrt.len() {
+                    0 => Duals::None,
+                    $($w => Duals::$variant(Chunked::new(n, p, wrt)),)*
+                    _ => Duals::W8(Chunked::new(n, p, wrt)),
+                }
+            }
+            fn eval<S: System>(&mut self, sys: &S, t: f64, u: &[f64], x: &[f64], dx: &mut [f64]) {
+                match self {
+                    Duals::None => {}
+                    $(Duals::$variant(c) => c.eval(sys, t, u, x, dx),)*
+                }
+            }
+        }
+    };
+}
+duals!(1 => W1, 2 => W2, 3 => W3, 4 => W4, 5 => W5, 6 => W6, 7 => W7, 8 => W8);
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
     /// The augmented right-hand side of `sys` at parameters `p`, columns `wrt`.
     pub fn new(sys: &'a S, p: &'a [f64], wrt: &'a [Wrt]) -> Self {
         let sig = sys.signature();
         let (n, np) = (sig.n_states(), sig.n_parameters());
+        let analytic = sys.analytic_jacobians();
         // Jacobian storage only for systems that supply them by hand.
-        let (jn, jnp) = if sys.analytic_jacobians() { (n, np) } else { (0, 0) };
+        let (jn, jnp) = if analytic { (n, np) } else { (0, 0) };
         Self {
             sys,
             p,
             wrt,
             u: vec![0.0; sig.n_inputs()],
-            yd: vec![Dual64::from_re(0.0); n],
-            pd: p.iter().map(|&v| Dual64::from_re(v)).collect(),
-            dyd: vec![Dual64::from_re(0.0); n],
+            duals: if analytic { Duals::None } else { Duals::new(n, p, wrt) },
             jy: DMatrix::zeros(jn, jn),
             jp: DMatrix::zeros(jn, jnp),
         }
@@ -169,9 +266,10 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
         let n = y0.len();
         let mut x = vec![0.0; n * (1 + self.wrt.len())];
         x[..n].copy_from_slice(y0);
+        let k = self.wrt.len();
         for (j, w) in self.wrt.iter().enumerate() {
             if let Wrt::InitialValue(i) = *w {
-                x[n + j * n + i] = 1.0;
+                x[n + i * k + j] = 1.0;
             }
         }
         x
@@ -184,48 +282,28 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
     }
 
     fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {
-        let n = self.yd.len();
+        let n = self.sys.signature().n_states();
         self.sys.input_values(t, side, &mut self.u);
+        if self.wrt.is_empty() {
+            self.sys.rhs(t, x, self.p, &self.u, dx);
+            return;
+        }
+        if !self.sys.analytic_jacobians() {
+            self.duals.eval(self.sys, t, &self.u, x, dx);
+            return;
+        }
         let (y, s) = x.split_at(n);
         let (dy, ds) = dx.split_at_mut(n);
-        if self.wrt.is_empty() {
-            self.sys.rhs(t, y, self.p, &self.u, dy);
-            return;
-        }
-        if self.sys.analytic_jacobians() {
-            self.sys.rhs(t, y, self.p, &self.u, dy);
-            self.sys.jacobians(t, y, self.p, &self.u, &mut self.jy, &mut self.jp);
-            for (j, w) in self.wrt.iter().enumerate() {
-                let col = &s[j * n..(j + 1) * n];
-                for i in 0..n {
-                    let mut v = (0..n).map(|l| self.jy[(i, l)] * col[l]).sum::<f64>();
-                    if let Wrt::Parameter(k) = *w {
-                        v += self.jp[(i, k)];
-                    }
-                    ds[j * n + i] = v;
-                }
-            }
-            return;
-        }
+        self.sys.rhs(t, y, self.p, &self.u, dy);
+        self.sys.jacobians(t, y, self.p, &self.u, &mut self.jy, &mut self.jp);
+        let k = self.wrt.len();
         for (j, w) in self.wrt.iter().enumerate() {
-            let col = &s[j * n..(j + 1) * n];
             for i in 0..n {
-                self.yd[i] = Dual64::new(y[i], col[i]);
-            }
-            if let Wrt::Parameter(k) = *w {
-                self.pd[k].eps = 1.0;
-            }
-            self.sys.rhs(t, &self.yd, &self.pd, &self.u, &mut self.dyd);
-            if let Wrt::Parameter(k) = *w {
-                self.pd[k].eps = 0.0;
-            }
-            for i in 0..n {
-                ds[j * n + i] = self.dyd[i].eps;
-            }
-            if j == 0 {
-                for (d, v) in dy.iter_mut().zip(&self.dyd) {
-                    *d = v.re;
+                let mut v = (0..n).map(|l| self.jy[(i, l)] * s[l * k + j]).sum::<f64>();
+                if let Wrt::Parameter(q) = *w {
+                    v += self.jp[(i, q)];
                 }
+                ds[i * k + j] = v;
             }
         }
     }
@@ -236,7 +314,8 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         if i < n {
             return format!("state {}", sig.states()[i]);
         }
-        let (j, row) = ((i - n) / n, (i - n) % n);
+        let k = self.wrt.len();
+        let (row, j) = ((i - n) / k, (i - n) % k);
         format!("sensitivity ∂{}/∂{}", sig.states()[row], wrt_name(sig, self.wrt[j]))
     }
 }
@@ -464,23 +543,23 @@ impl<'a, S: System> ObservableGradient<'a, S> {
     }
 
     /// The value of `obs` at (t, y) and its gradient row ∂h/∂z in `grad` (length k), given
-    /// S(t) column-major in `s`.
+    /// S(t) row by row in `s`.
     pub fn eval(&mut self, t: f64, y: &[f64], s: &[f64], obs: Observable, grad: &mut [f64]) -> f64 {
         let n = y.len();
         match obs {
             Observable::State(i) => {
-                for (j, g) in grad.iter_mut().enumerate() {
-                    *g = s[j * n + i];
-                }
+                let k = grad.len();
+                grad.copy_from_slice(&s[i * k..(i + 1) * k]);
                 y[i]
             }
             Observable::Output(o) => {
                 self.sys.input_values(t, Side::After, &mut self.u);
                 self.yf.copy_from_slice(y);
                 self.sys.outputs(t, &self.yf, self.p, &self.u, &mut self.hf);
+                let k = self.wrt.len();
                 for (j, w) in self.wrt.iter().enumerate() {
                     for i in 0..n {
-                        self.yd[i] = Dual64::new(y[i], s[j * n + i]);
+                        self.yd[i] = Dual64::new(y[i], s[i * k + j]);
                     }
                     if let Wrt::Parameter(k) = *w {
                         self.pd[k].eps = 1.0;

@@ -1,5 +1,7 @@
 //! Time series given by samples: input signals u(t) and measured records b(t).
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use serde::{Deserialize, Serialize};
 
 use crate::error::SignalError;
@@ -30,11 +32,33 @@ pub enum Interpolation {
 
 /// A signal given by samples (t_i, v_i), strictly increasing t_i, held constant outside the
 /// sampled range.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Debug)]
 pub struct Signal {
     times: Vec<f64>,
     values: Vec<f64>,
     interpolation: Interpolation,
+    /// The interval of the last lookup: integrators ask for nearby times, so the next
+    /// lookup usually needs no search.
+    hint: AtomicUsize,
+}
+
+impl Clone for Signal {
+    fn clone(&self) -> Self {
+        Self {
+            times: self.times.clone(),
+            values: self.values.clone(),
+            interpolation: self.interpolation,
+            hint: AtomicUsize::new(self.hint.load(Ordering::Relaxed)),
+        }
+    }
+}
+
+impl PartialEq for Signal {
+    fn eq(&self, other: &Self) -> bool {
+        self.times == other.times
+            && self.values == other.values
+            && self.interpolation == other.interpolation
+    }
 }
 
 impl Signal {
@@ -61,7 +85,7 @@ impl Signal {
                 time: times[index + 1],
             });
         }
-        Ok(Self { times, values, interpolation })
+        Ok(Self { times, values, interpolation, hint: AtomicUsize::new(0) })
     }
 
     /// A piecewise-constant signal that starts at `initial` and changes to `value` at `time`
@@ -92,14 +116,34 @@ impl Signal {
         self.interpolation
     }
 
+    /// Index of the first sample after t (strictly after for the right limit, at or after
+    /// for the left limit): where t lies among the samples.
+    fn locate(&self, t: f64, side: Side) -> usize {
+        let before = |ti: f64| match side {
+            Side::After => ti <= t,
+            Side::Before => ti < t,
+        };
+        let times = &self.times;
+        let hint = self.hint.load(Ordering::Relaxed).min(times.len());
+        // The hinted answer holds when the sample before it is before t and it is not.
+        let fits =
+            |i: usize| (i == 0 || before(times[i - 1])) && (i == times.len() || !before(times[i]));
+        if fits(hint) {
+            return hint;
+        }
+        if hint < times.len() && fits(hint + 1) {
+            self.hint.store(hint + 1, Ordering::Relaxed);
+            return hint + 1;
+        }
+        let i = times.partition_point(|&ti| before(ti));
+        self.hint.store(i, Ordering::Relaxed);
+        i
+    }
+
     /// The value at t; at a jump of a step signal, the limit from `side`.
     pub fn value(&self, t: f64, side: Side) -> f64 {
         let n = self.times.len();
-        // Index of the first sample strictly after t (or at t when taking the left limit).
-        let after = match side {
-            Side::After => self.times.partition_point(|&ti| ti <= t),
-            Side::Before => self.times.partition_point(|&ti| ti < t),
-        };
+        let after = self.locate(t, side);
         if after == 0 {
             return self.values[0];
         }
@@ -198,6 +242,27 @@ mod tests {
         assert_close_abs(s.value(2.0, Side::After), -0.05, 0.0);
         assert_close_abs(s.value(3.5, Side::After), 0.0, 0.0);
         assert_eq!(s.jumps().collect::<Vec<_>>(), vec![1.0, 2.0, 3.0]);
+    }
+
+    proptest::proptest! {
+        /// Lookups in any order agree with a fresh signal (no hint) for both sides.
+        #[test]
+        fn hinted_lookups_match_fresh_ones(
+            queries in proptest::collection::vec(-1.0..6.0f64, 1..60),
+            step in proptest::bool::ANY,
+        ) {
+            let interpolation = if step { Interpolation::Step } else { Interpolation::Linear };
+            let times = vec![0.0, 0.5, 1.0, 2.0, 2.5, 4.0, 5.0];
+            let values = vec![1.0, -1.0, 3.0, 0.5, 0.5, 2.0, -2.0];
+            let used = Signal::new(times.clone(), values.clone(), interpolation).unwrap();
+            // Exact sample times too, where the two sides differ.
+            for q in queries.iter().copied().chain(times.iter().copied()) {
+                for side in [Side::Before, Side::After] {
+                    let fresh = Signal::new(times.clone(), values.clone(), interpolation).unwrap();
+                    proptest::prop_assert_eq!(used.value(q, side).to_bits(), fresh.value(q, side).to_bits());
+                }
+            }
+        }
     }
 
     #[test]

@@ -275,3 +275,39 @@ fn sampled_record_is_integrated_exactly_between_samples() {
         assert_close_abs(*a, *f, 1e-11 * (1.0 + f.abs()));
     }
 }
+
+/// x' = A x with the 9 entries of A as parameters: 12 sensitivity columns, more than one
+/// chunk of dual numbers.
+struct Linear3(sysid_ode::Signature);
+impl System for Linear3 {
+    fn signature(&self) -> &sysid_ode::Signature {
+        &self.0
+    }
+    fn rhs<T: sysid_ode::Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        for i in 0..3 {
+            dy[i] = p[3 * i] * y[0] + p[3 * i + 1] * y[1] + p[3 * i + 2] * y[2];
+        }
+    }
+}
+
+#[test]
+fn many_columns_in_chunks_match_one_column_at_a_time() {
+    let names = ["a0", "a1", "a2", "a3", "a4", "a5", "a6", "a7", "a8"];
+    let sys = Linear3(sysid_ode::Signature::new(&["x", "y", "z"], &names));
+    let p = [-0.5, 0.2, 0.1, -0.3, -0.4, 0.25, 0.15, -0.2, -0.6];
+    let y0 = [1.0, -0.5, 2.0];
+    let wrt: Vec<Wrt> = (0..9).map(Wrt::Parameter).chain((0..3).map(Wrt::InitialValue)).collect();
+    // A fixed step gives every run the same steps, so the columns must agree to rounding.
+    let integrator = Integrator::default().with_fixed_step(0.05);
+    let times = [0.5, 2.0, 3.0];
+    let ivp = Ivp::new(&sys, 0.0, &y0, &p);
+    let all = ivp.solve_sensitivities(&integrator, &wrt, &times).unwrap();
+    for (j, w) in wrt.iter().enumerate() {
+        let one = ivp.solve_sensitivities(&integrator, &[*w], &times).unwrap();
+        for m in 0..times.len() {
+            for i in 0..3 {
+                assert_close_abs(all.sensitivity(m)[(i, j)], one.sensitivity(m)[(i, 0)], 1e-14);
+            }
+        }
+    }
+}

@@ -106,6 +106,7 @@ impl<S: System> Method<S> for Goodman {
                     break Termination::IntegrationFailed { message: e.to_string() };
                 }
                 Update::NoDescent => break Termination::NoDescent,
+                Update::Negligible => break Termination::Converged(Convergence::Step),
             }
         };
         finish(&z, Some(&lin), iterations, termination, history, counts)
@@ -120,6 +121,9 @@ enum Update {
     Failed(OdeError),
     /// Halving never reduced the cost.
     NoDescent,
+    /// Halving shrank the step below the step tolerance without reducing the cost: the cost
+    /// no longer changes beyond the integration's noise, so the iterate has converged.
+    Negligible,
 }
 
 /// Applies z + δ (projected on the bounds). With step halving, halves δ while the cost rises
@@ -133,7 +137,12 @@ fn update<S: System>(
     counts: &mut Counts,
 ) -> Update {
     let mut scale = 1.0;
+    let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let negligible = opts.step_tolerance * (z_norm + opts.step_tolerance);
     for _ in 0..=opts.max_halvings {
+        if scale < 1.0 && scale * delta.norm() <= negligible {
+            return Update::Negligible;
+        }
         let mut trial: Vec<f64> = z.iter().zip(delta).map(|(z, d)| z + scale * d).collect();
         problem.unknowns().project(&mut trial);
         match problem.linearize(&trial) {
