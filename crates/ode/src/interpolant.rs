@@ -66,73 +66,137 @@ impl Interpolant {
 
     /// Writes components `first .. first + out.len()` of the solution at s into `out`.
     pub fn eval_range(&self, s: f64, first: usize, out: &mut [f64]) {
-        let theta = if self.h == 0.0 { 0.0 } else { (s - self.t) / self.h };
-        let theta1 = 1.0 - theta;
-        let d = self.dim;
-        let c = &self.coefficients;
-        for (k, o) in out.iter_mut().enumerate() {
-            let i = first + k;
-            *o = c[i]
-                + theta
-                    * (c[d + i]
-                        + theta1 * (c[2 * d + i] + theta * (c[3 * d + i] + theta1 * c[4 * d + i])));
-        }
+        evaluate(self.t, self.t_end, self.dim, &self.coefficients, s, first, out);
     }
 }
 
 /// A stored solution: the interpolants of every accepted step, evaluable at any time in the
 /// integrated span. Used where a trajectory is needed as a function (quasilinearization's
-/// iterate, predictions).
+/// iterate, predictions). Coefficients are kept in one flat vector, so storing a step
+/// allocates only when the vector grows.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DenseSolution {
-    /// Steps in increasing time (backward steps are stored in increasing time too).
-    steps: Vec<Interpolant>,
+    dim: usize,
+    /// (start, end) of each step as integrated (end < start for a backward step), in
+    /// increasing time once finished.
+    spans: Vec<(f64, f64)>,
+    /// 5·dim coefficients per step (r₁..r₅ of [`Interpolant`]).
+    coefficients: Vec<f64>,
 }
 
 impl DenseSolution {
-    /// An empty solution.
-    pub fn new() -> Self {
-        Self::default()
+    /// An empty solution of vectors of length `dim`.
+    pub fn new(dim: usize) -> Self {
+        Self { dim, spans: Vec::new(), coefficients: Vec::new() }
     }
 
-    /// Adds a step. Steps may arrive in any order; call [`finish`](Self::finish) afterwards.
+    /// Length of the vectors.
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    /// Adds a step. Forward steps arrive in increasing time, backward ones in decreasing
+    /// time; call [`finish`](Self::finish) after integrating in both directions.
     pub fn push(&mut self, step: &Interpolant) {
-        self.steps.push(step.clone());
+        debug_assert_eq!(step.dim, self.dim);
+        self.spans.push((step.t, step.t_end));
+        self.coefficients.extend_from_slice(&step.coefficients);
     }
 
-    /// Sorts the steps by time. Needed after integrating in both directions.
+    /// Puts the steps in increasing time.
     pub fn finish(&mut self) {
-        self.steps.sort_by(|a, b| a.bounds().0.total_cmp(&b.bounds().0));
+        let mut order: Vec<usize> = (0..self.spans.len()).collect();
+        order.sort_by(|&a, &b| lower(self.spans[a]).total_cmp(&lower(self.spans[b])));
+        let w = 5 * self.dim;
+        let spans = order.iter().map(|&i| self.spans[i]).collect();
+        let mut coefficients = Vec::with_capacity(self.coefficients.len());
+        for &i in &order {
+            coefficients.extend_from_slice(&self.coefficients[i * w..(i + 1) * w]);
+        }
+        self.spans = spans;
+        self.coefficients = coefficients;
     }
 
     /// The span covered, if any step is stored.
     pub fn span(&self) -> Option<(f64, f64)> {
-        Some((self.steps.first()?.bounds().0, self.steps.last()?.bounds().1))
+        Some((lower(*self.spans.first()?), upper(*self.spans.last()?)))
     }
 
-    /// The stored steps, in increasing time.
-    pub fn steps(&self) -> &[Interpolant] {
-        &self.steps
+    /// Number of stored steps.
+    pub fn len(&self) -> usize {
+        self.spans.len()
+    }
+
+    /// Whether no step is stored.
+    pub fn is_empty(&self) -> bool {
+        self.spans.is_empty()
     }
 
     /// Writes the solution at t into `out`, or returns `false` if t is outside the span.
     pub fn eval(&self, t: f64, out: &mut [f64]) -> bool {
-        match self.step_at(t) {
-            Some(step) => {
-                step.eval(t, out);
-                true
-            }
-            None => false,
-        }
+        let mut hint = self.spans.len() / 2;
+        self.eval_hinted(t, &mut hint, out)
     }
 
-    /// The step whose span contains t.
-    pub fn step_at(&self, t: f64) -> Option<&Interpolant> {
-        let (lo, hi) = self.span()?;
-        if !(lo..=hi).contains(&t) {
-            return None;
+    /// Like [`eval`](Self::eval), starting the search at the step `hint` (updated): O(1)
+    /// for the nearby, mostly monotone times an integrator asks for.
+    pub fn eval_hinted(&self, t: f64, hint: &mut usize, out: &mut [f64]) -> bool {
+        let n = self.spans.len();
+        if n == 0 {
+            return false;
         }
-        let i = self.steps.partition_point(|s| s.bounds().1 < t);
-        self.steps.get(i.min(self.steps.len() - 1))
+        let inside = |i: usize| lower(self.spans[i]) <= t && t <= upper(self.spans[i]);
+        let i = (*hint).min(n - 1);
+        let found = if inside(i) {
+            Some(i)
+        } else if i + 1 < n && inside(i + 1) {
+            Some(i + 1)
+        } else if i > 0 && inside(i - 1) {
+            Some(i - 1)
+        } else if lower(self.spans[0]) <= t && t <= upper(self.spans[n - 1]) {
+            Some(self.spans.partition_point(|&s| upper(s) < t).min(n - 1))
+        } else {
+            None
+        };
+        let Some(i) = found else { return false };
+        *hint = i;
+        let (a, b) = self.spans[i];
+        let w = 5 * self.dim;
+        evaluate(a, b, self.dim, &self.coefficients[i * w..(i + 1) * w], t, 0, out);
+        true
+    }
+
+    /// The same solution under a linear map L of its vectors: `map(x, out)` writes L x (of
+    /// length `dim`). Exact, because the interpolants are linear in their coefficients.
+    pub fn map(&self, dim: usize, mut map: impl FnMut(&[f64], &mut [f64])) -> DenseSolution {
+        let mut coefficients = vec![0.0; self.spans.len() * 5 * dim];
+        for (r, o) in self.coefficients.chunks(self.dim).zip(coefficients.chunks_mut(dim)) {
+            map(r, o);
+        }
+        DenseSolution { dim, spans: self.spans.clone(), coefficients }
+    }
+}
+
+fn lower((a, b): (f64, f64)) -> f64 {
+    a.min(b)
+}
+
+fn upper((a, b): (f64, f64)) -> f64 {
+    a.max(b)
+}
+
+/// Evaluates the interpolation polynomial of a step from a to b with coefficients r₁..r₅ (each of
+/// length `dim`, stored one after another) at s, components `first..first + out.len()`.
+fn evaluate(a: f64, b: f64, dim: usize, c: &[f64], s: f64, first: usize, out: &mut [f64]) {
+    let h = b - a;
+    let theta = if h == 0.0 { 0.0 } else { (s - a) / h };
+    let theta1 = 1.0 - theta;
+    for (k, o) in out.iter_mut().enumerate() {
+        let i = first + k;
+        *o = c[i]
+            + theta
+                * (c[dim + i]
+                    + theta1
+                        * (c[2 * dim + i] + theta * (c[3 * dim + i] + theta1 * c[4 * dim + i])));
     }
 }

@@ -1,12 +1,12 @@
 //! Initial-value problems of a [`System`]: the solution and its forward sensitivities
 //! (Goodman 1966, eq. 6–7) at given times, on both sides of the initial time.
 
-use nalgebra::{Const, DMatrix, DMatrixView, Dyn, SVector, U1};
-use num_dual::{Derivative, Dual64, DualSVec64};
+use nalgebra::{DMatrix, DMatrixView, Dyn};
 
 use crate::driver::{Counts, Rhs, integrate};
 use crate::error::OdeError;
 use crate::interpolant::{DenseSolution, Interpolant};
+use crate::jacobian::{Function, JacobianProducts};
 use crate::options::Integrator;
 use crate::signal::Side;
 use crate::system::{Observable, System};
@@ -133,114 +133,32 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
 }
 
 /// The model together with its variational equations dS/dt = J_y S + J_α (for parameter
-/// columns), on x = [y; S column by column]. The columns' right-hand sides come from
-/// evaluations of the model with vector dual numbers seeded by the columns, W columns per
-/// evaluation (W = k up to 8, then chunks of 8): J_y S + J_α without forming a Jacobian and
-/// without allocating. Systems with hand-written Jacobians use them instead.
+/// columns), on x = [y; S row by row]. J_y S + J_α comes from [`JacobianProducts`]: the
+/// model evaluated with vector dual numbers seeded by the rows of S and by unit seeds for
+/// the parameter columns, without forming a Jacobian and without allocating. Systems with
+/// hand-written Jacobians use them instead.
 pub struct SensitivityRhs<'a, S> {
     sys: &'a S,
     p: &'a [f64],
     wrt: &'a [Wrt],
     u: Vec<f64>,
-    duals: Duals,
+    /// J_y S + J_α with the unit parameter directions of the parameter columns.
+    products: JacobianProducts,
     jy: DMatrix<f64>,
     jp: DMatrix<f64>,
 }
 
-/// Dual-number work space of one chunk width (a const generic, chosen at run time).
-struct Chunked<const W: usize> {
-    /// Number of sensitivity columns k.
-    k: usize,
-    yd: Vec<DualSVec64<W>>,
-    dyd: Vec<DualSVec64<W>>,
-    /// Per chunk: the parameters, seeded with the chunk's parameter columns (constant
-    /// during an integration).
-    pd: Vec<Vec<DualSVec64<W>>>,
-}
-
-impl<const W: usize> Chunked<W> {
-    fn new(n: usize, p: &[f64], wrt: &[Wrt]) -> Self {
-        let zero = DualSVec64::<W>::from_re(0.0);
-        let pd = wrt
-            .chunks(W)
-            .map(|chunk| {
-                (0..p.len())
-                    .map(|k| {
-                        let mut seed = SVector::<f64, W>::zeros();
-                        for (j, w) in chunk.iter().enumerate() {
-                            if *w == Wrt::Parameter(k) {
-                                seed[j] = 1.0;
-                            }
-                        }
-                        DualSVec64::new(p[k], Derivative::some(seed))
-                    })
-                    .collect()
-            })
-            .collect();
-        Self { k: wrt.len(), yd: vec![zero; n], dyd: vec![zero; n], pd }
-    }
-
-    /// dy and dS for every column, W columns per model evaluation.
-    fn eval<S: System>(&mut self, sys: &S, t: f64, u: &[f64], x: &[f64], dx: &mut [f64]) {
-        let (n, k) = (self.yd.len(), self.k);
-        let (y, s) = x.split_at(n);
-        let (dy, ds) = dx.split_at_mut(n);
-        for (c, pd) in self.pd.iter().enumerate() {
-            let first = c * W;
-            let width = W.min(k - first);
-            // Copies of compile-time length for a full chunk (the usual case): no memcpy call.
-            let full = width == W;
-            for (i, yd) in self.yd.iter_mut().enumerate() {
-                let at = i * k + first;
-                let seed = if full {
-                    let row: [f64; W] = s[at..at + W].try_into().expect("a full chunk");
-                    SVector::from(row)
-                } else {
-                    SVector::from_fn(|j, _| if j < width { s[at + j] } else { 0.0 })
-                };
-                *yd = DualSVec64::new(y[i], Derivative::some(seed));
-            }
-            sys.rhs(t, &self.yd, pd, u, &mut self.dyd);
-            for (i, d) in self.dyd.iter().enumerate() {
-                let eps = d.eps.unwrap_generic(Const::<W>, U1);
-                let at = i * k + first;
-                if full {
-                    let out: &mut [f64; W] =
-                        (&mut ds[at..at + W]).try_into().expect("a full chunk");
-                    *out = eps.into();
-                } else {
-                    ds[at..at + width].copy_from_slice(&eps.as_slice()[..width]);
-                }
-                if c == 0 {
-                    dy[i] = d.re;
-                }
-            }
+/// The n_α × k unit seeds of the parameter columns, row by row.
+fn parameter_seeds(np: usize, wrt: &[Wrt]) -> Vec<f64> {
+    let k = wrt.len();
+    let mut seeds = vec![0.0; np * k];
+    for (j, w) in wrt.iter().enumerate() {
+        if let Wrt::Parameter(q) = *w {
+            seeds[q * k + j] = 1.0;
         }
     }
+    seeds
 }
-
-macro_rules! duals {
-    ($($w:literal => $variant:ident),*) => {
-        enum Duals { None, $($variant(Chunked<$w>)),* }
-
-        impl Duals {
-            fn new(n: usize, p: &[f64], wrt: &[Wrt]) -> Self {
-                match wrt.len() {
-                    0 => Duals::None,
-                    $($w => Duals::$variant(Chunked::new(n, p, wrt)),)*
-                    _ => Duals::W8(Chunked::new(n, p, wrt)),
-                }
-            }
-            fn eval<S: System>(&mut self, sys: &S, t: f64, u: &[f64], x: &[f64], dx: &mut [f64]) {
-                match self {
-                    Duals::None => {}
-                    $(Duals::$variant(c) => c.eval(sys, t, u, x, dx),)*
-                }
-            }
-        }
-    };
-}
-duals!(1 => W1, 2 => W2, 3 => W3, 4 => W4, 5 => W5, 6 => W6, 7 => W7, 8 => W8);
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
     /// The augmented right-hand side of `sys` at parameters `p`, columns `wrt`.
@@ -255,7 +173,13 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
             p,
             wrt,
             u: vec![0.0; sig.n_inputs()],
-            duals: if analytic { Duals::None } else { Duals::new(n, p, wrt) },
+            products: JacobianProducts::new(
+                n,
+                p,
+                &parameter_seeds(np, wrt),
+                n,
+                if analytic { 0 } else { wrt.len() },
+            ),
             jy: DMatrix::zeros(jn, jn),
             jp: DMatrix::zeros(jn, jnp),
         }
@@ -288,12 +212,13 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
             self.sys.rhs(t, x, self.p, &self.u, dx);
             return;
         }
-        if !self.sys.analytic_jacobians() {
-            self.duals.eval(self.sys, t, &self.u, x, dx);
-            return;
-        }
         let (y, s) = x.split_at(n);
         let (dy, ds) = dx.split_at_mut(n);
+        if !self.sys.analytic_jacobians() {
+            let args = (t, y, self.u.as_slice());
+            self.products.eval(self.sys, Function::Rhs, args, s, dy, ds);
+            return;
+        }
         self.sys.rhs(t, y, self.p, &self.u, dy);
         self.sys.jacobians(t, y, self.p, &self.u, &mut self.jy, &mut self.jp);
         let k = self.wrt.len();
@@ -420,7 +345,7 @@ impl<'a, S: System> Ivp<'a, S> {
         wrt: &[Wrt],
         span: (f64, f64),
     ) -> Result<(DenseSolution, Counts), OdeError> {
-        let mut solution = DenseSolution::new();
+        let mut solution = DenseSolution::new(self.y0.len() * (1 + wrt.len()));
         let counts = self.integrate_steps(integrator, wrt, span, |s| solution.push(s))?;
         solution.finish();
         Ok((solution, counts))
@@ -514,63 +439,47 @@ pub(crate) fn sample<R: Rhs>(
 /// (parameter columns), exact by dual numbers for outputs that are not states.
 pub struct ObservableGradient<'a, S> {
     sys: &'a S,
-    p: &'a [f64],
-    wrt: &'a [Wrt],
     u: Vec<f64>,
-    yf: Vec<f64>,
-    hf: Vec<f64>,
-    yd: Vec<Dual64>,
-    pd: Vec<Dual64>,
-    hd: Vec<Dual64>,
+    products: JacobianProducts,
+    h: Vec<f64>,
+    dh: Vec<f64>,
 }
 
 impl<'a, S: System> ObservableGradient<'a, S> {
     /// For `sys` at parameters `p`, sensitivity columns `wrt`.
     pub fn new(sys: &'a S, p: &'a [f64], wrt: &'a [Wrt]) -> Self {
         let sig = sys.signature();
-        let (n, no) = (sig.n_states(), sig.outputs().len());
+        let (n, np, no) = (sig.n_states(), sig.n_parameters(), sig.outputs().len());
         Self {
             sys,
-            p,
-            wrt,
             u: vec![0.0; sig.n_inputs()],
-            yf: vec![0.0; n],
-            hf: vec![0.0; no],
-            yd: vec![Dual64::from_re(0.0); n],
-            pd: p.iter().map(|&v| Dual64::from_re(v)).collect(),
-            hd: vec![Dual64::from_re(0.0); no],
+            products: JacobianProducts::new(
+                n,
+                p,
+                &parameter_seeds(np, wrt),
+                no,
+                if no > 0 { wrt.len() } else { 0 },
+            ),
+            h: vec![0.0; no],
+            dh: vec![0.0; no * wrt.len()],
         }
     }
 
     /// The value of `obs` at (t, y) and its gradient row ∂h/∂z in `grad` (length k), given
     /// S(t) row by row in `s`.
     pub fn eval(&mut self, t: f64, y: &[f64], s: &[f64], obs: Observable, grad: &mut [f64]) -> f64 {
-        let n = y.len();
+        let k = grad.len();
         match obs {
             Observable::State(i) => {
-                let k = grad.len();
                 grad.copy_from_slice(&s[i * k..(i + 1) * k]);
                 y[i]
             }
             Observable::Output(o) => {
                 self.sys.input_values(t, Side::After, &mut self.u);
-                self.yf.copy_from_slice(y);
-                self.sys.outputs(t, &self.yf, self.p, &self.u, &mut self.hf);
-                let k = self.wrt.len();
-                for (j, w) in self.wrt.iter().enumerate() {
-                    for i in 0..n {
-                        self.yd[i] = Dual64::new(y[i], s[i * k + j]);
-                    }
-                    if let Wrt::Parameter(k) = *w {
-                        self.pd[k].eps = 1.0;
-                    }
-                    self.sys.outputs(t, &self.yd, &self.pd, &self.u, &mut self.hd);
-                    if let Wrt::Parameter(k) = *w {
-                        self.pd[k].eps = 0.0;
-                    }
-                    grad[j] = self.hd[o].eps;
-                }
-                self.hf[o]
+                let args = (t, y, self.u.as_slice());
+                self.products.eval(self.sys, Function::Outputs, args, s, &mut self.h, &mut self.dh);
+                grad.copy_from_slice(&self.dh[o * k..(o + 1) * k]);
+                self.h[o]
             }
         }
     }

@@ -46,6 +46,7 @@ mod driver;
 mod error;
 mod interpolant;
 mod ivp;
+mod jacobian;
 mod options;
 mod quadrature;
 mod signal;
@@ -59,6 +60,7 @@ pub use ivp::{
     Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory, Wrt,
     check_times, wrt_name,
 };
+pub use jacobian::{Function, JacobianProducts};
 pub use options::{Integrator, Scheme};
 pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput};
 pub use signal::{Inputs, Interpolation, Side, Signal};

@@ -271,3 +271,30 @@ fn every_output_time_is_filled_even_when_t_plus_h_rounds_past_it() {
         assert_close_abs(sol.state(m)[0], exact, 1e-12);
     }
 }
+
+#[test]
+fn dense_solution_on_both_sides_evaluates_and_maps_exactly() {
+    // Stored steps of a two-sided integration against the closed form, by plain and hinted
+    // lookups, and a linear map of the stored solution against the map of the values.
+    let sys = Oscillator::new(false);
+    let (solution, _) = Ivp::new(&sys, 1.0, &[1.0, 0.5], &[2.0])
+        .dense(&Integrator::dopri5(1e-10, 1e-12), &[], (-2.0, 4.0))
+        .unwrap();
+    assert_eq!(solution.span(), Some((-2.0, 4.0)));
+    let mut hint = 0;
+    let mut out = [0.0; 2];
+    let mut mapped_out = [0.0];
+    let mapped = solution.map(1, |x, o| o[0] = 3.0 * x[0] - x[1]);
+    for i in 0..=600 {
+        let t = -2.0 + 0.01 * i as f64;
+        let (x, v, _, _) = Oscillator::exact(1.0, 0.5, 2.0, t - 1.0);
+        assert!(solution.eval_hinted(t, &mut hint, &mut out));
+        assert_close_abs(out[0], x, 1e-8);
+        assert_close_abs(out[1], v, 2e-8);
+        assert!(solution.eval(t, &mut out));
+        assert_close_abs(out[0], x, 1e-8);
+        assert!(mapped.eval(t, &mut mapped_out));
+        assert_close_abs(mapped_out[0], 3.0 * out[0] - out[1], 1e-13);
+    }
+    assert!(!solution.eval(4.5, &mut out));
+}
