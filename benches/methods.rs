@@ -11,6 +11,7 @@ use sysid::core::Method;
 use sysid::gauss_newton::GaussNewton;
 use sysid::goodman::{Goodman, GoodmanOptions};
 use sysid::ode::System;
+use sysid::quasilinearization::Quasilinearization;
 use sysid::systems::{self, Case, Visit};
 
 /// Every method of the comparison, by its command-line name.
@@ -24,6 +25,8 @@ fn methods<S: System>() -> Vec<(&'static str, Box<dyn Method<S>>)> {
         ("gauss-newton", Box::new(GaussNewton::plain())),
         ("gauss-newton-ls", Box::new(GaussNewton::line_search())),
         ("gauss-newton-fd", Box::new(GaussNewton::finite_differences())),
+        ("quasilinearization", Box::new(Quasilinearization::default())),
+        ("quasilinearization-data", Box::new(Quasilinearization::from_data())),
     ]
 }
 

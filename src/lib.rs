@@ -7,6 +7,7 @@
 //! * [`core`] (`sysid-core`): problems, unknowns, data, estimates, the `Method` trait;
 //! * [`goodman`] (`sysid-goodman`): Goodman's 1966 Newton iteration;
 //! * [`gauss_newton`] (`sysid-gauss-newton`): the Gauss–Newton baseline on argmin;
+//! * [`quasilinearization`] (`sysid-quasilinearization`): Bellman–Kagiwada–Kalaba's method;
 //! * [`systems`] (`sysid-systems`): the benchmark catalogue.
 #![warn(missing_docs)]
 
@@ -14,6 +15,7 @@ pub use sysid_core as core;
 pub use sysid_gauss_newton as gauss_newton;
 pub use sysid_goodman as goodman;
 pub use sysid_ode as ode;
+pub use sysid_quasilinearization as quasilinearization;
 pub use sysid_systems as systems;
 
 /// The names most programs need.
@@ -22,4 +24,5 @@ pub mod prelude {
     pub use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions};
     pub use sysid_goodman::{Goodman, GoodmanOptions};
     pub use sysid_ode::{Integrator, Scalar, Signature, System};
+    pub use sysid_quasilinearization::{Quasilinearization, QuasilinearizationOptions};
 }

@@ -7,7 +7,7 @@ use sysid_ode::System;
 use sysid_systems::{Case, Visit};
 
 use crate::format::significant;
-use crate::methods::{Common, default_methods, method, parse_list};
+use crate::methods::{Common, QlStart, default_methods, method, parse_list};
 use crate::{Format, Outcome};
 
 /// Arguments of `sysid compare`.
@@ -28,6 +28,9 @@ pub struct CompareArgs {
     /// Output format: tables, or a JSON list of fit objects.
     #[arg(long, value_enum, default_value_t = Format::Table)]
     format: Format,
+    /// First trajectory of quasilinearization: the model from the guess, or the data.
+    #[arg(long, value_enum, default_value_t = QlStart::Guess)]
+    ql_start: QlStart,
     /// Most updates of the unknowns, for every method.
     #[arg(long, value_name = "N")]
     max_iterations: Option<usize>,
@@ -55,7 +58,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         let visit = CompareCase {
             methods: &methods,
             seed: args.seed,
-            common: Common { max_iterations: args.max_iterations },
+            common: Common { max_iterations: args.max_iterations, ql_start: args.ql_start },
         };
         let (table, records) = sysid_systems::visit(system, visit).ok_or_else(|| {
             anyhow!("unknown system `{system}` (systems: {})", sysid_systems::NAMES.join(", "))

@@ -7,7 +7,7 @@ use sysid_ode::System;
 use sysid_systems::{Case, Visit};
 
 use crate::format::significant;
-use crate::methods::{Common, METHODS, method};
+use crate::methods::{Common, METHODS, QlStart, method};
 use crate::{Format, Outcome};
 
 /// Arguments of `sysid fit`.
@@ -16,7 +16,8 @@ pub struct FitArgs {
     /// The catalogue system to identify (`sysid systems` lists them).
     #[arg(long, value_name = "NAME")]
     system: String,
-    /// The method: goodman, goodman-halving, gauss-newton, gauss-newton-ls, gauss-newton-fd.
+    /// The method: goodman, goodman-halving, gauss-newton, gauss-newton-ls, gauss-newton-fd,
+    /// quasilinearization, quasilinearization-data.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]
     method: String,
     /// Output format.
@@ -25,6 +26,9 @@ pub struct FitArgs {
     /// Seed of the synthetic data (systems with fixed data ignore it).
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// First trajectory of quasilinearization: the model from the guess, or the data.
+    #[arg(long, value_enum, default_value_t = QlStart::Guess)]
+    ql_start: QlStart,
     /// Most updates of the unknowns.
     #[arg(long, value_name = "N")]
     max_iterations: Option<usize>,
@@ -52,7 +56,10 @@ impl Visit for FitCase<'_> {
 
     fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
         let args = self.args;
-        let method = method::<S>(&args.method, Common { max_iterations: args.max_iterations })?;
+        let method = method::<S>(
+            &args.method,
+            Common { max_iterations: args.max_iterations, ql_start: args.ql_start },
+        )?;
         let mut problem =
             case.problem(args.seed).with_context(|| format!("system {}", case.name))?;
         if args.rtol.is_some() || args.atol.is_some() {

@@ -4,6 +4,7 @@ use sysid_core::Method;
 use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
 use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_ode::System;
+use sysid_quasilinearization::{Quasilinearization, QuasilinearizationOptions, Start};
 
 /// Method names and what they are, in the order tables list them.
 pub const METHODS: &[(&str, &str)] = &[
@@ -12,6 +13,11 @@ pub const METHODS: &[(&str, &str)] = &[
     ("gauss-newton", "argmin Gauss–Newton, full steps, Jacobian from sensitivities"),
     ("gauss-newton-ls", "argmin Gauss–Newton with Armijo line search, Jacobian from sensitivities"),
     ("gauss-newton-fd", "argmin Gauss–Newton with line search, forward-difference Jacobian"),
+    (
+        "quasilinearization",
+        "Bellman–Kagiwada–Kalaba 1963: iterate on trajectories of the linearised model",
+    ),
+    ("quasilinearization-data", "quasilinearization starting from the data for measured states"),
 ];
 
 /// The methods `compare` runs by default.
@@ -24,16 +30,34 @@ pub fn default_methods() -> Vec<&'static str> {
 pub struct Common {
     /// Iteration budget, if given.
     pub max_iterations: Option<usize>,
+    /// The first trajectory of `quasilinearization`.
+    pub ql_start: QlStart,
+}
+
+/// `--ql-start`: the first trajectory of quasilinearization.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum QlStart {
+    /// The model integrated from the starting guess.
+    #[default]
+    Guess,
+    /// The data for measured states, the guess's trajectory for the others.
+    Data,
 }
 
 /// The method called `name`.
 pub fn method<S: System>(name: &str, common: Common) -> anyhow::Result<Box<dyn Method<S>>> {
     let mut goodman = GoodmanOptions::default();
     let mut gn = GaussNewtonOptions::default();
+    let mut ql = QuasilinearizationOptions::default();
     if let Some(m) = common.max_iterations {
         goodman.max_iterations = m;
         gn.max_iterations = m as u64;
+        ql.max_iterations = m;
     }
+    let ql_start = match common.ql_start {
+        QlStart::Guess => Start::Guess,
+        QlStart::Data => Start::Data,
+    };
     Ok(match name {
         "goodman" => Box::new(Goodman::new(goodman)),
         "goodman-halving" => Box::new(Goodman::new(goodman.with_step_halving(true))),
@@ -46,6 +70,8 @@ pub fn method<S: System>(name: &str, common: Common) -> anyhow::Result<Box<dyn M
             jacobian: JacobianSource::FiniteDifferences,
             ..gn
         })),
+        "quasilinearization" => Box::new(Quasilinearization::new(ql.with_start(ql_start))),
+        "quasilinearization-data" => Box::new(Quasilinearization::new(ql.with_start(Start::Data))),
         _ => anyhow::bail!(
             "unknown method `{name}` (methods: {})",
             METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")

@@ -142,7 +142,15 @@ fn compare_lists_every_method_as_json() {
     let methods: Vec<&str> = fits.iter().map(|f| f["method"].as_str().unwrap()).collect();
     assert_eq!(
         methods,
-        ["goodman", "goodman-halving", "gauss-newton", "gauss-newton-ls", "gauss-newton-fd"]
+        [
+            "goodman",
+            "goodman-halving",
+            "gauss-newton",
+            "gauss-newton-ls",
+            "gauss-newton-fd",
+            "quasilinearization",
+            "quasilinearization-data"
+        ]
     );
     for f in fits {
         assert_eq!(f["system"], "van-der-pol");
@@ -197,4 +205,44 @@ fn simulate_writes_reproducible_csv() {
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(written.starts_with("t,alpha,q\n"));
     assert_eq!(written.lines().count(), 1 + 201);
+}
+
+#[test]
+fn quasilinearization_from_the_cli() {
+    let out = sysid(&[
+        "fit",
+        "--system",
+        "van-der-pol-three-point",
+        "--method",
+        "quasilinearization",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["method"], "quasilinearization");
+    for (name, value) in [("x", -1.74176832436092), ("v", 0.624666163677364), ("mu", 1.0)] {
+        assert!(
+            (json["estimates"][name].as_f64().unwrap() - value).abs() < 1e-8 * value.abs(),
+            "{name}"
+        );
+    }
+    assert!(json["cost"].as_f64().unwrap() < 1e-20);
+    assert!(json["history"][1]["linear_cost"].as_f64().is_some());
+    // --ql-start data on lotka-volterra converges where the guess's trajectory does not.
+    let out = sysid(&[
+        "fit",
+        "--system",
+        "lotka-volterra",
+        "--method",
+        "quasilinearization",
+        "--ql-start",
+        "data",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["method"], "quasilinearization-data");
+    assert!((json["estimates"]["a"].as_f64().unwrap() - 1.5).abs() < 0.05);
 }

@@ -102,6 +102,9 @@ pub struct Iteration {
     pub condition: Option<f64>,
     /// The unknowns at the iterate (values).
     pub values: Vec<f64>,
+    /// Quasilinearization: ε of the linear family whose optimum gave this iterate (ε above
+    /// is that of the nonlinear model re-integrated from the iterate). None for other methods.
+    pub linear_cost: Option<f64>,
 }
 
 /// The estimate of the unknowns with its uncertainty and the record of the run.
@@ -184,12 +187,15 @@ impl Serialize for Num {
 
 impl Serialize for Iteration {
     fn serialize<Z: Serializer>(&self, s: Z) -> Result<Z::Ok, Z::Error> {
-        let mut st = s.serialize_struct("Iteration", 5)?;
+        let mut st = s.serialize_struct("Iteration", 6)?;
         st.serialize_field("iteration", &self.iteration)?;
         st.serialize_field("cost", &Num(self.cost))?;
         st.serialize_field("step_norm", &self.step_norm.map(Num))?;
         st.serialize_field("gradient_norm", &Num(self.gradient_norm))?;
         st.serialize_field("condition", &self.condition.map(Num))?;
+        if let Some(c) = self.linear_cost {
+            st.serialize_field("linear_cost", &Num(c))?;
+        }
         st.end()
     }
 }

@@ -48,27 +48,36 @@ enum Plan {
     },
 }
 
-/// Measured values at discrete times, each with the square root of its weight: discrete data
-/// (weight w_o), or a record at quadrature nodes (weight w_o times the node's weight).
+/// The data in residual form: measured values at discrete times, each with the square root
+/// of its weight. Discrete data as given (weight w_o); a continuous record at the nodes of a
+/// composite Gauss–Legendre rule (weight w_o times the node's weight), so that
+/// Σ (√w (h − b))² is the quadrature of ε.
 #[derive(Clone, Debug)]
-struct Sampled {
+pub struct Sampled {
     /// All times, sorted, without repeats.
-    times: Vec<f64>,
-    series: Vec<PlannedSeries>,
+    pub times: Vec<f64>,
+    /// One entry per measured quantity.
+    pub series: Vec<PlannedSeries>,
 }
 
+/// The samples of one measured quantity in residual form.
 #[derive(Clone, Debug)]
-struct PlannedSeries {
-    observable: Observable,
-    samples: Vec<Sample>,
+pub struct PlannedSeries {
+    /// What is measured.
+    pub observable: Observable,
+    /// Its samples.
+    pub samples: Vec<Sample>,
 }
 
+/// One measured value: row √w (h(t) − b) of the residual vector.
 #[derive(Clone, Copy, Debug)]
-struct Sample {
-    /// Index into the sorted times.
-    index: usize,
-    value: f64,
-    sqrt_weight: f64,
+pub struct Sample {
+    /// Index into [`Sampled::times`].
+    pub index: usize,
+    /// The measured value b.
+    pub value: f64,
+    /// √w.
+    pub sqrt_weight: f64,
 }
 
 /// Panels per record span of a record given as a function, in its residual form.
@@ -171,6 +180,16 @@ impl<S: System> Problem<S> {
     pub fn integrator(&self) -> &Integrator {
         &self.integrator
     }
+    /// The time span a fit integrates over: the data (the record's span for continuous
+    /// data) together with t0.
+    pub fn span(&self) -> (f64, f64) {
+        let (lo, hi) = match &self.plan {
+            Plan::Discrete(s) => (s.times[0], s.times[s.times.len() - 1]),
+            Plan::Continuous { span, .. } => *span,
+        };
+        (lo.min(self.t0), hi.max(self.t0))
+    }
+
     /// Number of measured values (None for a record given as a function).
     pub fn n_observations(&self) -> Option<usize> {
         self.data.n_observations()
@@ -254,7 +273,8 @@ impl<S: System> Problem<S> {
         self.linearize_sampled(self.sampled(), z)
     }
 
-    fn sampled(&self) -> &Sampled {
+    /// The data in residual form (the rows of [`residuals`](Self::residuals)).
+    pub fn sampled(&self) -> &Sampled {
         match &self.plan {
             Plan::Discrete(sampled) => sampled,
             Plan::Continuous { nodes, .. } => nodes,
@@ -306,18 +326,31 @@ impl<S: System> Problem<S> {
         })
     }
 
-    /// ε at z, without sensitivities (the integral itself for a continuous record).
+    /// The integrator of [`cost`](Self::cost): the problem's, 100 times tighter. A plain
+    /// integration controls the error of the states only and so takes longer steps than one
+    /// with sensitivities; tightening it keeps ε as accurate as the fits' own evaluations.
+    fn cost_integrator(&self) -> Integrator {
+        Integrator {
+            rtol: self.integrator.rtol / 100.0,
+            atol: self.integrator.atol / 100.0,
+            ..self.integrator
+        }
+    }
+
+    /// ε at z by a plain integration of the model, with the tolerances 100 times tighter than
+    /// the fits use, so that every method's iterates are compared on one accurate measure
+    /// (the integral itself for a continuous record).
     pub fn cost(&self, z: &[f64]) -> Result<(f64, Counts), OdeError> {
         let (span, outputs) = match &self.plan {
             Plan::Discrete(_) => {
-                let (r, counts) = self.residuals(z)?;
+                let (r, counts) = self.residuals_with(&self.cost_integrator(), z)?;
                 return Ok((r.norm_squared(), counts));
             }
             Plan::Continuous { span, outputs, .. } => (*span, outputs),
         };
         let (y0, p) = self.point(z);
         let q = Ivp::new(&self.system, self.t0, &y0, &p).least_squares_integrals(
-            &self.integrator,
+            &self.cost_integrator(),
             &[],
             outputs,
             span,
@@ -337,10 +370,18 @@ impl<S: System> Problem<S> {
     /// The weighted residual vector at z, without sensitivities: the rows of
     /// [`residuals_and_jacobian`](Self::residuals_and_jacobian).
     pub fn residuals(&self, z: &[f64]) -> Result<(DVector<f64>, Counts), OdeError> {
+        self.residuals_with(&self.integrator, z)
+    }
+
+    fn residuals_with(
+        &self,
+        integrator: &Integrator,
+        z: &[f64],
+    ) -> Result<(DVector<f64>, Counts), OdeError> {
         let plan = self.sampled();
         let (y0, p) = self.point(z);
         let times = &plan.times;
-        let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve(&self.integrator, times)?;
+        let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve(integrator, times)?;
         let mut og = ObservableGradient::new(&self.system, &p, &[]);
         let rows: usize = plan.series.iter().map(|s| s.samples.len()).sum();
         let mut r = DVector::zeros(rows);

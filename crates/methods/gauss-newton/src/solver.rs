@@ -226,6 +226,7 @@ fn history<S: System>(
                     .and_then(|l| NormalFactor::new(&l.normal, f64::INFINITY).ok())
                     .map(|f| f.condition()),
                 values: problem.unknowns().values(z),
+                linear_cost: None,
             }
         })
         .collect()

@@ -61,6 +61,7 @@ impl<S: System> Method<S> for Goodman {
                 step_norm,
                 condition: None,
                 values: problem.unknowns().values(&z),
+                linear_cost: None,
             });
             if lin.cost == 0.0 {
                 break Termination::Converged(Convergence::ExactFit);

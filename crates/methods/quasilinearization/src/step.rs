@@ -1,0 +1,287 @@
+//! One iteration of quasilinearization (Bellman, Kagiwada & Kalaba 1963) in its own terms.
+//!
+//! Around the current trajectory x_k(t) the augmented model is linearised,
+//!
+//! x' = G(x_k) + J(x_k) (x − x_k),  J = ∂G/∂x along x_k,
+//!
+//! and its solutions are x(t) = p(t) + Φ(t) c with
+//!
+//! Φ' = J Φ,  Φ(t0) = unit columns of the unknowns,
+//! p' = G(x_k) + J(x_k)(p − x_k),  p(t0) = the known initial values (0 for unknowns),
+//!
+//! so c holds the unknowns' coordinates. BKK carry all N columns of Φ for the N components of
+//! the augmented state and fix the known ones; folding the known columns into p gives the
+//! same family with k columns. The parameter rows are constant (θ' = 0: p_θ = 0, Φ_θ = unit
+//! rows), so only the n state rows of p and Φ are integrated: n (1 + k) equations, with the
+//! products J·[Φ, p − x_k] from one dual-number evaluation per stage. c minimises ε of the
+//! linear family, a linear least-squares problem (QR, faer); x_{k+1} = p + Φ c is kept as a
+//! dense solution and linearised around next.
+
+use faer::linalg::solvers::SolveLstsq;
+use nalgebra::{DMatrix, DVector};
+use sysid_core::{Linearization, NormalFactor, Problem, Singular};
+use sysid_ode::{
+    Counts, DenseSolution, Function, JacobianProducts, Observable, OdeError, Rhs, Side, System,
+    integrate,
+};
+
+use crate::trajectory::{Layout, Trajectory};
+
+/// The linear system for [p; Φ] (state rows; Φ row by row) around x_k.
+struct LinearRhs<'a, S> {
+    sys: &'a S,
+    previous: &'a Trajectory,
+    hint: usize,
+    n: usize,
+    k: usize,
+    products: JacobianProducts,
+    u: Vec<f64>,
+    y: Vec<f64>,
+    vy: Vec<f64>,
+    g: Vec<f64>,
+    jv: Vec<f64>,
+}
+
+/// The directions of the parameters, n_α × (k + 1) row by row: column j < k is the θ row of
+/// Φ (a unit row for each unknown parameter) and column k is p_θ − θ_k = −θ_k, both mapped
+/// by dα/dθ (α itself on a log scale).
+fn parameter_directions(layout: &Layout, np: usize, z: &[f64]) -> Vec<f64> {
+    let kk = layout.k() + 1;
+    let mut vp = vec![0.0; np * kk];
+    for &(j, q, log) in &layout.parameters {
+        let scale = if log { z[j].exp() } else { 1.0 };
+        vp[q * kk + j] = scale;
+        vp[q * kk + layout.k()] = -scale * z[j];
+    }
+    vp
+}
+
+impl<'a, S: System> LinearRhs<'a, S> {
+    fn new(sys: &'a S, layout: &Layout, previous: &'a Trajectory, known: &[f64]) -> Self {
+        let sig = sys.signature();
+        let (n, k) = (layout.n, layout.k());
+        let p = layout.parameters(known, &previous.z);
+        let vp = parameter_directions(layout, p.len(), &previous.z);
+        Self {
+            sys,
+            previous,
+            hint: 0,
+            n,
+            k,
+            products: JacobianProducts::new(n, &p, &vp, n, k + 1),
+            u: vec![0.0; sig.n_inputs()],
+            y: vec![0.0; n],
+            vy: vec![0.0; n * (k + 1)],
+            g: vec![0.0; n],
+            jv: vec![0.0; n * (k + 1)],
+        }
+    }
+}
+
+impl<S: System> Rhs for LinearRhs<'_, S> {
+    fn dim(&self) -> usize {
+        self.n * (1 + self.k)
+    }
+
+    fn eval(&mut self, t: f64, side: Side, w: &[f64], dw: &mut [f64]) {
+        let (n, k) = (self.n, self.k);
+        let kk = k + 1;
+        self.previous.eval(t, &mut self.hint, &mut self.y);
+        self.sys.input_values(t, side, &mut self.u);
+        let (p, phi) = w.split_at(n);
+        // Directions [Φ | p − x_k], row by row.
+        for i in 0..n {
+            self.vy[i * kk..i * kk + k].copy_from_slice(&phi[i * k..(i + 1) * k]);
+            self.vy[i * kk + k] = p[i] - self.y[i];
+        }
+        let args = (t, self.y.as_slice(), self.u.as_slice());
+        self.products.eval(self.sys, Function::Rhs, args, &self.vy, &mut self.g, &mut self.jv);
+        let (dp, dphi) = dw.split_at_mut(n);
+        for i in 0..n {
+            dp[i] = self.g[i] + self.jv[i * kk + k];
+            dphi[i * k..(i + 1) * k].copy_from_slice(&self.jv[i * kk..i * kk + k]);
+        }
+    }
+
+    fn describe(&self, i: usize) -> String {
+        let sig = self.sys.signature();
+        if i < self.n {
+            format!("particular solution p of state {}", sig.states()[i])
+        } else {
+            let row = (i - self.n) / self.k;
+            format!("fundamental matrix Φ, row of state {}", sig.states()[row])
+        }
+    }
+}
+
+/// The integrated family: [p; Φ] as a function of time.
+pub struct Family {
+    /// p (n) followed by Φ (n × k, row by row).
+    pub dense: DenseSolution,
+    /// Work of the integration.
+    pub counts: Counts,
+}
+
+/// Integrates the linear system around `previous` from t0 over the problem's span.
+pub fn integrate_family<S: System>(
+    problem: &Problem<S>,
+    layout: &Layout,
+    previous: &Trajectory,
+) -> Result<Family, OdeError> {
+    let sys = problem.system();
+    let (n, k) = (layout.n, layout.k());
+    let (y0, known) = problem.point(&previous.z);
+    let mut rhs = LinearRhs::new(sys, layout, previous, &known);
+    // p(t0): the known initial values (unknown ones 0); Φ(t0): unit columns of the unknowns.
+    let mut w0 = vec![0.0; n * (1 + k)];
+    for (i, v) in y0.iter().enumerate() {
+        if !layout.state_of.contains(&Some(i)) {
+            w0[i] = *v;
+        }
+    }
+    for (j, s) in layout.state_of.iter().enumerate() {
+        if let Some(i) = *s {
+            w0[n + i * k + j] = 1.0;
+        }
+    }
+    let t0 = problem.t0();
+    let (t_lo, t_hi) = problem.span();
+    let mut dense = DenseSolution::new(w0.len());
+    let mut counts = Counts::default();
+    for t_end in [t_hi, t_lo] {
+        if (t_end - t0).abs() > 0.0 {
+            counts += integrate(
+                problem.integrator(),
+                &mut rhs,
+                (t0, &w0),
+                t_end,
+                sys.discontinuities(),
+                |s| dense.push(s),
+            )?
+            .0;
+        }
+    }
+    dense.finish();
+    Ok(Family { dense, counts })
+}
+
+/// The linear least-squares problem of a family: residuals a + B c (weighted rows).
+pub struct LeastSquares {
+    /// a.
+    pub a: DVector<f64>,
+    /// B.
+    pub b: DMatrix<f64>,
+}
+
+impl LeastSquares {
+    /// The rows of the family at the data: r = √w (h(x_k) + ∇h·(p + Φc − x_k) − b), which is
+    /// √w (p_i + Φ_i c − b) for a measured state.
+    pub fn new<S: System>(
+        problem: &Problem<S>,
+        layout: &Layout,
+        previous: &Trajectory,
+        family: &Family,
+    ) -> Self {
+        let sys = problem.system();
+        let sig = sys.signature();
+        let (n, k) = (layout.n, layout.k());
+        let kk = k + 1;
+        let sampled = problem.sampled();
+        let rows: usize = sampled.series.iter().map(|s| s.samples.len()).sum();
+        let (mut a, mut b) = (DVector::zeros(rows), DMatrix::zeros(rows, k));
+        // p and Φ at every sample time.
+        let mut at = vec![0.0; sampled.times.len() * n * (1 + k)];
+        let width = n * (1 + k);
+        let mut hint = 0;
+        for (m, &t) in sampled.times.iter().enumerate() {
+            family.dense.eval_hinted(t, &mut hint, &mut at[m * width..(m + 1) * width]);
+        }
+        // Outputs that are not states are linearised around x_k with dual numbers.
+        let n_out = sig.outputs().len();
+        let (_, known) = problem.point(&previous.z);
+        let params = layout.parameters(&known, &previous.z);
+        let vp = parameter_directions(layout, params.len(), &previous.z);
+        let mut products =
+            JacobianProducts::new(n, &params, &vp, n_out, if n_out > 0 { kk } else { 0 });
+        let (mut y, mut vy, mut h, mut dh, mut u) = (
+            vec![0.0; n],
+            vec![0.0; n * kk],
+            vec![0.0; n_out],
+            vec![0.0; n_out * kk],
+            vec![0.0; sig.n_inputs()],
+        );
+        let mut row = 0;
+        let mut hint = 0;
+        for series in &sampled.series {
+            for sample in &series.samples {
+                let t = sampled.times[sample.index];
+                let w = &at[sample.index * width..(sample.index + 1) * width];
+                let (p, phi) = w.split_at(n);
+                let sw = sample.sqrt_weight;
+                match series.observable {
+                    Observable::State(i) => {
+                        a[row] = sw * (p[i] - sample.value);
+                        for j in 0..k {
+                            b[(row, j)] = sw * phi[i * k + j];
+                        }
+                    }
+                    Observable::Output(o) => {
+                        previous.eval(t, &mut hint, &mut y);
+                        sys.input_values(t, Side::After, &mut u);
+                        for i in 0..n {
+                            vy[i * kk..i * kk + k].copy_from_slice(&phi[i * k..(i + 1) * k]);
+                            vy[i * kk + k] = p[i] - y[i];
+                        }
+                        products.eval(sys, Function::Outputs, (t, &y, &u), &vy, &mut h, &mut dh);
+                        a[row] = sw * (h[o] + dh[o * kk + k] - sample.value);
+                        for j in 0..k {
+                            b[(row, j)] = sw * dh[o * kk + j];
+                        }
+                    }
+                }
+                row += 1;
+            }
+        }
+        Self { a, b }
+    }
+
+    /// The c minimising ‖a + B c‖ (QR), or the unknowns B cannot tell apart.
+    pub fn solve(&self, max_condition: f64) -> Result<(DVector<f64>, f64), Singular> {
+        let factor = NormalFactor::new(&self.b.tr_mul(&self.b), max_condition)?;
+        let k = self.b.ncols();
+        let b = sysid_core::as_faer(&self.b);
+        let rhs = faer::Mat::from_fn(self.a.len(), 1, |i, _| -self.a[i]);
+        let c = b.qr().solve_lstsq(rhs);
+        Ok((DVector::from_fn(k, |j, _| c[(j, 0)]), factor.condition()))
+    }
+
+    /// The linear family's residual at c, a + B c.
+    pub fn residual(&self, c: &[f64]) -> DVector<f64> {
+        &self.a + &self.b * DVector::from_column_slice(c)
+    }
+
+    /// ε, U and A of the linear family at c (A = BᵀB, U = Bᵀ(a + Bc)): at convergence those
+    /// of the nonlinear problem, whose Jacobian B then is.
+    pub fn linearization(&self, c: &[f64], counts: Counts) -> Linearization {
+        let r = self.residual(c);
+        Linearization {
+            z: c.to_vec(),
+            cost: r.norm_squared(),
+            gradient: self.b.tr_mul(&r),
+            normal: self.b.tr_mul(&self.b),
+            residuals: None,
+            counts,
+        }
+    }
+}
+
+/// x_{k+1} = p + Φ c as a dense solution of the states.
+pub fn next_trajectory(layout: &Layout, family: &Family, c: &[f64]) -> Trajectory {
+    let (n, k) = (layout.n, layout.k());
+    let states = family.dense.map(n, |w, y| {
+        for i in 0..n {
+            y[i] = w[i] + (0..k).map(|j| w[n + i * k + j] * c[j]).sum::<f64>();
+        }
+    });
+    Trajectory::linear(states, c.to_vec())
+}
