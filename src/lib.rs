@@ -8,12 +8,14 @@
 //! * [`goodman`] (`sysid-goodman`): Goodman's 1966 Newton iteration;
 //! * [`gauss_newton`] (`sysid-gauss-newton`): the Gauss–Newton baseline on argmin;
 //! * [`quasilinearization`] (`sysid-quasilinearization`): Bellman–Kagiwada–Kalaba's method;
+//! * [`model`] (`sysid-model`): model files (TOML + expressions) and CSV data;
 //! * [`systems`] (`sysid-systems`): the benchmark catalogue.
 #![warn(missing_docs)]
 
 pub use sysid_core as core;
 pub use sysid_gauss_newton as gauss_newton;
 pub use sysid_goodman as goodman;
+pub use sysid_model as model;
 pub use sysid_ode as ode;
 pub use sysid_quasilinearization as quasilinearization;
 pub use sysid_systems as systems;

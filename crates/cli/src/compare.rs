@@ -1,21 +1,28 @@
 //! `sysid compare`: every chosen method on the same data from the same start.
 
-use anyhow::{Context, anyhow};
+use std::path::PathBuf;
+
 use clap::Args;
-use sysid_core::Estimate;
+use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
-use sysid_systems::{Case, Visit};
 
 use crate::format::significant;
 use crate::methods::{Common, QlStart, default_methods, method, parse_list};
+use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
 
 /// Arguments of `sysid compare`.
 #[derive(Args, Debug)]
 pub struct CompareArgs {
     /// The catalogue system (`sysid systems` lists them).
-    #[arg(long, value_name = "NAME", required_unless_present = "all", conflicts_with = "all")]
+    #[arg(long, value_name = "NAME", required_unless_present_any = ["all", "model"], conflicts_with_all = ["all", "model"])]
     system: Option<String>,
+    /// A model file instead of a catalogue system.
+    #[arg(long, value_name = "FILE", conflicts_with = "all")]
+    model: Option<PathBuf>,
+    /// The data file for --model (default: the model's `[data] file`).
+    #[arg(long, value_name = "CSV", requires = "model")]
+    data: Option<PathBuf>,
     /// Every catalogue system, one table each.
     #[arg(long)]
     all: bool,
@@ -48,21 +55,29 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         Some(list) => parse_list(list)?,
         None => default_methods().into_iter().map(String::from).collect(),
     };
-    let systems: Vec<String> = match (&args.system, args.all) {
-        (Some(name), _) => vec![name.clone()],
-        (None, _) => sysid_systems::NAMES.iter().map(|s| s.to_string()).collect(),
+    let sources: Vec<SourceArgs> = if args.all {
+        sysid_systems::NAMES
+            .iter()
+            .map(|n| SourceArgs {
+                system: Some(n.to_string()),
+                model: None,
+                data: None,
+                seed: args.seed,
+            })
+            .collect()
+    } else {
+        vec![SourceArgs {
+            system: args.system.clone(),
+            model: args.model.clone(),
+            data: args.data.clone(),
+            seed: args.seed,
+        }]
     };
+    let common = Common { max_iterations: args.max_iterations, ql_start: args.ql_start };
     let mut json = Vec::new();
     let mut tables = Vec::new();
-    for system in &systems {
-        let visit = CompareCase {
-            methods: &methods,
-            seed: args.seed,
-            common: Common { max_iterations: args.max_iterations, ql_start: args.ql_start },
-        };
-        let (table, records) = sysid_systems::visit(system, visit).ok_or_else(|| {
-            anyhow!("unknown system `{system}` (systems: {})", sysid_systems::NAMES.join(", "))
-        })??;
+    for source in &sources {
+        let (table, records) = with_problem(source, CompareProblem { methods: &methods, common })?;
         tables.push(table);
         json.extend(records);
     }
@@ -73,17 +88,19 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     Ok(Outcome::Success)
 }
 
-struct CompareCase<'a> {
+struct CompareProblem<'a> {
     methods: &'a [String],
-    seed: u64,
     common: Common,
 }
 
-impl Visit for CompareCase<'_> {
-    type Output = anyhow::Result<(String, Vec<serde_json::Value>)>;
+impl WithProblem for CompareProblem<'_> {
+    type Output = (String, Vec<serde_json::Value>);
 
-    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
-        let problem = case.problem(self.seed).with_context(|| format!("system {}", case.name))?;
+    fn run<S: System + Clone + Send + Sync + 'static>(
+        self,
+        problem: Problem<S>,
+        context: Context,
+    ) -> anyhow::Result<Self::Output> {
         let mut rows = Vec::with_capacity(self.methods.len());
         for name in self.methods {
             let m = method::<S>(name, self.common)?;
@@ -95,22 +112,22 @@ impl Visit for CompareCase<'_> {
         let json = rows
             .iter()
             .map(|row| match &row.result {
-                Ok(e) => serde_json::to_value(e.record(case.name)).expect("serialisable"),
+                Ok(e) => serde_json::to_value(e.record(&context.name)).expect("serialisable"),
                 Err(message) => serde_json::json!({
-                    "system": case.name, "method": row.method, "converged": false, "error": message,
+                    "system": context.name, "method": row.method, "converged": false, "error": message,
                 }),
             })
             .collect();
-        Ok((table(&case, &rows), json))
+        Ok((table(&problem, &context, &rows), json))
     }
 }
 
 /// One table: a row per method, the estimates under their unknowns with the truth or
 /// reference in the header.
-fn table<S: System + Clone>(case: &Case<S>, rows: &[Row]) -> String {
-    let mut out = format!("{}: {}\n", case.name, case.summary);
-    let unknowns: Vec<String> = case.unknowns.iter().map(|u| u.name.clone()).collect();
-    let label = if case.reference.is_some() { "reference" } else { "truth" };
+fn table<S: System>(problem: &Problem<S>, context: &Context, rows: &[Row]) -> String {
+    let mut out = format!("{}: {}\n", context.name, context.summary);
+    let unknowns = problem.names();
+    let label = context.expected_label;
     let mut header = format!(
         "  {:<16} {:>5} {:>5} {:>18} {:>10}",
         "method", "conv", "iter", "cost ε", "time ms"
@@ -122,8 +139,10 @@ fn table<S: System + Clone>(case: &Case<S>, rows: &[Row]) -> String {
     out += "\n";
     let mut expected = format!("  {:<16} {:>5} {:>5} {:>18} {:>10}", label, "", "", "", "");
     for name in &unknowns {
-        expected +=
-            &format!(" {:>16}", case.expected(name).map_or(String::new(), |v| significant(v, 8)));
+        expected += &format!(
+            " {:>16}",
+            context.expected(name).map_or(String::new(), |v| significant(v, 8))
+        );
     }
     out += &expected;
     out += "\n";
@@ -131,7 +150,7 @@ fn table<S: System + Clone>(case: &Case<S>, rows: &[Row]) -> String {
         match &row.result {
             Ok(e) => {
                 let mut line = format!(
-                    "  {:<16} {:>5} {:>5} {:>18} {:>10.3}",
+                    "  {:<24} {:>5} {:>5} {:>18} {:>10.3}",
                     row.method,
                     if e.converged() { "yes" } else { "no" },
                     e.iterations,
@@ -144,10 +163,10 @@ fn table<S: System + Clone>(case: &Case<S>, rows: &[Row]) -> String {
                 out += &line;
                 out += "\n";
                 if !e.converged() {
-                    out += &format!("  {:<16} └ {}\n", "", e.termination);
+                    out += &format!("  {:<24} └ {}\n", "", e.termination);
                 }
             }
-            Err(message) => out += &format!("  {:<16} error: {message}\n", row.method),
+            Err(message) => out += &format!("  {:<24} error: {message}\n", row.method),
         }
     }
     out

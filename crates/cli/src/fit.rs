@@ -1,21 +1,19 @@
 //! `sysid fit`.
 
-use anyhow::{Context, anyhow};
 use clap::Args;
-use sysid_core::Estimate;
+use sysid_core::{Estimate, Problem, Termination};
 use sysid_ode::System;
-use sysid_systems::{Case, Visit};
 
 use crate::format::significant;
 use crate::methods::{Common, METHODS, QlStart, method};
+use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
 
 /// Arguments of `sysid fit`.
 #[derive(Args, Debug)]
 pub struct FitArgs {
-    /// The catalogue system to identify (`sysid systems` lists them).
-    #[arg(long, value_name = "NAME")]
-    system: String,
+    #[command(flatten)]
+    source: SourceArgs,
     /// The method: goodman, goodman-halving, gauss-newton, gauss-newton-ls, gauss-newton-fd,
     /// quasilinearization, quasilinearization-data.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]
@@ -23,9 +21,6 @@ pub struct FitArgs {
     /// Output format.
     #[arg(long, value_enum, default_value_t = Format::Table)]
     format: Format,
-    /// Seed of the synthetic data (systems with fixed data ignore it).
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
     /// First trajectory of quasilinearization: the model from the guess, or the data.
     #[arg(long, value_enum, default_value_t = QlStart::Guess)]
     ql_start: QlStart,
@@ -40,76 +35,101 @@ pub struct FitArgs {
     atol: Option<f64>,
 }
 
-/// Runs `sysid fit`.
-pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
-    sysid_systems::visit(&args.system, FitCase { args }).ok_or_else(|| {
-        anyhow!("unknown system `{}` (systems: {})", args.system, sysid_systems::NAMES.join(", "))
-    })?
+impl FitArgs {
+    /// The method's shared options.
+    pub fn common(&self) -> Common {
+        Common { max_iterations: self.max_iterations, ql_start: self.ql_start }
+    }
 }
 
-struct FitCase<'a> {
+/// Runs `sysid fit`.
+pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
+    with_problem(&args.source, FitProblem { args })
+}
+
+struct FitProblem<'a> {
     args: &'a FitArgs,
 }
 
-impl Visit for FitCase<'_> {
-    type Output = anyhow::Result<Outcome>;
+impl WithProblem for FitProblem<'_> {
+    type Output = Outcome;
 
-    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
+    fn run<S: System + Clone + Send + Sync + 'static>(
+        self,
+        problem: Problem<S>,
+        context: Context,
+    ) -> anyhow::Result<Outcome> {
         let args = self.args;
-        let method = method::<S>(
-            &args.method,
-            Common { max_iterations: args.max_iterations, ql_start: args.ql_start },
-        )?;
-        let mut problem =
-            case.problem(args.seed).with_context(|| format!("system {}", case.name))?;
-        if args.rtol.is_some() || args.atol.is_some() {
-            let mut integrator = *problem.integrator();
-            integrator.rtol = args.rtol.unwrap_or(integrator.rtol);
-            integrator.atol = args.atol.unwrap_or(integrator.atol);
-            problem = problem.with_integrator(integrator)?;
-        }
-        let estimate = method.fit(&problem)?;
+        let problem = with_tolerances(problem, args.rtol, args.atol)?;
+        let estimate = fit(&problem, &args.method, args.common())?;
         match args.format {
             Format::Json => {
-                println!("{}", serde_json::to_string_pretty(&estimate.record(case.name))?)
+                println!("{}", serde_json::to_string_pretty(&estimate.record(&context.name))?)
             }
-            Format::Table => print!("{}", table(&case, &estimate)),
+            Format::Table => print!("{}", table(&context, &estimate)),
         }
         Ok(if estimate.converged() { Outcome::Success } else { Outcome::NotConverged })
     }
 }
 
+/// The problem with the integrator's tolerances replaced where given.
+pub fn with_tolerances<S: System>(
+    problem: Problem<S>,
+    rtol: Option<f64>,
+    atol: Option<f64>,
+) -> anyhow::Result<Problem<S>> {
+    if rtol.is_none() && atol.is_none() {
+        return Ok(problem);
+    }
+    let mut integrator = *problem.integrator();
+    integrator.rtol = rtol.unwrap_or(integrator.rtol);
+    integrator.atol = atol.unwrap_or(integrator.atol);
+    Ok(problem.with_integrator(integrator)?)
+}
+
+/// Fits with the named method. What is bad input rather than a method's failure is an
+/// error: unknowns the data cannot tell apart, and a model that cannot be integrated from
+/// the starting guess.
+pub fn fit<S: System>(
+    problem: &Problem<S>,
+    name: &str,
+    common: Common,
+) -> anyhow::Result<Estimate> {
+    let estimate = method::<S>(name, common)?.fit(problem)?;
+    match &estimate.termination {
+        Termination::SingularNormalMatrix { unknowns, condition } => anyhow::bail!(
+            "the data cannot identify {} (singular normal matrix, condition {condition:.1e}): fix some of them or add data",
+            unknowns.join(", ")
+        ),
+        Termination::IntegrationFailed { message } if estimate.iterations == 0 => {
+            anyhow::bail!("the model cannot be integrated from the starting guess: {message}")
+        }
+        _ => Ok(estimate),
+    }
+}
+
 /// The readable report: estimates next to the reference or truth, then the run.
-fn table<S>(case: &Case<S>, e: &Estimate) -> String
-where
-    S: System + Clone,
-{
+fn table(context: &Context, e: &Estimate) -> String {
     let mut out = String::new();
     let describe = METHODS.iter().find(|m| m.0 == e.method).map_or("", |m| m.1);
-    out += &format!("{}: {}\n", case.name, case.summary);
+    out += &format!("{}: {}\n", context.name, context.summary);
     out += &format!("method {}: {describe}\n\n", e.method);
-    let expected_label = match &case.reference {
-        Some(_) => "reference",
-        None if !case.truth.is_empty() => "truth",
-        None => "",
-    };
     out += &format!(
         "  {:<10} {:>24} {:>14} {:>24}\n",
-        "unknown", "estimate", "std. error", expected_label
+        "unknown", "estimate", "std. error", context.expected_label
     );
     for (i, name) in e.names.iter().enumerate() {
         let se = e.std_errors.as_ref().map_or("—".to_string(), |s| significant(s[i], 5));
-        let expected = case.expected(name).map_or(String::new(), |v| format!("{v}"));
+        let expected = context.expected(name).map_or(String::new(), |v| format!("{v}"));
         out +=
             &format!("  {name:<10} {:>24} {se:>14} {expected:>24}\n", significant(e.values[i], 10));
     }
     out += "\n";
     out += &format!("  termination  {}\n", e.termination);
     out += &format!("  iterations   {}\n", e.iterations);
-    let reference_cost = case
-        .reference
-        .as_ref()
-        .map_or(String::new(), |r| format!("   (reference {}, {})", r.cost, r.source));
+    let reference_cost = context
+        .reference_cost
+        .map_or(String::new(), |(cost, source)| format!("   (reference {cost}, {source})"));
     out += &format!("  cost ε       {}{reference_cost}\n", significant(e.cost, 10));
     out += &format!(
         "  work         {} integrations, {} steps ({} rejected), {} right-hand-side evaluations, {:.3} ms\n\n",

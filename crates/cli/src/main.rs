@@ -7,7 +7,9 @@ mod compare;
 mod fit;
 mod format;
 mod methods;
+mod predict;
 mod simulate;
+mod source;
 
 use std::process::ExitCode;
 
@@ -25,14 +27,18 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// Identify the unknowns of a catalogue system and print the estimates with standard
-    /// errors, the cost and the iteration history.
+    /// Identify the unknowns of a catalogue system or a model file and print the estimates
+    /// with standard errors, the cost and the iteration history.
     Fit(fit::FitArgs),
     /// Run several methods on the same data from the same start and print them side by
     /// side: convergence, iterations, cost, time, and each estimate next to the truth.
     Compare(compare::CompareArgs),
-    /// Write the data of a catalogue system as CSV (header row, time first).
+    /// Write a catalogue system's data, or a model file's trajectory, as CSV (header row,
+    /// time first).
     Simulate(simulate::SimulateArgs),
+    /// Fit, then write the fitted trajectory of every state from t0 to a later time with a
+    /// 95 % band from the linearised covariance (CSV).
+    Predict(predict::PredictArgs),
     /// List the built-in benchmark systems, one line each.
     Systems,
 }
@@ -76,6 +82,7 @@ fn main() -> ExitCode {
         Command::Fit(args) => fit::run(&args),
         Command::Compare(args) => compare::run(&args),
         Command::Simulate(args) => simulate::run(&args),
+        Command::Predict(args) => predict::run(&args),
         Command::Systems => {
             for (name, summary) in sysid_systems::summaries() {
                 println!("{name:<26} {summary}");

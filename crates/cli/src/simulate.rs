@@ -1,11 +1,13 @@
-//! `sysid simulate`: the data of a catalogue system as CSV.
+//! `sysid simulate`: a catalogue system's data, or a model's trajectory, as CSV.
 
 use std::io::Write;
+use std::path::{Path, PathBuf};
 
-use anyhow::anyhow;
+use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
 use sysid_core::{Data, Record, Samples};
-use sysid_ode::System;
+use sysid_model::Model;
+use sysid_ode::{Inputs, Ivp, System};
 use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
@@ -13,44 +15,161 @@ use crate::Outcome;
 /// Arguments of `sysid simulate`.
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
-    /// The catalogue system (`sysid systems` lists them).
-    #[arg(long, value_name = "NAME")]
-    system: String,
-    /// Seed of the synthetic noise: the same seed gives the same data on every machine.
+    /// A catalogue system: write its data (with the seeded noise).
+    #[arg(long, value_name = "NAME", required_unless_present = "model", conflicts_with = "model")]
+    system: Option<String>,
+    /// A model file: write its trajectory (states, then outputs) at --times.
+    #[arg(long, value_name = "FILE", requires = "times")]
+    model: Option<PathBuf>,
+    /// Output times a:b:step, e.g. 0:10:0.1 (model files).
+    #[arg(long, value_name = "A:B:STEP")]
+    times: Option<String>,
+    /// Set an unknown (or known) value, e.g. --set k1=0.8; unknowns are at their guesses
+    /// otherwise. Repeat for several.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    set: Vec<String>,
+    /// The data file whose input columns drive the model (default: the model's data file).
+    #[arg(long, value_name = "CSV", requires = "model")]
+    data: Option<PathBuf>,
+    /// Seed of the synthetic noise (catalogue systems): the same seed gives the same data.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Sample spacing for a record given as a function (continuous systems).
+    /// Sample spacing for a catalogue record given as a function (continuous systems).
     #[arg(long, default_value_t = 0.001, value_name = "DT")]
     step: f64,
     /// Write to this file instead of standard output.
     #[arg(long, value_name = "FILE")]
-    out: Option<std::path::PathBuf>,
+    out: Option<PathBuf>,
 }
 
 /// Runs `sysid simulate`.
 pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
-    if !(args.step > 0.0 && args.step.is_finite()) {
-        anyhow::bail!("--step must be positive, got {}", args.step);
-    }
-    let data =
-        sysid_systems::visit(&args.system, DataOf { seed: args.seed }).ok_or_else(|| {
-            anyhow!(
-                "unknown system `{}` (systems: {})",
-                args.system,
-                sysid_systems::NAMES.join(", ")
-            )
-        })??;
-    let text = csv(&data, args.step);
-    match &args.out {
+    let text = match (&args.system, &args.model) {
+        (Some(name), _) => {
+            if !(args.step > 0.0 && args.step.is_finite()) {
+                bail!("--step must be positive, got {}", args.step);
+            }
+            let data =
+                sysid_systems::visit(name, DataOf { seed: args.seed }).ok_or_else(|| {
+                    anyhow!(
+                        "unknown system `{name}` (systems: {})",
+                        sysid_systems::NAMES.join(", ")
+                    )
+                })??;
+            data_csv(&data, args.step)
+        }
+        (None, Some(path)) => model_csv(path, args)?,
+        (None, None) => bail!("give --system NAME or --model FILE"),
+    };
+    write_output(args.out.as_deref(), &text)?;
+    Ok(Outcome::Success)
+}
+
+/// Writes to a file (through a temporary, so a failure leaves no partial file) or stdout.
+pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
+    match out {
         Some(path) => {
-            // Write to a temporary file first, so a failure leaves no partial output.
-            let tmp = path.with_extension("csv.partial");
+            let tmp = path.with_extension("partial");
             std::fs::write(&tmp, text).map_err(|e| anyhow!("{}: {e}", tmp.display()))?;
             std::fs::rename(&tmp, path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
         }
         None => std::io::stdout().write_all(text.as_bytes())?,
     }
-    Ok(Outcome::Success)
+    Ok(())
+}
+
+/// Parses `a:b:step` into the times a, a + step, …, up to b (inclusive within rounding).
+pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
+    let parts: Vec<&str> = spec.split(':').collect();
+    let [a, b, h] = parts[..] else { bail!("--times must be a:b:step, got `{spec}`") };
+    let number = |s: &str| -> anyhow::Result<f64> {
+        let v: f64 = s.trim().parse().map_err(|_| anyhow!("--times: `{s}` is not a number"))?;
+        if !v.is_finite() {
+            bail!("--times: `{s}` is not a finite number");
+        }
+        Ok(v)
+    };
+    let (a, b, h) = (number(a)?, number(b)?, number(h)?);
+    if h <= 0.0 || b < a {
+        bail!("--times a:b:step needs a ≤ b and step > 0, got {spec}");
+    }
+    let n = ((b - a) / h + 1e-9).floor() as usize;
+    if n > 10_000_000 {
+        bail!("--times {spec} asks for {n} times");
+    }
+    Ok((0..=n).map(|i| a + h * i as f64).collect())
+}
+
+fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
+    let model = Model::load(path)?;
+    let times = parse_times(args.times.as_deref().unwrap_or_default())?;
+    // Inputs come from a data file; a model without inputs needs none.
+    let inputs = if model.file.inputs.is_empty() {
+        Inputs::default()
+    } else {
+        let data = match &args.data {
+            Some(d) => d.as_path(),
+            None => model.data_path()?,
+        };
+        sysid_model::data::read(&model.file, data)?.inputs
+    };
+    let system = model.system(inputs);
+    let sig = system.signature().clone();
+    let mut y0 = vec![f64::NAN; sig.n_states()];
+    let mut p = vec![f64::NAN; sig.n_parameters()];
+    let mut assign = |name: &str, value: f64| -> anyhow::Result<()> {
+        if let Some(i) = sig.state(name) {
+            y0[i] = value;
+        } else if let Some(k) = sig.parameter(name) {
+            p[k] = value;
+        } else {
+            bail!("--set: `{name}` is not a state or parameter of {}", path.display());
+        }
+        Ok(())
+    };
+    for (name, value) in &model.file.known {
+        assign(name, *value)?;
+    }
+    for u in &model.file.unknowns {
+        assign(&u.name, u.guess)?;
+    }
+    for s in &args.set {
+        let (name, value) =
+            s.split_once('=').ok_or_else(|| anyhow!("--set takes NAME=VALUE, got `{s}`"))?;
+        let value: f64 =
+            value.trim().parse().map_err(|_| anyhow!("--set {name}: `{value}` is not a number"))?;
+        if !value.is_finite() {
+            bail!("--set {name}: `{value}` is not a finite number");
+        }
+        assign(name.trim(), value)?;
+    }
+    let t0 = model.file.data.t0;
+    let sol = Ivp::new(&system, t0, &y0, &p)
+        .solve(&model.file.integrator, &times)
+        .with_context(|| format!("simulating {}", path.display()))?;
+    let n_out = sig.outputs().len();
+    let mut h = vec![0.0; n_out];
+    let mut u = vec![0.0; sig.n_inputs()];
+    let mut text = String::from("t");
+    for name in sig.states().iter().chain(sig.outputs()) {
+        text += &format!(",{name}");
+    }
+    text += "\n";
+    for (m, &t) in times.iter().enumerate() {
+        text += &format!("{t}");
+        for v in sol.state(m) {
+            text += &format!(",{v}");
+        }
+        if n_out > 0 {
+            system.input_values(t, sysid_ode::Side::After, &mut u);
+            system.outputs(t, sol.state(m), &p, &u, &mut h);
+            for v in &h {
+                text += &format!(",{v}");
+            }
+        }
+        text += "\n";
+    }
+    Ok(text)
 }
 
 struct DataOf {
@@ -66,7 +185,7 @@ impl Visit for DataOf {
 
 /// The data as CSV: a header row `t,<series...>`, one row per time, empty cells where a
 /// series has no sample. Every digit is kept (shortest round-trip representation).
-fn csv(data: &Data, step: f64) -> String {
+fn data_csv(data: &Data, step: f64) -> String {
     let columns: Vec<(String, Vec<(f64, f64)>)> = data
         .series
         .iter()

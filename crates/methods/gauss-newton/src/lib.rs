@@ -14,7 +14,9 @@
 //! with the gradient of ½‖r‖², which is inconsistent by the factor ‖r‖. A continuous record
 //! enters as residuals at Gauss–Legendre nodes
 //! ([`Problem::residuals_and_jacobian`](sysid_core::Problem::residuals_and_jacobian)).
-//! Bounds on unknowns are not supported (argmin's solver is unconstrained).
+//! argmin's solver is unconstrained: bounded unknowns are mapped to free coordinates by a
+//! smooth change of variables ([`bounds::Map`]), so an optimum on a bound is approached but
+//! not reached.
 //!
 //! ```
 //! use sysid_core::Method;
@@ -38,6 +40,7 @@
 //! ```
 #![warn(missing_docs)]
 
+pub mod bounds;
 mod options;
 mod residuals;
 mod solver;

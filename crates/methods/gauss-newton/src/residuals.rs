@@ -11,12 +11,13 @@ use nalgebra::{DMatrix, DVector};
 use sysid_core::{Linearization, Problem};
 use sysid_ode::{Counts, OdeError, System};
 
+use crate::bounds::Map;
 use crate::options::JacobianSource;
 
-/// One evaluation: r (and J when computed) at z.
+/// One evaluation: r (and J when computed) at argmin's parameters (w; z when unmapped).
 #[derive(Clone, Debug)]
 pub struct Evaluation {
-    /// Where.
+    /// Where, in argmin's coordinates.
     pub z: Vec<f64>,
     /// Weighted residuals.
     pub r: DVector<f64>,
@@ -49,17 +50,42 @@ struct Shared {
     failure: Option<OdeError>,
 }
 
-/// The residual operator of a problem for argmin.
+/// The residual operator of a problem for argmin, in the free coordinates w of
+/// [`Map`](crate::bounds::Map) (w = z for unbounded unknowns).
 pub struct Residuals<'a, S> {
     problem: &'a Problem<S>,
     source: JacobianSource,
+    maps: Vec<Map>,
     shared: Mutex<Shared>,
 }
 
 impl<'a, S: System> Residuals<'a, S> {
-    /// The operator of `problem` with Jacobians from `source`.
+    /// The operator of `problem` with Jacobians from `source`, bounded unknowns mapped to
+    /// free coordinates.
     pub fn new(problem: &'a Problem<S>, source: JacobianSource) -> Self {
-        Self { problem, source, shared: Mutex::new(Shared::default()) }
+        let maps = problem.unknowns().list().iter().map(Map::of).collect();
+        Self { problem, source, maps, shared: Mutex::new(Shared::default()) }
+    }
+
+    /// The same without mapping (w = z), for evaluations in the problem's coordinates.
+    pub fn unmapped(problem: &'a Problem<S>, source: JacobianSource) -> Self {
+        let maps = vec![Map::Free; problem.unknowns().len()];
+        Self { problem, source, maps, shared: Mutex::new(Shared::default()) }
+    }
+
+    /// Whether any unknown is mapped (has bounds).
+    pub fn is_mapped(&self) -> bool {
+        self.maps.iter().any(|m| *m != Map::Free)
+    }
+
+    /// z(w).
+    pub fn z(&self, w: &[f64]) -> Vec<f64> {
+        self.maps.iter().zip(w).map(|(m, &w)| m.z(w)).collect()
+    }
+
+    /// w(z).
+    pub fn w(&self, z: &[f64]) -> Vec<f64> {
+        self.maps.iter().zip(z).map(|(m, &z)| m.w(z)).collect()
     }
 
     /// The first integration failure, if any (a run that converged may have met failures at
@@ -97,7 +123,7 @@ impl<'a, S: System> Residuals<'a, S> {
         }
         let outcome = match self.source {
             JacobianSource::Sensitivities => self.with_sensitivities(z),
-            JacobianSource::FiniteDifferences => match self.problem.residuals(z) {
+            JacobianSource::FiniteDifferences => match self.problem.residuals(&self.z(z)) {
                 Ok((r, counts)) => {
                     self.lock().counts += counts;
                     Ok(Evaluation { z: z.to_vec(), r, jacobian: None })
@@ -118,10 +144,16 @@ impl<'a, S: System> Residuals<'a, S> {
         Ok(r)
     }
 
-    fn with_sensitivities(&self, z: &[f64]) -> Result<Evaluation, Error> {
-        let lin = self.problem.residuals_and_jacobian(z).map_err(|e| self.fail(e))?;
-        let w = lin.residuals.expect("the residual form has residuals");
-        let evaluation = Evaluation { z: z.to_vec(), r: w.r, jacobian: Some(w.jacobian) };
+    fn with_sensitivities(&self, w: &[f64]) -> Result<Evaluation, Error> {
+        let lin = self.problem.residuals_and_jacobian(&self.z(w)).map_err(|e| self.fail(e))?;
+        let rows = lin.residuals.expect("the residual form has residuals");
+        let mut jacobian = rows.jacobian;
+        for (j, (m, &wj)) in self.maps.iter().zip(w).enumerate() {
+            if *m != Map::Free {
+                jacobian.column_mut(j).scale_mut(m.dz_dw(wj));
+            }
+        }
+        let evaluation = Evaluation { z: w.to_vec(), r: rows.r, jacobian: Some(jacobian) };
         let mut shared = self.lock();
         shared.counts += lin.counts;
         shared.log.push(evaluation.clone());
@@ -153,7 +185,8 @@ impl<'a, S: System> Residuals<'a, S> {
             let h = eta.sqrt() * z[j].abs().max(1.0);
             let mut shifted = z.to_vec();
             shifted[j] += h;
-            let (rj, counts) = self.problem.residuals(&shifted).map_err(|e| self.fail(e))?;
+            let (rj, counts) =
+                self.problem.residuals(&self.z(&shifted)).map_err(|e| self.fail(e))?;
             self.lock().counts += counts;
             // The step actually taken, as represented in floating point.
             let h = shifted[j] - z[j];

@@ -14,7 +14,7 @@ use sysid_core::{
     Convergence, Estimate, FitError, Iteration, Method, NormalFactor, Problem, Run, Termination,
     start_coordinates,
 };
-use sysid_ode::System;
+use sysid_ode::{Counts, System};
 
 use crate::options::{GaussNewtonOptions, JacobianSource};
 use crate::residuals::{Evaluation, Residuals};
@@ -92,20 +92,22 @@ impl<S: System> Method<S> for GaussNewton {
         let opts = &self.options;
         opts.validate().map_err(FitError::InvalidOptions)?;
         let name = <Self as Method<S>>::name(self);
-        if problem.unknowns().list().iter().any(|u| u.min.is_some() || u.max.is_some()) {
-            return Err(FitError::Unsupported {
-                method: name.into(),
-                what: "bounds on unknowns (argmin's Gauss–Newton is unconstrained)".into(),
-            });
-        }
         let started = Instant::now();
-        let z0 = start_coordinates(problem, start)?;
         let residuals = Residuals::new(problem, opts.jacobian);
+        // argmin works on free coordinates w; bounded unknowns are mapped (see `bounds`).
+        let z0 = residuals.w(&start_coordinates(problem, start)?);
         let recorder = Recorder::default();
-        let finish = |z: &[f64], last: Option<&Evaluation>, iterations, termination, history| {
+        let finish = |w: &[f64],
+                      last: Option<&Evaluation>,
+                      iterations,
+                      termination,
+                      history,
+                      extra: Counts| {
             let lin = last.and_then(Evaluation::linearization);
-            let run = Run { iterations, termination, history, started, counts: residuals.counts() };
-            Ok(problem.estimate(name, z, lin.as_ref(), run))
+            let mut counts = residuals.counts();
+            counts += extra;
+            let run = Run { iterations, termination, history, started, counts };
+            Ok(problem.estimate(name, &residuals.z(w), lin.as_ref(), run))
         };
         // argmin's stopping rule is absolute; scale it by the starting residual.
         let r0 = match argmin::core::Operator::apply(&&residuals, &DVector::from_column_slice(&z0))
@@ -113,7 +115,7 @@ impl<S: System> Method<S> for GaussNewton {
             Ok(r) => r.norm(),
             Err(e) => {
                 let termination = Termination::IntegrationFailed { message: e.to_string() };
-                return finish(&z0, None, 0, termination, Vec::new());
+                return finish(&z0, None, 0, termination, Vec::new(), Counts::default());
             }
         };
         let tolerance = opts.tolerance * r0.max(1.0);
@@ -146,20 +148,41 @@ impl<S: System> Method<S> for GaussNewton {
                 (z, iterations, termination)
             }
         };
-        // The Jacobian at the answer for the covariance: usually already computed.
-        let last = match residuals.evaluation_at(&z) {
-            Some(e) => Some(e),
-            None => match opts.jacobian {
-                JacobianSource::Sensitivities => {
-                    problem.residuals_and_jacobian(&z).ok().map(|lin| {
-                        let w = lin.residuals.expect("residual form");
-                        Evaluation { z: z.clone(), r: w.r, jacobian: Some(w.jacobian) }
-                    })
+        // The Jacobian at the answer, in the problem's coordinates, for the covariance: usually
+        // already computed; with mapped bounds evaluated again without the map.
+        let at_answer = if residuals.is_mapped() { None } else { residuals.evaluation_at(&z) };
+        let (last, extra) = match at_answer {
+            Some(e) => (Some(e), Counts::default()),
+            None => {
+                let z_answer = residuals.z(&z);
+                match opts.jacobian {
+                    JacobianSource::Sensitivities => {
+                        match problem.residuals_and_jacobian(&z_answer) {
+                            Ok(lin) => {
+                                let rows = lin.residuals.expect("residual form");
+                                let e = Evaluation {
+                                    z: z_answer,
+                                    r: rows.r,
+                                    jacobian: Some(rows.jacobian),
+                                };
+                                (Some(e), lin.counts)
+                            }
+                            Err(_) => (None, Counts::default()),
+                        }
+                    }
+                    JacobianSource::FiniteDifferences => {
+                        let plain = Residuals::unmapped(problem, opts.jacobian);
+                        (plain.finite_differences(&z_answer).ok(), plain.counts())
+                    }
                 }
-                JacobianSource::FiniteDifferences => residuals.finite_differences(&z).ok(),
-            },
+            }
         };
-        finish(&z, last.as_ref(), iterations, termination, history)
+        let last = last.map(|mut e| {
+            // The estimate reports z; the linearization is in z's coordinates.
+            e.z = residuals.z(&z);
+            e
+        });
+        finish(&z, last.as_ref(), iterations, termination, history, extra)
     }
 }
 
@@ -203,20 +226,29 @@ fn run_argmin<S: System>(
 }
 
 /// The history in sysid's form: ε = ‖r‖², |U| = |Jᵀr| and the condition where the
-/// Jacobian at that iterate was computed; step norms in coordinates, as for every method.
+/// Jacobian at that iterate was computed; values and step norms in the problem's coordinates.
 fn history<S: System>(
     problem: &Problem<S>,
     residuals: &Residuals<'_, S>,
     observed: &[Observed],
 ) -> Vec<Iteration> {
-    let mut previous: Option<&[f64]> = None;
+    let mut previous: Option<Vec<f64>> = None;
     observed
         .iter()
-        .map(|(iteration, z, norm)| {
-            let lin = residuals.evaluation_at(z).and_then(|e| e.linearization());
-            let step_norm =
-                previous.map(|p| p.iter().zip(z).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt());
-            previous = Some(z);
+        .map(|(iteration, w, norm)| {
+            let evaluation = residuals.evaluation_at(w);
+            // argmin's line-search solver does not evaluate the start: take it from the log.
+            let norm = if norm.is_finite() {
+                *norm
+            } else {
+                evaluation.as_ref().map_or(f64::NAN, |e| e.r.norm())
+            };
+            let lin = evaluation.and_then(|e| e.linearization());
+            let z = residuals.z(w);
+            let step_norm = previous
+                .as_ref()
+                .map(|p| p.iter().zip(&z).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt());
+            previous = Some(z.clone());
             Iteration {
                 iteration: *iteration as usize,
                 cost: norm * norm,
@@ -225,24 +257,37 @@ fn history<S: System>(
                 condition: lin
                     .and_then(|l| NormalFactor::new(&l.normal, f64::INFINITY).ok())
                     .map(|f| f.condition()),
-                values: problem.unknowns().values(z),
+                values: problem.unknowns().values(&z),
                 linear_cost: None,
             }
         })
         .collect()
 }
 
-/// A singular normal matrix at the last Jacobian, with the unknowns it involves.
+/// A singular normal matrix at the last Jacobian, with the unknowns it involves; or, when
+/// those unknowns sit on a bound, the change of variables saturating there.
 fn singular<S: System>(
     problem: &Problem<S>,
     residuals: &Residuals<'_, S>,
     max_condition: f64,
 ) -> Option<Termination> {
-    let lin = residuals.last_with_jacobian()?.linearization()?;
-    let singular = NormalFactor::new(&lin.normal, max_condition).err()?;
+    let last = residuals.last_with_jacobian()?;
+    let singular = NormalFactor::new(&last.linearization()?.normal, max_condition).err()?;
     let names = problem.names();
-    Some(Termination::SingularNormalMatrix {
-        unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
-        condition: singular.condition,
-    })
+    let z = residuals.z(&last.z);
+    let on_bound = |i: usize| {
+        let (lo, hi) = problem.unknowns().list()[i].coordinate_bounds();
+        let tol = 1e-12 * z[i].abs().max(1.0);
+        (z[i] - lo).abs() <= tol || (hi - z[i]).abs() <= tol
+    };
+    let involved: Vec<String> = singular.unknowns.iter().map(|&i| names[i].clone()).collect();
+    if !singular.unknowns.is_empty() && singular.unknowns.iter().all(|&i| on_bound(i)) {
+        return Some(Termination::SolverFailed {
+            message: format!(
+                "stopped on the bound of {} (the change of variables that keeps argmin inside the bounds flattens there)",
+                involved.join(", ")
+            ),
+        });
+    }
+    Some(Termination::SingularNormalMatrix { unknowns: involved, condition: singular.condition })
 }

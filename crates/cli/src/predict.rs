@@ -1,0 +1,121 @@
+//! `sysid predict`: fit, then the fitted trajectory forward with a 95 % band.
+
+use std::path::PathBuf;
+
+use anyhow::bail;
+use clap::Args;
+use sysid_core::Problem;
+use sysid_ode::{Ivp, System};
+
+use crate::Outcome;
+use crate::fit::fit;
+use crate::methods::{Common, QlStart};
+use crate::simulate::write_output;
+use crate::source::{Context, SourceArgs, WithProblem, with_problem};
+
+/// Arguments of `sysid predict`.
+#[derive(Args, Debug)]
+pub struct PredictArgs {
+    #[command(flatten)]
+    source: SourceArgs,
+    /// Predict up to this time.
+    #[arg(long, value_name = "T", allow_negative_numbers = true)]
+    until: f64,
+    /// Spacing of the predicted times (default: 200 intervals from t0 to T).
+    #[arg(long, value_name = "H")]
+    step: Option<f64>,
+    /// The method that fits first.
+    #[arg(long, default_value = "goodman", value_name = "METHOD")]
+    method: String,
+    /// First trajectory of quasilinearization.
+    #[arg(long, value_enum, default_value_t = QlStart::Guess)]
+    ql_start: QlStart,
+    /// Write to this file instead of standard output.
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+}
+
+/// Runs `sysid predict`.
+pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
+    if !args.until.is_finite() {
+        bail!("--until must be a finite time");
+    }
+    with_problem(&args.source, Predict { args })
+}
+
+struct Predict<'a> {
+    args: &'a PredictArgs,
+}
+
+impl WithProblem for Predict<'_> {
+    type Output = Outcome;
+
+    fn run<S: System + Clone + Send + Sync + 'static>(
+        self,
+        problem: Problem<S>,
+        context: Context,
+    ) -> anyhow::Result<Outcome> {
+        let args = self.args;
+        let t0 = problem.t0();
+        if args.until <= t0 {
+            bail!("--until {} must lie after t0 = {t0}", args.until);
+        }
+        let step = args.step.unwrap_or((args.until - t0) / 200.0);
+        if !(step > 0.0 && step.is_finite()) {
+            bail!("--step must be positive, got {step}");
+        }
+        let estimate =
+            fit(&problem, &args.method, Common { max_iterations: None, ql_start: args.ql_start })?;
+        if !estimate.converged() {
+            eprintln!(
+                "{}: {} did not converge ({}): no prediction written",
+                context.name, estimate.method, estimate.termination
+            );
+            return Ok(Outcome::NotConverged);
+        }
+        let n = ((args.until - t0) / step + 1e-9).floor() as usize;
+        let mut times: Vec<f64> = (0..=n).map(|i| t0 + step * i as f64).collect();
+        if times.last().is_some_and(|&t| t < args.until) {
+            times.push(args.until);
+        }
+        // The trajectory and its sensitivities to the unknowns (as values) at the estimate.
+        let (y0, p) = problem.point(&problem.unknowns().coordinates(&estimate.values));
+        let wrt = problem.unknowns().wrt();
+        let sol = Ivp::new(problem.system(), t0, &y0, &p).solve_sensitivities(
+            problem.integrator(),
+            wrt,
+            &times,
+        )?;
+        let states = problem.system().signature().states();
+        let mut text = String::from("t");
+        for name in states {
+            text += &format!(",{name},{name}_lower,{name}_upper");
+        }
+        text += "\n";
+        if estimate.covariance.is_none() {
+            eprintln!(
+                "{}: no covariance (no more data than unknowns): the band columns are empty",
+                context.name
+            );
+        }
+        for (m, t) in times.iter().enumerate() {
+            text += &format!("{t}");
+            let s = sol.sensitivity(m);
+            for (i, y) in sol.state(m).iter().enumerate() {
+                match &estimate.covariance {
+                    Some(cov) => {
+                        // Var y_i = s_i Cov s_iᵀ; 95 % normal band.
+                        let row = s.row(i);
+                        let var = (row * cov * row.transpose())[(0, 0)];
+                        let half = 1.959963984540054 * var.max(0.0).sqrt();
+                        text += &format!(",{y},{},{}", y - half, y + half);
+                    }
+                    None => text += &format!(",{y},,"),
+                }
+            }
+            text += "\n";
+        }
+        write_output(args.out.as_deref(), &text)?;
+        Ok(Outcome::Success)
+    }
+}

@@ -1,0 +1,323 @@
+//! Model files from the command line: the workflow, and one clear line (file, line, column
+//! or column name), exit code 2, no panic and no partial output for every mistake.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn sysid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sysid")).args(args).output().expect("the binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8(bytes.to_vec()).expect("utf-8 output")
+}
+
+/// A fresh directory with a model file and a data file.
+struct Case {
+    dir: PathBuf,
+}
+
+impl Case {
+    fn new(tag: &str, model: &str, data: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("sysid-model-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("model.toml"), model).unwrap();
+        std::fs::write(dir.join("data.csv"), data).unwrap();
+        Self { dir }
+    }
+    fn model(&self) -> String {
+        self.dir.join("model.toml").display().to_string()
+    }
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+}
+
+impl Drop for Case {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+const DECAY: &str = r#"states = ["x"]
+parameters = ["k"]
+[equations]
+x = "-k * x"
+[initial]
+x = 2.0
+[unknowns]
+k = 0.5
+[data]
+file = "data.csv"
+"#;
+
+const DECAY_DATA: &str = "t,x\n0,2\n1,0.9\n2,0.4\n3,0.18\n";
+
+/// Runs `fit --model` and checks the error: exit 2, nothing on stdout, one line on stderr
+/// that contains `needle`.
+#[track_caller]
+fn bad(tag: &str, model: &str, data: &str, needle: &str) {
+    let case = Case::new(tag, model, data);
+    let out = sysid(&["fit", "--model", &case.model()]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{tag}: {stderr}");
+    assert!(out.stdout.is_empty(), "{tag}: stdout {}", text(&out.stdout));
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{tag}: {stderr}");
+    assert!(stderr.contains(needle), "{tag}: `{needle}` not in: {stderr}");
+    assert!(!stderr.contains("panicked"), "{tag}: {stderr}");
+}
+
+#[test]
+fn the_workflow_fits_simulates_and_predicts() {
+    let case = Case::new("workflow", DECAY, DECAY_DATA);
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let k = json["estimates"]["k"].as_f64().unwrap();
+    assert!((k - 0.8).abs() < 0.02, "k = {k}");
+    assert!(json["std_errors"]["k"].as_f64().unwrap() > 0.0);
+
+    let sim = case.path("sim.csv");
+    let out = sysid(&[
+        "simulate",
+        "--model",
+        &case.model(),
+        "--times",
+        "0:2:0.5",
+        "--set",
+        "k=0.8",
+        "--out",
+        sim.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let lines: Vec<String> =
+        std::fs::read_to_string(&sim).unwrap().lines().map(String::from).collect();
+    assert_eq!(lines[0], "t,x");
+    assert_eq!(lines.len(), 6);
+    let x2: f64 = lines[5].split(',').nth(1).unwrap().parse().unwrap();
+    assert!((x2 - 2.0 * (-1.6f64).exp()).abs() < 1e-7, "{x2}");
+
+    let pred = case.path("pred.csv");
+    let out = sysid(&[
+        "predict",
+        "--model",
+        &case.model(),
+        "--until",
+        "6",
+        "--step",
+        "1",
+        "--out",
+        pred.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let lines: Vec<String> =
+        std::fs::read_to_string(&pred).unwrap().lines().map(String::from).collect();
+    assert_eq!(lines[0], "t,x,x_lower,x_upper");
+    assert_eq!(lines.len(), 8);
+    let row: Vec<f64> = lines[7].split(',').map(|v| v.parse().unwrap()).collect();
+    assert!((row[0] - 6.0).abs() < 1e-12, "{row:?}");
+    assert!(row[2] < row[1] && row[1] < row[3], "band {row:?}");
+}
+
+#[test]
+fn toml_syntax_error() {
+    bad(
+        "toml",
+        "states = [\"x\"\nparameters = [\"k\"]\n",
+        DECAY_DATA,
+        "model.toml:2:1: TOML syntax error",
+    );
+}
+
+#[test]
+fn unknown_identifier_in_an_equation() {
+    let model = DECAY.replace("x = \"-k * x\"", "x = \"-kk * x\"");
+    bad(
+        "ident",
+        &model,
+        DECAY_DATA,
+        "model.toml:4:7: equation of x: unknown name `kk` (names: x, k, t)",
+    );
+}
+
+#[test]
+fn syntax_error_in_an_expression() {
+    let model = DECAY.replace("x = \"-k * x\"", "x = \"-k * * x\"");
+    bad(
+        "syntax",
+        &model,
+        DECAY_DATA,
+        "model.toml:4:11: equation of x: expected a number, a name or `(`, found `*`",
+    );
+}
+
+#[test]
+fn state_without_an_equation() {
+    let model = DECAY
+        .replace("states = [\"x\"]", "states = [\"x\", \"y\"]")
+        .replace("x = 2.0", "x = 2.0\ny = 0.0");
+    bad("noeq", &model, DECAY_DATA, "model.toml:1:16: state `y` has no equation in [equations]");
+}
+
+#[test]
+fn name_used_twice() {
+    let model = DECAY.replace("parameters = [\"k\"]", "parameters = [\"k\", \"x\"]");
+    bad(
+        "twice",
+        &model,
+        DECAY_DATA,
+        "model.toml:2:20: the name `x` is used twice (as a state and as a parameter)",
+    );
+}
+
+#[test]
+fn neither_known_nor_unknown() {
+    let model = DECAY.replace("[unknowns]\nk = 0.5\n", "");
+    bad(
+        "unspecified",
+        &model,
+        DECAY_DATA,
+        "model.toml:2:15: parameter `k` is neither in [known] nor in [unknowns]",
+    );
+}
+
+#[test]
+fn data_column_that_names_nothing() {
+    bad(
+        "column",
+        DECAY,
+        "t,x,zz\n0,2,1\n1,0.9,1\n",
+        "data.csv:1: column `zz` names nothing in the model (states: x; outputs: none; inputs: none)",
+    );
+}
+
+#[test]
+fn missing_time_column() {
+    bad(
+        "time",
+        DECAY,
+        "x\n2\n0.9\n",
+        "data.csv:1: the first column must be the time, named `t` or `time`; found `x`",
+    );
+}
+
+#[test]
+fn non_increasing_or_duplicate_times() {
+    bad(
+        "dup",
+        DECAY,
+        "t,x\n0,2\n1,0.9\n1,0.4\n",
+        "data.csv:4: column `t`: time 1 is repeated (previous 1)",
+    );
+    bad(
+        "back",
+        DECAY,
+        "t,x\n0,2\n2,0.9\n1,0.4\n",
+        "data.csv:4: column `t`: time 1 goes back (previous 2)",
+    );
+}
+
+#[test]
+fn non_numeric_cell() {
+    bad("cell", DECAY, "t,x\n0,2\n1,abc\n2,0.4\n", "data.csv:3: column `x`: `abc` is not a number");
+}
+
+#[test]
+fn nan_or_infinite_values() {
+    bad(
+        "nan",
+        DECAY,
+        "t,x\n0,2\n1,NaN\n2,0.4\n",
+        "data.csv:3: column `x`: `NaN` is not a finite number",
+    );
+    bad(
+        "inf",
+        DECAY,
+        "t,x\n0,2\n1,inf\n2,0.4\n",
+        "data.csv:3: column `x`: `inf` is not a finite number",
+    );
+    let model = DECAY.replace("x = 2.0", "x = nan");
+    bad(
+        "nanmodel",
+        &model,
+        DECAY_DATA,
+        "model.toml:6:5: [initial] x must be a finite number, got NaN",
+    );
+}
+
+#[test]
+fn fewer_data_than_unknowns() {
+    let model = DECAY.replace("[initial]\nx = 2.0\n", "").replace("k = 0.5", "k = 0.5\nx = 1.0");
+    bad(
+        "few",
+        &model,
+        "t,x\n0,2\n",
+        "data.csv: 1 data points for 2 unknowns: need at least as many data as unknowns",
+    );
+}
+
+#[test]
+fn unknowns_the_data_cannot_identify() {
+    let model = DECAY
+        .replace("parameters = [\"k\"]", "parameters = [\"a\", \"b\"]")
+        .replace("-k * x", "-(a + b) * x")
+        .replace("k = 0.5", "a = 0.3\nb = 0.3");
+    bad("singular", &model, DECAY_DATA, "the data cannot identify a, b (singular normal matrix");
+}
+
+#[test]
+fn a_model_that_blows_up() {
+    let model = DECAY.replace("-k * x", "k * x^2");
+    bad(
+        "blowup",
+        &model,
+        DECAY_DATA,
+        "the model cannot be integrated from the starting guess: step size underflow at t = 0.99",
+    );
+}
+
+#[test]
+fn failures_leave_no_partial_output_file() {
+    let case = Case::new("partial", DECAY, "t,x\n0,2\n1,abc\n");
+    let out_file = case.path("out.csv");
+    for args in [
+        vec![
+            "predict",
+            "--model",
+            &case.model(),
+            "--until",
+            "5",
+            "--out",
+            out_file.to_str().unwrap(),
+        ],
+        vec![
+            "simulate",
+            "--model",
+            &case.model(),
+            "--times",
+            "0:1:x",
+            "--out",
+            out_file.to_str().unwrap(),
+        ],
+    ] {
+        let out = sysid(&args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {}", text(&out.stderr));
+        assert!(
+            !out_file.exists() && !Path::new(&format!("{}.partial", out_file.display())).exists()
+        );
+    }
+}
+
+#[test]
+fn examples_fit_with_every_method() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    for example in ["falling-body", "kinetics", "short-period"] {
+        let model = root.join(example).join("model.toml");
+        let out = sysid(&["compare", "--model", model.to_str().unwrap(), "--format", "json"]);
+        assert_eq!(out.status.code(), Some(0), "{example}: {}", text(&out.stderr));
+        let fits: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        for fit in fits.as_array().unwrap() {
+            assert_eq!(fit["converged"], true, "{example}: {fit}");
+        }
+    }
+}

@@ -1,0 +1,70 @@
+//! Bounds through the change of variables: the same answer as Goodman's projected method
+//! when the bound is inactive, and iterates that respect an active bound.
+
+use sysid_core::{Data, Method, Problem, Unknown};
+use sysid_gauss_newton::GaussNewton;
+use sysid_goodman::Goodman;
+use sysid_ode::testing::assert_close;
+use sysid_ode::{Integrator, Scalar, Signature, System};
+
+#[derive(Clone, Debug)]
+struct Decay(Signature);
+impl System for Decay {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = -p[0] * y[0];
+    }
+}
+
+fn problem(k: Unknown) -> Problem<Decay> {
+    let times: [f64; 6] = [0.0, 0.5, 1.0, 2.0, 3.0, 4.0];
+    // 2 e^{-0.8 t} with a fixed perturbation, so that the residual is not zero.
+    let values: Vec<f64> = times
+        .iter()
+        .enumerate()
+        .map(|(m, t)| 2.0 * (-0.8 * t).exp() + 0.01 * (m as f64).cos())
+        .collect();
+    Problem::builder(Decay(Signature::new(&["x"], &["k"])))
+        .unknown("x", 1.5)
+        .unknown_with(k)
+        .data(Data::discrete().series("x", &times, &values))
+        .integrator(Integrator::dopri5(1e-10, 1e-12))
+        .build()
+        .unwrap()
+}
+
+#[test]
+fn inactive_bounds_do_not_change_the_answer() {
+    for k in [
+        Unknown::new("k", 0.5).min(0.1),
+        Unknown::new("k", 0.5).min(0.1).max(2.0),
+        Unknown::new("k", 0.5).max(5.0),
+    ] {
+        let p = problem(k);
+        let goodman = Goodman::default().fit(&p).unwrap();
+        for gn in [GaussNewton::plain(), GaussNewton::line_search()] {
+            let e = gn.fit(&p).unwrap();
+            assert!(e.converged(), "{}", e.termination);
+            assert_close(e.cost, goodman.cost, 1e-9);
+            for (a, b) in e.values.iter().zip(&goodman.values) {
+                assert_close(*a, *b, 1e-6);
+            }
+            // Standard errors in the problem's coordinates, as without bounds.
+            let (se, sg) = (e.std_errors.unwrap(), goodman.std_errors.clone().unwrap());
+            assert_close(se[1], sg[1], 1e-4);
+        }
+    }
+}
+
+#[test]
+fn an_active_bound_is_respected() {
+    // The best k is about 0.8; with k ≥ 1 the fit presses against the bound from inside.
+    let e = GaussNewton::line_search().fit(&problem(Unknown::new("k", 1.5).min(1.0))).unwrap();
+    // Never below the bound (it can reach it in floating point: 1 + eʷ rounds to 1).
+    assert!(e.history.iter().all(|h| h.values[1] >= 1.0));
+    assert!(e.value("k").unwrap() - 1.0 < 1e-3, "{:?}", e.values);
+    assert!(e.history[0].cost.is_finite(), "the start's cost is recorded");
+    assert!(e.termination.to_string().contains("bound of k"), "{}", e.termination);
+}

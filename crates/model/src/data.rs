@@ -1,0 +1,118 @@
+//! A data file (CSV) read against a model: measured series and input signals.
+
+use std::path::Path;
+
+use sysid_core::Data;
+use sysid_core::table::{Table, TableError};
+use sysid_ode::{Inputs, Signal};
+
+use crate::error::ModelError;
+use crate::file::{ModelFile, RecordKind};
+
+/// The measurements and input signals of a data file.
+pub struct ModelData {
+    /// The measured series.
+    pub data: Data,
+    /// The input signals, in the model's input order.
+    pub inputs: Inputs,
+    /// Number of rows.
+    pub rows: usize,
+}
+
+fn table_error(e: TableError) -> ModelError {
+    ModelError {
+        file: e.source,
+        line: e.line.map(|l| l as usize),
+        column: None,
+        message: match e.column {
+            Some(c) => format!("column `{c}`: {}", e.message),
+            None => e.message,
+        },
+    }
+}
+
+/// Reads `path` against `model`: the time column first (named `t` or `time`), then columns
+/// named after states, outputs or inputs; empty cells are missing values.
+pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|e| ModelError::file(&file, e.to_string()))?;
+    // The time column is checked by name before its values are read as times.
+    let time =
+        text.lines().next().and_then(|h| h.split(',').next()).map(str::trim).unwrap_or_default();
+    if !time.eq_ignore_ascii_case("t") && !time.eq_ignore_ascii_case("time") {
+        return Err(ModelError {
+            file,
+            line: Some(1),
+            column: None,
+            message: format!(
+                "the first column must be the time, named `t` or `time`; found `{time}`"
+            ),
+        });
+    }
+    let table = Table::parse(&text, &file).map_err(table_error)?;
+    let outputs: Vec<&str> = model.outputs.iter().map(|o| o.0.as_str()).collect();
+    let measurable = |name: &str| model.states.iter().any(|s| s == name) || outputs.contains(&name);
+    for name in table.names() {
+        if !measurable(name) && !model.inputs.iter().any(|i| i == name) {
+            return Err(ModelError {
+                file,
+                line: Some(1),
+                column: None,
+                message: format!(
+                    "column `{name}` names nothing in the model (states: {}; outputs: {}; inputs: {})",
+                    model.states.join(", "),
+                    if outputs.is_empty() { "none".into() } else { outputs.join(", ") },
+                    if model.inputs.is_empty() { "none".into() } else { model.inputs.join(", ") }
+                ),
+            });
+        }
+    }
+    for (name, _, at) in &model.data.weights {
+        if !table.names().iter().any(|n| n == name) || !measurable(name) {
+            return Err(ModelError::at(
+                &model.path.display().to_string(),
+                &model.text,
+                *at,
+                format!("[data.weights]: `{name}` is not a measured column of {file}"),
+            ));
+        }
+    }
+    let signals = model
+        .inputs
+        .iter()
+        .map(|name| {
+            let (times, values) = table.samples(name).ok_or_else(|| {
+                ModelError::file(
+                    &file,
+                    format!(
+                        "input `{name}` has no column (the inputs are read from the data file)"
+                    ),
+                )
+            })?;
+            Signal::new(times, values, model.input_mode)
+                .map_err(|e| ModelError::file(&file, format!("input `{name}`: {e}")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let times = table.time();
+    let mut data = match model.data.record {
+        RecordKind::Discrete => Data::discrete(),
+        RecordKind::Continuous => Data::continuous(times[0], times[times.len() - 1]),
+    };
+    let mut measured = 0;
+    for name in table.names().iter().filter(|n| measurable(n)) {
+        let (t, v) = table.samples(name).expect("a column of the table");
+        if t.is_empty() {
+            return Err(ModelError::file(&file, format!("column `{name}` has no values")));
+        }
+        let weight = model.data.weights.iter().find(|w| &w.0 == name).map_or(1.0, |w| w.1);
+        data = data.weighted_series(name, weight, &t, &v);
+        measured += 1;
+    }
+    if measured == 0 {
+        return Err(ModelError::file(
+            &file,
+            "no measured column: name columns after states or outputs",
+        ));
+    }
+    Ok(ModelData { data, inputs: Inputs::new(signals), rows: times.len() })
+}

@@ -1,0 +1,642 @@
+//! The expression language of model files.
+//!
+//! Grammar (usual precedence; `^` binds tighter than unary minus and is right-associative,
+//! so `-x^2` is −(x²) and `2^3^2` is 2⁹):
+//!
+//! ```text
+//! expr    = term (("+" | "-") term)*
+//! term    = unary (("*" | "/") unary)*
+//! unary   = ("-" | "+") unary | power
+//! power   = primary ("^" unary)?
+//! primary = number | name | name "(" expr ("," expr)* ")" | "(" expr ")"
+//! number  = digits ["." digits] [("e" | "E") ["+" | "-"] digits]   (also ".5", "2.")
+//! ```
+//!
+//! Functions: exp log sqrt sin cos tan tanh abs (one argument), min max (two). Names are the
+//! model's states, parameters and inputs, and `t`.
+//!
+//! Expressions are parsed once and compiled into a [`Program`]: a tree in one vector, names
+//! resolved to slots, constant subexpressions folded, integer powers specialised. It is
+//! evaluated for any [`Scalar`], so derivatives are exact dual numbers, never differences.
+
+use std::fmt;
+
+use sysid_ode::Scalar;
+
+/// A parse or name error at a character position of the expression (0-based).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ExprError {
+    /// Character offset in the expression.
+    pub position: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl fmt::Display for ExprError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} (character {})", self.message, self.position + 1)
+    }
+}
+
+/// A binary operator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Op {
+    /// +
+    Add,
+    /// −
+    Sub,
+    /// ×
+    Mul,
+    /// ÷
+    Div,
+    /// ^
+    Pow,
+}
+
+/// A function of the language.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Func {
+    /// eˣ
+    Exp,
+    /// natural logarithm
+    Log,
+    /// √x
+    Sqrt,
+    /// sine
+    Sin,
+    /// cosine
+    Cos,
+    /// tangent
+    Tan,
+    /// hyperbolic tangent
+    Tanh,
+    /// |x|
+    Abs,
+    /// min(a, b)
+    Min,
+    /// max(a, b)
+    Max,
+}
+
+impl Func {
+    fn from_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "exp" => Func::Exp,
+            "log" => Func::Log,
+            "sqrt" => Func::Sqrt,
+            "sin" => Func::Sin,
+            "cos" => Func::Cos,
+            "tan" => Func::Tan,
+            "tanh" => Func::Tanh,
+            "abs" => Func::Abs,
+            "min" => Func::Min,
+            "max" => Func::Max,
+            _ => return None,
+        })
+    }
+    fn arity(self) -> usize {
+        if matches!(self, Func::Min | Func::Max) { 2 } else { 1 }
+    }
+}
+
+/// The parsed expression, before names are resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Expr {
+    /// A number.
+    Num(f64),
+    /// A name and its position.
+    Name(String, usize),
+    /// Unary minus.
+    Neg(Box<Expr>),
+    /// A binary operation.
+    Bin(Op, Box<Expr>, Box<Expr>),
+    /// A function call and its position.
+    Call(Func, Vec<Expr>, usize),
+}
+
+#[derive(Clone, Debug, PartialEq)]
+enum Token {
+    Num(f64),
+    Name(String),
+    Op(char),
+    Open,
+    Close,
+    Comma,
+}
+
+fn lex(text: &str) -> Result<Vec<(Token, usize)>, ExprError> {
+    let chars: Vec<char> = text.chars().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < chars.len() {
+        let c = chars[i];
+        let start = i;
+        if c.is_whitespace() {
+            i += 1;
+            continue;
+        }
+        if c.is_ascii_digit() || (c == '.' && chars.get(i + 1).is_some_and(char::is_ascii_digit)) {
+            while i < chars.len() && (chars[i].is_ascii_digit() || chars[i] == '.') {
+                i += 1;
+            }
+            if i < chars.len() && (chars[i] == 'e' || chars[i] == 'E') {
+                let mut j = i + 1;
+                if j < chars.len() && (chars[j] == '+' || chars[j] == '-') {
+                    j += 1;
+                }
+                if j < chars.len() && chars[j].is_ascii_digit() {
+                    i = j;
+                    while i < chars.len() && chars[i].is_ascii_digit() {
+                        i += 1;
+                    }
+                }
+            }
+            let literal: String = chars[start..i].iter().collect();
+            let value: f64 = literal.parse().map_err(|_| ExprError {
+                position: start,
+                message: format!("`{literal}` is not a number"),
+            })?;
+            out.push((Token::Num(value), start));
+            continue;
+        }
+        if c.is_alphabetic() || c == '_' {
+            while i < chars.len() && (chars[i].is_alphanumeric() || chars[i] == '_') {
+                i += 1;
+            }
+            out.push((Token::Name(chars[start..i].iter().collect()), start));
+            continue;
+        }
+        let token = match c {
+            '+' | '-' | '*' | '/' | '^' => Token::Op(c),
+            '(' => Token::Open,
+            ')' => Token::Close,
+            ',' => Token::Comma,
+            _ => {
+                return Err(ExprError {
+                    position: i,
+                    message: format!("unexpected character `{c}`"),
+                });
+            }
+        };
+        out.push((token, start));
+        i += 1;
+    }
+    Ok(out)
+}
+
+struct Parser {
+    tokens: Vec<(Token, usize)>,
+    at: usize,
+    end: usize,
+}
+
+impl Parser {
+    fn peek(&self) -> Option<&Token> {
+        self.tokens.get(self.at).map(|t| &t.0)
+    }
+    fn position(&self) -> usize {
+        self.tokens.get(self.at).map_or(self.end, |t| t.1)
+    }
+    fn error<T>(&self, message: impl Into<String>) -> Result<T, ExprError> {
+        Err(ExprError { position: self.position(), message: message.into() })
+    }
+    fn found(&self) -> String {
+        match self.peek() {
+            None => "the end".into(),
+            Some(Token::Num(v)) => format!("`{v}`"),
+            Some(Token::Name(n)) => format!("`{n}`"),
+            Some(Token::Op(c)) => format!("`{c}`"),
+            Some(Token::Open) => "`(`".into(),
+            Some(Token::Close) => "`)`".into(),
+            Some(Token::Comma) => "`,`".into(),
+        }
+    }
+
+    fn expr(&mut self) -> Result<Expr, ExprError> {
+        let mut left = self.term()?;
+        while let Some(Token::Op(c @ ('+' | '-'))) = self.peek() {
+            let op = if *c == '+' { Op::Add } else { Op::Sub };
+            self.at += 1;
+            left = Expr::Bin(op, Box::new(left), Box::new(self.term()?));
+        }
+        Ok(left)
+    }
+
+    fn term(&mut self) -> Result<Expr, ExprError> {
+        let mut left = self.unary()?;
+        while let Some(Token::Op(c @ ('*' | '/'))) = self.peek() {
+            let op = if *c == '*' { Op::Mul } else { Op::Div };
+            self.at += 1;
+            left = Expr::Bin(op, Box::new(left), Box::new(self.unary()?));
+        }
+        Ok(left)
+    }
+
+    fn unary(&mut self) -> Result<Expr, ExprError> {
+        match self.peek() {
+            Some(Token::Op('-')) => {
+                self.at += 1;
+                Ok(Expr::Neg(Box::new(self.unary()?)))
+            }
+            Some(Token::Op('+')) => {
+                self.at += 1;
+                self.unary()
+            }
+            _ => self.power(),
+        }
+    }
+
+    fn power(&mut self) -> Result<Expr, ExprError> {
+        let base = self.primary()?;
+        if let Some(Token::Op('^')) = self.peek() {
+            self.at += 1;
+            // Right-associative, and the exponent may carry its own sign: 2^-x.
+            return Ok(Expr::Bin(Op::Pow, Box::new(base), Box::new(self.unary()?)));
+        }
+        Ok(base)
+    }
+
+    fn primary(&mut self) -> Result<Expr, ExprError> {
+        let position = self.position();
+        match self.peek().cloned() {
+            Some(Token::Num(v)) => {
+                self.at += 1;
+                Ok(Expr::Num(v))
+            }
+            Some(Token::Name(name)) => {
+                self.at += 1;
+                if self.peek() != Some(&Token::Open) {
+                    return Ok(Expr::Name(name, position));
+                }
+                let Some(func) = Func::from_name(&name) else {
+                    return Err(ExprError {
+                        position,
+                        message: format!(
+                            "unknown function `{name}` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max)"
+                        ),
+                    });
+                };
+                self.at += 1;
+                let mut args = vec![self.expr()?];
+                while self.peek() == Some(&Token::Comma) {
+                    self.at += 1;
+                    args.push(self.expr()?);
+                }
+                if self.peek() != Some(&Token::Close) {
+                    return self.error(format!(
+                        "expected `,` or `)` in the call of {name}, found {}",
+                        self.found()
+                    ));
+                }
+                self.at += 1;
+                if args.len() != func.arity() {
+                    return Err(ExprError {
+                        position,
+                        message: format!(
+                            "{name} takes {} argument(s), got {}",
+                            func.arity(),
+                            args.len()
+                        ),
+                    });
+                }
+                Ok(Expr::Call(func, args, position))
+            }
+            Some(Token::Open) => {
+                self.at += 1;
+                let inner = self.expr()?;
+                if self.peek() != Some(&Token::Close) {
+                    return self.error(format!("expected `)`, found {}", self.found()));
+                }
+                self.at += 1;
+                Ok(inner)
+            }
+            _ => self.error(format!("expected a number, a name or `(`, found {}", self.found())),
+        }
+    }
+}
+
+/// Parses an expression.
+pub fn parse(text: &str) -> Result<Expr, ExprError> {
+    let tokens = lex(text)?;
+    let end = text.chars().count();
+    let mut parser = Parser { tokens, at: 0, end };
+    if parser.peek().is_none() {
+        return parser.error("empty expression");
+    }
+    let expr = parser.expr()?;
+    if parser.peek().is_some() {
+        return parser.error(format!("unexpected {} after the expression", parser.found()));
+    }
+    Ok(expr)
+}
+
+/// What a name refers to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Slot {
+    /// State i.
+    State(usize),
+    /// Parameter i.
+    Parameter(usize),
+    /// Input i.
+    Input(usize),
+    /// The time t.
+    Time,
+}
+
+/// An argument of an operation: a value read directly (no call), or another node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Operand {
+    Node(u32),
+    Var(Slot),
+    Const(f64),
+}
+
+/// An operation. Operations with a constant argument have scalar forms, which skip the
+/// arithmetic on a dual constant's zero derivative.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Node {
+    Neg(Operand),
+    Add(Operand, Operand),
+    Sub(Operand, Operand),
+    Mul(Operand, Operand),
+    Div(Operand, Operand),
+    /// x + c.
+    AddC(Operand, f64),
+    /// c − x.
+    SubC(f64, Operand),
+    /// c·x.
+    MulC(Operand, f64),
+    /// x / c.
+    DivC(Operand, f64),
+    /// c / x.
+    CDiv(f64, Operand),
+    /// x^n for an integer n.
+    PowI(Operand, i32),
+    /// x^c for a constant c.
+    PowF(Operand, f64),
+    /// x^y.
+    Pow(Operand, Operand),
+    Func(Func, Operand),
+    Min(Operand, Operand),
+    Max(Operand, Operand),
+}
+
+/// A compiled expression.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Program {
+    nodes: Vec<Node>,
+    root: Operand,
+}
+
+impl Program {
+    /// Compiles a parsed expression; `resolve` maps a name to its slot.
+    pub fn compile(expr: &Expr, resolve: &dyn Fn(&str) -> Option<Slot>) -> Result<Self, ExprError> {
+        let mut program = Program { nodes: Vec::new(), root: Operand::Const(0.0) };
+        program.root = program.add(expr, resolve)?;
+        Ok(program)
+    }
+
+    fn node(&mut self, node: Node) -> Operand {
+        self.nodes.push(node);
+        Operand::Node((self.nodes.len() - 1) as u32)
+    }
+
+    fn add(
+        &mut self,
+        expr: &Expr,
+        resolve: &dyn Fn(&str) -> Option<Slot>,
+    ) -> Result<Operand, ExprError> {
+        use Operand::Const;
+        Ok(match expr {
+            Expr::Num(v) => Const(*v),
+            Expr::Name(name, position) => match resolve(name) {
+                Some(slot) => Operand::Var(slot),
+                None => {
+                    return Err(ExprError {
+                        position: *position,
+                        message: format!("unknown name `{name}`"),
+                    });
+                }
+            },
+            Expr::Neg(a) => match self.add(a, resolve)? {
+                Const(c) => Const(-c),
+                a => self.node(Node::Neg(a)),
+            },
+            Expr::Bin(op, a, b) => {
+                let a = self.add(a, resolve)?;
+                let b = self.add(b, resolve)?;
+                match (op, a, b) {
+                    (Op::Add, Const(x), Const(y)) => Const(x + y),
+                    (Op::Sub, Const(x), Const(y)) => Const(x - y),
+                    (Op::Mul, Const(x), Const(y)) => Const(x * y),
+                    (Op::Div, Const(x), Const(y)) => Const(x / y),
+                    (Op::Pow, Const(x), Const(y)) => Const(x.powf(y)),
+                    (Op::Add, x, Const(c)) | (Op::Add, Const(c), x) => self.node(Node::AddC(x, c)),
+                    (Op::Sub, x, Const(c)) => self.node(Node::AddC(x, -c)),
+                    (Op::Sub, Const(c), x) => self.node(Node::SubC(c, x)),
+                    (Op::Mul, x, Const(c)) | (Op::Mul, Const(c), x) => self.node(Node::MulC(x, c)),
+                    (Op::Div, x, Const(c)) => self.node(Node::DivC(x, c)),
+                    (Op::Div, Const(c), x) => self.node(Node::CDiv(c, x)),
+                    (Op::Pow, x, Const(c)) if c.fract() == 0.0 && c.abs() <= 64.0 => {
+                        self.node(Node::PowI(x, c as i32))
+                    }
+                    (Op::Pow, x, Const(c)) => self.node(Node::PowF(x, c)),
+                    (Op::Add, x, y) => self.node(Node::Add(x, y)),
+                    (Op::Sub, x, y) => self.node(Node::Sub(x, y)),
+                    (Op::Mul, x, y) => self.node(Node::Mul(x, y)),
+                    (Op::Div, x, y) => self.node(Node::Div(x, y)),
+                    (Op::Pow, x, y) => self.node(Node::Pow(x, y)),
+                }
+            }
+            Expr::Call(f, args, _) => {
+                let a = self.add(&args[0], resolve)?;
+                match f {
+                    Func::Min | Func::Max => {
+                        let b = self.add(&args[1], resolve)?;
+                        match (a, b) {
+                            (Const(x), Const(y)) => {
+                                Const(if *f == Func::Min { x.min(y) } else { x.max(y) })
+                            }
+                            _ if *f == Func::Min => self.node(Node::Min(a, b)),
+                            _ => self.node(Node::Max(a, b)),
+                        }
+                    }
+                    _ => match a {
+                        Const(x) => Const(eval_func(*f, x)),
+                        a => self.node(Node::Func(*f, a)),
+                    },
+                }
+            }
+        })
+    }
+
+    /// Evaluates at (t, y, α, u) for any scalar.
+    pub fn eval<T: Scalar>(&self, t: f64, y: &[T], p: &[T], u: &[f64]) -> T {
+        self.get(self.root, t, y, p, u)
+    }
+
+    /// Whether the value is a constant (does not depend on t, states, parameters or inputs).
+    pub fn is_constant(&self) -> bool {
+        matches!(self.root, Operand::Const(_))
+    }
+
+    #[inline]
+    fn get<T: Scalar>(&self, o: Operand, t: f64, y: &[T], p: &[T], u: &[f64]) -> T {
+        match o {
+            Operand::Node(i) => self.eval_node(i, t, y, p, u),
+            Operand::Var(Slot::State(k)) => y[k],
+            Operand::Var(Slot::Parameter(k)) => p[k],
+            Operand::Var(Slot::Input(k)) => T::from(u[k]),
+            Operand::Var(Slot::Time) => T::from(t),
+            Operand::Const(c) => T::from(c),
+        }
+    }
+
+    fn eval_node<T: Scalar>(&self, i: u32, t: f64, y: &[T], p: &[T], u: &[f64]) -> T {
+        let get = |o: Operand| self.get(o, t, y, p, u);
+        match self.nodes[i as usize] {
+            Node::Neg(a) => -get(a),
+            Node::Add(a, b) => get(a) + get(b),
+            Node::Sub(a, b) => get(a) - get(b),
+            Node::Mul(a, b) => get(a) * get(b),
+            Node::Div(a, b) => get(a) / get(b),
+            Node::AddC(a, c) => get(a) + c,
+            Node::SubC(c, a) => -get(a) + c,
+            Node::MulC(a, c) => get(a) * c,
+            Node::DivC(a, c) => get(a) / c,
+            Node::CDiv(c, a) => get(a).recip() * c,
+            Node::PowI(a, n) => get(a).powi(n),
+            Node::PowF(a, c) => get(a).powf(c),
+            Node::Pow(a, b) => get(a).powd(get(b)),
+            Node::Func(f, a) => {
+                let x = get(a);
+                match f {
+                    Func::Exp => x.exp(),
+                    Func::Log => x.ln(),
+                    Func::Sqrt => x.sqrt(),
+                    Func::Sin => x.sin(),
+                    Func::Cos => x.cos(),
+                    Func::Tan => x.tan(),
+                    Func::Tanh => x.tanh(),
+                    Func::Abs => x.abs(),
+                    Func::Min | Func::Max => unreachable!("compiled to Min and Max nodes"),
+                }
+            }
+            Node::Min(a, b) => {
+                let (x, y) = (get(a), get(b));
+                if y.re() < x.re() { y } else { x }
+            }
+            Node::Max(a, b) => {
+                let (x, y) = (get(a), get(b));
+                if y.re() > x.re() { y } else { x }
+            }
+        }
+    }
+}
+
+fn eval_func(f: Func, x: f64) -> f64 {
+    match f {
+        Func::Exp => x.exp(),
+        Func::Log => x.ln(),
+        Func::Sqrt => x.sqrt(),
+        Func::Sin => x.sin(),
+        Func::Cos => x.cos(),
+        Func::Tan => x.tan(),
+        Func::Tanh => x.tanh(),
+        Func::Abs => x.abs(),
+        Func::Min | Func::Max => unreachable!("two-argument functions are folded on their own"),
+    }
+}
+
+impl fmt::Display for Expr {
+    /// Fully parenthesised, for round trips in tests.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            // A negative number is parenthesised: -1 ^ 2 reads as -(1²).
+            Expr::Num(v) if v.is_sign_negative() => write!(f, "({v:?})"),
+            Expr::Num(v) => write!(f, "{v:?}"),
+            Expr::Name(n, _) => write!(f, "{n}"),
+            Expr::Neg(a) => write!(f, "(-{a})"),
+            Expr::Bin(op, a, b) => {
+                let c = match op {
+                    Op::Add => '+',
+                    Op::Sub => '-',
+                    Op::Mul => '*',
+                    Op::Div => '/',
+                    Op::Pow => '^',
+                };
+                write!(f, "({a} {c} {b})")
+            }
+            Expr::Call(func, args, _) => {
+                let name = format!("{func:?}").to_lowercase();
+                let args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+                write!(f, "{name}({})", args.join(", "))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sysid_ode::testing::assert_close;
+
+    fn value(text: &str) -> f64 {
+        let resolve = |name: &str| match name {
+            "x" => Some(Slot::State(0)),
+            "k" => Some(Slot::Parameter(0)),
+            "u" => Some(Slot::Input(0)),
+            "t" => Some(Slot::Time),
+            _ => None,
+        };
+        let program = Program::compile(&parse(text).unwrap(), &resolve).unwrap();
+        program.eval(0.5, &[2.0], &[3.0], &[-1.0])
+    }
+
+    #[test]
+    fn precedence_and_associativity() {
+        assert_close(value("1 + 2 * 3"), 7.0, 0.0);
+        assert_close(value("2 ^ 3 ^ 2"), 512.0, 0.0);
+        assert_close(value("-x ^ 2"), -4.0, 0.0);
+        assert_close(value("(-x) ^ 2"), 4.0, 0.0);
+        assert_close(value("2 ^ -1"), 0.5, 0.0);
+        assert_close(value("10 / 4 / 5"), 0.5, 0.0);
+        assert_close(value("8 - 3 - 2"), 3.0, 0.0);
+        assert_close(value("--x"), 2.0, 0.0);
+        assert_close(value("1.5e3 + .5 + 2. + 1E-3"), 1502.501, 1e-15);
+        assert_close(value("k * x^2 - u / t"), 14.0, 1e-15);
+        assert_close(value("max(x, k) + min(x, k) + abs(u)"), 6.0, 0.0);
+        assert_close(
+            value("exp(log(x)) + sqrt(k^2) + tanh(0) + sin(0) + cos(0) + tan(0)"),
+            6.0,
+            1e-15,
+        );
+        assert_close(value("x ^ 0.5"), 2f64.sqrt(), 1e-15);
+        assert_close(value("x ^ k"), 8.0, 1e-15);
+    }
+
+    #[test]
+    fn errors_point_at_the_character() {
+        let err = |text: &str| parse(text).unwrap_err();
+        assert_eq!(err("1 +").position, 3);
+        assert_eq!(err("1 + * 2").message, "expected a number, a name or `(`, found `*`");
+        assert_eq!(err("(x + 1").message, "expected `)`, found the end");
+        assert_eq!(err("x + 1)").message, "unexpected `)` after the expression");
+        assert_eq!(err("x # 2").position, 2);
+        assert!(err("foo(x)").message.starts_with("unknown function `foo`"));
+        assert_eq!(err("min(x)").message, "min takes 2 argument(s), got 1");
+        assert_eq!(err("   ").message, "empty expression");
+        assert_eq!(err("1.2.3").message, "`1.2.3` is not a number");
+        let resolve = |_: &str| None;
+        let unknown = Program::compile(&parse("2 * kk").unwrap(), &resolve).unwrap_err();
+        assert_eq!((unknown.position, unknown.message.as_str()), (4, "unknown name `kk`"));
+    }
+
+    #[test]
+    fn constants_are_folded() {
+        let resolve = |_: &str| None;
+        let program = Program::compile(&parse("2 * (3 + 4) - exp(0)").unwrap(), &resolve).unwrap();
+        assert!(program.is_constant());
+        assert_close(program.eval::<f64>(0.0, &[], &[], &[]), 13.0, 0.0);
+    }
+}

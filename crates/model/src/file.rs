@@ -1,0 +1,586 @@
+//! The TOML model file: reading it with the position of every key and value, checking it,
+//! and compiling its expressions.
+
+use std::path::{Path, PathBuf};
+
+use sysid_core::Unknown;
+use sysid_ode::{Integrator, Interpolation, Scheme};
+use toml::Spanned;
+use toml::de::{DeTable, DeValue};
+
+use crate::error::{ModelError, char_offset};
+use crate::expr::{self, Program, Slot};
+
+/// How the data are taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecordKind {
+    /// Samples at discrete times.
+    Discrete,
+    /// The columns are a continuous record b(t), linear between samples.
+    Continuous,
+}
+
+/// The `[data]` table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DataSpec {
+    /// The data file, relative to the model file.
+    pub file: Option<PathBuf>,
+    /// Time of the initial values (default 0).
+    pub t0: f64,
+    /// Discrete or continuous.
+    pub record: RecordKind,
+    /// Weight per measured column (default 1).
+    pub weights: Vec<(String, f64, usize)>,
+}
+
+/// A model file, read and checked, expressions compiled.
+#[derive(Clone, Debug)]
+pub struct ModelFile {
+    /// Where it was read from.
+    pub path: PathBuf,
+    /// Its text, for locating errors found later.
+    pub text: String,
+    /// State names.
+    pub states: Vec<String>,
+    /// Parameter names.
+    pub parameters: Vec<String>,
+    /// Input names.
+    pub inputs: Vec<String>,
+    /// How inputs are interpolated between samples.
+    pub input_mode: Interpolation,
+    /// One right-hand side per state, in state order.
+    pub equations: Vec<Program>,
+    /// Measured outputs: names and expressions.
+    pub outputs: Vec<(String, Program)>,
+    /// Known initial values and parameters.
+    pub known: Vec<(String, f64)>,
+    /// Unknowns with guesses, bounds and scales.
+    pub unknowns: Vec<Unknown>,
+    /// The `[data]` table.
+    pub data: DataSpec,
+    /// The integrator (`[integrator]`, default DOPRI5 with rtol 1e-8, atol 1e-10).
+    pub integrator: Integrator,
+    /// Byte offset of the `states` key, to locate model-wide errors.
+    pub states_at: usize,
+}
+
+/// Reserved words: time and the function names.
+const RESERVED: &[&str] =
+    &["t", "exp", "log", "sqrt", "sin", "cos", "tan", "tanh", "abs", "min", "max"];
+const TOP_LEVEL: &[&str] = &[
+    "states",
+    "parameters",
+    "inputs",
+    "equations",
+    "initial",
+    "known",
+    "unknowns",
+    "outputs",
+    "data",
+    "integrator",
+];
+
+struct Reader<'a> {
+    file: String,
+    text: &'a str,
+}
+
+type Entry<'a, 'i> = (&'a Spanned<std::borrow::Cow<'i, str>>, &'a Spanned<DeValue<'i>>);
+
+impl<'a> Reader<'a> {
+    fn err(&self, offset: usize, message: impl Into<String>) -> ModelError {
+        ModelError::at(&self.file, self.text, offset, message)
+    }
+
+    fn number(&self, value: &Spanned<DeValue<'_>>, what: &str) -> Result<f64, ModelError> {
+        let at = value.span().start;
+        let v = match value.get_ref() {
+            DeValue::Integer(i) => {
+                let digits: String = i.as_str().chars().filter(|c| *c != '_').collect();
+                i64::from_str_radix(&digits, i.radix()).map(|v| v as f64).ok()
+            }
+            DeValue::Float(f) => f.as_str().replace('_', "").parse::<f64>().ok(),
+            _ => None,
+        };
+        let v = v.ok_or_else(|| self.err(at, format!("{what} must be a number")))?;
+        if !v.is_finite() {
+            return Err(self.err(at, format!("{what} must be a finite number, got {v}")));
+        }
+        Ok(v)
+    }
+
+    fn string<'v>(
+        &self,
+        value: &'v Spanned<DeValue<'_>>,
+        what: &str,
+    ) -> Result<&'v str, ModelError> {
+        match value.get_ref() {
+            DeValue::String(s) => Ok(s),
+            _ => Err(self.err(value.span().start, format!("{what} must be a string"))),
+        }
+    }
+
+    fn table<'v, 'i>(
+        &self,
+        value: &'v Spanned<DeValue<'i>>,
+        what: &str,
+    ) -> Result<&'v DeTable<'i>, ModelError> {
+        match value.get_ref() {
+            DeValue::Table(t) => Ok(t),
+            _ => Err(self.err(value.span().start, format!("{what} must be a table"))),
+        }
+    }
+
+    /// A list of names: strings, each a valid identifier.
+    fn names(
+        &self,
+        value: &Spanned<DeValue<'_>>,
+        what: &str,
+    ) -> Result<Vec<(String, usize)>, ModelError> {
+        let DeValue::Array(items) = value.get_ref() else {
+            return Err(self.err(
+                value.span().start,
+                format!("`{what}` must be a list of names, like [\"x\", \"y\"]"),
+            ));
+        };
+        items
+            .iter()
+            .map(|item| {
+                let name = self.string(item, &format!("each entry of `{what}`"))?;
+                self.identifier(name, item.span().start)?;
+                Ok((name.to_string(), item.span().start))
+            })
+            .collect()
+    }
+
+    fn identifier(&self, name: &str, at: usize) -> Result<(), ModelError> {
+        let mut chars = name.chars();
+        let valid = chars.next().is_some_and(|c| c.is_alphabetic() || c == '_')
+            && chars.all(|c| c.is_alphanumeric() || c == '_');
+        if !valid {
+            return Err(self.err(at, format!("`{name}` is not a valid name (letters, digits and _, not starting with a digit)")));
+        }
+        if RESERVED.contains(&name) {
+            return Err(self.err(at, format!("`{name}` is reserved (the time or a function)")));
+        }
+        Ok(())
+    }
+
+    /// Compiles an expression string, locating its errors in the file.
+    fn expression(
+        &self,
+        value: &Spanned<DeValue<'_>>,
+        what: &str,
+        resolve: &dyn Fn(&str) -> Option<Slot>,
+        names: &str,
+    ) -> Result<Program, ModelError> {
+        let text = self.string(value, what)?;
+        let start = value.span().start;
+        let quote =
+            if self.text[start..].starts_with("\"\"\"") || self.text[start..].starts_with("'''") {
+                3
+            } else {
+                1
+            };
+        let locate = |e: expr::ExprError| {
+            let mut message = format!("{what}: {}", e.message);
+            if e.message.starts_with("unknown name") {
+                message += &format!(" (names: {names})");
+            }
+            self.err(char_offset(self.text, start + quote, e.position), message)
+        };
+        let parsed = expr::parse(text).map_err(locate)?;
+        Program::compile(&parsed, resolve).map_err(locate)
+    }
+}
+
+impl ModelFile {
+    /// Reads and checks a model file.
+    pub fn read(path: &Path) -> Result<Self, ModelError> {
+        let file = path.display().to_string();
+        let text =
+            std::fs::read_to_string(path).map_err(|e| ModelError::file(&file, e.to_string()))?;
+        Self::parse(&text, path)
+    }
+
+    /// Checks a model file's text; `path` names it and anchors relative data paths.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ModelError> {
+        let file = path.display().to_string();
+        let r = Reader { file: file.clone(), text };
+        let doc = DeTable::parse(text).map_err(|e| {
+            let at = e.span().map_or(0, |s| s.start);
+            r.err(at, format!("TOML syntax error: {}", e.message().trim()))
+        })?;
+        let doc = doc.get_ref();
+        for (key, _) in doc.iter() {
+            if !TOP_LEVEL.contains(&key.get_ref().as_ref()) {
+                return Err(r.err(
+                    key.span().start,
+                    format!("unknown key `{}` (keys: {})", key.get_ref(), TOP_LEVEL.join(", ")),
+                ));
+            }
+        }
+
+        // Names.
+        let states_value = doc
+            .get("states")
+            .ok_or_else(|| ModelError::file(&file, "`states` is missing: list the state names"))?;
+        let states = r.names(states_value, "states")?;
+        if states.is_empty() {
+            return Err(r.err(
+                states_value.span().start,
+                "`states` is empty: a model needs at least one state",
+            ));
+        }
+        let parameters = match doc.get("parameters") {
+            Some(v) => r.names(v, "parameters")?,
+            None => Vec::new(),
+        };
+        let (inputs, input_mode) = match doc.get("inputs") {
+            None => (Vec::new(), Interpolation::Linear),
+            Some(v) => match v.get_ref() {
+                DeValue::Array(_) => (r.names(v, "inputs")?, Interpolation::Linear),
+                DeValue::Table(t) => {
+                    let names = match t.get("names") {
+                        Some(n) => r.names(n, "inputs.names")?,
+                        None => return Err(r.err(v.span().start, "[inputs] needs `names = [...]`")),
+                    };
+                    let mode = match t.get("mode") {
+                        None => Interpolation::Linear,
+                        Some(m) => match r.string(m, "inputs.mode")? {
+                            "linear" => Interpolation::Linear,
+                            "step" => Interpolation::Step,
+                            other => {
+                                return Err(r.err(m.span().start, format!("inputs.mode must be \"linear\" or \"step\", got \"{other}\"")));
+                            }
+                        },
+                    };
+                    for (key, _) in t.iter() {
+                        if !["names", "mode"].contains(&key.get_ref().as_ref()) {
+                            return Err(r.err(
+                                key.span().start,
+                                format!(
+                                    "unknown key `{}` in [inputs] (keys: names, mode)",
+                                    key.get_ref()
+                                ),
+                            ));
+                        }
+                    }
+                    (names, mode)
+                }
+                _ => {
+                    return Err(r.err(
+                        v.span().start,
+                        "`inputs` must be a list of names or a table {names, mode}",
+                    ));
+                }
+            },
+        };
+        let output_entries: Vec<Entry<'_, '_>> = match doc.get("outputs") {
+            Some(v) => r.table(v, "[outputs]")?.iter().collect(),
+            None => Vec::new(),
+        };
+        // Unique names across states, parameters, inputs and outputs.
+        let mut seen: Vec<(&str, &str)> = Vec::new();
+        let outputs_named: Vec<(String, usize)> =
+            output_entries.iter().map(|(k, _)| (k.get_ref().to_string(), k.span().start)).collect();
+        for (kind, list) in [
+            ("a state", &states),
+            ("a parameter", &parameters),
+            ("an input", &inputs),
+            ("an output", &outputs_named),
+        ] {
+            for (name, at) in list {
+                if kind == "an output" {
+                    r.identifier(name, *at)?;
+                }
+                if let Some((_, first)) = seen.iter().find(|(n, _)| n == name) {
+                    return Err(r.err(
+                        *at,
+                        format!("the name `{name}` is used twice (as {first} and as {kind})"),
+                    ));
+                }
+                seen.push((name, kind));
+            }
+        }
+        let state_names: Vec<String> = states.iter().map(|s| s.0.clone()).collect();
+        let parameter_names: Vec<String> = parameters.iter().map(|s| s.0.clone()).collect();
+        let input_names: Vec<String> = inputs.iter().map(|s| s.0.clone()).collect();
+        let resolve = |name: &str| -> Option<Slot> {
+            if name == "t" {
+                return Some(Slot::Time);
+            }
+            state_names
+                .iter()
+                .position(|s| s == name)
+                .map(Slot::State)
+                .or_else(|| parameter_names.iter().position(|s| s == name).map(Slot::Parameter))
+                .or_else(|| input_names.iter().position(|s| s == name).map(Slot::Input))
+        };
+        let all_names = state_names
+            .iter()
+            .chain(&parameter_names)
+            .chain(&input_names)
+            .map(String::as_str)
+            .chain(["t"])
+            .collect::<Vec<_>>()
+            .join(", ");
+
+        // Equations: one per state.
+        let equations_value = doc.get("equations").ok_or_else(|| {
+            r.err(
+                states_value.span().start,
+                "[equations] is missing: give d(state)/dt for every state",
+            )
+        })?;
+        let equations_table = r.table(equations_value, "[equations]")?;
+        let mut equations: Vec<Option<Program>> = vec![None; states.len()];
+        for (key, value) in equations_table.iter() {
+            let name = key.get_ref();
+            let Some(i) = state_names.iter().position(|s| s == name) else {
+                return Err(r.err(
+                    key.span().start,
+                    format!(
+                        "[equations]: `{name}` is not a state (states: {})",
+                        state_names.join(", ")
+                    ),
+                ));
+            };
+            equations[i] =
+                Some(r.expression(value, &format!("equation of {name}"), &resolve, &all_names)?);
+        }
+        let equations = equations
+            .into_iter()
+            .zip(&states)
+            .map(|(e, (name, at))| {
+                e.ok_or_else(|| {
+                    r.err(*at, format!("state `{name}` has no equation in [equations]"))
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+
+        let outputs = output_entries
+            .iter()
+            .map(|(key, value)| {
+                let name = key.get_ref().to_string();
+                let program =
+                    r.expression(value, &format!("output {name}"), &resolve, &all_names)?;
+                Ok((name, program))
+            })
+            .collect::<Result<Vec<_>, ModelError>>()?;
+
+        // Known values and unknowns: every state and parameter exactly once.
+        let mut given: Vec<(String, &'static str)> = Vec::new();
+        let mut mark = |name: &str, how: &'static str, at: usize| -> Result<(), ModelError> {
+            if let Some((_, first)) = given.iter().find(|(n, _)| n == name) {
+                return Err(
+                    r.err(at, format!("`{name}` is given twice (in [{first}] and in [{how}])"))
+                );
+            }
+            given.push((name.to_string(), how));
+            Ok(())
+        };
+        let mut known = Vec::new();
+        for (section, names, kind) in
+            [("initial", &state_names, "state"), ("known", &parameter_names, "parameter")]
+        {
+            if let Some(v) = doc.get(section) {
+                for (key, value) in r.table(v, &format!("[{section}]"))?.iter() {
+                    let name = key.get_ref();
+                    if !names.iter().any(|n| n == name) {
+                        return Err(r.err(
+                            key.span().start,
+                            format!(
+                                "[{section}]: `{name}` is not a {kind} (names: {})",
+                                names.join(", ")
+                            ),
+                        ));
+                    }
+                    mark(name, section, key.span().start)?;
+                    known
+                        .push((name.to_string(), r.number(value, &format!("[{section}] {name}"))?));
+                }
+            }
+        }
+        let mut unknowns = Vec::new();
+        if let Some(v) = doc.get("unknowns") {
+            for (key, value) in r.table(v, "[unknowns]")?.iter() {
+                let name = key.get_ref();
+                if !state_names.iter().chain(&parameter_names).any(|n| n == name) {
+                    return Err(r.err(
+                        key.span().start,
+                        format!(
+                            "[unknowns]: `{name}` is not a state or parameter (names: {})",
+                            state_names
+                                .iter()
+                                .chain(&parameter_names)
+                                .cloned()
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
+                mark(name, "unknowns", key.span().start)?;
+                let unknown = match value.get_ref() {
+                    DeValue::Table(t) => {
+                        let guess = t.get("guess").ok_or_else(|| {
+                            r.err(
+                                value.span().start,
+                                format!("[unknowns] {name}: an unknown needs `guess`"),
+                            )
+                        })?;
+                        let mut u = Unknown::new(
+                            name.as_ref(),
+                            r.number(guess, &format!("[unknowns] {name}.guess"))?,
+                        );
+                        for (k, v) in t.iter() {
+                            match k.get_ref().as_ref() {
+                                "guess" => {}
+                                "min" => {
+                                    u.min = Some(r.number(v, &format!("[unknowns] {name}.min"))?)
+                                }
+                                "max" => {
+                                    u.max = Some(r.number(v, &format!("[unknowns] {name}.max"))?)
+                                }
+                                "log" => match v.get_ref() {
+                                    DeValue::Boolean(b) => u.log = *b,
+                                    _ => {
+                                        return Err(r.err(
+                                            v.span().start,
+                                            format!("[unknowns] {name}.log must be true or false"),
+                                        ));
+                                    }
+                                },
+                                other => {
+                                    return Err(r.err(k.span().start, format!("[unknowns] {name}: unknown key `{other}` (keys: guess, min, max, log)")));
+                                }
+                            }
+                        }
+                        u
+                    }
+                    _ => {
+                        Unknown::new(name.as_ref(), r.number(value, &format!("[unknowns] {name}"))?)
+                    }
+                };
+                unknowns.push(unknown);
+            }
+        }
+        for (kind, names, list) in
+            [("state", &state_names, &states), ("parameter", &parameter_names, &parameters)]
+        {
+            for (name, (_, at)) in names.iter().zip(list.iter()) {
+                if !given.iter().any(|(n, _)| n == name) {
+                    let section = if kind == "state" { "[initial]" } else { "[known]" };
+                    return Err(r.err(
+                        *at,
+                        format!("{kind} `{name}` is neither in {section} nor in [unknowns]"),
+                    ));
+                }
+            }
+        }
+
+        let data = match doc.get("data") {
+            None => {
+                DataSpec { file: None, t0: 0.0, record: RecordKind::Discrete, weights: Vec::new() }
+            }
+            Some(v) => read_data(&r, r.table(v, "[data]")?, path)?,
+        };
+        let integrator = match doc.get("integrator") {
+            None => Integrator::default(),
+            Some(v) => read_integrator(&r, v)?,
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            text: text.to_string(),
+            states: state_names,
+            parameters: parameter_names,
+            inputs: input_names,
+            input_mode,
+            equations,
+            outputs,
+            known,
+            unknowns,
+            data,
+            integrator,
+            states_at: states_value.span().start,
+        })
+    }
+}
+
+fn read_data(r: &Reader<'_>, t: &DeTable<'_>, path: &Path) -> Result<DataSpec, ModelError> {
+    let mut spec =
+        DataSpec { file: None, t0: 0.0, record: RecordKind::Discrete, weights: Vec::new() };
+    for (key, value) in t.iter() {
+        match key.get_ref().as_ref() {
+            "file" => {
+                let f = r.string(value, "[data] file")?;
+                let base = path.parent().unwrap_or(Path::new(""));
+                spec.file = Some(base.join(f));
+            }
+            "t0" => spec.t0 = r.number(value, "[data] t0")?,
+            "record" => {
+                spec.record = match r.string(value, "[data] record")? {
+                    "discrete" => RecordKind::Discrete,
+                    "continuous" => RecordKind::Continuous,
+                    other => {
+                        return Err(r.err(value.span().start, format!("[data] record must be \"discrete\" or \"continuous\", got \"{other}\"")));
+                    }
+                }
+            }
+            "weights" => {
+                for (k, w) in r.table(value, "[data.weights]")?.iter() {
+                    let weight = r.number(w, &format!("[data.weights] {}", k.get_ref()))?;
+                    if weight <= 0.0 {
+                        return Err(r.err(
+                            w.span().start,
+                            format!(
+                                "[data.weights] {} must be positive, got {weight}",
+                                k.get_ref()
+                            ),
+                        ));
+                    }
+                    spec.weights.push((k.get_ref().to_string(), weight, k.span().start));
+                }
+            }
+            other => {
+                return Err(r.err(
+                    key.span().start,
+                    format!("unknown key `{other}` in [data] (keys: file, t0, record, weights)"),
+                ));
+            }
+        }
+    }
+    Ok(spec)
+}
+
+fn read_integrator(r: &Reader<'_>, value: &Spanned<DeValue<'_>>) -> Result<Integrator, ModelError> {
+    let t = r.table(value, "[integrator]")?;
+    let mut integrator = Integrator::default();
+    for (key, v) in t.iter() {
+        match key.get_ref().as_ref() {
+            "method" => {
+                integrator.scheme = match r.string(v, "[integrator] method")? {
+                    "dopri5" => Scheme::Dopri5,
+                    "rk4" => Scheme::Rk4,
+                    other => {
+                        return Err(r.err(
+                            v.span().start,
+                            format!(
+                                "[integrator] method must be \"dopri5\" or \"rk4\", got \"{other}\""
+                            ),
+                        ));
+                    }
+                }
+            }
+            "rtol" => integrator.rtol = r.number(v, "[integrator] rtol")?,
+            "atol" => integrator.atol = r.number(v, "[integrator] atol")?,
+            "step" => integrator.fixed_step = Some(r.number(v, "[integrator] step")?),
+            "max_steps" => integrator.max_steps = r.number(v, "[integrator] max_steps")? as usize,
+            other => {
+                return Err(r.err(key.span().start, format!("unknown key `{other}` in [integrator] (keys: method, rtol, atol, step, max_steps)")));
+            }
+        }
+    }
+    integrator.validate().map_err(|e| r.err(value.span().start, format!("[integrator]: {e}")))?;
+    Ok(integrator)
+}

@@ -1,0 +1,120 @@
+//! # sysid-model: model files and data files
+//!
+//! Identify a system without writing Rust: a TOML model file names the states, parameters
+//! and inputs, gives the equations as expressions, says what is known and what is unknown,
+//! and points at a CSV data file.
+//!
+//! ```toml
+//! states = ["y1", "y2"]                 # order = state order
+//! parameters = ["k1", "k2"]
+//! inputs = []                           # signals u(t), read from data columns of that name
+//! [equations]                           # d(state)/dt: + - * / ^, parentheses, numbers,
+//! y1 = "-k1 * y1"                       # exp log sqrt sin cos tan tanh abs min max, t
+//! y2 = "k1 * y1 - k2 * y2"
+//! [initial]                             # known initial values at t0
+//! y1 = 1.0
+//! y2 = 0.0
+//! [unknowns]                            # parameters or states (= unknown initial values)
+//! k1 = 1.0
+//! k2 = { guess = 0.5, min = 0.0, log = true }
+//! [data]
+//! file = "data.csv"                     # relative to this file; time column first
+//! t0 = 0.0
+//! record = "discrete"                   # or "continuous"
+//! [data.weights]
+//! y2 = 100.0                            # 1/σ² of the column (default 1)
+//! ```
+//!
+//! Extensions of the contract: `inputs` may be a table `{ names = [...], mode = "step" }` for
+//! piecewise-constant inputs (default linear), `[outputs]` name measured expressions, and
+//! `[integrator]` sets `method` ("dopri5" | "rk4"), `rtol`, `atol`, `step`, `max_steps`.
+//!
+//! Expressions are compiled once ([`expr::Program`]) and evaluated for any scalar, so the
+//! sensitivities of a model file are exact dual numbers, as for a model written in Rust.
+//! Every error names the file, the line and the column.
+#![warn(missing_docs)]
+
+pub mod data;
+mod error;
+pub mod expr;
+pub mod file;
+mod system;
+
+use std::path::Path;
+
+use sysid_core::{Problem, ProblemError};
+use sysid_ode::{Inputs, Signature};
+
+pub use error::{ModelError, line_column};
+pub use file::{DataSpec, ModelFile, RecordKind};
+pub use system::ModelSystem;
+
+/// A model file, read and compiled.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// The checked file.
+    pub file: ModelFile,
+}
+
+impl Model {
+    /// Reads and checks a model file.
+    pub fn load(path: &Path) -> Result<Self, ModelError> {
+        Ok(Self { file: ModelFile::read(path)? })
+    }
+
+    fn signature(&self) -> Signature {
+        let f = &self.file;
+        Signature::try_new(
+            f.states.clone(),
+            f.parameters.clone(),
+            f.inputs.clone(),
+            f.outputs.iter().map(|o| o.0.clone()).collect(),
+        )
+        .expect("names were checked when the file was read")
+    }
+
+    /// The system, with input signals.
+    pub fn system(&self, inputs: Inputs) -> ModelSystem {
+        let outputs = self.file.outputs.iter().map(|o| o.1.clone()).collect();
+        ModelSystem::new(self.signature(), self.file.equations.clone(), outputs, inputs)
+    }
+
+    fn located(&self, message: String) -> ModelError {
+        ModelError::file(&self.file.path.display().to_string(), message)
+    }
+
+    /// The data file named in `[data] file`.
+    pub fn data_path(&self) -> Result<&Path, ModelError> {
+        self.file.data.file.as_deref().ok_or_else(|| {
+            self.located("no data file: give `[data] file = \"...\"` or --data".into())
+        })
+    }
+
+    /// The identification problem on the model's data file, or on `data` instead.
+    pub fn problem(&self, data: Option<&Path>) -> Result<Problem<ModelSystem>, ModelError> {
+        let path = match data {
+            Some(p) => p,
+            None => self.data_path()?,
+        };
+        let read = data::read(&self.file, path)?;
+        let file = path.display().to_string();
+        let mut builder = Problem::builder(self.system(read.inputs))
+            .t0(self.file.data.t0)
+            .integrator(self.file.integrator)
+            .data(read.data);
+        for (name, value) in &self.file.known {
+            builder = builder.known(name, *value);
+        }
+        for u in &self.file.unknowns {
+            builder = builder.unknown_with(u.clone());
+        }
+        builder.build().map_err(|e| match e {
+            ProblemError::TooFewData { observations, unknowns } => ModelError::file(
+                &file,
+                format!("{observations} data points for {unknowns} unknowns: need at least as many data as unknowns"),
+            ),
+            ProblemError::InvalidUnknown { .. } | ProblemError::NoUnknowns => self.located(e.to_string()),
+            other => ModelError::file(&file, other.to_string()),
+        })
+    }
+}

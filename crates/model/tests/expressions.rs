@@ -1,0 +1,136 @@
+//! Random expressions: printed, parsed back and compiled, they evaluate as an independent
+//! tree walk does, and their dual-number derivatives agree with finite differences.
+
+use num_dual::Dual64;
+use proptest::prelude::*;
+use sysid_model::expr::{Expr, Func, Op, Program, Slot, parse};
+
+const NAMES: [&str; 4] = ["x", "y", "k", "t"];
+
+fn resolve(name: &str) -> Option<Slot> {
+    match name {
+        "x" => Some(Slot::State(0)),
+        "y" => Some(Slot::State(1)),
+        "k" => Some(Slot::Parameter(0)),
+        "t" => Some(Slot::Time),
+        _ => None,
+    }
+}
+
+/// The reference: a direct walk of the tree in f64.
+fn reference(e: &Expr, x: f64, y: f64, k: f64, t: f64) -> f64 {
+    let r = |e: &Expr| reference(e, x, y, k, t);
+    match e {
+        Expr::Num(v) => *v,
+        Expr::Name(n, _) => match n.as_str() {
+            "x" => x,
+            "y" => y,
+            "k" => k,
+            _ => t,
+        },
+        Expr::Neg(a) => -r(a),
+        Expr::Bin(op, a, b) => {
+            let (a, b) = (r(a), r(b));
+            match op {
+                Op::Add => a + b,
+                Op::Sub => a - b,
+                Op::Mul => a * b,
+                Op::Div => a / b,
+                Op::Pow => a.powf(b),
+            }
+        }
+        Expr::Call(f, args, _) => {
+            let a = r(&args[0]);
+            match f {
+                Func::Exp => a.exp(),
+                Func::Log => a.ln(),
+                Func::Sqrt => a.sqrt(),
+                Func::Sin => a.sin(),
+                Func::Cos => a.cos(),
+                Func::Tan => a.tan(),
+                Func::Tanh => a.tanh(),
+                Func::Abs => a.abs(),
+                Func::Min => a.min(r(&args[1])),
+                Func::Max => a.max(r(&args[1])),
+            }
+        }
+    }
+}
+
+/// Smooth expressions (no abs, min, max: their kinks defeat finite differences).
+fn smooth() -> impl Strategy<Value = Expr> {
+    let leaf = prop_oneof![
+        (-3.0..3.0f64).prop_map(|v| Expr::Num((v * 4.0).round() / 4.0)),
+        (0..4usize).prop_map(|i| Expr::Name(NAMES[i].to_string(), 0)),
+    ];
+    leaf.prop_recursive(4, 24, 2, |inner| {
+        prop_oneof![
+            inner.clone().prop_map(|a| Expr::Neg(Box::new(a))),
+            (inner.clone(), inner.clone(), 0..4usize).prop_map(|(a, b, op)| {
+                Expr::Bin([Op::Add, Op::Sub, Op::Mul, Op::Div][op], Box::new(a), Box::new(b))
+            }),
+            (inner.clone(), 0..4i32).prop_map(|(a, n)| Expr::Bin(
+                Op::Pow,
+                Box::new(a),
+                Box::new(Expr::Num(n as f64))
+            )),
+            (inner.clone(), 0..7usize).prop_map(|(a, f)| {
+                let f =
+                    [Func::Exp, Func::Log, Func::Sqrt, Func::Sin, Func::Cos, Func::Tan, Func::Tanh]
+                        [f];
+                Expr::Call(f, vec![a], 0)
+            }),
+        ]
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+
+    #[test]
+    fn compiled_expressions_evaluate_and_differentiate(
+        e in smooth(),
+        x in 0.2..2.0f64, y in -1.5..1.5f64, k in 0.3..1.7f64, t in 0.0..2.0f64,
+    ) {
+        let text = e.to_string();
+        let parsed = parse(&text).map_err(|err| TestCaseError::fail(format!("{text}: {err}")))?;
+        let program = Program::compile(&parsed, &resolve).unwrap();
+        let expected = reference(&e, x, y, k, t);
+        prop_assume!(expected.is_finite() && expected.abs() < 1e6);
+        let value = program.eval::<f64>(t, &[x, y], &[k], &[]);
+        prop_assert!((value - expected).abs() <= 1e-12 * expected.abs().max(1.0), "{text}: {value} vs {expected}");
+
+        // ∂/∂x by dual numbers against central differences.
+        let dual = program.eval::<Dual64>(t, &[Dual64::new(x, 1.0), Dual64::from_re(y)], &[Dual64::from_re(k)], &[]);
+        prop_assert!((dual.re - value).abs() <= 1e-13 * value.abs().max(1.0));
+        let h = 1e-6;
+        let f = |x: f64| program.eval::<f64>(t, &[x, y], &[k], &[]);
+        let fd = (f(x + h) - f(x - h)) / (2.0 * h);
+        prop_assume!(fd.is_finite() && dual.eps.abs() < 1e4);
+        prop_assert!((dual.eps - fd).abs() <= 1e-5 * dual.eps.abs().max(1.0), "{text}: d/dx {} vs {fd}", dual.eps);
+    }
+
+    #[test]
+    fn the_parser_never_panics(text in "[-+*/^()., xyk0-9a-z]{0,40}") {
+        let _ = parse(&text);
+    }
+}
+
+#[test]
+fn kinks_take_a_side() {
+    let program = |text: &str| Program::compile(&parse(text).unwrap(), &resolve).unwrap();
+    let d = |text: &str, x: f64| {
+        program(text)
+            .eval::<Dual64>(
+                0.0,
+                &[Dual64::new(x, 1.0), Dual64::from_re(0.0)],
+                &[Dual64::from_re(0.0)],
+                &[],
+            )
+            .eps
+    };
+    assert!((d("abs(x)", -2.0) + 1.0).abs() < 1e-15);
+    assert!((d("min(x, 1)", 0.5) - 1.0).abs() < 1e-15);
+    assert!(d("min(x, 1)", 1.5).abs() < 1e-15);
+    assert!((d("max(x, 1)", 1.5) - 1.0).abs() < 1e-15);
+}
