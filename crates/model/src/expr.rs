@@ -21,6 +21,7 @@
 
 use std::fmt;
 
+use arrayvec::ArrayVec;
 use sysid_ode::Scalar;
 
 /// A parse or name error at a character position of the expression (0-based).
@@ -471,8 +472,21 @@ impl Program {
     }
 
     /// Evaluates at (t, y, α, u) for any scalar.
+    ///
+    /// The nodes are stored children first, so one pass in order computes them all, each
+    /// reading its children's values from the slots before it: no recursion and no
+    /// allocation (the slots live on the stack). Larger expressions than the slots hold are
+    /// evaluated recursively.
     pub fn eval<T: Scalar>(&self, t: f64, y: &[T], p: &[T], u: &[f64]) -> T {
-        self.get(self.root, t, y, p, u)
+        if self.nodes.len() > SLOTS {
+            return self.get(self.root, t, y, p, u);
+        }
+        let mut slots: ArrayVec<T, SLOTS> = ArrayVec::new();
+        for node in &self.nodes {
+            let value = compute(*node, |o| operand(o, &slots, t, y, p, u));
+            slots.push(value);
+        }
+        operand(self.root, &slots, t, y, p, u)
     }
 
     /// Whether the value is a constant (does not depend on t, states, parameters or inputs).
@@ -492,44 +506,67 @@ impl Program {
         }
     }
 
+    /// The recursive evaluation of node i, for expressions larger than the slots.
     fn eval_node<T: Scalar>(&self, i: u32, t: f64, y: &[T], p: &[T], u: &[f64]) -> T {
-        let get = |o: Operand| self.get(o, t, y, p, u);
-        match self.nodes[i as usize] {
-            Node::Neg(a) => -get(a),
-            Node::Add(a, b) => get(a) + get(b),
-            Node::Sub(a, b) => get(a) - get(b),
-            Node::Mul(a, b) => get(a) * get(b),
-            Node::Div(a, b) => get(a) / get(b),
-            Node::AddC(a, c) => get(a) + c,
-            Node::SubC(c, a) => -get(a) + c,
-            Node::MulC(a, c) => get(a) * c,
-            Node::DivC(a, c) => get(a) / c,
-            Node::CDiv(c, a) => get(a).recip() * c,
-            Node::PowI(a, n) => get(a).powi(n),
-            Node::PowF(a, c) => get(a).powf(c),
-            Node::Pow(a, b) => get(a).powd(get(b)),
-            Node::Func(f, a) => {
-                let x = get(a);
-                match f {
-                    Func::Exp => x.exp(),
-                    Func::Log => x.ln(),
-                    Func::Sqrt => x.sqrt(),
-                    Func::Sin => x.sin(),
-                    Func::Cos => x.cos(),
-                    Func::Tan => x.tan(),
-                    Func::Tanh => x.tanh(),
-                    Func::Abs => x.abs(),
-                    Func::Min | Func::Max => unreachable!("compiled to Min and Max nodes"),
-                }
+        compute(self.nodes[i as usize], |o| self.get(o, t, y, p, u))
+    }
+}
+
+/// Slots for intermediate values in [`Program::eval`]; an equation of a model rarely needs
+/// more than a few dozen.
+const SLOTS: usize = 64;
+
+/// The value of an operand, with node values from `slots`.
+#[inline(always)]
+fn operand<T: Scalar>(o: Operand, slots: &[T], t: f64, y: &[T], p: &[T], u: &[f64]) -> T {
+    match o {
+        Operand::Node(i) => slots[i as usize],
+        Operand::Var(Slot::State(k)) => y[k],
+        Operand::Var(Slot::Parameter(k)) => p[k],
+        Operand::Var(Slot::Input(k)) => T::from(u[k]),
+        Operand::Var(Slot::Time) => T::from(t),
+        Operand::Const(c) => T::from(c),
+    }
+}
+
+/// One operation on its operands' values.
+#[inline(always)]
+fn compute<T: Scalar>(node: Node, get: impl Fn(Operand) -> T) -> T {
+    match node {
+        Node::Neg(a) => -get(a),
+        Node::Add(a, b) => get(a) + get(b),
+        Node::Sub(a, b) => get(a) - get(b),
+        Node::Mul(a, b) => get(a) * get(b),
+        Node::Div(a, b) => get(a) / get(b),
+        Node::AddC(a, c) => get(a) + c,
+        Node::SubC(c, a) => -get(a) + c,
+        Node::MulC(a, c) => get(a) * c,
+        Node::DivC(a, c) => get(a) / c,
+        Node::CDiv(c, a) => get(a).recip() * c,
+        Node::PowI(a, n) => get(a).powi(n),
+        Node::PowF(a, c) => get(a).powf(c),
+        Node::Pow(a, b) => get(a).powd(get(b)),
+        Node::Func(f, a) => {
+            let x = get(a);
+            match f {
+                Func::Exp => x.exp(),
+                Func::Log => x.ln(),
+                Func::Sqrt => x.sqrt(),
+                Func::Sin => x.sin(),
+                Func::Cos => x.cos(),
+                Func::Tan => x.tan(),
+                Func::Tanh => x.tanh(),
+                Func::Abs => x.abs(),
+                Func::Min | Func::Max => unreachable!("compiled to Min and Max nodes"),
             }
-            Node::Min(a, b) => {
-                let (x, y) = (get(a), get(b));
-                if y.re() < x.re() { y } else { x }
-            }
-            Node::Max(a, b) => {
-                let (x, y) = (get(a), get(b));
-                if y.re() > x.re() { y } else { x }
-            }
+        }
+        Node::Min(a, b) => {
+            let (x, y) = (get(a), get(b));
+            if y.re() < x.re() { y } else { x }
+        }
+        Node::Max(a, b) => {
+            let (x, y) = (get(a), get(b));
+            if y.re() > x.re() { y } else { x }
         }
     }
 }
@@ -630,6 +667,17 @@ mod tests {
         let resolve = |_: &str| None;
         let unknown = Program::compile(&parse("2 * kk").unwrap(), &resolve).unwrap_err();
         assert_eq!((unknown.position, unknown.message.as_str()), (4, "unknown name `kk`"));
+    }
+
+    #[test]
+    fn expressions_beyond_the_slots_evaluate_recursively() {
+        // Σ_{i=1}^{50} x^2 / i: 150 nodes, more than the 64 slots.
+        let text: Vec<String> = (1..=50).map(|i| format!("x^2 / {i}")).collect();
+        let harmonic: f64 = (1..=50).map(|i| 1.0 / i as f64).sum();
+        assert_close(value(&text.join(" + ")), 4.0 * harmonic, 1e-14);
+        let short: Vec<String> = (1..=10).map(|i| format!("x^2 / {i}")).collect();
+        let h10: f64 = (1..=10).map(|i| 1.0 / i as f64).sum();
+        assert_close(value(&short.join(" + ")), 4.0 * h10, 1e-14);
     }
 
     #[test]
