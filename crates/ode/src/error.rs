@@ -50,6 +50,25 @@ pub enum OdeError {
         /// Its value.
         value: f64,
     },
+    /// The explicit integrator ran out of steps on a problem that its stiffness test
+    /// flagged: the steps were limited by stability, not accuracy.
+    #[error(
+        "too many steps ({steps}) at t = {t}: the problem is stiff from t = {since} on (DOPRI5's steps are limited by stability); use the rodas4 or auto integrator"
+    )]
+    Stiff {
+        /// Where the budget ran out.
+        t: f64,
+        /// Where stiffness was first detected.
+        since: f64,
+        /// The budget.
+        steps: usize,
+    },
+    /// The implicit integrator's iteration matrix is singular.
+    #[error("the implicit step matrix is singular at t = {t}")]
+    SingularJacobian {
+        /// Where.
+        t: f64,
+    },
     /// Invalid integrator settings or sensitivity columns.
     #[error("{0}")]
     InvalidSetup(String),

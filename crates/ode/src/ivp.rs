@@ -5,8 +5,10 @@ use nalgebra::{DMatrix, DMatrixView, Dyn};
 
 use crate::driver::{Counts, Rhs, integrate};
 use crate::error::OdeError;
+use crate::implicit::{AugmentedMatrix, IterationMatrix};
 use crate::interpolant::{DenseSolution, Interpolant};
 use crate::jacobian::{Function, JacobianProducts};
+use crate::lu::FactorError;
 use crate::options::Integrator;
 use crate::signal::Side;
 use crate::system::{Observable, System};
@@ -110,12 +112,14 @@ pub struct ModelRhs<'a, S> {
     sys: &'a S,
     p: &'a [f64],
     u: Vec<f64>,
+    /// Allocated on the first implicit step.
+    implicit: Option<Box<IterationMatrix>>,
 }
 
 impl<'a, S: System> ModelRhs<'a, S> {
     /// The right-hand side of `sys` at parameters `p`.
     pub fn new(sys: &'a S, p: &'a [f64]) -> Self {
-        Self { sys, p, u: vec![0.0; sys.signature().n_inputs()] }
+        Self { sys, p, u: vec![0.0; sys.signature().n_inputs()], implicit: None }
     }
 }
 
@@ -129,6 +133,23 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
     }
     fn describe(&self, i: usize) -> String {
         format!("state {}", self.sys.signature().states()[i])
+    }
+    fn factor(
+        &mut self,
+        t: f64,
+        side: Side,
+        x: &[f64],
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        let (sys, p) = (self.sys, self.p);
+        let matrix = self.implicit.get_or_insert_with(|| Box::new(IterationMatrix::new(sys, p, 1)));
+        sys.input_values(t, side, &mut self.u);
+        matrix.factor(sys, (t, x, p, &self.u), inv_gamma_h)
+    }
+    fn solve(&mut self, r: &mut [f64]) {
+        if let Some(matrix) = &mut self.implicit {
+            matrix.solve(r);
+        }
     }
 }
 
@@ -146,6 +167,8 @@ pub struct SensitivityRhs<'a, S> {
     products: JacobianProducts,
     jy: DMatrix<f64>,
     jp: DMatrix<f64>,
+    /// Allocated on the first implicit step.
+    implicit: Option<Box<AugmentedMatrix>>,
 }
 
 /// The n_α × k unit seeds of the parameter columns, row by row.
@@ -182,6 +205,7 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
             ),
             jy: DMatrix::zeros(jn, jn),
             jp: DMatrix::zeros(jn, jnp),
+            implicit: None,
         }
     }
 
@@ -242,6 +266,25 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         let k = self.wrt.len();
         let (row, j) = ((i - n) / k, (i - n) % k);
         format!("sensitivity ∂{}/∂{}", sig.states()[row], wrt_name(sig, self.wrt[j]))
+    }
+
+    fn factor(
+        &mut self,
+        t: f64,
+        side: Side,
+        x: &[f64],
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        let (sys, p, k) = (self.sys, self.p, self.wrt.len());
+        let matrix = self.implicit.get_or_insert_with(|| Box::new(AugmentedMatrix::new(sys, p, k)));
+        sys.input_values(t, side, &mut self.u);
+        matrix.factor(sys, (t, x, &self.u), inv_gamma_h)
+    }
+
+    fn solve(&mut self, r: &mut [f64]) {
+        if let Some(matrix) = &mut self.implicit {
+            matrix.solve(self.sys, self.wrt, r);
+        }
     }
 }
 

@@ -12,6 +12,13 @@ pub enum Scheme {
     Dopri5,
     /// Classical fourth-order Runge–Kutta with a fixed step; cubic Hermite dense output.
     Rk4,
+    /// Rodas4 (Hairer & Wanner): a Rosenbrock method of order 4 for stiff systems,
+    /// error-controlled, with dense output of order 3 and an exact Jacobian.
+    Rodas4,
+    /// DOPRI5 until Hairer's stiffness test fires (fifteen accepted steps in a row whose
+    /// h·λ, λ estimated from the last stages, says the step is limited by stability rather
+    /// than accuracy), then Rodas4 for the rest of the integration.
+    Auto,
 }
 
 /// How to integrate: scheme, tolerances and limits. Plain data with documented defaults.
@@ -57,6 +64,16 @@ impl Integrator {
         Self { rtol, atol, ..Self::default() }
     }
 
+    /// Rodas4 (stiff) with the given tolerances.
+    pub fn rodas4(rtol: f64, atol: f64) -> Self {
+        Self { scheme: Scheme::Rodas4, rtol, atol, ..Self::default() }
+    }
+
+    /// The automatic choice (DOPRI5, switching to Rodas4 when stiffness is detected).
+    pub fn auto(rtol: f64, atol: f64) -> Self {
+        Self { scheme: Scheme::Auto, rtol, atol, ..Self::default() }
+    }
+
     /// RK4 with a fixed step h.
     pub fn rk4(h: f64) -> Self {
         Self { scheme: Scheme::Rk4, fixed_step: Some(h), ..Self::default() }
@@ -84,6 +101,9 @@ impl Integrator {
             && !(h > 0.0 && h.is_finite())
         {
             return Err(format!("the fixed step must be positive, got {h}"));
+        }
+        if self.scheme == Scheme::Auto && self.fixed_step.is_some() {
+            return Err("the automatic choice needs error control, not a fixed step".into());
         }
         if self.scheme == Scheme::Rk4 && self.fixed_step.is_none() {
             return Err("RK4 needs a fixed step".into());

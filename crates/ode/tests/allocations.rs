@@ -1,6 +1,7 @@
 //! The step loop of a sensitivity integration allocates nothing: the number of heap
+//! allocations of an integration does not grow with its number of steps, explicit or
+//! implicit.
 #![allow(unsafe_code)] // a counting global allocator is the only way to observe allocations
-//! allocations of an integration does not grow with its number of steps.
 
 use std::alloc::{GlobalAlloc, Layout, System as Heap};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -31,17 +32,19 @@ fn allocations_do_not_grow_with_the_number_of_steps() {
     let sys = VanDerPol::new();
     let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
     let ivp = Ivp::new(&sys, 0.0, &[2.0, 0.0], &[1.0]);
-    let integrator = Integrator::dopri5(1e-8, 1e-10);
-    let run = |t_end: f64| {
-        let before = ALLOCATIONS.load(Ordering::Relaxed);
-        let sol = ivp.solve_sensitivities(&integrator, &wrt, &[t_end]).unwrap();
-        (ALLOCATIONS.load(Ordering::Relaxed) - before, sol.counts().steps)
-    };
-    let (short, short_steps) = run(2.0);
-    let (long, long_steps) = run(200.0);
-    assert!(long_steps > 20 * short_steps, "{short_steps} vs {long_steps} steps");
-    assert_eq!(
-        short, long,
-        "allocations: {short} for {short_steps} steps, {long} for {long_steps}"
-    );
+    for integrator in [Integrator::dopri5(1e-8, 1e-10), Integrator::rodas4(1e-6, 1e-8)] {
+        let run = |t_end: f64| {
+            let before = ALLOCATIONS.load(Ordering::Relaxed);
+            let sol = ivp.solve_sensitivities(&integrator, &wrt, &[t_end]).unwrap();
+            (ALLOCATIONS.load(Ordering::Relaxed) - before, sol.counts().steps)
+        };
+        let (short, short_steps) = run(2.0);
+        let (long, long_steps) = run(200.0);
+        assert!(long_steps > 20 * short_steps, "{short_steps} vs {long_steps} steps");
+        assert_eq!(
+            short, long,
+            "{:?} allocations: {short} for {short_steps} steps, {long} for {long_steps}",
+            integrator.scheme
+        );
+    }
 }

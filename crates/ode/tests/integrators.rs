@@ -141,7 +141,9 @@ fn steps_stop_on_input_discontinuities() {
     };
     let exact = |t: f64| (t - 1.0).clamp(0.0, 1.0) - (t - 2.0).clamp(0.0, 1.0);
     let times = [0.5, 1.0, 1.7, 2.0, 2.5, 3.0, 5.0];
-    for integrator in [Integrator::dopri5(1e-8, 1e-10), Integrator::rk4(0.3)] {
+    for integrator in
+        [Integrator::dopri5(1e-8, 1e-10), Integrator::rk4(0.3), Integrator::rodas4(1e-8, 1e-10)]
+    {
         let sol = Ivp::new(&sys, 0.0, &[0.0], &[]).solve(&integrator, &times).unwrap();
         for (m, &t) in times.iter().enumerate() {
             // Exact up to rounding: every step lies inside a piece where u is constant.

@@ -122,3 +122,40 @@ impl System for LotkaVolterra {
         h[0] = y[0] + y[1];
     }
 }
+
+/// Robertson's chemical kinetics (Hairer & Wanner, Solving ODE II, IV.1):
+/// y1' = −k1 y1 + k3 y2 y3, y2' = k1 y1 − k2 y2² − k3 y2 y3, y3' = k2 y2².
+pub struct Robertson(pub Signature);
+impl Robertson {
+    pub fn new() -> Self {
+        Self(Signature::new(&["y1", "y2", "y3"], &["k1", "k2", "k3"]))
+    }
+    /// The classical rate constants.
+    pub const RATES: [f64; 3] = [0.04, 3e7, 1e4];
+}
+impl System for Robertson {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        let (fast, slow) = (p[1] * y[1] * y[1], p[2] * y[1] * y[2]);
+        dy[0] = -p[0] * y[0] + slow;
+        dy[1] = p[0] * y[0] - fast - slow;
+        dy[2] = fast;
+    }
+}
+
+/// One value of tests/data/stiff_reference.csv (independent scipy Radau IIA solutions):
+/// (value, spread between independent runs) of `component` of `problem` at t.
+pub fn stiff_reference(problem: &str, t: f64, component: &str) -> (f64, f64) {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../tests/data/stiff_reference.csv");
+    let text = std::fs::read_to_string(path).expect("tests/data/stiff_reference.csv");
+    for line in text.lines().filter(|l| !l.starts_with('#')).skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let time: f64 = f[1].parse().unwrap();
+        if f[0] == problem && (time - t).abs() <= 1e-12 * t.abs() && f[2] == component {
+            return (f[3].parse().unwrap(), f[4].parse().unwrap());
+        }
+    }
+    panic!("no reference for {problem} {component} at t = {t}");
+}

@@ -1,0 +1,185 @@
+//! The linear algebra of implicit steps for a [`System`]: the exact Jacobian ∂g/∂y by dual
+//! numbers (or the system's analytic one), E = I/(γh) − ∂g/∂y factorised by LU (faer), and,
+//! for the variational equations, the second-derivative coupling that makes the augmented
+//! system's iteration matrix block lower triangular with E on the diagonal.
+
+use nalgebra::DMatrix;
+use num_dual::HyperDual64;
+
+use crate::ivp::Wrt;
+use crate::jacobian::{Function, JacobianProducts};
+use crate::lu::{FactorError, Lu};
+use crate::system::System;
+
+/// E = I/(γh) − ∂g/∂y at one point, factorised, for a system at fixed parameters.
+pub struct IterationMatrix {
+    n: usize,
+    lu: Lu,
+    /// ∂g/∂y row by row.
+    jac: Vec<f64>,
+    /// Dual numbers seeded with the identity: the Jacobian in one evaluation per chunk.
+    products: JacobianProducts,
+    identity: Vec<f64>,
+    value: Vec<f64>,
+    /// For systems with hand-written Jacobians.
+    analytic: Option<(DMatrix<f64>, DMatrix<f64>)>,
+}
+
+impl IterationMatrix {
+    /// For `sys` at parameters `p`; solves with up to `columns` right-hand sides at once.
+    pub fn new<S: System>(sys: &S, p: &[f64], columns: usize) -> Self {
+        let sig = sys.signature();
+        let (n, np) = (sig.n_states(), sig.n_parameters());
+        let mut identity = vec![0.0; n * n];
+        for i in 0..n {
+            identity[i * n + i] = 1.0;
+        }
+        let analytic = sys.analytic_jacobians();
+        Self {
+            n,
+            lu: Lu::new(n, columns),
+            jac: vec![0.0; n * n],
+            products: JacobianProducts::new(
+                n,
+                p,
+                &vec![0.0; np * n],
+                n,
+                if analytic { 0 } else { n },
+            ),
+            identity,
+            value: vec![0.0; n],
+            analytic: analytic.then(|| (DMatrix::zeros(n, n), DMatrix::zeros(n, np))),
+        }
+    }
+
+    /// New parameter values.
+    pub fn set_parameters(&mut self, p: &[f64]) {
+        let zeros = vec![0.0; p.len() * self.n];
+        self.products.set_parameters(p, &zeros);
+    }
+
+    /// Evaluates ∂g/∂y at (t, y, u) with parameters `p` and factorises E = I·`inv_gamma_h` − ∂g/∂y.
+    pub fn factor<S: System>(
+        &mut self,
+        sys: &S,
+        (t, y, p, u): (f64, &[f64], &[f64], &[f64]),
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        let n = self.n;
+        match &mut self.analytic {
+            Some((jy, jp)) => {
+                sys.jacobians(t, y, p, u, jy, jp);
+                for i in 0..n {
+                    for j in 0..n {
+                        self.jac[i * n + j] = jy[(i, j)];
+                    }
+                }
+            }
+            None => {
+                let args = (t, y, u);
+                self.products.eval(
+                    sys,
+                    Function::Rhs,
+                    args,
+                    &self.identity,
+                    &mut self.value,
+                    &mut self.jac,
+                );
+            }
+        }
+        let jac = &self.jac;
+        self.lu.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
+    }
+
+    /// The Jacobian ∂g/∂y of the last factorisation, row by row.
+    pub fn jacobian(&self) -> &[f64] {
+        &self.jac
+    }
+
+    /// Overwrites r with E⁻¹ r.
+    pub fn solve(&mut self, r: &mut [f64]) {
+        self.lu.solve(r);
+    }
+
+    /// Overwrites the n × k matrix R (row by row) with E⁻¹ R.
+    pub fn solve_rows(&mut self, r: &mut [f64], k: usize) {
+        self.lu.solve_rows(r, k);
+    }
+}
+
+/// The implicit solve of the state together with its sensitivities x = [y; S].
+///
+/// The augmented Jacobian is block lower triangular: ∂(J s_j + ∂g/∂α_j)/∂s_j = J and
+/// ∂(J s_j + ∂g/∂α_j)/∂y = M_j, the second derivative of g in the direction s_j (and α_j for
+/// a parameter column). So E_aug k = r is solved by one back-substitution with E for k_y, and
+/// one for every column, (I/(γh) − J) k_sj = r_sj + M_j k_y, M_j k_y from one hyper-dual
+/// evaluation of g (ε₁ along s_j and α_j, ε₂ along k_y).
+pub(crate) struct AugmentedMatrix {
+    matrix: IterationMatrix,
+    /// The point of the factorisation: t, u, y, S.
+    t: f64,
+    u: Vec<f64>,
+    x: Vec<f64>,
+    p: Vec<f64>,
+    yd: Vec<HyperDual64>,
+    pd: Vec<HyperDual64>,
+    gd: Vec<HyperDual64>,
+}
+
+impl AugmentedMatrix {
+    pub(crate) fn new<S: System>(sys: &S, p: &[f64], k: usize) -> Self {
+        let sig = sys.signature();
+        let n = sig.n_states();
+        let zero = HyperDual64::from_re(0.0);
+        Self {
+            matrix: IterationMatrix::new(sys, p, k),
+            t: 0.0,
+            u: vec![0.0; sig.n_inputs()],
+            x: vec![0.0; n * (1 + k)],
+            p: p.to_vec(),
+            yd: vec![zero; n],
+            pd: vec![zero; p.len()],
+            gd: vec![zero; n],
+        }
+    }
+
+    /// Factorises E at (t, x = [y; S]) with inputs `u`.
+    pub(crate) fn factor<S: System>(
+        &mut self,
+        sys: &S,
+        (t, x, u): (f64, &[f64], &[f64]),
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        self.t = t;
+        self.u.copy_from_slice(u);
+        self.x.copy_from_slice(x);
+        let n = self.yd.len();
+        self.matrix.factor(sys, (t, &x[..n], &self.p, u), inv_gamma_h)
+    }
+
+    /// Overwrites r = [r_y; r_S] with E_aug⁻¹ r.
+    pub(crate) fn solve<S: System>(&mut self, sys: &S, wrt: &[Wrt], r: &mut [f64]) {
+        let n = self.yd.len();
+        let k = wrt.len();
+        let (ry, rs) = r.split_at_mut(n);
+        self.matrix.solve(ry);
+        if k == 0 {
+            return;
+        }
+        let (y, s) = self.x.split_at(n);
+        for (j, w) in wrt.iter().enumerate() {
+            for i in 0..n {
+                self.yd[i] = HyperDual64::new(y[i], s[i * k + j], ry[i], 0.0);
+            }
+            for (q, pq) in self.p.iter().enumerate() {
+                let seed = if *w == Wrt::Parameter(q) { 1.0 } else { 0.0 };
+                self.pd[q] = HyperDual64::new(*pq, seed, 0.0, 0.0);
+            }
+            sys.rhs(self.t, &self.yd, &self.pd, &self.u, &mut self.gd);
+            for i in 0..n {
+                rs[i * k + j] += self.gd[i].eps1eps2;
+            }
+        }
+        self.matrix.solve_rows(rs, k);
+    }
+}

@@ -1,0 +1,251 @@
+//! Rodas4 (Hairer & Wanner, Solving ODE II, Section IV.7; their code RODAS): a
+//! Rosenbrock method of order 4 with an embedded method of order 3 for error control and a
+//! dense output of order 3, L-stable and stiffly accurate.
+//!
+//! Why a Rosenbrock method: a stage is one linear solve with the same matrix
+//! E = I/(γh) − ∂f/∂x, factorised once per step, and no Newton iteration whose convergence
+//! must be watched. With the Jacobian exact (dual numbers) this is reliable on stiff
+//! identification problems of the size sysid meets (n up to a few hundred). The variational
+//! equations share the factorisation: the Jacobian of [y; S] is block lower triangular with
+//! every diagonal block equal to ∂f/∂y, so each stage solves with E once for y and once per
+//! sensitivity column (the simultaneous-corrector structure), the coupling blocks
+//! ∂(J s_j + ∂f/∂α_j)/∂y coming from one hyper-dual evaluation each.
+//!
+//! Stage equations (increments k_i in units of x):
+//!
+//! E k_i = f(t + c_i h, x + Σ_{j<i} a_ij k_j) + Σ_{j<i} (c_ij / h) k_j + h d_i ∂f/∂t,
+//!
+//! x_new = x + Σ a_6j k_j + k_6 (the sixth stage input is the embedded order-3 solution, k_6
+//! the error estimate). The non-autonomous term ∂f/∂t is a one-sided difference quotient
+//! taken inside the current segment: [`System`](crate::System)s receive t as a number, so
+//! it cannot be a dual; it is exactly zero for autonomous systems and enters as h·d_i·∂f/∂t,
+//! so its error (~1e-8 relative) stays far below any tolerance used.
+
+// Hairer's RODAS coefficients (METH = 1), as published; verified against the order
+// conditions in the tests below.
+pub(crate) const GAMMA: f64 = 0.25;
+pub(crate) const C2: f64 = 0.386;
+pub(crate) const C3: f64 = 0.21;
+pub(crate) const C4: f64 = 0.63;
+pub(crate) const D1: f64 = 0.25;
+pub(crate) const D2: f64 = -0.1043;
+pub(crate) const D3: f64 = 0.1035;
+pub(crate) const D4: f64 = -0.036_200_000_000_000_23;
+pub(crate) const A21: f64 = 1.544;
+pub(crate) const A31: f64 = 0.946_678_528_081_582_6;
+pub(crate) const A32: f64 = 0.255_701_169_898_328_4;
+pub(crate) const A41: f64 = 3.314_825_187_068_521;
+pub(crate) const A42: f64 = 2.896_124_015_972_201;
+pub(crate) const A43: f64 = 0.998_641_913_997_781_7;
+pub(crate) const A51: f64 = 1.221_224_509_226_641;
+pub(crate) const A52: f64 = 6.019_134_481_288_629;
+pub(crate) const A53: f64 = 12.537_083_329_320_87;
+pub(crate) const A54: f64 = -0.687_886_036_105_895;
+pub(crate) const C21: f64 = -5.6688;
+pub(crate) const C31: f64 = -2.430_093_356_833_875;
+pub(crate) const C32: f64 = -0.206_359_915_709_191_5;
+pub(crate) const C41: f64 = -0.107_352_905_815_137_5;
+pub(crate) const C42: f64 = -9.594_562_251_023_355;
+pub(crate) const C43: f64 = -20.470_286_148_096_16;
+pub(crate) const C51: f64 = 7.496_443_313_967_647;
+pub(crate) const C52: f64 = -10.246_804_314_643_52;
+pub(crate) const C53: f64 = -33.999_903_528_199_05;
+pub(crate) const C54: f64 = 11.708_908_932_061_6;
+pub(crate) const C61: f64 = 8.083_246_795_921_522;
+pub(crate) const C62: f64 = -7.981_132_988_064_893;
+pub(crate) const C63: f64 = -31.521_594_328_743_71;
+pub(crate) const C64: f64 = 16.319_305_431_231_36;
+pub(crate) const C65: f64 = -6.058_818_238_834_054;
+// Dense output: x(θ) = (1 − θ) x + θ (x_new + (1 − θ)(K₁ + θ K₂)), K = Σ h_ij k_j.
+pub(crate) const H21: f64 = 10.126_235_083_445_86;
+pub(crate) const H22: f64 = -7.487_995_877_610_167;
+pub(crate) const H23: f64 = -34.800_918_615_557_47;
+pub(crate) const H24: f64 = -7.992_771_707_568_823;
+pub(crate) const H25: f64 = 1.025_137_723_295_662;
+pub(crate) const H31: f64 = -0.676_280_339_280_125_3;
+pub(crate) const H32: f64 = 6.087_714_651_680_015;
+pub(crate) const H33: f64 = 16.430_843_208_924_78;
+pub(crate) const H34: f64 = 24.767_225_114_183_86;
+pub(crate) const H35: f64 = -6.594_389_125_716_872;
+
+/// Step-size control of RODAS: h_new = h / clamp(err^{1/4} / 0.9, 1/6, 5).
+pub(crate) const SAFETY: f64 = 0.9;
+pub(crate) const MIN_FACTOR: f64 = 0.2;
+pub(crate) const MAX_FACTOR: f64 = 6.0;
+
+use crate::driver::{Rhs, Stepper, Work};
+use crate::lu::FactorError;
+
+/// Fills the interpolant of a Rodas4 step from the stage increments in `w.k`:
+/// r₁ = x, r₂ = x_new − x, r₃ = K₁, r₄ = K₂, r₅ = 0 (the form of [`crate::Interpolant`]).
+pub(crate) fn dense(w: &mut Work) {
+    let n = w.x.len();
+    let [r1, r2, r3, r4, r5] = w.interpolant.coefficients_mut();
+    let k = &w.k;
+    for i in 0..n {
+        r1[i] = w.x[i];
+        r2[i] = w.x_new[i] - w.x[i];
+        r3[i] = H21 * k[0][i] + H22 * k[1][i] + H23 * k[2][i] + H24 * k[3][i] + H25 * k[4][i];
+        r4[i] = H31 * k[0][i] + H32 * k[1][i] + H33 * k[2][i] + H34 * k[3][i] + H35 * k[4][i];
+        r5[i] = 0.0;
+    }
+}
+
+impl<R: Rhs> Stepper<'_, R> {
+    /// One Rodas4 step from (t, w.x) of size h: the solution in w.x_new, the stage increments
+    /// k₁..k₆ in w.k[0..6], and the error norm (of k₆).
+    pub(crate) fn rodas4(&mut self, w: &mut Work, t: f64, h: f64) -> Result<f64, FactorError> {
+        let n = w.x.len();
+        let side = self.side(t);
+        self.counts.jacobians += 1;
+        self.rhs.factor(t, side, &w.x, 1.0 / (GAMMA * h))?;
+        // f(t, x), and ∂f/∂t by a difference quotient inside the step.
+        self.f(t, &w.x, &mut w.f0);
+        let delta = (1e-7 * t.abs().max(1.0)).min(0.5 * h.abs()) * h.signum();
+        let t_delta = t + delta;
+        let delta = t_delta - t;
+        self.f(t_delta, &w.x, &mut w.ft);
+        for (ft, f0) in w.ft.iter_mut().zip(&w.f0) {
+            *ft = (*ft - f0) / delta;
+        }
+        let [k1, k2, k3, k4, k5, k6, _] = &mut w.k;
+        let (x, y, f0, ft) = (&w.x[..n], &mut w.tmp, &w.f0[..n], &w.ft[..n]);
+        // Stage 1.
+        for i in 0..n {
+            k1[i] = f0[i] + h * D1 * ft[i];
+        }
+        self.rhs.solve(k1);
+        // Stage 2.
+        for i in 0..n {
+            y[i] = x[i] + A21 * k1[i];
+        }
+        self.f(t + C2 * h, y, k2);
+        for i in 0..n {
+            k2[i] += C21 / h * k1[i] + h * D2 * ft[i];
+        }
+        self.rhs.solve(k2);
+        // Stage 3.
+        for i in 0..n {
+            y[i] = x[i] + A31 * k1[i] + A32 * k2[i];
+        }
+        self.f(t + C3 * h, y, k3);
+        for i in 0..n {
+            k3[i] += (C31 * k1[i] + C32 * k2[i]) / h + h * D3 * ft[i];
+        }
+        self.rhs.solve(k3);
+        // Stage 4.
+        for i in 0..n {
+            y[i] = x[i] + A41 * k1[i] + A42 * k2[i] + A43 * k3[i];
+        }
+        self.f(t + C4 * h, y, k4);
+        for i in 0..n {
+            k4[i] += (C41 * k1[i] + C42 * k2[i] + C43 * k3[i]) / h + h * D4 * ft[i];
+        }
+        self.rhs.solve(k4);
+        // Stage 5, at t + h (d₅ = 0).
+        for i in 0..n {
+            y[i] = x[i] + A51 * k1[i] + A52 * k2[i] + A53 * k3[i] + A54 * k4[i];
+        }
+        self.f(t + h, y, k5);
+        for i in 0..n {
+            k5[i] += (C51 * k1[i] + C52 * k2[i] + C53 * k3[i] + C54 * k4[i]) / h;
+        }
+        self.rhs.solve(k5);
+        // Stage 6: its input is the embedded order-3 solution.
+        for i in 0..n {
+            y[i] += k5[i];
+        }
+        self.f(t + h, y, k6);
+        for i in 0..n {
+            k6[i] += (C61 * k1[i] + C62 * k2[i] + C63 * k3[i] + C64 * k4[i] + C65 * k5[i]) / h;
+        }
+        self.rhs.solve(k6);
+        for i in 0..n {
+            w.x_new[i] = y[i] + k6[i];
+        }
+        Ok(self.error_norm(k6, x, &w.x_new))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The coefficients against the order conditions of Rosenbrock methods (Hairer & Wanner,
+    //! Table IV.7.1). The code uses the transformed coefficients (a, c, d); the conditions
+    //! are stated for the original ones (α, Γ, b), recovered from them first. A mistyped
+    //! digit fails these.
+    use super::*;
+    use nalgebra::{Matrix6, Vector6};
+
+    /// Recovers (α, γ_ij, b) of the untransformed method from the transformed (a, c, m):
+    /// C = diag(1/γ) − Γ⁻¹, A = α Γ⁻¹.
+    fn untransformed() -> (Matrix6<f64>, Matrix6<f64>, Vector6<f64>) {
+        let mut c = Matrix6::zeros();
+        let cs = [
+            [0.0; 5],
+            [C21, 0.0, 0.0, 0.0, 0.0],
+            [C31, C32, 0.0, 0.0, 0.0],
+            [C41, C42, C43, 0.0, 0.0],
+            [C51, C52, C53, C54, 0.0],
+            [C61, C62, C63, C64, C65],
+        ];
+        for i in 0..6 {
+            for j in 0..i {
+                c[(i, j)] = cs[i][j];
+            }
+        }
+        // Γ⁻¹ = diag(1/γ) − C.
+        let gamma_inv = Matrix6::from_diagonal_element(1.0 / GAMMA) - c;
+        let gamma_m = gamma_inv.try_inverse().unwrap();
+        let mut a = Matrix6::zeros();
+        let as_ = [
+            [0.0; 5],
+            [A21, 0.0, 0.0, 0.0, 0.0],
+            [A31, A32, 0.0, 0.0, 0.0],
+            [A41, A42, A43, 0.0, 0.0],
+            [A51, A52, A53, A54, 0.0],
+            [A51, A52, A53, A54, 1.0],
+        ];
+        for i in 0..6 {
+            for j in 0..i {
+                a[(i, j)] = as_[i][j];
+            }
+        }
+        let alpha = a * gamma_m;
+        // x_new = x + Σ m_j k_j with m = (a_61, .., a_65, 1): b = mᵀ Γ.
+        let m = Vector6::new(A51, A52, A53, A54, 1.0, 1.0);
+        let b = gamma_m.transpose() * m;
+        (alpha, gamma_m, b)
+    }
+
+    #[test]
+    fn coefficients_satisfy_the_order_conditions() {
+        // Hairer & Wanner, Table IV.7.1, with α and B' = β − γI strictly lower triangular.
+        let (alpha, gamma_m, b) = untransformed();
+        let g = GAMMA;
+        let bl = alpha + gamma_m - Matrix6::from_diagonal_element(g);
+        let one = Vector6::repeat(1.0);
+        let ai = alpha * one;
+        let bi = bl * one;
+        let sq = ai.component_mul(&ai);
+        let checks = [
+            ("b·1", b.sum(), 1.0),
+            ("b·B'1", b.dot(&bi), 0.5 - g),
+            ("b·(α1)²", b.dot(&sq), 1.0 / 3.0),
+            ("b·B'B'1", b.dot(&(bl * bi)), 1.0 / 6.0 - g + g * g),
+            ("b·(α1)³", b.dot(&sq.component_mul(&ai)), 0.25),
+            ("b·(α1)(αB'1)", b.dot(&ai.component_mul(&(alpha * bi))), 1.0 / 8.0 - g / 3.0),
+            ("b·B'(α1)²", b.dot(&(bl * sq)), 1.0 / 12.0 - g / 3.0),
+            ("b·B'B'B'1", b.dot(&(bl * bl * bi)), 1.0 / 24.0 - g / 2.0 + 1.5 * g * g - g * g * g),
+        ];
+        for (name, lhs, rhs) in checks {
+            assert!((lhs - rhs).abs() < 1e-12, "order condition {name}: {lhs} vs {rhs}");
+        }
+        // The nodes c_i are the row sums of α, the d_i those of Γ.
+        for (ci, x) in [0.0, C2, C3, C4, 1.0, 1.0].iter().zip(ai.iter()) {
+            assert!((ci - x).abs() < 1e-12, "c {ci} vs α row sum {x}");
+        }
+        for (di, x) in [D1, D2, D3, D4, 0.0, 0.0].iter().zip((gamma_m * one).iter()) {
+            assert!((di - x).abs() < 1e-12, "d {di} vs Γ row sum {x}");
+        }
+    }
+}

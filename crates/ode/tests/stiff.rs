@@ -1,0 +1,221 @@
+//! The stiff integrator (Rodas4) against independent references: Robertson's kinetics and
+//! the van der Pol oscillator with μ = 1000 against Radau IIA solutions computed by scipy
+//! (tests/data/stiff_reference.csv, scripts/reference/stiff.py), its sensitivities against
+//! central differences, closed forms for order, dense output and direction, and the
+//! automatic choice.
+
+mod common;
+
+use common::{Decay, Oscillator, Robertson, VanDerPol, stiff_reference};
+use sysid_ode::testing::{assert_close, assert_close_abs};
+use sysid_ode::{Integrator, Ivp, OdeError, Wrt};
+
+const ROBERTSON_Y0: [f64; 3] = [1.0, 0.0, 0.0];
+
+/// Asserts agreement with a reference value to c·(rtol·|y| + atol), the global error an
+/// integrator at these tolerances should reach, plus twice the spread of the independent
+/// reference runs (the reference's own error estimate).
+#[track_caller]
+fn assert_reference(actual: f64, (value, spread): (f64, f64), (rtol, atol): (f64, f64), c: f64) {
+    assert_close_abs(actual, value, c * (rtol * value.abs() + atol) + 2.0 * spread * value.abs());
+}
+
+#[test]
+fn robertson_matches_the_reference_at_40_and_4e5() {
+    // y2 falls to 2e-8: the absolute tolerance sits six decades below it.
+    let (rtol, atol) = (1e-10, 1e-14);
+    let times = [40.0, 4e5];
+    for integrator in [Integrator::rodas4(rtol, atol), Integrator::auto(rtol, atol)] {
+        let sol = Ivp::new(&Robertson::new(), 0.0, &ROBERTSON_Y0, &Robertson::RATES)
+            .solve(&integrator, &times)
+            .unwrap();
+        for (m, &t) in times.iter().enumerate() {
+            for (i, name) in ["y1", "y2", "y3"].iter().enumerate() {
+                // Measured: within 2.4 (rtol·|y| + atol), y2 at t = 40 limited by atol.
+                let reference = stiff_reference("robertson", t, name);
+                assert_reference(sol.state(m)[i], reference, (rtol, atol), 5.0);
+            }
+        }
+        // Mass is conserved by the equations and, being linear, by the scheme.
+        let total: f64 = sol.state(1).iter().sum();
+        assert_close(total, 1.0, 1e-13);
+        assert!(sol.counts().steps < 10_000, "{:?}", sol.counts());
+    }
+}
+
+#[test]
+fn van_der_pol_with_mu_1000_over_one_period() {
+    // The slow phases after the first and the second fast jump (t ≈ 807 and 1614).
+    let rtol = 1e-10;
+    let times = [1000.0, 2000.0];
+    let sol = Ivp::new(&VanDerPol::new(), 0.0, &[2.0, 0.0], &[1000.0])
+        .solve(&Integrator::rodas4(rtol, rtol), &times)
+        .unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        for (i, name) in ["x", "v"].iter().enumerate() {
+            let reference = stiff_reference("vdp1000", t, name);
+            assert_reference(sol.state(m)[i], reference, (rtol, rtol), 5.0);
+        }
+    }
+    // An explicit integrator needs of the order of μ² steps for the same span.
+    assert!(sol.counts().steps < 20_000, "{:?}", sol.counts());
+}
+
+/// Central differences of log-scale perturbations: p_k ∂y/∂p_k for the rates, ∂y/∂y_i(0)
+/// for the initial values, each from two tight Rodas4 integrations.
+#[test]
+fn robertson_sensitivities_match_central_differences() {
+    let sys = Robertson::new();
+    let wrt = [Wrt::Parameter(0), Wrt::Parameter(1), Wrt::Parameter(2), Wrt::InitialValue(0)];
+    let times = [0.01, 1.0, 40.0, 1e3];
+    let integrator = Integrator::rodas4(1e-10, 1e-16);
+    let sol = Ivp::new(&sys, 0.0, &ROBERTSON_Y0, &Robertson::RATES)
+        .solve_sensitivities(&integrator, &wrt, &times)
+        .unwrap();
+    let reference = Integrator::rodas4(1e-12, 1e-18).with_max_steps(1_000_000);
+    let delta = 1e-4;
+    for (j, w) in wrt.iter().enumerate() {
+        let solve = |s: f64| {
+            let (mut y0, mut p) = (ROBERTSON_Y0, Robertson::RATES);
+            match *w {
+                Wrt::Parameter(k) => p[k] *= s.exp(),
+                Wrt::InitialValue(i) => y0[i] += s,
+            }
+            Ivp::new(&sys, 0.0, &y0, &p).solve(&reference, &times).unwrap()
+        };
+        let (plus, minus) = (solve(delta), solve(-delta));
+        let scale = match *w {
+            Wrt::Parameter(k) => Robertson::RATES[k],
+            Wrt::InitialValue(_) => 1.0,
+        };
+        for m in 0..times.len() {
+            for i in 0..3 {
+                let fd = (plus.state(m)[i] - minus.state(m)[i]) / (2.0 * delta);
+                let s = scale * sol.sensitivity(m)[(i, j)];
+                // Difference error ~δ²·|y|, integration noise ~1e-12·|y|/δ and the
+                // sensitivities' own tolerance 1e-10: measured within 4e-9 of |y|.
+                let size = sol.state(m)[i].abs();
+                assert_close_abs(s, fd, 2e-8 * (size + s.abs()));
+            }
+        }
+    }
+}
+
+#[test]
+fn rodas4_with_sensitivities_agrees_with_dopri5_on_a_non_stiff_problem() {
+    // Same variational equations, different schemes: agreement to the tolerances.
+    let sys = VanDerPol::new();
+    let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
+    let times = [0.5, 3.0, 7.0, 12.0];
+    let ivp = Ivp::new(&sys, 0.0, &[2.0, 0.0], &[1.0]);
+    let rodas = ivp.solve_sensitivities(&Integrator::rodas4(1e-11, 1e-13), &wrt, &times).unwrap();
+    let dopri = ivp.solve_sensitivities(&Integrator::dopri5(1e-12, 1e-14), &wrt, &times).unwrap();
+    for m in 0..times.len() {
+        for (a, b) in rodas.state(m).iter().zip(dopri.state(m)) {
+            assert_close_abs(*a, *b, 1e-8);
+        }
+        for (a, b) in rodas.sensitivity_slice(m).iter().zip(dopri.sensitivity_slice(m)) {
+            assert_close_abs(*a, *b, 1e-8 * (1.0 + b.abs()));
+        }
+    }
+}
+
+#[test]
+fn hand_written_jacobians_give_the_same_implicit_steps() {
+    let wrt = [Wrt::InitialValue(0), Wrt::Parameter(0)];
+    let times = [0.5, 2.0, 7.0];
+    let run = |analytic| {
+        let sys = Oscillator::new(analytic);
+        Ivp::new(&sys, 0.0, &[1.0, 0.3], &[1.7])
+            .solve_sensitivities(&Integrator::rodas4(1e-9, 1e-11), &wrt, &times)
+            .unwrap()
+    };
+    let (dual, hand) = (run(false), run(true));
+    for (m, &t) in times.iter().enumerate() {
+        for (a, b) in dual.sensitivity_slice(m).iter().zip(hand.sensitivity_slice(m)) {
+            assert_close_abs(*a, *b, 1e-13);
+        }
+        let (x, _, dx, _) = Oscillator::exact(1.0, 0.3, 1.7, t);
+        assert_close_abs(dual.state(m)[0], x, 1e-8);
+        assert_close_abs(dual.sensitivity(m)[(0, 1)], dx, 1e-8 * (1.0 + t));
+    }
+}
+
+#[test]
+fn rodas4_converges_with_order_four() {
+    // Fixed steps on the oscillator (no error control): p = log2(e(h) / e(h/2)).
+    let sys = Oscillator::new(false);
+    let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, 10.0);
+    let errors: Vec<f64> = [0.2, 0.1, 0.05, 0.025]
+        .iter()
+        .map(|&h| {
+            let integrator = Integrator::rodas4(1e-8, 1e-10).with_fixed_step(h);
+            let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0]).solve(&integrator, &[10.0]).unwrap();
+            ((sol.state(0)[0] - x).powi(2) + (sol.state(0)[1] - v).powi(2)).sqrt()
+        })
+        .collect();
+    for e in errors.windows(2) {
+        let p = (e[0] / e[1]).log2();
+        assert!((p - 4.0).abs() < 0.15, "observed order {p} from errors {errors:?}");
+    }
+}
+
+#[test]
+fn dense_output_and_backward_integration() {
+    let sys = Oscillator::new(false);
+    let times: Vec<f64> = (0..5000).map(|i| 0.002 * i as f64 + 0.0007).collect();
+    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0])
+        .solve(&Integrator::rodas4(1e-10, 1e-12), &times)
+        .unwrap();
+    assert!((sol.counts().steps as usize) < times.len() / 2, "{:?}", sol.counts());
+    let mut worst: f64 = 0.0;
+    for (m, &t) in times.iter().enumerate() {
+        let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, t);
+        worst = worst.max((sol.state(m)[0] - x).abs()).max((sol.state(m)[1] - v).abs());
+    }
+    // The dense output is of order 3, one below the step.
+    // Measured 1e-10 at rtol 1e-10.
+    assert!(worst < 5e-10, "worst dense-output error {worst:e}");
+
+    let decay = Decay::new();
+    let times = [-3.0, -1.0, 0.5, 2.0, 4.0];
+    let sol = Ivp::new(&decay, 2.0, &[1.5], &[0.4])
+        .solve_sensitivities(&Integrator::rodas4(1e-11, 1e-13), &[Wrt::Parameter(0)], &times)
+        .unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        let (x, _, dk) = Decay::exact(1.5, 0.4, t - 2.0);
+        assert_close(sol.state(m)[0], x, 1e-9);
+        assert_close_abs(sol.sensitivity(m)[(0, 0)], dk, 1e-9 * x.abs().max(1.0));
+    }
+}
+
+#[test]
+fn the_automatic_choice_switches_only_on_stiff_problems() {
+    let (rob, vdp, oscillator) = (Robertson::new(), VanDerPol::new(), Oscillator::new(false));
+    let robertson = Ivp::new(&rob, 0.0, &ROBERTSON_Y0, &Robertson::RATES);
+    let auto = robertson.solve(&Integrator::auto(1e-8, 1e-14), &[40.0]).unwrap();
+    assert!(auto.counts().jacobians > 0, "{:?}", auto.counts());
+    let explicit = robertson.solve(&Integrator::dopri5(1e-8, 1e-14), &[40.0]).unwrap();
+    // DOPRI5 gets there, limited by stability: tens of times more steps.
+    assert!(explicit.counts().steps > 20 * auto.counts().steps, "{:?}", explicit.counts());
+    for (a, b) in auto.state(0).iter().zip(explicit.state(0)) {
+        assert_close_abs(*a, *b, 1e-7 * b.abs() + 1e-13);
+    }
+    // With a budget it cannot meet, DOPRI5 says why.
+    let budget = Integrator::dopri5(1e-8, 1e-14).with_max_steps(10_000);
+    match robertson.solve(&budget, &[40.0]) {
+        Err(OdeError::Stiff { since, .. }) => assert!(since < 1.0, "stiff since {since}"),
+        other => panic!("expected a stiffness error, got {other:?}"),
+    }
+    // Non-stiff problems never leave DOPRI5, at loose or tight tolerances.
+    for tol in [1e-3, 1e-6, 1e-10] {
+        let vdp = Ivp::new(&vdp, 0.0, &[2.0, 0.0], &[1.0]);
+        let oscillator = Ivp::new(&oscillator, 0.0, &[1.0, 0.0], &[3.0]);
+        for sol in [
+            vdp.solve(&Integrator::auto(tol, tol), &[20.0]),
+            oscillator.solve(&Integrator::auto(tol, tol), &[20.0]),
+        ] {
+            assert_eq!(sol.unwrap().counts().jacobians, 0, "switched at tolerance {tol}");
+        }
+    }
+}
