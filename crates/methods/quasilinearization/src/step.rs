@@ -21,8 +21,8 @@ use faer::linalg::solvers::SolveLstsq;
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{Linearization, NormalFactor, Problem, Singular};
 use sysid_ode::{
-    Counts, DenseSolution, Function, JacobianProducts, Observable, OdeError, Rhs, Side, System,
-    integrate,
+    Counts, DenseSolution, FactorError, Function, IterationMatrix, JacobianProducts, Observable,
+    OdeError, Rhs, Side, System, integrate,
 };
 
 use crate::trajectory::{Layout, Trajectory};
@@ -40,6 +40,10 @@ struct LinearRhs<'a, S> {
     vy: Vec<f64>,
     g: Vec<f64>,
     jv: Vec<f64>,
+    /// The model's parameters along x_k, and E = I/(γh) − J(x_k) for implicit steps
+    /// (allocated on the first).
+    p: Vec<f64>,
+    implicit: Option<Box<IterationMatrix>>,
 }
 
 /// The directions of the parameters, n_α × (k + 1) row by row: column j < k is the θ row of
@@ -74,6 +78,8 @@ impl<'a, S: System> LinearRhs<'a, S> {
             vy: vec![0.0; n * (k + 1)],
             g: vec![0.0; n],
             jv: vec![0.0; n * (k + 1)],
+            p,
+            implicit: None,
         }
     }
 }
@@ -100,6 +106,33 @@ impl<S: System> Rhs for LinearRhs<'_, S> {
         for i in 0..n {
             dp[i] = self.g[i] + self.jv[i * kk + k];
             dphi[i * k..(i + 1) * k].copy_from_slice(&self.jv[i * kk..i * kk + k]);
+        }
+    }
+
+    /// The linear system's Jacobian is J(x_k(t)) on every block (p and each column of Φ),
+    /// independent of [p; Φ]: one n × n factorisation serves them all.
+    fn factor(
+        &mut self,
+        t: f64,
+        side: Side,
+        _w: &[f64],
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        let (sys, k) = (self.sys, self.k);
+        let p = &self.p;
+        let matrix = self.implicit.get_or_insert_with(|| Box::new(IterationMatrix::new(sys, p, k)));
+        self.previous.eval(t, &mut self.hint, &mut self.y);
+        sys.input_values(t, side, &mut self.u);
+        matrix.factor(sys, (t, &self.y, p, &self.u), inv_gamma_h)
+    }
+
+    fn solve(&mut self, r: &mut [f64]) {
+        if let Some(matrix) = &mut self.implicit {
+            let (p, phi) = r.split_at_mut(self.n);
+            matrix.solve(p);
+            if self.k > 0 {
+                matrix.solve_rows(phi, self.k);
+            }
         }
     }
 
