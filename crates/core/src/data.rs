@@ -36,6 +36,9 @@ pub struct Series {
     pub weight: f64,
     /// The measured values.
     pub samples: Samples,
+    /// Per-sample weights w_{o,m} multiplying w_o, for noise whose variance changes from
+    /// sample to sample (relative noise); discrete data only. `None`: all 1.
+    pub sample_weights: Option<Vec<f64>>,
 }
 
 /// Whether the data are samples or a continuous record.
@@ -90,6 +93,25 @@ impl Data {
             name: name.into(),
             weight,
             samples: Samples::Points { times: times.to_vec(), values: values.to_vec() },
+            sample_weights: None,
+        });
+        self
+    }
+
+    /// Adds samples of `name` with one weight per sample, w_m = 1/σ_m² for noise of standard
+    /// deviation σ_m (discrete data only): ε gains Σ_m w_m (h(t_m) − b_m)².
+    pub fn series_with_weights(
+        mut self,
+        name: &str,
+        times: &[f64],
+        values: &[f64],
+        weights: &[f64],
+    ) -> Self {
+        self.series.push(Series {
+            name: name.into(),
+            weight: 1.0,
+            samples: Samples::Points { times: times.to_vec(), values: values.to_vec() },
+            sample_weights: Some(weights.to_vec()),
         });
         self
     }
@@ -105,6 +127,7 @@ impl Data {
             name: name.into(),
             weight,
             samples: Samples::Function(Arc::new(b)),
+            sample_weights: None,
         });
         self
     }

@@ -663,6 +663,27 @@ fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemErr
                 )));
             }
         }
+        if let Some(weights) = &s.sample_weights {
+            let count = match &s.samples {
+                Samples::Points { values, .. } => values.len(),
+                Samples::Function(_) => 0,
+            };
+            if weights.len() != count {
+                return Err(invalid(format!(
+                    "{} sample weights for {count} samples",
+                    weights.len()
+                )));
+            }
+            if let Some(i) = weights.iter().position(|w| !(*w > 0.0 && w.is_finite())) {
+                return Err(invalid(format!(
+                    "sample weight {i} must be positive and finite, got {}",
+                    weights[i]
+                )));
+            }
+            if data.record != Kind::Discrete {
+                return Err(invalid("per-sample weights need discrete data".into()));
+            }
+        }
         resolved.push(observable);
     }
     match data.record {
@@ -671,8 +692,18 @@ fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemErr
             for s in &data.series {
                 match &s.samples {
                     Samples::Points { times, values } => {
-                        let w = s.weight.sqrt();
-                        points.push(times.iter().zip(values).map(|(&t, &v)| (t, v, w)).collect());
+                        let sqrt_weight = |m: usize| match &s.sample_weights {
+                            Some(w) => (s.weight * w[m]).sqrt(),
+                            None => s.weight.sqrt(),
+                        };
+                        points.push(
+                            times
+                                .iter()
+                                .zip(values)
+                                .enumerate()
+                                .map(|(m, (&t, &v))| (t, v, sqrt_weight(m)))
+                                .collect(),
+                        );
                     }
                     Samples::Function(_) => {
                         return Err(ProblemError::InvalidSeries {

@@ -127,6 +127,46 @@ fn data_errors() {
         e(Data::continuous(1.0, 0.0).function("y", 1.0, |t| t)).to_string(),
         "invalid value for record span [1, 0]: -1"
     );
+    let times = [0.0, 1.0, 2.0];
+    assert_eq!(
+        e(Data::discrete().series_with_weights("y", &times, &[0.0; 3], &[1.0, 2.0])).to_string(),
+        "measured series `y`: 2 sample weights for 3 samples"
+    );
+    assert_eq!(
+        e(Data::discrete().series_with_weights("y", &times, &[0.0; 3], &[1.0, 0.0, 1.0]))
+            .to_string(),
+        "measured series `y`: sample weight 1 must be positive and finite, got 0"
+    );
+    assert_eq!(
+        e(Data::continuous(0.0, 2.0).series_with_weights("y", &times, &[0.0; 3], &[1.0; 3]))
+            .to_string(),
+        "measured series `y`: per-sample weights need discrete data"
+    );
+}
+
+#[test]
+fn per_sample_weights_weight_each_residual() {
+    // Relative noise: w_m = 1 / (0.01 b_m)², so ε sums squared relative residuals.
+    let (times, b) = ([0.5, 1.0, 2.0, 3.0], [4.0, 15.0, 65.0, 145.0]);
+    let weights: Vec<f64> = b.iter().map(|v: &f64| 1.0 / (0.01 * v).powi(2)).collect();
+    let problem = Problem::builder(fall())
+        .known("y", 0.0)
+        .known("v", 0.0)
+        .unknown("g", 31.0)
+        .data(Data::discrete().series_with_weights("y", &times, &b, &weights))
+        .build()
+        .unwrap();
+    let z = problem.unknowns().coordinates(&[31.0]);
+    let expected: f64 =
+        times.iter().zip(b).map(|(t, b)| ((15.5 * t * t - b) / (0.01 * b)).powi(2)).sum();
+    assert_close(problem.cost(&z).unwrap().0, expected, 1e-12);
+    let lin = problem.linearize(&z).unwrap();
+    assert_close(lin.cost, expected, 1e-12);
+    // Row m of the Jacobian is √w_m ∂y(t_m)/∂g = t_m² / 2 / (0.01 b_m).
+    let jac = &lin.residuals.as_ref().unwrap().jacobian;
+    for (m, (t, b)) in times.iter().zip(b).enumerate() {
+        assert_close(jac[(m, 0)], t * t / 2.0 / (0.01 * b), 1e-12);
+    }
 }
 
 #[test]
