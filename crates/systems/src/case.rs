@@ -4,7 +4,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use sysid_core::{Data, Problem, ProblemError, Unknown};
-use sysid_ode::{Integrator, Ivp, OdeError, System};
+use sysid_ode::{Integrator, Ivp, OdeError, Scheme, System};
 
 /// A published or exact answer a fit must reproduce, with the tolerance that applies.
 #[derive(Clone, Debug, PartialEq)]
@@ -26,6 +26,21 @@ pub struct Noise {
     pub name: &'static str,
     /// Standard deviation σ; the series gets the weight 1/σ² (Goodman's eq. 32).
     pub sigma: f64,
+    /// Whether σ is relative to the true value: sample m then has the standard deviation
+    /// σ·|y(t_m)| and the weight 1/(σ·y(t_m))².
+    pub relative: bool,
+}
+
+impl Noise {
+    /// Noise of standard deviation σ on every sample of `name`.
+    pub fn absolute(name: &'static str, sigma: f64) -> Self {
+        Self { name, sigma, relative: false }
+    }
+
+    /// Noise of standard deviation σ·|y(t_m)| (σ = 0.01: 1 % of the value).
+    pub fn relative(name: &'static str, sigma: f64) -> Self {
+        Self { name, sigma, relative: true }
+    }
 }
 
 /// Where a case's data come from.
@@ -33,7 +48,8 @@ pub struct Noise {
 pub enum DataSource {
     /// Fixed data: a published table or record.
     Fixed(fn() -> Data),
-    /// The truth simulated at `times` (DOPRI5, rtol 1e-12) plus seeded Gaussian noise.
+    /// The truth simulated at `times` (rtol 1e-12, see [`Case::truth_integrator`]) plus
+    /// seeded Gaussian noise.
     Synthetic {
         /// Measurement times.
         times: Vec<f64>,
@@ -66,7 +82,8 @@ pub struct Case<S> {
     pub reference: Option<Reference>,
 }
 
-/// The integrator that simulates the truth: far tighter than any fit uses.
+/// The integrator that simulates the truth of non-stiff cases: far tighter than any fit
+/// uses.
 pub fn truth_integrator() -> Integrator {
     Integrator::dopri5(1e-12, 1e-14)
 }
@@ -79,21 +96,46 @@ impl<S: System + Clone> Case<S> {
             DataSource::Fixed(data) => Ok(data()),
             DataSource::Synthetic { times, noise } => {
                 let (y0, p) = self.true_point();
-                let sol =
-                    Ivp::new(&self.system, self.t0, &y0, &p).solve(&truth_integrator(), times)?;
+                let sol = Ivp::new(&self.system, self.t0, &y0, &p)
+                    .solve(&self.truth_integrator(), times)?;
                 let mut rng = ChaCha8Rng::seed_from_u64(seed);
                 let sig = self.system.signature();
                 let mut data = Data::discrete();
                 for n in noise {
                     let i = sig.state(n.name).expect("noise on a state of the system");
-                    let normal = Normal::new(0.0, n.sigma).expect("a positive sigma");
+                    let normal = Normal::new(0.0, 1.0).expect("the standard normal");
+                    let sigma = |m: usize| match n.relative {
+                        true => n.sigma * sol.state(m)[i].abs(),
+                        false => n.sigma,
+                    };
                     let values: Vec<f64> = (0..times.len())
-                        .map(|m| sol.state(m)[i] + normal.sample(&mut rng))
+                        .map(|m| sol.state(m)[i] + sigma(m) * normal.sample(&mut rng))
                         .collect();
-                    data = data.weighted_series(n.name, 1.0 / (n.sigma * n.sigma), times, &values);
+                    data = match n.relative {
+                        true => {
+                            let w: Vec<f64> =
+                                (0..times.len()).map(|m| 1.0 / (sigma(m) * sigma(m))).collect();
+                            data.series_with_weights(n.name, times, &values, &w)
+                        }
+                        false => {
+                            data.weighted_series(n.name, 1.0 / (n.sigma * n.sigma), times, &values)
+                        }
+                    };
                 }
                 Ok(data)
             }
+        }
+    }
+
+    /// The integrator that simulates the truth: [`truth_integrator`], or for a case fitted
+    /// with the stiff integrator, Rodas4 at rtol 1e-11 with an absolute tolerance far below
+    /// the smallest concentration measured.
+    pub fn truth_integrator(&self) -> Integrator {
+        match self.integrator.scheme {
+            Scheme::Rodas4 | Scheme::Auto => {
+                Integrator::rodas4(1e-11, 1e-18).with_max_steps(10_000_000)
+            }
+            _ => truth_integrator(),
         }
     }
 

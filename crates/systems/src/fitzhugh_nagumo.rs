@@ -39,7 +39,7 @@ pub fn fitzhugh_nagumo() -> Case<FitzHughNagumo> {
         integrator: Integrator::dopri5(1e-8, 1e-10),
         data: DataSource::Synthetic {
             times: grid(0.0, 0.05, 401),
-            noise: vec![Noise { name: "V", sigma: 0.05 }, Noise { name: "R", sigma: 0.05 }],
+            noise: vec![Noise::absolute("V", 0.05), Noise::absolute("R", 0.05)],
         },
         truth: vec![("a", 0.2), ("b", 0.2), ("c", 3.0)],
         reference: None,

@@ -14,10 +14,12 @@
 //! | `fitzhugh-nagumo` | V' = c(V − V³/3 + R), R' = −(V − a + bR)/c | V, R every 0.05 on [0, 20], σ = 0.05 | a, b, c from (0.3, 0.3, 2.5) |
 //! | `short-period` | α' = Zα α + q + Zδ δe, q' = Mα α + Mq q + Mδ δe | α (σ = 0.002), q (σ = 0.005) every 0.05 on [0, 10] | from (−1, −3, −1, −0.1, −6) |
 //! | `van-der-pol-three-point` | van der Pol, t0 = 4 | x at t = 4, 6, 8 (no noise) | x, v, μ from (−1.5, 0.3, 1.5); ε = 0 |
+//! | `robertson` (stiff) | y1' = −k1y1 + k3y2y3, y2' = k1y1 − k2y2² − k3y2y3, y3' = k2y2² | y1, y3 at 20 log-spaced t in [0.01, 100], 1 % relative noise | log k1, k2, k3 from truth + 0.3 decades |
 //!
 //! Synthetic data are the truth integrated with rtol 1e-12 plus Gaussian noise drawn from
 //! ChaCha8 seeded by the seed, series after series: the same data on every machine; each
-//! noisy series is weighted by 1/σ² (Goodman's eq. 32).
+//! noisy series is weighted by 1/σ² (Goodman's eq. 32), each sample by 1/σ_m² where the
+//! noise is relative (σ_m = σ·|y(t_m)|). The stiff case's truth is integrated by Rodas4.
 //!
 //! A caller that works with any system implements [`Visit`] and calls [`visit`] with a name:
 //!
@@ -39,6 +41,7 @@ mod case;
 pub mod falling_body;
 pub mod fitzhugh_nagumo;
 pub mod lotka_volterra;
+pub mod robertson;
 pub mod short_period;
 pub mod van_der_pol;
 
@@ -46,6 +49,7 @@ pub use case::{Case, DataSource, Noise, Reference, grid, truth_integrator};
 pub use falling_body::FallingBody;
 pub use fitzhugh_nagumo::FitzHughNagumo;
 pub use lotka_volterra::LotkaVolterra;
+pub use robertson::Robertson;
 pub use short_period::ShortPeriod;
 pub use van_der_pol::VanDerPol;
 
@@ -82,6 +86,7 @@ catalogue! {
     "fitzhugh-nagumo" => fitzhugh_nagumo::fitzhugh_nagumo,
     "short-period" => short_period::short_period,
     "van-der-pol-three-point" => van_der_pol::van_der_pol_three_point,
+    "robertson" => robertson::robertson,
 }
 
 /// The one-line summary of each catalogue system, in catalogue order.

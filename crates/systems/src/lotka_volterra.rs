@@ -44,7 +44,7 @@ pub fn lotka_volterra() -> Case<LotkaVolterra> {
         integrator: Integrator::dopri5(1e-8, 1e-10),
         data: DataSource::Synthetic {
             times: grid(0.0, 0.1, 101),
-            noise: vec![Noise { name: "x", sigma: 0.1 }, Noise { name: "y", sigma: 0.1 }],
+            noise: vec![Noise::absolute("x", 0.1), Noise::absolute("y", 0.1)],
         },
         truth: vec![("a", 1.5), ("b", 1.0), ("g", 3.0), ("d", 1.0)],
         reference: None,

@@ -72,7 +72,7 @@ pub fn short_period() -> Case<ShortPeriod> {
         integrator: Integrator::dopri5(1e-8, 1e-10),
         data: DataSource::Synthetic {
             times: grid(0.0, 0.05, 201),
-            noise: vec![Noise { name: "alpha", sigma: 0.002 }, Noise { name: "q", sigma: 0.005 }],
+            noise: vec![Noise::absolute("alpha", 0.002), Noise::absolute("q", 0.005)],
         },
         truth: vec![("Za", -1.2), ("Ma", -4.5), ("Mq", -1.8), ("Zd", -0.15), ("Md", -8.0)],
         reference: None,

@@ -38,7 +38,7 @@ pub fn van_der_pol() -> Case<VanDerPol> {
         integrator: Integrator::dopri5(1e-8, 1e-10),
         data: DataSource::Synthetic {
             times: grid(0.0, 0.2, 101),
-            noise: vec![Noise { name: "x", sigma: 0.05 }],
+            noise: vec![Noise::absolute("x", 0.05)],
         },
         truth: vec![("mu", 1.0), ("x", 2.0), ("v", 0.0)],
         reference: None,
