@@ -7,6 +7,7 @@ use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
 
 use crate::format::significant;
+use crate::integrator::IntegratorArgs;
 use crate::methods::{Common, QlStart, default_methods, method, parse_list};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
@@ -41,6 +42,8 @@ pub struct CompareArgs {
     /// Most updates of the unknowns, for every method.
     #[arg(long, value_name = "N")]
     max_iterations: Option<usize>,
+    #[command(flatten)]
+    integrator: IntegratorArgs,
 }
 
 /// One method's outcome on one system.
@@ -77,7 +80,8 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     let mut json = Vec::new();
     let mut tables = Vec::new();
     for source in &sources {
-        let (table, records) = with_problem(source, CompareProblem { methods: &methods, common })?;
+        let with = CompareProblem { methods: &methods, common, integrator: args.integrator };
+        let (table, records) = with_problem(source, with)?;
         tables.push(table);
         json.extend(records);
     }
@@ -91,6 +95,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
 struct CompareProblem<'a> {
     methods: &'a [String],
     common: Common,
+    integrator: IntegratorArgs,
 }
 
 impl WithProblem for CompareProblem<'_> {
@@ -101,6 +106,7 @@ impl WithProblem for CompareProblem<'_> {
         problem: Problem<S>,
         context: Context,
     ) -> anyhow::Result<Self::Output> {
+        let problem = self.integrator.apply(problem)?;
         let mut rows = Vec::with_capacity(self.methods.len());
         for name in self.methods {
             let m = method::<S>(name, self.common)?;

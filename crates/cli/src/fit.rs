@@ -5,6 +5,7 @@ use sysid_core::{Estimate, Problem, Termination};
 use sysid_ode::System;
 
 use crate::format::significant;
+use crate::integrator::IntegratorArgs;
 use crate::methods::{Common, METHODS, QlStart, method};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
@@ -27,12 +28,8 @@ pub struct FitArgs {
     /// Most updates of the unknowns.
     #[arg(long, value_name = "N")]
     max_iterations: Option<usize>,
-    /// Relative tolerance of the integrator (default: the system's).
-    #[arg(long, value_name = "RTOL", allow_negative_numbers = true)]
-    rtol: Option<f64>,
-    /// Absolute tolerance of the integrator (default: the system's).
-    #[arg(long, value_name = "ATOL", allow_negative_numbers = true)]
-    atol: Option<f64>,
+    #[command(flatten)]
+    integrator: IntegratorArgs,
 }
 
 impl FitArgs {
@@ -60,7 +57,7 @@ impl WithProblem for FitProblem<'_> {
         context: Context,
     ) -> anyhow::Result<Outcome> {
         let args = self.args;
-        let problem = with_tolerances(problem, args.rtol, args.atol)?;
+        let problem = args.integrator.apply(problem)?;
         let estimate = fit(&problem, &args.method, args.common())?;
         match args.format {
             Format::Json => {
@@ -70,21 +67,6 @@ impl WithProblem for FitProblem<'_> {
         }
         Ok(if estimate.converged() { Outcome::Success } else { Outcome::NotConverged })
     }
-}
-
-/// The problem with the integrator's tolerances replaced where given.
-pub fn with_tolerances<S: System>(
-    problem: Problem<S>,
-    rtol: Option<f64>,
-    atol: Option<f64>,
-) -> anyhow::Result<Problem<S>> {
-    if rtol.is_none() && atol.is_none() {
-        return Ok(problem);
-    }
-    let mut integrator = *problem.integrator();
-    integrator.rtol = rtol.unwrap_or(integrator.rtol);
-    integrator.atol = atol.unwrap_or(integrator.atol);
-    Ok(problem.with_integrator(integrator)?)
 }
 
 /// Fits with the named method. What is bad input rather than a method's failure is an

@@ -6,6 +6,7 @@
 mod compare;
 mod fit;
 mod format;
+mod integrator;
 mod methods;
 mod predict;
 mod simulate;

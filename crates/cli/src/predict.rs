@@ -9,6 +9,7 @@ use sysid_ode::{Ivp, System};
 
 use crate::Outcome;
 use crate::fit::fit;
+use crate::integrator::IntegratorArgs;
 use crate::methods::{Common, QlStart};
 use crate::simulate::write_output;
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
@@ -33,6 +34,8 @@ pub struct PredictArgs {
     /// Write to this file instead of standard output.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
+    #[command(flatten)]
+    integrator: IntegratorArgs,
 }
 
 /// Runs `sysid predict`.
@@ -56,6 +59,7 @@ impl WithProblem for Predict<'_> {
         context: Context,
     ) -> anyhow::Result<Outcome> {
         let args = self.args;
+        let problem = args.integrator.apply(problem)?;
         let t0 = problem.t0();
         if args.until <= t0 {
             bail!("--until {} must lie after t0 = {t0}", args.until);

@@ -355,3 +355,78 @@ record = "continuous"
         assert!((v - value).abs() < 1e-5, "{name}: {v} vs {value}");
     }
 }
+
+/// Robertson's stiff kinetics as a model file fitted with the implicit integrator.
+const ROBERTSON: &str = r#"states = ["y1", "y2", "y3"]
+parameters = ["k1", "k2", "k3"]
+[equations]
+y1 = "-k1 * y1 + k3 * y2 * y3"
+y2 = "k1 * y1 - k2 * y2^2 - k3 * y2 * y3"
+y3 = "k2 * y2^2"
+[initial]
+y1 = 1.0
+y2 = 0.0
+y3 = 0.0
+[unknowns]
+k1 = { guess = 0.08, log = true }
+k2 = { guess = 6e7, log = true }
+k3 = { guess = 2e4, log = true }
+[data]
+file = "data.csv"
+[integrator]
+method = "rodas4"
+rtol = 1e-9
+atol = 1e-16
+"#;
+
+#[test]
+fn a_stiff_model_file_fits_with_rodas4_and_explicit_integration_says_why_it_fails() {
+    let case = Case::new("robertson", ROBERTSON, "");
+    let data = case.path("data.csv");
+    let args = ["--set", "k1=0.04", "--set", "k2=3e7", "--set", "k3=1e4"];
+    let out = sysid(
+        &[
+            &["simulate", "--model", &case.model(), "--times", "0:40:2", "--out"][..],
+            &[data.to_str().unwrap()],
+            &args,
+        ]
+        .concat(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    // Noise-free data from the truth: the fit returns it, to the integration tolerance
+    // (measured: 1e-9 relative).
+    for (name, value) in [("k1", 0.04), ("k2", 3e7), ("k3", 1e4)] {
+        let k = json["estimates"][name].as_f64().unwrap();
+        assert!((k - value).abs() < 1e-7 * value, "{name}: {k} vs {value}");
+    }
+    // DOPRI5 with a modest step budget: exit 2, and the message says the model is stiff.
+    let out =
+        sysid(&["fit", "--model", &case.model(), "--integrator", "dopri5", "--max-steps", "20000"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("stiff") && stderr.contains("rodas4"), "{stderr}");
+}
+
+#[test]
+fn integrator_choices_are_checked() {
+    let model = ROBERTSON.replace("method = \"rodas4\"", "method = \"radau\"");
+    bad(
+        "radau",
+        &model,
+        DECAY_DATA,
+        "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\" or \"auto\", got \"radau\"",
+    );
+    let case = Case::new("rk4-step", DECAY, DECAY_DATA);
+    let out = sysid(&["fit", "--model", &case.model(), "--integrator", "rk4"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("--fixed-step"), "{}", text(&out.stderr));
+    let out = sysid(&["fit", "--model", &case.model(), "--integrator", "radau"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("rodas4"), "{}", text(&out.stderr));
+    let out =
+        sysid(&["fit", "--model", &case.model(), "--integrator", "rk4", "--fixed-step", "0.01"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}

@@ -562,11 +562,13 @@ fn read_integrator(r: &Reader<'_>, value: &Spanned<DeValue<'_>>) -> Result<Integ
                 integrator.scheme = match r.string(v, "[integrator] method")? {
                     "dopri5" => Scheme::Dopri5,
                     "rk4" => Scheme::Rk4,
+                    "rodas4" => Scheme::Rodas4,
+                    "auto" => Scheme::Auto,
                     other => {
                         return Err(r.err(
                             v.span().start,
                             format!(
-                                "[integrator] method must be \"dopri5\" or \"rk4\", got \"{other}\""
+                                "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\" or \"auto\", got \"{other}\""
                             ),
                         ));
                     }
