@@ -9,7 +9,7 @@ use sysid_ode::{Integrator, Scheme, System};
 pub enum SchemeArg {
     /// Dormand–Prince 5(4), adaptive (explicit; the default for non-stiff systems).
     Dopri5,
-    /// Classical Runge–Kutta 4 with the fixed step --step (explicit).
+    /// Classical Runge–Kutta 4 with the fixed step --fixed-step (explicit).
     Rk4,
     /// Rodas4, a Rosenbrock method of order 4 with exact Jacobians (implicit, for stiff
     /// systems).
