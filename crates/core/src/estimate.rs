@@ -46,7 +46,8 @@ pub enum Convergence {
     Gradient,
     /// The model passes through every data point (ε = 0).
     ExactFit,
-    /// The change of the cost between iterations fell below the tolerance (argmin's rule).
+    /// The change of the cost between iterations (argmin's rule), or the decrease the next
+    /// step predicts (Goodman's cost tolerance), fell below the tolerance.
     CostChange,
 }
 
