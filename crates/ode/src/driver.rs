@@ -177,9 +177,9 @@ impl<R: Rhs> Stepper<'_, R> {
     }
 
     /// One DOPRI5 step from (t, w.x) with k[0] = f(t, x). Leaves the solution in w.x_new,
-    /// f(t + h, x_new) in k[6], and returns the error norm and Hairer's estimate of h·λ,
-    /// λ the dominant eigenvalue: h ‖f(x_new) − f(x₆)‖ / ‖x_new − x₆‖, both at t + h.
-    fn dopri5(&mut self, w: &mut Work, t: f64, h: f64) -> (f64, f64) {
+    /// the sixth stage's argument x₆ in w.tmp, f(t + h, x_new) in k[6], and returns the
+    /// error norm.
+    fn dopri5(&mut self, w: &mut Work, t: f64, h: f64) -> f64 {
         let n = w.x.len();
         let [k1, k2, k3, k4, k5, k6, k7] = &mut w.k;
         // Slices of one length: the loops below run without bounds checks.
@@ -217,17 +217,25 @@ impl<R: Rhs> Stepper<'_, R> {
         self.f(t + h, xn, k7);
         let k7 = &k7[..n];
         let (rtol, atol) = (self.cfg.rtol, self.cfg.atol);
-        let (mut sum, mut st_num, mut st_den) = (0.0, 0.0, 0.0);
+        let mut sum = 0.0;
         for i in 0..n {
             let e =
                 h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
             let sk = atol + rtol * x[i].abs().max(xn[i].abs());
             sum += (e / sk) * (e / sk);
-            st_num += (k7[i] - k6[i]) * (k7[i] - k6[i]);
-            st_den += (xn[i] - tmp[i]) * (xn[i] - tmp[i]);
         }
-        let h_lambda = if st_den > 0.0 { h.abs() * (st_num / st_den).sqrt() } else { 0.0 };
-        ((sum / n as f64).sqrt(), h_lambda)
+        (sum / n as f64).sqrt()
+    }
+
+    /// Hairer's estimate of h·λ for the DOPRI5 step just taken, λ the dominant eigenvalue
+    /// of ∂f/∂x: h ‖f(x_new) − f(x₆)‖ / ‖x_new − x₆‖, both at t + h.
+    fn stiffness_estimate(w: &Work, h: f64) -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for i in 0..w.x.len() {
+            num += (w.k[6][i] - w.k[5][i]) * (w.k[6][i] - w.k[5][i]);
+            den += (w.x_new[i] - w.tmp[i]) * (w.x_new[i] - w.tmp[i]);
+        }
+        if den > 0.0 { h.abs() * (num / den).sqrt() } else { 0.0 }
     }
 
     /// One classical RK4 step; f(t + h, x_new) in k[6] for the Hermite dense output.
@@ -326,6 +334,21 @@ pub fn integrate<R: Rhs>(
     (t0, x0): (f64, &[f64]),
     t_end: f64,
     stops: &[f64],
+    on_step: impl FnMut(&Interpolant),
+) -> Result<(Counts, Vec<f64>), OdeError> {
+    integrate_selected(cfg, rhs, (t0, x0), t_end, stops, |_, _| true, on_step)
+}
+
+/// [`integrate`], handing `on_step` only the steps from t to t_next for which
+/// `wants(t, t_next)` holds: the others' interpolants are never formed (sampling at a
+/// hundred output times needs one step in five on van der Pol).
+pub(crate) fn integrate_selected<R: Rhs>(
+    cfg: &Integrator,
+    rhs: &mut R,
+    (t0, x0): (f64, &[f64]),
+    t_end: f64,
+    stops: &[f64],
+    mut wants: impl FnMut(f64, f64) -> bool,
     mut on_step: impl FnMut(&Interpolant),
 ) -> Result<(Counts, Vec<f64>), OdeError> {
     let n = rhs.dim();
@@ -397,7 +420,7 @@ pub fn integrate<R: Rhs>(
                         st.dopri5(&mut work, t, t_next - t);
                     }
                 }
-                accept(&mut st, &mut work, current, t, t_next, &mut on_step)?;
+                accept(&mut st, &mut work, current, (t, t_next), &mut wants, &mut on_step)?;
                 t = t_next;
             }
             continue;
@@ -433,15 +456,23 @@ pub fn integrate<R: Rhs>(
                 });
             }
             let t_next = if lands { seg_end } else { t + dir * hs };
-            let (err, h_lambda) = match current {
+            let err = match current {
                 Scheme::Rodas4 => match st.rodas4(&mut work, t, t_next - t) {
-                    Ok(err) => (err, 0.0),
+                    Ok(err) => err,
                     // A singular iteration matrix: a shorter step changes it.
-                    Err(FactorError::Singular) => (f64::NAN, 0.0),
+                    Err(FactorError::Singular) => f64::NAN,
                     Err(e) => return Err(implicit_error(e, t)),
                 },
                 _ => st.dopri5(&mut work, t, t_next - t),
             };
+            // The automatic choice tests every explicit step; plain DOPRI5 (whose test only
+            // explains a later failure) every 64th step and every step once one looked stiff,
+            // as Hairer's code does.
+            let check = current == Scheme::Dopri5
+                && (cfg.scheme == Scheme::Auto
+                    || stiffness.suspected()
+                    || st.counts.steps.is_multiple_of(STIFF_CHECK_EVERY));
+            let h_lambda = if check { Stepper::<R>::stiffness_estimate(&work, hs) } else { 0.0 };
             if !err.is_finite() {
                 // The trial step left the region where f is defined: retry much shorter.
                 st.counts.rejected_steps += 1;
@@ -454,7 +485,7 @@ pub fn integrate<R: Rhs>(
             non_finite = None;
             let ln_err = err.max(f64::MIN_POSITIVE).ln();
             if err <= 1.0 {
-                accept(&mut st, &mut work, current, t, t_next, &mut on_step)?;
+                accept(&mut st, &mut work, current, (t, t_next), &mut wants, &mut on_step)?;
                 t = t_next;
                 reached = lands;
                 let fac = match current {
@@ -471,7 +502,7 @@ pub fn integrate<R: Rhs>(
                     h = h.min(hs);
                 }
                 last_rejected = false;
-                if current == Scheme::Dopri5 && stiffness.observe(h_lambda) {
+                if check && stiffness.observe(h_lambda) {
                     match cfg.scheme {
                         Scheme::Auto if st.rhs.factor(t, st.side(t), &work.x, 1.0).is_ok() => {
                             current = Scheme::Rodas4;
@@ -507,6 +538,8 @@ pub fn integrate<R: Rhs>(
 const STIFF_H_LAMBDA: f64 = 2.0;
 /// Consecutive stiff-looking steps that decide it (Hairer's DOPRI5).
 const STIFF_STEPS: u32 = 15;
+/// How often plain DOPRI5 tests a step while nothing looks stiff.
+const STIFF_CHECK_EVERY: u64 = 64;
 
 /// Hairer's stiffness detection for DOPRI5: fifteen accepted steps in a row with
 /// h·λ > [`STIFF_H_LAMBDA`] (six non-stiff ones reset the count).
@@ -517,6 +550,11 @@ struct Stiffness {
 }
 
 impl Stiffness {
+    /// Whether a recent test looked stiff.
+    fn suspected(&self) -> bool {
+        self.stiff > 0
+    }
+
     /// Records a step; true when the integration looks stiff.
     fn observe(&mut self, h_lambda: f64) -> bool {
         if h_lambda > STIFF_H_LAMBDA {
@@ -541,21 +579,24 @@ fn implicit_error(e: FactorError, t: f64) -> OdeError {
     }
 }
 
-/// Accepts the step from t to t_next held in `work`: interpolant, callback, advance.
+/// Accepts the step from t to t_next held in `work`: interpolant and callback (if wanted),
+/// advance.
 fn accept<R: Rhs>(
     st: &mut Stepper<'_, R>,
     work: &mut Work,
     scheme: Scheme,
-    t: f64,
-    t_next: f64,
+    (t, t_next): (f64, f64),
+    wants: &mut impl FnMut(f64, f64) -> bool,
     on_step: &mut impl FnMut(&Interpolant),
 ) -> Result<(), OdeError> {
     if let Some(i) = work.x_new.iter().position(|v| !v.is_finite()) {
         return Err(OdeError::NonFinite { t, what: st.rhs.describe(i) });
     }
     st.counts.steps += 1;
-    Stepper::<R>::dense(work, scheme, t, t_next);
-    on_step(&work.interpolant);
+    if wants(t, t_next) {
+        Stepper::<R>::dense(work, scheme, t, t_next);
+        on_step(&work.interpolant);
+    }
     std::mem::swap(&mut work.x, &mut work.x_new);
     // The explicit schemes' last stage is f(t_next, x_next): the next step's first.
     work.k.swap(0, 6);

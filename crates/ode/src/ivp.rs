@@ -3,7 +3,7 @@
 
 use nalgebra::{DMatrix, DMatrixView, Dyn};
 
-use crate::driver::{Counts, Rhs, integrate};
+use crate::driver::{Counts, Rhs, integrate, integrate_selected};
 use crate::error::OdeError;
 use crate::implicit::{AugmentedMatrix, IterationMatrix};
 use crate::interpolant::{DenseSolution, Interpolant};
@@ -448,14 +448,20 @@ pub(crate) fn sample<R: Rhs>(
         out[m * w..(m + 1) * w].copy_from_slice(x0);
     }
     if at < times.len() {
-        let mut next = at;
+        // The next output time, shared by the step filter and the callback.
+        let next = std::cell::Cell::new(at);
         let t_last = times[times.len() - 1];
-        let (c, x_end) = integrate(integrator, rhs, (t0, x0), t_last, stops, |s| {
-            while next < times.len() && times[next] <= s.t_end() {
-                s.eval(times[next], &mut out[next * w..(next + 1) * w]);
-                next += 1;
-            }
-        })?;
+        let wants = |_: f64, t_end: f64| times.get(next.get()).is_some_and(|&t| t <= t_end);
+        let (c, x_end) =
+            integrate_selected(integrator, rhs, (t0, x0), t_last, stops, wants, |s| {
+                let mut m = next.get();
+                while m < times.len() && times[m] <= s.t_end() {
+                    s.eval(times[m], &mut out[m * w..(m + 1) * w]);
+                    m += 1;
+                }
+                next.set(m);
+            })?;
+        let next = next.get();
         counts += c;
         // Only times equal to the end can remain: the integration stops exactly on it.
         for m in next..times.len() {
@@ -463,13 +469,18 @@ pub(crate) fn sample<R: Rhs>(
         }
     }
     if before > 0 {
-        let mut next = before;
-        let (c, x_end) = integrate(integrator, rhs, (t0, x0), times[0], stops, |s| {
-            while next > 0 && times[next - 1] >= s.t_end() {
-                next -= 1;
-                s.eval(times[next], &mut out[next * w..(next + 1) * w]);
-            }
-        })?;
+        let next = std::cell::Cell::new(before);
+        let wants = |_: f64, t_end: f64| next.get() > 0 && times[next.get() - 1] >= t_end;
+        let (c, x_end) =
+            integrate_selected(integrator, rhs, (t0, x0), times[0], stops, wants, |s| {
+                let mut m = next.get();
+                while m > 0 && times[m - 1] >= s.t_end() {
+                    m -= 1;
+                    s.eval(times[m], &mut out[m * w..(m + 1) * w]);
+                }
+                next.set(m);
+            })?;
+        let next = next.get();
         counts += c;
         for m in 0..next {
             out[m * w..(m + 1) * w].copy_from_slice(&x_end);

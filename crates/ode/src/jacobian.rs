@@ -112,6 +112,10 @@ impl<const W: usize> Chunked<W> {
         }
     }
 
+    // One function per width, never inlined into the dispatch over widths: the model's
+    // right-hand side then compiles the same way whichever crate instantiates it (25 %
+    // apart on van der Pol between two such crates otherwise).
+    #[inline(never)]
     #[allow(clippy::too_many_arguments)]
     fn eval<S: System>(
         &mut self,
