@@ -14,6 +14,11 @@ pub struct GoodmanOptions {
     /// max_i |U_i| / √(A_ii ε) ≤ tol: the cosine between the residual and each sensitivity
     /// (MINPACK's gtol; scale-free; default 1e-10).
     pub gradient_tolerance: f64,
+    /// Converged when the decrease of ε the next Newton step predicts, δᵀAδ, is at most
+    /// this fraction of ε (MINPACK's ftol; default 0: off, the step and gradient tests
+    /// decide). ε is then within that fraction of the minimum's: what a fit needs whose
+    /// only purpose is the minimum's cost.
+    pub cost_tolerance: f64,
     /// Halve the step while the cost rises (default off: the paper's method takes the full
     /// step; the comparison reports show both).
     pub step_halving: bool,
@@ -30,6 +35,7 @@ impl Default for GoodmanOptions {
             max_iterations: 50,
             step_tolerance: 1e-10,
             gradient_tolerance: 1e-10,
+            cost_tolerance: 0.0,
             step_halving: false,
             max_halvings: 30,
             max_condition: 1e12,
@@ -43,6 +49,11 @@ impl GoodmanOptions {
         Self { step_halving: on, ..self }
     }
 
+    /// The same options with a cost tolerance (see [`cost_tolerance`](Self::cost_tolerance)).
+    pub fn with_cost_tolerance(self, cost_tolerance: f64) -> Self {
+        Self { cost_tolerance, ..self }
+    }
+
     /// The same options with another iteration budget.
     pub fn with_max_iterations(self, max_iterations: usize) -> Self {
         Self { max_iterations, ..self }
@@ -53,6 +64,7 @@ impl GoodmanOptions {
         for (name, v) in [
             ("step_tolerance", self.step_tolerance),
             ("gradient_tolerance", self.gradient_tolerance),
+            ("cost_tolerance", self.cost_tolerance),
         ] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(format!("{name} must be a non-negative number, got {v}"));

@@ -83,6 +83,11 @@ impl<S: System> Method<S> for Goodman {
             if gradient_measure(&lin, &held) <= opts.gradient_tolerance {
                 break Termination::Converged(Convergence::Gradient);
             }
+            // The decrease the step predicts: ε − ε_lin(z + δ) = δᵀAδ for the Newton step.
+            let predicted = step.delta.dot(&(&lin.normal * &step.delta));
+            if opts.cost_tolerance > 0.0 && predicted <= opts.cost_tolerance * lin.cost {
+                break Termination::Converged(Convergence::CostChange);
+            }
             // The step as it would be taken: projected on the bounds.
             let mut projected: Vec<f64> = z.iter().zip(&step.delta).map(|(z, d)| z + d).collect();
             problem.unknowns().project(&mut projected);
@@ -140,6 +145,8 @@ fn update<S: System>(
     let mut scale = 1.0;
     let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
     let negligible = opts.step_tolerance * (z_norm + opts.step_tolerance);
+    // ε is computed to about rtol relative: a rise smaller than that says nothing.
+    let resolution = problem.integrator().rtol * lin.cost;
     for _ in 0..=opts.max_halvings {
         if scale < 1.0 && scale * delta.norm() <= negligible {
             return Update::Negligible;
@@ -149,7 +156,15 @@ fn update<S: System>(
         match problem.linearize(&trial) {
             Ok(l) => {
                 *counts += l.counts;
-                if !opts.step_halving || l.cost <= lin.cost {
+                // The decrease the linearization predicts for this step: a step it expects
+                // to change ε by less than ε's accuracy is judged by the iteration's tests,
+                // not by comparing two costs that agree to their accuracy.
+                let d = nalgebra::DVector::from_iterator(
+                    trial.len(),
+                    trial.iter().zip(z).map(|(a, b)| a - b),
+                );
+                let predicted = -(2.0 * lin.gradient.dot(&d) + d.dot(&(&lin.normal * &d)));
+                if !opts.step_halving || l.cost <= lin.cost || predicted <= resolution {
                     return Update::Accepted(trial, l);
                 }
             }
