@@ -1,0 +1,229 @@
+//! What a study repeats: a problem whose data are the model at the truth plus noise of known
+//! standard deviation, sample by sample.
+
+use nalgebra::DMatrix;
+use rand::Rng;
+use rand_distr::StandardNormal;
+use sysid_core::{Data, NormalFactor, Problem, Samples, Series};
+use sysid_ode::System;
+use sysid_systems::{Case, DataSource};
+
+use crate::error::StudyError;
+
+/// A problem template (model, knowns, unknowns with their bounds and scales, integrator, the
+/// measurement times and weights), the true values of the unknowns, the noise-free data and
+/// the standard deviation of the noise on every sample.
+#[derive(Clone, Debug)]
+pub struct Scenario<S> {
+    base: Problem<S>,
+    truth: Vec<f64>,
+    /// Noise-free values, one per sample, series after series in data order.
+    clean: Vec<f64>,
+    /// σ of each sample, in the same order.
+    sigma: Vec<f64>,
+}
+
+impl<S: System + Clone> Scenario<S> {
+    /// A scenario from its parts. `sigma` has one entry per measured value, series after
+    /// series in the order of `base`'s data; the noise-free data are the model at `truth`
+    /// (values of the unknowns), integrated 10 times tighter than the fits.
+    pub fn new(base: Problem<S>, truth: Vec<f64>, sigma: Vec<f64>) -> Result<Self, StudyError> {
+        let clean = predictions(&base, &truth)?;
+        Self::build(base, truth, clean, sigma)
+    }
+
+    fn build(
+        base: Problem<S>,
+        truth: Vec<f64>,
+        clean: Vec<f64>,
+        sigma: Vec<f64>,
+    ) -> Result<Self, StudyError> {
+        if sigma.len() != clean.len() {
+            return Err(StudyError::Setup(format!(
+                "{} noise levels for {} measured values",
+                sigma.len(),
+                clean.len()
+            )));
+        }
+        if let Some(i) = sigma.iter().position(|s| !(*s >= 0.0 && s.is_finite())) {
+            return Err(StudyError::Setup(format!("noise level {i} is {}", sigma[i])));
+        }
+        Ok(Self { base, truth, clean, sigma })
+    }
+
+    /// A catalogue case. Synthetic data keep their noise model (σ, or σ·|y| for relative
+    /// noise); fixed data (a published table) get the noise their reference fit leaves,
+    /// σ_m = s / √w_m with s² = ε / (N − k), around the reference answer.
+    pub fn from_case(case: &Case<S>) -> Result<Self, StudyError> {
+        let problem = case.problem(1).map_err(|e| StudyError::Setup(e.to_string()))?;
+        let truth = case.expected_values().ok_or_else(|| {
+            StudyError::Setup(format!("{}: no true values or reference answer", case.name))
+        })?;
+        match &case.data {
+            DataSource::Synthetic { noise, .. } => {
+                // The data's series follow the noise list; relative σ refers to the truth.
+                let truth_problem = problem.clone().with_integrator(case.truth_integrator())?;
+                let clean = predictions(&truth_problem, &truth)?;
+                let mut sigma = Vec::with_capacity(clean.len());
+                let mut at = 0;
+                for (series, n) in problem.data().series.iter().zip(noise) {
+                    let count = sample_count(series);
+                    for y in &clean[at..at + count] {
+                        sigma.push(if n.relative { n.sigma * y.abs() } else { n.sigma });
+                    }
+                    at += count;
+                }
+                Self::build(problem, truth, clean, sigma)
+            }
+            DataSource::Fixed(_) => Self::from_residuals(problem, truth),
+        }
+    }
+
+    /// Noise as the data of `problem` show it around `truth` (for example a fit of a model
+    /// file): σ_m = s / √w_m, s² = ε(truth) / (N − k), so that the weights keep their
+    /// meaning of relative precisions.
+    pub fn from_residuals(problem: Problem<S>, truth: Vec<f64>) -> Result<Self, StudyError> {
+        let k = problem.unknowns().len();
+        let n = problem.n_residuals();
+        if n <= k {
+            return Err(StudyError::Setup(format!(
+                "{n} measured values for {k} unknowns: no residual variance to take the noise level from"
+            )));
+        }
+        let z = problem.unknowns().coordinates(&truth);
+        let (cost, _) = problem.cost(&z).map_err(|e| {
+            StudyError::Setup(format!("the model cannot be integrated at the truth: {e}"))
+        })?;
+        let s = (cost / (n - k) as f64).sqrt();
+        if s == 0.0 {
+            return Err(StudyError::Setup(
+                "the model fits the data exactly: no noise level to simulate".into(),
+            ));
+        }
+        let sigma: Vec<f64> = problem
+            .sampled()
+            .series
+            .iter()
+            .flat_map(|series| series.samples.iter().map(|m| s / m.sqrt_weight))
+            .collect();
+        Self::new(problem, truth, sigma)
+    }
+}
+
+impl<S: System + Clone> Scenario<S> {
+    /// The problem template.
+    pub fn problem(&self) -> &Problem<S> {
+        &self.base
+    }
+
+    /// True values of the unknowns.
+    pub fn truth(&self) -> &[f64] {
+        &self.truth
+    }
+
+    /// σ of every measured value.
+    pub fn sigma(&self) -> &[f64] {
+        &self.sigma
+    }
+
+    /// The noise-free data.
+    pub fn clean(&self) -> &[f64] {
+        &self.clean
+    }
+
+    /// Data with noise `noise`·σ_m drawn from `rng` (standard normal, sample after sample).
+    pub fn noisy_data(&self, noise: f64, rng: &mut impl Rng) -> Data {
+        let mut data = self.base.data().clone();
+        let mut at = 0;
+        for series in &mut data.series {
+            if let Samples::Points { values, .. } = &mut series.samples {
+                for v in values.iter_mut() {
+                    let e: f64 = rng.sample(StandardNormal);
+                    *v = self.clean[at] + noise * self.sigma[at] * e;
+                    at += 1;
+                }
+            }
+        }
+        data
+    }
+
+    /// The problem on `data` (same times and weights as the template).
+    pub fn with_data(&self, data: Data) -> Result<Problem<S>, StudyError> {
+        Ok(self.base.clone().with_data(data)?)
+    }
+
+    /// The Cramér–Rao bound at the truth for noise `noise`·σ: the inverse Fisher information
+    /// F = Σ_m ∇h_m ∇h_mᵀ / (noise σ_m)², as a covariance of the values of the unknowns (the
+    /// smallest covariance any unbiased estimator can have, to first order).
+    pub fn cramer_rao(&self, noise: f64) -> Result<DMatrix<f64>, StudyError> {
+        let problem = self.with_data(self.clean_data())?;
+        let z = problem.unknowns().coordinates(&self.truth);
+        let lin = problem.residuals_and_jacobian(&z).map_err(|e| {
+            StudyError::Setup(format!("the model cannot be integrated at the truth: {e}"))
+        })?;
+        let jac = &lin.residuals.as_ref().expect("discrete data give residuals").jacobian;
+        // Row m of the weighted Jacobian is √w_m ∇h_m (in coordinates z).
+        let sqrt_w: Vec<f64> = problem
+            .sampled()
+            .series
+            .iter()
+            .flat_map(|s| s.samples.iter().map(|m| m.sqrt_weight))
+            .collect();
+        let mut g = jac.clone();
+        for (m, mut row) in g.row_iter_mut().enumerate() {
+            row /= sqrt_w[m] * noise * self.sigma[m];
+        }
+        let fisher = g.tr_mul(&g);
+        let factor = NormalFactor::new(&fisher, 1e14).map_err(|s| {
+            let names = problem.names();
+            let which: Vec<&str> = s.unknowns.iter().map(|&i| names[i].as_str()).collect();
+            StudyError::Setup(format!(
+                "the Fisher information is singular at the truth: the data cannot identify {}",
+                which.join(", ")
+            ))
+        })?;
+        let inverse = factor.inverse();
+        let scale: Vec<f64> =
+            problem.unknowns().list().iter().zip(&z).map(|(u, &zi)| u.scale(zi)).collect();
+        let k = scale.len();
+        Ok(DMatrix::from_fn(k, k, |i, j| inverse[(i, j)] * scale[i] * scale[j]))
+    }
+
+    /// The data without noise.
+    pub fn clean_data(&self) -> Data {
+        let mut data = self.base.data().clone();
+        let mut at = 0;
+        for series in &mut data.series {
+            if let Samples::Points { values, .. } = &mut series.samples {
+                let n = values.len();
+                values.copy_from_slice(&self.clean[at..at + n]);
+                at += n;
+            }
+        }
+        data
+    }
+}
+
+/// The model's values at the truth: noise-free data (discrete data only).
+fn predictions<S: System>(problem: &Problem<S>, truth: &[f64]) -> Result<Vec<f64>, StudyError> {
+    if problem.is_continuous() {
+        return Err(StudyError::Setup(
+            "a study needs discrete data (a continuous record has no sample noise)".into(),
+        ));
+    }
+    let k = problem.unknowns().len();
+    if truth.len() != k {
+        return Err(StudyError::Setup(format!("{} true values for {k} unknowns", truth.len())));
+    }
+    let z = problem.unknowns().coordinates(truth);
+    problem
+        .predictions(&z)
+        .map_err(|e| StudyError::Setup(format!("the model cannot be integrated at the truth: {e}")))
+}
+
+fn sample_count(series: &Series) -> usize {
+    match &series.samples {
+        Samples::Points { values, .. } => values.len(),
+        Samples::Function(_) => 0,
+    }
+}

@@ -1,0 +1,218 @@
+//! Studies: determinism across thread counts and shards, resume after a kill, the
+//! Cramér–Rao bound against a closed form, and Goodman's efficiency on van der Pol.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::DMatrix;
+use serde_json::Value;
+use sysid_gauss_newton::GaussNewton;
+use sysid_goodman::{Goodman, GoodmanOptions};
+use sysid_montecarlo::{Scenario, SharedMethod, Study, StudySpec, files, files::Shard};
+use sysid_ode::System;
+use sysid_quasilinearization::Quasilinearization;
+use sysid_systems::Case;
+
+fn method<S: System + Clone + Send + Sync>(name: &str) -> SharedMethod<S> {
+    match name {
+        "goodman" => Box::new(Goodman::default()),
+        "goodman-halving" => {
+            Box::new(Goodman::new(GoodmanOptions::default().with_step_halving(true)))
+        }
+        "gauss-newton-ls" => Box::new(GaussNewton::line_search()),
+        "quasilinearization" => Box::new(Quasilinearization::default()),
+        other => panic!("no method {other}"),
+    }
+}
+
+fn study<S: System + Clone + Send + Sync>(
+    case: &Case<S>,
+    methods: &[&str],
+    trials: usize,
+    perturb: f64,
+) -> Study<S> {
+    let spec = StudySpec {
+        system: case.name.into(),
+        methods: methods.iter().map(|m| m.to_string()).collect(),
+        reference: "goodman-halving".into(),
+        trials,
+        noise: 1.0,
+        perturb,
+        seed: 7,
+    };
+    let methods = methods.iter().map(|m| method(m)).collect();
+    Study::new(spec, Scenario::from_case(case).unwrap(), methods, method("goodman-halving"))
+        .unwrap()
+}
+
+/// A scratch directory, removed at the end.
+struct Scratch(PathBuf);
+impl Scratch {
+    fn new(tag: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("sysid-study-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        Self(dir)
+    }
+    fn join(&self, p: &str) -> PathBuf {
+        self.0.join(p)
+    }
+}
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// A JSON value without its measured times (`time_ms` anywhere): what must be identical.
+fn untimed(mut v: Value) -> Value {
+    match &mut v {
+        Value::Object(map) => {
+            map.remove("time_ms");
+            for (_, x) in map.iter_mut() {
+                *x = untimed(x.take());
+            }
+        }
+        Value::Array(items) => {
+            for x in items.iter_mut() {
+                *x = untimed(x.take());
+            }
+        }
+        _ => {}
+    }
+    v
+}
+
+/// A study directory's results without the times: trials.jsonl line by line, summary.json
+/// and study.json.
+fn results(dir: &Path) -> (Vec<Value>, Value, Value) {
+    let read = |f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
+    let lines =
+        read("trials.jsonl").lines().map(|l| untimed(serde_json::from_str(l).unwrap())).collect();
+    (
+        lines,
+        untimed(serde_json::from_str(&read("summary.json")).unwrap()),
+        serde_json::from_str(&read("study.json")).unwrap(),
+    )
+}
+
+fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
+}
+
+#[test]
+fn results_do_not_depend_on_threads_shards_or_interruptions() {
+    let case = sysid_systems::van_der_pol::van_der_pol();
+    let study = study(&case, &["goodman", "gauss-newton-ls"], 12, 0.3);
+    let scratch = Scratch::new("determinism");
+    let quiet = |_: usize, _: usize| {};
+
+    // One thread and two threads.
+    let one = scratch.join("one");
+    pool(1).install(|| files::run(&study, &one, None, false, &quiet)).unwrap();
+    let two = scratch.join("two");
+    pool(2).install(|| files::run(&study, &two, None, false, &quiet)).unwrap();
+    let reference = results(&one);
+    assert_eq!(reference.0.len(), 12 * 3, "a line per trial and method, the reference included");
+    assert_eq!(results(&two), reference);
+    // Bit-identical estimates, not just close: compare the raw text of one line.
+    let line = |d: &Path| {
+        std::fs::read_to_string(d.join("trials.jsonl")).unwrap().lines().nth(4).unwrap().to_string()
+    };
+    let strip = |l: String| l.split("\"time_ms\"").next().unwrap().to_string();
+    assert_eq!(strip(line(&one)), strip(line(&two)));
+
+    // Three shards, merged.
+    let shards: Vec<PathBuf> = (1..=3).map(|i| scratch.join(&format!("shard{i}"))).collect();
+    for (i, dir) in shards.iter().enumerate() {
+        let shard = Shard { index: i + 1, count: 3 };
+        files::run(&study, dir, Some(shard), false, &quiet).unwrap();
+    }
+    let merged = scratch.join("merged");
+    files::merge(&shards, &merged).unwrap();
+    assert_eq!(results(&merged), reference);
+    // A missing shard and a shard given twice are refused.
+    let e = files::merge(&shards[..2], &scratch.join("partial")).unwrap_err().to_string();
+    assert!(e.contains("in none of the shards"), "{e}");
+    let twice = [shards[0].clone(), shards[0].clone(), shards[1].clone(), shards[2].clone()];
+    let e = files::merge(&twice, &scratch.join("twice")).unwrap_err().to_string();
+    assert!(e.contains("twice"), "{e}");
+
+    // A killed run: keep the first 14 lines (4 trials and part of a fifth) and half of the
+    // next line, as a kill in the middle of a write leaves them; resume.
+    let killed = scratch.join("killed");
+    std::fs::create_dir_all(&killed).unwrap();
+    std::fs::copy(one.join("study.json"), killed.join("study.json")).unwrap();
+    let text = std::fs::read_to_string(one.join("trials.jsonl")).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let torn = format!("{}\n{}", lines[..14].join("\n"), &lines[14][..lines[14].len() / 2]);
+    std::fs::write(killed.join("trials.jsonl"), torn).unwrap();
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let count = |n: usize, _: usize| {
+        done.fetch_max(n, std::sync::atomic::Ordering::Relaxed);
+    };
+    files::run(&study, &killed, None, true, &count).unwrap();
+    assert_eq!(done.into_inner(), 12 - 4, "only the trials not complete run again");
+    assert_eq!(results(&killed), reference);
+}
+
+#[test]
+fn directories_are_never_overwritten_or_mixed() {
+    let case = sysid_systems::falling_body::falling_body();
+    let scratch = Scratch::new("mismatch");
+    let dir = scratch.join("a");
+    let quiet = |_: usize, _: usize| {};
+    let e = files::run(&study(&case, &["goodman"], 3, 0.1), &dir, None, true, &quiet).unwrap_err();
+    assert!(e.to_string().contains("nothing to resume"), "{e}");
+    files::run(&study(&case, &["goodman"], 3, 0.1), &dir, None, false, &quiet).unwrap();
+    let e = files::run(&study(&case, &["goodman"], 3, 0.1), &dir, None, false, &quiet).unwrap_err();
+    assert!(e.to_string().contains("already holds a study"), "{e}");
+    let e = files::run(&study(&case, &["goodman"], 5, 0.1), &dir, None, true, &quiet).unwrap_err();
+    assert!(e.to_string().contains("trials 3 vs 5"), "{e}");
+    assert_eq!("2/4".parse::<Shard>(), Ok(Shard { index: 2, count: 4 }));
+    for bad in ["0/4", "5/4", "2", "a/b"] {
+        assert!(bad.parse::<Shard>().is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn cramer_rao_bound_of_the_falling_body_is_the_regression_covariance() {
+    // y(t) = y0 + v0 t + g t²/2 is linear in the unknowns: the bound is exact,
+    // σ² (ΦᵀΦ)⁻¹ with rows (1, t, t²/2), σ² = ε/(N − k) = 1.25 of the paper's fit, times the
+    // noise multiple squared.
+    let case = sysid_systems::falling_body::falling_body();
+    let scenario = Scenario::from_case(&case).unwrap();
+    let phi = DMatrix::from_fn(4, 3, |m, j| [1.0, m as f64, (m * m) as f64 / 2.0][j]);
+    let expected = (phi.transpose() * &phi).try_inverse().unwrap() * 1.25;
+    for noise in [1.0, 3.0] {
+        let crb = scenario.cramer_rao(noise).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let e = expected[(i, j)] * noise * noise;
+                assert!(
+                    (crb[(i, j)] - e).abs() <= 1e-9 * e.abs().max(1.0),
+                    "({i}, {j}): {} vs {e}",
+                    crb[(i, j)]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn goodman_is_efficient_for_mu_on_van_der_pol() {
+    // 200 trials at ρ = 0.1: the spread of Goodman's μ against the Cramér–Rao bound. With
+    // 200 samples the variance ratio has a relative standard error of about 10 %.
+    let case = sysid_systems::van_der_pol::van_der_pol();
+    let study = study(&case, &["goodman"], 200, 0.1);
+    let scratch = Scratch::new("efficiency");
+    let summary = files::run(&study, &scratch.join("vdp"), None, false, &|_, _| {}).unwrap();
+    let goodman = &summary.methods[1];
+    assert_eq!(goodman.method, "goodman");
+    assert!(goodman.success_rate > 0.99, "{}", goodman.success_rate);
+    let mu = &goodman.accuracy[0];
+    assert_eq!(mu.name, "mu");
+    let efficiency = mu.efficiency.unwrap();
+    assert!((0.8..=1.25).contains(&efficiency), "efficiency {efficiency}");
+    // The fits' own 95 % intervals cover the truth about 95 % of the time.
+    let coverage = mu.coverage.unwrap();
+    assert!((0.9..=0.99).contains(&coverage), "coverage {coverage}");
+}
