@@ -76,7 +76,11 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
             seed: args.seed,
         }]
     };
-    let common = Common { max_iterations: args.max_iterations, ql_start: args.ql_start };
+    let common = Common {
+        max_iterations: args.max_iterations,
+        ql_start: args.ql_start,
+        ..Common::default()
+    };
     let mut json = Vec::new();
     let mut tables = Vec::new();
     for source in &sources {

@@ -35,7 +35,7 @@ pub struct FitArgs {
 impl FitArgs {
     /// The method's shared options.
     pub fn common(&self) -> Common {
-        Common { max_iterations: self.max_iterations, ql_start: self.ql_start }
+        Common { max_iterations: self.max_iterations, ql_start: self.ql_start, ..Common::default() }
     }
 }
 

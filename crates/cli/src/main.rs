@@ -11,6 +11,7 @@ mod methods;
 mod predict;
 mod simulate;
 mod source;
+mod study;
 
 use std::process::ExitCode;
 
@@ -40,6 +41,14 @@ enum Command {
     /// Fit, then write the fitted trajectory of every state from t0 to a later time with a
     /// 95 % band from the linearised covariance (CSV).
     Predict(predict::PredictArgs),
+    /// Monte-Carlo robustness study: many noise realisations and starts, every method on
+    /// each, against a reference fit from the truth; success rates, accuracy against the
+    /// Cramér–Rao bound, iterations and time (trials.jsonl, summary.json, summary.md in
+    /// --out). With --basin, a map of convergence over a grid of starts instead.
+    Study(study::StudyArgs),
+    /// Merge the shard directories of one study (`study --shard i/n`) into one, identical
+    /// to an unsharded run.
+    Merge(study::MergeArgs),
     /// List the built-in benchmark systems, one line each.
     Systems,
 }
@@ -84,6 +93,8 @@ fn main() -> ExitCode {
         Command::Compare(args) => compare::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Predict(args) => predict::run(&args),
+        Command::Study(args) => study::run(&args),
+        Command::Merge(args) => study::merge(&args),
         Command::Systems => {
             for (name, summary) in sysid_systems::summaries() {
                 println!("{name:<26} {summary}");

@@ -32,6 +32,8 @@ pub struct Common {
     pub max_iterations: Option<usize>,
     /// The first trajectory of `quasilinearization`.
     pub ql_start: QlStart,
+    /// Goodman's cost tolerance (see `GoodmanOptions::cost_tolerance`), if given.
+    pub cost_tolerance: Option<f64>,
 }
 
 /// `--ql-start`: the first trajectory of quasilinearization.
@@ -44,11 +46,17 @@ pub enum QlStart {
     Data,
 }
 
-/// The method called `name`.
-pub fn method<S: System>(name: &str, common: Common) -> anyhow::Result<Box<dyn Method<S>>> {
+/// The method called `name` (usable from several threads, as studies run them).
+pub fn method<S: System>(
+    name: &str,
+    common: Common,
+) -> anyhow::Result<Box<dyn Method<S> + Send + Sync>> {
     let mut goodman = GoodmanOptions::default();
     let mut gn = GaussNewtonOptions::default();
     let mut ql = QuasilinearizationOptions::default();
+    if let Some(c) = common.cost_tolerance {
+        goodman.cost_tolerance = c;
+    }
     if let Some(m) = common.max_iterations {
         goodman.max_iterations = m;
         gn.max_iterations = m as u64;

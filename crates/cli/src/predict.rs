@@ -69,7 +69,7 @@ impl WithProblem for Predict<'_> {
             bail!("--step must be positive, got {step}");
         }
         let estimate =
-            fit(&problem, &args.method, Common { max_iterations: None, ql_start: args.ql_start })?;
+            fit(&problem, &args.method, Common { ql_start: args.ql_start, ..Common::default() })?;
         if !estimate.converged() {
             eprintln!(
                 "{}: {} did not converge ({}): no prediction written",

@@ -1,0 +1,217 @@
+//! `sysid study` and `sysid merge`: Monte-Carlo robustness studies.
+
+use std::path::PathBuf;
+
+use anyhow::{Context as _, anyhow, bail};
+use clap::Args;
+use indicatif::{ProgressBar, ProgressStyle};
+use sysid_model::Model;
+use sysid_montecarlo::files::{self, Shard};
+use sysid_montecarlo::{Scenario, SharedMethod, Study, StudySpec, basin};
+use sysid_ode::System;
+use sysid_systems::{Case, Visit};
+
+use crate::Outcome;
+use crate::fit::fit;
+use crate::integrator::IntegratorArgs;
+use crate::methods::{Common, method, parse_list};
+
+/// The methods a study compares unless told otherwise: the three classical ones.
+const DEFAULT_METHODS: &str = "goodman,quasilinearization,gauss-newton-ls";
+
+/// Arguments of `sysid study`.
+#[derive(Args, Debug)]
+pub struct StudyArgs {
+    /// A catalogue system (`sysid systems` lists them).
+    #[arg(long, value_name = "NAME", required_unless_present = "model", conflicts_with = "model")]
+    system: Option<String>,
+    /// A model file: the truth is its fit to its data, the noise what the fit leaves.
+    #[arg(long, value_name = "FILE")]
+    model: Option<PathBuf>,
+    /// The data file for --model (default: the model's `[data] file`).
+    #[arg(long, value_name = "CSV", requires = "model")]
+    data: Option<PathBuf>,
+    /// Comma-separated methods (default: goodman, quasilinearization, gauss-newton-ls).
+    #[arg(long, value_name = "A,B,C")]
+    methods: Option<String>,
+    /// The method of the reference fit from the truth that decides success.
+    #[arg(long, default_value = "goodman-halving", value_name = "METHOD")]
+    reference: String,
+    /// Number of trials.
+    #[arg(long, default_value_t = 100, value_name = "N")]
+    trials: usize,
+    /// Noise level, a multiple of the system's σ.
+    #[arg(long, default_value_t = 1.0, value_name = "K")]
+    noise: f64,
+    /// Start perturbation ρ: each unknown starts at truth·(1 + ρu), u uniform on [−1, 1]
+    /// (truth·(1 + ρ)^u on a log scale, truth + ρu for a truth of 0).
+    #[arg(long, default_value_t = 0.2, value_name = "RHO")]
+    perturb: f64,
+    /// Seed: trial i draws from the random stream i of this seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The study's directory: trials.jsonl, summary.json, summary.md (basin.json, basin.md).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Run only part i of n of the trials (1 ≤ i ≤ n); `sysid merge` combines the parts.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<Shard>,
+    /// Continue a study that was interrupted, keeping its finished trials.
+    #[arg(long)]
+    resume: bool,
+    /// Instead of trials: a basin map over a grid of starts for these two unknowns (the
+    /// others at the truth), spread by --perturb.
+    #[arg(long, value_name = "U1,U2")]
+    basin: Option<String>,
+    /// Points per axis of the basin map.
+    #[arg(long, default_value_t = 41, value_name = "G", requires = "basin")]
+    grid: usize,
+    #[command(flatten)]
+    integrator: IntegratorArgs,
+}
+
+/// Arguments of `sysid merge`.
+#[derive(Args, Debug)]
+pub struct MergeArgs {
+    /// The shard directories of one study.
+    #[arg(required = true, value_name = "DIR")]
+    shards: Vec<PathBuf>,
+    /// The merged study's directory (new).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+}
+
+/// Runs `sysid study`.
+pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
+    let methods = parse_list(args.methods.as_deref().unwrap_or(DEFAULT_METHODS))?;
+    parse_list(&args.reference)?;
+    if args.basin.is_some() && (args.shard.is_some() || args.resume) {
+        bail!("a basin map runs in one go: --shard and --resume are for trials");
+    }
+    match (&args.system, &args.model) {
+        (Some(name), _) => {
+            sysid_systems::visit(name, FromCase { args, methods }).ok_or_else(|| {
+                anyhow!("unknown system `{name}` (systems: {})", sysid_systems::NAMES.join(", "))
+            })?
+        }
+        (None, Some(path)) => {
+            let model = Model::load(path)?;
+            let problem = args.integrator.apply(model.problem(args.data.as_deref())?)?;
+            // The truth of a model file: its fit to its own data.
+            let fitted = fit(&problem, &args.reference, Common::default())?;
+            if !fitted.converged() {
+                bail!(
+                    "{}: the fit to the data that gives the study its truth did not converge ({})",
+                    path.display(),
+                    fitted.termination
+                );
+            }
+            let scenario = Scenario::from_residuals(problem, fitted.values)?;
+            run_scenario(args, &path.display().to_string(), scenario, methods)
+        }
+        (None, None) => bail!("give --system NAME or --model FILE"),
+    }
+}
+
+struct FromCase<'a> {
+    args: &'a StudyArgs,
+    methods: Vec<String>,
+}
+
+impl Visit for FromCase<'_> {
+    type Output = anyhow::Result<Outcome>;
+    fn visit<S: System + Clone + Send + Sync + 'static>(self, mut case: Case<S>) -> Self::Output {
+        case.integrator = self.args.integrator.apply_to(case.integrator)?;
+        let scenario =
+            Scenario::from_case(&case).with_context(|| format!("system {}", case.name))?;
+        run_scenario(self.args, case.name, scenario, self.methods)
+    }
+}
+
+fn shared<S: System + Send + Sync + 'static>(name: &str) -> anyhow::Result<SharedMethod<S>> {
+    method::<S>(name, Common::default())
+}
+
+/// The reference fit decides success by its cost only: Goodman's method stops once the next
+/// step would lower ε by less than 1e-10 of it, four decades inside the success tolerance.
+fn reference<S: System + Send + Sync + 'static>(name: &str) -> anyhow::Result<SharedMethod<S>> {
+    method::<S>(
+        name,
+        Common { cost_tolerance: Some(REFERENCE_COST_TOLERANCE), ..Common::default() },
+    )
+}
+
+/// See [`reference`].
+const REFERENCE_COST_TOLERANCE: f64 = 1e-10;
+
+fn run_scenario<S: System + Clone + Send + Sync + 'static>(
+    args: &StudyArgs,
+    system: &str,
+    scenario: Scenario<S>,
+    methods: Vec<String>,
+) -> anyhow::Result<Outcome> {
+    let spec = StudySpec {
+        system: system.to_string(),
+        methods: methods.clone(),
+        reference: args.reference.clone(),
+        trials: args.trials,
+        noise: args.noise,
+        perturb: args.perturb,
+        seed: args.seed,
+    };
+    let fits = methods.iter().map(|m| shared::<S>(m)).collect::<anyhow::Result<Vec<_>>>()?;
+    let study = Study::new(spec, scenario, fits, reference::<S>(&args.reference)?)?;
+    if let Some(axes) = &args.basin {
+        let names = study.scenario().problem().names();
+        let index = |n: &str| {
+            names.iter().position(|x| x == n.trim()).ok_or_else(|| {
+                anyhow!(
+                    "--basin: `{}` is not an unknown (unknowns: {})",
+                    n.trim(),
+                    names.join(", ")
+                )
+            })
+        };
+        let (a, b) =
+            axes.split_once(',').ok_or_else(|| anyhow!("--basin takes two unknowns, U1,U2"))?;
+        let bar = progress_bar((args.grid * args.grid) as u64, "starts");
+        let map = basin(&study, (index(a)?, index(b)?), args.grid, &|done, _| {
+            bar.set_position(done as u64)
+        })?;
+        bar.finish_and_clear();
+        map.write(&args.out)?;
+        print!("{}", map.markdown());
+        return Ok(Outcome::Success);
+    }
+    let total = study.spec().trials;
+    let bar = progress_bar(total as u64, "trials");
+    let summary = files::run(&study, &args.out, args.shard, args.resume, &|done, todo| {
+        bar.set_length(todo as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    print!("{}", summary.markdown());
+    eprintln!("{}: {} trials written to {}", system, summary.trials, args.out.display());
+    Ok(Outcome::Success)
+}
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+fn progress_bar(total: u64, unit: &str) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    let template = format!("{{bar:40}} {{pos}}/{{len}} {unit}, {{per_sec}}, {{eta}} left");
+    bar.set_style(ProgressStyle::with_template(&template).expect("a valid template"));
+    bar
+}
+
+/// Runs `sysid merge`.
+pub fn merge(args: &MergeArgs) -> anyhow::Result<Outcome> {
+    let summary = files::merge(&args.shards, &args.out)?;
+    print!("{}", summary.markdown());
+    eprintln!(
+        "{} shards merged into {} ({} trials)",
+        args.shards.len(),
+        args.out.display(),
+        summary.trials
+    );
+    Ok(Outcome::Success)
+}
