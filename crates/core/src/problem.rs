@@ -190,6 +190,14 @@ impl<S: System> Problem<S> {
         (lo.min(self.t0), hi.max(self.t0))
     }
 
+    /// A step tolerance as the methods apply it: not below the integrator's relative
+    /// tolerance. The model is integrated to about rtol, so changes of the unknowns below
+    /// it are indistinguishable from integration error; iterating on them costs
+    /// integrations and changes nothing the integration can resolve.
+    pub fn resolvable_step(&self, step_tolerance: f64) -> f64 {
+        step_tolerance.max(self.integrator.rtol)
+    }
+
     /// Number of measured values (None for a record given as a function).
     pub fn n_observations(&self) -> Option<usize> {
         self.data.n_observations()

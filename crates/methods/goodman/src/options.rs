@@ -8,7 +8,9 @@ use serde::{Deserialize, Serialize};
 pub struct GoodmanOptions {
     /// Most updates of the unknowns (default 50).
     pub max_iterations: usize,
-    /// Converged when the Newton step satisfies ‖δz‖ ≤ tol · (‖z‖ + tol) (default 1e-10).
+    /// Converged when the Newton step satisfies ‖δz‖ ≤ tol · (‖z‖ + tol), tol not below the
+    /// integrator's rtol ([`Problem::resolvable_step`](sysid_core::Problem::resolvable_step);
+    /// default 1e-10).
     pub step_tolerance: f64,
     /// Converged when every U_i is small against the residual and the sensitivity it pairs,
     /// max_i |U_i| / √(A_ii ε) ≤ tol: the cosine between the residual and each sensitivity

@@ -51,6 +51,7 @@ impl<S: System> Method<S> for Goodman {
         };
         counts += lin.counts;
         let opts = &self.options;
+        let step_tolerance = problem.resolvable_step(opts.step_tolerance);
         let mut iterations = 0;
         let mut step_norm = None;
         let termination = loop {
@@ -93,7 +94,7 @@ impl<S: System> Method<S> for Goodman {
             problem.unknowns().project(&mut projected);
             let moved = projected.iter().zip(&z).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
             let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if moved <= opts.step_tolerance * (z_norm + opts.step_tolerance) {
+            if moved <= step_tolerance * (z_norm + step_tolerance) {
                 break Termination::Converged(Convergence::Step);
             }
             if iterations >= opts.max_iterations {
@@ -144,7 +145,8 @@ fn update<S: System>(
 ) -> Update {
     let mut scale = 1.0;
     let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let negligible = opts.step_tolerance * (z_norm + opts.step_tolerance);
+    let step_tolerance = problem.resolvable_step(opts.step_tolerance);
+    let negligible = step_tolerance * (z_norm + step_tolerance);
     // ε is computed to about rtol relative: a rise smaller than that says nothing.
     let resolution = problem.integrator().rtol * lin.cost;
     for _ in 0..=opts.max_halvings {

@@ -34,8 +34,9 @@ impl std::fmt::Debug for Start {
 pub struct QuasilinearizationOptions {
     /// Most updates of the unknowns (default 50).
     pub max_iterations: usize,
-    /// Converged when the update satisfies ‖c_{k+1} − c_k‖ ≤ tol · (‖c_k‖ + tol)
-    /// (default 1e-10).
+    /// Converged when the update satisfies ‖c_{k+1} − c_k‖ ≤ tol · (‖c_k‖ + tol), tol not
+    /// below the integrator's rtol
+    /// ([`Problem::resolvable_step`](sysid_core::Problem::resolvable_step); default 1e-10).
     pub step_tolerance: f64,
     /// The first trajectory (default: from the guess).
     pub start: Start,

@@ -144,7 +144,8 @@ impl Quasilinearization {
             problem.unknowns().project(c.as_mut_slice());
             let step = c.iter().zip(&z).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
             let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if step <= opts.step_tolerance * (z_norm + opts.step_tolerance) {
+            let tolerance = problem.resolvable_step(opts.step_tolerance);
+            if step <= tolerance * (z_norm + tolerance) {
                 break Termination::Converged(Convergence::Step);
             }
             if iterations >= opts.max_iterations {
