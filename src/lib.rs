@@ -16,6 +16,7 @@ pub use sysid_core as core;
 pub use sysid_gauss_newton as gauss_newton;
 pub use sysid_goodman as goodman;
 pub use sysid_model as model;
+pub use sysid_montecarlo as montecarlo;
 pub use sysid_ode as ode;
 pub use sysid_quasilinearization as quasilinearization;
 pub use sysid_systems as systems;

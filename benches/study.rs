@@ -1,0 +1,59 @@
+//! A Monte-Carlo study: 1 000 trials on `van-der-pol` (noise 1·σ, starts perturbed by
+//! ρ = 0.2), each trial the reference fit from the truth plus Goodman's fit, written to a
+//! study directory as `sysid study` writes it; on one thread and on two:
+//! `study/van-der-pol-goodman-1000/threads-<n>`. Trials per second per core is
+//! 1000 / time / threads.
+
+use std::time::Duration;
+
+use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
+use sysid::goodman::{Goodman, GoodmanOptions};
+use sysid::montecarlo::{Scenario, Study, StudySpec, files};
+
+fn study(c: &mut Criterion) {
+    let case = sysid::systems::van_der_pol::van_der_pol();
+    let spec = StudySpec {
+        system: case.name.into(),
+        methods: vec!["goodman".into()],
+        reference: "goodman-halving".into(),
+        trials: 1000,
+        noise: 1.0,
+        perturb: 0.2,
+        seed: 1,
+    };
+    // The reference as `sysid study` builds it: step halving, stopping on its cost.
+    let reference = GoodmanOptions::default().with_step_halving(true).with_cost_tolerance(1e-10);
+    let study = Study::new(
+        spec,
+        Scenario::from_case(&case).expect("the catalogue case"),
+        vec![Box::new(Goodman::default())],
+        Box::new(Goodman::new(reference)),
+    )
+    .expect("a valid study");
+    let dir = std::env::temp_dir().join(format!("sysid-bench-study-{}", std::process::id()));
+    let mut group = c.benchmark_group("study");
+    group
+        .sample_size(10)
+        .warm_up_time(Duration::from_secs(1))
+        .measurement_time(Duration::from_secs(25));
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a pool");
+        group.bench_function(format!("van-der-pol-goodman-1000/threads-{threads}"), |b| {
+            b.iter_batched(
+                || {
+                    let _ = std::fs::remove_dir_all(&dir);
+                },
+                |()| {
+                    pool.install(|| files::run(&study, &dir, None, false, &|_, _| {}))
+                        .expect("the study runs")
+                },
+                BatchSize::PerIteration,
+            )
+        });
+    }
+    group.finish();
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+criterion_group!(benches, study);
+criterion_main!(benches);
