@@ -56,7 +56,8 @@ pub struct StudyArgs {
     /// Run only part i of n of the trials (1 ≤ i ≤ n); `sysid merge` combines the parts.
     #[arg(long, value_name = "I/N")]
     shard: Option<Shard>,
-    /// Continue a study that was interrupted, keeping its finished trials.
+    /// Continue a study that was interrupted, keeping its finished trials (or start it, if
+    /// --out holds none yet: batch jobs can always pass --resume).
     #[arg(long)]
     resume: bool,
     /// Instead of trials: a basin map over a grid of starts for these two unknowns (the

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use sysid_ode::System;
 
 use crate::error::StudyError;
+use crate::stats::significant;
 use crate::trial::{Study, StudySpec, TrialRecord, perturb};
 
 /// A basin map's settings and results, written to `basin.json`.
@@ -138,11 +139,11 @@ impl Basin {
             self.x.len(),
             self.y.len(),
             self.axes[0],
-            self.x[0],
-            self.x[self.x.len() - 1],
+            significant(self.x[0]),
+            significant(self.x[self.x.len() - 1]),
             self.axes[1],
-            self.y[0],
-            self.y[self.y.len() - 1],
+            significant(self.y[0]),
+            significant(self.y[self.y.len() - 1]),
             s.noise,
             s.seed
         );

@@ -108,8 +108,9 @@ impl Header {
     }
 }
 
-/// Runs `study` (or one shard of it) into `dir` and returns its summary. With `resume`, the
-/// directory must hold the same study; its complete trials are kept. `progress(done, total)`
+/// Runs `study` (or one shard of it) into `dir` and returns its summary. With `resume`, a
+/// directory that holds a study must hold the same one, and its complete trials are kept; one
+/// without a study starts it. Without `resume`, a directory that holds a study is refused. `progress(done, total)`
 /// is called as trials finish.
 pub fn run<S: System + Clone + Send + Sync>(
     study: &Study<S>,
@@ -141,12 +142,7 @@ pub fn run<S: System + Clone + Send + Sync>(
         // Start from the complete trials only: a torn line of a killed run goes.
         write_lines(&dir.join(TRIALS_FILE), &records)?;
     } else {
-        if resume {
-            return Err(StudyError::Mismatch(format!(
-                "nothing to resume: {} holds no {STUDY_FILE}",
-                dir.display()
-            )));
-        }
+        // Nothing to resume starts the study: a requeued batch job runs with --resume always.
         write_atomically(&study_file, &json(&header))?;
         write_lines(&dir.join(TRIALS_FILE), &[])?;
     }

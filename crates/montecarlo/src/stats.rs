@@ -285,7 +285,7 @@ fn number(v: Option<f64>, decimals: usize) -> String {
 }
 
 /// Four significant digits, in exponent form outside [1e-3, 1e5).
-fn significant(v: f64) -> String {
+pub(crate) fn significant(v: f64) -> String {
     let a = v.abs();
     if a == 0.0 || (1e-3..1e5).contains(&a) {
         let digits = if a == 0.0 { 3 } else { (3 - a.log10().floor() as i32).max(0) as usize };

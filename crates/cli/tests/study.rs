@@ -1,0 +1,185 @@
+//! `sysid study` and `sysid merge` as a user runs them: the files, the table, shards merged
+//! into the unsharded study, resume, basin maps, and one-line errors with exit code 2.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn sysid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sysid")).args(args).output().expect("the binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// A scratch directory removed when the test ends.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(tag: &str) -> Self {
+        let dir =
+            std::env::temp_dir().join(format!("sysid-cli-study-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("a scratch directory");
+        Scratch(dir)
+    }
+
+    fn path(&self, name: &str) -> String {
+        self.0.join(name).display().to_string()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// trials.jsonl without the measured times: what must not depend on how the study ran.
+fn untimed_trials(dir: &str) -> Vec<String> {
+    let body = std::fs::read_to_string(Path::new(dir).join("trials.jsonl")).expect("trials.jsonl");
+    body.lines()
+        .map(|line| {
+            let mut record: serde_json::Value = serde_json::from_str(line).expect("a JSON line");
+            record.as_object_mut().expect("an object").remove("time_ms");
+            record.to_string()
+        })
+        .collect()
+}
+
+const STUDY: [&str; 6] = ["study", "--system", "van-der-pol", "--trials", "12", "--perturb"];
+
+fn study(out: &str, extra: &[&str]) -> Output {
+    let mut args = STUDY.to_vec();
+    args.extend(["0.1", "--out", out]);
+    args.extend(extra);
+    sysid(&args)
+}
+
+#[test]
+fn a_study_writes_its_files_and_prints_the_table() {
+    let scratch = Scratch::new("files");
+    let out = scratch.path("vdp");
+    let run = study(&out, &[]);
+    assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    let table = text(&run.stdout);
+    for needle in [
+        "# Study: van-der-pol",
+        "| goodman |",
+        "| quasilinearization |",
+        "| gauss-newton-ls |",
+        "Cramér–Rao σ",
+    ] {
+        assert!(table.contains(needle), "`{needle}` missing from\n{table}");
+    }
+    for file in ["study.json", "trials.jsonl", "summary.json", "summary.md"] {
+        assert!(Path::new(&out).join(file).is_file(), "{file} missing");
+    }
+    // One line per trial and method (the reference fit included), in trial order.
+    assert_eq!(untimed_trials(&out).len(), 12 * 4);
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(Path::new(&out).join("summary.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(summary["trials"], 12);
+    // No progress bar when stderr is not a terminal: one closing line only.
+    assert_eq!(text(&run.stderr).lines().count(), 1, "{}", text(&run.stderr));
+    // The table on stdout is summary.md.
+    assert_eq!(table, std::fs::read_to_string(Path::new(&out).join("summary.md")).unwrap());
+}
+
+#[test]
+fn shards_merge_into_the_unsharded_study() {
+    let scratch = Scratch::new("shards");
+    let whole = scratch.path("whole");
+    assert_eq!(study(&whole, &[]).status.code(), Some(0));
+    let (one, two, merged) = (scratch.path("one"), scratch.path("two"), scratch.path("merged"));
+    assert_eq!(study(&one, &["--shard", "1/2"]).status.code(), Some(0));
+    assert_eq!(study(&two, &["--shard", "2/2"]).status.code(), Some(0));
+    let merge = sysid(&["merge", &one, &two, "--out", &merged]);
+    assert_eq!(merge.status.code(), Some(0), "{}", text(&merge.stderr));
+    assert_eq!(untimed_trials(&merged), untimed_trials(&whole));
+    // Merging again into an existing directory is refused rather than mixed.
+    let again = sysid(&["merge", &one, &two, "--out", &merged]);
+    assert_eq!(again.status.code(), Some(2));
+}
+
+#[test]
+fn resume_completes_a_cut_study() {
+    let scratch = Scratch::new("resume");
+    let whole = scratch.path("whole");
+    assert_eq!(study(&whole, &[]).status.code(), Some(0));
+    // A study killed after five trials, the sixth half written.
+    let cut = scratch.path("cut");
+    assert_eq!(study(&cut, &[]).status.code(), Some(0));
+    let lines = std::fs::read_to_string(Path::new(&cut).join("trials.jsonl")).unwrap();
+    let mut kept: String = lines.lines().take(5 * 4 + 2).map(|l| format!("{l}\n")).collect();
+    kept.push_str(&lines.lines().nth(5 * 4 + 2).unwrap()[..40]);
+    std::fs::write(Path::new(&cut).join("trials.jsonl"), kept).unwrap();
+    std::fs::remove_file(Path::new(&cut).join("summary.json")).unwrap();
+    std::fs::remove_file(Path::new(&cut).join("summary.md")).unwrap();
+    let without = study(&cut, &[]);
+    assert_eq!(without.status.code(), Some(2), "a study directory needs --resume");
+    assert!(text(&without.stderr).contains("--resume"), "{}", text(&without.stderr));
+    let resumed = study(&cut, &["--resume"]);
+    assert_eq!(resumed.status.code(), Some(0), "{}", text(&resumed.stderr));
+    assert_eq!(untimed_trials(&cut), untimed_trials(&whole));
+}
+
+#[test]
+fn basin_map_over_two_unknowns() {
+    let scratch = Scratch::new("basin");
+    let out = scratch.path("basin");
+    let run = sysid(&[
+        "study",
+        "--system",
+        "van-der-pol",
+        "--methods",
+        "goodman",
+        "--basin",
+        "mu,x",
+        "--grid",
+        "5",
+        "--perturb",
+        "0.5",
+        "--out",
+        &out,
+    ]);
+    assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    let map: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(Path::new(&out).join("basin.json")).unwrap())
+            .unwrap();
+    let text_map = serde_json::to_string(&map).unwrap();
+    assert!(text_map.contains("mu") && text_map.contains("\"x\""), "{text_map}");
+    assert!(Path::new(&out).join("basin.md").is_file());
+    // The centre of the grid is the truth: Goodman converges there.
+    assert!(text(&run.stdout).contains("goodman"), "{}", text(&run.stdout));
+}
+
+#[test]
+fn bad_study_input_exits_2_with_one_line() {
+    let scratch = Scratch::new("bad");
+    let out = scratch.path("never");
+    for (args, needle) in [
+        (vec!["study", "--system", "nope", "--out", &out], "unknown system `nope`"),
+        (
+            vec!["study", "--system", "van-der-pol", "--methods", "goodman,newton", "--out", &out],
+            "newton",
+        ),
+        (vec!["study", "--system", "van-der-pol", "--shard", "3/2", "--out", &out], "3/2"),
+        (
+            vec!["study", "--system", "van-der-pol", "--basin", "mu,k", "--out", &out],
+            "`k` is not an unknown",
+        ),
+        (vec!["study", "--system", "van-der-pol", "--basin", "mu", "--out", &out], "two unknowns"),
+        (vec!["merge", "--out", &out, &out], "never"),
+    ] {
+        let run = sysid(&args);
+        assert_eq!(run.status.code(), Some(2), "{args:?}: {}", text(&run.stderr));
+        let err = text(&run.stderr);
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(needle), "{args:?}: `{needle}` not in {err}");
+        assert!(run.stdout.is_empty(), "{args:?}");
+    }
+    assert!(!Path::new(&out).exists(), "a failed study leaves no directory");
+}
