@@ -48,6 +48,20 @@ enum Plan {
     },
 }
 
+/// A measured quantity as the model predicts it: see [`Problem::observed`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Observed {
+    /// The state or output.
+    pub name: String,
+    /// Its values at the times asked for.
+    pub values: Vec<f64>,
+    /// Half-width of the 95 % band at each time (when a covariance was given).
+    pub half_width: Option<Vec<f64>>,
+}
+
+/// The two-sided 95 % quantile of the standard normal distribution.
+const Z95: f64 = 1.959_963_984_540_054;
+
 /// The data in residual form: measured values at discrete times, each with the square root
 /// of its weight. Discrete data as given (weight w_o); a continuous record at the nodes of a
 /// composite Gauss–Legendre rule (weight w_o times the node's weight), so that
@@ -429,6 +443,53 @@ impl<S: System> Problem<S> {
             }
         }
         Ok((h, sol.counts()))
+    }
+
+    /// Every measured quantity of the model at `values` of the unknowns, at `times` (sorted;
+    /// on either side of t0), with the half-width of its 95 % band from `covariance` (of the
+    /// values): 1.96 √(g Cov gᵀ), g = ∂h/∂(values) from the sensitivities. What a fit
+    /// predicts for the measurements, with its uncertainty.
+    pub fn observed(
+        &self,
+        values: &[f64],
+        covariance: Option<&DMatrix<f64>>,
+        times: &[f64],
+    ) -> Result<Vec<Observed>, OdeError> {
+        let z = self.unknowns.coordinates(values);
+        let (y0, p) = self.point(&z);
+        let wrt = self.unknowns.wrt();
+        let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve_sensitivities(
+            &self.integrator,
+            wrt,
+            times,
+        )?;
+        let signature = self.system.signature();
+        let mut og = ObservableGradient::new(&self.system, &p, wrt);
+        let mut grad = vec![0.0; wrt.len()];
+        let mut out = Vec::new();
+        for series in &self.sampled().series {
+            let name = match series.observable {
+                Observable::State(i) => signature.states()[i].clone(),
+                Observable::Output(i) => signature.outputs()[i].clone(),
+            };
+            let mut observed = Observed {
+                name,
+                values: Vec::with_capacity(times.len()),
+                half_width: covariance.map(|_| Vec::with_capacity(times.len())),
+            };
+            for (m, &t) in times.iter().enumerate() {
+                let s = sol.sensitivity_slice(m);
+                let h = og.eval(t, sol.state(m), s, series.observable, &mut grad);
+                observed.values.push(h);
+                if let (Some(cov), Some(w)) = (covariance, observed.half_width.as_mut()) {
+                    let g = DVector::from_column_slice(&grad);
+                    let var = g.dot(&(cov * &g));
+                    w.push(Z95 * var.max(0.0).sqrt());
+                }
+            }
+            out.push(observed);
+        }
+        Ok(out)
     }
 
     /// The report of a finished fit at coordinates z: values, and standard errors and

@@ -234,3 +234,38 @@ fn residual_form_of_a_record_matches_its_integrals() {
         }
     }
 }
+
+#[test]
+fn observed_values_and_bands_of_a_linear_model() {
+    // y(t) = y0 + v0 (t − 1) + g (t − 1)²/2 with y0, v0, g unknown (g on a log scale, which
+    // must not matter: the covariance is of the values): the band is 1.96 √(φ Cov φᵀ) with
+    // φ = (1, t − 1, (t − 1)²/2), in closed form.
+    let problem = Problem::builder(fall())
+        .t0(1.0)
+        .unknown("y", 0.0)
+        .unknown("v", 0.0)
+        .unknown_with(Unknown::new("g", 30.0).log())
+        .data(table())
+        .build()
+        .unwrap();
+    let values = [0.5, 2.0, 30.0];
+    let cov = nalgebra::DMatrix::from_row_slice(
+        3,
+        3,
+        &[0.04, 0.01, -0.002, 0.01, 0.09, 0.003, -0.002, 0.003, 0.25],
+    );
+    let times = [-1.0, 0.0, 0.5, 1.0, 2.5, 6.0];
+    let seen = problem.observed(&values, Some(&cov), &times).unwrap();
+    assert_eq!(seen.len(), 1);
+    assert_eq!(seen[0].name, "y");
+    let bands = seen[0].half_width.as_ref().unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        let s = t - 1.0;
+        assert_close(seen[0].values[m], 0.5 + 2.0 * s + 15.0 * s * s, 1e-9);
+        let phi = nalgebra::DVector::from_vec(vec![1.0, s, s * s / 2.0]);
+        let half = 1.959_963_984_540_054 * phi.dot(&(&cov * &phi)).sqrt();
+        assert_close(bands[m], half, 1e-9);
+    }
+    let plain = problem.observed(&values, None, &times).unwrap();
+    assert!(plain[0].half_width.is_none());
+}
