@@ -9,6 +9,8 @@ mod format;
 mod integrator;
 mod methods;
 mod predict;
+mod report;
+mod report_bench;
 mod simulate;
 mod source;
 mod study;
@@ -49,6 +51,10 @@ enum Command {
     /// Merge the shard directories of one study (`study --shard i/n`) into one, identical
     /// to an unsharded run.
     Merge(study::MergeArgs),
+    /// The comparison report of the whole catalogue: for every system, convergence from the
+    /// default start, a Monte-Carlo study, basins of convergence and the fit with its
+    /// prediction band, as figures (PNG, SVG), their data (CSV, JSON) and README.md in --out.
+    Report(report::ReportArgs),
     /// List the built-in benchmark systems, one line each.
     Systems,
 }
@@ -95,6 +101,7 @@ fn main() -> ExitCode {
         Command::Predict(args) => predict::run(&args),
         Command::Study(args) => study::run(&args),
         Command::Merge(args) => study::merge(&args),
+        Command::Report(args) => report::run(&args),
         Command::Systems => {
             for (name, summary) in sysid_systems::summaries() {
                 println!("{name:<26} {summary}");

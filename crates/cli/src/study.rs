@@ -129,13 +129,17 @@ impl Visit for FromCase<'_> {
     }
 }
 
-fn shared<S: System + Send + Sync + 'static>(name: &str) -> anyhow::Result<SharedMethod<S>> {
+pub(crate) fn shared<S: System + Send + Sync + 'static>(
+    name: &str,
+) -> anyhow::Result<SharedMethod<S>> {
     method::<S>(name, Common::default())
 }
 
 /// The reference fit decides success by its cost only: Goodman's method stops once the next
 /// step would lower ε by less than 1e-10 of it, four decades inside the success tolerance.
-fn reference<S: System + Send + Sync + 'static>(name: &str) -> anyhow::Result<SharedMethod<S>> {
+pub(crate) fn reference<S: System + Send + Sync + 'static>(
+    name: &str,
+) -> anyhow::Result<SharedMethod<S>> {
     method::<S>(
         name,
         Common { cost_tolerance: Some(REFERENCE_COST_TOLERANCE), ..Common::default() },
@@ -197,7 +201,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).
-fn progress_bar(total: u64, unit: &str) -> ProgressBar {
+pub(crate) fn progress_bar(total: u64, unit: &str) -> ProgressBar {
     let bar = ProgressBar::new(total);
     let template = format!("{{bar:40}} {{pos}}/{{len}} {unit}, {{per_sec}}, {{eta}} left");
     bar.set_style(ProgressStyle::with_template(&template).expect("a valid template"));

@@ -183,3 +183,55 @@ fn bad_study_input_exits_2_with_one_line() {
     }
     assert!(!Path::new(&out).exists(), "a failed study leaves no directory");
 }
+
+#[test]
+fn report_writes_figures_data_and_readme() {
+    let scratch = Scratch::new("report");
+    let out = scratch.path("reports");
+    let run = sysid(&[
+        "report",
+        "--out",
+        &out,
+        "--systems",
+        "falling-body,falling-body-continuous",
+        "--trials",
+        "6",
+        "--grid",
+        "3",
+    ]);
+    assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    let fb = Path::new(&out).join("falling-body");
+    for file in [
+        "convergence.png",
+        "convergence.svg",
+        "convergence.csv",
+        "prediction.png",
+        "prediction.svg",
+        "prediction.csv",
+        "data.csv",
+        "accuracy.png",
+        "accuracy.svg",
+        "cost.png",
+        "cost.svg",
+        "basin.png",
+        "basin.svg",
+        "study/trials.jsonl",
+        "study/summary.json",
+        "basin/basin.json",
+    ] {
+        assert!(fb.join(file).is_file(), "{file} missing");
+    }
+    // PNGs are PNGs; SVGs carry their text.
+    let png = std::fs::read(fb.join("convergence.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    let svg = std::fs::read_to_string(fb.join("convergence.svg")).unwrap();
+    assert!(svg.contains("iteration") && svg.contains("goodman"), "axis label or legend missing");
+    let readme = std::fs::read_to_string(Path::new(&out).join("README.md")).unwrap();
+    assert!(readme.contains("## falling-body\n"), "{readme}");
+    assert!(readme.contains("![convergence](falling-body/convergence.png)"), "{readme}");
+    // The continuous record has no study, and the report says why.
+    assert!(readme.contains("No Monte-Carlo study for this system"), "{readme}");
+    let bad = sysid(&["report", "--out", &out, "--systems", "nope"]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(text(&bad.stderr).contains("unknown system `nope`"));
+}

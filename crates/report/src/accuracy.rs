@@ -70,7 +70,9 @@ impl Figure for Accuracy {
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
             let (lo, hi) = padded(lo, hi, 0.06);
             let caption = match spread.crb_sd {
-                Some(sd) => format!("{} (truth {}, σ_CRB {})", spread.name, tick(spread.truth), tick(sd)),
+                Some(sd) => {
+                    format!("{} (truth {}, σ_CRB {})", spread.name, tick(spread.truth), tick(sd))
+                }
                 None => format!("{} (truth {})", spread.name, tick(spread.truth)),
             };
             let mut chart = ChartBuilder::on(area)

@@ -49,9 +49,9 @@ impl Figure for Convergence {
             .unwrap_or(1)
             .max(1);
         let draw_panel = |area: &DrawingArea<DB, Shift>,
-                              caption: &str,
-                              y_desc: &str,
-                              pick: &dyn Fn(&History) -> &[(usize, f64)]|
+                          caption: &str,
+                          y_desc: &str,
+                          pick: &dyn Fn(&History) -> &[(usize, f64)]|
          -> DrawResult<DB> {
             let (lo, hi) = log_range(self.methods.iter().flat_map(|m| pick(m).iter().map(|p| p.1)));
             let lo = lo.max(FLOOR);
@@ -66,7 +66,11 @@ impl Figure for Convergence {
                 .x_desc("iteration")
                 .y_desc(y_desc)
                 .x_label_formatter(&|v| {
-                    if (v - v.round()).abs() < 1e-9 { format!("{}", v.round()) } else { String::new() }
+                    if (v - v.round()).abs() < 1e-9 {
+                        format!("{}", v.round())
+                    } else {
+                        String::new()
+                    }
                 })
                 .y_label_formatter(&|v| decade(*v))
                 .label_style((FONT, 13))

@@ -5,7 +5,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::look::look;
-use crate::{DrawResult, FONT, Figure, decade, log_range};
+use crate::{DrawResult, FONT, Figure, log_range, one_two_five};
 
 /// One method's cost.
 #[derive(Clone, Debug)]
@@ -63,7 +63,8 @@ impl Figure for Cost {
             .disable_x_mesh()
             .x_labels(2 * m + 1)
             .x_label_formatter(&name_of)
-            .y_label_formatter(&|v| decade(*v))
+            .y_labels(30)
+            .y_label_formatter(&|v| one_two_five(*v))
             .y_desc("ms per fit")
             .label_style((FONT, 12))
             .axis_desc_style((FONT, 14))

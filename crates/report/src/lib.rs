@@ -88,11 +88,8 @@ fn init_fonts() {
         for family in ["sans-serif", "serif", "monospace"] {
             // The fonts are compiled in and valid; a failure would leave text undrawn, and
             // drawing then reports `FontUnavailable` with the figure's path.
-            let _ = plotters::style::register_font(
-                family,
-                FontStyle::Normal,
-                dejavu::sans::regular(),
-            );
+            let _ =
+                plotters::style::register_font(family, FontStyle::Normal, dejavu::sans::regular());
             let _ = plotters::style::register_font(family, FontStyle::Bold, dejavu::sans::bold());
         }
     });
@@ -130,7 +127,8 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 /// A number for a tick label: short, exponent form outside [1e-3, 1e4).
 fn tick(v: f64) -> String {
     let a = v.abs();
-    if a == 0.0 {
+    // Ticks are computed in floating point: a zero comes out as ±1e-17 or so.
+    if a < 1e-12 {
         "0".into()
     } else if (1e-3..1e4).contains(&a) {
         let s = format!("{v:.4}");
@@ -145,6 +143,17 @@ fn tick(v: f64) -> String {
 fn decade(v: f64) -> String {
     let e = v.log10();
     if (e - e.round()).abs() < 1e-6 { format!("1e{}", e.round() as i32) } else { String::new() }
+}
+
+/// A label for a log-axis tick over few decades: 1, 2 and 5 times a power of ten.
+fn one_two_five(v: f64) -> String {
+    let e = v.log10().floor();
+    let mantissa = v / 10f64.powf(e);
+    if [1.0, 2.0, 5.0].iter().any(|m| (mantissa - m).abs() < 1e-6) {
+        tick(v)
+    } else {
+        String::new()
+    }
 }
 
 #[cfg(test)]
@@ -162,5 +171,9 @@ mod tests {
         assert_eq!(tick(3e7), "3e7");
         assert_eq!(decade(1e-3), "1e-3");
         assert_eq!(decade(2e-3), "");
+        assert_eq!(tick(-6e-17), "0");
+        assert_eq!(one_two_five(20.0), "20");
+        assert_eq!(one_two_five(0.5), "0.5");
+        assert_eq!(one_two_five(3.0), "");
     }
 }

@@ -56,6 +56,8 @@ impl Figure for Prediction {
             let (y_lo, y_hi) =
                 ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| (a.min(y), b.max(y)));
             let (y_lo, y_hi) = padded(y_lo, y_hi, 0.05);
+            // Room above the curves for the legend.
+            let y_hi = y_hi + 0.4 * (y_hi - y_lo);
             let mut chart = ChartBuilder::on(area)
                 .margin(10)
                 .x_label_area_size(38)
@@ -80,7 +82,10 @@ impl Figure for Prediction {
                 .collect();
             if !band.is_empty() {
                 chart
-                    .draw_series(std::iter::once(Polygon::new(band, band_color.mix(0.45).filled())))?
+                    .draw_series(std::iter::once(Polygon::new(
+                        band,
+                        band_color.mix(0.45).filled(),
+                    )))?
                     .label("95 % band (linearised covariance)")
                     .legend(move |(x, y)| {
                         Rectangle::new([(x, y - 5), (x + 24, y + 5)], band_color.mix(0.45).filled())
@@ -99,9 +104,10 @@ impl Figure for Prediction {
                 .map(|&(t, y, _)| (t, y))
                 .collect();
             let stroke = ShapeStyle::from(fit_color).stroke_width(2);
-            chart.draw_series(LineSeries::new(fitted, stroke))?.label("fit").legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 24, y)], stroke)
-            });
+            chart
+                .draw_series(LineSeries::new(fitted, stroke))?
+                .label("fit")
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 24, y)], stroke));
             chart
                 .draw_series(DashedLineSeries::new(predicted, 3, 4, stroke))?
                 .label("prediction")
@@ -110,9 +116,7 @@ impl Figure for Prediction {
                 });
             let dot = RGBColor(213, 94, 0);
             chart
-                .draw_series(
-                    panel.data.iter().map(|&p| Circle::new(p, 2, dot.filled())),
-                )?
+                .draw_series(panel.data.iter().map(|&p| Circle::new(p, 2, dot.filled())))?
                 .label("data")
                 .legend(move |(x, y)| Circle::new((x + 12, y), 3, dot.filled()));
             chart.draw_series(std::iter::once(PathElement::new(
@@ -121,7 +125,7 @@ impl Figure for Prediction {
             )))?;
             chart
                 .configure_series_labels()
-                .position(SeriesLabelPosition::UpperLeft)
+                .position(SeriesLabelPosition::UpperRight)
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK)
                 .label_font((FONT, 13))

@@ -64,6 +64,8 @@ pub struct Case<S> {
     pub name: &'static str,
     /// One line: what it is.
     pub summary: &'static str,
+    /// The unit of time (`s`, or `dimensionless` for models in scaled time).
+    pub time_unit: &'static str,
     /// The model.
     pub system: S,
     /// Time of the initial values.

@@ -38,6 +38,7 @@ pub const TABLE_I: ([f64; 4], [f64; 4]) = ([0.0, 1.0, 2.0, 3.0], [0.0, 15.0, 65.
 pub fn falling_body() -> Case<FallingBody> {
     Case {
         name: "falling-body",
+        time_unit: "s",
         summary: "Goodman 1966 §IV: falling body y' = v, v' = g; y at t = 0..3 (Table I); y(0), v(0), g",
         system: FallingBody::default(),
         t0: 0.0,
@@ -67,6 +68,7 @@ pub fn continuous_record(t: f64) -> f64 {
 pub fn falling_body_continuous() -> Case<FallingBody> {
     Case {
         name: "falling-body-continuous",
+        time_unit: "s",
         summary: "Goodman 1966 §III: falling body, continuous record b(t) = 16.25t² − 0.25t − 0.25 + 0.5 sin 5t on [0, 3]",
         system: FallingBody::default(),
         t0: 0.0,

@@ -31,6 +31,7 @@ impl System for FitzHughNagumo {
 pub fn fitzhugh_nagumo() -> Case<FitzHughNagumo> {
     Case {
         name: "fitzhugh-nagumo",
+        time_unit: "dimensionless",
         summary: "FitzHugh–Nagumo, a = b = 0.2, c = 3: V, R at t = 0, 0.05, …, 20, σ = 0.05; a, b, c",
         system: FitzHughNagumo::default(),
         t0: 0.0,

@@ -31,6 +31,7 @@ impl System for LotkaVolterra {
 pub fn lotka_volterra() -> Case<LotkaVolterra> {
     Case {
         name: "lotka-volterra",
+        time_unit: "dimensionless",
         summary: "Lotka–Volterra, a = 1.5, b = 1, g = 3, d = 1: x, y at t = 0, 0.1, …, 10, σ = 0.1; a, b, g, d",
         system: LotkaVolterra::default(),
         t0: 0.0,

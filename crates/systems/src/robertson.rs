@@ -48,6 +48,7 @@ pub fn robertson() -> Case<Robertson> {
     let start = |k: f64| k * 10f64.powf(0.3);
     Case {
         name: "robertson",
+        time_unit: "s",
         summary: "Robertson's stiff kinetics, k = (0.04, 3e7, 1e4): y1, y3 at 20 log-spaced t in [0.01, 100], 1 % relative noise; k1, k2, k3 on a log scale",
         system: Robertson::default(),
         t0: 0.0,

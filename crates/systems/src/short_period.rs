@@ -58,6 +58,7 @@ impl System for ShortPeriod {
 pub fn short_period() -> Case<ShortPeriod> {
     Case {
         name: "short-period",
+        time_unit: "s",
         summary: "aircraft short period with an elevator doublet: α (σ = 0.002), q (σ = 0.005) every 0.05 s on [0, 10]; Za, Ma, Mq, Zd, Md",
         system: ShortPeriod::default(),
         t0: 0.0,

@@ -30,6 +30,7 @@ impl System for VanDerPol {
 pub fn van_der_pol() -> Case<VanDerPol> {
     Case {
         name: "van-der-pol",
+        time_unit: "dimensionless",
         summary: "van der Pol oscillator, μ = 1: x at t = 0, 0.2, …, 20 with σ = 0.05; μ, x(0), v(0)",
         system: VanDerPol::default(),
         t0: 0.0,
@@ -53,6 +54,7 @@ pub const THREE_POINTS: ([f64; 3], [f64; 3]) =
 pub fn van_der_pol_three_point() -> Case<VanDerPol> {
     Case {
         name: "van-der-pol-three-point",
+        time_unit: "dimensionless",
         summary: "van der Pol through 3 points x(4), x(6), x(8), t0 = 4: x(4), v(4), μ; ε = 0 (Goodman's M = n)",
         system: VanDerPol::default(),
         t0: 4.0,
