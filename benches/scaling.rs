@@ -84,13 +84,8 @@ fn problem(n: usize, k: usize, samples: usize) -> (Problem<Lorenz96>, Vec<f64>) 
         };
     }
     let problem = builder.build().expect("a valid problem");
-    let z = problem.unknowns().coordinates(
-        &vec![1.05; k]
-            .iter()
-            .enumerate()
-            .map(|(j, s)| if j == 0 { f * s } else { d * s })
-            .collect::<Vec<_>>(),
-    );
+    let values: Vec<f64> = (0..k).map(|j| 1.05 * if j == 0 { f } else { d }).collect();
+    let z = problem.unknowns().coordinates(&values);
     (problem, z)
 }
 

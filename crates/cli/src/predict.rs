@@ -111,7 +111,7 @@ impl WithProblem for Predict<'_> {
                         // Var y_i = s_i Cov s_iᵀ; 95 % normal band.
                         let row = s.row(i);
                         let var = (row * cov * row.transpose())[(0, 0)];
-                        let half = 1.959963984540054 * var.max(0.0).sqrt();
+                        let half = sysid_core::Z95 * var.max(0.0).sqrt();
                         text += &format!(",{y},{},{}", y - half, y + half);
                     }
                     None => text += &format!(",{y},,"),

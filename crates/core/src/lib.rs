@@ -32,6 +32,6 @@ pub use estimate::{Convergence, Estimate, FitRecord, Iteration, Termination};
 pub use linalg::{NormalFactor, Singular, as_faer};
 pub use method::{Method, start_coordinates};
 pub use problem::{
-    Linearization, Observed, Problem, ProblemBuilder, QUADRATURE_RTOL, Run, WeightedResiduals,
+    Linearization, Observed, Problem, ProblemBuilder, QUADRATURE_RTOL, Run, WeightedResiduals, Z95,
 };
 pub use unknowns::{Unknown, Unknowns};

@@ -60,7 +60,7 @@ pub struct Observed {
 }
 
 /// The two-sided 95 % quantile of the standard normal distribution.
-const Z95: f64 = 1.959_963_984_540_054;
+pub const Z95: f64 = 1.959_963_984_540_054;
 
 /// The data in residual form: measured values at discrete times, each with the square root
 /// of its weight. Discrete data as given (weight w_o); a continuous record at the nodes of a

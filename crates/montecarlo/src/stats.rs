@@ -7,8 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::trial::{REFERENCE, StudySpec, TrialRecord};
 
-/// The two-sided 95 % quantile of the standard normal distribution.
-pub const Z95: f64 = 1.959_963_984_540_054;
+pub use sysid_core::Z95;
 
 /// What a study established, written to `summary.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
