@@ -1,67 +1,88 @@
-//! Integration with and without forward sensitivities: `ode/<system>/<what>`.
+//! Integration per catalogue system, sysid's integrators side by side with diffsol's:
+//! `ode/<system>/<states|sensitivities>/<solver>`.
+//!
+//! Every run is the case's initial-value problem at the truth (or the reference answer), at
+//! the case's tolerances (rtol, atol for states and sensitivities alike), with output at the
+//! case's measurement times and, for `sensitivities`, derivatives with respect to the case's
+//! unknowns. Solvers: sysid's explicit DOPRI5 and implicit Rodas4, diffsol's explicit
+//! Tsit45 and implicit BDF (dense nalgebra LU). All four get their Jacobian products from
+//! the same dual-number evaluation of the model, so the comparison is between integrators,
+//! not model code. `tests/agreement.rs` of `sysid-peer-diffsol` checks that they agree.
+//!
+//! `SYSID_BENCH_SYSTEMS=van-der-pol,robertson cargo bench -p sysid --bench ode` limits the
+//! run to some systems.
 
 use std::hint::black_box;
+use std::time::Duration;
 
-use criterion::{Criterion, criterion_group, criterion_main};
-use sysid::ode::{Integrator, Ivp, Scheme, Wrt};
-use sysid::systems::{Robertson, VanDerPol};
+use criterion::{
+    BenchmarkGroup, Criterion, criterion_group, criterion_main, measurement::WallTime,
+};
+use sysid::ode::{Integrator, Ivp, System};
+use sysid::systems::{self, Case, Visit};
+use sysid_peer_diffsol::{Peer, Solver};
 
-fn van_der_pol(c: &mut Criterion) {
+struct Bench<'g, 'c> {
+    group: &'g mut BenchmarkGroup<'c, WallTime>,
+}
+
+impl Visit for Bench<'_, '_> {
+    type Output = ();
+    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) {
+        let problem = case.problem(1).expect("catalogue problems build");
+        let (y0, p) = case.true_point();
+        let (times, wrt) = (&problem.sampled().times, problem.unknowns().wrt());
+        let Integrator { rtol, atol, .. } = *problem.integrator();
+        // An explicit integrator on a stiff case takes ~10⁵ steps: allow them.
+        let ours = [
+            ("sysid-dopri5", Integrator::dopri5(rtol, atol).with_max_steps(10_000_000)),
+            ("sysid-rodas4", Integrator::rodas4(rtol, atol).with_max_steps(10_000_000)),
+        ];
+        let ivp = |y0, p| Ivp::new(&case.system, case.t0, y0, p);
+        let peer = |y0, p| Peer::new(&case.system, case.t0, y0, p, rtol, atol);
+        let group = self.group;
+        for (name, integrator) in &ours {
+            group.bench_function(format!("{}/states/{name}", case.name), |b| {
+                b.iter(|| ivp(black_box(&y0), black_box(&p)).solve(integrator, times).unwrap())
+            });
+            group.bench_function(format!("{}/sensitivities/{name}", case.name), |b| {
+                b.iter(|| {
+                    ivp(black_box(&y0), black_box(&p))
+                        .solve_sensitivities(integrator, wrt, times)
+                        .unwrap()
+                })
+            });
+        }
+        for solver in Solver::ALL {
+            let name = format!("diffsol-{}", solver.name());
+            group.bench_function(format!("{}/states/{name}", case.name), |b| {
+                b.iter(|| peer(black_box(&y0), black_box(&p)).solve(solver, times).unwrap())
+            });
+            group.bench_function(format!("{}/sensitivities/{name}", case.name), |b| {
+                b.iter(|| {
+                    peer(black_box(&y0), black_box(&p))
+                        .solve_sensitivities(solver, wrt, times)
+                        .unwrap()
+                })
+            });
+        }
+    }
+}
+
+fn ode(c: &mut Criterion) {
     let mut group = c.benchmark_group("ode");
-    // μ = 1, x(0) = 2, v(0) = 0 on [0, 20], rtol 1e-8; output at t = 0, 0.2, ..., 20.
-    let sys = VanDerPol::default();
-    let (y0, p) = ([2.0, 0.0], [1.0]);
-    let integrator = Integrator::dopri5(1e-8, 1e-10);
-    let times: Vec<f64> = (0..=100).map(|i| 0.2 * i as f64).collect();
-    let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
-    group.bench_function("van-der-pol/sensitivities", |b| {
-        b.iter(|| {
-            Ivp::new(&sys, 0.0, black_box(&y0), black_box(&p))
-                .solve_sensitivities(&integrator, &wrt, &times)
-                .unwrap()
-        })
-    });
-    group.bench_function("van-der-pol/states", |b| {
-        b.iter(|| {
-            Ivp::new(&sys, 0.0, black_box(&y0), black_box(&p)).solve(&integrator, &times).unwrap()
-        })
-    });
+    group
+        .warm_up_time(Duration::from_millis(500))
+        .measurement_time(Duration::from_secs(2))
+        .sample_size(20);
+    let only = std::env::var("SYSID_BENCH_SYSTEMS").ok();
+    for name in systems::NAMES {
+        if only.as_ref().is_none_or(|only| only.split(',').any(|o| o == *name)) {
+            systems::visit(name, Bench { group: &mut group });
+        }
+    }
     group.finish();
 }
 
-fn robertson(c: &mut Criterion) {
-    let mut group = c.benchmark_group("ode");
-    // The catalogue case at the truth: y(0) = (1, 0, 0), k = (0.04, 3e7, 1e4), output at its 20
-    // log-spaced times in [0.01, 100]; Rodas4 at the case's tolerances (rtol 1e-8,
-    // atol 1e-16), sensitivities to the three rates.
-    let case = sysid::systems::robertson::robertson();
-    let sys = Robertson::default();
-    let (y0, p) = ([1.0, 0.0, 0.0], [0.04, 3e7, 1e4]);
-    let times = sysid::systems::robertson::times();
-    let wrt = [Wrt::Parameter(0), Wrt::Parameter(1), Wrt::Parameter(2)];
-    let ivp = |y0, p| Ivp::new(&sys, 0.0, y0, p);
-    group.bench_function("robertson/sensitivities", |b| {
-        b.iter(|| {
-            ivp(black_box(&y0), black_box(&p))
-                .solve_sensitivities(&case.integrator, &wrt, &times)
-                .unwrap()
-        })
-    });
-    group.bench_function("robertson/states", |b| {
-        b.iter(|| ivp(black_box(&y0), black_box(&p)).solve(&case.integrator, &times).unwrap())
-    });
-    // The same with the automatic choice, and with the explicit integrator for comparison.
-    let auto = Integrator { scheme: Scheme::Auto, ..case.integrator };
-    group.bench_function("robertson/states-auto", |b| {
-        b.iter(|| ivp(black_box(&y0), black_box(&p)).solve(&auto, &times).unwrap())
-    });
-    let explicit = Integrator { scheme: Scheme::Dopri5, max_steps: 10_000_000, ..case.integrator };
-    group.sample_size(10);
-    group.bench_function("robertson/states-dopri5", |b| {
-        b.iter(|| ivp(black_box(&y0), black_box(&p)).solve(&explicit, &times).unwrap())
-    });
-    group.finish();
-}
-
-criterion_group!(benches, van_der_pol, robertson);
+criterion_group!(benches, ode);
 criterion_main!(benches);

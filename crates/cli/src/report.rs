@@ -274,10 +274,22 @@ fn prediction<S: System + Clone>(
     fitted: &Estimate,
     dir: &Path,
 ) -> anyhow::Result<()> {
-    let (t_lo, t_hi) = problem.span();
-    let t_lo = t_lo.min(problem.t0());
-    let end = t_hi + 0.5 * (t_hi - t_lo);
-    let times: Vec<f64> = (0..=400).map(|i| t_lo + (end - t_lo) * i as f64 / 400.0).collect();
+    let (_, t_hi) = problem.span();
+    let first = problem.sampled().times[0];
+    // Data spread over two decades or more from a positive first time (robertson: 0.01 to
+    // 100) are drawn on a log time axis from the first datum, continued half a decade;
+    // otherwise linear from t0, continued half the span.
+    let log_time =
+        !problem.is_continuous() && first > 0.0 && problem.t0() >= 0.0 && t_hi >= 100.0 * first;
+    let times: Vec<f64> = if log_time {
+        let (a, b) = (first.log10(), t_hi.log10() + 0.5);
+        (0..=400).map(|i| 10f64.powf(a + (b - a) * i as f64 / 400.0)).collect()
+    } else {
+        let t_lo = problem.span().0;
+        let end = t_hi + 0.5 * (t_hi - t_lo);
+        (0..=400).map(|i| t_lo + (end - t_lo) * i as f64 / 400.0).collect()
+    };
+    let t_lo = times[0];
     let observed = problem.observed(&fitted.values, fitted.covariance.as_ref(), &times)?;
     let mut panels = Vec::new();
     let mut csv = String::from("t");
@@ -323,8 +335,12 @@ fn prediction<S: System + Clone>(
     write(&dir.join("data.csv"), &data_csv)?;
     let figure = Prediction {
         title: format!("{}: fit and prediction", case.name),
-        time_label: format!("t ({})", case.time_unit),
+        time_label: match log_time {
+            true => format!("t ({}, log scale)", case.time_unit),
+            false => format!("t ({})", case.time_unit),
+        },
         data_end: t_hi,
+        log_time,
         panels,
     };
     save(&figure, &dir.join("prediction"))?;

@@ -40,6 +40,140 @@ fn collect(dir: &Path, id: &str, out: &mut Vec<(String, f64)>) {
     }
 }
 
+/// The methods of the `methods` bench, in its order.
+const METHODS: [&str; 7] = [
+    "goodman",
+    "goodman-halving",
+    "gauss-newton",
+    "gauss-newton-ls",
+    "gauss-newton-fd",
+    "quasilinearization",
+    "quasilinearization-data",
+];
+
+/// The solvers of the `ode` bench and their column headers.
+const SOLVERS: [(&str, &str); 4] = [
+    ("sysid-dopri5", "sysid DOPRI5"),
+    ("diffsol-tsit45", "diffsol Tsit45"),
+    ("sysid-rodas4", "sysid Rodas4"),
+    ("diffsol-bdf", "diffsol BDF"),
+];
+
+/// A markdown table of medians: one row per catalogue system (in catalogue order), one
+/// column per `(suffix, header)`, the cell being the median of `<system>/<middle><suffix>`.
+/// Rows without any result are left out.
+fn pivot(medians: &[(String, f64)], middle: &str, columns: &[(&str, &str)]) -> String {
+    let mut md = String::from("| system |");
+    for (_, header) in columns {
+        let _ = write!(md, " {header} |");
+    }
+    md += "\n|---|";
+    md += &"---|".repeat(columns.len());
+    md += "\n";
+    for system in sysid_systems::NAMES {
+        let cells: Vec<Option<f64>> = columns
+            .iter()
+            .map(|(suffix, _)| lookup(medians, &format!("{system}/{middle}{suffix}")))
+            .collect();
+        if cells.iter().all(Option::is_none) {
+            continue;
+        }
+        let _ = write!(md, "| {system} |");
+        for cell in cells {
+            let _ = write!(md, " {} |", cell.map_or("—".into(), time));
+        }
+        md += "\n";
+    }
+    md
+}
+
+fn lookup(medians: &[(String, f64)], id: &str) -> Option<f64> {
+    medians.iter().find(|(i, _)| i == id).map(|m| m.1)
+}
+
+/// The integration tables (states alone, with sensitivities) and what they show: sysid's
+/// integrators against diffsol's of the same kind, per system.
+fn integration(ode: &[(String, f64)]) -> String {
+    let mut md = String::from(
+        "\n**Integration, sysid against diffsol 0.14.2** (`--bench ode`): each case's \
+         initial-value problem at the truth, at the case's tolerances (rtol and atol for the \
+         states and the sensitivities alike) and output times; sensitivities with respect to \
+         the case's unknowns. All four solvers take their Jacobian products from the same \
+         dual-number evaluation of the model. Same tolerances do not mean the same accuracy: \
+         at rtol 1e-10 the BDF solution differs from a 1e-13 reference by up to 3e-8 where the \
+         explicit ones stay below 1e-9 (`crates/peer-diffsol/tests/agreement.rs`).\n",
+    );
+    for (what, title) in [("states", "States only"), ("sensitivities", "States and sensitivities")]
+    {
+        let _ = writeln!(md, "\n{title}:\n");
+        md += &pivot(ode, &format!("{what}/"), &SOLVERS);
+        for (ours, theirs) in [(0, 1), (2, 3)] {
+            if let Some(text) = compare(ode, what, SOLVERS[ours], SOLVERS[theirs]) {
+                let _ = writeln!(md, "\n{text}");
+            }
+        }
+    }
+    md
+}
+
+/// One sentence comparing two solvers over the systems where both ran: on how many each is
+/// faster, and by what factors (the other's median time divided by its own).
+fn compare(
+    ode: &[(String, f64)],
+    what: &str,
+    ours: (&str, &str),
+    theirs: (&str, &str),
+) -> Option<String> {
+    let mut faster = Vec::new();
+    let mut slower = Vec::new();
+    for system in sysid_systems::NAMES {
+        let a = lookup(ode, &format!("{system}/{what}/{}", ours.0));
+        let b = lookup(ode, &format!("{system}/{what}/{}", theirs.0));
+        if let (Some(a), Some(b)) = (a, b) {
+            if a <= b { faster.push((*system, b / a)) } else { slower.push((*system, a / b)) }
+        }
+    }
+    let total = faster.len() + slower.len();
+    if total == 0 {
+        return None;
+    }
+    let range = |v: &[(&str, f64)]| {
+        let lo = v.iter().map(|x| x.1).fold(f64::INFINITY, f64::min);
+        let hi = v.iter().map(|x| x.1).fold(0.0, f64::max);
+        if v.len() == 1 { format!("{lo:.1}×") } else { format!("{lo:.1}× to {hi:.1}×") }
+    };
+    let names = |v: &[(&str, f64)]| v.iter().map(|x| x.0).collect::<Vec<_>>().join(", ");
+    let what = if what == "states" { "the states alone" } else { "states and sensitivities" };
+    Some(if slower.is_empty() {
+        format!(
+            "For {what}, {} is faster than {} on all {total} systems, by {}.",
+            ours.1,
+            theirs.1,
+            range(&faster)
+        )
+    } else if faster.is_empty() {
+        format!(
+            "For {what}, {} is slower than {} on all {total} systems, by {}.",
+            ours.1,
+            theirs.1,
+            range(&slower)
+        )
+    } else {
+        format!(
+            "For {what}, {} is faster than {} on {} of {total} systems ({}; by {}) and slower \
+             on {} ({}; by {}).",
+            ours.1,
+            theirs.1,
+            faster.len(),
+            names(&faster),
+            range(&faster),
+            slower.len(),
+            names(&slower),
+            range(&slower)
+        )
+    })
+}
+
 /// Least-squares slope of log(time) against log(size): the exponent p of time ∝ size^p.
 pub fn exponent(points: &[(f64, f64)]) -> Option<f64> {
     if points.len() < 2 {
@@ -77,16 +211,12 @@ pub fn section() -> String {
     md += "Medians of criterion's samples on this machine (`cargo bench -p sysid`; the report \
            reads them from `target/criterion`).\n";
     if !fits.is_empty() {
-        md += "\n**Time to fit from the default start** (`--bench methods`):\n\n| system / method | median |\n|---|---|\n";
-        for (id, ns) in &fits {
-            let _ = writeln!(md, "| {id} | {} |", time(*ns));
-        }
+        md += "\n**Time to fit from the default start** (`--bench methods`; seed-1 data, the \
+               problem built outside the timed loop):\n\n";
+        md += &pivot(&fits, "", &METHODS.map(|m| (m, m)));
     }
     if !ode.is_empty() {
-        md += "\n**Integration** (`--bench ode`):\n\n| system / what | median |\n|---|---|\n";
-        for (id, ns) in &ode {
-            let _ = writeln!(md, "| {id} | {} |", time(*ns));
-        }
+        md += &integration(&ode);
     }
     if !scaling.is_empty() {
         md += "\n**Scaling of one Goodman iteration** (`--bench scaling`, Lorenz-96; one \

@@ -27,6 +27,8 @@ pub struct Prediction {
     pub time_label: String,
     /// The end of the data: the prediction starts here.
     pub data_end: f64,
+    /// A logarithmic time axis (for data spaced over decades; every time must be positive).
+    pub log_time: bool,
     /// One panel per measured quantity.
     pub panels: Vec<PredictionPanel>,
 }
@@ -44,8 +46,15 @@ impl Figure for Prediction {
         let areas = root.split_evenly((self.panels.len().max(1), 1));
         let fit_color = RGBColor(0, 0, 0);
         let band_color = RGBColor(86, 180, 233);
+        // On a log axis the chart's x is log10 t, labelled at whole decades.
+        let x = |t: f64| if self.log_time { t.log10() } else { t };
+        let x_label = |v: &f64| match self.log_time {
+            true if (v - v.round()).abs() < 1e-9 => tick(10f64.powf(v.round())),
+            true => String::new(),
+            false => tick(*v),
+        };
         for (panel, area) in self.panels.iter().zip(&areas) {
-            let ts = panel.curve.iter().map(|c| c.0).chain(panel.data.iter().map(|d| d.0));
+            let ts = panel.curve.iter().map(|c| x(c.0)).chain(panel.data.iter().map(|d| x(d.0)));
             let (t_lo, t_hi) =
                 ts.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| (a.min(t), b.max(t)));
             let ys = panel
@@ -67,7 +76,7 @@ impl Figure for Prediction {
                 .configure_mesh()
                 .x_desc(&self.time_label)
                 .y_desc(&panel.name)
-                .x_label_formatter(&|v| tick(*v))
+                .x_label_formatter(&x_label)
                 .y_label_formatter(&|v| tick(*v))
                 .label_style((FONT, 12))
                 .axis_desc_style((FONT, 14))
@@ -77,8 +86,8 @@ impl Figure for Prediction {
             let band: Vec<(f64, f64)> = panel
                 .curve
                 .iter()
-                .filter_map(|&(t, y, h)| h.map(|h| (t, y + h)))
-                .chain(panel.curve.iter().rev().filter_map(|&(t, y, h)| h.map(|h| (t, y - h))))
+                .filter_map(|&(t, y, h)| h.map(|h| (x(t), y + h)))
+                .chain(panel.curve.iter().rev().filter_map(|&(t, y, h)| h.map(|h| (x(t), y - h))))
                 .collect();
             if !band.is_empty() {
                 chart
@@ -95,13 +104,13 @@ impl Figure for Prediction {
                 .curve
                 .iter()
                 .filter(|c| c.0 <= self.data_end)
-                .map(|&(t, y, _)| (t, y))
+                .map(|&(t, y, _)| (x(t), y))
                 .collect();
             let predicted: Vec<(f64, f64)> = panel
                 .curve
                 .iter()
                 .filter(|c| c.0 >= self.data_end)
-                .map(|&(t, y, _)| (t, y))
+                .map(|&(t, y, _)| (x(t), y))
                 .collect();
             let stroke = ShapeStyle::from(fit_color).stroke_width(2);
             chart
@@ -116,11 +125,13 @@ impl Figure for Prediction {
                 });
             let dot = RGBColor(213, 94, 0);
             chart
-                .draw_series(panel.data.iter().map(|&p| Circle::new(p, 2, dot.filled())))?
+                .draw_series(
+                    panel.data.iter().map(|&(t, v)| Circle::new((x(t), v), 2, dot.filled())),
+                )?
                 .label("data")
                 .legend(move |(x, y)| Circle::new((x + 12, y), 3, dot.filled()));
             chart.draw_series(std::iter::once(PathElement::new(
-                vec![(self.data_end, y_lo), (self.data_end, y_hi)],
+                vec![(x(self.data_end), y_lo), (x(self.data_end), y_hi)],
                 BLACK.mix(0.4),
             )))?;
             chart
