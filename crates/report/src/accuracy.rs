@@ -95,6 +95,7 @@ impl Figure for Accuracy {
                     }
                 })
                 .y_label_formatter(&|v| tick(*v))
+                .light_line_style(TRANSPARENT)
                 .y_desc(format!("estimate of {}", spread.name))
                 .label_style((FONT, 12))
                 .axis_desc_style((FONT, 14))
