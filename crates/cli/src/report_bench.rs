@@ -40,17 +40,6 @@ fn collect(dir: &Path, id: &str, out: &mut Vec<(String, f64)>) {
     }
 }
 
-/// The methods of the `methods` bench, in its order.
-const METHODS: [&str; 7] = [
-    "goodman",
-    "goodman-halving",
-    "gauss-newton",
-    "gauss-newton-ls",
-    "gauss-newton-fd",
-    "quasilinearization",
-    "quasilinearization-data",
-];
-
 /// The solvers of the `ode` bench and their column headers.
 const SOLVERS: [(&str, &str); 4] = [
     ("sysid-dopri5", "sysid DOPRI5"),
@@ -213,7 +202,10 @@ pub fn section() -> String {
     if !fits.is_empty() {
         md += "\n**Time to fit from the default start** (`--bench methods`; seed-1 data, the \
                problem built outside the timed loop):\n\n";
-        md += &pivot(&fits, "", &METHODS.map(|m| (m, m)));
+        // The `methods` bench times every method of the command line, in the same order.
+        let methods: Vec<(&str, &str)> =
+            crate::methods::METHODS.iter().map(|m| (m.0, m.0)).collect();
+        md += &pivot(&fits, "", &methods);
     }
     if !ode.is_empty() {
         md += &integration(&ode);
