@@ -121,10 +121,14 @@ fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     }
     let lo = 10f64.powf(lo.log10().floor());
     let hi = 10f64.powf(hi.log10().ceil());
-    if hi > lo { (lo, hi) } else { (lo, lo * 10.0) }
+    let hi = if hi > lo { hi } else { lo * 10.0 };
+    // Widened by a hair: plotters puts its first tick at 10^ceil(log10 lo), and 0.1 comes out
+    // of powf as 10^−0.99999…, which would lose the bottom decade's ticks.
+    (lo * (1.0 - 1e-9), hi * (1.0 + 1e-9))
 }
 
-/// A number for a tick label: short, exponent form outside [1e-3, 1e4).
+/// A number for a tick label: short, exponent form outside [1e-3, 1e4) with up to four
+/// significant digits (so that 1e4 and 1.05e4 stay apart).
 fn tick(v: f64) -> String {
     let a = v.abs();
     // Ticks are computed in floating point: a zero comes out as ±1e-17 or so.
@@ -135,7 +139,10 @@ fn tick(v: f64) -> String {
         let s = s.trim_end_matches('0').trim_end_matches('.');
         s.to_string()
     } else {
-        format!("{v:.0e}")
+        let s = format!("{v:.3e}");
+        let (mantissa, exponent) = s.split_once('e').expect("exponent form");
+        let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+        format!("{mantissa}e{exponent}")
     }
 }
 
@@ -164,11 +171,20 @@ mod tests {
     fn ranges_and_ticks() {
         assert_eq!(padded(1.0, 1.0, 0.05), (0.9, 1.1));
         assert_eq!(padded(0.0, 0.0, 0.05), (-1.0, 1.0));
-        assert_eq!(log_range([3e-5, 0.2, 0.0, f64::NAN].into_iter()), (1e-5, 1.0));
-        assert_eq!(log_range([1.0].into_iter()), (1.0, 10.0));
+        let close = |(a, b): (f64, f64), (c, d): (f64, f64)| {
+            assert!((a / c - 1.0).abs() < 1e-8 && (b / d - 1.0).abs() < 1e-8, "{a} {b}")
+        };
+        close(log_range([3e-5, 0.2, 0.0, f64::NAN].into_iter()), (1e-5, 1.0));
+        close(log_range([1.0].into_iter()), (1.0, 10.0));
+        // The first tick plotters computes, 10^ceil(log10 lo), is the bottom decade itself.
+        let (lo, _) = log_range([0.6, 1.4].into_iter());
+        assert_eq!((lo.ln() / 10f64.ln()).ceil(), -1.0);
         assert_eq!(tick(0.25), "0.25");
         assert_eq!(tick(32.5), "32.5");
         assert_eq!(tick(3e7), "3e7");
+        assert_eq!(tick(2.5e7), "2.5e7");
+        assert_eq!(tick(1.05e4), "1.05e4");
+        assert_eq!(tick(-1.2345e-5), "-1.234e-5");
         assert_eq!(decade(1e-3), "1e-3");
         assert_eq!(decade(2e-3), "");
         assert_eq!(tick(-6e-17), "0");
