@@ -178,7 +178,7 @@ mod tests {
         close(log_range([1.0].into_iter()), (1.0, 10.0));
         // The first tick plotters computes, 10^ceil(log10 lo), is the bottom decade itself.
         let (lo, _) = log_range([0.6, 1.4].into_iter());
-        assert_eq!((lo.ln() / 10f64.ln()).ceil(), -1.0);
+        assert_eq!((lo.ln() / 10f64.ln()).ceil() as i32, -1);
         assert_eq!(tick(0.25), "0.25");
         assert_eq!(tick(32.5), "32.5");
         assert_eq!(tick(3e7), "3e7");
