@@ -3,7 +3,8 @@
 
 mod common;
 
-use common::{Decay, FallingBody, Oscillator};
+use common::{FallingBody, Oscillator};
+use sysid_ode::testing::Decay;
 use sysid_ode::testing::{assert_close, assert_close_abs};
 use sysid_ode::{
     Inputs, Integrator, Ivp, OdeError, Scalar, Side, Signal, Signature, System, integrate,

@@ -3,9 +3,10 @@
 
 mod common;
 
-use common::{Decay, LotkaVolterra, Oscillator, VanDerPol};
+use common::{LotkaVolterra, Oscillator, VanDerPol};
 use nalgebra::DMatrix;
 use proptest::prelude::*;
+use sysid_ode::testing::Decay;
 use sysid_ode::testing::{assert_close, assert_close_abs};
 use sysid_ode::{
     Integrator, Interpolation, Ivp, Observable, ObservableGradient, Record, RecordedOutput, Signal,

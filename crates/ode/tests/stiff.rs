@@ -6,7 +6,8 @@
 
 mod common;
 
-use common::{Decay, Oscillator, Robertson, VanDerPol, stiff_reference};
+use common::{Oscillator, Robertson, VanDerPol, stiff_reference};
+use sysid_ode::testing::Decay;
 use sysid_ode::testing::{assert_close, assert_close_abs};
 use sysid_ode::{Integrator, Ivp, OdeError, Wrt};
 

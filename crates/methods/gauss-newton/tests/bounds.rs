@@ -4,19 +4,8 @@
 use sysid_core::{Data, Method, Problem, Unknown};
 use sysid_gauss_newton::GaussNewton;
 use sysid_goodman::Goodman;
-use sysid_ode::testing::assert_close;
-use sysid_ode::{Integrator, Scalar, Signature, System};
-
-#[derive(Clone, Debug)]
-struct Decay(Signature);
-impl System for Decay {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = -p[0] * y[0];
-    }
-}
+use sysid_ode::Integrator;
+use sysid_ode::testing::{Decay, assert_close};
 
 fn problem(k: Unknown) -> Problem<Decay> {
     let times: [f64; 6] = [0.0, 0.5, 1.0, 2.0, 3.0, 4.0];
@@ -26,7 +15,7 @@ fn problem(k: Unknown) -> Problem<Decay> {
         .enumerate()
         .map(|(m, t)| 2.0 * (-0.8 * t).exp() + 0.01 * (m as f64).cos())
         .collect();
-    Problem::builder(Decay(Signature::new(&["x"], &["k"])))
+    Problem::builder(Decay::new())
         .unknown("x", 1.5)
         .unknown_with(k)
         .data(Data::discrete().series("x", &times, &values))

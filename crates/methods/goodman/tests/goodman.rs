@@ -3,7 +3,7 @@
 
 use sysid_core::{Data, FitError, Method, Problem, Termination, Unknown};
 use sysid_goodman::{Goodman, GoodmanOptions};
-use sysid_ode::testing::assert_close;
+use sysid_ode::testing::{Decay, assert_close};
 use sysid_ode::{Integrator, Ivp, Scalar, Signature, System};
 use sysid_systems::VanDerPol;
 
@@ -159,20 +159,8 @@ fn integration_failure_reports_where() {
     assert_eq!(estimate.iterations, 0);
 }
 
-/// x' = −k x.
-#[derive(Clone)]
-struct Decay(Signature);
-impl System for Decay {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = -p[0] * y[0];
-    }
-}
-
 fn decay_problem(t0: f64, k: Unknown) -> Problem<Decay> {
-    let sys = Decay(Signature::new(&["x"], &["k"]));
+    let sys = Decay::new();
     let times = [0.0, 0.5, 1.0, 2.0, 3.0, 4.0];
     let data = exact_data(&sys, 0.0, &[2.0], &[0.8], &times, &[0]);
     let x0 = 2.0 * (-0.8 * t0).exp();

@@ -4,27 +4,6 @@
 use nalgebra::DMatrix;
 use sysid_ode::{Scalar, Signature, System};
 
-/// x' = −k x.
-pub struct Decay(pub Signature);
-impl Decay {
-    pub fn new() -> Self {
-        Self(Signature::new(&["x"], &["k"]))
-    }
-    /// (x, ∂x/∂x0, ∂x/∂k) at time τ after t0.
-    pub fn exact(x0: f64, k: f64, tau: f64) -> (f64, f64, f64) {
-        let e = (-k * tau).exp();
-        (x0 * e, e, -tau * x0 * e)
-    }
-}
-impl System for Decay {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = -p[0] * y[0];
-    }
-}
-
 /// x' = v, v' = −ω² x; optionally with hand-written Jacobians.
 pub struct Oscillator {
     pub sig: Signature,
