@@ -373,25 +373,35 @@ impl<'a, S: System> Model<'a, S> {
 
     /// y = J_y v: the system evaluated at x + εv.
     fn jac_y(&self, x: &[f64], q: &[f64], t: f64, v: &[f64], y: &mut [f64]) {
-        self.jacobian_products.set(self.jacobian_products.get() + 1);
-        let s = &mut *self.scratch.borrow_mut();
-        self.parameters(q, &mut s.p);
-        self.system.input_values(t, Side::After, &mut s.u);
-        for ((d, &xi), &vi) in s.yd.iter_mut().zip(x).zip(v) {
-            *d = Dual64::new(xi, vi);
-        }
-        for (d, &pk) in s.pd.iter_mut().zip(&s.p) {
-            *d = Dual64::from_re(pk);
-        }
-        self.system.rhs(t, &s.yd, &s.pd, &s.u, &mut s.dy);
-        for (yi, d) in y.iter_mut().zip(&s.dy) {
-            *yi = d.eps;
-        }
+        self.directional(x, q, t, y, |s| {
+            for (d, &vi) in s.yd.iter_mut().zip(v) {
+                d.eps = vi;
+            }
+        });
     }
 
     /// y = (∂g/∂q) v: the system evaluated with the unknown parameters at q + εv (unknown
     /// initial values do not enter g).
     fn jac_q(&self, x: &[f64], q: &[f64], t: f64, v: &[f64], y: &mut [f64]) {
+        self.directional(x, q, t, y, |s| {
+            for (w, &vj) in self.wrt.iter().zip(v) {
+                if let Wrt::Parameter(k) = *w {
+                    s.pd[k].eps = vj;
+                }
+            }
+        });
+    }
+
+    /// One dual-number evaluation at (x, q) with the derivative parts `seed` sets (all zero
+    /// before it runs); y = the derivative of g in that direction.
+    fn directional(
+        &self,
+        x: &[f64],
+        q: &[f64],
+        t: f64,
+        y: &mut [f64],
+        seed: impl Fn(&mut Scratch),
+    ) {
         self.jacobian_products.set(self.jacobian_products.get() + 1);
         let s = &mut *self.scratch.borrow_mut();
         self.parameters(q, &mut s.p);
@@ -402,11 +412,7 @@ impl<'a, S: System> Model<'a, S> {
         for (d, &pk) in s.pd.iter_mut().zip(&s.p) {
             *d = Dual64::from_re(pk);
         }
-        for (w, &vj) in self.wrt.iter().zip(v) {
-            if let Wrt::Parameter(k) = *w {
-                s.pd[k].eps = vj;
-            }
-        }
+        seed(s);
         self.system.rhs(t, &s.yd, &s.pd, &s.u, &mut s.dy);
         for (yi, d) in y.iter_mut().zip(&s.dy) {
             *yi = d.eps;
