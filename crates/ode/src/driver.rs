@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::OdeError;
+use crate::error::{BLOW_UP_GROWTH, OdeError};
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
 use crate::options::{Integrator, Scheme};
@@ -158,6 +158,22 @@ impl<R: Rhs> Stepper<'_, R> {
         self.counts.rhs_evaluations += 1;
         let side = self.side(t);
         self.rhs.eval(t, side, x, dx);
+    }
+
+    /// The error to report for a failed integration whose state at t is x: a blow-up when a
+    /// component overflowed or grew beyond [`BLOW_UP_GROWTH`] times `start`, `e` otherwise.
+    fn explain(&self, e: OdeError, start: f64, t: f64, x: &[f64]) -> OdeError {
+        let largest = x
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| !v.is_nan())
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
+        match largest {
+            Some((i, &value)) if value.abs() > BLOW_UP_GROWTH * start => {
+                OdeError::BlowUp { t, what: self.rhs.describe(i), value, start }
+            }
+            _ => e,
+        }
     }
 
     pub(crate) fn side(&self, t: f64) -> Side {
@@ -366,6 +382,8 @@ pub(crate) fn integrate_selected<R: Rhs>(
     }
     let mut work = Work::new(n);
     work.x.copy_from_slice(x0);
+    // The largest magnitude at the start (at least 1): what a blow-up is measured against.
+    let start = x0.iter().fold(1.0f64, |m, v| m.max(v.abs()));
     let mut st = Stepper {
         rhs,
         cfg: *cfg,
@@ -408,7 +426,8 @@ pub(crate) fn integrate_selected<R: Rhs>(
             let hs = length / count as f64;
             for i in 0..count {
                 if (st.counts.steps + st.counts.rejected_steps) as usize >= cfg.max_steps {
-                    return Err(OdeError::TooManySteps { t, t_end, steps: cfg.max_steps });
+                    let e = OdeError::TooManySteps { t, t_end, steps: cfg.max_steps };
+                    return Err(st.explain(e, start, t, &work.x));
                 }
                 let t_next = if i + 1 == count { seg_end } else { t + hs };
                 match current {
@@ -420,7 +439,8 @@ pub(crate) fn integrate_selected<R: Rhs>(
                         st.dopri5(&mut work, t, t_next - t);
                     }
                 }
-                accept(&mut st, &mut work, current, (t, t_next), &mut wants, &mut on_step)?;
+                accept(&mut st, &mut work, current, (t, t_next), &mut wants, &mut on_step)
+                    .map_err(|e| st.explain(e, start, t_next, &work.x_new))?;
                 t = t_next;
             }
             continue;
@@ -437,10 +457,11 @@ pub(crate) fn integrate_selected<R: Rhs>(
         while !reached {
             if (st.counts.steps + st.counts.rejected_steps) as usize >= cfg.max_steps {
                 let steps = cfg.max_steps;
-                return Err(match stiff_since {
+                let e = match stiff_since {
                     Some(since) => OdeError::Stiff { t, since, steps },
                     None => OdeError::TooManySteps { t, t_end, steps },
-                });
+                };
+                return Err(st.explain(e, start, t, &work.x));
             }
             let remaining = seg_end - t;
             let mut hs = h.min(cfg.max_step);
@@ -450,10 +471,11 @@ pub(crate) fn integrate_selected<R: Rhs>(
             }
             // Hairer's test: the step no longer changes t in floating point.
             if hs <= 16.0 * f64::EPSILON * t.abs() || hs < f64::MIN_POSITIVE {
-                return Err(match non_finite {
+                let e = match non_finite {
                     Some(i) => OdeError::NonFinite { t, what: st.rhs.describe(i) },
                     None => OdeError::StepSizeTooSmall { t, h: hs * dir },
-                });
+                };
+                return Err(st.explain(e, start, t, &work.x));
             }
             let t_next = if lands { seg_end } else { t + dir * hs };
             let err = match current {
@@ -485,7 +507,8 @@ pub(crate) fn integrate_selected<R: Rhs>(
             non_finite = None;
             let ln_err = err.max(f64::MIN_POSITIVE).ln();
             if err <= 1.0 {
-                accept(&mut st, &mut work, current, (t, t_next), &mut wants, &mut on_step)?;
+                accept(&mut st, &mut work, current, (t, t_next), &mut wants, &mut on_step)
+                    .map_err(|e| st.explain(e, start, t_next, &work.x_new))?;
                 t = t_next;
                 reached = lands;
                 let fac = match current {

@@ -2,6 +2,10 @@
 
 use thiserror::Error;
 
+/// Growth of the largest component, relative to the largest magnitude at the start (at
+/// least 1), beyond which a failed integration is reported as [`OdeError::BlowUp`].
+pub const BLOW_UP_GROWTH: f64 = 1e8;
+
 /// Why an integration stopped before reaching its end.
 #[derive(Clone, Debug, Error, PartialEq)]
 pub enum OdeError {
@@ -62,6 +66,23 @@ pub enum OdeError {
         since: f64,
         /// The budget.
         steps: usize,
+    },
+    /// The solution grows without bound: the integration failed (step size, step budget or
+    /// overflow) after a component grew to more than [`BLOW_UP_GROWTH`] times the largest
+    /// magnitude at the start (at least 1). A finite-time singularity, or exponential growth
+    /// faster than the integrator can follow.
+    #[error(
+        "the solution blows up: {what} reaches {value:.3e} at t = {t} (it started at most {start:.3e} in magnitude)"
+    )]
+    BlowUp {
+        /// Where the integration stopped.
+        t: f64,
+        /// The component that grew most.
+        what: String,
+        /// Its value there (infinite when it overflowed).
+        value: f64,
+        /// The largest magnitude at the start (at least 1).
+        start: f64,
     },
     /// The implicit integrator's iteration matrix is singular.
     #[error("the implicit step matrix is singular at t = {t}")]

@@ -76,7 +76,7 @@ mod system;
 pub mod testing;
 
 pub use driver::{Counts, Rhs, integrate};
-pub use error::{OdeError, SignalError, SignatureError};
+pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError};
 pub use implicit::IterationMatrix;
 pub use interpolant::{DenseSolution, Interpolant};
 pub use ivp::{

@@ -182,13 +182,25 @@ impl System for SqrtDecay {
 }
 
 #[test]
-fn finite_time_blow_up_is_a_step_size_error_at_the_singularity() {
+fn finite_time_blow_up_is_reported_as_a_blow_up_at_the_singularity() {
+    // y' = y², y(0) = 1: y = 1/(1 − t) grows without bound as t → 1. The step size collapses
+    // there; the error says why, with the component and how far it grew.
     let sys = BlowUp(Signature::new(&["y"], &[]));
     let err = Ivp::new(&sys, 0.0, &[1.0], &[]).solve(&tight(), &[2.0]).unwrap_err();
-    match err {
-        OdeError::StepSizeTooSmall { t, .. } => assert!((t - 1.0).abs() < 1e-6, "t = {t}"),
+    match &err {
+        OdeError::BlowUp { t, what, value, start } => {
+            assert!((t - 1.0).abs() < 1e-6, "t = {t}");
+            assert_eq!(what, "state y");
+            assert!(*value > sysid_ode::BLOW_UP_GROWTH, "{value}");
+            assert_eq!(start.to_bits(), 1.0f64.to_bits());
+        }
         other => panic!("unexpected {other:?}"),
     }
+    assert!(err.to_string().starts_with("the solution blows up: state y reaches"), "{err}");
+    // A step budget that runs out long before the singularity is not a blow-up.
+    let err =
+        Ivp::new(&sys, 0.0, &[1.0], &[]).solve(&tight().with_max_steps(5), &[0.9]).unwrap_err();
+    assert!(matches!(err, OdeError::TooManySteps { .. }), "{err:?}");
 }
 
 #[test]
