@@ -20,6 +20,8 @@ fn study(c: &mut Criterion) {
         noise: 1.0,
         perturb: 0.2,
         seed: 1,
+        fixed: Vec::new(),
+        driver: Default::default(),
     };
     // The reference as `sysid study` builds it: step halving, stopping on its cost.
     let reference = GoodmanOptions::default().with_step_halving(true).with_cost_tolerance(1e-10);

@@ -3,7 +3,7 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use sysid::core::table::Table;
-use sysid::core::{Convergence, Data, Method, Problem, Termination};
+use sysid::core::{Data, Method, Problem, Rule, Termination};
 use sysid::goodman::{Goodman, newton_step};
 use sysid::ode::testing::{assert_close, assert_close_abs};
 use sysid::systems::falling_body::{self, FallingBody, TABLE_I, continuous_record};
@@ -160,10 +160,7 @@ fn continuous_record_sampled_every_millisecond_from_csv() {
     assert_close(estimate.cost, cost, 1e-5);
     // A sampled record has a sample count, hence standard errors.
     assert!(estimate.std_errors.is_some());
-    assert!(matches!(
-        estimate.termination,
-        Termination::Converged(Convergence::Gradient | Convergence::Step)
-    ));
+    assert!(matches!(estimate.termination, Termination::Converged(Rule::Gradient | Rule::Step)));
 }
 
 #[test]

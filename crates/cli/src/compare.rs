@@ -6,9 +6,10 @@ use clap::Args;
 use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
 
+use crate::fit::prepare;
 use crate::format::significant;
 use crate::integrator::IntegratorArgs;
-use crate::methods::{Common, QlStart, default_methods, method, parse_list};
+use crate::methods::{MethodArgs, default_methods, method, parse_list};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
 
@@ -33,15 +34,12 @@ pub struct CompareArgs {
     /// Seed of the synthetic data.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Output format: tables, or a JSON list of fit objects.
+    /// Output format: tables, or a JSON list of fit objects (one per method, converged or
+    /// not).
     #[arg(long, value_enum, default_value_t = Format::Table)]
     format: Format,
-    /// First trajectory of quasilinearization: the model from the guess, or the data.
-    #[arg(long, value_enum, default_value_t = QlStart::Guess)]
-    ql_start: QlStart,
-    /// Most updates of the unknowns, for every method.
-    #[arg(long, value_name = "N")]
-    max_iterations: Option<usize>,
+    #[command(flatten)]
+    options: MethodArgs,
     #[command(flatten)]
     integrator: IntegratorArgs,
 }
@@ -54,6 +52,7 @@ pub struct Row {
 
 /// Runs `sysid compare`.
 pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
+    args.options.validate()?;
     let methods = match &args.methods {
         Some(list) => parse_list(list)?,
         None => default_methods().into_iter().map(String::from).collect(),
@@ -76,15 +75,10 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
             seed: args.seed,
         }]
     };
-    let common = Common {
-        max_iterations: args.max_iterations,
-        ql_start: args.ql_start,
-        ..Common::default()
-    };
     let mut json = Vec::new();
     let mut tables = Vec::new();
     for source in &sources {
-        let with = CompareProblem { methods: &methods, common, integrator: args.integrator };
+        let with = CompareProblem { methods: &methods, args };
         let (table, records) = with_problem(source, with)?;
         tables.push(table);
         json.extend(records);
@@ -98,8 +92,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
 
 struct CompareProblem<'a> {
     methods: &'a [String],
-    common: Common,
-    integrator: IntegratorArgs,
+    args: &'a CompareArgs,
 }
 
 impl WithProblem for CompareProblem<'_> {
@@ -110,10 +103,11 @@ impl WithProblem for CompareProblem<'_> {
         problem: Problem<S>,
         context: Context,
     ) -> anyhow::Result<Self::Output> {
-        let problem = self.integrator.apply(problem)?;
+        let problem = prepare(problem, &self.args.integrator, &self.args.options)?;
+        let common = self.args.options.common();
         let mut rows = Vec::with_capacity(self.methods.len());
         for name in self.methods {
-            let m = method::<S>(name, self.common)?;
+            let m = method::<S>(name, common)?;
             rows.push(Row {
                 method: name.clone(),
                 result: m.fit(&problem).map_err(|e| e.to_string()),

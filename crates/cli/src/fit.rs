@@ -1,12 +1,12 @@
 //! `sysid fit`.
 
 use clap::Args;
-use sysid_core::{Estimate, Problem, Termination};
+use sysid_core::{Bound, Estimate, Failure, Problem, Termination};
 use sysid_ode::System;
 
 use crate::format::significant;
 use crate::integrator::IntegratorArgs;
-use crate::methods::{Common, METHODS, QlStart, method};
+use crate::methods::{Common, METHODS, MethodArgs, method};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
 
@@ -19,28 +19,19 @@ pub struct FitArgs {
     /// quasilinearization, quasilinearization-data.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]
     method: String,
-    /// Output format.
+    /// Output format: a readable table, or the JSON object of the README's contract (printed
+    /// for every run past input checking, converged or not).
     #[arg(long, value_enum, default_value_t = Format::Table)]
     format: Format,
-    /// First trajectory of quasilinearization: the model from the guess, or the data.
-    #[arg(long, value_enum, default_value_t = QlStart::Guess)]
-    ql_start: QlStart,
-    /// Most updates of the unknowns.
-    #[arg(long, value_name = "N")]
-    max_iterations: Option<usize>,
+    #[command(flatten)]
+    options: MethodArgs,
     #[command(flatten)]
     integrator: IntegratorArgs,
 }
 
-impl FitArgs {
-    /// The method's shared options.
-    pub fn common(&self) -> Common {
-        Common { max_iterations: self.max_iterations, ql_start: self.ql_start, ..Common::default() }
-    }
-}
-
 /// Runs `sysid fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
+    args.options.validate()?;
     with_problem(&args.source, FitProblem { args })
 }
 
@@ -57,62 +48,116 @@ impl WithProblem for FitProblem<'_> {
         context: Context,
     ) -> anyhow::Result<Outcome> {
         let args = self.args;
-        let problem = args.integrator.apply(problem)?;
-        let estimate = fit(&problem, &args.method, args.common())?;
+        let problem = prepare(problem, &args.integrator, &args.options)?;
+        let estimate = fit(&problem, &args.method, args.options.common())?;
         match args.format {
             Format::Json => {
                 println!("{}", serde_json::to_string_pretty(&estimate.record(&context.name))?)
             }
-            Format::Table => print!("{}", table(&context, &estimate)),
+            Format::Table => print!("{}", table(&problem, &context, &estimate)),
         }
         Ok(if estimate.converged() { Outcome::Success } else { Outcome::NotConverged })
     }
 }
 
-/// Fits with the named method. What is bad input rather than a method's failure is an
-/// error: unknowns the data cannot tell apart, and a model that cannot be integrated from
-/// the starting guess.
+/// The problem with the command line's integrator settings and `--fix`ed unknowns.
+pub fn prepare<S: System>(
+    problem: Problem<S>,
+    integrator: &IntegratorArgs,
+    options: &MethodArgs,
+) -> anyhow::Result<Problem<S>> {
+    Ok(integrator.apply(problem)?.with_fixed(&options.fix)?)
+}
+
+/// Fits with the named method. A start that cannot be used is bad input, not a result of the
+/// method: a model that cannot be evaluated there, or unknowns the data cannot tell apart
+/// there before any step was taken.
 pub fn fit<S: System>(
     problem: &Problem<S>,
     name: &str,
     common: Common,
 ) -> anyhow::Result<Estimate> {
     let estimate = method::<S>(name, common)?.fit(problem)?;
-    match &estimate.termination {
-        Termination::SingularNormalMatrix { unknowns, condition } => anyhow::bail!(
-            "the data cannot identify {} (singular normal matrix, condition {condition:.1e}): fix some of them or add data",
-            unknowns.join(", ")
-        ),
-        Termination::IntegrationFailed { message } if estimate.iterations == 0 => {
-            anyhow::bail!("the model cannot be integrated from the starting guess: {message}")
+    if let Some(message) = unusable_start(problem, &estimate) {
+        anyhow::bail!(message);
+    }
+    Ok(estimate)
+}
+
+/// Why the start cannot be used, if it cannot.
+pub fn unusable_start<S: System>(problem: &Problem<S>, e: &Estimate) -> Option<String> {
+    match &e.termination {
+        Termination::StartFailed(Failure::Integration { error, .. }) => {
+            Some(format!("the model cannot be integrated from the starting guess: {error}"))
         }
-        _ => Ok(estimate),
+        Termination::StartFailed(failure) => {
+            Some(format!("the starting guess cannot be used: {failure}"))
+        }
+        Termination::Failed { failure: Failure::Singular { .. }, .. } if e.iterations == 0 => {
+            let space = e.certificate.null_space.as_ref()?;
+            Some(format!(
+                "the data cannot identify {} at the starting guess (singular normal matrix, condition {:.1e}; the combination {} is not seen by the data): fix some of them or add data",
+                space.unknowns.join(", "),
+                space.condition,
+                space.combination(problem)
+            ))
+        }
+        _ => None,
     }
 }
 
 /// The readable report: estimates next to the reference or truth, then the run.
-fn table(context: &Context, e: &Estimate) -> String {
+fn table<S: System>(problem: &Problem<S>, context: &Context, e: &Estimate) -> String {
     let mut out = String::new();
     let describe = METHODS.iter().find(|m| m.0 == e.method).map_or("", |m| m.1);
     out += &format!("{}: {}\n", context.name, context.summary);
     out += &format!("method {}: {describe}\n\n", e.method);
     out += &format!(
-        "  {:<10} {:>24} {:>14} {:>24}\n",
-        "unknown", "estimate", "std. error", context.expected_label
+        "  {:<10} {:>24} {:>14} {:>34} {:>24}\n",
+        "unknown", "estimate", "std. error", "95 % interval (Student's t)", context.expected_label
     );
     for (i, name) in e.names.iter().enumerate() {
         let se = e.std_errors.as_ref().map_or("—".to_string(), |s| significant(s[i], 5));
+        let interval = e.intervals.as_ref().map_or("—".to_string(), |list| {
+            format!("[{}, {}]", significant(list[i][0], 6), significant(list[i][1], 6))
+        });
         let expected = context.expected(name).map_or(String::new(), |v| format!("{v}"));
-        out +=
-            &format!("  {name:<10} {:>24} {se:>14} {expected:>24}\n", significant(e.values[i], 10));
+        let bound = match e.certificate.active[i] {
+            Some(Bound::Lower) => "   on its lower bound",
+            Some(Bound::Upper) => "   on its upper bound",
+            None => "",
+        };
+        out += &format!(
+            "  {name:<10} {:>24} {se:>14} {interval:>34} {expected:>24}{bound}\n",
+            significant(e.values[i], 10)
+        );
     }
     out += "\n";
+    out += &format!("  converged    {}\n", e.verdict());
     out += &format!("  termination  {}\n", e.termination);
-    out += &format!("  iterations   {}\n", e.iterations);
+    if let Some(at) = e.failed_at() {
+        out += &format!("  failed at    {at}\n");
+    }
+    if let Some(space) = &e.certificate.null_space {
+        out += &format!(
+            "  identifiability  the data cannot identify {} here (condition {:.1e}): the combination {} is not seen by the data\n",
+            space.unknowns.join(", "),
+            space.condition,
+            space.combination(problem)
+        );
+    }
+    let reported = if e.best_iteration == e.iterations {
+        String::new()
+    } else {
+        format!(" (the best, iterate {}, is reported)", e.best_iteration)
+    };
+    out += &format!("  iterations   {}{reported}\n", e.iterations);
     let reference_cost = context
         .reference_cost
         .map_or(String::new(), |(cost, source)| format!("   (reference {cost}, {source})"));
     out += &format!("  cost ε       {}{reference_cost}\n", significant(e.cost, 10));
+    let dof = e.dof.map_or("—".to_string(), |d| d.to_string());
+    out += &format!("  dof          {dof} (measured values − unknowns)\n");
     out += &format!(
         "  work         {} integrations, {} steps ({} rejected), {} right-hand-side evaluations, {:.3} ms\n\n",
         e.counts.integrations,
@@ -122,17 +167,19 @@ fn table(context: &Context, e: &Estimate) -> String {
         e.elapsed.as_secs_f64() * 1e3
     );
     out += &format!(
-        "  {:>9} {:>24} {:>12} {:>12} {:>12}\n",
-        "iteration", "cost ε", "|U|", "step", "condition"
+        "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}\n",
+        "iteration", "cost ε", "|U|", "step", "condition", "optimality"
     );
+    let dash = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.3e}"));
     for h in &e.history {
-        let step = h.step_norm.map_or("—".to_string(), |s| format!("{s:.3e}"));
-        let cond = h.condition.map_or("—".to_string(), |c| format!("{c:.3e}"));
         out += &format!(
-            "  {:>9} {:>24} {:>12.3e} {step:>12} {cond:>12}\n",
+            "  {:>9} {:>24} {:>12.3e} {:>12} {:>12} {:>12}\n",
             h.iteration,
             significant(h.cost, 10),
-            h.gradient_norm
+            h.gradient_norm,
+            dash(h.step_norm),
+            dash(h.condition),
+            dash(h.optimality)
         );
     }
     out

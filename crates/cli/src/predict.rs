@@ -8,9 +8,9 @@ use sysid_core::Problem;
 use sysid_ode::{Ivp, System};
 
 use crate::Outcome;
-use crate::fit::fit;
+use crate::fit::{fit, prepare};
 use crate::integrator::IntegratorArgs;
-use crate::methods::{Common, QlStart};
+use crate::methods::MethodArgs;
 use crate::simulate::write_output;
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 
@@ -28,9 +28,8 @@ pub struct PredictArgs {
     /// The method that fits first.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]
     method: String,
-    /// First trajectory of quasilinearization.
-    #[arg(long, value_enum, default_value_t = QlStart::Guess)]
-    ql_start: QlStart,
+    #[command(flatten)]
+    options: MethodArgs,
     /// Write to this file instead of standard output.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
@@ -43,6 +42,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
     if !args.until.is_finite() {
         bail!("--until must be a finite time");
     }
+    args.options.validate()?;
     with_problem(&args.source, Predict { args })
 }
 
@@ -59,7 +59,7 @@ impl WithProblem for Predict<'_> {
         context: Context,
     ) -> anyhow::Result<Outcome> {
         let args = self.args;
-        let problem = args.integrator.apply(problem)?;
+        let problem = prepare(problem, &args.integrator, &args.options)?;
         let t0 = problem.t0();
         if args.until <= t0 {
             bail!("--until {} must lie after t0 = {t0}", args.until);
@@ -68,12 +68,14 @@ impl WithProblem for Predict<'_> {
         if !(step > 0.0 && step.is_finite()) {
             bail!("--step must be positive, got {step}");
         }
-        let estimate =
-            fit(&problem, &args.method, Common { ql_start: args.ql_start, ..Common::default() })?;
+        let estimate = fit(&problem, &args.method, args.options.common())?;
         if !estimate.converged() {
             eprintln!(
-                "{}: {} did not converge ({}): no prediction written",
-                context.name, estimate.method, estimate.termination
+                "{}: {} did not converge ({}; {}): no prediction written",
+                context.name,
+                estimate.method,
+                estimate.verdict(),
+                estimate.termination
             );
             return Ok(Outcome::NotConverged);
         }
@@ -96,9 +98,12 @@ impl WithProblem for Predict<'_> {
             text += &format!(",{name},{name}_lower,{name}_upper");
         }
         text += "\n";
-        if estimate.covariance.is_none() {
+        // The band: Student's t for the fit's N − k degrees of freedom.
+        let quantile = problem.band_quantile();
+        let covariance = estimate.covariance.as_ref().filter(|_| quantile.is_some());
+        if covariance.is_none() {
             eprintln!(
-                "{}: no covariance (no more data than unknowns): the band columns are empty",
+                "{}: no covariance (no more data than unknowns, or a singular normal matrix): the band columns are empty",
                 context.name
             );
         }
@@ -106,15 +111,15 @@ impl WithProblem for Predict<'_> {
             text += &format!("{t}");
             let s = sol.sensitivity(m);
             for (i, y) in sol.state(m).iter().enumerate() {
-                match &estimate.covariance {
-                    Some(cov) => {
-                        // Var y_i = s_i Cov s_iᵀ; 95 % normal band.
+                match (covariance, quantile) {
+                    (Some(cov), Some(q)) => {
+                        // Var y_i = s_i Cov s_iᵀ; 95 % band with Student's t.
                         let row = s.row(i);
                         let var = (row * cov * row.transpose())[(0, 0)];
-                        let half = sysid_core::Z95 * var.max(0.0).sqrt();
+                        let half = q * var.max(0.0).sqrt();
                         text += &format!(",{y},{},{}", y - half, y + half);
                     }
-                    None => text += &format!(",{y},,"),
+                    _ => text += &format!(",{y},,"),
                 }
             }
             text += "\n";

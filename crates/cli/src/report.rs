@@ -24,7 +24,7 @@ use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
 use crate::methods::{Common, method, parse_list};
-use crate::study::{progress_bar, reference, shared};
+use crate::study::{progress_bar, reference};
 
 /// Arguments of `sysid report`.
 #[derive(Args, Debug)]
@@ -177,10 +177,20 @@ impl Visit for SystemReport<'_> {
                     noise: 1.0,
                     perturb: args.perturb,
                     seed: args.seed,
+                    fixed: Vec::new(),
+                    driver: Default::default(),
                 };
-                let fits =
-                    self.methods.iter().map(|m| shared::<S>(m)).collect::<anyhow::Result<_>>()?;
-                let study = Study::new(spec, scenario, fits, reference::<S>(REFERENCE)?)?;
+                let fits = self
+                    .methods
+                    .iter()
+                    .map(|m| method::<S>(m, Common::default()))
+                    .collect::<anyhow::Result<_>>()?;
+                let study = Study::new(
+                    spec,
+                    scenario,
+                    fits,
+                    reference::<S>(REFERENCE, Common::default())?,
+                )?;
                 let summary = run_study(&study, &dir.join("study"))?;
                 draw_study(&case, &summary, &dir)?;
                 figures.push((
@@ -199,13 +209,16 @@ impl Visit for SystemReport<'_> {
                 ));
                 let basin_spec =
                     StudySpec { perturb: args.basin_spread, trials: 1, ..study.spec().clone() };
-                let fits =
-                    self.methods.iter().map(|m| shared::<S>(m)).collect::<anyhow::Result<_>>()?;
+                let fits = self
+                    .methods
+                    .iter()
+                    .map(|m| method::<S>(m, Common::default()))
+                    .collect::<anyhow::Result<_>>()?;
                 let basin_study = Study::new(
                     basin_spec,
                     study.scenario().clone(),
                     fits,
-                    reference::<S>(REFERENCE)?,
+                    reference::<S>(REFERENCE, Common::default())?,
                 )?;
                 let numbers = draw_basin(&case, &basin_study, args.grid, &dir)?;
                 figures.push((

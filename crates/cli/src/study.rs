@@ -12,9 +12,9 @@ use sysid_ode::System;
 use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
-use crate::fit::fit;
+use crate::fit::{fit, prepare};
 use crate::integrator::IntegratorArgs;
-use crate::methods::{Common, method, parse_list};
+use crate::methods::{Common, MethodArgs, method, parse_list};
 
 /// The methods a study compares unless told otherwise: the three classical ones.
 const DEFAULT_METHODS: &str = "goodman,quasilinearization,gauss-newton-ls";
@@ -68,6 +68,8 @@ pub struct StudyArgs {
     #[arg(long, default_value_t = 41, value_name = "G", requires = "basin")]
     grid: usize,
     #[command(flatten)]
+    options: MethodArgs,
+    #[command(flatten)]
     integrator: IntegratorArgs,
 }
 
@@ -84,6 +86,7 @@ pub struct MergeArgs {
 
 /// Runs `sysid study`.
 pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
+    args.options.validate()?;
     let methods = parse_list(args.methods.as_deref().unwrap_or(DEFAULT_METHODS))?;
     parse_list(&args.reference)?;
     if args.basin.is_some() && (args.shard.is_some() || args.resume) {
@@ -97,9 +100,10 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
         }
         (None, Some(path)) => {
             let model = Model::load(path)?;
-            let problem = args.integrator.apply(model.problem(args.data.as_deref())?)?;
+            let problem =
+                prepare(model.problem(args.data.as_deref())?, &args.integrator, &args.options)?;
             // The truth of a model file: its fit to its own data.
-            let fitted = fit(&problem, &args.reference, Common::default())?;
+            let fitted = fit(&problem, &args.reference, args.options.common())?;
             if !fitted.converged() {
                 bail!(
                     "{}: the fit to the data that gives the study its truth did not converge ({})",
@@ -123,27 +127,20 @@ impl Visit for FromCase<'_> {
     type Output = anyhow::Result<Outcome>;
     fn visit<S: System + Clone + Send + Sync + 'static>(self, mut case: Case<S>) -> Self::Output {
         case.integrator = self.args.integrator.apply_to(case.integrator)?;
-        let scenario =
-            Scenario::from_case(&case).with_context(|| format!("system {}", case.name))?;
+        let scenario = Scenario::from_case(&case)
+            .and_then(|s| s.with_fixed(&self.args.options.fix))
+            .with_context(|| format!("system {}", case.name))?;
         run_scenario(self.args, case.name, scenario, self.methods)
     }
-}
-
-pub(crate) fn shared<S: System + Send + Sync + 'static>(
-    name: &str,
-) -> anyhow::Result<SharedMethod<S>> {
-    method::<S>(name, Common::default())
 }
 
 /// The reference fit decides success by its cost only: Goodman's method stops once the next
 /// step would lower ε by less than 1e-10 of it, four decades inside the success tolerance.
 pub(crate) fn reference<S: System + Send + Sync + 'static>(
     name: &str,
+    common: Common,
 ) -> anyhow::Result<SharedMethod<S>> {
-    method::<S>(
-        name,
-        Common { cost_tolerance: Some(REFERENCE_COST_TOLERANCE), ..Common::default() },
-    )
+    method::<S>(name, Common { cost_tolerance: Some(REFERENCE_COST_TOLERANCE), ..common })
 }
 
 /// See [`reference`].
@@ -155,6 +152,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
     scenario: Scenario<S>,
     methods: Vec<String>,
 ) -> anyhow::Result<Outcome> {
+    let common = args.options.common();
     let spec = StudySpec {
         system: system.to_string(),
         methods: methods.clone(),
@@ -163,9 +161,12 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         noise: args.noise,
         perturb: args.perturb,
         seed: args.seed,
+        fixed: args.options.fix.clone(),
+        driver: common.driver,
     };
-    let fits = methods.iter().map(|m| shared::<S>(m)).collect::<anyhow::Result<Vec<_>>>()?;
-    let study = Study::new(spec, scenario, fits, reference::<S>(&args.reference)?)?;
+    let fits =
+        methods.iter().map(|m| method::<S>(m, common)).collect::<anyhow::Result<Vec<_>>>()?;
+    let study = Study::new(spec, scenario, fits, reference::<S>(&args.reference, common)?)?;
     if let Some(axes) = &args.basin {
         let names = study.scenario().problem().names();
         let index = |n: &str| {

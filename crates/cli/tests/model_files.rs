@@ -262,7 +262,12 @@ fn unknowns_the_data_cannot_identify() {
         .replace("parameters = [\"k\"]", "parameters = [\"a\", \"b\"]")
         .replace("-k * x", "-(a + b) * x")
         .replace("k = 0.5", "a = 0.3\nb = 0.3");
-    bad("singular", &model, DECAY_DATA, "the data cannot identify a, b (singular normal matrix");
+    bad(
+        "singular",
+        &model,
+        DECAY_DATA,
+        "the data cannot identify a, b at the starting guess (singular normal matrix, condition inf; the combination",
+    );
 }
 
 #[test]
@@ -272,7 +277,7 @@ fn a_model_that_blows_up() {
         "blowup",
         &model,
         DECAY_DATA,
-        "the model cannot be integrated from the starting guess: step size underflow at t = 0.99",
+        "the model cannot be integrated from the starting guess: the solution blows up: state x reaches",
     );
 }
 
@@ -317,7 +322,7 @@ fn examples_fit_with_every_method() {
         assert_eq!(out.status.code(), Some(0), "{example}: {}", text(&out.stderr));
         let fits: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         for fit in fits.as_array().unwrap() {
-            assert_eq!(fit["converged"], true, "{example}: {fit}");
+            assert_certified_or_fd(fit);
         }
     }
 }
@@ -429,4 +434,18 @@ fn integrator_choices_are_checked() {
     let out =
         sysid(&["fit", "--model", &case.model(), "--integrator", "rk4", "--fixed-step", "0.01"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}
+
+/// Every method ends on its stopping rule, and all but the forward-difference variant are
+/// certified: forward differences with h = √rtol leave the exact gradient at a cosine of
+/// about 1e-5, above the certificate's 1e-6, and it says so (stalled).
+fn assert_certified_or_fd(fit: &serde_json::Value) {
+    let code = fit["termination_code"].as_str().unwrap();
+    if fit["method"] == "gauss-newton-fd" {
+        assert!(code.starts_with("converged_") || code.starts_with("stalled_"), "{fit}");
+        assert_eq!(fit["converged"], code.starts_with("converged_"), "{fit}");
+    } else {
+        assert_eq!(fit["converged"], true, "{fit}");
+        assert!(code.starts_with("converged_"), "{fit}");
+    }
 }

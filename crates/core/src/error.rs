@@ -52,6 +52,15 @@ pub enum ProblemError {
         /// What is wrong.
         message: String,
     },
+    /// `--fix` (or [`Problem::with_fixed`](crate::Problem::with_fixed)) names something that
+    /// is not an unknown.
+    #[error("`{name}` is not an unknown of the problem (unknowns: {unknowns})")]
+    NotAnUnknown {
+        /// The name given.
+        name: String,
+        /// The unknowns, comma-separated.
+        unknowns: String,
+    },
     /// There is nothing to identify.
     #[error("no unknowns: name at least one parameter or initial value to identify")]
     NoUnknowns,
@@ -110,5 +119,5 @@ pub enum FitError {
     },
     /// The method's options are invalid.
     #[error("invalid options: {0}")]
-    InvalidOptions(String),
+    InvalidOptions(#[from] crate::options::OptionsError),
 }

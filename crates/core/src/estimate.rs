@@ -8,85 +8,8 @@ use serde::ser::{SerializeMap, SerializeStruct};
 use serde::{Serialize, Serializer};
 use sysid_ode::Counts;
 
-/// Why a method stopped. Not converging is a result, not an error.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Termination {
-    /// A convergence test was met.
-    Converged(Convergence),
-    /// The iteration budget ran out.
-    MaxIterations,
-    /// The normal matrix is (nearly) singular: these unknowns cannot be told apart by the
-    /// data, or do not influence it.
-    SingularNormalMatrix {
-        /// Names of the unknowns in the null space, in problem order.
-        unknowns: Vec<String>,
-        /// Condition number of the Jacobi-scaled normal matrix.
-        condition: f64,
-    },
-    /// The model could not be integrated at an iterate.
-    IntegrationFailed {
-        /// The integrator's message, with the time it failed.
-        message: String,
-    },
-    /// Step halving (or a line search) could not reduce the cost.
-    NoDescent,
-    /// The optimisation library stopped with an error of its own.
-    SolverFailed {
-        /// Its message.
-        message: String,
-    },
-}
-
-/// Which convergence test was met.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Convergence {
-    /// The step fell below the step tolerance.
-    Step,
-    /// The gradient fell below the gradient tolerance.
-    Gradient,
-    /// The model passes through every data point (ε = 0).
-    ExactFit,
-    /// The change of the cost between iterations (argmin's rule), or the decrease the next
-    /// step predicts (Goodman's cost tolerance), fell below the tolerance.
-    CostChange,
-}
-
-impl Termination {
-    /// Whether a convergence test was met.
-    pub fn is_converged(&self) -> bool {
-        matches!(self, Termination::Converged(_))
-    }
-}
-
-impl fmt::Display for Termination {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Termination::Converged(Convergence::Step) => {
-                write!(f, "converged: step below tolerance")
-            }
-            Termination::Converged(Convergence::Gradient) => {
-                write!(f, "converged: gradient below tolerance")
-            }
-            Termination::Converged(Convergence::ExactFit) => {
-                write!(f, "converged: the model passes through the data (ε = 0)")
-            }
-            Termination::MaxIterations => write!(f, "not converged: iteration limit reached"),
-            Termination::SingularNormalMatrix { unknowns, condition } => write!(
-                f,
-                "singular normal matrix (condition {condition:.1e}): the data cannot tell apart {}",
-                unknowns.join(", ")
-            ),
-            Termination::IntegrationFailed { message } => {
-                write!(f, "integration failed: {message}")
-            }
-            Termination::NoDescent => write!(f, "not converged: no step reduced the cost"),
-            Termination::SolverFailed { message } => write!(f, "solver error: {message}"),
-            Termination::Converged(Convergence::CostChange) => {
-                write!(f, "converged: cost change below tolerance")
-            }
-        }
-    }
-}
+use crate::certificate::{Bound, Certificate};
+use crate::termination::Termination;
 
 /// One row of the iteration history, for the iterate z_i.
 #[derive(Clone, Debug, PartialEq)]
@@ -99,8 +22,11 @@ pub struct Iteration {
     pub gradient_norm: f64,
     /// Norm of the update that led here (None for the start).
     pub step_norm: Option<f64>,
-    /// Condition number of the Jacobi-scaled normal matrix at the iterate.
+    /// Condition number of the matrix the step from this iterate solved with.
     pub condition: Option<f64>,
+    /// The certificate's first-order optimality measure at the iterate, where the method
+    /// computed the model's sensitivities there.
+    pub optimality: Option<f64>,
     /// The unknowns at the iterate (values).
     pub values: Vec<f64>,
     /// Quasilinearization: ε of the linear family whose optimum gave this iterate (ε above
@@ -118,16 +44,26 @@ pub struct Estimate {
     /// Estimated values.
     pub values: Vec<f64>,
     /// Standard errors, sqrt(diag Cov) (None when there is no residual variance: as many data
-    /// as unknowns, or a record given as a function).
+    /// as unknowns, or a record given as a function; or when A is singular).
     pub std_errors: Option<Vec<f64>>,
+    /// 95 % intervals with Student's t for `dof` degrees of freedom (on a log scale formed
+    /// for ln(value) and mapped back).
+    pub intervals: Option<Vec<[f64; 2]>>,
     /// Covariance of the values: s² A⁻¹ with s² = ε/(N − k).
     pub covariance: Option<DMatrix<f64>>,
     /// ε at the estimate.
     pub cost: f64,
-    /// Number of updates of the unknowns.
+    /// Degrees of freedom N − k (None for a record given as a function).
+    pub dof: Option<usize>,
+    /// Number of updates of the unknowns the method made.
     pub iterations: usize,
+    /// Which iterate is reported: the last one when a stopping rule ended the run, the best
+    /// one (lowest cost) when a failure or a budget did.
+    pub best_iteration: usize,
     /// Why the method stopped.
     pub termination: Termination,
+    /// The first-order verdict on the reported point: it decides [`converged`](Self::converged).
+    pub certificate: Certificate,
     /// One row per iterate, the start first.
     pub history: Vec<Iteration>,
     /// Wall-clock time of the fit.
@@ -137,9 +73,24 @@ pub struct Estimate {
 }
 
 impl Estimate {
-    /// Whether the method converged.
+    /// Whether the fit converged: the reported point passes the certificate (a first-order
+    /// optimality test that does not trust the method's stopping rule).
     pub fn converged(&self) -> bool {
-        self.termination.is_converged()
+        self.certificate.holds()
+    }
+
+    /// Whether the start could not be evaluated (a bad start or bad data, not a result).
+    pub fn start_failed(&self) -> bool {
+        matches!(self.termination, Termination::StartFailed(_))
+    }
+
+    /// The unknowns held on a bound, with which.
+    pub fn active_bounds(&self) -> Vec<(&str, Bound)> {
+        self.names
+            .iter()
+            .zip(&self.certificate.active)
+            .filter_map(|(n, b)| b.map(|b| (n.as_str(), b)))
+            .collect()
     }
     /// Same as [`converged`](Self::converged).
     pub fn succeeded(&self) -> bool {
@@ -150,15 +101,16 @@ impl Estimate {
         self.names.iter().position(|n| n == name).map(|i| self.values[i])
     }
 
-    /// The fit as the object of the `sysid fit --format json` contract (DESIGN.md), keys in
-    /// the contract's order: serialise it with serde_json.
+    /// The fit as the object of the `sysid fit --format json` contract (docs in the README),
+    /// keys in the contract's order: serialise it with serde_json.
     pub fn record<'a>(&'a self, system: &'a str) -> FitRecord<'a> {
         FitRecord { system, estimate: self }
     }
 }
 
 /// The `sysid fit --format json` object: the contract keys in the contract's order, then the
-/// extensions (termination, gradient norm and condition per iteration, work counts).
+/// extensions (termination and its code, the certificate, degrees of freedom and intervals,
+/// gradient norm, condition and optimality per iteration, work counts).
 pub struct FitRecord<'a> {
     /// The system's name.
     pub system: &'a str,
@@ -188,12 +140,13 @@ impl Serialize for Num {
 
 impl Serialize for Iteration {
     fn serialize<Z: Serializer>(&self, s: Z) -> Result<Z::Ok, Z::Error> {
-        let mut st = s.serialize_struct("Iteration", 6)?;
+        let mut st = s.serialize_struct("Iteration", 7)?;
         st.serialize_field("iteration", &self.iteration)?;
         st.serialize_field("cost", &Num(self.cost))?;
         st.serialize_field("step_norm", &self.step_norm.map(Num))?;
         st.serialize_field("gradient_norm", &Num(self.gradient_norm))?;
         st.serialize_field("condition", &self.condition.map(Num))?;
+        st.serialize_field("optimality", &self.optimality.map(Num))?;
         if let Some(c) = self.linear_cost {
             st.serialize_field("linear_cost", &Num(c))?;
         }
@@ -204,7 +157,7 @@ impl Serialize for Iteration {
 impl Serialize for FitRecord<'_> {
     fn serialize<Z: Serializer>(&self, s: Z) -> Result<Z::Ok, Z::Error> {
         let e = self.estimate;
-        let mut st = s.serialize_struct("Fit", 12)?;
+        let mut st = s.serialize_struct("Fit", 22)?;
         st.serialize_field("system", self.system)?;
         st.serialize_field("method", &e.method)?;
         st.serialize_field("converged", &e.converged())?;
@@ -220,27 +173,110 @@ impl Serialize for FitRecord<'_> {
         st.serialize_field("history", &e.history)?;
         st.serialize_field("elapsed_ms", &(e.elapsed.as_secs_f64() * 1e3))?;
         st.serialize_field("termination", &e.termination.to_string())?;
+        st.serialize_field("termination_code", &e.termination.code())?;
+        st.serialize_field("optimality", &Num(e.certificate.optimality))?;
+        st.serialize_field("gtol", &e.certificate.gtol)?;
+        st.serialize_field("exact_fit", &e.certificate.exact_fit)?;
+        let active = e.active_bounds();
+        let (names, bounds): (Vec<String>, Vec<Bound>) =
+            active.iter().map(|(n, b)| (n.to_string(), *b)).unzip();
+        st.serialize_field("active_bounds", &Named(&names, &bounds))?;
+        st.serialize_field("dof", &e.dof)?;
+        let intervals: Vec<Option<[Num; 2]>> = match &e.intervals {
+            Some(list) => list.iter().map(|[a, b]| Some([Num(*a), Num(*b)])).collect(),
+            None => e.names.iter().map(|_| None).collect(),
+        };
+        st.serialize_field("intervals", &Named(&e.names, &intervals))?;
+        st.serialize_field("best_iteration", &e.best_iteration)?;
+        if let Some(at) = e.termination.failure().and_then(|f| f.at()) {
+            let at: Vec<Num> = at.iter().map(|&v| Num(v)).collect();
+            st.serialize_field("failed_at", &Named(&e.names, &at))?;
+        }
+        if let Some(space) = &e.certificate.null_space {
+            st.serialize_field(
+                "unidentifiable",
+                &serde_json::json!({
+                    "unknowns": space.unknowns,
+                    "condition": space.condition.is_finite().then_some(space.condition),
+                    "direction": space.direction,
+                }),
+            )?;
+        }
         st.serialize_field("counts", &e.counts)?;
         st.end()
     }
 }
 
+impl Estimate {
+    /// The certificate's verdict in words: "yes (first-order optimality 3.1e-9 ≤ gtol 1e-6)".
+    pub fn verdict(&self) -> String {
+        let c = &self.certificate;
+        if c.exact_fit {
+            "yes (the model passes through the data: ε = 0 to rounding)".into()
+        } else if !c.optimality.is_finite() {
+            "no (the reported point could not be evaluated)".into()
+        } else if c.holds() {
+            format!("yes (first-order optimality {:.2e} ≤ gtol {:.0e})", c.optimality, c.gtol)
+        } else {
+            format!("no (first-order optimality {:.2e} > gtol {:.0e})", c.optimality, c.gtol)
+        }
+    }
+
+    /// Where the run failed, "a = 1.2, b = −3", if it failed at a point.
+    pub fn failed_at(&self) -> Option<String> {
+        let at = self.termination.failure()?.at()?;
+        Some(
+            self.names
+                .iter()
+                .zip(at)
+                .map(|(n, v)| format!("{n} = {}", format_value(*v)))
+                .collect::<Vec<_>>()
+                .join(", "),
+        )
+    }
+}
+
 impl fmt::Display for Estimate {
-    /// A readable table: estimates with standard errors, then the run.
+    /// A readable table: estimates with standard errors and intervals, then the run.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let width = self.names.iter().map(|n| n.chars().count()).max().unwrap_or(0).max(7);
-        writeln!(f, "{:<width$}  {:>22}  {:>12}", "unknown", "estimate", "std. error")?;
+        writeln!(
+            f,
+            "{:<width$}  {:>22}  {:>12}  {:>30}",
+            "unknown", "estimate", "std. error", "95 % interval"
+        )?;
         for (i, name) in self.names.iter().enumerate() {
             let se = match &self.std_errors {
                 Some(s) => format!("{:.6e}", s[i]),
                 None => "—".into(),
             };
-            writeln!(f, "{name:<width$}  {:>22}  {se:>12}", format_value(self.values[i]))?;
+            let interval = match &self.intervals {
+                Some(list) => format!("[{:.6e}, {:.6e}]", list[i][0], list[i][1]),
+                None => "—".into(),
+            };
+            let bound = match self.certificate.active[i] {
+                Some(Bound::Lower) => "  on its lower bound",
+                Some(Bound::Upper) => "  on its upper bound",
+                None => "",
+            };
+            writeln!(
+                f,
+                "{name:<width$}  {:>22}  {se:>12}  {interval:>30}{bound}",
+                format_value(self.values[i])
+            )?;
         }
         writeln!(f)?;
         writeln!(f, "method       {}", self.method)?;
+        writeln!(f, "converged    {}", self.verdict())?;
         writeln!(f, "termination  {}", self.termination)?;
-        writeln!(f, "iterations   {}", self.iterations)?;
+        if let Some(at) = self.failed_at() {
+            writeln!(f, "failed at    {at}")?;
+        }
+        writeln!(
+            f,
+            "iterations   {} (reported: iterate {})",
+            self.iterations, self.best_iteration
+        )?;
         writeln!(f, "cost ε       {}", format_value(self.cost))?;
         write!(
             f,

@@ -11,27 +11,43 @@
 //! * [`NormalFactor`]: the symmetric normal equations solved by Cholesky after Jacobi
 //!   scaling, with the scale-free condition number and, when singular, the unknowns the data
 //!   cannot tell apart.
-//! * [`Estimate`]: values, standard errors and covariance (s² A⁻¹, s² = ε/(N − k)), cost,
-//!   iterations, [`Termination`], per-iteration history, time and work; the JSON of
-//!   `sysid fit` ([`Estimate::to_json`]).
+//! * [`drive`]: the iteration driver every method uses. A method supplies its [`Step`]; the
+//!   driver owns the loop, the history, the budgets ([`DriverOptions`], [`Evaluations`]),
+//!   the step test, the best iterate, and the [`Certificate`] at the returned point, a
+//!   first-order optimality test that decides whether the fit converged.
+//! * [`Estimate`]: values, standard errors, 95 % intervals (Student's t) and covariance
+//!   (s² A⁻¹, s² = ε/(N − k)), cost, iterations, [`Termination`], the certificate,
+//!   per-iteration history, time and work; the JSON of `sysid fit` ([`Estimate::record`]).
 //! * [`Method`]: the trait every method crate implements.
 #![warn(missing_docs)]
 
+mod certificate;
+mod confidence;
 mod data;
+mod driver;
 mod error;
 mod estimate;
+mod evaluations;
 mod linalg;
 mod method;
+mod options;
 mod problem;
 pub mod table;
+mod termination;
 mod unknowns;
 
+pub use certificate::{Bound, Certificate, EXACT_FIT, NullSpace, certify, optimality};
+pub use confidence::{Z95, interval, t95};
 pub use data::{Data, Record, Samples, Series};
+pub use driver::{Advance, Iterate, Proposal, Step, drive};
 pub use error::{FitError, ProblemError};
-pub use estimate::{Convergence, Estimate, FitRecord, Iteration, Termination};
+pub use estimate::{Estimate, FitRecord, Iteration};
+pub use evaluations::Evaluations;
 pub use linalg::{NormalFactor, Singular, as_faer};
 pub use method::{Method, start_coordinates};
+pub use options::{DEFAULT_GTOL, DriverOptions, OptionsError};
 pub use problem::{
-    Linearization, Observed, Problem, ProblemBuilder, QUADRATURE_RTOL, Run, WeightedResiduals, Z95,
+    Linearization, Observed, Problem, ProblemBuilder, QUADRATURE_RTOL, WeightedResiduals,
 };
+pub use termination::{Failure, Rule, Termination};
 pub use unknowns::{Unknown, Unknowns};

@@ -18,6 +18,29 @@ pub struct Singular {
     pub unknowns: Vec<usize>,
     /// Condition number of the scaled matrix (infinite when exactly singular).
     pub condition: f64,
+    /// The coordinate change δz the matrix (nearly) does not see: the eigenvector of the
+    /// smallest eigenvalue of the scaled matrix, unscaled, its largest component +1.
+    pub direction: Vec<f64>,
+}
+
+impl Singular {
+    /// Singular with every unknown in `unknowns` involved equally (an exact zero).
+    fn along(k: usize, unknowns: Vec<usize>) -> Self {
+        let mut direction = vec![0.0; k];
+        for &i in &unknowns {
+            direction[i] = 1.0;
+        }
+        Self { unknowns, condition: f64::INFINITY, direction }
+    }
+}
+
+/// `v` scaled so that its largest component is +1.
+fn unit_max(mut v: Vec<f64>) -> Vec<f64> {
+    let top = v.iter().copied().max_by(|a, b| a.abs().total_cmp(&b.abs())).unwrap_or(0.0);
+    if top != 0.0 && top.is_finite() {
+        v.iter_mut().for_each(|x| *x /= top);
+    }
+    v
 }
 
 /// A factorised, well-conditioned normal matrix.
@@ -40,14 +63,14 @@ impl NormalFactor {
         let dead: Vec<usize> =
             (0..k).filter(|&i| !(diag[i] > 0.0 && diag[i].is_finite())).collect();
         if !dead.is_empty() || a.iter().any(|v| !v.is_finite()) {
-            return Err(Singular { unknowns: dead, condition: f64::INFINITY });
+            return Err(Singular::along(k, dead));
         }
         let inv_sqrt_diag: Vec<f64> = diag.iter().map(|d| 1.0 / d.sqrt()).collect();
         let scaled =
             faer::Mat::from_fn(k, k, |i, j| a[(i, j)] * inv_sqrt_diag[i] * inv_sqrt_diag[j]);
         let eigen = scaled
             .self_adjoint_eigen(Side::Lower)
-            .map_err(|_| Singular { unknowns: (0..k).collect(), condition: f64::INFINITY })?;
+            .map_err(|_| Singular::along(k, (0..k).collect()))?;
         let s = eigen.S().column_vector();
         let (lo, hi) = (s[0], s[k - 1]);
         let condition = if lo > 0.0 { hi / lo } else { f64::INFINITY };
@@ -65,11 +88,11 @@ impl NormalFactor {
                 }
             }
             let unknowns: Vec<usize> = (0..k).filter(|&i| weight[i] > 0.0).collect();
-            return Err(Singular { unknowns, condition });
+            let smallest = u.col(0);
+            let direction = unit_max((0..k).map(|i| smallest[i] * inv_sqrt_diag[i]).collect());
+            return Err(Singular { unknowns, condition, direction });
         }
-        let llt = scaled
-            .llt(Side::Lower)
-            .map_err(|_| Singular { unknowns: (0..k).collect(), condition: f64::INFINITY })?;
+        let llt = scaled.llt(Side::Lower).map_err(|_| Singular::along(k, (0..k).collect()))?;
         Ok(Self { inv_sqrt_diag, llt, condition })
     }
 
@@ -134,6 +157,12 @@ mod tests {
         let err = NormalFactor::new(&a, 1e12).err().unwrap();
         assert_eq!(err.unknowns, vec![1, 2]);
         assert!(err.condition > 1e12);
+        // J (0, 1, −1)ᵀ = 0: that is the direction the data do not see.
+        let d = &err.direction;
+        let sign = d[1].signum();
+        for (d, e) in d.iter().zip([0.0, 1.0, -1.0]) {
+            assert!((d - sign * e).abs() < 1e-8, "{:?}", err.direction);
+        }
         // An unknown without influence.
         let a = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, 0.0]);
         assert_eq!(NormalFactor::new(&a, 1e12).err().unwrap().unknowns, vec![1]);

@@ -1,17 +1,15 @@
 //! The identification problem: a model, what is known, what is unknown, and the data. It
 //! knows nothing of methods; it evaluates the least-squares quantities every method needs.
 
-use std::time::Instant;
-
 use nalgebra::{DMatrix, DVector};
 use sysid_ode::{
     Counts, Integrator, Interpolation, Ivp, Observable, ObservableGradient, OdeError, Record,
     RecordedOutput, Signal, System, Wrt,
 };
 
+use crate::confidence::t95;
 use crate::data::{Data, Record as Kind, Samples};
 use crate::error::ProblemError;
-use crate::estimate::{Estimate, Iteration, Termination};
 use crate::linalg::NormalFactor;
 use crate::unknowns::{Unknown, Unknowns};
 
@@ -55,12 +53,10 @@ pub struct Observed {
     pub name: String,
     /// Its values at the times asked for.
     pub values: Vec<f64>,
-    /// Half-width of the 95 % band at each time (when a covariance was given).
+    /// Half-width of the 95 % band at each time, t_{0.975, N−k} √(g Cov gᵀ) (when a covariance
+    /// was given and N > k).
     pub half_width: Option<Vec<f64>>,
 }
-
-/// The two-sided 95 % quantile of the standard normal distribution.
-pub const Z95: f64 = 1.959_963_984_540_054;
 
 /// The data in residual form: measured values at discrete times, each with the square root
 /// of its weight. Discrete data as given (weight w_o); a continuous record at the nodes of a
@@ -114,21 +110,6 @@ pub struct WeightedResiduals {
     pub r: DVector<f64>,
     /// ∂r/∂z.
     pub jacobian: DMatrix<f64>,
-}
-
-/// The record of a method's run, handed to [`Problem::estimate`].
-#[derive(Clone, Debug)]
-pub struct Run {
-    /// Number of updates of the unknowns.
-    pub iterations: usize,
-    /// Why the method stopped.
-    pub termination: Termination,
-    /// One row per iterate.
-    pub history: Vec<Iteration>,
-    /// When the fit started.
-    pub started: Instant,
-    /// Work of all integrations.
-    pub counts: Counts,
 }
 
 /// Everything one integration with sensitivities tells about the unknowns z.
@@ -215,6 +196,85 @@ impl<S: System> Problem<S> {
     /// Number of measured values (None for a record given as a function).
     pub fn n_observations(&self) -> Option<usize> {
         self.data.n_observations()
+    }
+
+    /// Degrees of freedom N − k of the residual variance (None for a record given as a
+    /// function).
+    pub fn dof(&self) -> Option<usize> {
+        self.n_observations().map(|n| n.saturating_sub(self.unknowns.len()))
+    }
+
+    /// The half-width of a 95 % band in standard deviations: Student's t quantile for the
+    /// problem's N − k degrees of freedom (None without residual degrees of freedom).
+    pub fn band_quantile(&self) -> Option<f64> {
+        self.dof().and_then(t95)
+    }
+
+    /// ‖W^½ b‖: the weighted data's norm (the record's for continuous data, by the
+    /// quadrature of its residual form), the scale an exact fit is measured against.
+    pub fn data_norm(&self) -> f64 {
+        self.sampled()
+            .series
+            .iter()
+            .flat_map(|s| &s.samples)
+            .map(|m| (m.sqrt_weight * m.value).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// Row `row` of the residual vector in words: "`B` at t = 3 (sample 14 of `B`)".
+    pub fn describe_row(&self, row: usize) -> String {
+        let sampled = self.sampled();
+        let signature = self.system.signature();
+        let mut at = row;
+        for s in &sampled.series {
+            if at < s.samples.len() {
+                let name = match s.observable {
+                    Observable::State(i) => &signature.states()[i],
+                    Observable::Output(i) => &signature.outputs()[i],
+                };
+                let t = sampled.times[s.samples[at].index];
+                return format!("`{name}` at t = {t} (sample {} of `{name}`)", at + 1);
+            }
+            at -= s.samples.len();
+        }
+        format!("row {row}")
+    }
+
+    /// The same problem with the unknowns named in `fixed` held at the given values: they
+    /// become known, and the degrees of freedom and every method count them so.
+    pub fn with_fixed(mut self, fixed: &[(String, f64)]) -> Result<Self, ProblemError> {
+        if fixed.is_empty() {
+            return Ok(self);
+        }
+        let mut list = self.unknowns.list().to_vec();
+        let mut wrt = self.unknowns.wrt().to_vec();
+        for (name, value) in fixed {
+            let Some(i) = list.iter().position(|u| &u.name == name) else {
+                return Err(ProblemError::NotAnUnknown {
+                    name: name.clone(),
+                    unknowns: self.unknowns.names().join(", "),
+                });
+            };
+            if !value.is_finite() {
+                return Err(ProblemError::InvalidValue {
+                    what: format!("fixed `{name}`"),
+                    value: *value,
+                });
+            }
+            match wrt[i] {
+                Wrt::InitialValue(j) => self.initial[j] = *value,
+                Wrt::Parameter(j) => self.parameters[j] = *value,
+            }
+            list.remove(i);
+            wrt.remove(i);
+        }
+        if list.is_empty() {
+            return Err(ProblemError::NoUnknowns);
+        }
+        self.plan = plan(&self.system, &self.data, list.len())?;
+        self.unknowns = Unknowns::new(list, wrt);
+        Ok(self)
     }
 
     /// The same problem with another integrator.
@@ -447,7 +507,7 @@ impl<S: System> Problem<S> {
 
     /// Every measured quantity of the model at `values` of the unknowns, at `times` (sorted;
     /// on either side of t0), with the half-width of its 95 % band from `covariance` (of the
-    /// values): 1.96 √(g Cov gᵀ), g = ∂h/∂(values) from the sensitivities. What a fit
+    /// values): t_{0.975, N−k} √(g Cov gᵀ), g = ∂h/∂(values) from the sensitivities. What a fit
     /// predicts for the measurements, with its uncertainty.
     pub fn observed(
         &self,
@@ -467,6 +527,7 @@ impl<S: System> Problem<S> {
         let mut og = ObservableGradient::new(&self.system, &p, wrt);
         let mut grad = vec![0.0; wrt.len()];
         let mut out = Vec::new();
+        let quantile = self.band_quantile();
         for series in &self.sampled().series {
             let name = match series.observable {
                 Observable::State(i) => signature.states()[i].clone(),
@@ -475,7 +536,7 @@ impl<S: System> Problem<S> {
             let mut observed = Observed {
                 name,
                 values: Vec::with_capacity(times.len()),
-                half_width: covariance.map(|_| Vec::with_capacity(times.len())),
+                half_width: quantile.and(covariance).map(|_| Vec::with_capacity(times.len())),
             };
             for (m, &t) in times.iter().enumerate() {
                 let s = sol.sensitivity_slice(m);
@@ -484,40 +545,12 @@ impl<S: System> Problem<S> {
                 if let (Some(cov), Some(w)) = (covariance, observed.half_width.as_mut()) {
                     let g = DVector::from_column_slice(&grad);
                     let var = g.dot(&(cov * &g));
-                    w.push(Z95 * var.max(0.0).sqrt());
+                    w.push(quantile.unwrap_or(f64::NAN) * var.max(0.0).sqrt());
                 }
             }
             out.push(observed);
         }
         Ok(out)
-    }
-
-    /// The report of a finished fit at coordinates z: values, and standard errors and
-    /// covariance from `last`, the linearization at z (None when the model could not be
-    /// integrated there; the cost is then NaN, printed as null).
-    pub fn estimate(
-        &self,
-        method: &str,
-        z: &[f64],
-        last: Option<&Linearization>,
-        run: Run,
-    ) -> Estimate {
-        let covariance = last.and_then(|l| self.covariance(l));
-        let std_errors =
-            covariance.as_ref().map(|c| (0..c.nrows()).map(|i| c[(i, i)].sqrt()).collect());
-        Estimate {
-            method: method.to_string(),
-            names: self.names(),
-            values: self.unknowns.values(z),
-            std_errors,
-            covariance,
-            cost: last.map_or(f64::NAN, |l| l.cost),
-            iterations: run.iterations,
-            termination: run.termination,
-            history: run.history,
-            elapsed: run.started.elapsed(),
-            counts: run.counts,
-        }
     }
 
     /// Covariance of the estimates (as values) from the normal matrix at the estimate, scaled

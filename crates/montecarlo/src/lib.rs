@@ -29,6 +29,8 @@
 //!     noise: 1.0,
 //!     perturb: 0.2,
 //!     seed: 1,
+//!     fixed: Vec::new(),
+//!     driver: Default::default(),
 //! };
 //! let halving = sysid_goodman::GoodmanOptions::default().with_step_halving(true);
 //! let study = Study::new(

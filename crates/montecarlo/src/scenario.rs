@@ -111,6 +111,20 @@ impl<S: System + Clone> Scenario<S> {
 }
 
 impl<S: System + Clone> Scenario<S> {
+    /// The same scenario with unknowns held at values (`--fix`): the data stay the model at
+    /// the full truth; the fits estimate the other unknowns only.
+    pub fn with_fixed(self, fixed: &[(String, f64)]) -> Result<Self, StudyError> {
+        if fixed.is_empty() {
+            return Ok(self);
+        }
+        let names = self.base.names();
+        let base = self.base.with_fixed(fixed)?;
+        let kept = base.names();
+        let truth =
+            names.iter().zip(&self.truth).filter(|(n, _)| kept.contains(n)).map(|p| *p.1).collect();
+        Ok(Self { base, truth, ..self })
+    }
+
     /// The problem template.
     pub fn problem(&self) -> &Problem<S> {
         &self.base

@@ -74,8 +74,8 @@ pub struct Accuracy {
     pub crb_sd: f64,
     /// CRB variance / observed variance: 1 for an efficient estimator.
     pub efficiency: Option<f64>,
-    /// Fraction of successful fits whose own 95 % interval (±1.96 standard errors)
-    /// contains the truth.
+    /// Fraction of successful fits whose own 95 % interval (estimate ± t_{0.975, N−k}
+    /// standard errors, Student's t) contains the truth.
     pub coverage: Option<f64>,
 }
 
@@ -203,14 +203,11 @@ fn accuracy(name: &str, i: usize, rows: &[&TrialRecord], truth: f64, crb_sd: f64
         (errors.iter().map(|e| (e - m) * (e - m)).sum::<f64>() / (n - 1) as f64).sqrt()
     });
     let rmse = (n > 0).then(|| (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt());
-    let with_se: Vec<(f64, f64)> = rows
-        .iter()
-        .zip(&errors)
-        .filter_map(|(r, e)| r.std_errors.as_ref().map(|se| (*e, se[i])))
-        .collect();
-    let coverage = (!with_se.is_empty()).then(|| {
-        let inside = with_se.iter().filter(|(e, se)| e.abs() <= Z95 * se).count();
-        inside as f64 / with_se.len() as f64
+    let intervals: Vec<[f64; 2]> =
+        rows.iter().filter_map(|r| r.intervals.as_ref().map(|list| list[i])).collect();
+    let coverage = (!intervals.is_empty()).then(|| {
+        let inside = intervals.iter().filter(|[lo, hi]| (*lo..=*hi).contains(&truth)).count();
+        inside as f64 / intervals.len() as f64
     });
     Accuracy {
         name: name.to_string(),
@@ -260,7 +257,7 @@ impl Summary {
                 significant(self.truth[i]),
                 significant(self.crb_sd[i])
             );
-            out += "| method | bias | sd | RMSE | efficiency (CRB var / var) | coverage of ±1.96 se |\n";
+            out += "| method | bias | sd | RMSE | efficiency (CRB var / var) | coverage of the 95 % t interval |\n";
             out += "|---|---|---|---|---|---|\n";
             for m in &self.methods {
                 let a = &m.accuracy[i];

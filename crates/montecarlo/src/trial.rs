@@ -4,7 +4,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
-use sysid_core::{Estimate, Method, Termination, Unknown};
+use sysid_core::{DriverOptions, Estimate, Failure, Method, Rule, Termination, Unknown};
 use sysid_ode::System;
 
 use crate::error::StudyError;
@@ -41,6 +41,13 @@ pub struct StudySpec {
     pub perturb: f64,
     /// Seed of the random streams: trial i draws from ChaCha8(seed) stream i.
     pub seed: u64,
+    /// Unknowns held at a value in every fit (`--fix`), not estimated.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub fixed: Vec<(String, f64)>,
+    /// The iteration driver's budgets and tolerances of every fit (the certificate's gtol
+    /// decides what converged means).
+    #[serde(default)]
+    pub driver: DriverOptions,
 }
 
 impl StudySpec {
@@ -87,7 +94,8 @@ pub struct TrialRecord {
     pub success: Option<bool>,
     /// `success`, `reference`, or why not: `other_minimum` (converged elsewhere),
     /// `diverged`, `max_iterations`, `singular`, `integration_failed` (at the start),
-    /// `no_descent`, `solver_failed`, `no_reference`, `error`.
+    /// `no_descent`, `stalled` (a stopping rule where the certificate fails),
+    /// `integration_budget`, `solver_failed`, `no_reference`, `error`.
     pub outcome: String,
     /// The method's termination, as it reports it.
     pub termination: String,
@@ -97,6 +105,10 @@ pub struct TrialRecord {
     pub values: Vec<f64>,
     /// The fit's own standard errors, where it has them.
     pub std_errors: Option<Vec<f64>>,
+    /// The fit's own 95 % intervals (Student's t for N − k degrees of freedom), where it has
+    /// them.
+    #[serde(default)]
+    pub intervals: Option<Vec<[f64; 2]>>,
     /// Updates of the unknowns.
     pub iterations: usize,
     /// Accepted integration steps.
@@ -247,6 +259,7 @@ fn record(
                 cost: None,
                 values: start.to_vec(),
                 std_errors: None,
+                intervals: None,
                 iterations: 0,
                 steps: 0,
                 rhs_evaluations: 0,
@@ -279,6 +292,7 @@ fn record(
         cost,
         values: e.values.clone(),
         std_errors: e.std_errors.clone(),
+        intervals: e.intervals.clone(),
         iterations: e.iterations,
         steps: e.counts.steps,
         rhs_evaluations: e.counts.rhs_evaluations,
@@ -287,22 +301,27 @@ fn record(
 }
 
 /// Why a run that did not converge failed. It diverged when its iterates left the region
-/// where the model can be integrated, or ran out of iterations with the cost above where it
+/// where the model can be evaluated, or ran out of iterations with the cost above where it
 /// started.
 fn failure(e: &Estimate) -> String {
     let first = e.history.first().map(|h| h.cost);
     let last = e.history.last().map(|h| h.cost);
     match &e.termination {
         Termination::Converged(_) => "converged",
-        Termination::IntegrationFailed { .. } if e.iterations > 0 => "diverged",
-        Termination::IntegrationFailed { .. } => "integration_failed",
+        Termination::Stalled { rule: Rule::NoDescent, .. } => "no_descent",
+        Termination::Stalled { .. } => "stalled",
+        Termination::StartFailed(_) => "integration_failed",
+        Termination::Failed { failure, .. } => match failure {
+            Failure::Integration { .. } | Failure::NonFinite { .. } => "diverged",
+            Failure::Singular { .. } => "singular",
+            Failure::Budget { .. } => "integration_budget",
+            Failure::Solver(_) => "solver_failed",
+        },
+        Termination::IntegrationBudget { .. } => "integration_budget",
         Termination::MaxIterations => match (first, last) {
             (Some(a), Some(b)) if b > a || b.is_nan() => "diverged",
             _ => "max_iterations",
         },
-        Termination::SingularNormalMatrix { .. } => "singular",
-        Termination::NoDescent => "no_descent",
-        Termination::SolverFailed { .. } => "solver_failed",
     }
     .to_string()
 }

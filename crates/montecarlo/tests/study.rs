@@ -38,6 +38,8 @@ fn study<S: System + Clone + Send + Sync>(
         noise: 1.0,
         perturb,
         seed: 7,
+        fixed: Vec::new(),
+        driver: Default::default(),
     };
     let methods = methods.iter().map(|m| method(m)).collect();
     Study::new(spec, Scenario::from_case(case).unwrap(), methods, method("goodman-halving"))

@@ -22,6 +22,11 @@ pub trait Rhs {
     fn describe(&self, i: usize) -> String {
         format!("component {i}")
     }
+    /// How many leading components are the model's states (the others being sensitivities
+    /// or other derived quantities): a blow-up is reported on a state when one grew.
+    fn states(&self) -> usize {
+        self.dim()
+    }
     /// For implicit (Rosenbrock) steps: evaluates the Jacobian ∂f/∂x at (t, x) exactly and
     /// factorises E = I·`inv_gamma_h` − ∂f/∂x. Default: unsupported (explicit schemes only).
     fn factor(
@@ -163,16 +168,17 @@ impl<R: Rhs> Stepper<'_, R> {
     /// The error to report for a failed integration whose state at t is x: a blow-up when a
     /// component overflowed or grew beyond [`BLOW_UP_GROWTH`] times `start`, `e` otherwise.
     fn explain(&self, e: OdeError, start: f64, t: f64, x: &[f64]) -> OdeError {
-        let largest = x
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| !v.is_nan())
-            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()));
-        match largest {
-            Some((i, &value)) if value.abs() > BLOW_UP_GROWTH * start => {
-                OdeError::BlowUp { t, what: self.rhs.describe(i), value, start }
-            }
-            _ => e,
+        let largest = |from: usize, to: usize| {
+            (from..to.min(x.len()))
+                .filter(|&i| !x[i].is_nan())
+                .max_by(|&a, &b| x[a].abs().total_cmp(&x[b].abs()))
+                .filter(|&i| x[i].abs() > BLOW_UP_GROWTH * start)
+        };
+        // A state that grew is the news; sensitivities grow with it, and faster.
+        let states = self.rhs.states();
+        match largest(0, states).or_else(|| largest(states, x.len())) {
+            Some(i) => OdeError::BlowUp { t, what: self.rhs.describe(i), value: x[i], start },
+            None => e,
         }
     }
 

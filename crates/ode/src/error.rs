@@ -4,7 +4,7 @@ use thiserror::Error;
 
 /// Growth of the largest component, relative to the largest magnitude at the start (at
 /// least 1), beyond which a failed integration is reported as [`OdeError::BlowUp`].
-pub const BLOW_UP_GROWTH: f64 = 1e8;
+pub const BLOW_UP_GROWTH: f64 = 1e6;
 
 /// Why an integration stopped before reaching its end.
 #[derive(Clone, Debug, Error, PartialEq)]

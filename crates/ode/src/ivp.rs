@@ -257,6 +257,10 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         }
     }
 
+    fn states(&self) -> usize {
+        self.sys.signature().n_states()
+    }
+
     fn describe(&self, i: usize) -> String {
         let sig = self.sys.signature();
         let n = sig.n_states();

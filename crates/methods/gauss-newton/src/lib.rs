@@ -46,5 +46,5 @@ mod residuals;
 mod solver;
 
 pub use options::{GaussNewtonOptions, JacobianSource};
-pub use residuals::{Evaluation, Residuals};
+pub use residuals::{Cache, Evaluation, Residuals};
 pub use solver::GaussNewton;

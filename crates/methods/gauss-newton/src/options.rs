@@ -1,6 +1,7 @@
 //! Options of the Gauss–Newton baseline.
 
 use serde::{Deserialize, Serialize};
+use sysid_core::{DriverOptions, OptionsError};
 
 /// Where the Jacobian of the residuals comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -19,8 +20,10 @@ pub enum JacobianSource {
 /// Options with documented defaults.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GaussNewtonOptions {
-    /// Most iterations (default 50).
-    pub max_iterations: u64,
+    /// The iteration's budgets, step tolerance and the certificate's tolerance, shared by
+    /// every method ([`DriverOptions`]; a failed solve counts as singular above its
+    /// `max_condition`, where argmin itself only fails on an exactly singular JᵀJ).
+    pub driver: DriverOptions,
     /// argmin's stopping rule: |‖r_prev‖ − ‖r‖| below `tolerance · max(‖r(start)‖, 1)`
     /// (argmin's test is absolute; it is made relative to the starting residual here;
     /// default 1e-12).
@@ -32,33 +35,31 @@ pub struct GaussNewtonOptions {
     pub armijo: f64,
     /// The Jacobian (default: sensitivities).
     pub jacobian: JacobianSource,
-    /// Condition number of the scaled normal matrix above which a failed solve is reported as
-    /// singular (default 1e12; argmin itself only fails on an exactly singular JᵀJ).
-    pub max_condition: f64,
 }
 
 impl Default for GaussNewtonOptions {
     fn default() -> Self {
         Self {
-            max_iterations: 50,
+            driver: DriverOptions::default(),
             tolerance: 1e-12,
             line_search: false,
             armijo: 1e-4,
             jacobian: JacobianSource::Sensitivities,
-            max_condition: 1e12,
         }
     }
 }
 
 impl GaussNewtonOptions {
-    /// Checks the options; returns a description of the first problem.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
-            return Err(format!("tolerance must be positive, got {}", self.tolerance));
-        }
-        if !(self.armijo > 0.0 && self.armijo < 1.0) {
-            return Err(format!("the Armijo constant must lie in (0, 1), got {}", self.armijo));
-        }
-        Ok(())
+    /// The same options with another iteration budget.
+    pub fn with_max_iterations(mut self, max_iterations: usize) -> Self {
+        self.driver.max_iterations = max_iterations;
+        self
+    }
+
+    /// Checks the options.
+    pub fn validate(&self) -> Result<(), OptionsError> {
+        self.driver.validate()?;
+        OptionsError::positive("tolerance", self.tolerance)?;
+        OptionsError::within("armijo", self.armijo, 0.0, 1.0)
     }
 }

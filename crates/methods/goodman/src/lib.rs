@@ -18,9 +18,11 @@
 //! full steps, so a poor start can diverge. [`GoodmanOptions::step_halving`] adds a
 //! safeguard (off by default, to keep the paper's method).
 //!
-//! **When it stops.** [`Termination`](sysid_core::Termination): converged (step or gradient
-//! tolerance, or an exact fit), iteration limit, a singular normal matrix with the unknowns
-//! the data cannot tell apart, or an integration failure with its time.
+//! **When it stops.** The shared driver ([`sysid_core::drive`]) applies the step and gradient
+//! tests, the budgets and the certificate; see [`Termination`](sysid_core::Termination):
+//! converged, stalled (a rule fired where the cost is not stationary), iteration or
+//! integration budget, a singular normal matrix, or an integration failure with its time; a
+//! failure after the start reports the best iterate.
 //!
 //! ```
 //! use sysid_core::{Data, Method, Problem};
@@ -57,7 +59,7 @@ pub mod step;
 
 pub use options::GoodmanOptions;
 pub use solver::Goodman;
-pub use step::{NewtonStep, gradient_measure, newton_step};
+pub use step::{NewtonStep, newton_step};
 
 #[doc(no_inline)]
 pub use sysid_core::Problem;

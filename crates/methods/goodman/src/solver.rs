@@ -1,15 +1,15 @@
-//! The iteration loop and its termination.
+//! Goodman's method as a [`Step`] of the shared driver: the Newton step of eq. (14) and, as
+//! an option, step halving.
 
-use std::time::Instant;
-
+use nalgebra::DVector;
 use sysid_core::{
-    Convergence, Estimate, FitError, Iteration, Linearization, Method, Problem, Run, Termination,
-    start_coordinates,
+    Advance, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem, Proposal, Rule,
+    Step, drive,
 };
-use sysid_ode::{Counts, OdeError, System};
+use sysid_ode::System;
 
 use crate::options::GoodmanOptions;
-use crate::step::{gradient_measure, newton_step};
+use crate::step::newton_step;
 
 /// Goodman's method with its options.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -31,149 +31,99 @@ impl<S: System> Method<S> for Goodman {
     }
 
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
-        self.options.validate().map_err(FitError::InvalidOptions)?;
-        let started = Instant::now();
-        let mut z = start_coordinates(problem, start)?;
+        self.options.validate()?;
         let name = <Self as Method<S>>::name(self);
-        let mut counts = Counts::default();
-        let mut history = Vec::new();
-        let finish =
-            |z: &[f64], last: Option<&Linearization>, iterations, termination, history, counts| {
-                let run = Run { iterations, termination, history, started, counts };
-                Ok(problem.estimate(name, z, last, run))
-            };
-        let mut lin = match problem.linearize(&z) {
-            Ok(lin) => lin,
-            Err(e) => {
-                let t = Termination::IntegrationFailed { message: e.to_string() };
-                return finish(&z, None, 0, t, history, counts);
-            }
-        };
-        counts += lin.counts;
-        let opts = &self.options;
-        let step_tolerance = problem.resolvable_step(opts.step_tolerance);
-        let mut iterations = 0;
-        let mut step_norm = None;
-        let termination = loop {
-            history.push(Iteration {
-                iteration: iterations,
-                cost: lin.cost,
-                gradient_norm: lin.gradient.norm(),
-                step_norm,
-                condition: None,
-                values: problem.unknowns().values(&z),
-                linear_cost: None,
-            });
-            if lin.cost == 0.0 {
-                break Termination::Converged(Convergence::ExactFit);
-            }
-            let held = problem.unknowns().active(&z, lin.gradient.as_slice());
-            let step = match newton_step(&lin, opts.max_condition, &held) {
-                Ok(step) => step,
-                Err(singular) => {
-                    let names = problem.names();
-                    break Termination::SingularNormalMatrix {
-                        unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
-                        condition: singular.condition,
-                    };
-                }
-            };
-            if let Some(row) = history.last_mut() {
-                row.condition = Some(step.condition);
-            }
-            if gradient_measure(&lin, &held) <= opts.gradient_tolerance {
-                break Termination::Converged(Convergence::Gradient);
-            }
-            // The decrease the step predicts: ε − ε_lin(z + δ) = δᵀAδ for the Newton step.
-            let predicted = step.delta.dot(&(&lin.normal * &step.delta));
-            if opts.cost_tolerance > 0.0 && predicted <= opts.cost_tolerance * lin.cost {
-                break Termination::Converged(Convergence::CostChange);
-            }
-            // The step as it would be taken: projected on the bounds.
-            let mut projected: Vec<f64> = z.iter().zip(&step.delta).map(|(z, d)| z + d).collect();
-            problem.unknowns().project(&mut projected);
-            let moved = projected.iter().zip(&z).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
-            let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if moved <= step_tolerance * (z_norm + step_tolerance) {
-                break Termination::Converged(Convergence::Step);
-            }
-            if iterations >= opts.max_iterations {
-                break Termination::MaxIterations;
-            }
-            // c ← c* + δc, then integrate again from the new initial vector.
-            match update(problem, &z, &lin, &step.delta, opts, &mut counts) {
-                Update::Accepted(trial, l) => {
-                    let moved = trial.iter().zip(&z).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
-                    step_norm = Some(moved.sqrt());
-                    z = trial;
-                    lin = l;
-                    iterations += 1;
-                }
-                Update::Failed(e) => {
-                    break Termination::IntegrationFailed { message: e.to_string() };
-                }
-                Update::NoDescent => break Termination::NoDescent,
-                Update::Negligible => break Termination::Converged(Convergence::Step),
-            }
-        };
-        finish(&z, Some(&lin), iterations, termination, history, counts)
+        let mut step = Newton { options: &self.options, delta: DVector::zeros(0) };
+        drive(problem, name, &self.options.driver, &mut step, start)
     }
 }
 
-/// The outcome of applying a Newton step.
-enum Update {
-    /// The new iterate and its linearization.
-    Accepted(Vec<f64>, Linearization),
-    /// The model could not be integrated at the new iterate (full step, no halving).
-    Failed(OdeError),
-    /// Halving never reduced the cost.
-    NoDescent,
-    /// Halving shrank the step below the step tolerance without reducing the cost: the cost
-    /// no longer changes beyond the integration's noise, so the iterate has converged.
-    Negligible,
+/// The state of Goodman's iteration between proposing and taking a step.
+struct Newton<'o> {
+    options: &'o GoodmanOptions,
+    /// The Newton step of the last proposal (before projection on the bounds).
+    delta: DVector<f64>,
 }
 
-/// Applies z + δ (projected on the bounds). With step halving, halves δ while the cost rises
-/// or the integration fails, at most `max_halvings` times.
-fn update<S: System>(
-    problem: &Problem<S>,
-    z: &[f64],
-    lin: &Linearization,
-    delta: &nalgebra::DVector<f64>,
-    opts: &GoodmanOptions,
-    counts: &mut Counts,
-) -> Update {
-    let mut scale = 1.0;
-    let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let step_tolerance = problem.resolvable_step(opts.step_tolerance);
-    let negligible = step_tolerance * (z_norm + step_tolerance);
-    // ε is computed to about rtol relative: a rise smaller than that says nothing.
-    let resolution = problem.integrator().rtol * lin.cost;
-    for _ in 0..=opts.max_halvings {
-        if scale < 1.0 && scale * delta.norm() <= negligible {
-            return Update::Negligible;
-        }
-        let mut trial: Vec<f64> = z.iter().zip(delta).map(|(z, d)| z + scale * d).collect();
-        problem.unknowns().project(&mut trial);
-        match problem.linearize(&trial) {
-            Ok(l) => {
-                *counts += l.counts;
-                // The decrease the linearization predicts for this step: a step it expects
-                // to change ε by less than ε's accuracy is judged by the iteration's tests,
-                // not by comparing two costs that agree to their accuracy.
-                let d = nalgebra::DVector::from_iterator(
-                    trial.len(),
-                    trial.iter().zip(z).map(|(a, b)| a - b),
-                );
-                let predicted = -(2.0 * lin.gradient.dot(&d) + d.dot(&(&lin.normal * &d)));
-                if !opts.step_halving || l.cost <= lin.cost || predicted <= resolution {
-                    return Update::Accepted(trial, l);
-                }
-            }
-            Err(e) if !opts.step_halving => return Update::Failed(e),
-            Err(_) => {}
-        }
-        scale *= 0.5;
+impl<S: System> Step<S> for Newton<'_> {
+    /// Integrates the model and its variational equations at the start: U* and A.
+    fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
+        ev.linearize(&z).map(Iterate::linearized)
     }
-    Update::NoDescent
+
+    /// Solves A δc = −U* (eq. 14) for the unknowns not held on a bound; the proposal is
+    /// c* + δc projected on the bounds.
+    fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
+        let problem = ev.problem();
+        let lin = current.linearization.as_ref().expect("Goodman's iterates are linearized");
+        let held = problem.unknowns().active(&current.z, lin.gradient.as_slice());
+        let step =
+            newton_step(lin, self.options.driver.max_condition, &held).map_err(|singular| {
+                let names = problem.names();
+                Failure::Singular {
+                    unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
+                    condition: singular.condition,
+                }
+            })?;
+        // The decrease the step predicts: ε − ε_lin(z + δ) = δᵀAδ for the Newton step.
+        let predicted = step.delta.dot(&(&lin.normal * &step.delta));
+        let cost_tolerance = self.options.cost_tolerance;
+        let stop = (cost_tolerance > 0.0 && predicted <= cost_tolerance * lin.cost)
+            .then_some(Rule::PredictedDecrease);
+        let mut z: Vec<f64> = current.z.iter().zip(&step.delta).map(|(z, d)| z + d).collect();
+        problem.unknowns().project(&mut z);
+        self.delta = step.delta;
+        Ok(Proposal { z, condition: Some(step.condition), gradient_norm: None, stop })
+    }
+
+    /// c ← c* + δc, then integrate again from the new initial vector. With step halving, δc
+    /// is halved while the cost rises or the integration fails, at most `max_halvings` times.
+    fn advance(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        current: &Iterate,
+        proposal: Proposal,
+    ) -> Result<Advance, Failure> {
+        if !self.options.step_halving {
+            return ev.linearize(&proposal.z).map(|l| Advance::Moved(Iterate::linearized(l)));
+        }
+        let problem = ev.problem();
+        let lin = current.linearization.as_ref().expect("Goodman's iterates are linearized");
+        let z = &current.z;
+        let step_tolerance = problem.resolvable_step(self.options.driver.step_tolerance);
+        let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let negligible = step_tolerance * (z_norm + step_tolerance);
+        // ε is computed to about rtol relative: a rise smaller than that says nothing.
+        let resolution = problem.integrator().rtol * lin.cost;
+        let mut scale = 1.0;
+        for _ in 0..=self.options.max_halvings {
+            if scale < 1.0 && scale * self.delta.norm() <= negligible {
+                // Shrunk below the step tolerance without reducing the cost.
+                return Ok(Advance::Stop(Rule::Step));
+            }
+            let mut trial: Vec<f64> =
+                z.iter().zip(&self.delta).map(|(z, d)| z + scale * d).collect();
+            problem.unknowns().project(&mut trial);
+            match ev.linearize(&trial) {
+                Ok(l) => {
+                    // The decrease the linearization predicts for this step: a step it
+                    // expects to change ε by less than ε's accuracy is judged by the
+                    // iteration's tests, not by comparing two costs that agree to their
+                    // accuracy.
+                    let d = DVector::from_iterator(
+                        trial.len(),
+                        trial.iter().zip(z).map(|(a, b)| a - b),
+                    );
+                    let predicted = -(2.0 * lin.gradient.dot(&d) + d.dot(&(&lin.normal * &d)));
+                    if l.cost <= lin.cost || predicted <= resolution {
+                        return Ok(Advance::Moved(Iterate::linearized(l)));
+                    }
+                }
+                Err(budget @ Failure::Budget { .. }) => return Err(budget),
+                Err(_) => {}
+            }
+            scale *= 0.5;
+        }
+        Ok(Advance::Stop(Rule::NoDescent))
+    }
 }

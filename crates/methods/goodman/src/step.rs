@@ -30,29 +30,27 @@ pub fn newton_step(
     max_condition: f64,
     held: &[bool],
 ) -> Result<NewtonStep, Singular> {
-    let free: Vec<usize> = (0..lin.gradient.len()).filter(|&i| !held[i]).collect();
-    let mut delta = DVector::zeros(lin.gradient.len());
+    let k = lin.gradient.len();
+    let free: Vec<usize> = (0..k).filter(|&i| !held[i]).collect();
+    let mut delta = DVector::zeros(k);
     if free.is_empty() {
         return Ok(NewtonStep { delta, condition: 1.0 });
     }
     let a = lin.normal.select_rows(&free).select_columns(&free);
     let u = lin.gradient.select_rows(&free);
-    let factor = NormalFactor::new(&a, max_condition).map_err(|s| Singular {
-        unknowns: s.unknowns.iter().map(|&i| free[i]).collect(),
-        condition: s.condition,
+    let factor = NormalFactor::new(&a, max_condition).map_err(|s| {
+        let mut direction = vec![0.0; k];
+        for (d, &i) in s.direction.iter().zip(&free) {
+            direction[i] = *d;
+        }
+        Singular {
+            unknowns: s.unknowns.iter().map(|&i| free[i]).collect(),
+            condition: s.condition,
+            direction,
+        }
     })?;
     for (d, &i) in factor.solve(&u).iter().zip(&free) {
         delta[i] = -d;
     }
     Ok(NewtonStep { delta, condition: factor.condition() })
-}
-
-/// max_i |U_i| / √(A_ii ε) over the unknowns not held at a bound: the largest cosine between
-/// the residual and a sensitivity. It is zero at a stationary point of ε and does not depend
-/// on units.
-pub fn gradient_measure(lin: &Linearization, held: &[bool]) -> f64 {
-    (0..lin.gradient.len())
-        .filter(|&i| !held[i])
-        .map(|i| lin.gradient[i].abs() / (lin.normal[(i, i)] * lin.cost).sqrt())
-        .fold(0.0, f64::max)
 }

@@ -1,10 +1,10 @@
 //! Goodman's method beyond the paper's example: convergence rate, termination reasons,
 //! initial time inside the data, outputs, scales and bounds.
 
-use sysid_core::{Data, FitError, Method, Problem, Termination, Unknown};
+use sysid_core::{Data, Failure, FitError, Method, Problem, Termination, Unknown};
 use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_ode::testing::{Decay, assert_close};
-use sysid_ode::{Integrator, Ivp, Scalar, Signature, System};
+use sysid_ode::{Integrator, Ivp, OdeError, Scalar, Signature, System};
 use sysid_systems::VanDerPol;
 
 fn tight() -> Integrator {
@@ -103,14 +103,28 @@ fn singular_normal_matrix_names_the_unknowns() {
         .unwrap();
     let estimate = Goodman::default().fit(&problem).unwrap();
     match &estimate.termination {
-        Termination::SingularNormalMatrix { unknowns, condition } => {
+        Termination::Failed {
+            iteration: 0,
+            failure: Failure::Singular { unknowns, condition },
+        } => {
             assert_eq!(unknowns, &["a", "b"]);
             assert!(*condition > 1e12);
         }
         other => panic!("unexpected {other}"),
     }
-    assert!(estimate.termination.to_string().contains("cannot tell apart a, b"));
+    assert!(
+        estimate.termination.to_string().contains("involving a, b"),
+        "{}",
+        estimate.termination
+    );
     assert!(estimate.values.iter().all(|v| v.is_finite()));
+    assert!(!estimate.converged(), "a + b = 0.4 against 0.7 in the data: not a minimum");
+    // The start is kept and the certificate names the direction the data cannot see: δa = −δb.
+    let space = estimate.certificate.null_space.as_ref().expect("singular at the start");
+    assert_eq!(space.unknowns, ["a", "b"]);
+    assert!((space.direction[0] + space.direction[1]).abs() < 1e-8, "{:?}", space.direction);
+    let combination = space.combination(&problem);
+    assert!(combination == "a − b" || combination == "−a + b", "{combination}");
 
     let problem = Problem::builder(sys)
         .known("x", 1.0)
@@ -122,7 +136,7 @@ fn singular_normal_matrix_names_the_unknowns() {
         .unwrap();
     let estimate = Goodman::default().fit(&problem).unwrap();
     assert!(
-        matches!(&estimate.termination, Termination::SingularNormalMatrix { unknowns, .. } if unknowns == &["c"]),
+        matches!(&estimate.termination, Termination::Failed { failure: Failure::Singular { unknowns, .. }, .. } if unknowns == &["c"]),
         "{}",
         estimate.termination
     );
@@ -150,11 +164,16 @@ fn integration_failure_reports_where() {
         Problem::builder(sys).known("x", 1.0).unknown("p", 1.0).data(data).build().unwrap();
     let estimate = Goodman::default().fit(&problem).unwrap();
     match &estimate.termination {
-        Termination::IntegrationFailed { message } => {
-            assert!(message.contains("at t = 0.99") || message.contains("at t = 1"), "{message}");
+        Termination::StartFailed(Failure::Integration {
+            error: OdeError::BlowUp { t, .. },
+            at,
+        }) => {
+            assert!((t - 1.0).abs() < 1e-6, "{}", estimate.termination);
+            assert_eq!(at, &[1.0]);
         }
         other => panic!("unexpected {other}"),
     }
+    assert!(estimate.start_failed());
     assert!(estimate.cost.is_nan(), "no cost where the model cannot be integrated");
     assert_eq!(estimate.iterations, 0);
 }
@@ -261,7 +280,9 @@ fn misuse_is_an_error() {
     let method = Goodman::default();
     assert!(matches!(method.fit_from(&problem, &[1.0]), Err(FitError::InvalidStart(_))));
     assert!(matches!(method.fit_from(&problem, &[1.0, f64::NAN]), Err(FitError::InvalidStart(_))));
-    let bad = Goodman::new(GoodmanOptions { step_tolerance: -1.0, ..GoodmanOptions::default() });
+    let mut options = GoodmanOptions::default();
+    options.driver.step_tolerance = -1.0;
+    let bad = Goodman::new(options);
     assert!(matches!(bad.fit(&problem), Err(FitError::InvalidOptions(_))));
 }
 

@@ -2,6 +2,8 @@
 
 use std::sync::Arc;
 
+use sysid_core::{DriverOptions, OptionsError};
+
 /// A trajectory of all states as a function of time: `f(t, y)` writes y(t).
 pub type StateFunction = Arc<dyn Fn(f64, &mut [f64]) + Send + Sync>;
 
@@ -30,25 +32,14 @@ impl std::fmt::Debug for Start {
 }
 
 /// Options with documented defaults.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct QuasilinearizationOptions {
-    /// Most updates of the unknowns (default 50).
-    pub max_iterations: usize,
-    /// Converged when the update satisfies ‖c_{k+1} − c_k‖ ≤ tol · (‖c_k‖ + tol), tol not
-    /// below the integrator's rtol
-    /// ([`Problem::resolvable_step`](sysid_core::Problem::resolvable_step); default 1e-10).
-    pub step_tolerance: f64,
+    /// The iteration's budgets, step tolerance (on ‖c_{k+1} − c_k‖) and the certificate's
+    /// tolerance, shared by every method ([`DriverOptions`]; the least-squares problem of
+    /// the linear family counts as singular above its `max_condition`).
+    pub driver: DriverOptions,
     /// The first trajectory (default: from the guess).
     pub start: Start,
-    /// The least-squares problem counts as singular when the condition number of the
-    /// Jacobi-scaled BᵀB exceeds this (default 1e12).
-    pub max_condition: f64,
-}
-
-impl Default for QuasilinearizationOptions {
-    fn default() -> Self {
-        Self { max_iterations: 50, step_tolerance: 1e-10, start: Start::Guess, max_condition: 1e12 }
-    }
 }
 
 impl QuasilinearizationOptions {
@@ -57,17 +48,14 @@ impl QuasilinearizationOptions {
         Self { start, ..self }
     }
 
-    /// Checks the options; returns a description of the first problem.
-    pub fn validate(&self) -> Result<(), String> {
-        if !(self.step_tolerance >= 0.0 && self.step_tolerance.is_finite()) {
-            return Err(format!(
-                "step_tolerance must be non-negative, got {}",
-                self.step_tolerance
-            ));
-        }
-        if self.max_condition.is_nan() || self.max_condition <= 1.0 {
-            return Err(format!("max_condition must exceed 1, got {}", self.max_condition));
-        }
-        Ok(())
+    /// The same options with another iteration budget.
+    pub fn with_max_iterations(mut self, max_iterations: usize) -> Self {
+        self.driver.max_iterations = max_iterations;
+        self
+    }
+
+    /// Checks the options.
+    pub fn validate(&self) -> Result<(), OptionsError> {
+        self.driver.validate()
     }
 }

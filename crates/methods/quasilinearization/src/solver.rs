@@ -1,15 +1,14 @@
-//! The iteration loop and its termination.
-
-use std::time::Instant;
+//! Quasilinearization as a [`Step`] of the shared driver: integrate the linear family around
+//! the current trajectory, choose its constants by least squares, move to p + Φc.
 
 use sysid_core::{
-    Convergence, Estimate, FitError, Iteration, Linearization, Method, Problem, Run, Termination,
-    start_coordinates,
+    Advance, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem, Proposal, Step,
+    drive,
 };
 use sysid_ode::{Counts, System};
 
 use crate::options::{QuasilinearizationOptions, Start};
-use crate::step::{LeastSquares, integrate_family, next_trajectory};
+use crate::step::{Family, LeastSquares, integrate_family, next_trajectory};
 use crate::trajectory::{Layout, Trajectory};
 
 /// Quasilinearization with its options.
@@ -23,9 +22,9 @@ pub struct Quasilinearization {
 pub struct QuasilinearizationRun {
     /// The estimate.
     pub estimate: Estimate,
-    /// The trajectory the method ended on (the state at the estimate, as the linear family
-    /// gives it).
-    pub trajectory: Trajectory,
+    /// The last trajectory of the iteration (the state at the estimate, as the linear family
+    /// gives it, when the run ended on a stopping rule).
+    pub trajectory: Option<Trajectory>,
 }
 
 impl Quasilinearization {
@@ -53,8 +52,7 @@ impl Quasilinearization {
         problem: &Problem<S>,
         start: &[f64],
     ) -> Result<QuasilinearizationRun, FitError> {
-        let opts = &self.options;
-        opts.validate().map_err(FitError::InvalidOptions)?;
+        self.options.validate()?;
         let name = self.method_name();
         if let Some(u) =
             problem.unknowns().list().iter().zip(problem.unknowns().wrt()).find_map(|(u, w)| {
@@ -69,96 +67,14 @@ impl Quasilinearization {
                 ),
             });
         }
-        let started = Instant::now();
-        let mut z = start_coordinates(problem, start)?;
-        let layout = Layout::new(problem);
-        let mut counts = Counts::default();
-        let mut history = Vec::new();
-        let finish = |z: &[f64],
-                      last: Option<&Linearization>,
-                      trajectory,
-                      iterations,
-                      termination,
-                      history,
-                      counts| {
-            let run = Run { iterations, termination, history, started, counts };
-            Ok(QuasilinearizationRun { estimate: problem.estimate(name, z, last, run), trajectory })
+        let mut step = Quasi {
+            options: &self.options,
+            layout: Layout::new(problem),
+            trajectory: None,
+            proposed: None,
         };
-        // The nonlinear model's cost at an iterate: the measure every method reports.
-        let nonlinear_cost = |z: &[f64], counts: &mut Counts| match problem.cost(z) {
-            Ok((cost, c)) => {
-                *counts += c;
-                cost
-            }
-            Err(_) => f64::NAN,
-        };
-        let mut trajectory = match Trajectory::start(problem, &z, &opts.start) {
-            Ok((t, c)) => {
-                counts += c;
-                t
-            }
-            Err(e) => {
-                let termination = Termination::IntegrationFailed { message: e.to_string() };
-                let empty = Trajectory::linear(sysid_ode::DenseSolution::new(layout.n), z.clone());
-                return finish(&z, None, empty, 0, termination, history, counts);
-            }
-        };
-        let mut cost = nonlinear_cost(&z, &mut counts);
-        let (mut iterations, mut step_norm, mut linear_cost) = (0, None, None);
-        let mut last: Option<Linearization> = None;
-        let termination = loop {
-            let family = match integrate_family(problem, &layout, &trajectory) {
-                Ok(f) => f,
-                Err(e) => break Termination::IntegrationFailed { message: e.to_string() },
-            };
-            counts += family.counts;
-            let ls = LeastSquares::new(problem, &layout, &trajectory, &family);
-            let mut here = ls.linearization(&z, Counts::default());
-            if cost.is_finite() {
-                // Report the nonlinear model's cost, the measure all methods share.
-                here.cost = cost;
-            }
-            history.push(Iteration {
-                iteration: iterations,
-                cost,
-                gradient_norm: here.gradient.norm(),
-                step_norm,
-                condition: None,
-                values: problem.unknowns().values(&z),
-                linear_cost,
-            });
-            last = Some(here);
-            let (mut c, condition) = match ls.solve(opts.max_condition) {
-                Ok(solution) => solution,
-                Err(singular) => {
-                    let names = problem.names();
-                    break Termination::SingularNormalMatrix {
-                        unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
-                        condition: singular.condition,
-                    };
-                }
-            };
-            if let Some(row) = history.last_mut() {
-                row.condition = Some(condition);
-            }
-            problem.unknowns().project(c.as_mut_slice());
-            let step = c.iter().zip(&z).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
-            let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let tolerance = problem.resolvable_step(opts.step_tolerance);
-            if step <= tolerance * (z_norm + tolerance) {
-                break Termination::Converged(Convergence::Step);
-            }
-            if iterations >= opts.max_iterations {
-                break Termination::MaxIterations;
-            }
-            linear_cost = Some(ls.residual(c.as_slice()).norm_squared());
-            trajectory = next_trajectory(&layout, &family, c.as_slice());
-            z = c.as_slice().to_vec();
-            cost = nonlinear_cost(&z, &mut counts);
-            step_norm = Some(step);
-            iterations += 1;
-        };
-        finish(&z, last.as_ref(), trajectory, iterations, termination, history, counts)
+        let estimate = drive(problem, name, &self.options.driver, &mut step, start)?;
+        Ok(QuasilinearizationRun { estimate, trajectory: step.trajectory })
     }
 }
 
@@ -169,5 +85,84 @@ impl<S: System> Method<S> for Quasilinearization {
 
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         self.run(problem, start).map(|r| r.estimate)
+    }
+}
+
+/// The state of the iteration: the trajectory x_k(t) and the family of the last proposal.
+struct Quasi<'o> {
+    options: &'o QuasilinearizationOptions,
+    layout: Layout,
+    trajectory: Option<Trajectory>,
+    /// The family around x_k, its least-squares constants c and the linear family's ε there.
+    proposed: Option<(Family, Vec<f64>, f64)>,
+}
+
+/// The nonlinear model's cost at an iterate, the measure every method reports. The method
+/// does not need it to move on (its iterates need not be solutions of the model), so a point
+/// where the model cannot be integrated gets NaN; only a used-up budget ends the run.
+fn nonlinear_cost<S: System>(ev: &Evaluations<'_, S>, z: &[f64]) -> Result<f64, Failure> {
+    match ev.cost(z) {
+        Ok(cost) => Ok(cost),
+        Err(budget @ Failure::Budget { .. }) => Err(budget),
+        Err(_) => Ok(f64::NAN),
+    }
+}
+
+impl<S: System> Step<S> for Quasi<'_> {
+    /// The first trajectory: the model from the guess, the data, or the caller's.
+    fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
+        let problem = ev.problem();
+        let trajectory = ev.run(&z, || Trajectory::start(problem, &z, &self.options.start))?;
+        self.trajectory = Some(trajectory);
+        let cost = nonlinear_cost(ev, &z)?;
+        Ok(Iterate { z, cost, gradient_norm: None, linearization: None, linear_cost: None })
+    }
+
+    /// Integrates p and Φ around x_k and chooses c by least squares (QR), projected on the
+    /// bounds.
+    fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
+        let problem = ev.problem();
+        let trajectory = self.trajectory.as_ref().expect("started");
+        let layout = &self.layout;
+        let family = ev.run(&current.z, || {
+            integrate_family(problem, layout, trajectory).map(|f| {
+                let counts = f.counts;
+                (f, counts)
+            })
+        })?;
+        let ls = LeastSquares::new(problem, layout, trajectory, &family);
+        let gradient_norm = Some(ls.linearization(&current.z, Counts::default()).gradient.norm());
+        let (mut c, condition) =
+            ls.solve(self.options.driver.max_condition).map_err(|singular| {
+                let names = problem.names();
+                Failure::Singular {
+                    unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
+                    condition: singular.condition,
+                }
+            })?;
+        problem.unknowns().project(c.as_mut_slice());
+        let z = c.as_slice().to_vec();
+        let linear_cost = ls.residual(&z).norm_squared();
+        self.proposed = Some((family, z.clone(), linear_cost));
+        Ok(Proposal { z, condition: Some(condition), gradient_norm, stop: None })
+    }
+
+    /// x_{k+1} = p + Φ c, kept as a dense solution; the nonlinear model's cost at c.
+    fn advance(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        _current: &Iterate,
+        _proposal: Proposal,
+    ) -> Result<Advance, Failure> {
+        let (family, z, linear_cost) = self.proposed.take().expect("a proposal to take");
+        self.trajectory = Some(next_trajectory(&self.layout, &family, &z));
+        let cost = nonlinear_cost(ev, &z)?;
+        Ok(Advance::Moved(Iterate {
+            z,
+            cost,
+            gradient_norm: None,
+            linearization: None,
+            linear_cost: Some(linear_cost),
+        }))
     }
 }

@@ -136,6 +136,10 @@ impl<S: System> Rhs for LinearRhs<'_, S> {
         }
     }
 
+    fn states(&self) -> usize {
+        self.n
+    }
+
     fn describe(&self, i: usize) -> String {
         let sig = self.sys.signature();
         if i < self.n {

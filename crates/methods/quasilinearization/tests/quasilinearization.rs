@@ -92,8 +92,9 @@ fn van_der_pol_same_minimum_as_goodman() {
         .unwrap();
     let mut y = [0.0; 2];
     let mut hint = 0;
+    let trajectory = run.trajectory.expect("the run's last trajectory");
     for (m, &t) in times.iter().enumerate() {
-        run.trajectory.eval(t, &mut hint, &mut y);
+        trajectory.eval(t, &mut hint, &mut y);
         for (yi, fi) in y.iter().zip(fresh.state(m)) {
             // rtol 1e-8 over 20 time units of an oscillator with |x| ≤ 2.1: 1e-6 absolute.
             assert_close_abs(*yi, *fi, 1e-6);
@@ -179,7 +180,10 @@ fn backward_instability_defeats_goodman_not_quasilinearization() {
     // Finding: van der Pol's limit cycle repels in reverse time. With t0 = 10 inside a record
     // on [0, 20], Goodman's iterates are re-integrated backwards from perturbed states and
     // blow up; quasilinearization moves whole trajectories of the linearised model and
-    // converges, to a minimum Goodman confirms when started there.
+    // converges, to a minimum Goodman confirms when started there. Integrating backwards
+    // across an unstable cycle amplifies the integration error: at rtol 1e-8 the first-order
+    // optimality cannot be resolved below about 5e-6 here (both methods stop on the step
+    // test, stalled), so the test integrates at 1e-10, where the measure reaches 4e-8.
     let case = van_der_pol::van_der_pol();
     let (y0, p) = case.true_point();
     let at10 = Ivp::new(&case.system, 0.0, &y0, &p)
@@ -191,11 +195,18 @@ fn backward_instability_defeats_goodman_not_quasilinearization() {
         .unknown("v", at10.state(0)[1] - 0.05)
         .unknown("mu", 1.1)
         .data(case.data(1).unwrap())
+        .integrator(Integrator::dopri5(1e-10, 1e-12))
         .build()
         .unwrap();
     let goodman = Goodman::default().fit(&problem).unwrap();
     assert!(
-        matches!(goodman.termination, sysid_core::Termination::IntegrationFailed { .. }),
+        matches!(
+            goodman.termination,
+            sysid_core::Termination::Failed {
+                failure: sysid_core::Failure::Integration { .. },
+                ..
+            }
+        ),
         "{}",
         goodman.termination
     );
@@ -247,9 +258,7 @@ fn a_supplied_trajectory_and_misuse() {
     assert_close(e.cost, goodman.cost, 1e-8);
 
     assert!(Quasilinearization::default().fit_from(&problem, &[1.0]).is_err());
-    let bad = QuasilinearizationOptions {
-        step_tolerance: f64::NAN,
-        ..QuasilinearizationOptions::default()
-    };
+    let mut bad = QuasilinearizationOptions::default();
+    bad.driver.step_tolerance = f64::NAN;
     assert!(Quasilinearization::new(bad).fit(&problem).is_err());
 }

@@ -1,0 +1,178 @@
+//! The certificate: one first-order test at the point a method returns, the same for every
+//! method, that decides whether the fit converged. A method's stopping rule says when to
+//! stop; the certificate says whether the point is a minimum.
+//!
+//! With the weighted residuals r = W^½ (h − b), their Jacobian J, ε = ‖r‖², the half
+//! gradient g = Jᵀr (Goodman's U) and a_i = ‖J_i‖² (the diagonal of A), the measure of
+//! unknown i is
+//!
+//!   m_i = min( |g_i| / (√a_i ‖r‖),  √a_i d_i / ‖r‖ ),
+//!
+//! where d_i is the distance from z_i to the bound that the descent direction −g_i points at
+//! (∞ without one). The first term is MINPACK's gtol cosine between the residual and the
+//! column J_i: scale-free, 0 at a stationary point, at most 1. The second is the relative
+//! change of ‖r‖ (to first order) that moving z_i onto that bound could make: 0 for an
+//! unknown held on its bound by a gradient that pushes outwards, so such an unknown counts
+//! as not free (scipy's `active_mask`, Ceres' projected gradient); away from bounds it is
+//! large and the cosine decides. The optimality is max_i m_i; the point is certified when
+//! it is at most `gtol`, or when the model passes through the data: ‖r‖ ≤ 1e-10 ‖W^½ b‖, a
+//! cost within 1e-20 ‖W^½ b‖² of the least possible cost 0. Non-finite r, g or A never pass.
+
+use serde::Serialize;
+use sysid_ode::System;
+
+use crate::linalg::NormalFactor;
+use crate::problem::{Linearization, Problem};
+
+/// ‖W^½ r‖ / ‖W^½ b‖ at or below which the model passes through the data (ε = 0 to rounding).
+pub const EXACT_FIT: f64 = 1e-10;
+
+/// The bound an unknown is held on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Bound {
+    /// Its minimum.
+    Lower,
+    /// Its maximum.
+    Upper,
+}
+
+/// A direction the data cannot see: the normal matrix is singular at the point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NullSpace {
+    /// Names of the unknowns involved.
+    pub unknowns: Vec<String>,
+    /// Condition number of the Jacobi-scaled normal matrix.
+    pub condition: f64,
+    /// The combination of coordinate changes δz the data do not constrain (largest
+    /// component ±1), one entry per unknown.
+    pub direction: Vec<f64>,
+}
+
+/// The verdict on a returned point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Certificate {
+    /// max_i m_i (module docs); 0 for an exact fit, ∞ when r, g or A is not finite.
+    pub optimality: f64,
+    /// The tolerance it was held to.
+    pub gtol: f64,
+    /// The model passes through the data (ε = 0 to rounding).
+    pub exact_fit: bool,
+    /// Per unknown: the bound it is held on, if any.
+    pub active: Vec<Option<Bound>>,
+    /// The direction the data cannot identify, when the normal matrix is singular there.
+    pub null_space: Option<NullSpace>,
+}
+
+impl Certificate {
+    /// Whether the point is certified: the first-order test holds (or ε = 0 to rounding).
+    pub fn holds(&self) -> bool {
+        self.exact_fit || self.optimality <= self.gtol
+    }
+
+    /// The certificate of a point that could not be evaluated.
+    pub fn failed(k: usize, gtol: f64) -> Self {
+        Self {
+            optimality: f64::INFINITY,
+            gtol,
+            exact_fit: false,
+            active: vec![None; k],
+            null_space: None,
+        }
+    }
+}
+
+/// The first-order optimality measure at `lin` (coordinates `lin.z`) with the bounds of
+/// `problem`'s unknowns, and the bound each unknown is held on.
+pub fn optimality<S: System>(
+    problem: &Problem<S>,
+    lin: &Linearization,
+    gtol: f64,
+) -> (f64, Vec<Option<Bound>>) {
+    let k = lin.gradient.len();
+    let norm_r = lin.cost.sqrt();
+    let finite = lin.cost.is_finite()
+        && lin.gradient.iter().all(|v| v.is_finite())
+        && lin.normal.iter().all(|v| v.is_finite());
+    if !finite {
+        return (f64::INFINITY, vec![None; k]);
+    }
+    let mut worst = 0.0f64;
+    let mut active = vec![None; k];
+    for (i, u) in problem.unknowns().list().iter().enumerate() {
+        let (g, a) = (lin.gradient[i], lin.normal[(i, i)]);
+        if g == 0.0 || a == 0.0 {
+            continue;
+        }
+        let cosine = g.abs() / (a.sqrt() * norm_r);
+        let (lo, hi) = u.coordinate_bounds();
+        // Descent (−g) lowers z_i when g > 0.
+        let (distance, bound) =
+            if g > 0.0 { (lin.z[i] - lo, Bound::Lower) } else { (hi - lin.z[i], Bound::Upper) };
+        let to_bound = a.sqrt() * distance.max(0.0) / norm_r;
+        if to_bound < cosine && to_bound <= gtol {
+            active[i] = Some(bound);
+        }
+        let m = cosine.min(to_bound);
+        worst = if m.is_nan() { f64::INFINITY } else { worst.max(m) };
+    }
+    (worst, active)
+}
+
+/// The certificate at `lin` (the model's linearization at the returned point): optimality,
+/// active bounds, exact fit, and the null space when the normal matrix is singular (condition
+/// above `max_condition`).
+pub fn certify<S: System>(
+    problem: &Problem<S>,
+    lin: &Linearization,
+    gtol: f64,
+    max_condition: f64,
+) -> Certificate {
+    let (measure, active) = optimality(problem, lin, gtol);
+    let exact_fit = lin.cost.is_finite() && lin.cost.sqrt() <= EXACT_FIT * problem.data_norm();
+    let null_space = if lin.normal.iter().all(|v| v.is_finite()) {
+        NormalFactor::new(&lin.normal, max_condition).err().map(|s| {
+            let names = problem.names();
+            NullSpace {
+                unknowns: s.unknowns.iter().map(|&i| names[i].clone()).collect(),
+                condition: s.condition,
+                direction: s.direction,
+            }
+        })
+    } else {
+        None
+    };
+    Certificate {
+        optimality: if exact_fit { 0.0 } else { measure },
+        gtol,
+        exact_fit,
+        active,
+        null_space,
+    }
+}
+
+impl NullSpace {
+    /// The combination as a readable sum, "ln k1 − 0.98·ln k2" (coordinates: ln of log-scale
+    /// unknowns), terms below 1 % of the largest left out.
+    pub fn combination<S: System>(&self, problem: &Problem<S>) -> String {
+        let mut out = String::new();
+        for (u, &c) in problem.unknowns().list().iter().zip(&self.direction) {
+            if c.abs() < 0.01 {
+                continue;
+            }
+            let name = if u.log { format!("ln {}", u.name) } else { u.name.clone() };
+            let sign = if c < 0.0 { "−" } else { "+" };
+            let magnitude = if (c.abs() - 1.0).abs() < 5e-3 {
+                String::new()
+            } else {
+                format!("{:.2}·", c.abs())
+            };
+            if out.is_empty() {
+                out = format!("{}{magnitude}{name}", if c < 0.0 { "−" } else { "" });
+            } else {
+                out += &format!(" {sign} {magnitude}{name}");
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,146 @@
+//! Every model integration a method makes goes through [`Evaluations`]: it counts the work,
+//! enforces the hard budget of integrations (inside line searches and step halvings too, so
+//! no fit runs without an end), and turns what cannot be used (an integration failure, a
+//! cost or gradient that overflows) into a [`Failure`] that names the point.
+
+use std::cell::Cell;
+
+use nalgebra::DVector;
+use sysid_ode::{Counts, OdeError, System};
+
+use crate::problem::{Linearization, Problem};
+use crate::termination::Failure;
+
+/// Counted, budgeted access to a problem's evaluations. One per fit; not shared between
+/// threads.
+pub struct Evaluations<'p, S> {
+    problem: &'p Problem<S>,
+    budget: u64,
+    counts: Cell<Counts>,
+}
+
+impl<'p, S: System> Evaluations<'p, S> {
+    /// Evaluations of `problem` with a budget of `budget` integrations.
+    pub fn new(problem: &'p Problem<S>, budget: u64) -> Self {
+        Self { problem, budget, counts: Cell::new(Counts::default()) }
+    }
+
+    /// The problem.
+    pub fn problem(&self) -> &'p Problem<S> {
+        self.problem
+    }
+
+    /// The work so far.
+    pub fn counts(&self) -> Counts {
+        self.counts.get()
+    }
+
+    /// The budget of integrations.
+    pub fn budget(&self) -> u64 {
+        self.budget
+    }
+
+    /// Runs `integrate`, which makes model integrations and returns its work, if the budget
+    /// allows another; a failure is reported at the values of `z`.
+    pub fn run<T>(
+        &self,
+        z: &[f64],
+        integrate: impl FnOnce() -> Result<(T, Counts), OdeError>,
+    ) -> Result<T, Failure> {
+        let used = self.counts.get().integrations;
+        if used >= self.budget {
+            return Err(Failure::Budget { integrations: used });
+        }
+        match integrate() {
+            Ok((value, counts)) => {
+                self.add(counts);
+                Ok(value)
+            }
+            Err(error) => {
+                // A failed integration counts as one.
+                self.add(Counts { integrations: 1, ..Counts::default() });
+                Err(Failure::Integration { error, at: self.values(z) })
+            }
+        }
+    }
+
+    /// Adds work done outside [`run`](Self::run).
+    pub fn add(&self, counts: Counts) {
+        let mut c = self.counts.get();
+        c += counts;
+        self.counts.set(c);
+    }
+
+    /// ε, U and A at z ([`Problem::linearize`]), all finite.
+    pub fn linearize(&self, z: &[f64]) -> Result<Linearization, Failure> {
+        let lin = self.run(z, || self.problem.linearize(z).map(with_counts))?;
+        self.check(z, &lin)?;
+        Ok(lin)
+    }
+
+    /// The weighted residuals and their Jacobian at z
+    /// ([`Problem::residuals_and_jacobian`]), with ε, U and A, all finite.
+    pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, Failure> {
+        let lin = self.run(z, || self.problem.residuals_and_jacobian(z).map(with_counts))?;
+        self.check(z, &lin)?;
+        Ok(lin)
+    }
+
+    /// The weighted residuals at z ([`Problem::residuals`]), with a finite sum of squares.
+    pub fn residuals(&self, z: &[f64]) -> Result<DVector<f64>, Failure> {
+        let r = self.run(z, || self.problem.residuals(z))?;
+        if !r.norm_squared().is_finite() {
+            return Err(self.overflow(z, "the cost ε", Some(&r)));
+        }
+        Ok(r)
+    }
+
+    /// ε at z by the accurate plain integration ([`Problem::cost`]), finite.
+    pub fn cost(&self, z: &[f64]) -> Result<f64, Failure> {
+        let cost = self.run(z, || self.problem.cost(z))?;
+        if !cost.is_finite() {
+            return Err(self.overflow(z, "the cost ε", None));
+        }
+        Ok(cost)
+    }
+
+    fn values(&self, z: &[f64]) -> Vec<f64> {
+        self.problem.unknowns().values(z)
+    }
+
+    fn check(&self, z: &[f64], lin: &Linearization) -> Result<(), Failure> {
+        let r = lin.residuals.as_ref().map(|w| &w.r);
+        if !lin.cost.is_finite() {
+            return Err(self.overflow(z, "the cost ε", r));
+        }
+        if lin.gradient.iter().any(|v| !v.is_finite()) {
+            return Err(self.overflow(z, "the gradient U", None));
+        }
+        if lin.normal.iter().any(|v| !v.is_finite()) {
+            return Err(self.overflow(z, "the normal matrix A", None));
+        }
+        Ok(())
+    }
+
+    /// A non-finite quantity at z; for the cost, the residual row that overflows (the
+    /// largest one when only their sum does).
+    fn overflow(&self, z: &[f64], what: &str, r: Option<&DVector<f64>>) -> Failure {
+        let what = match r {
+            Some(r) if !r.is_empty() => {
+                let row = r.iamax();
+                format!(
+                    "{what} (the weighted residual of {} is {:e}; its square overflows)",
+                    self.problem.describe_row(row),
+                    r[row]
+                )
+            }
+            _ => what.to_string(),
+        };
+        Failure::NonFinite { what, at: self.values(z) }
+    }
+}
+
+fn with_counts(lin: Linearization) -> (Linearization, Counts) {
+    let counts = lin.counts;
+    (lin, counts)
+}

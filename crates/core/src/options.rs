@@ -1,0 +1,149 @@
+//! What every method's iteration shares: the budgets, the stopping tolerances the driver
+//! applies, and the certificate's tolerance; and the errors of invalid options.
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// An option that cannot be used, with its name and value.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum OptionsError {
+    /// A tolerance or constant must be a non-negative finite number.
+    #[error("{name} must be a non-negative number, got {value}")]
+    Negative {
+        /// The option.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A tolerance or constant must be a positive finite number.
+    #[error("{name} must be a positive number, got {value}")]
+    NotPositive {
+        /// The option.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A number must lie in an open interval.
+    #[error("{name} must lie in ({low}, {high}), got {value}")]
+    OutOfRange {
+        /// The option.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// Lower end (excluded).
+        low: f64,
+        /// Upper end (excluded).
+        high: f64,
+    },
+    /// A count must be at least 1.
+    #[error("{name} must be at least 1")]
+    Zero {
+        /// The option.
+        name: &'static str,
+    },
+}
+
+impl OptionsError {
+    /// Checks that `value` is finite and ≥ 0.
+    pub fn non_negative(name: &'static str, value: f64) -> Result<(), Self> {
+        if value >= 0.0 && value.is_finite() { Ok(()) } else { Err(Self::Negative { name, value }) }
+    }
+    /// Checks that `value` is finite and > 0.
+    pub fn positive(name: &'static str, value: f64) -> Result<(), Self> {
+        if value > 0.0 && value.is_finite() {
+            Ok(())
+        } else {
+            Err(Self::NotPositive { name, value })
+        }
+    }
+    /// Checks that `value` lies in (low, high).
+    pub fn within(name: &'static str, value: f64, low: f64, high: f64) -> Result<(), Self> {
+        if value > low && value < high {
+            Ok(())
+        } else {
+            Err(Self::OutOfRange { name, value, low, high })
+        }
+    }
+}
+
+/// The certificate's default tolerance on the first-order optimality measure, at the
+/// default integrator tolerance (rtol 1e-8); looser integrations get 100·rtol. At the true
+/// minima of the catalogue the measure is at most 8.8e-8 at rtol 1e-8 (the integration's
+/// noise, about 9·rtol), so 1e-6 leaves a factor 11; and a point that passes is within
+/// about k·κ·gtol² (κ the scaled condition number) of the minimum's cost. The README ("What
+/// converged means") has the measurements.
+pub const DEFAULT_GTOL: f64 = 1e-6;
+
+/// Options of the iteration driver, the same for every method (a method's options embed
+/// them). Defaults: 50 iterations, step tolerance 1e-10, gradient tolerance 1e-10, gtol
+/// max([`DEFAULT_GTOL`], 100·rtol), singular above condition 1e12, integration budget
+/// 10·(k + 1)·(max_iterations + 1) for k unknowns.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct DriverOptions {
+    /// Most updates of the unknowns.
+    pub max_iterations: usize,
+    /// Stop when the step satisfies ‖δz‖ ≤ tol·(‖z‖ + tol), tol not below the integrator's
+    /// rtol ([`Problem::resolvable_step`](crate::Problem::resolvable_step)).
+    pub step_tolerance: f64,
+    /// Stop when the first-order optimality measure at an iterate (where the method computed
+    /// the model's sensitivities there) is at most this.
+    pub gradient_tolerance: f64,
+    /// The certificate: the returned point counts as converged when its first-order
+    /// optimality measure is at most this (or the model passes through the data). `None`:
+    /// max([`DEFAULT_GTOL`], 100·rtol) for the problem's integrator, which cannot resolve
+    /// the measure much below 10·rtol.
+    pub gtol: Option<f64>,
+    /// A normal matrix counts as singular when the condition number of its Jacobi-scaled
+    /// form exceeds this.
+    pub max_condition: f64,
+    /// The hard budget of model integrations (trial points of line searches and halvings
+    /// included); `None`: 10·(k + 1)·(max_iterations + 1).
+    pub max_integrations: Option<u64>,
+}
+
+impl Default for DriverOptions {
+    fn default() -> Self {
+        Self {
+            max_iterations: 50,
+            step_tolerance: 1e-10,
+            gradient_tolerance: 1e-10,
+            gtol: None,
+            max_condition: 1e12,
+            max_integrations: None,
+        }
+    }
+}
+
+impl DriverOptions {
+    /// Checks the options.
+    pub fn validate(&self) -> Result<(), OptionsError> {
+        OptionsError::non_negative("step_tolerance", self.step_tolerance)?;
+        OptionsError::non_negative("gradient_tolerance", self.gradient_tolerance)?;
+        if let Some(gtol) = self.gtol {
+            OptionsError::within("gtol", gtol, 0.0, 1.0)?;
+        }
+        if self.max_condition.is_nan() || self.max_condition <= 1.0 {
+            return Err(OptionsError::OutOfRange {
+                name: "max_condition",
+                value: self.max_condition,
+                low: 1.0,
+                high: f64::INFINITY,
+            });
+        }
+        if self.max_integrations == Some(0) {
+            return Err(OptionsError::Zero { name: "max_integrations" });
+        }
+        Ok(())
+    }
+
+    /// The certificate's tolerance for an integrator of relative tolerance `rtol`.
+    pub fn gtol_for(&self, rtol: f64) -> f64 {
+        self.gtol.unwrap_or((100.0 * rtol).max(DEFAULT_GTOL))
+    }
+
+    /// The integration budget for k unknowns.
+    pub fn integration_budget(&self, k: usize) -> u64 {
+        self.max_integrations.unwrap_or(10 * (k as u64 + 1) * (self.max_iterations as u64 + 1))
+    }
+}

@@ -1,0 +1,219 @@
+//! Why a run ended, as data: the stopping rule that fired (judged by the certificate), the
+//! budget that ran out, or the failure with the iteration and the point where it happened.
+//!
+//! Every termination has a stable snake_case [`code`](Termination::code), the
+//! `termination_code` of the JSON report; the README lists them.
+
+use std::fmt;
+
+use serde::Serialize;
+use sysid_ode::OdeError;
+
+/// A method's own stopping rule. It says when to stop iterating, not whether the point is a
+/// minimum: the [`Certificate`](crate::Certificate) says that, and decides between
+/// [`Termination::Converged`] and [`Termination::Stalled`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Rule {
+    /// The (projected) step fell below the step tolerance: ‖δz‖ ≤ tol·(‖z‖ + tol).
+    Step,
+    /// The first-order optimality measure fell below the gradient tolerance.
+    Gradient,
+    /// The decrease of ε the next step predicts fell below a fraction of ε (MINPACK's ftol,
+    /// Goodman's cost tolerance).
+    PredictedDecrease,
+    /// ‖r‖ changed by less than the tolerance between two iterates (argmin's rule).
+    CostChange,
+    /// No step along the search direction reduced the cost (step halving, line search).
+    NoDescent,
+    /// ε is exactly 0: the model passes through every data point.
+    ExactFit,
+}
+
+impl Rule {
+    /// The rule's snake_case name.
+    pub fn code(self) -> &'static str {
+        match self {
+            Rule::Step => "step",
+            Rule::Gradient => "gradient",
+            Rule::PredictedDecrease => "predicted_decrease",
+            Rule::CostChange => "cost_change",
+            Rule::NoDescent => "no_descent",
+            Rule::ExactFit => "exact_fit",
+        }
+    }
+}
+
+impl fmt::Display for Rule {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Rule::Step => "step below tolerance",
+            Rule::Gradient => "gradient below tolerance",
+            Rule::PredictedDecrease => "predicted decrease of the cost below tolerance",
+            Rule::CostChange => "cost change below tolerance",
+            Rule::NoDescent => "no step along the search direction reduced the cost",
+            Rule::ExactFit => "the model passes through the data (ε = 0)",
+        })
+    }
+}
+
+/// What went wrong at a point. Values are the unknowns' values (not coordinates).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Failure {
+    /// The model could not be integrated at `at` (including a solution that blows up).
+    Integration {
+        /// The integrator's error, with its time.
+        error: OdeError,
+        /// The unknowns where it failed.
+        at: Vec<f64>,
+    },
+    /// The model integrated, but ε, its gradient or the normal matrix is not finite there
+    /// (overflow).
+    NonFinite {
+        /// Which quantity, and the residual row when one overflows.
+        what: String,
+        /// The unknowns where it happened.
+        at: Vec<f64>,
+    },
+    /// The (method's) normal matrix is singular at the iterate the step starts from.
+    Singular {
+        /// Names of the unknowns in the near null space, in problem order.
+        unknowns: Vec<String>,
+        /// Condition number of the Jacobi-scaled matrix.
+        condition: f64,
+    },
+    /// The hard budget of model integrations is used up.
+    Budget {
+        /// Integrations made.
+        integrations: u64,
+    },
+    /// The optimisation library stopped with an error of its own.
+    Solver(String),
+}
+
+impl Failure {
+    /// Where it happened, when it is a point.
+    pub fn at(&self) -> Option<&[f64]> {
+        match self {
+            Failure::Integration { at, .. } | Failure::NonFinite { at, .. } => Some(at),
+            _ => None,
+        }
+    }
+
+    fn code(&self) -> &'static str {
+        match self {
+            Failure::Integration { error: OdeError::BlowUp { .. }, .. } => "blow_up",
+            Failure::Integration { .. } => "integration_failed",
+            Failure::NonFinite { .. } => "non_finite",
+            Failure::Singular { .. } => "singular",
+            Failure::Budget { .. } => "integration_budget",
+            Failure::Solver(_) => "solver_failed",
+        }
+    }
+}
+
+impl fmt::Display for Failure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Failure::Integration { error, .. } => write!(f, "{error}"),
+            Failure::NonFinite { what, .. } => write!(f, "{what} is not finite"),
+            Failure::Singular { unknowns, condition } => write!(
+                f,
+                "singular normal matrix (condition {condition:.1e}) involving {}",
+                unknowns.join(", ")
+            ),
+            Failure::Budget { integrations } => {
+                write!(f, "the budget of {integrations} model integrations is used up")
+            }
+            Failure::Solver(message) => write!(f, "solver error: {message}"),
+        }
+    }
+}
+
+/// Why a method stopped. Not converging is a result, not an error; whether the returned
+/// point is a minimum is the certificate's verdict ([`Estimate::converged`](crate::Estimate::converged)).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Termination {
+    /// A stopping rule fired and the certificate holds at the returned point.
+    Converged(Rule),
+    /// A stopping rule fired but the returned point fails the certificate: the method stopped
+    /// where the cost is not stationary.
+    Stalled {
+        /// The rule that stopped the method.
+        rule: Rule,
+        /// The certificate's measure there.
+        optimality: f64,
+    },
+    /// The iteration budget ran out.
+    MaxIterations,
+    /// The hard budget of model integrations ran out.
+    IntegrationBudget {
+        /// Integrations made.
+        integrations: u64,
+    },
+    /// Stepping from iterate `iteration` failed; the best iterate so far is reported.
+    Failed {
+        /// The iterate the step started from.
+        iteration: usize,
+        /// What went wrong, and where.
+        failure: Failure,
+    },
+    /// The starting point itself cannot be evaluated: not a result of the method, but a
+    /// start (or data) to change.
+    StartFailed(Failure),
+}
+
+impl Termination {
+    /// The stable snake_case tag of the JSON report's `termination_code`.
+    pub fn code(&self) -> String {
+        match self {
+            Termination::Converged(Rule::ExactFit) => "exact_fit".into(),
+            Termination::Converged(rule) => format!("converged_{}", rule.code()),
+            Termination::Stalled { rule, .. } => format!("stalled_{}", rule.code()),
+            Termination::MaxIterations => "max_iterations".into(),
+            Termination::IntegrationBudget { .. } => "integration_budget".into(),
+            Termination::Failed { failure, .. } => failure.code().into(),
+            Termination::StartFailed(_) => "start_failed".into(),
+        }
+    }
+
+    /// The failure, if the run ended on one.
+    pub fn failure(&self) -> Option<&Failure> {
+        match self {
+            Termination::Failed { failure, .. } | Termination::StartFailed(failure) => {
+                Some(failure)
+            }
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for Termination {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Termination::Converged(rule) => write!(f, "converged: {rule}"),
+            Termination::Stalled { rule, optimality } => write!(
+                f,
+                "stalled: {rule}, but the point is not a minimum (first-order optimality {optimality:.2e})"
+            ),
+            Termination::MaxIterations => write!(f, "iteration limit reached"),
+            Termination::IntegrationBudget { integrations } => {
+                write!(f, "the budget of {integrations} model integrations is used up")
+            }
+            Termination::Failed {
+                iteration,
+                failure: Failure::Singular { unknowns, condition },
+            } => {
+                write!(
+                    f,
+                    "singular normal matrix at iteration {iteration} (condition {condition:.1e}, involving {})",
+                    unknowns.join(", ")
+                )
+            }
+            Termination::Failed { iteration, failure } => {
+                write!(f, "failed stepping from iteration {iteration}: {failure}")
+            }
+            Termination::StartFailed(failure) => write!(f, "the start cannot be used: {failure}"),
+        }
+    }
+}
