@@ -192,13 +192,7 @@ pub fn drive<S: System>(
         }
         iteration += 1;
     };
-    // A rule judges the iterate it stopped at; otherwise the best iterate is returned.
-    let (at, point) = match (&ending, best) {
-        (Ending::Rule(_), _) => (iteration, current),
-        (_, Some((i, b))) if is_better(&b, Some(&current)) => (i, b),
-        _ => (iteration, current),
-    };
-    Ok(record.finish(&ev, at, point, iteration, ending, history))
+    Ok(record.finish(&ev, (iteration, current), best, ending, history))
 }
 
 /// Whether `a` has a finite cost below `b`'s (or `b` is missing or has none).
@@ -243,19 +237,72 @@ impl<S: System> Record<'_, S> {
         self.estimate(ev, point, None, certificate, termination, (0, 0), Vec::new())
     }
 
-    /// The estimate at `point` (iterate `at` of `iterations` updates) after `ending`.
+    /// The estimate after `ending`, with `current` the last iterate (its number is the count
+    /// of updates) and `best` the best earlier one. A rule that the certificate confirms
+    /// returns the iterate it stopped at; anything else returns the best iterate.
     fn finish(
         &self,
         ev: &Evaluations<'_, S>,
-        at: usize,
-        point: Iterate,
-        iterations: usize,
+        (iterations, current): (usize, Iterate),
+        best: Option<(usize, Iterate)>,
         ending: Ending,
         history: Vec<Iteration>,
     ) -> Estimate {
+        let mut stalled = None;
+        if let Ending::Rule(rule) = ending {
+            let (lin, certificate) = self.judge(ev, &current);
+            if certificate.holds() {
+                let termination = Termination::Converged(rule);
+                let at = (iterations, iterations);
+                return self.estimate(
+                    ev,
+                    current,
+                    lin.as_ref(),
+                    certificate,
+                    termination,
+                    at,
+                    history,
+                );
+            }
+            stalled = Some((rule, certificate.optimality, lin, certificate));
+        }
+        let termination = match ending {
+            Ending::Rule(rule) => Termination::Stalled {
+                rule,
+                iteration: iterations,
+                optimality: stalled.as_ref().map_or(f64::INFINITY, |s| s.1),
+            },
+            Ending::MaxIterations => Termination::MaxIterations,
+            Ending::Failed { failure: Failure::Budget { integrations }, .. } => {
+                Termination::IntegrationBudget { integrations }
+            }
+            Ending::Failed { iteration, failure } => Termination::Failed { iteration, failure },
+        };
+        let (at, point, lin, certificate) = match best {
+            Some((i, b)) if is_better(&b, Some(&current)) => {
+                let (lin, certificate) = self.judge(ev, &b);
+                (i, b, lin, certificate)
+            }
+            _ => {
+                let (lin, certificate) = match stalled {
+                    Some((.., lin, certificate)) => (lin, certificate),
+                    None => self.judge(ev, &current),
+                };
+                (iterations, current, lin, certificate)
+            }
+        };
+        self.estimate(ev, point, lin.as_ref(), certificate, termination, (at, iterations), history)
+    }
+
+    /// The model's linearization at `point` and the certificate there: the method's own
+    /// linearization when it made one, else one more integration (outside the budget: the
+    /// verdict needs it).
+    fn judge(
+        &self,
+        ev: &Evaluations<'_, S>,
+        point: &Iterate,
+    ) -> (Option<Linearization>, Certificate) {
         let problem = self.problem;
-        // The model's linearization at the returned point: the method's own when it made
-        // one there, else one more integration (outside the budget: the verdict needs it).
         let lin = match &point.linearization {
             Some(lin) => Some(lin.clone()),
             None => match problem.linearize(&point.z) {
@@ -270,16 +317,7 @@ impl<S: System> Record<'_, S> {
             Some(lin) => certify(problem, lin, self.gtol, self.options.max_condition),
             None => Certificate::failed(point.z.len(), self.gtol),
         };
-        let termination = match ending {
-            Ending::Rule(rule) if certificate.holds() => Termination::Converged(rule),
-            Ending::Rule(rule) => Termination::Stalled { rule, optimality: certificate.optimality },
-            Ending::MaxIterations => Termination::MaxIterations,
-            Ending::Failed { failure: Failure::Budget { integrations }, .. } => {
-                Termination::IntegrationBudget { integrations }
-            }
-            Ending::Failed { iteration, failure } => Termination::Failed { iteration, failure },
-        };
-        self.estimate(ev, point, lin.as_ref(), certificate, termination, (at, iterations), history)
+        (lin, certificate)
     }
 
     #[allow(clippy::too_many_arguments)]

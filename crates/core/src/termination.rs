@@ -136,11 +136,13 @@ impl fmt::Display for Failure {
 pub enum Termination {
     /// A stopping rule fired and the certificate holds at the returned point.
     Converged(Rule),
-    /// A stopping rule fired but the returned point fails the certificate: the method stopped
-    /// where the cost is not stationary.
+    /// A stopping rule fired at an iterate that fails the certificate: the method stopped
+    /// where the cost is not stationary. The best iterate is reported.
     Stalled {
         /// The rule that stopped the method.
         rule: Rule,
+        /// The iterate it stopped at.
+        iteration: usize,
         /// The certificate's measure there.
         optimality: f64,
     },
@@ -192,9 +194,9 @@ impl fmt::Display for Termination {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Termination::Converged(rule) => write!(f, "converged: {rule}"),
-            Termination::Stalled { rule, optimality } => write!(
+            Termination::Stalled { rule, iteration, optimality } => write!(
                 f,
-                "stalled: {rule}, but the point is not a minimum (first-order optimality {optimality:.2e})"
+                "stalled at iteration {iteration}: {rule}, but the point is not a minimum (first-order optimality {optimality:.2e})"
             ),
             Termination::MaxIterations => write!(f, "iteration limit reached"),
             Termination::IntegrationBudget { integrations } => {

@@ -29,17 +29,25 @@ pub struct Noise {
     /// Whether σ is relative to the true value: sample m then has the standard deviation
     /// σ·|y(t_m)| and the weight 1/(σ·y(t_m))².
     pub relative: bool,
+    /// Whether the series is weighted by 1/σ² (eq. 32); unweighted (weight 1) as a user
+    /// fitting raw counts would, the cost is then of the order of N σ².
+    pub weighted: bool,
 }
 
 impl Noise {
     /// Noise of standard deviation σ on every sample of `name`.
     pub fn absolute(name: &'static str, sigma: f64) -> Self {
-        Self { name, sigma, relative: false }
+        Self { name, sigma, relative: false, weighted: true }
     }
 
     /// Noise of standard deviation σ·|y(t_m)| (σ = 0.01: 1 % of the value).
     pub fn relative(name: &'static str, sigma: f64) -> Self {
-        Self { name, sigma, relative: true }
+        Self { name, sigma, relative: true, weighted: true }
+    }
+
+    /// The same noise, fitted with weight 1.
+    pub fn unweighted(self) -> Self {
+        Self { weighted: false, ..self }
     }
 }
 
@@ -120,7 +128,8 @@ impl<S: System + Clone> Case<S> {
                             data.series_with_weights(n.name, times, &values, &w)
                         }
                         false => {
-                            data.weighted_series(n.name, 1.0 / (n.sigma * n.sigma), times, &values)
+                            let w = if n.weighted { 1.0 / (n.sigma * n.sigma) } else { 1.0 };
+                            data.weighted_series(n.name, w, times, &values)
                         }
                     };
                 }

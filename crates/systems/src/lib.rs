@@ -43,6 +43,7 @@ pub mod fitzhugh_nagumo;
 pub mod lotka_volterra;
 pub mod robertson;
 pub mod short_period;
+pub mod stress;
 pub mod van_der_pol;
 
 pub use case::{Case, DataSource, Noise, Reference, grid, truth_integrator};
