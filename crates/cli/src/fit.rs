@@ -170,13 +170,15 @@ fn table<S: System>(problem: &Problem<S>, context: &Context, e: &Estimate) -> St
         "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}\n",
         "iteration", "cost ε", "|U|", "step", "condition", "optimality"
     );
-    let dash = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.3e}"));
+    let dash = |v: Option<f64>| {
+        v.filter(|v| v.is_finite()).map_or("—".to_string(), |v| format!("{v:.3e}"))
+    };
     for h in &e.history {
         out += &format!(
-            "  {:>9} {:>24} {:>12.3e} {:>12} {:>12} {:>12}\n",
+            "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}\n",
             h.iteration,
             significant(h.cost, 10),
-            h.gradient_norm,
+            dash(Some(h.gradient_norm)),
             dash(h.step_norm),
             dash(h.condition),
             dash(h.optimality)

@@ -722,7 +722,7 @@ fn study_paragraph(summary: &Summary) -> String {
         {
             let _ = write!(
                 p,
-                ", and each fit's own ±1.96 se interval covers the truth in {} to {} of them",
+                ", and each fit's own 95 % interval (Student's t, N − k degrees of freedom) covers the truth in {} to {} of them",
                 percent(c_lo),
                 percent(c_hi)
             );

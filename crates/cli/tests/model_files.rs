@@ -207,19 +207,24 @@ fn non_increasing_or_duplicate_times() {
         "dup",
         DECAY,
         "t,x\n0,2\n1,0.9\n1,0.4\n",
-        "data.csv:4: column `t`: time 1 is repeated (previous 1)",
+        "data.csv:4:1: column `t`: time 1 is repeated (previous 1)",
     );
     bad(
         "back",
         DECAY,
         "t,x\n0,2\n2,0.9\n1,0.4\n",
-        "data.csv:4: column `t`: time 1 goes back (previous 2)",
+        "data.csv:4:1: column `t`: time 1 goes back (previous 2)",
     );
 }
 
 #[test]
 fn non_numeric_cell() {
-    bad("cell", DECAY, "t,x\n0,2\n1,abc\n2,0.4\n", "data.csv:3: column `x`: `abc` is not a number");
+    bad(
+        "cell",
+        DECAY,
+        "t,x\n0,2\n1,abc\n2,0.4\n",
+        "data.csv:3:3: column `x`: `abc` is not a number",
+    );
 }
 
 #[test]
@@ -228,13 +233,13 @@ fn nan_or_infinite_values() {
         "nan",
         DECAY,
         "t,x\n0,2\n1,NaN\n2,0.4\n",
-        "data.csv:3: column `x`: `NaN` is not a finite number",
+        "data.csv:3:3: column `x`: `NaN` is not a finite number",
     );
     bad(
         "inf",
         DECAY,
         "t,x\n0,2\n1,inf\n2,0.4\n",
-        "data.csv:3: column `x`: `inf` is not a finite number",
+        "data.csv:3:3: column `x`: `inf` is not a finite number",
     );
     let model = DECAY.replace("x = 2.0", "x = nan");
     bad(

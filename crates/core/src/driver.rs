@@ -334,7 +334,8 @@ impl<S: System> Record<'_, S> {
         let problem = self.problem;
         let unknowns = problem.unknowns();
         let values = unknowns.values(&point.z);
-        let covariance = lin.and_then(|l| problem.covariance(l));
+        // s² A⁻¹ is the estimate's covariance at a minimum only.
+        let covariance = lin.filter(|_| certificate.holds()).and_then(|l| problem.covariance(l));
         let std_errors: Option<Vec<f64>> =
             covariance.as_ref().map(|c| (0..c.nrows()).map(|i| c[(i, i)].sqrt()).collect());
         let dof = problem.n_observations().map(|n| n.saturating_sub(unknowns.len()));

@@ -43,8 +43,9 @@ pub struct Estimate {
     pub names: Vec<String>,
     /// Estimated values.
     pub values: Vec<f64>,
-    /// Standard errors, sqrt(diag Cov) (None when there is no residual variance: as many data
-    /// as unknowns, or a record given as a function; or when A is singular).
+    /// Standard errors, sqrt(diag Cov) (None when the fit did not converge, when there is no
+    /// residual variance — as many data as unknowns, or a record given as a function — or
+    /// when A is singular).
     pub std_errors: Option<Vec<f64>>,
     /// 95 % intervals with Student's t for `dof` degrees of freedom (on a log scale formed
     /// for ln(value) and mapped back).

@@ -10,6 +10,8 @@ pub struct Table {
     source: String,
     headers: Vec<String>,
     time: Vec<f64>,
+    /// The file line of each row.
+    lines: Vec<u64>,
     /// Columns after the time column; `None` for an empty cell.
     columns: Vec<Vec<Option<f64>>>,
 }
@@ -21,6 +23,8 @@ pub struct TableError {
     pub source: String,
     /// 1-based line number, if the error is on a line.
     pub line: Option<u64>,
+    /// 1-based character position of the cell on its line, if the error is in a cell.
+    pub position: Option<usize>,
     /// The column, if the error is in one.
     pub column: Option<String>,
     /// What is wrong.
@@ -32,6 +36,9 @@ impl fmt::Display for TableError {
         write!(f, "{}", self.source)?;
         if let Some(line) = self.line {
             write!(f, ":{line}")?;
+            if let Some(position) = self.position {
+                write!(f, ":{position}")?;
+            }
         }
         if let Some(column) = &self.column {
             write!(f, ": column `{column}`")?;
@@ -49,6 +56,7 @@ impl Table {
         let text = std::fs::read_to_string(path).map_err(|e| TableError {
             source: source.clone(),
             line: None,
+            position: None,
             column: None,
             message: e.to_string(),
         })?;
@@ -60,8 +68,14 @@ impl Table {
         let err = |line: Option<u64>, column: Option<&str>, message: String| TableError {
             source: source.to_string(),
             line,
+            position: None,
             column: column.map(str::to_string),
             message,
+        };
+        // The same, at the cell of field `c` on `line`.
+        let at_cell = |line: Option<u64>, c: usize, column: &str, message: String| TableError {
+            position: line.and_then(|l| cell_position(text, l, c)),
+            ..err(line, Some(column), message)
         };
         let mut reader =
             csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(text.as_bytes());
@@ -83,6 +97,7 @@ impl Table {
             }
         }
         let mut time = Vec::new();
+        let mut lines = Vec::new();
         let mut columns = vec![Vec::new(); headers.len() - 1];
         for record in reader.records() {
             let record = record.map_err(|e| {
@@ -98,12 +113,13 @@ impl Table {
                     None
                 } else {
                     let v: f64 = cell.parse().map_err(|_| {
-                        err(line, Some(&headers[c]), format!("`{cell}` is not a number"))
+                        at_cell(line, c, &headers[c], format!("`{cell}` is not a number"))
                     })?;
                     if !v.is_finite() {
-                        return Err(err(
+                        return Err(at_cell(
                             line,
-                            Some(&headers[c]),
+                            c,
+                            &headers[c],
                             format!("`{cell}` is not a finite number"),
                         ));
                     }
@@ -111,19 +127,21 @@ impl Table {
                 };
                 if c == 0 {
                     let t = value.ok_or_else(|| {
-                        err(line, Some(&headers[0]), "the time is missing".into())
+                        at_cell(line, 0, &headers[0], "the time is missing".into())
                     })?;
                     if let Some(&previous) = time.last()
                         && t <= previous
                     {
                         let what = if t < previous { "goes back" } else { "is repeated" };
-                        return Err(err(
+                        return Err(at_cell(
                             line,
-                            Some(&headers[0]),
+                            0,
+                            &headers[0],
                             format!("time {t} {what} (previous {previous})"),
                         ));
                     }
                     time.push(t);
+                    lines.push(line.unwrap_or(0));
                 } else {
                     columns[c - 1].push(value);
                 }
@@ -132,7 +150,12 @@ impl Table {
         if time.is_empty() {
             return Err(err(None, None, "no data rows".into()));
         }
-        Ok(Self { source: source.to_string(), headers, time, columns })
+        Ok(Self { source: source.to_string(), headers, time, lines, columns })
+    }
+
+    /// The file line of data row `row` (0-based, in time order).
+    pub fn line(&self, row: usize) -> Option<u64> {
+        self.lines.get(row).copied().filter(|&l| l > 0)
     }
 
     /// Where the table came from.
@@ -162,6 +185,18 @@ impl Table {
     }
 }
 
+/// The 1-based character position of field `field` (0-based) on line `line` of `text`:
+/// after `field` commas, past leading blanks (a numeric table has no quoted commas).
+pub fn cell_position(text: &str, line: u64, field: usize) -> Option<usize> {
+    let raw = text.lines().nth(usize::try_from(line).ok()?.checked_sub(1)?)?;
+    let mut start = 0;
+    for _ in 0..field {
+        start += raw[start..].find(',')? + 1;
+    }
+    let blanks = raw[start..].chars().take_while(|c| c.is_whitespace()).count();
+    Some(raw[..start].chars().count() + blanks + 1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -178,11 +213,21 @@ mod tests {
     #[test]
     fn errors_name_file_line_and_column() {
         let e = |text: &str| Table::parse(text, "data.csv").unwrap_err().to_string();
-        assert_eq!(e("t,y\n0,1\n1,abc\n"), "data.csv:3: column `y`: `abc` is not a number");
-        assert_eq!(e("t,y\n0,1\n1,NaN\n"), "data.csv:3: column `y`: `NaN` is not a finite number");
-        assert_eq!(e("t,y\n0,1\n0,2\n"), "data.csv:3: column `t`: time 0 is repeated (previous 0)");
-        assert_eq!(e("t,y\n1,1\n0,2\n"), "data.csv:3: column `t`: time 0 goes back (previous 1)");
-        assert_eq!(e("t,y\n0,1\n,2\n"), "data.csv:3: column `t`: the time is missing");
+        assert_eq!(e("t,y\n0,1\n1,abc\n"), "data.csv:3:3: column `y`: `abc` is not a number");
+        assert_eq!(
+            e("t, y\n0, 1\n1,  NaN\n"),
+            "data.csv:3:5: column `y`: `NaN` is not a finite number"
+        );
+        assert_eq!(
+            e("t,y\n0,1\n1,1e400\n"),
+            "data.csv:3:3: column `y`: `1e400` is not a finite number"
+        );
+        assert_eq!(
+            e("t,y\n0,1\n0,2\n"),
+            "data.csv:3:1: column `t`: time 0 is repeated (previous 0)"
+        );
+        assert_eq!(e("t,y\n1,1\n0,2\n"), "data.csv:3:1: column `t`: time 0 goes back (previous 1)");
+        assert_eq!(e("t,y\n0,1\n,2\n"), "data.csv:3:1: column `t`: the time is missing");
         assert_eq!(e("t,y,y\n0,1,2\n"), "data.csv:1: column `y`: the name is used twice");
         assert_eq!(e("t,y\n"), "data.csv: no data rows");
         assert!(e("t,y\n0,1\n1,2,3\n").starts_with("data.csv:3: "), "{}", e("t,y\n0,1\n1,2,3\n"));

@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use sysid_core::Data;
-use sysid_core::table::{Table, TableError};
+use sysid_core::table::{Table, TableError, cell_position};
 use sysid_ode::{Inputs, Signal};
 
 use crate::error::ModelError;
@@ -19,11 +19,36 @@ pub struct ModelData {
     pub rows: usize,
 }
 
+/// The largest weighted magnitude whose square an f64 holds: a value beyond it makes the
+/// cost infinite whatever the model predicts.
+const LARGEST: f64 = 1.3e154;
+
+/// Refuses a measured value whose weighted square overflows, at its cell.
+fn overflow(table: &Table, text: &str, name: &str, weight: f64) -> Result<(), ModelError> {
+    let field = 1 + table.names().iter().position(|n| n == name).expect("a column");
+    let cells = table.column(name).expect("a column");
+    match cells.iter().position(|v| v.is_some_and(|v| v.abs() * weight.sqrt() > LARGEST)) {
+        None => Ok(()),
+        Some(row) => {
+            let line = table.line(row);
+            Err(ModelError {
+                file: table.source().to_string(),
+                line: line.map(|l| l as usize),
+                column: line.and_then(|l| cell_position(text, l, field)),
+                message: format!(
+                    "column `{name}`: {:e} is too large for least squares: its weighted square overflows (the largest usable magnitude is {LARGEST:.1e}/√w, w = {weight})",
+                    cells[row].unwrap_or_default()
+                ),
+            })
+        }
+    }
+}
+
 fn table_error(e: TableError) -> ModelError {
     ModelError {
         file: e.source,
         line: e.line.map(|l| l as usize),
-        column: None,
+        column: e.position,
         message: match e.column {
             Some(c) => format!("column `{c}`: {}", e.message),
             None => e.message,
@@ -105,6 +130,7 @@ pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
             return Err(ModelError::file(&file, format!("column `{name}` has no values")));
         }
         let weight = model.data.weights.iter().find(|w| &w.0 == name).map_or(1.0, |w| w.1);
+        overflow(&table, &text, name, weight)?;
         data = data.weighted_series(name, weight, &t, &v);
         measured += 1;
     }

@@ -217,3 +217,35 @@ fn goodman_is_efficient_for_mu_on_van_der_pol() {
     let coverage = mu.coverage.unwrap();
     assert!((0.9..=0.99).contains(&coverage), "coverage {coverage}");
 }
+
+#[test]
+fn intervals_with_one_degree_of_freedom_cover_95_percent() {
+    // The paper's falling body: 4 data, 3 unknowns, N − k = 1. A linear model with Gaussian
+    // noise: estimate ± t_{0.975, 1}·se (t = 12.71) covers the truth 95 % of the time
+    // exactly; ±1.96·se covers 70 % (P(|T₁| ≤ 1.96) = 2 arctan(1.96)/π). 2000 trials: the
+    // binomial standard deviation of a coverage is 0.5 %, so [92 %, 98 %] is six of them.
+    let case = sysid_systems::falling_body::falling_body();
+    let study = study(&case, &["goodman"], 2000, 0.3);
+    let scratch = Scratch::new("coverage");
+    let summary = files::run(&study, &scratch.join("fb"), None, false, &|_, _| {}).unwrap();
+    let goodman = &summary.methods[1];
+    assert_eq!(goodman.successes, 2000);
+    for a in &goodman.accuracy {
+        let coverage = a.coverage.unwrap();
+        assert!((0.92..=0.98).contains(&coverage), "{}: coverage {coverage}", a.name);
+    }
+    // The normal quantile would cover far less: recount with ±1.96 se from the records.
+    let (records, _, _) = results(&scratch.join("fb"));
+    let fits: Vec<&Value> = records.iter().filter(|r| r["method"] == "goodman").collect();
+    let truth = study.scenario().truth();
+    let inside = fits
+        .iter()
+        .filter(|r| {
+            let (v, se) = (&r["values"], &r["std_errors"]);
+            (v[2].as_f64().unwrap() - truth[2]).abs() <= 1.959964 * se[2].as_f64().unwrap()
+        })
+        .count();
+    let normal = inside as f64 / fits.len() as f64;
+    let expected = 2.0 * 1.959964f64.atan() / std::f64::consts::PI;
+    assert!((normal - expected).abs() < 0.03, "±1.96 se covers {normal}, expected {expected}");
+}
