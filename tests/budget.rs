@@ -6,8 +6,8 @@ use proptest::prelude::*;
 use sysid::core::{Data, DriverOptions, Method, Problem, Unknown};
 use sysid::gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
 use sysid::goodman::{Goodman, GoodmanOptions};
-use sysid::quasilinearization::{Quasilinearization, QuasilinearizationOptions, Start};
 use sysid::ode::Integrator;
+use sysid::quasilinearization::{Quasilinearization, QuasilinearizationOptions, Start};
 use sysid::systems::stress::Tracking;
 
 /// The hard budget of these tests: small, so that a runaway shows at once.

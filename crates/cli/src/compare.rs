@@ -84,8 +84,8 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         json.extend(records);
     }
     match args.format {
-        Format::Json => println!("{}", serde_json::to_string_pretty(&json)?),
-        Format::Table => print!("{}", tables.join("\n")),
+        Format::Json => crate::emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?,
+        Format::Table => crate::emit(&tables.join("\n"))?,
     }
     Ok(Outcome::Success)
 }

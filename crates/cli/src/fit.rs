@@ -51,10 +51,11 @@ impl WithProblem for FitProblem<'_> {
         let problem = prepare(problem, &args.integrator, &args.options)?;
         let estimate = fit(&problem, &args.method, args.options.common())?;
         match args.format {
-            Format::Json => {
-                println!("{}", serde_json::to_string_pretty(&estimate.record(&context.name))?)
-            }
-            Format::Table => print!("{}", table(&problem, &context, &estimate)),
+            Format::Json => crate::emit(&format!(
+                "{}\n",
+                serde_json::to_string_pretty(&estimate.record(&context.name))?
+            ))?,
+            Format::Table => crate::emit(&table(&problem, &context, &estimate))?,
         }
         Ok(if estimate.converged() { Outcome::Success } else { Outcome::NotConverged })
     }

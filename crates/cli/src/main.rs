@@ -103,10 +103,11 @@ fn main() -> ExitCode {
         Command::Merge(args) => study::merge(&args),
         Command::Report(args) => report::run(&args),
         Command::Systems => {
-            for (name, summary) in sysid_systems::summaries() {
-                println!("{name:<26} {summary}");
-            }
-            Ok(Outcome::Success)
+            let lines: Vec<String> = sysid_systems::summaries()
+                .into_iter()
+                .map(|(name, summary)| format!("{name:<26} {summary}\n"))
+                .collect();
+            emit(&lines.concat()).map(|()| Outcome::Success)
         }
     };
     match result {
@@ -116,6 +117,17 @@ fn main() -> ExitCode {
             eprintln!("error: {}", one_line(&format!("{e:#}")));
             ExitCode::from(2)
         }
+    }
+}
+
+/// Writes `text` to standard output. A reader that has gone away (`sysid ... | head`) is not
+/// an error: there is nobody left to tell.
+pub fn emit(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
     }
 }
 

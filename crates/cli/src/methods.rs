@@ -51,24 +51,24 @@ pub enum QlStart {
 #[derive(Args, Debug, Clone, Default)]
 pub struct MethodArgs {
     /// Most updates of the unknowns (default 50).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
     pub max_iterations: Option<usize>,
     /// The certificate's tolerance: a fit converged when the first-order optimality of the
     /// point it returns (the largest cosine between the residual and a sensitivity of a free
     /// unknown; 0 at a minimum, at most 1) is at most this (default 1e-6, or 100·rtol for an
     /// integrator looser than rtol 1e-8).
-    #[arg(long, value_name = "TOL")]
+    #[arg(long, value_name = "TOL", allow_hyphen_values = true)]
     pub gtol: Option<f64>,
     /// Hard budget of model integrations per fit, line-search and halving trials included
     /// (default 10·(k + 1)·(max iterations + 1) for k unknowns).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
     pub max_integrations: Option<u64>,
     /// First trajectory of quasilinearization: the model from the guess, or the data.
     #[arg(long, value_enum, default_value_t = QlStart::Guess)]
     pub ql_start: QlStart,
     /// Hold an unknown at a value for this run, without editing the model file; it then
     /// counts as known (degrees of freedom, certificate). Repeatable.
-    #[arg(long = "fix", value_name = "NAME=VALUE", value_parser = parse_fix)]
+    #[arg(long = "fix", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
     pub fix: Vec<(String, f64)>,
 }
 

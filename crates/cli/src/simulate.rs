@@ -1,6 +1,5 @@
 //! `sysid simulate`: a catalogue system's data, or a model's trajectory, as CSV.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow, bail};
@@ -73,7 +72,7 @@ pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
             std::fs::write(&tmp, text).map_err(|e| anyhow!("{}: {e}", tmp.display()))?;
             std::fs::rename(&tmp, path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
         }
-        None => std::io::stdout().write_all(text.as_bytes())?,
+        None => crate::emit(text)?,
     }
     Ok(())
 }

@@ -186,7 +186,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         })?;
         bar.finish_and_clear();
         map.write(&args.out)?;
-        print!("{}", map.markdown());
+        crate::emit(&map.markdown())?;
         return Ok(Outcome::Success);
     }
     let total = study.spec().trials;
@@ -196,7 +196,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         bar.set_position(done as u64);
     })?;
     bar.finish_and_clear();
-    print!("{}", summary.markdown());
+    crate::emit(&summary.markdown())?;
     eprintln!("{}: {} trials written to {}", system, summary.trials, args.out.display());
     Ok(Outcome::Success)
 }
@@ -212,7 +212,7 @@ pub(crate) fn progress_bar(total: u64, unit: &str) -> ProgressBar {
 /// Runs `sysid merge`.
 pub fn merge(args: &MergeArgs) -> anyhow::Result<Outcome> {
     let summary = files::merge(&args.shards, &args.out)?;
-    print!("{}", summary.markdown());
+    crate::emit(&summary.markdown())?;
     eprintln!(
         "{} shards merged into {} ({} trials)",
         args.shards.len(),

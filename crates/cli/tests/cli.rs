@@ -255,3 +255,89 @@ fn quasilinearization_from_the_cli() {
     assert_eq!(json["method"], "quasilinearization-data");
     assert!((json["estimates"]["a"].as_f64().unwrap() - 1.5).abs() < 0.05);
 }
+
+#[test]
+fn a_failure_after_the_start_exits_1_with_the_best_iterate() {
+    // Quasilinearization from the guess's trajectory on lotka-volterra: its linear family
+    // becomes singular at iteration 12; the report keeps the best iterate and its history.
+    let args = ["fit", "--system", "lotka-volterra", "--method", "quasilinearization"];
+    let out = sysid(&[&args[..], &["--format", "json"]].concat());
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["converged"], false);
+    assert_eq!(json["termination_code"], "singular");
+    let (best, last) =
+        (json["best_iteration"].as_u64().unwrap(), json["iterations"].as_u64().unwrap());
+    assert!(best < last, "best {best}, last {last}");
+    let history = json["history"].as_array().unwrap();
+    assert_eq!(history.len() as u64, last + 1);
+    // The reported cost is the best one of the history.
+    let best_cost = history[best as usize]["cost"].as_f64().unwrap();
+    assert!(history.iter().filter_map(|h| h["cost"].as_f64()).all(|c| c >= best_cost));
+    assert_eq!(json["cost"].as_f64(), Some(best_cost));
+    for key in ["optimality", "gtol", "dof", "intervals", "active_bounds", "std_errors"] {
+        assert!(json.get(key).is_some(), "no `{key}`");
+    }
+    assert!(
+        json["std_errors"]["a"].is_null(),
+        "no standard errors at a point that is not a minimum"
+    );
+    // The readable report says so, and does not blame the data: they identify a, b, g, d at
+    // the best iterate.
+    let out = sysid(&args);
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("converged    no (first-order optimality"), "{stdout}");
+    assert!(stdout.contains(&format!("(the best, iterate {best}, is reported)")), "{stdout}");
+    assert!(!stdout.contains("cannot identify"), "{stdout}");
+}
+
+#[test]
+fn the_certificate_decides_converged() {
+    // At rtol 1e-8 the integration resolves the first-order measure to about 1e-7: asking
+    // for 1e-12 makes the same run stall, and says so.
+    let out = sysid(&["fit", "--system", "van-der-pol", "--format", "json", "--gtol", "1e-12"]);
+    assert_eq!(out.status.code(), Some(1));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["termination_code"], "stalled_step");
+    assert!(json["optimality"].as_f64().unwrap() > 1e-12);
+    let out = sysid(&["fit", "--system", "van-der-pol", "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["termination_code"], "converged_step");
+    assert!(json["optimality"].as_f64().unwrap() <= json["gtol"].as_f64().unwrap());
+    assert_eq!(json["dof"], 98);
+    for bad in ["2", "0", "-1e-6"] {
+        let out = sysid(&["fit", "--system", "van-der-pol", "--gtol", bad]);
+        assert_eq!(out.status.code(), Some(2), "--gtol {bad}");
+        assert!(text(&out.stderr).contains("--gtol must lie in (0, 1)"), "{}", text(&out.stderr));
+    }
+}
+
+#[test]
+fn fix_holds_an_unknown_for_one_run() {
+    // g held at the paper's answer: y and v are fitted alone, to the same values, with
+    // 4 − 2 degrees of freedom.
+    for command in ["fit", "compare"] {
+        let out =
+            sysid(&[command, "--system", "falling-body", "--fix", "g=32.5", "--format", "json"]);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let fit = if command == "fit" { &json } else { &json[0] };
+        assert_eq!(fit["estimates"].as_object().unwrap().len(), 2, "{fit}");
+        assert!(fit["estimates"].get("g").is_none());
+        assert!((fit["estimates"]["y"].as_f64().unwrap() + 0.25).abs() < 1e-9);
+        assert_eq!(fit["dof"], 2);
+    }
+    let out = sysid(&["predict", "--system", "falling-body", "--fix", "g=30", "--until", "4"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    for (args, needle) in [
+        (&["--fix", "k=1"][..], "`k` is not an unknown of the problem (unknowns: y, v, g)"),
+        (&["--fix", "g"][..], "expected NAME=VALUE"),
+        (&["--fix", "g=abc"][..], "`abc` is not a number"),
+        (&["--fix", "y=0", "--fix", "v=0", "--fix", "g=1"][..], "no unknowns"),
+    ] {
+        let out = sysid(&[&["fit", "--system", "falling-body"][..], args].concat());
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(text(&out.stderr).contains(needle), "{args:?}: {}", text(&out.stderr));
+    }
+}

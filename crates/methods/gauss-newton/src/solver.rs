@@ -172,6 +172,14 @@ impl<S: System> Step<S> for Adapter<'_> {
     ) -> Result<Proposal, Failure> {
         self.cache.borrow_mut().failure = None;
         let op = self.operator(ev);
+        // J at the current point (free when it came with the residuals; argmin's own request
+        // for it then finds it cached): the condition and |Jᵀr| of the history.
+        let jacobian = op.jacobian_at(&self.w)?;
+        let r = op.evaluate(&self.w)?.r;
+        let gradient_norm = Some(jacobian.tr_mul(&r).norm());
+        let condition = NormalFactor::new(&jacobian.tr_mul(&jacobian), f64::INFINITY)
+            .ok()
+            .map(|f| f.condition());
         let w = Vector::from_column_slice(&self.w);
         let outcome = if self.options.line_search {
             let condition = ArmijoCondition::new(self.options.armijo)
@@ -179,17 +187,12 @@ impl<S: System> Step<S> for Adapter<'_> {
             let mut solver = GaussNewtonLS::new(BacktrackingLineSearch::new(condition));
             next::<S, _, Vector, ()>(&mut solver, &op, IterState::new().param(w))
         } else {
-            let r = op.evaluate(&self.w)?.r;
             next(&mut ArgminGn::new(), &op, IterState::new().param(w).residuals(r))
         };
         let w_new = outcome.map_err(|message| self.failure(ev.problem(), &self.w, message))?;
-        let condition = self.cache.borrow().at(&self.w).and_then(|e| {
-            let j = e.jacobian.as_ref()?;
-            NormalFactor::new(&j.tr_mul(j), f64::INFINITY).ok().map(|f| f.condition())
-        });
         let z = self.maps.iter().zip(&w_new).map(|(m, &w)| m.z(w)).collect();
         self.w = w_new;
-        Ok(Proposal { z, condition, gradient_norm: None, stop: None })
+        Ok(Proposal { z, condition, gradient_norm, stop: None })
     }
 
     /// The point argmin moved to (already evaluated); argmin's rule judges the change of ‖r‖.
