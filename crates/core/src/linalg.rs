@@ -19,7 +19,8 @@ pub struct Singular {
     /// Condition number of the scaled matrix (infinite when exactly singular).
     pub condition: f64,
     /// The coordinate change δz the matrix (nearly) does not see: the eigenvector of the
-    /// smallest eigenvalue of the scaled matrix, unscaled, its largest component +1.
+    /// smallest eigenvalue of the scaled matrix, unscaled, its largest component ±1 and its
+    /// first significant component positive.
     pub direction: Vec<f64>,
 }
 
@@ -34,11 +35,14 @@ impl Singular {
     }
 }
 
-/// `v` scaled so that its largest component is +1.
+/// `v` scaled so that its largest component is ±1 and its first component above 1 % of
+/// that is positive (a direction has no sign; this one reads "a − b", not "−a + b").
 fn unit_max(mut v: Vec<f64>) -> Vec<f64> {
-    let top = v.iter().copied().max_by(|a, b| a.abs().total_cmp(&b.abs())).unwrap_or(0.0);
-    if top != 0.0 && top.is_finite() {
-        v.iter_mut().for_each(|x| *x /= top);
+    let top = v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    if top > 0.0 && top.is_finite() {
+        let first = v.iter().copied().find(|x| x.abs() >= 0.01 * top).unwrap_or(top);
+        let scale = top.copysign(first);
+        v.iter_mut().for_each(|x| *x /= scale);
     }
     v
 }
