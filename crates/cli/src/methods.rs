@@ -33,8 +33,6 @@ pub struct Common {
     pub driver: DriverOptions,
     /// The first trajectory of `quasilinearization`.
     pub ql_start: QlStart,
-    /// Goodman's cost tolerance (see `GoodmanOptions::cost_tolerance`), if given.
-    pub cost_tolerance: Option<f64>,
 }
 
 /// `--ql-start`: the first trajectory of quasilinearization.
@@ -81,7 +79,7 @@ impl MethodArgs {
         }
         driver.gtol = self.gtol;
         driver.max_integrations = self.max_integrations.or(driver.max_integrations);
-        Common { driver, ql_start: self.ql_start, cost_tolerance: None }
+        Common { driver, ql_start: self.ql_start }
     }
 
     /// Checks the options before anything runs.
@@ -119,12 +117,9 @@ pub fn method<S: System>(
     name: &str,
     common: Common,
 ) -> anyhow::Result<Box<dyn Method<S> + Send + Sync>> {
-    let mut goodman = GoodmanOptions { driver: common.driver, ..GoodmanOptions::default() };
+    let goodman = GoodmanOptions { driver: common.driver, ..GoodmanOptions::default() };
     let gn = GaussNewtonOptions { driver: common.driver, ..GaussNewtonOptions::default() };
     let ql = QuasilinearizationOptions { driver: common.driver, ..Default::default() };
-    if let Some(c) = common.cost_tolerance {
-        goodman.cost_tolerance = c;
-    }
     let ql_start = match common.ql_start {
         QlStart::Guess => Start::Guess,
         QlStart::Data => Start::Data,

@@ -24,7 +24,7 @@ use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
 use crate::methods::{Common, method, parse_list};
-use crate::study::{progress_bar, reference};
+use crate::study::progress_bar;
 
 /// Arguments of `sysid report`.
 #[derive(Args, Debug)]
@@ -185,12 +185,8 @@ impl Visit for SystemReport<'_> {
                     .iter()
                     .map(|m| method::<S>(m, Common::default()))
                     .collect::<anyhow::Result<_>>()?;
-                let study = Study::new(
-                    spec,
-                    scenario,
-                    fits,
-                    reference::<S>(REFERENCE, Common::default())?,
-                )?;
+                let study =
+                    Study::new(spec, scenario, fits, method::<S>(REFERENCE, Common::default())?)?;
                 let summary = run_study(&study, &dir.join("study"))?;
                 draw_study(&case, &summary, &dir)?;
                 figures.push((
@@ -218,7 +214,7 @@ impl Visit for SystemReport<'_> {
                     basin_spec,
                     study.scenario().clone(),
                     fits,
-                    reference::<S>(REFERENCE, Common::default())?,
+                    method::<S>(REFERENCE, Common::default())?,
                 )?;
                 let numbers = draw_basin(&case, &basin_study, args.grid, &dir)?;
                 figures.push((

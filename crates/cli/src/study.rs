@@ -7,14 +7,14 @@ use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sysid_model::Model;
 use sysid_montecarlo::files::{self, Shard};
-use sysid_montecarlo::{Scenario, SharedMethod, Study, StudySpec, basin};
+use sysid_montecarlo::{Scenario, Study, StudySpec, basin};
 use sysid_ode::System;
 use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
 use crate::fit::{fit, prepare};
 use crate::integrator::IntegratorArgs;
-use crate::methods::{Common, MethodArgs, method, parse_list};
+use crate::methods::{MethodArgs, method, parse_list};
 
 /// The methods a study compares unless told otherwise: the three classical ones.
 const DEFAULT_METHODS: &str = "goodman,quasilinearization,gauss-newton-ls";
@@ -134,18 +134,6 @@ impl Visit for FromCase<'_> {
     }
 }
 
-/// The reference fit decides success by its cost only: Goodman's method stops once the next
-/// step would lower ε by less than 1e-10 of it, four decades inside the success tolerance.
-pub(crate) fn reference<S: System + Send + Sync + 'static>(
-    name: &str,
-    common: Common,
-) -> anyhow::Result<SharedMethod<S>> {
-    method::<S>(name, Common { cost_tolerance: Some(REFERENCE_COST_TOLERANCE), ..common })
-}
-
-/// See [`reference`].
-const REFERENCE_COST_TOLERANCE: f64 = 1e-10;
-
 fn run_scenario<S: System + Clone + Send + Sync + 'static>(
     args: &StudyArgs,
     system: &str,
@@ -166,7 +154,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
     };
     let fits =
         methods.iter().map(|m| method::<S>(m, common)).collect::<anyhow::Result<Vec<_>>>()?;
-    let study = Study::new(spec, scenario, fits, reference::<S>(&args.reference, common)?)?;
+    let study = Study::new(spec, scenario, fits, method::<S>(&args.reference, common)?)?;
     if let Some(axes) = &args.basin {
         let names = study.scenario().problem().names();
         let index = |n: &str| {

@@ -161,7 +161,7 @@ fn compare_lists_every_method_as_json() {
         if f["method"] == "gauss-newton-fd" {
             // Forward differences with h = √rtol stop where the exact gradient's cosine is
             // about 2e-5: stalled, and said so.
-            assert_eq!(code, "stalled_step", "{f}");
+            assert!(code.starts_with("stalled_"), "{f}");
         } else {
             assert!(certified && code.starts_with("converged_"), "{f}");
         }
@@ -293,13 +293,13 @@ fn a_failure_after_the_start_exits_1_with_the_best_iterate() {
 
 #[test]
 fn the_certificate_decides_converged() {
-    // At rtol 1e-8 the integration resolves the first-order measure to about 1e-7: asking
-    // for 1e-12 makes the same run stall, and says so.
-    let out = sysid(&["fit", "--system", "van-der-pol", "--format", "json", "--gtol", "1e-12"]);
+    // A gtol below what rounding lets the measure reach makes the same run stall (after the
+    // few extra steps the driver allows past a stopping rule), and says so.
+    let out = sysid(&["fit", "--system", "van-der-pol", "--format", "json", "--gtol", "1e-16"]);
     assert_eq!(out.status.code(), Some(1));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(json["termination_code"], "stalled_step");
-    assert!(json["optimality"].as_f64().unwrap() > 1e-12);
+    assert!(json["termination_code"].as_str().unwrap().starts_with("stalled_"), "{json}");
+    assert!(json["optimality"].as_f64().unwrap() > 1e-16);
     let out = sysid(&["fit", "--system", "van-der-pol", "--format", "json"]);
     assert_eq!(out.status.code(), Some(0));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();

@@ -67,10 +67,11 @@ impl OptionsError {
 }
 
 /// The certificate's default tolerance on the first-order optimality measure, at the
-/// default integrator tolerance (rtol 1e-8); looser integrations get 100·rtol. At the true
-/// minima of the catalogue the measure is at most 8.8e-8 at rtol 1e-8 (the integration's
-/// noise, about 9·rtol), so 1e-6 leaves a factor 11; and a point that passes is within
-/// about k·κ·gtol² (κ the scaled condition number) of the minimum's cost. The README ("What
+/// default integrator tolerance (rtol 1e-8); looser integrations get 100·rtol. The
+/// integration error alone moves the measure at the true minima of the catalogue to at most
+/// 8.8e-8 at rtol 1e-8 (about 9·rtol), so 1e-6 leaves a factor 11: tighter, it would certify
+/// the integrator's error rather than the model's minimum. A point that passes is within about
+/// k·κ·gtol² (κ the scaled condition number) of the minimum's cost. The README ("What
 /// converged means") has the measurements.
 pub const DEFAULT_GTOL: f64 = 1e-6;
 
@@ -91,8 +92,8 @@ pub struct DriverOptions {
     pub gradient_tolerance: f64,
     /// The certificate: the returned point counts as converged when its first-order
     /// optimality measure is at most this (or the model passes through the data). `None`:
-    /// max([`DEFAULT_GTOL`], 100·rtol) for the problem's integrator, which cannot resolve
-    /// the measure much below 10·rtol.
+    /// max([`DEFAULT_GTOL`], 100·rtol) for the problem's integrator, whose error moves the
+    /// measure by about 10·rtol.
     pub gtol: Option<f64>,
     /// A normal matrix counts as singular when the condition number of its Jacobi-scaled
     /// form exceeds this.
