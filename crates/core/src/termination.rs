@@ -92,6 +92,14 @@ pub enum Failure {
 }
 
 impl Failure {
+    /// A singular matrix, its unknowns (indices into `names`) named.
+    pub fn singular(singular: &crate::Singular, names: &[String]) -> Self {
+        Failure::Singular {
+            unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
+            condition: singular.condition,
+        }
+    }
+
     /// Where it happened, when it is a point.
     pub fn at(&self) -> Option<&[f64]> {
         match self {

@@ -131,7 +131,7 @@ impl Adapter<'_> {
                 involved.join(", ")
             ));
         }
-        Failure::Singular { unknowns: involved, condition: singular.condition }
+        Failure::singular(&singular, &names)
     }
 }
 

@@ -57,14 +57,8 @@ impl<S: System> Step<S> for Newton<'_> {
         let problem = ev.problem();
         let lin = current.linearization.as_ref().expect("Goodman's iterates are linearized");
         let held = problem.unknowns().active(&current.z, lin.gradient.as_slice());
-        let step =
-            newton_step(lin, self.options.driver.max_condition, &held).map_err(|singular| {
-                let names = problem.names();
-                Failure::Singular {
-                    unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
-                    condition: singular.condition,
-                }
-            })?;
+        let step = newton_step(lin, self.options.driver.max_condition, &held)
+            .map_err(|s| Failure::singular(&s, &problem.names()))?;
         // The decrease the step predicts: ε − ε_lin(z + δ) = δᵀAδ for the Newton step.
         let predicted = step.delta.dot(&(&lin.normal * &step.delta));
         let cost_tolerance = self.options.cost_tolerance;

@@ -132,14 +132,9 @@ impl<S: System> Step<S> for Quasi<'_> {
         })?;
         let ls = LeastSquares::new(problem, layout, trajectory, &family);
         let gradient_norm = Some(ls.linearization(&current.z, Counts::default()).gradient.norm());
-        let (mut c, condition) =
-            ls.solve(self.options.driver.max_condition).map_err(|singular| {
-                let names = problem.names();
-                Failure::Singular {
-                    unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
-                    condition: singular.condition,
-                }
-            })?;
+        let (mut c, condition) = ls
+            .solve(self.options.driver.max_condition)
+            .map_err(|s| Failure::singular(&s, &problem.names()))?;
         problem.unknowns().project(c.as_mut_slice());
         let z = c.as_slice().to_vec();
         let linear_cost = ls.residual(&z).norm_squared();
