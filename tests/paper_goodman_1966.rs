@@ -47,7 +47,8 @@ fn table_three_and_the_normal_matrix_at_the_start() {
 fn one_newton_step_is_exact_and_the_next_is_negligible() {
     let problem = falling_body::falling_body().problem(1).unwrap();
     let lin = problem.linearize(&[0.0, 0.0, 32.0]).unwrap();
-    let step = newton_step(&lin, 1e12, &[false; 3]).unwrap();
+    let unbounded = ([f64::NEG_INFINITY; 3], [f64::INFINITY; 3]);
+    let step = newton_step(&lin, (&unbounded.0, &unbounded.1), 1e12).unwrap();
     let c: Vec<f64> = [0.0, 0.0, 32.0].iter().zip(&step.delta).map(|(c, d)| c + d).collect();
     // Eq. (28): A = −.25, B = −.25, α = 32.5.
     for (ci, expected) in c.iter().zip([-0.25, -0.25, 32.5]) {
@@ -55,7 +56,7 @@ fn one_newton_step_is_exact_and_the_next_is_negligible() {
     }
     // The second iteration's step is below 1e-10: the first one was exact.
     let again = problem.linearize(&c).unwrap();
-    assert!(newton_step(&again, 1e12, &[false; 3]).unwrap().delta.norm() < 1e-10);
+    assert!(newton_step(&again, (&unbounded.0, &unbounded.1), 1e12).unwrap().delta.norm() < 1e-10);
     assert_close(again.cost, 1.25, ROUNDING);
 
     let estimate = Goodman::default().fit(&problem).unwrap();

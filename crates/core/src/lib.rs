@@ -21,6 +21,7 @@
 //! * [`Method`]: the trait every method crate implements.
 #![warn(missing_docs)]
 
+mod bounded;
 mod certificate;
 mod confidence;
 mod data;
@@ -36,6 +37,7 @@ pub mod table;
 mod termination;
 mod unknowns;
 
+pub use bounded::{BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box};
 pub use certificate::{Bound, Certificate, EXACT_FIT, NullSpace, certify, optimality};
 pub use confidence::{Z95, interval, t95};
 pub use data::{Data, Record, Samples, Series};

@@ -1,13 +1,18 @@
-//! Bounds for an unconstrained solver: a smooth change of variables z = T(w) per unknown.
+//! Bounds for an unconstrained solver: a smooth change of variables z = T(w) per unknown,
+//! safe for every w (no overflow to ±∞, no NaN).
 //!
 //! argmin's Gauss–Newton knows nothing of bounds, so a bounded coordinate z is written as a
 //! function of a free one w:
-//! * lower bound only: z = lo + eʷ;
-//! * upper bound only: z = hi − eʷ;
+//! * lower bound only: z = lo + softplus(w), softplus(w) = ln(1 + eʷ), computed as
+//!   max(w, 0) + ln(1 + e^{−|w|});
+//! * upper bound only: z = hi − softplus(w);
 //! * both: z = lo + (hi − lo) σ(w), σ the logistic function.
 //!
-//! The solver works on w; residuals are evaluated at T(w) and the Jacobian picks up dz/dw.
-//! An optimum on a bound is approached but not reached (w → ±∞).
+//! Far from its bound z ≈ w (softplus is the identity plus e^{−w}), so the map does not
+//! distort the problem where the bound does not matter; at the bound dz/dw → 0, and an
+//! optimum on the bound is approached but not reached. The adapter
+//! ([`GaussNewton`](crate::GaussNewton)) therefore holds an unknown on its bound once the
+//! certificate finds it there, and releases it when the gradient turns inwards.
 
 use sysid_core::Unknown;
 
@@ -16,12 +21,32 @@ use sysid_core::Unknown;
 pub enum Map {
     /// Unbounded: z = w.
     Free,
-    /// z = lo + eʷ.
+    /// z = lo + softplus(w).
     Lower(f64),
-    /// z = hi − eʷ.
+    /// z = hi − softplus(w).
     Upper(f64),
     /// z = lo + (hi − lo) σ(w).
     Interval(f64, f64),
+}
+
+/// ln(1 + eʷ) without overflow.
+fn softplus(w: f64) -> f64 {
+    w.max(0.0) + (-w.abs()).exp().ln_1p()
+}
+
+/// The logistic function 1/(1 + e^{−w}), in [0, 1] for every w.
+fn sigmoid(w: f64) -> f64 {
+    if w >= 0.0 {
+        1.0 / (1.0 + (-w).exp())
+    } else {
+        let e = w.exp();
+        e / (1.0 + e)
+    }
+}
+
+/// The w with softplus(w) = d > 0: ln(eᵈ − 1).
+fn softplus_inverse(d: f64) -> f64 {
+    if d > 30.0 { d + (-(-d).exp()).ln_1p() } else { d.exp_m1().ln() }
 }
 
 impl Map {
@@ -40,9 +65,9 @@ impl Map {
     pub fn z(self, w: f64) -> f64 {
         match self {
             Map::Free => w,
-            Map::Lower(lo) => lo + w.exp(),
-            Map::Upper(hi) => hi - w.exp(),
-            Map::Interval(lo, hi) => lo + (hi - lo) / (1.0 + (-w).exp()),
+            Map::Lower(lo) => lo + softplus(w),
+            Map::Upper(hi) => hi - softplus(w),
+            Map::Interval(lo, hi) => lo + (hi - lo) * sigmoid(w),
         }
     }
 
@@ -50,10 +75,10 @@ impl Map {
     pub fn dz_dw(self, w: f64) -> f64 {
         match self {
             Map::Free => 1.0,
-            Map::Lower(_) => w.exp(),
-            Map::Upper(_) => -w.exp(),
+            Map::Lower(_) => sigmoid(w),
+            Map::Upper(_) => -sigmoid(w),
             Map::Interval(lo, hi) => {
-                let s = 1.0 / (1.0 + (-w).exp());
+                let s = sigmoid(w);
                 (hi - lo) * s * (1.0 - s)
             }
         }
@@ -64,8 +89,8 @@ impl Map {
         let margin = |width: f64| 1e-8 * width.abs().max(1.0);
         match self {
             Map::Free => z,
-            Map::Lower(lo) => (z - lo).max(margin(lo)).ln(),
-            Map::Upper(hi) => (hi - z).max(margin(hi)).ln(),
+            Map::Lower(lo) => softplus_inverse((z - lo).max(margin(lo))),
+            Map::Upper(hi) => softplus_inverse((hi - z).max(margin(hi))),
             Map::Interval(lo, hi) => {
                 let m = margin(hi - lo) / (hi - lo);
                 let s = ((z - lo) / (hi - lo)).clamp(m, 1.0 - m);
@@ -93,5 +118,19 @@ mod tests {
         }
         // A start on a bound moves inside.
         assert!(Map::Lower(0.0).z(Map::Lower(0.0).w(0.0)) > 0.0);
+    }
+
+    #[test]
+    fn no_w_overflows_or_gives_nan() {
+        for map in [Map::Lower(-1.0), Map::Upper(2.0), Map::Interval(-1.0, 3.0)] {
+            for w in [-1e308, -1e5, -800.0, -30.0, 0.0, 30.0, 800.0, 1e5, 1e308] {
+                let (z, d) = (map.z(w), map.dz_dw(w));
+                assert!(z.is_finite() && d.is_finite(), "{map:?} at {w}: {z} {d}");
+            }
+        }
+        // Far from a one-sided bound the map is the identity plus a vanishing term.
+        assert_close(Map::Lower(0.0).z(50.0), 50.0, 1e-15);
+        // Tiny distances invert without underflow to −∞.
+        assert!(Map::Lower(0.0).w(1e-300).is_finite());
     }
 }

@@ -46,5 +46,5 @@ mod residuals;
 mod solver;
 
 pub use options::{GaussNewtonOptions, JacobianSource};
-pub use residuals::{Cache, Evaluation, Residuals};
+pub use residuals::{Cache, Evaluation, HalfSquares, Residuals, Space};
 pub use solver::GaussNewton;

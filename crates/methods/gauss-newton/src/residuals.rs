@@ -1,15 +1,16 @@
-//! The problem as argmin sees it: the weighted residual vector r(w) and its Jacobian, in
-//! the free coordinates w of [`Map`] (w = z for unbounded unknowns).
+//! The problem as argmin sees it: the weighted residual vector r(w) and its Jacobian, in the
+//! free coordinates w of [`Map`] of the unknowns not held on a bound.
 //!
-//! argmin asks for r and J separately; with sensitivities both come from one integration and
-//! are kept together with the w they belong to, so a request for J at the w whose r was just
-//! computed costs nothing (the pairing mistake of argmin issue #342 cannot happen). Every
-//! integration goes through the driver's [`Evaluations`], so the line search's trial points
-//! count against the fit's integration budget.
+//! Every evaluation is made and remembered in the problem's coordinates z (Jacobian ∂r/∂z
+//! over all unknowns) and mapped to argmin's w on request, so a request for J at the point
+//! whose r was just computed costs nothing (the pairing mistake of argmin issue #342 cannot
+//! happen), and changing which unknowns are held does not invalidate it. Every integration
+//! goes through the driver's [`Evaluations`], so the line search's trial points count against
+//! the fit's integration budget.
 
 use std::cell::RefCell;
 
-use argmin::core::{Error, Jacobian, Operator};
+use argmin::core::{CostFunction, Error, Gradient, Jacobian, Operator};
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{Evaluations, Failure, Linearization};
 use sysid_ode::System;
@@ -17,18 +18,25 @@ use sysid_ode::System;
 use crate::bounds::Map;
 use crate::options::JacobianSource;
 
-/// One evaluation at argmin's parameters w.
+/// One evaluation at coordinates z.
 #[derive(Clone, Debug)]
 pub struct Evaluation {
-    /// Where, in argmin's coordinates.
-    pub w: Vec<f64>,
+    /// Where.
+    pub z: Vec<f64>,
     /// Weighted residuals (infinite where the model could not be evaluated, so that a line
     /// search backs off).
     pub r: DVector<f64>,
-    /// ∂r/∂w, if computed.
+    /// ∂r/∂z over all unknowns, if computed (sensitivities, or forward differences).
     pub jacobian: Option<DMatrix<f64>>,
-    /// The model's linearization at z(w) in the problem's coordinates (with sensitivities).
+    /// The model's linearization at z from its sensitivities.
     pub linearization: Option<Linearization>,
+}
+
+impl Evaluation {
+    /// Whether the model could be evaluated here.
+    pub fn is_finite(&self) -> bool {
+        self.r.iter().all(|v| v.is_finite())
+    }
 }
 
 /// What the operator remembers between argmin's calls within one fit.
@@ -36,18 +44,60 @@ pub struct Evaluation {
 pub struct Cache {
     /// The last evaluation.
     pub last: Option<Evaluation>,
-    /// The first failure met since the last [`take_failure`](Cache::take_failure).
+    /// The first failure met since it was last taken.
     pub failure: Option<Failure>,
 }
 
 impl Cache {
-    /// The evaluation at exactly w, if it is the last one.
-    pub fn at(&self, w: &[f64]) -> Option<&Evaluation> {
-        self.last.as_ref().filter(|e| e.w == w)
+    /// The evaluation at exactly z, if it is the last one.
+    pub fn at(&self, z: &[f64]) -> Option<&Evaluation> {
+        self.last.as_ref().filter(|e| e.z == z)
     }
-    /// The failure met, if any, forgetting it.
-    pub fn take_failure(&mut self) -> Option<Failure> {
-        self.failure.take()
+}
+
+/// argmin's coordinates: the unknowns not held on a bound, each through its map.
+#[derive(Clone, Debug)]
+pub struct Space {
+    /// The map of every unknown.
+    pub maps: Vec<Map>,
+    /// The value each held unknown is held at (its bound), `None` for a free one.
+    pub held: Vec<Option<f64>>,
+    /// w of every unknown (the held ones' entries are unused).
+    pub w: Vec<f64>,
+}
+
+impl Space {
+    /// The free unknowns' indices.
+    pub fn free(&self) -> Vec<usize> {
+        (0..self.maps.len()).filter(|&i| self.held[i].is_none()).collect()
+    }
+    /// The free unknowns' w.
+    pub fn free_w(&self) -> Vec<f64> {
+        self.free().iter().map(|&i| self.w[i]).collect()
+    }
+    /// Sets the free unknowns' w.
+    pub fn set_free_w(&mut self, w: &[f64]) {
+        for (&i, &v) in self.free().iter().zip(w) {
+            self.w[i] = v;
+        }
+    }
+    /// z for the free unknowns at `free_w` (the held ones at their bounds).
+    pub fn z(&self, free_w: &[f64]) -> Vec<f64> {
+        let mut z: Vec<f64> = self
+            .maps
+            .iter()
+            .zip(&self.w)
+            .zip(&self.held)
+            .map(|((m, &w), h)| h.unwrap_or(m.z(w)))
+            .collect();
+        for (&i, &w) in self.free().iter().zip(free_w) {
+            z[i] = self.maps[i].z(w);
+        }
+        z
+    }
+    /// z at the current w.
+    pub fn current_z(&self) -> Vec<f64> {
+        self.z(&self.free_w())
     }
 }
 
@@ -57,32 +107,34 @@ pub struct Residuals<'a, S> {
     pub ev: &'a Evaluations<'a, S>,
     /// Where the Jacobian comes from.
     pub source: JacobianSource,
-    /// The change of variables per unknown.
-    pub maps: &'a [Map],
+    /// argmin's coordinates.
+    pub space: &'a Space,
+    /// Typical magnitudes of the coordinates (from the start), for difference steps.
+    pub typical: &'a [f64],
     /// The evaluations remembered.
     pub cache: &'a RefCell<Cache>,
 }
 
 impl<S: System> Residuals<'_, S> {
-    /// z(w).
-    pub fn z(&self, w: &[f64]) -> Vec<f64> {
-        self.maps.iter().zip(w).map(|(m, &w)| m.z(w)).collect()
-    }
-
-    /// The evaluation at w (with the Jacobian when the source gives it for free), reusing
-    /// the last one when it was at w. A used-up budget is an error; a point where the model
-    /// cannot be evaluated gets infinite residuals and its failure is remembered.
-    pub fn evaluate(&self, w: &[f64]) -> Result<Evaluation, Failure> {
-        if let Some(e) = self.cache.borrow().at(w) {
+    /// The evaluation at z, reusing the last one when it was at z. A used-up budget is an
+    /// error; a point where the model cannot be evaluated gets infinite residuals and its
+    /// failure is remembered.
+    pub fn evaluate(&self, z: &[f64]) -> Result<Evaluation, Failure> {
+        if let Some(e) = self.cache.borrow().at(z) {
             return Ok(e.clone());
         }
-        let z = self.z(w);
         let outcome = match self.source {
-            JacobianSource::Sensitivities => {
-                self.ev.residuals_and_jacobian(&z).map(|lin| self.with_sensitivities(w, lin))
-            }
-            JacobianSource::FiniteDifferences => self.ev.residuals(&z).map(|r| Evaluation {
-                w: w.to_vec(),
+            JacobianSource::Sensitivities => self.ev.residuals_and_jacobian(z).map(|lin| {
+                let rows = lin.residuals.as_ref().expect("the residual form has residuals");
+                Evaluation {
+                    z: z.to_vec(),
+                    r: rows.r.clone(),
+                    jacobian: Some(rows.jacobian.clone()),
+                    linearization: Some(lin),
+                }
+            }),
+            JacobianSource::FiniteDifferences => self.ev.residuals(z).map(|r| Evaluation {
+                z: z.to_vec(),
                 r,
                 jacobian: None,
                 linearization: None,
@@ -94,7 +146,7 @@ impl<S: System> Residuals<'_, S> {
             Err(failure) => {
                 self.cache.borrow_mut().failure.get_or_insert(failure);
                 Evaluation {
-                    w: w.to_vec(),
+                    z: z.to_vec(),
                     r: DVector::from_element(self.ev.problem().n_residuals(), f64::INFINITY),
                     jacobian: None,
                     linearization: None,
@@ -105,69 +157,70 @@ impl<S: System> Residuals<'_, S> {
         Ok(evaluation)
     }
 
-    fn with_sensitivities(&self, w: &[f64], lin: Linearization) -> Evaluation {
-        let rows = lin.residuals.as_ref().expect("the residual form has residuals");
-        let mut jacobian = rows.jacobian.clone();
-        for (j, (m, &wj)) in self.maps.iter().zip(w).enumerate() {
-            if *m != Map::Free {
-                jacobian.column_mut(j).scale_mut(m.dz_dw(wj));
-            }
+    /// The evaluation at z with ∂r/∂z: from the sensitivities, or by forward differences in
+    /// the coordinate each unknown is estimated in (ln for a log scale),
+    /// (r(z + h_j e_j) − r(z)) / h_j with h_j = √ε_mach · max(|z_j|, typical_j), backwards
+    /// where the forward step would leave the bounds.
+    pub fn with_jacobian(&self, z: &[f64]) -> Result<Evaluation, Failure> {
+        let mut evaluation = self.evaluate(z)?;
+        if evaluation.jacobian.is_some() || !evaluation.is_finite() {
+            return Ok(evaluation);
         }
-        Evaluation {
-            w: w.to_vec(),
-            r: rows.r.clone(),
-            jacobian: Some(jacobian),
-            linearization: Some(lin),
-        }
-    }
-
-    /// J at w: from the evaluation there, or by forward differences
-    /// (r(w + h_j e_j) − r(w)) / h_j, h_j = √η · max(|w_j|, 1), η = max(rtol, machine ε).
-    pub fn jacobian_at(&self, w: &[f64]) -> Result<DMatrix<f64>, Failure> {
-        let evaluation = self.evaluate(w)?;
-        if let Some(j) = evaluation.jacobian {
-            return Ok(j);
-        }
-        if !evaluation.r.iter().all(|v| v.is_finite()) {
-            return Err(self.failure_at(w));
-        }
-        let r = evaluation.r.clone();
-        let eta = self.ev.problem().integrator().rtol.max(f64::EPSILON);
-        let mut jacobian = DMatrix::zeros(r.len(), w.len());
-        for j in 0..w.len() {
-            let h = eta.sqrt() * w[j].abs().max(1.0);
-            let mut shifted = w.to_vec();
-            shifted[j] += h;
-            let rj = self.ev.residuals(&self.z(&shifted))?;
+        let unknowns = self.ev.problem().unknowns().list();
+        let r = &evaluation.r;
+        let mut jacobian = DMatrix::zeros(r.len(), z.len());
+        for j in 0..z.len() {
+            let h = f64::EPSILON.sqrt() * z[j].abs().max(self.typical[j]);
+            let (_, hi) = unknowns[j].coordinate_bounds();
+            let mut shifted = z.to_vec();
+            shifted[j] = if z[j] + h <= hi { z[j] + h } else { z[j] - h };
+            let rj = self.ev.residuals(&shifted)?;
             // The step actually taken, as represented in floating point.
-            let h = shifted[j] - w[j];
-            jacobian.set_column(j, &((rj - &r) / h));
+            let h = shifted[j] - z[j];
+            jacobian.set_column(j, &((rj - r) / h));
         }
+        evaluation.jacobian = Some(jacobian);
         let mut cache = self.cache.borrow_mut();
-        if let Some(last) = cache.last.as_mut().filter(|e| e.w == w) {
-            last.jacobian = Some(jacobian.clone());
+        if let Some(last) = cache.last.as_mut().filter(|e| e.z == z) {
+            last.jacobian.clone_from(&evaluation.jacobian);
         }
-        Ok(jacobian)
+        Ok(evaluation)
     }
 
     /// The failure remembered for a point whose residuals are infinite.
-    pub fn failure_at(&self, w: &[f64]) -> Failure {
-        self.cache.borrow_mut().take_failure().unwrap_or_else(|| Failure::NonFinite {
+    pub fn failure_at(&self, z: &[f64]) -> Failure {
+        self.cache.borrow_mut().failure.take().unwrap_or_else(|| Failure::NonFinite {
             what: "the residuals".into(),
-            at: self.ev.problem().unknowns().values(&self.z(w)),
+            at: self.ev.problem().unknowns().values(z),
         })
     }
-}
 
-fn to_error(failure: Failure) -> Error {
-    Error::msg(failure.to_string())
+    /// ∂r/∂w of the free unknowns at free w: ∂r/∂z times dz/dw.
+    fn jacobian_w(&self, w: &[f64]) -> Result<DMatrix<f64>, Failure> {
+        let z = self.space.z(w);
+        let e = self.with_jacobian(&z)?;
+        let Some(jz) = e.jacobian else { return Err(self.failure_at(&z)) };
+        let free = self.space.free();
+        let mut jw = jz.select_columns(&free);
+        for (c, (&i, &wi)) in free.iter().zip(w).enumerate() {
+            jw.column_mut(c).scale_mut(self.space.maps[i].dz_dw(wi));
+        }
+        Ok(jw)
+    }
+
+    /// Keeps a failure that ends argmin's iteration, for the driver to report.
+    fn remember(&self, failure: Failure) -> Error {
+        let error = Error::msg(failure.to_string());
+        self.cache.borrow_mut().failure = Some(failure);
+        error
+    }
 }
 
 impl<S: System> Operator for &Residuals<'_, S> {
     type Param = DVector<f64>;
     type Output = DVector<f64>;
     fn apply(&self, w: &Self::Param) -> Result<Self::Output, Error> {
-        self.evaluate(w.as_slice()).map(|e| e.r).map_err(|f| self.remember(f))
+        self.evaluate(&self.space.z(w.as_slice())).map(|e| e.r).map_err(|f| self.remember(f))
     }
 }
 
@@ -175,15 +228,30 @@ impl<S: System> Jacobian for &Residuals<'_, S> {
     type Param = DVector<f64>;
     type Jacobian = DMatrix<f64>;
     fn jacobian(&self, w: &Self::Param) -> Result<Self::Jacobian, Error> {
-        self.jacobian_at(w.as_slice()).map_err(|f| self.remember(f))
+        self.jacobian_w(w.as_slice()).map_err(|f| self.remember(f))
     }
 }
 
-impl<S: System> Residuals<'_, S> {
-    /// Keeps a failure that ends argmin's iteration, for the driver to report.
-    fn remember(&self, failure: Failure) -> Error {
-        let error = to_error(failure.clone());
-        self.cache.borrow_mut().failure = Some(failure);
-        error
+/// The line search's view: the cost ½‖r‖² and its gradient Jᵀr, consistent with each
+/// other (argmin's own Gauss–Newton line search pairs ‖r‖ with the gradient of ½‖r‖², which
+/// rejects every step once ‖r‖ is large).
+pub struct HalfSquares<'a, S>(pub &'a Residuals<'a, S>);
+
+impl<S: System> CostFunction for HalfSquares<'_, S> {
+    type Param = DVector<f64>;
+    type Output = f64;
+    fn cost(&self, w: &Self::Param) -> Result<f64, Error> {
+        let r = Operator::apply(&self.0, w)?;
+        Ok(0.5 * r.norm_squared())
+    }
+}
+
+impl<S: System> Gradient for HalfSquares<'_, S> {
+    type Param = DVector<f64>;
+    type Gradient = DVector<f64>;
+    fn gradient(&self, w: &Self::Param) -> Result<Self::Gradient, Error> {
+        let r = Operator::apply(&self.0, w)?;
+        let j = Jacobian::jacobian(&self.0, w)?;
+        Ok(j.tr_mul(&r))
     }
 }

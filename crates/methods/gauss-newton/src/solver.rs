@@ -4,20 +4,23 @@
 
 use std::cell::RefCell;
 
-use argmin::core::{IterState, Problem as ArgminProblem, Solver, State};
-use argmin::solver::gaussnewton::{GaussNewton as ArgminGn, GaussNewtonLS};
+use argmin::core::{
+    Executor, IterState, Jacobian, LineSearch, Operator, Problem as ArgminProblem, Solver, State,
+    TerminationReason,
+};
+use argmin::solver::gaussnewton::GaussNewton as ArgminGn;
 use argmin::solver::linesearch::BacktrackingLineSearch;
 use argmin::solver::linesearch::condition::ArmijoCondition;
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, Estimate, Evaluations, Failure, FitError, Iterate, Method, NormalFactor, Problem,
-    Proposal, Rule, Step, drive,
+    Advance, Bound, Estimate, Evaluations, Failure, FitError, Iterate, Linearization, Method,
+    NormalFactor, Problem, Proposal, Rule, Step, drive, optimality,
 };
-use sysid_ode::System;
+use sysid_ode::{Counts, System};
 
 use crate::bounds::Map;
 use crate::options::{GaussNewtonOptions, JacobianSource};
-use crate::residuals::{Cache, Evaluation, Residuals};
+use crate::residuals::{Cache, Evaluation, HalfSquares, Residuals, Space};
 
 /// The Gauss–Newton baseline: argmin's solver on the weighted residuals of a problem.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -61,13 +64,19 @@ impl<S: System> Method<S> for GaussNewton {
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         self.options.validate()?;
         let name = <Self as Method<S>>::name(self);
+        let k = problem.unknowns().len();
         let mut step = Adapter {
             options: &self.options,
-            maps: problem.unknowns().list().iter().map(Map::of).collect(),
+            space: Space {
+                maps: problem.unknowns().list().iter().map(Map::of).collect(),
+                held: vec![None; k],
+                w: Vec::new(),
+            },
+            typical: Vec::new(),
             cache: RefCell::new(Cache::default()),
-            w: Vec::new(),
             norm: f64::NAN,
             tolerance: f64::NAN,
+            gtol: self.options.driver.gtol_for(problem.integrator().rtol),
         };
         drive(problem, name, &self.options.driver, &mut step, start)
     }
@@ -76,32 +85,39 @@ impl<S: System> Method<S> for GaussNewton {
 type Vector = DVector<f64>;
 type Matrix = DMatrix<f64>;
 
-/// argmin's solver between the driver's iterations: the current point in argmin's
-/// coordinates and what its stopping rule compares.
+/// argmin's solver between the driver's iterations: argmin's coordinates (which unknowns
+/// are held on a bound, the others' w) and what argmin's stopping rule compares.
 struct Adapter<'o> {
     options: &'o GaussNewtonOptions,
-    maps: Vec<Map>,
+    space: Space,
+    /// Typical magnitudes of the coordinates, from the start (1 where it is 0).
+    typical: Vec<f64>,
     cache: RefCell<Cache>,
-    /// The current iterate in argmin's coordinates.
-    w: Vec<f64>,
-    /// ‖r‖ there.
+    /// ‖r‖ at the current iterate.
     norm: f64,
     /// argmin's rule, |Δ‖r‖| < tolerance, made relative to the start: tolerance·max(‖r₀‖, 1).
     tolerance: f64,
+    /// The certificate's tolerance: an unknown it finds on a bound is held there.
+    gtol: f64,
 }
 
 impl Adapter<'_> {
     fn operator<'a, S: System>(&'a self, ev: &'a Evaluations<'a, S>) -> Residuals<'a, S> {
-        Residuals { ev, source: self.options.jacobian, maps: &self.maps, cache: &self.cache }
+        Residuals {
+            ev,
+            source: self.options.jacobian,
+            space: &self.space,
+            typical: &self.typical,
+            cache: &self.cache,
+        }
     }
 
     /// The driver's iterate for an evaluation (at a finite point).
     fn iterate(&self, e: Evaluation) -> Iterate {
-        let z = self.maps.iter().zip(&e.w).map(|(m, &w)| m.z(w)).collect();
         let norm = e.r.norm();
         let gradient_norm = e.jacobian.as_ref().map(|j| j.tr_mul(&e.r).norm());
         Iterate {
-            z,
+            z: e.z,
             cost: norm * norm,
             gradient_norm,
             linearization: e.linearization,
@@ -109,40 +125,67 @@ impl Adapter<'_> {
         }
     }
 
-    /// Why argmin's iteration from w stopped with `message`: a failure the operator met, a
-    /// singular JᵀJ (or the change of variables flattening on a bound), or argmin's own error.
-    fn failure<S: System>(&self, problem: &Problem<S>, w: &[f64], message: String) -> Failure {
-        if let Some(failure) = self.cache.borrow_mut().take_failure() {
+    /// Holds on its bound every unknown the certificate finds there (∂r/∂z at z from `e`),
+    /// and releases a held one whose gradient points inwards.
+    fn hold<S: System>(&mut self, problem: &Problem<S>, e: &Evaluation) {
+        let Some(jacobian) = &e.jacobian else { return };
+        let lin = Linearization {
+            z: e.z.clone(),
+            cost: e.r.norm_squared(),
+            gradient: jacobian.tr_mul(&e.r),
+            normal: jacobian.tr_mul(jacobian),
+            residuals: None,
+            counts: Counts::default(),
+        };
+        let (_, active) = optimality(problem, &lin, self.gtol);
+        for (i, u) in problem.unknowns().list().iter().enumerate() {
+            let (lo, hi) = u.coordinate_bounds();
+            match (self.space.held[i], active[i]) {
+                (None, Some(Bound::Lower)) => self.space.held[i] = Some(lo),
+                (None, Some(Bound::Upper)) => self.space.held[i] = Some(hi),
+                (Some(at), _) => {
+                    let g = lin.gradient[i];
+                    let inwards = if at <= lo { g < 0.0 } else { g > 0.0 };
+                    if inwards {
+                        self.space.held[i] = None;
+                        self.space.w[i] = self.space.maps[i].w(at);
+                    }
+                }
+                (None, None) => {}
+            }
+        }
+    }
+
+    /// Why argmin's iteration stopped with `message`: a failure the operator met, a singular
+    /// JᵀJ, or argmin's own error.
+    fn failure<S: System>(
+        &self,
+        problem: &Problem<S>,
+        jacobian: &Matrix,
+        message: String,
+    ) -> Failure {
+        if let Some(failure) = self.cache.borrow_mut().failure.take() {
             return failure;
         }
-        let jacobian = self.cache.borrow().at(w).and_then(|e| e.jacobian.clone());
-        let Some(j) = jacobian else { return Failure::Solver(message) };
-        let Err(singular) = NormalFactor::new(&j.tr_mul(&j), self.options.driver.max_condition)
-        else {
-            return Failure::Solver(message);
-        };
-        let names = problem.names();
-        let involved: Vec<String> = singular.unknowns.iter().map(|&i| names[i].clone()).collect();
-        // dz/dw → 0 as w → ±∞: the column of an unknown pressed against its bound vanishes.
-        let flat = |i: usize| self.maps[i] != Map::Free && self.maps[i].dz_dw(w[i]).abs() < 1e-8;
-        if !singular.unknowns.is_empty() && singular.unknowns.iter().all(|&i| flat(i)) {
-            return Failure::Solver(format!(
-                "stopped on the bound of {} (the change of variables that keeps argmin inside the bounds flattens there)",
-                involved.join(", ")
-            ));
+        match NormalFactor::new(&jacobian.tr_mul(jacobian), self.options.driver.max_condition) {
+            Err(singular) => {
+                let free = self.space.free();
+                let names: Vec<String> = free.iter().map(|&i| problem.names()[i].clone()).collect();
+                Failure::singular(&singular, &names)
+            }
+            Ok(_) => Failure::Solver(message),
         }
-        Failure::singular(&singular, &names)
     }
 }
 
 /// One `next_iter` of an argmin solver from `state` on `operator`: the new parameters.
-fn next<S: System, Sv, G, R>(
+fn next<O, Sv, G, R>(
     solver: &mut Sv,
-    operator: &Residuals<'_, S>,
+    operator: O,
     state: IterState<Vector, G, Matrix, (), R, f64>,
 ) -> Result<Vec<f64>, String>
 where
-    for<'r> Sv: Solver<&'r Residuals<'r, S>, IterState<Vector, G, Matrix, (), R, f64>>,
+    Sv: Solver<O, IterState<Vector, G, Matrix, (), R, f64>>,
 {
     let mut problem = ArgminProblem::new(operator);
     let (state, _) = solver.next_iter(&mut problem, state).map_err(|e| e.to_string())?;
@@ -151,48 +194,62 @@ where
 
 impl<S: System> Step<S> for Adapter<'_> {
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
-        let w: Vec<f64> = self.maps.iter().zip(&z).map(|(m, &z)| m.w(z)).collect();
+        self.space.w = self.space.maps.iter().zip(&z).map(|(m, &z)| m.w(z)).collect();
+        self.typical = z.iter().map(|v| if *v == 0.0 { 1.0 } else { v.abs() }).collect();
+        let z = self.space.current_z();
         let op = self.operator(ev);
-        let e = op.evaluate(&w)?;
-        if !e.r.iter().all(|v| v.is_finite()) {
-            return Err(op.failure_at(&w));
+        let e = op.evaluate(&z)?;
+        if !e.is_finite() {
+            return Err(op.failure_at(&z));
         }
         self.norm = e.r.norm();
         self.tolerance = self.options.tolerance * self.norm.max(1.0);
-        self.w = w;
         Ok(self.iterate(e))
     }
 
-    /// One iteration of argmin's solver: the Gauss–Newton direction from (JᵀJ)⁻¹Jᵀr, taken
-    /// whole or after argmin's backtracking line search.
+    /// One Gauss–Newton step by argmin's solver on the free unknowns: the full step, or
+    /// argmin's backtracking Armijo line search along it on ½‖r‖² with its gradient Jᵀr.
     fn propose(
         &mut self,
         ev: &Evaluations<'_, S>,
         _current: &Iterate,
     ) -> Result<Proposal, Failure> {
         self.cache.borrow_mut().failure = None;
+        // Unknowns on their bounds are held there; argmin moves the others.
+        let here = self.operator(ev).with_jacobian(&self.space.current_z())?;
+        self.hold(ev.problem(), &here);
         let op = self.operator(ev);
-        // J at the current point (free when it came with the residuals; argmin's own request
-        // for it then finds it cached): the condition and |Jᵀr| of the history.
-        let jacobian = op.jacobian_at(&self.w)?;
-        let r = op.evaluate(&self.w)?.r;
-        let gradient_norm = Some(jacobian.tr_mul(&r).norm());
+        let w = Vector::from_vec(self.space.free_w());
+        if w.is_empty() {
+            return Ok(Proposal {
+                z: self.space.current_z(),
+                condition: None,
+                gradient_norm: None,
+                stop: None,
+            });
+        }
+        let jacobian = Jacobian::jacobian(&&op, &w).map_err(|_| op.failure_at(&here.z))?;
+        let r = Operator::apply(&&op, &w).map_err(|_| op.failure_at(&here.z))?;
+        let gradient = jacobian.tr_mul(&r);
         let condition = NormalFactor::new(&jacobian.tr_mul(&jacobian), f64::INFINITY)
             .ok()
             .map(|f| f.condition());
-        let w = Vector::from_column_slice(&self.w);
-        let outcome = if self.options.line_search {
-            let condition = ArmijoCondition::new(self.options.armijo)
-                .map_err(|e| Failure::Solver(e.to_string()))?;
-            let mut solver = GaussNewtonLS::new(BacktrackingLineSearch::new(condition));
-            next::<S, _, Vector, ()>(&mut solver, &op, IterState::new().param(w))
+        let full =
+            next(&mut ArgminGn::new(), &op, IterState::new().param(w.clone()).residuals(r.clone()))
+                .map_err(|message| self.failure(ev.problem(), &jacobian, message))?;
+        let w_new = if self.options.line_search {
+            let direction = Vector::from_vec(full) - &w;
+            self.line_search(&op, &w, direction, gradient.clone(), 0.5 * r.norm_squared())?
         } else {
-            next(&mut ArgminGn::new(), &op, IterState::new().param(w).residuals(r))
+            full
         };
-        let w_new = outcome.map_err(|message| self.failure(ev.problem(), &self.w, message))?;
-        let z = self.maps.iter().zip(&w_new).map(|(m, &w)| m.z(w)).collect();
-        self.w = w_new;
-        Ok(Proposal { z, condition, gradient_norm, stop: None })
+        self.space.set_free_w(&w_new);
+        Ok(Proposal {
+            z: self.space.current_z(),
+            condition,
+            gradient_norm: Some(gradient.norm()),
+            stop: None,
+        })
     }
 
     /// The point argmin moved to (already evaluated); argmin's rule judges the change of ‖r‖.
@@ -203,9 +260,10 @@ impl<S: System> Step<S> for Adapter<'_> {
         _proposal: Proposal,
     ) -> Result<Advance, Failure> {
         let op = self.operator(ev);
-        let e = op.evaluate(&self.w)?;
-        if !e.r.iter().all(|v| v.is_finite()) {
-            return Err(op.failure_at(&self.w));
+        let z = self.space.current_z();
+        let e = op.evaluate(&z)?;
+        if !e.is_finite() {
+            return Err(op.failure_at(&z));
         }
         let norm = e.r.norm();
         let change = (self.norm - norm).abs();
@@ -215,6 +273,43 @@ impl<S: System> Step<S> for Adapter<'_> {
             Advance::MovedThenStop(next, Rule::CostChange)
         } else {
             Advance::Moved(next)
+        })
+    }
+}
+
+impl Adapter<'_> {
+    /// argmin's backtracking line search (Armijo, contraction 1/2) from w along `direction`,
+    /// on ½‖r‖² with gradient `gradient` and value `cost` at w. The full step, already
+    /// evaluated by argmin's Gauss–Newton solver, is the first trial and costs nothing. At
+    /// most 60 contractions (2⁻⁶⁰): a line search that finds no decrease leaves w where it is.
+    fn line_search<S: System>(
+        &self,
+        op: &Residuals<'_, S>,
+        w: &Vector,
+        direction: Vector,
+        gradient: Vector,
+        cost: f64,
+    ) -> Result<Vec<f64>, Failure> {
+        let solver = || -> Result<_, argmin::core::Error> {
+            let condition = ArmijoCondition::new(self.options.armijo)?;
+            let mut search = BacktrackingLineSearch::new(condition).rho(0.5)?;
+            search.search_direction(direction.clone());
+            search.initial_step_length(1.0)?;
+            Executor::new(HalfSquares(op), search)
+                .configure(|s| {
+                    s.param(w.clone()).gradient(gradient.clone()).cost(cost).max_iters(60)
+                })
+                .run()
+        };
+        let result = solver().map_err(|e| {
+            self.cache.borrow_mut().failure.take().unwrap_or(Failure::Solver(e.to_string()))
+        })?;
+        let state = result.state();
+        Ok(match state.get_termination_reason() {
+            Some(TerminationReason::SolverConverged) => {
+                state.get_param().map_or_else(|| w.as_slice().to_vec(), |p| p.as_slice().to_vec())
+            }
+            _ => w.as_slice().to_vec(),
         })
     }
 }

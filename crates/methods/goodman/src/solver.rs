@@ -56,22 +56,33 @@ impl<S: System> Step<S> for Newton<'_> {
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
         let problem = ev.problem();
         let lin = current.linearization.as_ref().expect("Goodman's iterates are linearized");
-        let held = problem.unknowns().active(&current.z, lin.gradient.as_slice());
-        let step = newton_step(lin, self.options.driver.max_condition, &held)
+        let (lo, hi): (Vec<f64>, Vec<f64>) = problem
+            .unknowns()
+            .list()
+            .iter()
+            .zip(&current.z)
+            .map(|(u, z)| {
+                let (lo, hi) = u.coordinate_bounds();
+                (lo - z, hi - z)
+            })
+            .unzip();
+        let step = newton_step(lin, (&lo, &hi), self.options.driver.max_condition)
             .map_err(|s| Failure::singular(&s, &problem.names()))?;
-        // The decrease the step predicts: ε − ε_lin(z + δ) = δᵀAδ for the Newton step.
-        let predicted = step.delta.dot(&(&lin.normal * &step.delta));
+        // The decrease the quadratic model predicts, ε − ε_lin(z + δ) = −(2Uᵀδ + δᵀAδ)
+        // (δᵀAδ for the unbounded Newton step).
+        let predicted =
+            -(2.0 * lin.gradient.dot(&step.delta) + step.delta.dot(&(&lin.normal * &step.delta)));
         let cost_tolerance = self.options.cost_tolerance;
         let stop = (cost_tolerance > 0.0 && predicted <= cost_tolerance * lin.cost)
             .then_some(Rule::PredictedDecrease);
-        let mut z: Vec<f64> = current.z.iter().zip(&step.delta).map(|(z, d)| z + d).collect();
-        problem.unknowns().project(&mut z);
+        let z = inside(problem, &current.z, &step.delta, 1.0);
         self.delta = step.delta;
         Ok(Proposal { z, condition: Some(step.condition), gradient_norm: None, stop })
     }
 
     /// c ← c* + δc, then integrate again from the new initial vector. With step halving, δc
-    /// is halved while the cost rises or the integration fails, at most `max_halvings` times.
+    /// is halved while the cost does not fall or the integration fails, at most
+    /// `max_halvings` times; the box is convex, so every shortened step stays inside it.
     fn advance(
         &mut self,
         ev: &Evaluations<'_, S>,
@@ -87,22 +98,16 @@ impl<S: System> Step<S> for Newton<'_> {
         let step_tolerance = problem.resolvable_step(self.options.driver.step_tolerance);
         let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
         let negligible = step_tolerance * (z_norm + step_tolerance);
-        let resolution = problem.integrator().rtol * lin.cost;
         let mut scale = 1.0;
         for _ in 0..=self.options.max_halvings {
             if scale < 1.0 && scale * self.delta.norm() <= negligible {
                 // Shrunk below the step tolerance without reducing the cost.
                 return Ok(Advance::Stop(Rule::Step));
             }
-            let mut trial: Vec<f64> =
-                z.iter().zip(&self.delta).map(|(z, d)| z + scale * d).collect();
-            problem.unknowns().project(&mut trial);
+            let trial = inside(problem, z, &self.delta, scale);
             match ev.linearize(&trial) {
-                // A rise within ε's accuracy (about rtol relative) says nothing: such a step
-                // is judged by the iteration's tests, not by comparing two costs that agree
-                // to their accuracy. A larger rise is rejected, however small the decrease
-                // the linearization predicted.
-                Ok(l) if l.cost <= lin.cost + resolution => {
+                // Only an actual decrease of the cost is a step taken.
+                Ok(l) if l.cost < lin.cost => {
                     return Ok(Advance::Moved(Iterate::linearized(l)));
                 }
                 Ok(_) => {}
@@ -113,4 +118,12 @@ impl<S: System> Step<S> for Newton<'_> {
         }
         Ok(Advance::Stop(Rule::NoDescent))
     }
+}
+
+/// z + s·δ, on the bounds exactly where it reaches them (δ keeps z inside; this only
+/// removes rounding).
+fn inside<S: System>(problem: &Problem<S>, z: &[f64], delta: &DVector<f64>, s: f64) -> Vec<f64> {
+    let mut trial: Vec<f64> = z.iter().zip(delta).map(|(z, d)| z + s * d).collect();
+    problem.unknowns().project(&mut trial);
+    trial
 }

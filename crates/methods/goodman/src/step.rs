@@ -9,48 +9,42 @@
 //! Σ_j A_ij δc_j = −U*_i,
 //!
 //! solved here by Cholesky after Jacobi scaling (the paper notes the matrix is symmetric).
+//!
+//! With bounds on the unknowns the step is the projected Newton step: δc minimises the
+//! quadratic model ε + 2U*ᵀδ + δᵀAδ, whose minimiser without bounds is eq. (14), over the box
+//! the bounds leave (`sysid_core::minimise_in_box`, an active-set method). An unknown is held
+//! on its bound when the model's multiplier (U* + Aδ)_i pushes it outwards, and released only
+//! when it points inwards: the active set is that of the model's minimiser, not the sign of
+//! U* at the iterate, so a bound is not entered and left on alternate iterations.
 
 use nalgebra::DVector;
-use sysid_core::{Linearization, NormalFactor, Singular};
+use sysid_core::{Bound, Linearization, Quadratic, Singular, minimise_in_box};
 
 /// The Newton correction δc of one iteration.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NewtonStep {
     /// δc, in the coordinates of the unknowns.
     pub delta: DVector<f64>,
-    /// Condition number of the Jacobi-scaled normal matrix.
+    /// Condition number of the Jacobi-scaled normal matrix of the free unknowns.
     pub condition: f64,
+    /// The bound each unknown is held on.
+    pub active: Vec<Option<Bound>>,
 }
 
-/// Solves eq. (14), A δc = −U*, at the linearization `lin`, for the unknowns not held at a
-/// bound (`held[i]`: see [`Unknowns::active`](sysid_core::Unknowns::active)); held unknowns
-/// do not move. Without bounds, `held` is all false and this is the paper's step.
+/// Solves eq. (14), A δc = −U*, at the linearization `lin` within the box `(lo, hi)` of
+/// allowed corrections (the bounds minus c*; infinite without bounds, where this is the
+/// paper's step).
 pub fn newton_step(
     lin: &Linearization,
+    (lo, hi): (&[f64], &[f64]),
     max_condition: f64,
-    held: &[bool],
 ) -> Result<NewtonStep, Singular> {
     let k = lin.gradient.len();
-    let free: Vec<usize> = (0..k).filter(|&i| !held[i]).collect();
-    let mut delta = DVector::zeros(k);
-    if free.is_empty() {
-        return Ok(NewtonStep { delta, condition: 1.0 });
-    }
-    let a = lin.normal.select_rows(&free).select_columns(&free);
-    let u = lin.gradient.select_rows(&free);
-    let factor = NormalFactor::new(&a, max_condition).map_err(|s| {
-        let mut direction = vec![0.0; k];
-        for (d, &i) in s.direction.iter().zip(&free) {
-            direction[i] = *d;
-        }
-        Singular {
-            unknowns: s.unknowns.iter().map(|&i| free[i]).collect(),
-            condition: s.condition,
-            direction,
-        }
-    })?;
-    for (d, &i) in factor.solve(&u).iter().zip(&free) {
-        delta[i] = -d;
-    }
-    Ok(NewtonStep { delta, condition: factor.condition() })
+    let model = Quadratic { h: &lin.normal, c: &lin.gradient };
+    let solution = minimise_in_box(&model, (lo, hi), &vec![0.0; k], max_condition)?;
+    Ok(NewtonStep {
+        delta: DVector::from_vec(solution.x),
+        condition: solution.condition,
+        active: solution.active,
+    })
 }

@@ -132,11 +132,14 @@ impl<S: System> Step<S> for Quasi<'_> {
         })?;
         let ls = LeastSquares::new(problem, layout, trajectory, &family);
         let gradient_norm = Some(ls.linearization(&current.z, Counts::default()).gradient.norm());
-        let (mut c, condition) = ls
-            .solve(self.options.driver.max_condition)
+        let (lo, hi): (Vec<f64>, Vec<f64>) =
+            problem.unknowns().list().iter().map(|u| u.coordinate_bounds()).unzip();
+        let (c, condition) = ls
+            .solve((&lo, &hi), &current.z, self.options.driver.max_condition)
             .map_err(|s| Failure::singular(&s, &problem.names()))?;
-        problem.unknowns().project(c.as_mut_slice());
-        let z = c.as_slice().to_vec();
+        let mut z = c.as_slice().to_vec();
+        // On the bounds exactly where it reaches them (rounding only).
+        problem.unknowns().project(&mut z);
         let linear_cost = ls.residual(&z).norm_squared();
         self.proposed = Some((family, z.clone(), linear_cost));
         Ok(Proposal { z, condition: Some(condition), gradient_norm, stop: None })

@@ -17,9 +17,8 @@
 //! linear family, a linear least-squares problem (QR, faer); x_{k+1} = p + Φ c is kept as a
 //! dense solution and linearised around next.
 
-use faer::linalg::solvers::SolveLstsq;
 use nalgebra::{DMatrix, DVector};
-use sysid_core::{Linearization, NormalFactor, Problem, Singular};
+use sysid_core::{LinearLeastSquares, Linearization, Problem, Singular, minimise_in_box};
 use sysid_ode::{
     Counts, DenseSolution, FactorError, Function, IterationMatrix, JacobianProducts, Observable,
     OdeError, Rhs, Side, System, integrate,
@@ -282,14 +281,20 @@ impl LeastSquares {
         Self { a, b }
     }
 
-    /// The c minimising ‖a + B c‖ (QR), or the unknowns B cannot tell apart.
-    pub fn solve(&self, max_condition: f64) -> Result<(DVector<f64>, f64), Singular> {
-        let factor = NormalFactor::new(&self.b.tr_mul(&self.b), max_condition)?;
-        let k = self.b.ncols();
-        let b = sysid_core::as_faer(&self.b);
-        let rhs = faer::Mat::from_fn(self.a.len(), 1, |i, _| -self.a[i]);
-        let c = b.qr().solve_lstsq(rhs);
-        Ok((DVector::from_fn(k, |j, _| c[(j, 0)]), factor.condition()))
+    /// The c minimising ‖a + B c‖ within the bounds (lo, hi) of the unknowns' coordinates,
+    /// and the condition number of the free columns; or the unknowns B cannot tell apart.
+    /// Without bounds one QR solve; with them bounded-variable least squares (Stark & Parker's
+    /// active-set method, QR on the free columns) from the feasible `start`: never the free
+    /// solution clipped.
+    pub fn solve(
+        &self,
+        (lo, hi): (&[f64], &[f64]),
+        start: &[f64],
+        max_condition: f64,
+    ) -> Result<(DVector<f64>, f64), Singular> {
+        let problem = LinearLeastSquares { b: &self.b, a: &self.a };
+        let solution = minimise_in_box(&problem, (lo, hi), start, max_condition)?;
+        Ok((DVector::from_vec(solution.x), solution.condition))
     }
 
     /// The linear family's residual at c, a + B c.
