@@ -118,10 +118,19 @@ fn table<S: System>(problem: &Problem<S>, context: &Context, e: &Estimate) -> St
         "unknown", "estimate", "std. error", "95 % interval (Student's t)", context.expected_label
     );
     for (i, name) in e.names.iter().enumerate() {
-        let se = e.std_errors.as_ref().map_or("—".to_string(), |s| significant(s[i], 5));
-        let interval = e.intervals.as_ref().map_or("—".to_string(), |list| {
-            format!("[{}, {}]", significant(list[i][0], 6), significant(list[i][1], 6))
-        });
+        let on_bound = e.certificate.active[i].is_some();
+        let se = match &e.std_errors {
+            _ if on_bound => "on bound".to_string(),
+            Some(s) => significant(s[i], 5),
+            None => "—".to_string(),
+        };
+        let interval = match &e.intervals {
+            _ if on_bound => "—".to_string(),
+            Some(list) => {
+                format!("[{}, {}]", significant(list[i][0], 6), significant(list[i][1], 6))
+            }
+            None => "—".to_string(),
+        };
         let expected = context.expected(name).map_or(String::new(), |v| format!("{v}"));
         let bound = match e.certificate.active[i] {
             Some(Bound::Lower) => "   on its lower bound",
@@ -158,7 +167,7 @@ fn table<S: System>(problem: &Problem<S>, context: &Context, e: &Estimate) -> St
         .map_or(String::new(), |(cost, source)| format!("   (reference {cost}, {source})"));
     out += &format!("  cost ε       {}{reference_cost}\n", significant(e.cost, 10));
     let dof = e.dof.map_or("—".to_string(), |d| d.to_string());
-    out += &format!("  dof          {dof} (measured values − unknowns)\n");
+    out += &format!("  dof          {dof} (measured values − unknowns not held on a bound)\n");
     out += &format!(
         "  work         {} integrations, {} steps ({} rejected), {} right-hand-side evaluations, {:.3} ms\n\n",
         e.counts.integrations,

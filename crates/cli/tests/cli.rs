@@ -265,10 +265,11 @@ fn a_failure_after_the_start_exits_1_with_the_best_iterate() {
     assert!(best < last, "best {best}, last {last}");
     let history = json["history"].as_array().unwrap();
     assert_eq!(history.len() as u64, last + 1);
-    // The reported cost is the best one of the history.
+    // The reported point is the best one of the history (its cost there from the
+    // certificate's integration, within the integrations' tolerance of the history's).
     let best_cost = history[best as usize]["cost"].as_f64().unwrap();
     assert!(history.iter().filter_map(|h| h["cost"].as_f64()).all(|c| c >= best_cost));
-    assert_eq!(json["cost"].as_f64(), Some(best_cost));
+    assert!((json["cost"].as_f64().unwrap() - best_cost).abs() <= 1e-6 * best_cost);
     for key in ["optimality", "gtol", "dof", "intervals", "active_bounds", "std_errors"] {
         assert!(json.get(key).is_some(), "no `{key}`");
     }

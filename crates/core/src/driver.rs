@@ -351,18 +351,26 @@ impl<S: System> Record<'_, S> {
         let problem = self.problem;
         let unknowns = problem.unknowns();
         let values = unknowns.values(&point.z);
+        // Unknowns held on a bound are not estimated there: no standard error, no interval,
+        // and they do not count in the degrees of freedom.
+        let held: Vec<bool> = certificate.active.iter().map(Option::is_some).collect();
+        let free = held.iter().filter(|h| !**h).count();
         // s² A⁻¹ is the estimate's covariance at a minimum only.
-        let covariance = lin.filter(|_| certificate.holds()).and_then(|l| problem.covariance(l));
-        let std_errors: Option<Vec<f64>> =
-            covariance.as_ref().map(|c| (0..c.nrows()).map(|i| c[(i, i)].sqrt()).collect());
-        let dof = problem.n_observations().map(|n| n.saturating_sub(unknowns.len()));
+        let covariance =
+            lin.filter(|_| certificate.holds()).and_then(|l| problem.covariance(l, &held));
+        let std_errors: Option<Vec<f64>> = covariance.as_ref().map(|c| {
+            (0..c.nrows()).map(|i| if held[i] { f64::NAN } else { c[(i, i)].sqrt() }).collect()
+        });
+        let dof = problem.n_observations().map(|n| n.saturating_sub(free));
         let intervals = match (&std_errors, dof) {
-            (Some(se), Some(dof)) => unknowns
-                .list()
-                .iter()
-                .zip(values.iter().zip(se))
-                .map(|(u, (&v, &s))| interval(v, s, dof, u.log))
-                .collect(),
+            (Some(se), Some(dof)) if dof > 0 => Some(
+                unknowns
+                    .list()
+                    .iter()
+                    .zip(values.iter().zip(se))
+                    .map(|(u, (&v, &s))| interval(v, s, dof, u.log).unwrap_or([f64::NAN; 2]))
+                    .collect(),
+            ),
             _ => None,
         };
         Estimate {
@@ -372,12 +380,10 @@ impl<S: System> Record<'_, S> {
             std_errors,
             intervals,
             covariance,
-            // Quasilinearization may return a point where its own measure is missing.
-            cost: if point.cost.is_finite() {
-                point.cost
-            } else {
-                lin.map_or(f64::NAN, |l| l.cost)
-            },
+            // One measure for every method: ε from the integration the certificate judged
+            // (the problem's integrator, with sensitivities); the method's own where there is
+            // none.
+            cost: lin.map_or(point.cost, |l| l.cost),
             dof,
             iterations,
             best_iteration,

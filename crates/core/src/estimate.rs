@@ -48,13 +48,15 @@ pub struct Estimate {
     /// when A is singular).
     pub std_errors: Option<Vec<f64>>,
     /// 95 % intervals with Student's t for `dof` degrees of freedom (on a log scale formed
-    /// for ln(value) and mapped back).
+    /// for ln(value) and mapped back); NaN for an unknown held on a bound.
     pub intervals: Option<Vec<[f64; 2]>>,
     /// Covariance of the values: s² A⁻¹ with s² = ε/(N − k).
     pub covariance: Option<DMatrix<f64>>,
-    /// ε at the estimate.
+    /// ε at the estimate, from the integration the certificate was computed on (the same for
+    /// every method), so that methods at the same point report the same cost.
     pub cost: f64,
-    /// Degrees of freedom N − k (None for a record given as a function).
+    /// Degrees of freedom N − k_free: measured values less the unknowns not held on a bound
+    /// (None for a record given as a function).
     pub dof: Option<usize>,
     /// Number of updates of the unknowns the method made.
     pub iterations: usize,
@@ -184,7 +186,10 @@ impl Serialize for FitRecord<'_> {
         st.serialize_field("active_bounds", &Named(&names, &bounds))?;
         st.serialize_field("dof", &e.dof)?;
         let intervals: Vec<Option<[Num; 2]>> = match &e.intervals {
-            Some(list) => list.iter().map(|[a, b]| Some([Num(*a), Num(*b)])).collect(),
+            Some(list) => list
+                .iter()
+                .map(|&[a, b]| (a.is_finite() && b.is_finite()).then_some([Num(a), Num(b)]))
+                .collect(),
             None => e.names.iter().map(|_| None).collect(),
         };
         st.serialize_field("intervals", &Named(&e.names, &intervals))?;
@@ -252,7 +257,10 @@ impl fmt::Display for Estimate {
                 None => "—".into(),
             };
             let interval = match &self.intervals {
-                Some(list) => format!("[{:.6e}, {:.6e}]", list[i][0], list[i][1]),
+                Some(list) if list[i][0].is_finite() => {
+                    format!("[{:.6e}, {:.6e}]", list[i][0], list[i][1])
+                }
+                Some(_) => "on a bound".into(),
                 None => "—".into(),
             };
             let bound = match self.certificate.active[i] {

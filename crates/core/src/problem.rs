@@ -555,19 +555,29 @@ impl<S: System> Problem<S> {
 
     /// Covariance of the estimates (as values) from the normal matrix at the estimate, scaled
     /// by the residual variance s² = ε / (N − k):  Cov = s² A⁻¹, transformed to values by the
-    /// delta method. `None` when there are no more data than unknowns (no residual variance),
-    /// for a record given as a function (no count N), or when A is singular.
-    pub fn covariance(&self, lin: &Linearization) -> Option<DMatrix<f64>> {
+    /// delta method. Unknowns `held` on a bound are not estimated there: the covariance is
+    /// that of the free ones, s² (A_FF)⁻¹ with s² = ε / (N − k_free), and the held ones' rows
+    /// and columns are 0. `None` when there are no more data than free unknowns (no residual
+    /// variance), for a record given as a function (no count N), or when A_FF is singular.
+    pub fn covariance(&self, lin: &Linearization, held: &[bool]) -> Option<DMatrix<f64>> {
         let k = self.unknowns.len();
+        let free: Vec<usize> = (0..k).filter(|&i| !held.get(i).copied().unwrap_or(false)).collect();
         let n = self.n_observations()?;
-        if n <= k {
+        if n <= free.len() || free.is_empty() {
             return None;
         }
-        let s2 = lin.cost / (n - k) as f64;
-        let inverse = NormalFactor::new(&lin.normal, f64::INFINITY).ok()?.inverse();
+        let s2 = lin.cost / (n - free.len()) as f64;
+        let block = lin.normal.select_rows(&free).select_columns(&free);
+        let inverse = NormalFactor::new(&block, f64::INFINITY).ok()?.inverse();
         let scale: Vec<f64> =
             self.unknowns.list().iter().zip(&lin.z).map(|(u, &z)| u.scale(z)).collect();
-        Some(DMatrix::from_fn(k, k, |i, j| s2 * inverse[(i, j)] * scale[i] * scale[j]))
+        let mut cov = DMatrix::zeros(k, k);
+        for (a, &i) in free.iter().enumerate() {
+            for (b, &j) in free.iter().enumerate() {
+                cov[(i, j)] = s2 * inverse[(a, b)] * scale[i] * scale[j];
+            }
+        }
+        Some(cov)
     }
 }
 

@@ -11,9 +11,10 @@ use sysid_ode::Wrt;
 /// positive and makes relative changes uniform; estimates and standard errors are reported
 /// as values (the standard error by the delta method, value · σ(ln value)).
 ///
-/// Bounds are enforced by projection (active-set projected Newton): an unknown on a bound
-/// that the descent direction would push past is held there while the others are solved for,
-/// and every update is clipped to [min, max] (on the log scale: to [ln min, ln max]).
+/// Bounds hold inside every method's step (on the log scale as [ln min, ln max]): Goodman's
+/// projected Newton step and quasilinearization's least squares solve the step's subproblem
+/// within the box ([`minimise_in_box`](crate::minimise_in_box)); the argmin baseline maps
+/// the unknown to a free coordinate and holds it on its bound once it is there.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Unknown {
     /// A parameter's name, or a state's name for its initial value.
@@ -144,21 +145,8 @@ impl Unknowns {
     pub fn values(&self, z: &[f64]) -> Vec<f64> {
         self.list.iter().zip(z).map(|(u, &z)| u.value(z)).collect()
     }
-    /// Which unknowns are held at a bound: those on a bound that the descent direction −U
-    /// (U = half the gradient of ε) would push past. Newton-type methods solve for the others
-    /// only (the active-set projected Newton method).
-    pub fn active(&self, z: &[f64], gradient: &[f64]) -> Vec<bool> {
-        self.list
-            .iter()
-            .zip(z.iter().zip(gradient))
-            .map(|(u, (&zi, &g))| {
-                let (lo, hi) = u.coordinate_bounds();
-                (zi <= lo && g > 0.0) || (zi >= hi && g < 0.0)
-            })
-            .collect()
-    }
-
-    /// Clips coordinates to the bounds; returns whether any was clipped.
+    /// Moves coordinates onto the bounds they are outside of (rounding, or a start given
+    /// outside); returns whether any moved.
     pub fn project(&self, z: &mut [f64]) -> bool {
         let mut clipped = false;
         for (u, zi) in self.list.iter().zip(z.iter_mut()) {

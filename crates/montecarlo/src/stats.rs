@@ -203,8 +203,9 @@ fn accuracy(name: &str, i: usize, rows: &[&TrialRecord], truth: f64, crb_sd: f64
         (errors.iter().map(|e| (e - m) * (e - m)).sum::<f64>() / (n - 1) as f64).sqrt()
     });
     let rmse = (n > 0).then(|| (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt());
+    // Fits that hold the unknown on a bound have no interval for it.
     let intervals: Vec<[f64; 2]> =
-        rows.iter().filter_map(|r| r.intervals.as_ref().map(|list| list[i])).collect();
+        rows.iter().filter_map(|r| r.intervals.as_ref().and_then(|list| list[i])).collect();
     let coverage = (!intervals.is_empty()).then(|| {
         let inside = intervals.iter().filter(|[lo, hi]| (*lo..=*hi).contains(&truth)).count();
         inside as f64 / intervals.len() as f64

@@ -103,12 +103,13 @@ pub struct TrialRecord {
     pub cost: Option<f64>,
     /// Final values of the unknowns.
     pub values: Vec<f64>,
-    /// The fit's own standard errors, where it has them.
-    pub std_errors: Option<Vec<f64>>,
+    /// The fit's own standard errors, where it has them (none for an unknown held on a
+    /// bound).
+    pub std_errors: Option<Vec<Option<f64>>>,
     /// The fit's own 95 % intervals (Student's t for N − k degrees of freedom), where it has
-    /// them.
+    /// them (none for an unknown held on a bound).
     #[serde(default)]
-    pub intervals: Option<Vec<[f64; 2]>>,
+    pub intervals: Option<Vec<Option<[f64; 2]>>>,
     /// Updates of the unknowns.
     pub iterations: usize,
     /// Accepted integration steps.
@@ -291,8 +292,10 @@ fn record(
         termination: e.termination.to_string(),
         cost,
         values: e.values.clone(),
-        std_errors: e.std_errors.clone(),
-        intervals: e.intervals.clone(),
+        std_errors: e.std_errors.as_ref().map(|list| list.iter().map(|&v| finite(v)).collect()),
+        intervals: e.intervals.as_ref().map(|list| {
+            list.iter().map(|&[a, b]| (a.is_finite() && b.is_finite()).then_some([a, b])).collect()
+        }),
         iterations: e.iterations,
         steps: e.counts.steps,
         rhs_evaluations: e.counts.rhs_evaluations,
@@ -324,4 +327,8 @@ fn failure(e: &Estimate) -> String {
         },
     }
     .to_string()
+}
+
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
 }

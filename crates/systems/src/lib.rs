@@ -15,6 +15,7 @@
 //! | `short-period` | α' = Zα α + q + Zδ δe, q' = Mα α + Mq q + Mδ δe | α (σ = 0.002), q (σ = 0.005) every 0.05 on [0, 10] | from (−1, −3, −1, −0.1, −6) |
 //! | `van-der-pol-three-point` | van der Pol, t0 = 4 | x at t = 4, 6, 8 (no noise) | x, v, μ from (−1.5, 0.3, 1.5); ε = 0 |
 //! | `robertson` (stiff) | y1' = −k1y1 + k3y2y3, y2' = k1y1 − k2y2² − k3y2y3, y3' = k2y2² | y1, y3 at 20 log-spaced t in [0.01, 100], 1 % relative noise | log k1, k2, k3 from truth + 0.3 decades |
+//! | `compartment-chain` (bounded) | x1' = −(k1 + d1)x1, x_i' = k_{i−1}x_{i−1} − (k_i + d_i)x_i, x8' = k7x7 − d8x8 | all 8 states at t = 0..29, σ = 100, unweighted | 7 transfer and 8 loss rates ≥ 0, 8 initial values ≥ 0, 30 % off the truth; d1 = 0 on its bound at the optimum |
 //!
 //! Synthetic data are the truth integrated with rtol 1e-12 plus Gaussian noise drawn from
 //! ChaCha8 seeded by the seed, series after series: the same data on every machine; each
@@ -38,6 +39,7 @@
 #![warn(missing_docs)]
 
 mod case;
+pub mod compartment_chain;
 pub mod falling_body;
 pub mod fitzhugh_nagumo;
 pub mod lotka_volterra;
@@ -47,6 +49,7 @@ pub mod stress;
 pub mod van_der_pol;
 
 pub use case::{Case, DataSource, Noise, Reference, grid, truth_integrator};
+pub use compartment_chain::Chain;
 pub use falling_body::FallingBody;
 pub use fitzhugh_nagumo::FitzHughNagumo;
 pub use lotka_volterra::LotkaVolterra;
@@ -88,6 +91,7 @@ catalogue! {
     "short-period" => short_period::short_period,
     "van-der-pol-three-point" => van_der_pol::van_der_pol_three_point,
     "robertson" => robertson::robertson,
+    "compartment-chain" => compartment_chain::compartment_chain,
 }
 
 /// The one-line summary of each catalogue system, in catalogue order.

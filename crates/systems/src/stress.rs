@@ -7,7 +7,7 @@
 //! | `rate-on-bound` | A → B (k1), A → C (k2), k ≥ 0; the data were made with k2 = −0.03, so the bounded optimum has k2 = 0 on its bound |
 //! | `outlier` | x' = −kx with σ = 0.01 data and one outlier of 1e3: weighted residual norm ≈ 1e5 |
 //! | `slow-rates` | A → B → C with k1 = 2e-5 /s, k2 = 1e-5 /s on a linear scale, data of order 1e2 over 3e5 s |
-//! | `chain` | 8 compartments in a chain, 15 rates ≥ 0 and 8 initial values ≥ 0 (23 unknowns), unweighted, residual norm ≈ 1.5e3, the last loss rate on its bound |
+//! | `two-sided-bound` | x' = −kx with 0.1 ≤ k ≤ 0.6 and data from k = 0.8: the optimum has k on its upper bound |
 //! | `runaway` | y' = −k (y − cos t) from k = 10: a full Newton step makes k negative, and the solution grows like e^{28 t} |
 //! | `vanishing-component` | y1 + y2 measured, y2 absent from the data: as y2(0) → 0 (its bound), k2 stops influencing the data (a singular direction away from the start) |
 
@@ -18,8 +18,14 @@ use crate::Visit;
 use crate::case::{Case, DataSource, Noise, grid};
 
 /// Names of the stress cases.
-pub const NAMES: &[&str] =
-    &["rate-on-bound", "outlier", "slow-rates", "chain", "runaway", "vanishing-component"];
+pub const NAMES: &[&str] = &[
+    "rate-on-bound",
+    "two-sided-bound",
+    "outlier",
+    "slow-rates",
+    "runaway",
+    "vanishing-component",
+];
 
 /// Calls `visitor` with the stress case named `name`, or returns `None`.
 pub fn visit<V: Visit>(name: &str, visitor: V) -> Option<V::Output> {
@@ -27,7 +33,7 @@ pub fn visit<V: Visit>(name: &str, visitor: V) -> Option<V::Output> {
         "rate-on-bound" => visitor.visit(rate_on_bound()),
         "outlier" => visitor.visit(outlier()),
         "slow-rates" => visitor.visit(slow_rates()),
-        "chain" => visitor.visit(chain()),
+        "two-sided-bound" => visitor.visit(two_sided_bound()),
         "runaway" => visitor.visit(runaway()),
         "vanishing-component" => visitor.visit(vanishing_component()),
         _ => return None,
@@ -124,6 +130,27 @@ pub fn outlier() -> Case<Decay> {
     }
 }
 
+/// `two-sided-bound`: 2 e^{−0.8 t} with σ = 0.01, k bounded to [0.1, 0.6]: the bounded
+/// optimum has k = 0.6 on its upper bound, and x(0) free.
+pub fn two_sided_bound() -> Case<Decay> {
+    Case {
+        name: "two-sided-bound",
+        summary: "x' = −kx, data from k = 0.8, 0.1 ≤ k ≤ 0.6: the optimum has k on its upper bound",
+        time_unit: "s",
+        system: Decay::default(),
+        t0: 0.0,
+        known: vec![],
+        unknowns: vec![Unknown::new("x", 1.5), Unknown::new("k", 0.2).min(0.1).max(0.6)],
+        integrator: Integrator::default(),
+        data: DataSource::Synthetic {
+            times: grid(0.0, 0.25, 21),
+            noise: vec![Noise::absolute("x", 0.01)],
+        },
+        truth: vec![("x", 2.0), ("k", 0.8)],
+        reference: None,
+    }
+}
+
 /// A → B → C at rates k1, k2: A' = −k1 A, B' = k1 A − k2 B, C' = k2 B.
 #[derive(Clone, Debug)]
 pub struct Consecutive(Signature);
@@ -161,87 +188,6 @@ pub fn slow_rates() -> Case<Consecutive> {
             noise: vec![Noise::absolute("B", 0.5), Noise::absolute("C", 0.5)],
         },
         truth: vec![("k1", 2e-5), ("k2", 1e-5)],
-        reference: None,
-    }
-}
-
-/// Compartments in a chain: x1' = −(k1 + d1) x1, x_i' = k_{i−1} x_{i−1} − (k_i + d_i) x_i,
-/// x_n' = k_{n−1} x_{n−1} − d_n x_n: transfer rates k and loss rates d.
-#[derive(Clone, Debug)]
-pub struct Chain {
-    signature: Signature,
-    n: usize,
-}
-
-impl Chain {
-    /// A chain of `n` compartments x1..xn with transfer rates k1..k(n−1) and loss rates
-    /// d1..dn (parameters in that order).
-    pub fn new(n: usize) -> Self {
-        let states: Vec<String> = (1..=n).map(|i| format!("x{i}")).collect();
-        let mut parameters: Vec<String> = (1..n).map(|i| format!("k{i}")).collect();
-        parameters.extend((1..=n).map(|i| format!("d{i}")));
-        let s: Vec<&str> = states.iter().map(String::as_str).collect();
-        let p: Vec<&str> = parameters.iter().map(String::as_str).collect();
-        Self { signature: Signature::new(&s, &p), n }
-    }
-}
-
-impl System for Chain {
-    fn signature(&self) -> &Signature {
-        &self.signature
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        let n = self.n;
-        let (k, d) = p.split_at(n - 1);
-        for i in 0..n {
-            let mut out = d[i] * y[i];
-            if i + 1 < n {
-                out += k[i] * y[i];
-            }
-            dy[i] = -out;
-            if i > 0 {
-                dy[i] += k[i - 1] * y[i - 1];
-            }
-        }
-    }
-}
-
-/// `chain`: 8 compartments, every state measured 30 times with σ = 100, fitted unweighted
-/// (residual norm about 1.5e3); 23 unknowns ≥ 0. The data were made with d8 = −0.01 (a
-/// source, not a loss), so d8 = 0 on its bound at the optimum.
-pub fn chain() -> Case<Chain> {
-    const K: [&str; 7] = ["k1", "k2", "k3", "k4", "k5", "k6", "k7"];
-    const D: [&str; 8] = ["d1", "d2", "d3", "d4", "d5", "d6", "d7", "d8"];
-    const X: [&str; 8] = ["x1", "x2", "x3", "x4", "x5", "x6", "x7", "x8"];
-    let k = [0.4, 0.35, 0.3, 0.25, 0.3, 0.35, 0.4];
-    let d = [0.02, 0.03, 0.02, 0.04, 0.03, 0.02, 0.03, -0.01];
-    let x0 = [5000.0, 3000.0, 2000.0, 1000.0, 800.0, 600.0, 400.0, 200.0];
-    let mut truth: Vec<(&'static str, f64)> = K.into_iter().zip(k).collect();
-    truth.extend(D.into_iter().zip(d));
-    truth.extend(X.into_iter().zip(x0));
-    // Starts 30 % off in alternating directions, inside the bounds.
-    let unknowns = truth
-        .iter()
-        .enumerate()
-        .map(|(i, (name, v))| {
-            let f = if i % 2 == 0 { 1.3 } else { 0.7 };
-            Unknown::new(*name, (v * f).abs().max(0.005)).min(0.0)
-        })
-        .collect();
-    Case {
-        name: "chain",
-        summary: "8 compartments in a chain, 15 rates ≥ 0 and 8 initial values ≥ 0, σ = 100 unweighted; d8 on its bound 0",
-        time_unit: "h",
-        system: Chain::new(X.len()),
-        t0: 0.0,
-        known: vec![],
-        unknowns,
-        integrator: Integrator::default(),
-        data: DataSource::Synthetic {
-            times: grid(0.0, 1.0, 30),
-            noise: X.iter().map(|x| Noise::absolute(x, 100.0).unweighted()).collect(),
-        },
-        truth,
         reference: None,
     }
 }

@@ -9,14 +9,17 @@
 //!
 //! **What to expect.** Near a small-residual minimum Gauss–Newton and Goodman's method take
 //! the same steps (Goodman's A and U are JᵀJ and Jᵀr); the differences are argmin's: it
-//! inverts JᵀJ explicitly, stops when ‖r‖ stops changing (|Δ‖r‖| below a tolerance, here
-//! relative to the starting ‖r‖), and its line search tests the Armijo condition on ‖r‖
-//! with the gradient of ½‖r‖², which is inconsistent by the factor ‖r‖. A continuous record
-//! enters as residuals at Gauss–Legendre nodes
+//! inverts JᵀJ explicitly and stops when ‖r‖ stops changing (|Δ‖r‖| below a tolerance,
+//! here relative to the starting ‖r‖). `gauss-newton-ls` takes argmin's Gauss–Newton step
+//! as the search direction and runs argmin's backtracking Armijo line search on ½‖r‖² with
+//! its gradient Jᵀr (argmin's own `GaussNewtonLS` tests ‖r‖ against the gradient of ½‖r‖²,
+//! inconsistent by the factor ‖r‖, and rejects every step at large residuals). A continuous
+//! record enters as residuals at Gauss–Legendre nodes
 //! ([`Problem::residuals_and_jacobian`](sysid_core::Problem::residuals_and_jacobian)).
 //! argmin's solver is unconstrained: bounded unknowns are mapped to free coordinates by a
-//! smooth change of variables ([`bounds::Map`]), so an optimum on a bound is approached but
-//! not reached.
+//! smooth change of variables ([`bounds::Map`], softplus or logistic: finite for every w),
+//! and an unknown the certificate finds on its bound is held there (and released when its
+//! gradient turns inwards), so an optimum on a bound is reached and reported as such.
 //!
 //! ```
 //! use sysid_core::Method;

@@ -11,9 +11,13 @@ pub enum JacobianSource {
     #[default]
     Sensitivities,
     /// Forward differences of the residuals, one extra integration per unknown: what a user
-    /// without sensitivity equations gets. The step for unknown j is
-    /// h_j = √η · max(|z_j|, 1) with η = max(rtol, machine ε), the noise level of a residual
-    /// computed by an integrator with relative tolerance rtol.
+    /// without sensitivity equations gets. The difference is taken in the coordinate the
+    /// unknown is estimated in (ln for a log scale) with the relative step
+    /// h_j = √ε_mach · max(|z_j|, typical_j), typical_j = |z_j| at the start (1 where 0),
+    /// backwards where the forward step would leave the bounds. The integration's error is a
+    /// smooth function of z between changes of the step sequence, so this small step gives
+    /// the Jacobian to about √ε_mach where h = √rtol gave it to about √rtol (and left the
+    /// exact gradient's cosine at 1e-5 at the fits' ends).
     FiniteDifferences,
 }
 

@@ -41,7 +41,7 @@ impl<S: System> Method<S> for Goodman {
 /// The state of Goodman's iteration between proposing and taking a step.
 struct Newton<'o> {
     options: &'o GoodmanOptions,
-    /// The Newton step of the last proposal (before projection on the bounds).
+    /// The Newton step of the last proposal (inside the bounds).
     delta: DVector<f64>,
 }
 

@@ -26,8 +26,9 @@
 //! measure) and, separately, the cost of the linear family.
 //!
 //! Discrete data, a continuous record (at the nodes of a Gauss–Legendre rule), weighted
-//! outputs and an initial time inside the data are handled as in Goodman's method. Bounds
-//! are enforced by projecting c; a log scale is supported for parameters (the augmented
+//! outputs and an initial time inside the data are handled as in Goodman's method. With
+//! bounds, c is chosen by bounded-variable least squares within them (never solved free and
+//! clipped); a log scale is supported for parameters (the augmented
 //! state is ln α), not for initial values.
 //!
 //! ```
