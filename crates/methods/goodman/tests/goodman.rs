@@ -315,3 +315,55 @@ fn step_halving_stops_when_the_cost_changes_only_by_noise() {
     );
     assert_close(halving.cost, plain.cost, 1e-10);
 }
+
+/// The unknowns on a bound at each iterate of a fit.
+fn active_sets(e: &sysid_core::Estimate, problem: &Problem<impl System>) -> Vec<Vec<bool>> {
+    e.history
+        .iter()
+        .map(|h| {
+            problem
+                .unknowns()
+                .list()
+                .iter()
+                .zip(&h.values)
+                .map(|(u, &v)| u.min == Some(v) || u.max == Some(v))
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn bounds_are_not_entered_and_left_on_alternate_iterations() {
+    // The projected step solves the bounded quadratic model exactly, so an unknown is held by
+    // the model's multiplier, not by the gradient's sign at the iterate: on the bounded cases
+    // no unknown enters and leaves its bound repeatedly (the old sign rule let a rate
+    // alternate until the iteration limit), the active set settles for the last iterates,
+    // and step halving accepts only steps that lower the cost.
+    let rates = sysid_systems::stress::rate_on_bound().problem(1).unwrap();
+    check_monotone_active_sets(&rates, "rate-on-bound");
+    let chain = sysid_systems::compartment_chain::compartment_chain().problem(1).unwrap();
+    check_monotone_active_sets(&chain, "compartment-chain");
+}
+
+fn check_monotone_active_sets<S: System>(problem: &Problem<S>, name: &str) {
+    for halving in [false, true] {
+        let e = Goodman::new(GoodmanOptions::default().with_step_halving(halving))
+            .fit(problem)
+            .unwrap();
+        assert!(e.converged(), "{name} (halving {halving}): {}", e.termination);
+        let sets = active_sets(&e, problem);
+        for i in 0..problem.unknowns().len() {
+            let changes = sets.windows(2).filter(|w| w[0][i] != w[1][i]).count();
+            assert!(changes <= 2, "{name}: unknown {i} alternates on its bound: {sets:?}");
+        }
+        let last = &sets[sets.len().saturating_sub(3)..];
+        assert!(last.windows(2).all(|w| w[0] == w[1]), "{name}: the active set moves at the end");
+        // One integration per iteration, and one for the start: bounds cost nothing extra.
+        if !halving {
+            assert_eq!(e.counts.integrations as usize, e.iterations + 1, "{name}");
+        } else {
+            let costs: Vec<f64> = e.history.iter().map(|h| h.cost).collect();
+            assert!(costs.windows(2).all(|c| c[1] < c[0]), "{name}: costs {costs:?}");
+        }
+    }
+}
