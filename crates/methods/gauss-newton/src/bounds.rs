@@ -84,6 +84,15 @@ impl Map {
         }
     }
 
+    /// The largest |dz/dw| the map has (where it is least curved): 1 for one bound or none,
+    /// (hi − lo)/4 for two.
+    pub fn dz_dw_far(self) -> f64 {
+        match self {
+            Map::Interval(lo, hi) => 0.25 * (hi - lo),
+            _ => 1.0,
+        }
+    }
+
     /// w(z), for z moved strictly inside the bounds by a small margin if it lies on one.
     pub fn w(self, z: f64) -> f64 {
         let margin = |width: f64| 1e-8 * width.abs().max(1.0);

@@ -82,6 +82,10 @@ impl<S: System> Method<S> for GaussNewton {
     }
 }
 
+/// The largest change of a bounded unknown's free coordinate w that a line search starts
+/// with (softplus: a factor e⁴ ≈ 55 near the bound, 4 coordinate units far from it).
+const MAX_MAPPED_MOVE: f64 = 4.0;
+
 type Vector = DVector<f64>;
 type Matrix = DMatrix<f64>;
 
@@ -239,7 +243,24 @@ impl<S: System> Step<S> for Adapter<'_> {
                 .map_err(|message| self.failure(ev.problem(), &jacobian, message))?;
         let w_new = if self.options.line_search {
             let direction = Vector::from_vec(full) - &w;
-            self.line_search(&op, &w, direction, gradient.clone(), 0.5 * r.norm_squared())?
+            // Through a bound's change of variables the Gauss–Newton step can ask a w to move
+            // by hundreds where the map is curved (near the bound dz/dw is small), sending the
+            // trial point to rates that make the model stiff: the search starts no further
+            // than MAX_MAPPED_MOVE in any w on the curved part of its map. Unknowns where the
+            // map is nearly the identity, and unbounded ones, are not limited.
+            let free = self.space.free();
+            let curved = |i: usize, w: f64| {
+                let map = self.space.maps[i];
+                map != Map::Free && map.dz_dw(w).abs() < 0.5 * map.dz_dw_far()
+            };
+            let largest = free
+                .iter()
+                .zip(w.iter().zip(direction.iter()))
+                .filter(|(i, (w, _))| curved(**i, **w))
+                .fold(0.0f64, |m, (_, (_, d))| m.max(d.abs()));
+            let first = if largest > MAX_MAPPED_MOVE { MAX_MAPPED_MOVE / largest } else { 1.0 };
+            let cost = 0.5 * r.norm_squared();
+            self.line_search(&op, &w, direction, gradient.clone(), cost, first)?
         } else {
             full
         };
@@ -279,9 +300,10 @@ impl<S: System> Step<S> for Adapter<'_> {
 
 impl Adapter<'_> {
     /// argmin's backtracking line search (Armijo, contraction 1/2) from w along `direction`,
-    /// on ½‖r‖² with gradient `gradient` and value `cost` at w. The full step, already
-    /// evaluated by argmin's Gauss–Newton solver, is the first trial and costs nothing. At
-    /// most 60 contractions (2⁻⁶⁰): a line search that finds no decrease leaves w where it is.
+    /// on ½‖r‖² with gradient `gradient` and value `cost` at w, from the step length `first`
+    /// (1: the full step, already evaluated by argmin's Gauss–Newton solver, costs nothing).
+    /// At most 60 contractions (2⁻⁶⁰): a line search that finds no decrease leaves w where it
+    /// is.
     fn line_search<S: System>(
         &self,
         op: &Residuals<'_, S>,
@@ -289,12 +311,13 @@ impl Adapter<'_> {
         direction: Vector,
         gradient: Vector,
         cost: f64,
+        first: f64,
     ) -> Result<Vec<f64>, Failure> {
         let solver = || -> Result<_, argmin::core::Error> {
             let condition = ArmijoCondition::new(self.options.armijo)?;
             let mut search = BacktrackingLineSearch::new(condition).rho(0.5)?;
             search.search_direction(direction.clone());
-            search.initial_step_length(1.0)?;
+            search.initial_step_length(first)?;
             Executor::new(HalfSquares(op), search)
                 .configure(|s| {
                     s.param(w.clone()).gradient(gradient.clone()).cost(cost).max_iters(60)
