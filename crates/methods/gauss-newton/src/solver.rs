@@ -13,10 +13,10 @@ use argmin::solver::linesearch::BacktrackingLineSearch;
 use argmin::solver::linesearch::condition::ArmijoCondition;
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, Bound, Estimate, Evaluations, Failure, FitError, Iterate, Linearization, Method,
-    NormalFactor, Problem, Proposal, Rule, Step, drive, optimality,
+    Advance, Bound, Estimate, Evaluations, Failure, FitError, Iterate, Method, NormalFactor,
+    Problem, Proposal, Quadratic, Rule, Step, drive, minimise_in_box,
 };
-use sysid_ode::{Counts, System};
+use sysid_ode::System;
 
 use crate::bounds::Map;
 use crate::options::{GaussNewtonOptions, JacobianSource};
@@ -76,7 +76,6 @@ impl<S: System> Method<S> for GaussNewton {
             cache: RefCell::new(Cache::default()),
             norm: f64::NAN,
             tolerance: f64::NAN,
-            gtol: self.options.driver.gtol_for(problem.integrator().rtol),
         };
         drive(problem, name, &self.options.driver, &mut step, start)
     }
@@ -101,8 +100,6 @@ struct Adapter<'o> {
     norm: f64,
     /// argmin's rule, |Δ‖r‖| < tolerance, made relative to the start: tolerance·max(‖r₀‖, 1).
     tolerance: f64,
-    /// The certificate's tolerance: an unknown it finds on a bound is held there.
-    gtol: f64,
 }
 
 impl Adapter<'_> {
@@ -129,31 +126,42 @@ impl Adapter<'_> {
         }
     }
 
-    /// Holds on its bound every unknown the certificate finds there (∂r/∂z at z from `e`),
-    /// and releases a held one whose gradient points inwards.
-    fn hold<S: System>(&mut self, problem: &Problem<S>, e: &Evaluation) {
-        let Some(jacobian) = &e.jacobian else { return };
-        let lin = Linearization {
-            z: e.z.clone(),
-            cost: e.r.norm_squared(),
-            gradient: jacobian.tr_mul(&e.r),
-            normal: jacobian.tr_mul(jacobian),
-            residuals: None,
-            counts: Counts::default(),
+    /// Chooses the unknowns to hold on their bounds for this step, from the Gauss–Newton
+    /// model at `here` (∂r/∂z and r): those its bounded minimiser holds
+    /// ([`minimise_in_box`], the projected Gauss–Newton step's active set), each snapped onto
+    /// its bound; a held unknown the model lets go is released where the model moves it. argmin then
+    /// moves the others. (The change of variables alone only approaches a bound: the step
+    /// in w would have to be infinite.)
+    fn hold<S: System>(&mut self, problem: &Problem<S>, here: &Evaluation) {
+        let Some(jacobian) = &here.jacobian else { return };
+        let (normal, gradient) = (jacobian.tr_mul(jacobian), jacobian.tr_mul(&here.r));
+        let (lo, hi): (Vec<f64>, Vec<f64>) = problem
+            .unknowns()
+            .list()
+            .iter()
+            .zip(&here.z)
+            .map(|(u, z)| {
+                let (lo, hi) = u.coordinate_bounds();
+                (lo - z, hi - z)
+            })
+            .unzip();
+        let model = Quadratic { h: &normal, c: &gradient };
+        let k = here.z.len();
+        let Ok(step) =
+            minimise_in_box(&model, (&lo, &hi), &vec![0.0; k], self.options.driver.max_condition)
+        else {
+            return;
         };
-        let (_, active) = optimality(problem, &lin, self.gtol);
         for (i, u) in problem.unknowns().list().iter().enumerate() {
             let (lo, hi) = u.coordinate_bounds();
-            match (self.space.held[i], active[i]) {
-                (None, Some(Bound::Lower)) => self.space.held[i] = Some(lo),
-                (None, Some(Bound::Upper)) => self.space.held[i] = Some(hi),
-                (Some(at), _) => {
-                    let g = lin.gradient[i];
-                    let inwards = if at <= lo { g < 0.0 } else { g > 0.0 };
-                    if inwards {
-                        self.space.held[i] = None;
-                        self.space.w[i] = self.space.maps[i].w(at);
-                    }
+            match (self.space.held[i], step.active[i]) {
+                (_, Some(Bound::Lower)) => self.space.held[i] = Some(lo),
+                (_, Some(Bound::Upper)) => self.space.held[i] = Some(hi),
+                (Some(_), None) => {
+                    // Released where the model moves it, not a hair inside the bound, from
+                    // where the curved map would let it crawl out by a factor e⁴ a step.
+                    self.space.held[i] = None;
+                    self.space.w[i] = self.space.maps[i].w(here.z[i] + step.x[i]);
                 }
                 (None, None) => {}
             }
@@ -219,21 +227,19 @@ impl<S: System> Step<S> for Adapter<'_> {
         _current: &Iterate,
     ) -> Result<Proposal, Failure> {
         self.cache.borrow_mut().failure = None;
-        // Unknowns on their bounds are held there; argmin moves the others.
+        // The unknowns the projected Gauss–Newton model holds on their bounds are held
+        // there; argmin moves the others.
         let here = self.operator(ev).with_jacobian(&self.space.current_z())?;
         self.hold(ev.problem(), &here);
-        let op = self.operator(ev);
         let w = Vector::from_vec(self.space.free_w());
         if w.is_empty() {
-            return Ok(Proposal {
-                z: self.space.current_z(),
-                condition: None,
-                gradient_norm: None,
-                stop: None,
-            });
+            let z = self.space.current_z();
+            return Ok(Proposal { z, condition: None, gradient_norm: None, stop: None });
         }
-        let jacobian = Jacobian::jacobian(&&op, &w).map_err(|_| op.failure_at(&here.z))?;
-        let r = Operator::apply(&&op, &w).map_err(|_| op.failure_at(&here.z))?;
+        let op = self.operator(ev);
+        let z = self.space.current_z();
+        let jacobian = Jacobian::jacobian(&&op, &w).map_err(|_| op.failure_at(&z))?;
+        let r = Operator::apply(&&op, &w).map_err(|_| op.failure_at(&z))?;
         let gradient = jacobian.tr_mul(&r);
         let condition = NormalFactor::new(&jacobian.tr_mul(&jacobian), f64::INFINITY)
             .ok()
@@ -243,22 +249,7 @@ impl<S: System> Step<S> for Adapter<'_> {
                 .map_err(|message| self.failure(ev.problem(), &jacobian, message))?;
         let w_new = if self.options.line_search {
             let direction = Vector::from_vec(full) - &w;
-            // Through a bound's change of variables the Gauss–Newton step can ask a w to move
-            // by hundreds where the map is curved (near the bound dz/dw is small), sending the
-            // trial point to rates that make the model stiff: the search starts no further
-            // than MAX_MAPPED_MOVE in any w on the curved part of its map. Unknowns where the
-            // map is nearly the identity, and unbounded ones, are not limited.
-            let free = self.space.free();
-            let curved = |i: usize, w: f64| {
-                let map = self.space.maps[i];
-                map != Map::Free && map.dz_dw(w).abs() < 0.5 * map.dz_dw_far()
-            };
-            let largest = free
-                .iter()
-                .zip(w.iter().zip(direction.iter()))
-                .filter(|(i, (w, _))| curved(**i, **w))
-                .fold(0.0f64, |m, (_, (_, d))| m.max(d.abs()));
-            let first = if largest > MAX_MAPPED_MOVE { MAX_MAPPED_MOVE / largest } else { 1.0 };
+            let first = self.first_step(&w, &direction);
             let cost = 0.5 * r.norm_squared();
             self.line_search(&op, &w, direction, gradient.clone(), cost, first)?
         } else {
@@ -299,6 +290,28 @@ impl<S: System> Step<S> for Adapter<'_> {
 }
 
 impl Adapter<'_> {
+    /// Whether the free unknown i sits on the curved part of its map at w.
+    fn curved(&self, i: usize, w: f64) -> bool {
+        let map = self.space.maps[i];
+        map != Map::Free && map.dz_dw(w).abs() < 0.5 * map.dz_dw_far()
+    }
+
+    /// The step length a line search starts from: 1, or less so that no w on the curved part
+    /// of its map moves by more than [`MAX_MAPPED_MOVE`] (the Gauss–Newton step through a
+    /// bound's change of variables can ask for hundreds there, sending the trial point to
+    /// rates that make the model stiff). Unknowns where the map is nearly the identity, and
+    /// unbounded ones, are not limited.
+    fn first_step(&self, w: &Vector, direction: &Vector) -> f64 {
+        let largest = self
+            .space
+            .free()
+            .iter()
+            .zip(w.iter().zip(direction.iter()))
+            .filter(|(i, (w, _))| self.curved(**i, **w))
+            .fold(0.0f64, |m, (_, (_, d))| m.max(d.abs()));
+        if largest > MAX_MAPPED_MOVE { MAX_MAPPED_MOVE / largest } else { 1.0 }
+    }
+
     /// argmin's backtracking line search (Armijo, contraction 1/2) from w along `direction`,
     /// on ½‖r‖² with gradient `gradient` and value `cost` at w, from the step length `first`
     /// (1: the full step, already evaluated by argmin's Gauss–Newton solver, costs nothing).

@@ -81,8 +81,9 @@ impl<S: System> Step<S> for Newton<'_> {
     }
 
     /// c ← c* + δc, then integrate again from the new initial vector. With step halving, δc
-    /// is halved while the cost does not fall or the integration fails, at most
-    /// `max_halvings` times; the box is convex, so every shortened step stays inside it.
+    /// is halved while the cost does not fall (beyond ε's accuracy, near the minimum) or the
+    /// integration fails, at most `max_halvings` times; the box is convex, so every
+    /// shortened step stays inside it.
     fn advance(
         &mut self,
         ev: &Evaluations<'_, S>,
@@ -98,6 +99,12 @@ impl<S: System> Step<S> for Newton<'_> {
         let step_tolerance = problem.resolvable_step(self.options.driver.step_tolerance);
         let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
         let negligible = step_tolerance * (z_norm + step_tolerance);
+        let resolution = problem.integrator().rtol * lin.cost;
+        // The decrease of ε the quadratic model predicts for a move to `trial`.
+        let predicted = |trial: &[f64]| {
+            let d = DVector::from_iterator(trial.len(), trial.iter().zip(z).map(|(a, b)| a - b));
+            -(2.0 * lin.gradient.dot(&d) + d.dot(&(&lin.normal * &d)))
+        };
         let mut scale = 1.0;
         for _ in 0..=self.options.max_halvings {
             if scale < 1.0 && scale * self.delta.norm() <= negligible {
@@ -106,8 +113,14 @@ impl<S: System> Step<S> for Newton<'_> {
             }
             let trial = inside(problem, z, &self.delta, scale);
             match ev.linearize(&trial) {
-                // Only an actual decrease of the cost is a step taken.
-                Ok(l) if l.cost < lin.cost => {
+                // A step is taken on an actual decrease of the cost; or, where the model
+                // itself expects a change below ε's accuracy (about rtol relative: the
+                // minimum's noise floor), on a change within that accuracy, so that the
+                // iteration can refine the point rather than halve to nothing.
+                Ok(l)
+                    if l.cost < lin.cost
+                        || (l.cost <= lin.cost + resolution && predicted(&trial) <= resolution) =>
+                {
                     return Ok(Advance::Moved(Iterate::linearized(l)));
                 }
                 Ok(_) => {}
