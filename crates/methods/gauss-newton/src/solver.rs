@@ -251,7 +251,11 @@ impl<S: System> Step<S> for Adapter<'_> {
             let direction = Vector::from_vec(full) - &w;
             let first = self.first_step(&w, &direction);
             let cost = 0.5 * r.norm_squared();
-            self.line_search(&op, &w, direction, gradient.clone(), cost, first)?
+            let resolution = ev.problem().integrator().rtol * cost;
+            match self.within_resolution(&op, &w, &jacobian, &r, &direction * first, resolution)? {
+                Some(w_new) => w_new,
+                None => self.line_search(&op, &w, direction, gradient.clone(), cost, first)?,
+            }
         } else {
             full
         };
@@ -310,6 +314,31 @@ impl Adapter<'_> {
             .filter(|(i, (w, _))| self.curved(**i, **w))
             .fold(0.0f64, |m, (_, (_, d))| m.max(d.abs()));
         if largest > MAX_MAPPED_MOVE { MAX_MAPPED_MOVE / largest } else { 1.0 }
+    }
+
+    /// The step at the minimum's noise floor: where the Gauss–Newton model predicts a
+    /// decrease of ½‖r‖² no larger than its accuracy (`resolution`, rtol relative), an
+    /// Armijo search can only halve to nothing; the step is taken when the cost changes by
+    /// no more than that accuracy, as Goodman's halving does. `None`: search as usual.
+    fn within_resolution<S: System>(
+        &self,
+        op: &Residuals<'_, S>,
+        w: &Vector,
+        jacobian: &Matrix,
+        r: &Vector,
+        step: Vector,
+        resolution: f64,
+    ) -> Result<Option<Vec<f64>>, Failure> {
+        let predicted = -(r.dot(&(jacobian * &step)) + 0.5 * (jacobian * &step).norm_squared());
+        if predicted > resolution {
+            return Ok(None);
+        }
+        let trial = w + step;
+        let trial_r = Operator::apply(&op, &trial).map_err(|e| {
+            self.cache.borrow_mut().failure.take().unwrap_or(Failure::Solver(e.to_string()))
+        })?;
+        let change = 0.5 * trial_r.norm_squared() - 0.5 * r.norm_squared();
+        Ok((change <= resolution).then(|| trial.as_slice().to_vec()))
     }
 
     /// argmin's backtracking line search (Armijo, contraction 1/2) from w along `direction`,
