@@ -2,7 +2,7 @@
 //! Section III against a closed form.
 
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
-use sysid::core::table::Table;
+use sysid::model::table::Table;
 use sysid::core::{Data, Method, Problem, Rule, Termination};
 use sysid::goodman::{Goodman, newton_step};
 use sysid::ode::testing::{assert_close, assert_close_abs};

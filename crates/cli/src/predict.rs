@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::Args;
-use sysid_core::Problem;
+use sysid_core::{Problem, band_half_width};
 use sysid_ode::{Ivp, System};
 
 use crate::Outcome;
@@ -113,10 +113,7 @@ impl WithProblem for Predict<'_> {
             for (i, y) in sol.state(m).iter().enumerate() {
                 match (covariance, quantile) {
                     (Some(cov), Some(q)) => {
-                        // Var y_i = s_i Cov s_iᵀ; 95 % band with Student's t.
-                        let row = s.row(i);
-                        let var = (row * cov * row.transpose())[(0, 0)];
-                        let half = q * var.max(0.0).sqrt();
+                        let half = band_half_width(q, &s.row(i).transpose(), cov);
                         text += &format!(",{y},{},{}", y - half, y + half);
                     }
                     _ => text += &format!(",{y},,"),

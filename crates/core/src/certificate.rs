@@ -21,8 +21,9 @@
 use serde::Serialize;
 use sysid_ode::System;
 
+use crate::evaluate::Linearization;
 use crate::linalg::NormalFactor;
-use crate::problem::{Linearization, Problem};
+use crate::problem::Problem;
 
 /// ‖W^½ r‖ / ‖W^½ b‖ at or below which the model passes through the data (ε = 0 to rounding).
 pub const EXACT_FIT: f64 = 1e-10;

@@ -7,6 +7,7 @@
 //! less (70 % at one degree of freedom). The quantile comes from cdflib, a port of CDFLIB.
 
 use cdflib::traits::ContinuousCdf;
+use nalgebra::{DMatrix, DVector};
 
 /// The two-sided 95 % quantile of the standard normal distribution (t with infinitely many
 /// degrees of freedom).
@@ -19,6 +20,14 @@ pub fn t95(dof: usize) -> Option<f64> {
         return None;
     }
     cdflib::StudentsT::new(dof as f64).inverse_cdf(0.975).ok()
+}
+
+/// The half-width of the 95 % band of a predicted quantity q with gradient g = ∂q/∂(values)
+/// at the estimate, whose covariance is `covariance`: t·√(gᵀ Cov g) (the delta method), with
+/// `quantile` the t quantile of the fit's degrees of freedom ([`t95`]). Every band sysid
+/// draws or writes (measured quantities, predicted states) is this one.
+pub fn band_half_width(quantile: f64, gradient: &DVector<f64>, covariance: &DMatrix<f64>) -> f64 {
+    quantile * gradient.dot(&(covariance * gradient)).max(0.0).sqrt()
 }
 
 /// The 95 % interval of a value with standard error `se` and `dof` degrees of freedom. On a

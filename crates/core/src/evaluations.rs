@@ -8,7 +8,8 @@ use std::cell::Cell;
 use nalgebra::DVector;
 use sysid_ode::{Counts, OdeError, System};
 
-use crate::problem::{Linearization, Problem};
+use crate::evaluate::Linearization;
+use crate::problem::Problem;
 use crate::termination::Failure;
 
 /// Counted, budgeted access to a problem's evaluations. One per fit; not shared between

@@ -21,6 +21,7 @@
 //! * [`Method`]: the trait every method crate implements.
 #![warn(missing_docs)]
 
+mod assemble;
 mod bounded;
 mod certificate;
 mod confidence;
@@ -28,28 +29,31 @@ mod data;
 mod driver;
 mod error;
 mod estimate;
+mod evaluate;
 mod evaluations;
 mod linalg;
 mod method;
 mod options;
+mod plan;
 mod problem;
-pub mod table;
+mod step;
 mod termination;
 mod unknowns;
 
 pub use bounded::{BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box};
 pub use certificate::{Bound, Certificate, EXACT_FIT, NullSpace, certify, optimality};
-pub use confidence::{Z95, interval, t95};
+pub use confidence::{Z95, band_half_width, interval, t95};
 pub use data::{Data, Record, Samples, Series};
-pub use driver::{Advance, Iterate, Proposal, Step, drive};
+pub use driver::drive;
 pub use error::{FitError, ProblemError};
 pub use estimate::{Estimate, FitRecord, Iteration};
+pub use evaluate::{Linearization, Observed, WeightedResiduals};
 pub use evaluations::Evaluations;
 pub use linalg::{NormalFactor, Singular, as_faer};
 pub use method::{Method, start_coordinates};
 pub use options::{DEFAULT_GTOL, DriverOptions, OptionsError};
-pub use problem::{
-    Linearization, Observed, Problem, ProblemBuilder, QUADRATURE_RTOL, WeightedResiduals,
-};
+pub use plan::{PlannedSeries, RESIDUAL_PANELS, Sample, Sampled};
+pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL};
+pub use step::{Advance, Iterate, Proposal, Step};
 pub use termination::{Failure, Rule, Termination};
 pub use unknowns::{Unknown, Unknowns};

@@ -2,8 +2,8 @@
 
 use std::path::Path;
 
+use crate::table::{Table, TableError, cell_position};
 use sysid_core::Data;
-use sysid_core::table::{Table, TableError, cell_position};
 use sysid_ode::{Inputs, Signal};
 
 use crate::error::ModelError;

@@ -40,6 +40,7 @@ mod error;
 pub mod expr;
 pub mod file;
 mod system;
+pub mod table;
 
 use std::path::Path;
 

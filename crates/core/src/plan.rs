@@ -1,0 +1,267 @@
+//! The measurements resolved against the system and checked: which state or output each
+//! series measures, with what weight, on one sorted time grid; a continuous record also as
+//! residual rows at the nodes of a composite Gauss–Legendre rule.
+
+use sysid_ode::{Interpolation, Observable, Record, RecordedOutput, Signal, System};
+
+use crate::data::{Data, Record as Kind, Samples, Series};
+use crate::error::ProblemError;
+
+/// The measurements resolved against the system.
+#[derive(Clone, Debug)]
+pub(crate) enum Plan {
+    Discrete(Sampled),
+    Continuous {
+        span: (f64, f64),
+        outputs: Vec<RecordedOutput>,
+        /// The record discretised for least-squares solvers that need a residual vector.
+        nodes: Sampled,
+    },
+}
+
+/// The data in residual form: measured values at discrete times, each with the square root
+/// of its weight. Discrete data as given (weight w_o); a continuous record at the nodes of a
+/// composite Gauss–Legendre rule (weight w_o times the node's weight), so that
+/// Σ (√w (h − b))² is the quadrature of ε.
+#[derive(Clone, Debug)]
+pub struct Sampled {
+    /// All times, sorted, without repeats.
+    pub times: Vec<f64>,
+    /// One entry per measured quantity.
+    pub series: Vec<PlannedSeries>,
+}
+
+/// The samples of one measured quantity in residual form.
+#[derive(Clone, Debug)]
+pub struct PlannedSeries {
+    /// What is measured.
+    pub observable: Observable,
+    /// Its samples.
+    pub samples: Vec<Sample>,
+}
+
+/// One measured value: row √w (h(t) − b) of the residual vector.
+#[derive(Clone, Copy, Debug)]
+pub struct Sample {
+    /// Index into [`Sampled::times`].
+    pub index: usize,
+    /// The measured value b.
+    pub value: f64,
+    /// √w.
+    pub sqrt_weight: f64,
+}
+
+/// Panels per record span of a record given as a function, in its residual form.
+pub const RESIDUAL_PANELS: usize = 256;
+
+// Gauss–Legendre, 4 points on [−1, 1].
+const GL4: [(f64, f64); 4] = [
+    (-0.861_136_311_594_052_6, 0.347_854_845_137_453_9),
+    (-0.339_981_043_584_856_3, 0.652_145_154_862_546_1),
+    (0.339_981_043_584_856_3, 0.652_145_154_862_546_1),
+    (0.861_136_311_594_052_6, 0.347_854_845_137_453_9),
+];
+
+/// Resolves and checks the measurements.
+pub(crate) fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemError> {
+    if data.series.is_empty() {
+        return Err(ProblemError::NoData);
+    }
+    let mut seen = std::collections::HashSet::new();
+    let mut resolved = Vec::with_capacity(data.series.len());
+    for s in &data.series {
+        if !seen.insert(&s.name) {
+            return Err(ProblemError::InvalidSeries {
+                name: s.name.clone(),
+                message: "given twice".into(),
+            });
+        }
+        resolved.push(resolve(system, data, s)?);
+    }
+    match data.record {
+        Kind::Discrete => plan_discrete(data, &resolved, k),
+        Kind::Continuous { t_lo, t_hi } => plan_continuous(data, &resolved, k, (t_lo, t_hi)),
+    }
+}
+
+/// The state or output series `s` measures, after checking its weights and samples.
+fn resolve<S: System>(system: &S, data: &Data, s: &Series) -> Result<Observable, ProblemError> {
+    let sig = system.signature();
+    let invalid = |message: String| ProblemError::InvalidSeries { name: s.name.clone(), message };
+    let observable = sig.observable(&s.name).ok_or_else(|| ProblemError::UnknownSeries {
+        name: s.name.clone(),
+        observable: sig
+            .states()
+            .iter()
+            .chain(sig.outputs())
+            .cloned()
+            .collect::<Vec<_>>()
+            .join(", "),
+    })?;
+    if !(s.weight > 0.0 && s.weight.is_finite()) {
+        return Err(invalid(format!("the weight must be positive and finite, got {}", s.weight)));
+    }
+    if let Samples::Points { times, values } = &s.samples {
+        if times.len() != values.len() {
+            return Err(invalid(format!("{} times but {} values", times.len(), values.len())));
+        }
+        if times.is_empty() {
+            return Err(invalid("no samples".into()));
+        }
+        if let Some(i) = times.iter().position(|t| !t.is_finite()) {
+            return Err(invalid(format!("time {i} is {}", times[i])));
+        }
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(invalid(format!("value at t = {} is {}", times[i], values[i])));
+        }
+        if let Some(i) = times.windows(2).position(|w| w[1] <= w[0]) {
+            return Err(invalid(format!(
+                "times must increase: {} follows {}",
+                times[i + 1],
+                times[i]
+            )));
+        }
+    }
+    if let Some(weights) = &s.sample_weights {
+        let count = match &s.samples {
+            Samples::Points { values, .. } => values.len(),
+            Samples::Function(_) => 0,
+        };
+        if weights.len() != count {
+            return Err(invalid(format!("{} sample weights for {count} samples", weights.len())));
+        }
+        if let Some(i) = weights.iter().position(|w| !(*w > 0.0 && w.is_finite())) {
+            return Err(invalid(format!(
+                "sample weight {i} must be positive and finite, got {}",
+                weights[i]
+            )));
+        }
+        if data.record != Kind::Discrete {
+            return Err(invalid("per-sample weights need discrete data".into()));
+        }
+    }
+    Ok(observable)
+}
+
+/// Discrete data: one residual row per sample.
+fn plan_discrete(data: &Data, resolved: &[Observable], k: usize) -> Result<Plan, ProblemError> {
+    let mut points = Vec::with_capacity(data.series.len());
+    for s in &data.series {
+        match &s.samples {
+            Samples::Points { times, values } => {
+                let sqrt_weight = |m: usize| match &s.sample_weights {
+                    Some(w) => (s.weight * w[m]).sqrt(),
+                    None => s.weight.sqrt(),
+                };
+                points.push(
+                    times
+                        .iter()
+                        .zip(values)
+                        .enumerate()
+                        .map(|(m, (&t, &v))| (t, v, sqrt_weight(m)))
+                        .collect(),
+                );
+            }
+            Samples::Function(_) => {
+                return Err(ProblemError::InvalidSeries {
+                    name: s.name.clone(),
+                    message: "a record given as a function needs continuous data".into(),
+                });
+            }
+        }
+    }
+    let observations = data.n_observations().unwrap_or(0);
+    if observations < k {
+        return Err(ProblemError::TooFewData { observations, unknowns: k });
+    }
+    Ok(Plan::Discrete(gather(resolved, points)))
+}
+
+/// A continuous record over `(t_lo, t_hi)`: the record itself for the integrals, and its
+/// residual form at Gauss–Legendre nodes.
+fn plan_continuous(
+    data: &Data,
+    resolved: &[Observable],
+    k: usize,
+    (t_lo, t_hi): (f64, f64),
+) -> Result<Plan, ProblemError> {
+    if !(t_lo.is_finite() && t_hi.is_finite() && t_lo < t_hi) {
+        return Err(ProblemError::InvalidValue {
+            what: format!("record span [{t_lo}, {t_hi}]"),
+            value: t_hi - t_lo,
+        });
+    }
+    let outputs = data
+        .series
+        .iter()
+        .zip(resolved)
+        .map(|(s, &observable)| {
+            let record = match &s.samples {
+                Samples::Points { times, values } => Record::Samples(
+                    Signal::new(times.clone(), values.clone(), Interpolation::Linear).map_err(
+                        |e| ProblemError::InvalidSeries {
+                            name: s.name.clone(),
+                            message: e.to_string(),
+                        },
+                    )?,
+                ),
+                Samples::Function(f) => Record::Function(f.clone()),
+            };
+            Ok(RecordedOutput { observable, weight: s.weight, record })
+        })
+        .collect::<Result<Vec<_>, ProblemError>>()?;
+    if let Some(observations) = data.n_observations()
+        && observations < k
+    {
+        return Err(ProblemError::TooFewData { observations, unknowns: k });
+    }
+    let points = outputs.iter().map(|o| record_nodes(o, (t_lo, t_hi))).collect();
+    let nodes = gather(resolved, points);
+    Ok(Plan::Continuous { span: (t_lo, t_hi), outputs, nodes })
+}
+
+/// Gathers per-series (time, value, √weight) points on one sorted time grid.
+fn gather(observables: &[Observable], points: Vec<Vec<(f64, f64, f64)>>) -> Sampled {
+    let mut times: Vec<f64> = points.iter().flatten().map(|p| p.0).collect();
+    times.sort_by(f64::total_cmp);
+    times.dedup();
+    let series = observables
+        .iter()
+        .zip(points)
+        .map(|(&observable, pts)| PlannedSeries {
+            observable,
+            samples: pts
+                .into_iter()
+                .map(|(t, value, sqrt_weight)| Sample {
+                    index: times.partition_point(|x| *x < t),
+                    value,
+                    sqrt_weight,
+                })
+                .collect(),
+        })
+        .collect();
+    Sampled { times, series }
+}
+
+/// A record as residual rows: b at the nodes of a composite 4-point Gauss–Legendre rule,
+/// each with the square root of w_o times its quadrature weight.
+fn record_nodes(output: &RecordedOutput, (t_lo, t_hi): (f64, f64)) -> Vec<(f64, f64, f64)> {
+    let mut breaks = vec![t_lo];
+    match &output.record {
+        Record::Samples(s) => breaks.extend(s.times().iter().filter(|&&t| t > t_lo && t < t_hi)),
+        Record::Function(_) => {
+            let h = (t_hi - t_lo) / RESIDUAL_PANELS as f64;
+            breaks.extend((1..RESIDUAL_PANELS).map(|i| t_lo + h * i as f64));
+        }
+    }
+    breaks.push(t_hi);
+    let mut nodes = Vec::with_capacity(4 * breaks.len());
+    for panel in breaks.windows(2) {
+        let (c, r) = (0.5 * (panel[0] + panel[1]), 0.5 * (panel[1] - panel[0]));
+        for (x, w) in GL4 {
+            let t = c + r * x;
+            nodes.push((t, output.record.value(t), (output.weight * w * r).sqrt()));
+        }
+    }
+    nodes
+}
