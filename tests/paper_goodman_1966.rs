@@ -2,9 +2,9 @@
 //! Section III against a closed form.
 
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
-use sysid::model::table::Table;
 use sysid::core::{Data, Method, Problem, Rule, Termination};
 use sysid::goodman::{Goodman, newton_step};
+use sysid::model::table::Table;
 use sysid::ode::testing::{assert_close, assert_close_abs};
 use sysid::systems::falling_body::{self, FallingBody, TABLE_I, continuous_record};
 
@@ -108,7 +108,7 @@ fn continuous_closed_form() -> ([f64; 3], f64) {
 fn continuous_record_as_a_function() {
     let case = falling_body::falling_body_continuous();
     let reference = case.reference.clone().unwrap();
-    // DESIGN.md's reference agrees with the closed form.
+    // docs/catalogue.md's reference agrees with the closed form.
     let (exact, cost) = continuous_closed_form();
     for ((_, r), e) in reference.values.iter().zip(exact) {
         assert_close(*r, e, 1e-13);

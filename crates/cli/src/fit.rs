@@ -19,7 +19,7 @@ pub struct FitArgs {
     /// quasilinearization, quasilinearization-data.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]
     method: String,
-    /// Output format: a readable table, or the JSON object of the README's contract (printed
+    /// Output format: a readable table, or the JSON object of docs/json.md (printed
     /// for every run past input checking, converged or not).
     #[arg(long, value_enum, default_value_t = Format::Table)]
     format: Format,

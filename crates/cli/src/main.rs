@@ -1,7 +1,7 @@
 //! `sysid`: identify dynamic systems and compare the classical methods.
 //!
 //! Exit codes: 0 success, 1 the method did not converge (its report is still printed),
-//! 2 bad input (one line on stderr, nothing on stdout).
+//! 2 bad input (one line on stderr, nothing on stdout); docs/terminations.md has them all.
 
 mod compare;
 mod fit;
@@ -65,7 +65,7 @@ pub enum Format {
     /// A readable table.
     #[default]
     Table,
-    /// The JSON object documented in DESIGN.md.
+    /// The JSON object documented in docs/json.md.
     Json,
 }
 

@@ -99,9 +99,8 @@ impl WithProblem for Predict<'_> {
         }
         text += "\n";
         // The band: Student's t for the fit's N − k degrees of freedom.
-        let quantile = problem.band_quantile();
-        let covariance = estimate.covariance.as_ref().filter(|_| quantile.is_some());
-        if covariance.is_none() {
+        let band = estimate.band();
+        if band.is_none() {
             eprintln!(
                 "{}: no covariance (no more data than unknowns, or a singular normal matrix): the band columns are empty",
                 context.name
@@ -111,8 +110,8 @@ impl WithProblem for Predict<'_> {
             text += &format!("{t}");
             let s = sol.sensitivity(m);
             for (i, y) in sol.state(m).iter().enumerate() {
-                match (covariance, quantile) {
-                    (Some(cov), Some(q)) => {
+                match band {
+                    Some((cov, q)) => {
                         let half = band_half_width(q, &s.row(i).transpose(), cov);
                         text += &format!(",{y},{},{}", y - half, y + half);
                     }

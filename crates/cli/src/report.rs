@@ -299,7 +299,7 @@ fn prediction<S: System + Clone>(
         (0..=400).map(|i| t_lo + (end - t_lo) * i as f64 / 400.0).collect()
     };
     let t_lo = times[0];
-    let observed = problem.observed(&fitted.values, fitted.covariance.as_ref(), &times)?;
+    let observed = problem.observed(&fitted.values, fitted.band(), &times)?;
     let mut panels = Vec::new();
     let mut csv = String::from("t");
     for o in &observed {

@@ -15,7 +15,7 @@ pub struct SourceArgs {
     /// A catalogue system (`sysid systems` lists them).
     #[arg(long, value_name = "NAME", required_unless_present = "model", conflicts_with = "model")]
     pub system: Option<String>,
-    /// A model file (TOML; see the README for its keys).
+    /// A model file (TOML; its keys in docs/model-files.md).
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
     /// The data file (CSV) to use instead of the model file's `[data] file`.

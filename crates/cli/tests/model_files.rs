@@ -357,7 +357,7 @@ record = "continuous"
     let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    // DESIGN.md's exact answer; the 1 ms samples move it by a few 1e-6.
+    // docs/catalogue.md's exact answer; the 1 ms samples move it by a few 1e-6.
     for (name, value) in
         [("y", 0.14500913909107217), ("v", -0.9022248117533034), ("g", 32.9279895615339)]
     {

@@ -9,6 +9,7 @@ use serde::{Serialize, Serializer};
 use sysid_ode::Counts;
 
 use crate::certificate::{Bound, Certificate};
+use crate::confidence::t95;
 use crate::termination::Termination;
 
 /// One row of the iteration history, for the iterate z_i.
@@ -99,12 +100,19 @@ impl Estimate {
     pub fn succeeded(&self) -> bool {
         self.converged()
     }
+    /// What a 95 % band of a prediction needs: the covariance of the values and Student's t
+    /// quantile for the fit's degrees of freedom (N − k_free: an unknown held on a bound is
+    /// not estimated). `None` without a covariance.
+    pub fn band(&self) -> Option<(&DMatrix<f64>, f64)> {
+        self.covariance.as_ref().zip(self.dof.and_then(t95))
+    }
+
     /// The estimate of one unknown by name.
     pub fn value(&self, name: &str) -> Option<f64> {
         self.names.iter().position(|n| n == name).map(|i| self.values[i])
     }
 
-    /// The fit as the object of the `sysid fit --format json` contract (docs in the README),
+    /// The fit as the object of the `sysid fit --format json` contract (docs/json.md),
     /// keys in the contract's order: serialise it with serde_json.
     pub fn record<'a>(&'a self, system: &'a str) -> FitRecord<'a> {
         FitRecord { system, estimate: self }

@@ -248,13 +248,14 @@ impl<S: System> Problem<S> {
     }
 
     /// Every measured quantity of the model at `values` of the unknowns, at `times` (sorted;
-    /// on either side of t0), with the half-width of its 95 % band from `covariance` (of the
-    /// values): t_{0.975, N−k} √(g Cov gᵀ), g = ∂h/∂(values) from the sensitivities. What a fit
-    /// predicts for the measurements, with its uncertainty.
+    /// on either side of t0), with the half-width of its 95 % band from `band`, the
+    /// covariance of the values and the t quantile of the fit's degrees of freedom
+    /// ([`Estimate::band`](crate::Estimate::band)): t √(g Cov gᵀ), g = ∂h/∂(values) from the
+    /// sensitivities. What a fit predicts for the measurements, with its uncertainty.
     pub fn observed(
         &self,
         values: &[f64],
-        covariance: Option<&DMatrix<f64>>,
+        band: Option<(&DMatrix<f64>, f64)>,
         times: &[f64],
     ) -> Result<Vec<Observed>, OdeError> {
         let z = self.unknowns.coordinates(values);
@@ -269,7 +270,6 @@ impl<S: System> Problem<S> {
         let mut og = ObservableGradient::new(&self.system, &p, wrt);
         let mut grad = vec![0.0; wrt.len()];
         let mut out = Vec::new();
-        let quantile = self.band_quantile();
         for series in &self.sampled().series {
             let name = match series.observable {
                 Observable::State(i) => signature.states()[i].clone(),
@@ -278,15 +278,13 @@ impl<S: System> Problem<S> {
             let mut observed = Observed {
                 name,
                 values: Vec::with_capacity(times.len()),
-                half_width: quantile.and(covariance).map(|_| Vec::with_capacity(times.len())),
+                half_width: band.map(|_| Vec::with_capacity(times.len())),
             };
             for (m, &t) in times.iter().enumerate() {
                 let s = sol.sensitivity_slice(m);
                 let h = og.eval(t, sol.state(m), s, series.observable, &mut grad);
                 observed.values.push(h);
-                if let (Some(cov), Some(w), Some(q)) =
-                    (covariance, observed.half_width.as_mut(), quantile)
-                {
+                if let (Some((cov, q)), Some(w)) = (band, observed.half_width.as_mut()) {
                     w.push(band_half_width(q, &DVector::from_column_slice(&grad), cov));
                 }
             }

@@ -71,8 +71,8 @@ impl OptionsError {
 /// integration error alone moves the measure at the true minima of the catalogue to at most
 /// 8.8e-8 at rtol 1e-8 (about 9·rtol), so 1e-6 leaves a factor 11: tighter, it would certify
 /// the integrator's error rather than the model's minimum. A point that passes is within about
-/// k·κ·gtol² (κ the scaled condition number) of the minimum's cost. The README ("What
-/// converged means") has the measurements.
+/// k·κ·gtol² (κ the scaled condition number) of the minimum's cost. docs/methods.md (the
+/// certificate) has the measurements.
 pub const DEFAULT_GTOL: f64 = 1e-6;
 
 /// Options of the iteration driver, the same for every method (a method's options embed

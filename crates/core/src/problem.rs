@@ -3,7 +3,6 @@
 
 use sysid_ode::{Integrator, Observable, System, Wrt};
 
-use crate::confidence::t95;
 use crate::data::Data;
 use crate::error::ProblemError;
 use crate::plan::{Plan, plan};
@@ -103,12 +102,6 @@ impl<S: System> Problem<S> {
     /// function).
     pub fn dof(&self) -> Option<usize> {
         self.n_observations().map(|n| n.saturating_sub(self.unknowns.len()))
-    }
-
-    /// The half-width of a 95 % band in standard deviations: Student's t quantile for the
-    /// problem's N − k degrees of freedom (None without residual degrees of freedom).
-    pub fn band_quantile(&self) -> Option<f64> {
-        self.dof().and_then(t95)
     }
 
     /// ‖W^½ b‖: the weighted data's norm (the record's for continuous data, by the

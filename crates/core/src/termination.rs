@@ -2,7 +2,7 @@
 //! budget that ran out, or the failure with the iteration and the point where it happened.
 //!
 //! Every termination has a stable snake_case [`code`](Termination::code), the
-//! `termination_code` of the JSON report; the README lists them.
+//! `termination_code` of the JSON report; docs/terminations.md lists them.
 
 use std::fmt;
 

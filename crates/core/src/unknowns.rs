@@ -14,7 +14,8 @@ use sysid_ode::Wrt;
 /// Bounds hold inside every method's step (on the log scale as [ln min, ln max]): Goodman's
 /// projected Newton step and quasilinearization's least squares solve the step's subproblem
 /// within the box ([`minimise_in_box`](crate::minimise_in_box)); the argmin baseline maps
-/// the unknown to a free coordinate and holds it on its bound once it is there.
+/// the unknown to a free coordinate and holds it on its bound where the projected
+/// Gauss–Newton model does.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Unknown {
     /// A parameter's name, or a state's name for its initial value.

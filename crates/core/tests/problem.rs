@@ -256,7 +256,8 @@ fn observed_values_and_bands_of_a_linear_model() {
         &[0.04, 0.01, -0.002, 0.01, 0.09, 0.003, -0.002, 0.003, 0.25],
     );
     let times = [-1.0, 0.0, 0.5, 1.0, 2.5, 6.0];
-    let seen = problem.observed(&values, Some(&cov), &times).unwrap();
+    let quantile = sysid_core::t95(problem.dof().unwrap()).unwrap();
+    let seen = problem.observed(&values, Some((&cov, quantile)), &times).unwrap();
     assert_eq!(seen.len(), 1);
     assert_eq!(seen[0].name, "y");
     let bands = seen[0].half_width.as_ref().unwrap();

@@ -87,7 +87,7 @@ pub fn falling_body_continuous() -> Case<FallingBody> {
             ],
             cost: 0.31497118786884043,
             tolerance: 1e-8,
-            source: "least-squares projection of b(t) on {1, t, t²/2} over [0, 3] (DESIGN.md)",
+            source: "least-squares projection of b(t) on {1, t, t²/2} over [0, 3] (docs/catalogue.md)",
         }),
     }
 }

@@ -68,7 +68,7 @@ pub fn van_der_pol_three_point() -> Case<VanDerPol> {
             cost: 0.0,
             // The published values carry 15 significant digits.
             tolerance: 1e-8,
-            source: "DESIGN.md: the trajectory of μ = 1, x(0) = 2, v(0) = 0 at t0 = 4",
+            source: "docs/catalogue.md: the trajectory of μ = 1, x(0) = 2, v(0) = 0 at t0 = 4",
         }),
     }
 }

@@ -29,7 +29,7 @@ fn same_seed_same_data_other_seed_other_data() {
 
 #[test]
 fn three_published_points_lie_on_the_true_trajectory() {
-    // DESIGN.md gives x(4), x(6), x(8) and v(4) of μ = 1, x(0) = 2, v(0) = 0 to 15 digits.
+    // docs/catalogue.md gives x(4), x(6), x(8) and v(4) of μ = 1, x(0) = 2, v(0) = 0 to 15 digits.
     let case = van_der_pol_three_point();
     let sys = &case.system;
     let sol = Ivp::new(sys, 0.0, &[2.0, 0.0], &[1.0])

@@ -11,8 +11,8 @@
 //! Far from its bound z ≈ w (softplus is the identity plus e^{−w}), so the map does not
 //! distort the problem where the bound does not matter; at the bound dz/dw → 0, and an
 //! optimum on the bound is approached but not reached. The adapter
-//! ([`GaussNewton`](crate::GaussNewton)) therefore holds an unknown on its bound once the
-//! certificate finds it there, and releases it when the gradient turns inwards.
+//! ([`GaussNewton`](crate::GaussNewton)) therefore holds an unknown on its bound where the
+//! projected Gauss–Newton model holds it, and releases it where that model moves it inwards.
 
 use sysid_core::Unknown;
 

@@ -18,8 +18,9 @@
 //! ([`Problem::residuals_and_jacobian`](sysid_core::Problem::residuals_and_jacobian)).
 //! argmin's solver is unconstrained: bounded unknowns are mapped to free coordinates by a
 //! smooth change of variables ([`bounds::Map`], softplus or logistic: finite for every w),
-//! and an unknown the certificate finds on its bound is held there (and released when its
-//! gradient turns inwards), so an optimum on a bound is reached and reported as such.
+//! and an unknown that the projected Gauss–Newton model (the box solver of sysid-core) holds
+//! on its bound is held there, and released where that model moves it inwards, so an optimum
+//! on a bound is reached and reported as such.
 //!
 //! ```
 //! use sysid_core::Method;

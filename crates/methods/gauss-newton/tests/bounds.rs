@@ -50,8 +50,8 @@ fn inactive_bounds_do_not_change_the_answer() {
 #[test]
 fn an_optimum_on_a_bound_is_reached_and_reported() {
     // The best k is about 0.8; with k ≥ 1 the bounded optimum has k on its bound. The change
-    // of variables approaches it; the adapter holds k there once the certificate finds it on
-    // the bound, and every method agrees on the bounded optimum.
+    // of variables approaches it; the adapter holds k there once the projected Gauss–Newton
+    // model holds it on the bound, and every method agrees on the bounded optimum.
     let problem = problem(Unknown::new("k", 1.5).min(1.0));
     let goodman = Goodman::default().fit(&problem).unwrap();
     assert!(goodman.converged(), "{}", goodman.termination);
