@@ -10,26 +10,14 @@ use criterion::{
     BenchmarkGroup, Criterion, criterion_group, criterion_main, measurement::WallTime,
 };
 use sysid::core::Method;
-use sysid::gauss_newton::GaussNewton;
-use sysid::goodman::{Goodman, GoodmanOptions};
 use sysid::ode::System;
-use sysid::quasilinearization::Quasilinearization;
+use sysid::registry::{Settings, entries};
 use sysid::systems::{self, Case, Visit};
 
-/// Every method of the comparison, by its command-line name.
-fn methods<S: System>() -> Vec<(&'static str, Box<dyn Method<S>>)> {
-    vec![
-        ("goodman", Box::new(Goodman::default())),
-        (
-            "goodman-halving",
-            Box::new(Goodman::new(GoodmanOptions::default().with_step_halving(true))),
-        ),
-        ("gauss-newton", Box::new(GaussNewton::plain())),
-        ("gauss-newton-ls", Box::new(GaussNewton::line_search())),
-        ("gauss-newton-fd", Box::new(GaussNewton::finite_differences())),
-        ("quasilinearization", Box::new(Quasilinearization::default())),
-        ("quasilinearization-data", Box::new(Quasilinearization::from_data())),
-    ]
+/// Every method of the registry, by its command-line name, with the default settings.
+fn methods<S: System>() -> Vec<(&'static str, Box<dyn Method<S> + Send + Sync>)> {
+    let settings = Settings::default();
+    entries::<S>().into_iter().map(|e| (e.name, (e.build)(&settings))).collect()
 }
 
 struct Bench<'g, 'c> {

@@ -7,8 +7,8 @@
 use std::time::Duration;
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
-use sysid::goodman::{Goodman, GoodmanOptions};
 use sysid::montecarlo::{Scenario, Study, StudySpec, files};
+use sysid::registry::{Registry, Settings};
 
 fn study(c: &mut Criterion) {
     let case = sysid::systems::van_der_pol::van_der_pol();
@@ -23,13 +23,14 @@ fn study(c: &mut Criterion) {
         fixed: Vec::new(),
         driver: Default::default(),
     };
-    // The reference as `sysid study` builds it: step halving, stopping on its cost.
-    let reference = GoodmanOptions::default().with_step_halving(true).with_cost_tolerance(1e-10);
+    // The methods as `sysid study` builds them: from the registry, default settings.
+    let registry = Registry::standard();
+    let build = |name| registry.build(name, &Settings::default()).expect("a registered method");
     let study = Study::new(
         spec,
         Scenario::from_case(&case).expect("the catalogue case"),
-        vec![Box::new(Goodman::default())],
-        Box::new(Goodman::new(reference)),
+        vec![build("goodman")],
+        build("goodman-halving"),
     )
     .expect("a valid study");
     let dir = std::env::temp_dir().join(format!("sysid-bench-study-{}", std::process::id()));

@@ -19,6 +19,7 @@ pub use sysid_model as model;
 pub use sysid_montecarlo as montecarlo;
 pub use sysid_ode as ode;
 pub use sysid_quasilinearization as quasilinearization;
+pub use sysid_registry as registry;
 pub use sysid_systems as systems;
 
 /// The names most programs need.

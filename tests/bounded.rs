@@ -11,11 +11,9 @@
 use std::path::PathBuf;
 
 use serde_json::{Value, json};
-use sysid::core::{Method, Samples};
-use sysid::gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
-use sysid::goodman::{Goodman, GoodmanOptions};
+use sysid::core::Samples;
 use sysid::ode::System;
-use sysid::quasilinearization::Quasilinearization;
+use sysid::registry::{Boxed, Settings, entries};
 use sysid::systems::{self, Case, Visit, stress};
 
 const CASES: [&str; 4] = ["rate-on-bound", "two-sided-bound", "compartment-chain", "slow-rates"];
@@ -77,21 +75,10 @@ fn write_reference_data() {
     std::fs::write(&path, serde_json::to_string_pretty(&cases).unwrap()).unwrap();
 }
 
-/// The laboratory's methods, by name.
-fn methods<S: System>() -> Vec<Box<dyn Method<S>>> {
-    vec![
-        Box::new(Goodman::default()),
-        Box::new(Goodman::new(GoodmanOptions::default().with_step_halving(true))),
-        Box::new(GaussNewton::plain()),
-        Box::new(GaussNewton::line_search()),
-        Box::new(GaussNewton::new(GaussNewtonOptions {
-            line_search: true,
-            jacobian: JacobianSource::FiniteDifferences,
-            ..GaussNewtonOptions::default()
-        })),
-        Box::new(Quasilinearization::default()),
-        Box::new(Quasilinearization::from_data()),
-    ]
+/// The laboratory's methods, from the registry, with the default settings.
+fn methods<S: System>() -> Vec<Boxed<S>> {
+    let settings = Settings::default();
+    entries::<S>().iter().map(|e| (e.build)(&settings)).collect()
 }
 
 /// Every method from the case's default start against the reference.

@@ -3,34 +3,18 @@
 //! still fits in an f64) and starts of either sign and any scale.
 
 use proptest::prelude::*;
-use sysid::core::{Data, DriverOptions, Method, Problem, Unknown};
-use sysid::gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
-use sysid::goodman::{Goodman, GoodmanOptions};
+use sysid::core::{Data, DriverOptions, Problem, Unknown};
 use sysid::ode::Integrator;
-use sysid::quasilinearization::{Quasilinearization, QuasilinearizationOptions, Start};
+use sysid::registry::{Boxed, Settings, entries};
 use sysid::systems::stress::Tracking;
 
 /// The hard budget of these tests: small, so that a runaway shows at once.
 const BUDGET: u64 = 40;
 
-fn methods() -> Vec<Box<dyn Method<Tracking>>> {
+fn methods() -> Vec<Boxed<Tracking>> {
     let driver = DriverOptions { max_integrations: Some(BUDGET), ..DriverOptions::default() };
-    let goodman = GoodmanOptions { driver, ..GoodmanOptions::default() };
-    let gn = GaussNewtonOptions { driver, ..GaussNewtonOptions::default() };
-    let ql = QuasilinearizationOptions { driver, ..QuasilinearizationOptions::default() };
-    vec![
-        Box::new(Goodman::new(goodman.clone())),
-        Box::new(Goodman::new(goodman.with_step_halving(true))),
-        Box::new(GaussNewton::new(gn.clone())),
-        Box::new(GaussNewton::new(GaussNewtonOptions { line_search: true, ..gn.clone() })),
-        Box::new(GaussNewton::new(GaussNewtonOptions {
-            line_search: true,
-            jacobian: JacobianSource::FiniteDifferences,
-            ..gn
-        })),
-        Box::new(Quasilinearization::new(ql.clone())),
-        Box::new(Quasilinearization::new(ql.with_start(Start::Data))),
-    ]
+    let settings = Settings { driver, ..Settings::default() };
+    entries::<Tracking>().iter().map(|e| (e.build)(&settings)).collect()
 }
 
 /// A value m·10^e with e spread over the usable range.

@@ -14,29 +14,16 @@
 use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sysid::core::{Method, Problem, Termination};
-use sysid::gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
-use sysid::goodman::{Goodman, GoodmanOptions};
+use sysid::core::{Problem, Termination};
 use sysid::montecarlo::perturb;
 use sysid::ode::{Integrator, System};
-use sysid::quasilinearization::Quasilinearization;
+use sysid::registry::{Boxed, Settings, entries};
 use sysid::systems::{self, Case, Visit, stress};
 
-/// The laboratory's methods, by name.
-fn methods<S: System>() -> Vec<Box<dyn Method<S>>> {
-    vec![
-        Box::new(Goodman::default()),
-        Box::new(Goodman::new(GoodmanOptions::default().with_step_halving(true))),
-        Box::new(GaussNewton::plain()),
-        Box::new(GaussNewton::line_search()),
-        Box::new(GaussNewton::new(GaussNewtonOptions {
-            line_search: true,
-            jacobian: JacobianSource::FiniteDifferences,
-            ..GaussNewtonOptions::default()
-        })),
-        Box::new(Quasilinearization::default()),
-        Box::new(Quasilinearization::from_data()),
-    ]
+/// The laboratory's methods, from the registry, with the default settings.
+fn methods<S: System>() -> Vec<Boxed<S>> {
+    let settings = Settings::default();
+    entries::<S>().iter().map(|e| (e.build)(&settings)).collect()
 }
 
 /// The cost an independent search may find below a certified point: 1e-6 relative, or the

@@ -107,7 +107,7 @@ impl WithProblem for CompareProblem<'_> {
         let common = self.args.options.common();
         let mut rows = Vec::with_capacity(self.methods.len());
         for name in self.methods {
-            let m = method::<S>(name, common)?;
+            let m = method::<S>(name, &common)?;
             rows.push(Row {
                 method: name.clone(),
                 result: m.fit(&problem).map_err(|e| e.to_string()),

@@ -6,7 +6,7 @@ use sysid_ode::System;
 
 use crate::format::significant;
 use crate::integrator::IntegratorArgs;
-use crate::methods::{Common, METHODS, MethodArgs, method};
+use crate::methods::{Common, MethodArgs, method, methods};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
 
@@ -78,7 +78,7 @@ pub fn fit<S: System>(
     name: &str,
     common: Common,
 ) -> anyhow::Result<Estimate> {
-    let estimate = method::<S>(name, common)?.fit(problem)?;
+    let estimate = method::<S>(name, &common)?.fit(problem)?;
     if let Some(message) = unusable_start(problem, &estimate) {
         anyhow::bail!(message);
     }
@@ -110,7 +110,7 @@ pub fn unusable_start<S: System>(problem: &Problem<S>, e: &Estimate) -> Option<S
 /// The readable report: estimates next to the reference or truth, then the run.
 fn table<S: System>(problem: &Problem<S>, context: &Context, e: &Estimate) -> String {
     let mut out = String::new();
-    let describe = METHODS.iter().find(|m| m.0 == e.method).map_or("", |m| m.1);
+    let describe = methods().into_iter().find(|m| m.0 == e.method).map_or("", |m| m.1);
     out += &format!("{}: {}\n", context.name, context.summary);
     out += &format!("method {}: {describe}\n\n", e.method);
     out += &format!(

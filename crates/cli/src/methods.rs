@@ -1,38 +1,14 @@
 //! The methods the command line offers, by name, and the options every method shares.
 
 use clap::Args;
-use sysid_core::{DriverOptions, Method};
-use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
-use sysid_goodman::{Goodman, GoodmanOptions};
+use sysid_core::DriverOptions;
 use sysid_ode::System;
-use sysid_quasilinearization::{Quasilinearization, QuasilinearizationOptions, Start};
+use sysid_registry::{Boxed, Registry, Start};
+pub use sysid_registry::{Settings as Common, methods};
 
-/// Method names and what they are, in the order tables list them.
-pub const METHODS: &[(&str, &str)] = &[
-    ("goodman", "Goodman 1966: Newton iteration on the initial values, full steps"),
-    ("goodman-halving", "Goodman 1966 with step halving while the cost rises"),
-    ("gauss-newton", "argmin Gauss–Newton, full steps, Jacobian from sensitivities"),
-    ("gauss-newton-ls", "argmin Gauss–Newton with Armijo line search, Jacobian from sensitivities"),
-    ("gauss-newton-fd", "argmin Gauss–Newton with line search, forward-difference Jacobian"),
-    (
-        "quasilinearization",
-        "Bellman–Kagiwada–Kalaba 1963: iterate on trajectories of the linearised model",
-    ),
-    ("quasilinearization-data", "quasilinearization starting from the data for measured states"),
-];
-
-/// The methods `compare` runs by default.
+/// The methods `compare` runs by default: all of them.
 pub fn default_methods() -> Vec<&'static str> {
-    METHODS.iter().map(|m| m.0).collect()
-}
-
-/// Options shared by every method.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Common {
-    /// The driver's budgets and tolerances.
-    pub driver: DriverOptions,
-    /// The first trajectory of `quasilinearization`.
-    pub ql_start: QlStart,
+    methods().into_iter().map(|m| m.0).collect()
 }
 
 /// `--ql-start`: the first trajectory of quasilinearization.
@@ -79,7 +55,11 @@ impl MethodArgs {
         }
         driver.gtol = self.gtol;
         driver.max_integrations = self.max_integrations.or(driver.max_integrations);
-        Common { driver, ql_start: self.ql_start }
+        let ql_start = match self.ql_start {
+            QlStart::Guess => Start::Guess,
+            QlStart::Data => Start::Data,
+        };
+        Common { driver, ql_start }
     }
 
     /// Checks the options before anything runs.
@@ -113,52 +93,11 @@ fn parse_fix(s: &str) -> Result<(String, f64), String> {
 }
 
 /// The method called `name` (usable from several threads, as studies run them).
-pub fn method<S: System>(
-    name: &str,
-    common: Common,
-) -> anyhow::Result<Box<dyn Method<S> + Send + Sync>> {
-    let goodman = GoodmanOptions { driver: common.driver, ..GoodmanOptions::default() };
-    let gn = GaussNewtonOptions { driver: common.driver, ..GaussNewtonOptions::default() };
-    let ql = QuasilinearizationOptions { driver: common.driver, ..Default::default() };
-    let ql_start = match common.ql_start {
-        QlStart::Guess => Start::Guess,
-        QlStart::Data => Start::Data,
-    };
-    Ok(match name {
-        "goodman" => Box::new(Goodman::new(goodman)),
-        "goodman-halving" => Box::new(Goodman::new(goodman.with_step_halving(true))),
-        "gauss-newton" => Box::new(GaussNewton::new(gn)),
-        "gauss-newton-ls" => {
-            Box::new(GaussNewton::new(GaussNewtonOptions { line_search: true, ..gn }))
-        }
-        "gauss-newton-fd" => Box::new(GaussNewton::new(GaussNewtonOptions {
-            line_search: true,
-            jacobian: JacobianSource::FiniteDifferences,
-            ..gn
-        })),
-        "quasilinearization" => Box::new(Quasilinearization::new(ql.with_start(ql_start))),
-        "quasilinearization-data" => Box::new(Quasilinearization::new(ql.with_start(Start::Data))),
-        _ => anyhow::bail!(
-            "unknown method `{name}` (methods: {})",
-            METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")
-        ),
-    })
+pub fn method<S: System>(name: &str, common: &Common) -> anyhow::Result<Boxed<S>> {
+    Ok(Registry::standard().build(name, common)?)
 }
 
 /// Checks a comma-separated list of method names.
 pub fn parse_list(list: &str) -> anyhow::Result<Vec<String>> {
-    let names: Vec<String> =
-        list.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect();
-    if names.is_empty() {
-        anyhow::bail!("no methods given");
-    }
-    for n in &names {
-        if !METHODS.iter().any(|m| m.0 == n) {
-            anyhow::bail!(
-                "unknown method `{n}` (methods: {})",
-                METHODS.iter().map(|m| m.0).collect::<Vec<_>>().join(", ")
-            );
-        }
-    }
-    Ok(names)
+    Ok(Registry::<sysid_ode::testing::Decay>::standard().parse_list(list)?)
 }

@@ -135,7 +135,7 @@ impl Visit for SystemReport<'_> {
         // Convergence from the default start.
         let mut fits = Vec::new();
         for m in self.methods {
-            let fit = method::<S>(m, Common::default())?.fit(&problem).map_err(|e| e.to_string());
+            let fit = method::<S>(m, &Common::default())?.fit(&problem).map_err(|e| e.to_string());
             fits.push((m.clone(), fit));
         }
         write_convergence(&dir, &fits)?;
@@ -153,7 +153,7 @@ impl Visit for SystemReport<'_> {
         ));
 
         // Fit and prediction, by the reference method.
-        let fitted = method::<S>(REFERENCE, Common::default())?.fit(&problem)?;
+        let fitted = method::<S>(REFERENCE, &Common::default())?.fit(&problem)?;
         if fitted.converged() {
             prediction(&case, &problem, &fitted, &dir)?;
             figures.push((
@@ -183,10 +183,10 @@ impl Visit for SystemReport<'_> {
                 let fits = self
                     .methods
                     .iter()
-                    .map(|m| method::<S>(m, Common::default()))
+                    .map(|m| method::<S>(m, &Common::default()))
                     .collect::<anyhow::Result<_>>()?;
                 let study =
-                    Study::new(spec, scenario, fits, method::<S>(REFERENCE, Common::default())?)?;
+                    Study::new(spec, scenario, fits, method::<S>(REFERENCE, &Common::default())?)?;
                 let summary = run_study(&study, &dir.join("study"))?;
                 draw_study(&case, &summary, &dir)?;
                 figures.push((
@@ -208,13 +208,13 @@ impl Visit for SystemReport<'_> {
                 let fits = self
                     .methods
                     .iter()
-                    .map(|m| method::<S>(m, Common::default()))
+                    .map(|m| method::<S>(m, &Common::default()))
                     .collect::<anyhow::Result<_>>()?;
                 let basin_study = Study::new(
                     basin_spec,
                     study.scenario().clone(),
                     fits,
-                    method::<S>(REFERENCE, Common::default())?,
+                    method::<S>(REFERENCE, &Common::default())?,
                 )?;
                 let numbers = draw_basin(&case, &basin_study, args.grid, &dir)?;
                 figures.push((

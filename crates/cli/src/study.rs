@@ -153,8 +153,8 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         driver: common.driver,
     };
     let fits =
-        methods.iter().map(|m| method::<S>(m, common)).collect::<anyhow::Result<Vec<_>>>()?;
-    let study = Study::new(spec, scenario, fits, method::<S>(&args.reference, common)?)?;
+        methods.iter().map(|m| method::<S>(m, &common)).collect::<anyhow::Result<Vec<_>>>()?;
+    let study = Study::new(spec, scenario, fits, method::<S>(&args.reference, &common)?)?;
     if let Some(axes) = &args.basin {
         let names = study.scenario().problem().names();
         let index = |n: &str| {

@@ -5,23 +5,13 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
 use serde_json::Value;
-use sysid_gauss_newton::GaussNewton;
-use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_montecarlo::{Scenario, SharedMethod, Study, StudySpec, files, files::Shard};
 use sysid_ode::System;
-use sysid_quasilinearization::Quasilinearization;
+use sysid_registry::{Registry, Settings};
 use sysid_systems::Case;
 
 fn method<S: System + Clone + Send + Sync>(name: &str) -> SharedMethod<S> {
-    match name {
-        "goodman" => Box::new(Goodman::default()),
-        "goodman-halving" => {
-            Box::new(Goodman::new(GoodmanOptions::default().with_step_halving(true)))
-        }
-        "gauss-newton-ls" => Box::new(GaussNewton::line_search()),
-        "quasilinearization" => Box::new(Quasilinearization::default()),
-        other => panic!("no method {other}"),
-    }
+    Registry::standard().build(name, &Settings::default()).unwrap()
 }
 
 fn study<S: System + Clone + Send + Sync>(
