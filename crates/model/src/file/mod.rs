@@ -4,12 +4,19 @@
 use std::path::{Path, PathBuf};
 
 use sysid_core::Unknown;
-use sysid_ode::{Integrator, Interpolation, Scheme};
-use toml::Spanned;
+use sysid_ode::{Integrator, Interpolation};
 use toml::de::{DeTable, DeValue};
 
-use crate::error::{ModelError, char_offset};
-use crate::expr::{self, Program, Slot};
+use crate::error::ModelError;
+use crate::expr::{Program, Slot};
+
+mod data;
+mod integrator;
+mod reader;
+
+use data::read_data;
+use integrator::read_integrator;
+use reader::{Entry, Reader};
 
 /// How the data are taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -64,9 +71,6 @@ pub struct ModelFile {
     pub states_at: usize,
 }
 
-/// Reserved words: time and the function names.
-const RESERVED: &[&str] =
-    &["t", "exp", "log", "sqrt", "sin", "cos", "tan", "tanh", "abs", "min", "max"];
 const TOP_LEVEL: &[&str] = &[
     "states",
     "parameters",
@@ -79,120 +83,6 @@ const TOP_LEVEL: &[&str] = &[
     "data",
     "integrator",
 ];
-
-struct Reader<'a> {
-    file: String,
-    text: &'a str,
-}
-
-type Entry<'a, 'i> = (&'a Spanned<std::borrow::Cow<'i, str>>, &'a Spanned<DeValue<'i>>);
-
-impl<'a> Reader<'a> {
-    fn err(&self, offset: usize, message: impl Into<String>) -> ModelError {
-        ModelError::at(&self.file, self.text, offset, message)
-    }
-
-    fn number(&self, value: &Spanned<DeValue<'_>>, what: &str) -> Result<f64, ModelError> {
-        let at = value.span().start;
-        let v = match value.get_ref() {
-            DeValue::Integer(i) => {
-                let digits: String = i.as_str().chars().filter(|c| *c != '_').collect();
-                i64::from_str_radix(&digits, i.radix()).map(|v| v as f64).ok()
-            }
-            DeValue::Float(f) => f.as_str().replace('_', "").parse::<f64>().ok(),
-            _ => None,
-        };
-        let v = v.ok_or_else(|| self.err(at, format!("{what} must be a number")))?;
-        if !v.is_finite() {
-            return Err(self.err(at, format!("{what} must be a finite number, got {v}")));
-        }
-        Ok(v)
-    }
-
-    fn string<'v>(
-        &self,
-        value: &'v Spanned<DeValue<'_>>,
-        what: &str,
-    ) -> Result<&'v str, ModelError> {
-        match value.get_ref() {
-            DeValue::String(s) => Ok(s),
-            _ => Err(self.err(value.span().start, format!("{what} must be a string"))),
-        }
-    }
-
-    fn table<'v, 'i>(
-        &self,
-        value: &'v Spanned<DeValue<'i>>,
-        what: &str,
-    ) -> Result<&'v DeTable<'i>, ModelError> {
-        match value.get_ref() {
-            DeValue::Table(t) => Ok(t),
-            _ => Err(self.err(value.span().start, format!("{what} must be a table"))),
-        }
-    }
-
-    /// A list of names: strings, each a valid identifier.
-    fn names(
-        &self,
-        value: &Spanned<DeValue<'_>>,
-        what: &str,
-    ) -> Result<Vec<(String, usize)>, ModelError> {
-        let DeValue::Array(items) = value.get_ref() else {
-            return Err(self.err(
-                value.span().start,
-                format!("`{what}` must be a list of names, like [\"x\", \"y\"]"),
-            ));
-        };
-        items
-            .iter()
-            .map(|item| {
-                let name = self.string(item, &format!("each entry of `{what}`"))?;
-                self.identifier(name, item.span().start)?;
-                Ok((name.to_string(), item.span().start))
-            })
-            .collect()
-    }
-
-    fn identifier(&self, name: &str, at: usize) -> Result<(), ModelError> {
-        let mut chars = name.chars();
-        let valid = chars.next().is_some_and(|c| c.is_alphabetic() || c == '_')
-            && chars.all(|c| c.is_alphanumeric() || c == '_');
-        if !valid {
-            return Err(self.err(at, format!("`{name}` is not a valid name (letters, digits and _, not starting with a digit)")));
-        }
-        if RESERVED.contains(&name) {
-            return Err(self.err(at, format!("`{name}` is reserved (the time or a function)")));
-        }
-        Ok(())
-    }
-
-    /// Compiles an expression string, locating its errors in the file.
-    fn expression(
-        &self,
-        value: &Spanned<DeValue<'_>>,
-        what: &str,
-        resolve: &dyn Fn(&str) -> Option<Slot>,
-        names: &str,
-    ) -> Result<Program, ModelError> {
-        let text = self.string(value, what)?;
-        let start = value.span().start;
-        let quote =
-            if self.text[start..].starts_with("\"\"\"") || self.text[start..].starts_with("'''") {
-                3
-            } else {
-                1
-            };
-        let locate = |e: expr::ExprError| {
-            let mut message = format!("{what}: {}", e.message);
-            if e.message.starts_with("unknown name") {
-                message += &format!(" (names: {names})");
-            }
-            self.err(char_offset(self.text, start + quote, e.position), message)
-        };
-        let parsed = expr::parse(text).map_err(locate)?;
-        Program::compile(&parsed, resolve).map_err(locate)
-    }
-}
 
 impl ModelFile {
     /// Reads and checks a model file.
@@ -505,84 +395,4 @@ impl ModelFile {
             states_at: states_value.span().start,
         })
     }
-}
-
-fn read_data(r: &Reader<'_>, t: &DeTable<'_>, path: &Path) -> Result<DataSpec, ModelError> {
-    let mut spec =
-        DataSpec { file: None, t0: 0.0, record: RecordKind::Discrete, weights: Vec::new() };
-    for (key, value) in t.iter() {
-        match key.get_ref().as_ref() {
-            "file" => {
-                let f = r.string(value, "[data] file")?;
-                let base = path.parent().unwrap_or(Path::new(""));
-                spec.file = Some(base.join(f));
-            }
-            "t0" => spec.t0 = r.number(value, "[data] t0")?,
-            "record" => {
-                spec.record = match r.string(value, "[data] record")? {
-                    "discrete" => RecordKind::Discrete,
-                    "continuous" => RecordKind::Continuous,
-                    other => {
-                        return Err(r.err(value.span().start, format!("[data] record must be \"discrete\" or \"continuous\", got \"{other}\"")));
-                    }
-                }
-            }
-            "weights" => {
-                for (k, w) in r.table(value, "[data.weights]")?.iter() {
-                    let weight = r.number(w, &format!("[data.weights] {}", k.get_ref()))?;
-                    if weight <= 0.0 {
-                        return Err(r.err(
-                            w.span().start,
-                            format!(
-                                "[data.weights] {} must be positive, got {weight}",
-                                k.get_ref()
-                            ),
-                        ));
-                    }
-                    spec.weights.push((k.get_ref().to_string(), weight, k.span().start));
-                }
-            }
-            other => {
-                return Err(r.err(
-                    key.span().start,
-                    format!("unknown key `{other}` in [data] (keys: file, t0, record, weights)"),
-                ));
-            }
-        }
-    }
-    Ok(spec)
-}
-
-fn read_integrator(r: &Reader<'_>, value: &Spanned<DeValue<'_>>) -> Result<Integrator, ModelError> {
-    let t = r.table(value, "[integrator]")?;
-    let mut integrator = Integrator::default();
-    for (key, v) in t.iter() {
-        match key.get_ref().as_ref() {
-            "method" => {
-                integrator.scheme = match r.string(v, "[integrator] method")? {
-                    "dopri5" => Scheme::Dopri5,
-                    "rk4" => Scheme::Rk4,
-                    "rodas4" => Scheme::Rodas4,
-                    "auto" => Scheme::Auto,
-                    other => {
-                        return Err(r.err(
-                            v.span().start,
-                            format!(
-                                "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\" or \"auto\", got \"{other}\""
-                            ),
-                        ));
-                    }
-                }
-            }
-            "rtol" => integrator.rtol = r.number(v, "[integrator] rtol")?,
-            "atol" => integrator.atol = r.number(v, "[integrator] atol")?,
-            "step" => integrator.fixed_step = Some(r.number(v, "[integrator] step")?),
-            "max_steps" => integrator.max_steps = r.number(v, "[integrator] max_steps")? as usize,
-            other => {
-                return Err(r.err(key.span().start, format!("unknown key `{other}` in [integrator] (keys: method, rtol, atol, step, max_steps)")));
-            }
-        }
-    }
-    integrator.validate().map_err(|e| r.err(value.span().start, format!("[integrator]: {e}")))?;
-    Ok(integrator)
 }
