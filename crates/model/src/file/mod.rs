@@ -8,15 +8,17 @@ use sysid_ode::{Integrator, Interpolation};
 use toml::de::{DeTable, DeValue};
 
 use crate::error::ModelError;
-use crate::expr::{Program, Slot};
+use crate::expr::Program;
 
 mod data;
 mod integrator;
+mod names;
 mod reader;
 
 use data::read_data;
 use integrator::read_integrator;
-use reader::{Entry, Reader};
+use names::{Names, Scope};
+use reader::Reader;
 
 /// How the data are taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -111,117 +113,16 @@ impl ModelFile {
             }
         }
 
-        // Names.
-        let states_value = doc
-            .get("states")
-            .ok_or_else(|| ModelError::file(&file, "`states` is missing: list the state names"))?;
-        let states = r.names(states_value, "states")?;
-        if states.is_empty() {
-            return Err(r.err(
-                states_value.span().start,
-                "`states` is empty: a model needs at least one state",
-            ));
-        }
-        let parameters = match doc.get("parameters") {
-            Some(v) => r.names(v, "parameters")?,
-            None => Vec::new(),
-        };
-        let (inputs, input_mode) = match doc.get("inputs") {
-            None => (Vec::new(), Interpolation::Linear),
-            Some(v) => match v.get_ref() {
-                DeValue::Array(_) => (r.names(v, "inputs")?, Interpolation::Linear),
-                DeValue::Table(t) => {
-                    let names = match t.get("names") {
-                        Some(n) => r.names(n, "inputs.names")?,
-                        None => return Err(r.err(v.span().start, "[inputs] needs `names = [...]`")),
-                    };
-                    let mode = match t.get("mode") {
-                        None => Interpolation::Linear,
-                        Some(m) => match r.string(m, "inputs.mode")? {
-                            "linear" => Interpolation::Linear,
-                            "step" => Interpolation::Step,
-                            other => {
-                                return Err(r.err(m.span().start, format!("inputs.mode must be \"linear\" or \"step\", got \"{other}\"")));
-                            }
-                        },
-                    };
-                    for (key, _) in t.iter() {
-                        if !["names", "mode"].contains(&key.get_ref().as_ref()) {
-                            return Err(r.err(
-                                key.span().start,
-                                format!(
-                                    "unknown key `{}` in [inputs] (keys: names, mode)",
-                                    key.get_ref()
-                                ),
-                            ));
-                        }
-                    }
-                    (names, mode)
-                }
-                _ => {
-                    return Err(r.err(
-                        v.span().start,
-                        "`inputs` must be a list of names or a table {names, mode}",
-                    ));
-                }
-            },
-        };
-        let output_entries: Vec<Entry<'_, '_>> = match doc.get("outputs") {
-            Some(v) => r.table(v, "[outputs]")?.iter().collect(),
-            None => Vec::new(),
-        };
-        // Unique names across states, parameters, inputs and outputs.
-        let mut seen: Vec<(&str, &str)> = Vec::new();
-        let outputs_named: Vec<(String, usize)> =
-            output_entries.iter().map(|(k, _)| (k.get_ref().to_string(), k.span().start)).collect();
-        for (kind, list) in [
-            ("a state", &states),
-            ("a parameter", &parameters),
-            ("an input", &inputs),
-            ("an output", &outputs_named),
-        ] {
-            for (name, at) in list {
-                if kind == "an output" {
-                    r.identifier(name, *at)?;
-                }
-                if let Some((_, first)) = seen.iter().find(|(n, _)| n == name) {
-                    return Err(r.err(
-                        *at,
-                        format!("the name `{name}` is used twice (as {first} and as {kind})"),
-                    ));
-                }
-                seen.push((name, kind));
-            }
-        }
-        let state_names: Vec<String> = states.iter().map(|s| s.0.clone()).collect();
-        let parameter_names: Vec<String> = parameters.iter().map(|s| s.0.clone()).collect();
-        let input_names: Vec<String> = inputs.iter().map(|s| s.0.clone()).collect();
-        let resolve = |name: &str| -> Option<Slot> {
-            if name == "t" {
-                return Some(Slot::Time);
-            }
-            state_names
-                .iter()
-                .position(|s| s == name)
-                .map(Slot::State)
-                .or_else(|| parameter_names.iter().position(|s| s == name).map(Slot::Parameter))
-                .or_else(|| input_names.iter().position(|s| s == name).map(Slot::Input))
-        };
-        let all_names = state_names
-            .iter()
-            .chain(&parameter_names)
-            .chain(&input_names)
-            .map(String::as_str)
-            .chain(["t"])
-            .collect::<Vec<_>>()
-            .join(", ");
+        let names = Names::read(&r, doc)?;
+        let scope = Scope::new(&names);
+        let Scope { states: state_names, parameters: parameter_names, .. } = &scope;
+        let resolve = |name: &str| scope.resolve(name);
+        let all_names = &scope.listed;
+        let (states, parameters) = (&names.states, &names.parameters);
 
         // Equations: one per state.
         let equations_value = doc.get("equations").ok_or_else(|| {
-            r.err(
-                states_value.span().start,
-                "[equations] is missing: give d(state)/dt for every state",
-            )
+            r.err(names.states_at, "[equations] is missing: give d(state)/dt for every state")
         })?;
         let equations_table = r.table(equations_value, "[equations]")?;
         let mut equations: Vec<Option<Program>> = vec![None; states.len()];
@@ -237,11 +138,11 @@ impl ModelFile {
                 ));
             };
             equations[i] =
-                Some(r.expression(value, &format!("equation of {name}"), &resolve, &all_names)?);
+                Some(r.expression(value, &format!("equation of {name}"), &resolve, all_names)?);
         }
         let equations = equations
             .into_iter()
-            .zip(&states)
+            .zip(states)
             .map(|(e, (name, at))| {
                 e.ok_or_else(|| {
                     r.err(*at, format!("state `{name}` has no equation in [equations]"))
@@ -249,12 +150,13 @@ impl ModelFile {
             })
             .collect::<Result<Vec<_>, _>>()?;
 
-        let outputs = output_entries
+        let outputs = names
+            .outputs
             .iter()
             .map(|(key, value)| {
                 let name = key.get_ref().to_string();
                 let program =
-                    r.expression(value, &format!("output {name}"), &resolve, &all_names)?;
+                    r.expression(value, &format!("output {name}"), &resolve, all_names)?;
                 Ok((name, program))
             })
             .collect::<Result<Vec<_>, ModelError>>()?;
@@ -296,14 +198,14 @@ impl ModelFile {
         if let Some(v) = doc.get("unknowns") {
             for (key, value) in r.table(v, "[unknowns]")?.iter() {
                 let name = key.get_ref();
-                if !state_names.iter().chain(&parameter_names).any(|n| n == name) {
+                if !state_names.iter().chain(parameter_names).any(|n| n == name) {
                     return Err(r.err(
                         key.span().start,
                         format!(
                             "[unknowns]: `{name}` is not a state or parameter (names: {})",
                             state_names
                                 .iter()
-                                .chain(&parameter_names)
+                                .chain(parameter_names)
                                 .cloned()
                                 .collect::<Vec<_>>()
                                 .join(", ")
@@ -382,17 +284,17 @@ impl ModelFile {
         Ok(Self {
             path: path.to_path_buf(),
             text: text.to_string(),
-            states: state_names,
-            parameters: parameter_names,
-            inputs: input_names,
-            input_mode,
+            states: scope.states,
+            parameters: scope.parameters,
+            inputs: scope.inputs,
+            input_mode: names.input_mode,
             equations,
             outputs,
             known,
             unknowns,
             data,
             integrator,
-            states_at: states_value.span().start,
+            states_at: names.states_at,
         })
     }
 }
