@@ -11,11 +11,13 @@ use crate::error::ModelError;
 use crate::expr::Program;
 
 mod data;
+mod equations;
 mod integrator;
 mod names;
 mod reader;
 
 use data::read_data;
+use equations::{read_equations, read_outputs};
 use integrator::read_integrator;
 use names::{Names, Scope};
 use reader::Reader;
@@ -116,50 +118,10 @@ impl ModelFile {
         let names = Names::read(&r, doc)?;
         let scope = Scope::new(&names);
         let Scope { states: state_names, parameters: parameter_names, .. } = &scope;
-        let resolve = |name: &str| scope.resolve(name);
-        let all_names = &scope.listed;
         let (states, parameters) = (&names.states, &names.parameters);
 
-        // Equations: one per state.
-        let equations_value = doc.get("equations").ok_or_else(|| {
-            r.err(names.states_at, "[equations] is missing: give d(state)/dt for every state")
-        })?;
-        let equations_table = r.table(equations_value, "[equations]")?;
-        let mut equations: Vec<Option<Program>> = vec![None; states.len()];
-        for (key, value) in equations_table.iter() {
-            let name = key.get_ref();
-            let Some(i) = state_names.iter().position(|s| s == name) else {
-                return Err(r.err(
-                    key.span().start,
-                    format!(
-                        "[equations]: `{name}` is not a state (states: {})",
-                        state_names.join(", ")
-                    ),
-                ));
-            };
-            equations[i] =
-                Some(r.expression(value, &format!("equation of {name}"), &resolve, all_names)?);
-        }
-        let equations = equations
-            .into_iter()
-            .zip(states)
-            .map(|(e, (name, at))| {
-                e.ok_or_else(|| {
-                    r.err(*at, format!("state `{name}` has no equation in [equations]"))
-                })
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-
-        let outputs = names
-            .outputs
-            .iter()
-            .map(|(key, value)| {
-                let name = key.get_ref().to_string();
-                let program =
-                    r.expression(value, &format!("output {name}"), &resolve, all_names)?;
-                Ok((name, program))
-            })
-            .collect::<Result<Vec<_>, ModelError>>()?;
+        let equations = read_equations(&r, doc, &names, &scope)?;
+        let outputs = read_outputs(&r, &names, &scope)?;
 
         // Known values and unknowns: every state and parameter exactly once.
         let mut given: Vec<(String, &'static str)> = Vec::new();
