@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use sysid_core::Unknown;
 use sysid_ode::{Integrator, Interpolation};
-use toml::de::{DeTable, DeValue};
+use toml::de::DeTable;
 
 use crate::error::ModelError;
 use crate::expr::Program;
@@ -15,12 +15,14 @@ mod equations;
 mod integrator;
 mod names;
 mod reader;
+mod values;
 
 use data::read_data;
 use equations::{read_equations, read_outputs};
 use integrator::read_integrator;
 use names::{Names, Scope};
 use reader::Reader;
+use values::{Values, read_values};
 
 /// How the data are taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -117,121 +119,11 @@ impl ModelFile {
 
         let names = Names::read(&r, doc)?;
         let scope = Scope::new(&names);
-        let Scope { states: state_names, parameters: parameter_names, .. } = &scope;
-        let (states, parameters) = (&names.states, &names.parameters);
 
         let equations = read_equations(&r, doc, &names, &scope)?;
         let outputs = read_outputs(&r, &names, &scope)?;
 
-        // Known values and unknowns: every state and parameter exactly once.
-        let mut given: Vec<(String, &'static str)> = Vec::new();
-        let mut mark = |name: &str, how: &'static str, at: usize| -> Result<(), ModelError> {
-            if let Some((_, first)) = given.iter().find(|(n, _)| n == name) {
-                return Err(
-                    r.err(at, format!("`{name}` is given twice (in [{first}] and in [{how}])"))
-                );
-            }
-            given.push((name.to_string(), how));
-            Ok(())
-        };
-        let mut known = Vec::new();
-        for (section, names, kind) in
-            [("initial", &state_names, "state"), ("known", &parameter_names, "parameter")]
-        {
-            if let Some(v) = doc.get(section) {
-                for (key, value) in r.table(v, &format!("[{section}]"))?.iter() {
-                    let name = key.get_ref();
-                    if !names.iter().any(|n| n == name) {
-                        return Err(r.err(
-                            key.span().start,
-                            format!(
-                                "[{section}]: `{name}` is not a {kind} (names: {})",
-                                names.join(", ")
-                            ),
-                        ));
-                    }
-                    mark(name, section, key.span().start)?;
-                    known
-                        .push((name.to_string(), r.number(value, &format!("[{section}] {name}"))?));
-                }
-            }
-        }
-        let mut unknowns = Vec::new();
-        if let Some(v) = doc.get("unknowns") {
-            for (key, value) in r.table(v, "[unknowns]")?.iter() {
-                let name = key.get_ref();
-                if !state_names.iter().chain(parameter_names).any(|n| n == name) {
-                    return Err(r.err(
-                        key.span().start,
-                        format!(
-                            "[unknowns]: `{name}` is not a state or parameter (names: {})",
-                            state_names
-                                .iter()
-                                .chain(parameter_names)
-                                .cloned()
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
-                }
-                mark(name, "unknowns", key.span().start)?;
-                let unknown = match value.get_ref() {
-                    DeValue::Table(t) => {
-                        let guess = t.get("guess").ok_or_else(|| {
-                            r.err(
-                                value.span().start,
-                                format!("[unknowns] {name}: an unknown needs `guess`"),
-                            )
-                        })?;
-                        let mut u = Unknown::new(
-                            name.as_ref(),
-                            r.number(guess, &format!("[unknowns] {name}.guess"))?,
-                        );
-                        for (k, v) in t.iter() {
-                            match k.get_ref().as_ref() {
-                                "guess" => {}
-                                "min" => {
-                                    u.min = Some(r.number(v, &format!("[unknowns] {name}.min"))?)
-                                }
-                                "max" => {
-                                    u.max = Some(r.number(v, &format!("[unknowns] {name}.max"))?)
-                                }
-                                "log" => match v.get_ref() {
-                                    DeValue::Boolean(b) => u.log = *b,
-                                    _ => {
-                                        return Err(r.err(
-                                            v.span().start,
-                                            format!("[unknowns] {name}.log must be true or false"),
-                                        ));
-                                    }
-                                },
-                                other => {
-                                    return Err(r.err(k.span().start, format!("[unknowns] {name}: unknown key `{other}` (keys: guess, min, max, log)")));
-                                }
-                            }
-                        }
-                        u
-                    }
-                    _ => {
-                        Unknown::new(name.as_ref(), r.number(value, &format!("[unknowns] {name}"))?)
-                    }
-                };
-                unknowns.push(unknown);
-            }
-        }
-        for (kind, names, list) in
-            [("state", &state_names, &states), ("parameter", &parameter_names, &parameters)]
-        {
-            for (name, (_, at)) in names.iter().zip(list.iter()) {
-                if !given.iter().any(|(n, _)| n == name) {
-                    let section = if kind == "state" { "[initial]" } else { "[known]" };
-                    return Err(r.err(
-                        *at,
-                        format!("{kind} `{name}` is neither in {section} nor in [unknowns]"),
-                    ));
-                }
-            }
-        }
+        let Values { known, unknowns } = read_values(&r, doc, &names, &scope)?;
 
         let data = match doc.get("data") {
             None => {
