@@ -77,6 +77,7 @@ pub struct ModelFile {
     pub states_at: usize,
 }
 
+/// The top-level keys: the sections of a model file.
 const TOP_LEVEL: &[&str] = &[
     "states",
     "parameters",
@@ -100,41 +101,23 @@ impl ModelFile {
     }
 
     /// Checks a model file's text; `path` names it and anchors relative data paths.
+    ///
+    /// The sections are checked in a fixed order, whatever their order in the file, and the
+    /// first mistake is reported: TOML syntax and top-level keys; the names, which every
+    /// expression and value refers to; `[equations]`, `[outputs]`, `[initial]`, `[known]`,
+    /// `[unknowns]`, `[data]` and `[integrator]`.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ModelError> {
-        let file = path.display().to_string();
-        let r = Reader { file: file.clone(), text };
-        let doc = DeTable::parse(text).map_err(|e| {
-            let at = e.span().map_or(0, |s| s.start);
-            r.err(at, format!("TOML syntax error: {}", e.message().trim()))
-        })?;
+        let r = Reader::new(path, text);
+        let doc = r.document()?;
         let doc = doc.get_ref();
-        for (key, _) in doc.iter() {
-            if !TOP_LEVEL.contains(&key.get_ref().as_ref()) {
-                return Err(r.err(
-                    key.span().start,
-                    format!("unknown key `{}` (keys: {})", key.get_ref(), TOP_LEVEL.join(", ")),
-                ));
-            }
-        }
-
+        check_top_level_keys(&r, doc)?;
         let names = Names::read(&r, doc)?;
         let scope = Scope::new(&names);
-
         let equations = read_equations(&r, doc, &names, &scope)?;
         let outputs = read_outputs(&r, &names, &scope)?;
-
         let Values { known, unknowns } = read_values(&r, doc, &names, &scope)?;
-
-        let data = match doc.get("data") {
-            None => {
-                DataSpec { file: None, t0: 0.0, record: RecordKind::Discrete, weights: Vec::new() }
-            }
-            Some(v) => read_data(&r, r.table(v, "[data]")?, path)?,
-        };
-        let integrator = match doc.get("integrator") {
-            None => Integrator::default(),
-            Some(v) => read_integrator(&r, v)?,
-        };
+        let data = read_data(&r, doc.get("data"), path)?;
+        let integrator = read_integrator(&r, doc.get("integrator"))?;
         Ok(Self {
             path: path.to_path_buf(),
             text: text.to_string(),
@@ -151,4 +134,17 @@ impl ModelFile {
             states_at: names.states_at,
         })
     }
+}
+
+/// Checks every top-level key is one of the model file's sections.
+fn check_top_level_keys(r: &Reader<'_>, doc: &DeTable<'_>) -> Result<(), ModelError> {
+    for (key, _) in doc.iter() {
+        if !TOP_LEVEL.contains(&key.get_ref().as_ref()) {
+            return Err(r.err(
+                key.span().start,
+                format!("unknown key `{}` (keys: {})", key.get_ref(), TOP_LEVEL.join(", ")),
+            ));
+        }
+    }
+    Ok(())
 }

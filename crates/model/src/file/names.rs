@@ -81,9 +81,8 @@ fn read_states(
     r: &Reader<'_>,
     doc: &DeTable<'_>,
 ) -> Result<(Vec<(String, usize)>, usize), ModelError> {
-    let value = doc
-        .get("states")
-        .ok_or_else(|| ModelError::file(&r.file, "`states` is missing: list the state names"))?;
+    let value =
+        doc.get("states").ok_or_else(|| r.file_err("`states` is missing: list the state names"))?;
     let states = r.names(value, "states")?;
     if states.is_empty() {
         return Err(

@@ -1,6 +1,8 @@
 //! Reading TOML values with their positions: numbers, strings, tables, names and
 //! expressions, each failing with a message located in the file.
 
+use std::path::Path;
+
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
@@ -13,14 +15,32 @@ const RESERVED: &[&str] =
 
 /// The file being read: its name and text, to locate every error.
 pub(super) struct Reader<'a> {
-    pub(super) file: String,
-    pub(super) text: &'a str,
+    file: String,
+    text: &'a str,
 }
 
 /// A key of a table and its value.
 pub(super) type Entry<'a, 'i> = (&'a Spanned<std::borrow::Cow<'i, str>>, &'a Spanned<DeValue<'i>>);
 
 impl<'a> Reader<'a> {
+    /// A reader of `text`, naming it after `path` in errors.
+    pub(super) fn new(path: &Path, text: &'a str) -> Self {
+        Self { file: path.display().to_string(), text }
+    }
+
+    /// Parses the text as TOML, keeping every key's and value's position.
+    pub(super) fn document(&self) -> Result<Spanned<DeTable<'a>>, ModelError> {
+        DeTable::parse(self.text).map_err(|e| {
+            let at = e.span().map_or(0, |s| s.start);
+            self.err(at, format!("TOML syntax error: {}", e.message().trim()))
+        })
+    }
+
+    /// An error about the whole file, with no position.
+    pub(super) fn file_err(&self, message: impl Into<String>) -> ModelError {
+        ModelError::file(&self.file, message)
+    }
+
     /// An error at a byte offset of the file.
     pub(super) fn err(&self, offset: usize, message: impl Into<String>) -> ModelError {
         ModelError::at(&self.file, self.text, offset, message)
