@@ -61,12 +61,27 @@ fn table_error(e: TableError) -> ModelError {
 pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ModelError::file(&file, e.to_string()))?;
-    // The time column is checked by name before its values are read as times.
+    check_time_column(&text, &file)?;
+    let table = Table::parse(&text, &file).map_err(table_error)?;
+    check_columns(model, &table, &file)?;
+    check_weights(model, &table, &file)?;
+    let signals = input_signals(model, &table, &file)?;
+    let data = measured_series(model, &table, &text, &file)?;
+    Ok(ModelData { data, inputs: Inputs::new(signals), rows: table.time().len() })
+}
+
+/// Whether a column is measured: it names a state or an output.
+fn measurable(model: &ModelFile, name: &str) -> bool {
+    model.states.iter().any(|s| s == name) || model.outputs.iter().any(|o| o.0 == name)
+}
+
+/// Checks the first column's name is `t` or `time`, before its values are read as times.
+fn check_time_column(text: &str, file: &str) -> Result<(), ModelError> {
     let time =
         text.lines().next().and_then(|h| h.split(',').next()).map(str::trim).unwrap_or_default();
     if !time.eq_ignore_ascii_case("t") && !time.eq_ignore_ascii_case("time") {
         return Err(ModelError {
-            file,
+            file: file.to_string(),
             line: Some(1),
             column: None,
             message: format!(
@@ -74,13 +89,16 @@ pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
             ),
         });
     }
-    let table = Table::parse(&text, &file).map_err(table_error)?;
+    Ok(())
+}
+
+/// Checks every column names a state, an output or an input.
+fn check_columns(model: &ModelFile, table: &Table, file: &str) -> Result<(), ModelError> {
     let outputs: Vec<&str> = model.outputs.iter().map(|o| o.0.as_str()).collect();
-    let measurable = |name: &str| model.states.iter().any(|s| s == name) || outputs.contains(&name);
     for name in table.names() {
-        if !measurable(name) && !model.inputs.iter().any(|i| i == name) {
+        if !measurable(model, name) && !model.inputs.iter().any(|i| i == name) {
             return Err(ModelError {
-                file,
+                file: file.to_string(),
                 line: Some(1),
                 column: None,
                 message: format!(
@@ -92,8 +110,14 @@ pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
             });
         }
     }
+    Ok(())
+}
+
+/// Checks each `[data.weights]` entry weights a measured column of the table, locating a
+/// wrong one in the model file.
+fn check_weights(model: &ModelFile, table: &Table, file: &str) -> Result<(), ModelError> {
     for (name, _, at) in &model.data.weights {
-        if !table.names().iter().any(|n| n == name) || !measurable(name) {
+        if !table.names().iter().any(|n| n == name) || !measurable(model, name) {
             return Err(ModelError::at(
                 &model.path.display().to_string(),
                 &model.text,
@@ -102,43 +126,58 @@ pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
             ));
         }
     }
-    let signals = model
+    Ok(())
+}
+
+/// The input signals, in the model's input order, each from its column.
+fn input_signals(model: &ModelFile, table: &Table, file: &str) -> Result<Vec<Signal>, ModelError> {
+    model
         .inputs
         .iter()
         .map(|name| {
             let (times, values) = table.samples(name).ok_or_else(|| {
                 ModelError::file(
-                    &file,
+                    file,
                     format!(
                         "input `{name}` has no column (the inputs are read from the data file)"
                     ),
                 )
             })?;
             Signal::new(times, values, model.input_mode)
-                .map_err(|e| ModelError::file(&file, format!("input `{name}`: {e}")))
+                .map_err(|e| ModelError::file(file, format!("input `{name}`: {e}")))
         })
-        .collect::<Result<Vec<_>, _>>()?;
+        .collect()
+}
+
+/// The measured series, weighted, in column order; at least one, none empty, none
+/// overflowing.
+fn measured_series(
+    model: &ModelFile,
+    table: &Table,
+    text: &str,
+    file: &str,
+) -> Result<Data, ModelError> {
     let times = table.time();
     let mut data = match model.data.record {
         RecordKind::Discrete => Data::discrete(),
         RecordKind::Continuous => Data::continuous(times[0], times[times.len() - 1]),
     };
     let mut measured = 0;
-    for name in table.names().iter().filter(|n| measurable(n)) {
+    for name in table.names().iter().filter(|n| measurable(model, n)) {
         let (t, v) = table.samples(name).expect("a column of the table");
         if t.is_empty() {
-            return Err(ModelError::file(&file, format!("column `{name}` has no values")));
+            return Err(ModelError::file(file, format!("column `{name}` has no values")));
         }
         let weight = model.data.weights.iter().find(|w| &w.0 == name).map_or(1.0, |w| w.1);
-        overflow(&table, &text, name, weight)?;
+        overflow(table, text, name, weight)?;
         data = data.weighted_series(name, weight, &t, &v);
         measured += 1;
     }
     if measured == 0 {
         return Err(ModelError::file(
-            &file,
+            file,
             "no measured column: name columns after states or outputs",
         ));
     }
-    Ok(ModelData { data, inputs: Inputs::new(signals), rows: times.len() })
+    Ok(data)
 }

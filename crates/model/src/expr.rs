@@ -402,6 +402,7 @@ impl Program {
         Operand::Node((self.nodes.len() - 1) as u32)
     }
 
+    /// Adds the nodes of `expr`, children first, and returns the operand of its value.
     fn add(
         &mut self,
         expr: &Expr,
@@ -426,48 +427,62 @@ impl Program {
             Expr::Bin(op, a, b) => {
                 let a = self.add(a, resolve)?;
                 let b = self.add(b, resolve)?;
-                match (op, a, b) {
-                    (Op::Add, Const(x), Const(y)) => Const(x + y),
-                    (Op::Sub, Const(x), Const(y)) => Const(x - y),
-                    (Op::Mul, Const(x), Const(y)) => Const(x * y),
-                    (Op::Div, Const(x), Const(y)) => Const(x / y),
-                    (Op::Pow, Const(x), Const(y)) => Const(x.powf(y)),
-                    (Op::Add, x, Const(c)) | (Op::Add, Const(c), x) => self.node(Node::AddC(x, c)),
-                    (Op::Sub, x, Const(c)) => self.node(Node::AddC(x, -c)),
-                    (Op::Sub, Const(c), x) => self.node(Node::SubC(c, x)),
-                    (Op::Mul, x, Const(c)) | (Op::Mul, Const(c), x) => self.node(Node::MulC(x, c)),
-                    (Op::Div, x, Const(c)) => self.node(Node::DivC(x, c)),
-                    (Op::Div, Const(c), x) => self.node(Node::CDiv(c, x)),
-                    (Op::Pow, x, Const(c)) if c.fract() == 0.0 && c.abs() <= 64.0 => {
-                        self.node(Node::PowI(x, c as i32))
-                    }
-                    (Op::Pow, x, Const(c)) => self.node(Node::PowF(x, c)),
-                    (Op::Add, x, y) => self.node(Node::Add(x, y)),
-                    (Op::Sub, x, y) => self.node(Node::Sub(x, y)),
-                    (Op::Mul, x, y) => self.node(Node::Mul(x, y)),
-                    (Op::Div, x, y) => self.node(Node::Div(x, y)),
-                    (Op::Pow, x, y) => self.node(Node::Pow(x, y)),
+                self.binary(*op, a, b)
+            }
+            Expr::Call(f, args, _) => self.call(*f, args, resolve)?,
+        })
+    }
+
+    /// A binary operation: folded when both operands are constant, in its scalar form when
+    /// one is, integer powers specialised.
+    fn binary(&mut self, op: Op, a: Operand, b: Operand) -> Operand {
+        use Operand::Const;
+        match (op, a, b) {
+            (Op::Add, Const(x), Const(y)) => Const(x + y),
+            (Op::Sub, Const(x), Const(y)) => Const(x - y),
+            (Op::Mul, Const(x), Const(y)) => Const(x * y),
+            (Op::Div, Const(x), Const(y)) => Const(x / y),
+            (Op::Pow, Const(x), Const(y)) => Const(x.powf(y)),
+            (Op::Add, x, Const(c)) | (Op::Add, Const(c), x) => self.node(Node::AddC(x, c)),
+            (Op::Sub, x, Const(c)) => self.node(Node::AddC(x, -c)),
+            (Op::Sub, Const(c), x) => self.node(Node::SubC(c, x)),
+            (Op::Mul, x, Const(c)) | (Op::Mul, Const(c), x) => self.node(Node::MulC(x, c)),
+            (Op::Div, x, Const(c)) => self.node(Node::DivC(x, c)),
+            (Op::Div, Const(c), x) => self.node(Node::CDiv(c, x)),
+            (Op::Pow, x, Const(c)) if c.fract() == 0.0 && c.abs() <= 64.0 => {
+                self.node(Node::PowI(x, c as i32))
+            }
+            (Op::Pow, x, Const(c)) => self.node(Node::PowF(x, c)),
+            (Op::Add, x, y) => self.node(Node::Add(x, y)),
+            (Op::Sub, x, y) => self.node(Node::Sub(x, y)),
+            (Op::Mul, x, y) => self.node(Node::Mul(x, y)),
+            (Op::Div, x, y) => self.node(Node::Div(x, y)),
+            (Op::Pow, x, y) => self.node(Node::Pow(x, y)),
+        }
+    }
+
+    /// A function call: folded when its arguments are constant.
+    fn call(
+        &mut self,
+        f: Func,
+        args: &[Expr],
+        resolve: &dyn Fn(&str) -> Option<Slot>,
+    ) -> Result<Operand, ExprError> {
+        use Operand::Const;
+        let a = self.add(&args[0], resolve)?;
+        Ok(match f {
+            Func::Min | Func::Max => {
+                let b = self.add(&args[1], resolve)?;
+                match (a, b) {
+                    (Const(x), Const(y)) => Const(if f == Func::Min { x.min(y) } else { x.max(y) }),
+                    _ if f == Func::Min => self.node(Node::Min(a, b)),
+                    _ => self.node(Node::Max(a, b)),
                 }
             }
-            Expr::Call(f, args, _) => {
-                let a = self.add(&args[0], resolve)?;
-                match f {
-                    Func::Min | Func::Max => {
-                        let b = self.add(&args[1], resolve)?;
-                        match (a, b) {
-                            (Const(x), Const(y)) => {
-                                Const(if *f == Func::Min { x.min(y) } else { x.max(y) })
-                            }
-                            _ if *f == Func::Min => self.node(Node::Min(a, b)),
-                            _ => self.node(Node::Max(a, b)),
-                        }
-                    }
-                    _ => match a {
-                        Const(x) => Const(eval_func(*f, x)),
-                        a => self.node(Node::Func(*f, a)),
-                    },
-                }
-            }
+            _ => match a {
+                Const(x) => Const(eval_func(f, x)),
+                a => self.node(Node::Func(f, a)),
+            },
         })
     }
 

@@ -1,0 +1,55 @@
+//! The `[integrator]` table: the scheme, tolerances and step budget.
+
+use sysid_ode::{Integrator, Scheme};
+use toml::Spanned;
+use toml::de::DeValue;
+
+use super::reader::Reader;
+use crate::error::ModelError;
+
+/// Reads `[integrator]` (optional, default DOPRI5 with its default tolerances): its keys,
+/// then the options' own validation, located at the table.
+pub(super) fn read_integrator(
+    r: &Reader<'_>,
+    value: Option<&Spanned<DeValue<'_>>>,
+) -> Result<Integrator, ModelError> {
+    let Some(value) = value else {
+        return Ok(Integrator::default());
+    };
+    let mut integrator = Integrator::default();
+    for (key, v) in r.table(value, "[integrator]")?.iter() {
+        match key.get_ref().as_ref() {
+            "method" => integrator.scheme = read_scheme(r, v)?,
+            "rtol" => integrator.rtol = r.number(v, "[integrator] rtol")?,
+            "atol" => integrator.atol = r.number(v, "[integrator] atol")?,
+            "step" => integrator.fixed_step = Some(r.number(v, "[integrator] step")?),
+            "max_steps" => integrator.max_steps = r.number(v, "[integrator] max_steps")? as usize,
+            other => {
+                return Err(r.err(
+                    key.span().start,
+                    format!(
+                        "unknown key `{other}` in [integrator] (keys: method, rtol, atol, step, max_steps)"
+                    ),
+                ));
+            }
+        }
+    }
+    integrator.validate().map_err(|e| r.err(value.span().start, format!("[integrator]: {e}")))?;
+    Ok(integrator)
+}
+
+/// Reads `[integrator] method`: "dopri5", "rk4", "rodas4" or "auto".
+fn read_scheme(r: &Reader<'_>, v: &Spanned<DeValue<'_>>) -> Result<Scheme, ModelError> {
+    match r.string(v, "[integrator] method")? {
+        "dopri5" => Ok(Scheme::Dopri5),
+        "rk4" => Ok(Scheme::Rk4),
+        "rodas4" => Ok(Scheme::Rodas4),
+        "auto" => Ok(Scheme::Auto),
+        other => Err(r.err(
+            v.span().start,
+            format!(
+                "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\" or \"auto\", got \"{other}\""
+            ),
+        )),
+    }
+}

@@ -1,0 +1,188 @@
+//! The names a model file declares: `states`, `parameters`, `inputs` and the keys of
+//! `[outputs]`, each a valid identifier used once; and the scope expressions resolve them in.
+
+use sysid_ode::Interpolation;
+use toml::Spanned;
+use toml::de::{DeTable, DeValue};
+
+use super::reader::{Entry, Reader};
+use crate::error::ModelError;
+use crate::expr::Slot;
+
+/// The declared names, each with the byte offset where it is written.
+pub(super) struct Names<'a, 'i> {
+    /// State names, in state order.
+    pub(super) states: Vec<(String, usize)>,
+    /// Byte offset of the `states` value, to locate model-wide errors.
+    pub(super) states_at: usize,
+    /// Parameter names.
+    pub(super) parameters: Vec<(String, usize)>,
+    /// Input names.
+    pub(super) inputs: Vec<(String, usize)>,
+    /// How inputs are interpolated between samples.
+    pub(super) input_mode: Interpolation,
+    /// The `[outputs]` entries: their expressions are compiled once every name is known.
+    pub(super) outputs: Vec<Entry<'a, 'i>>,
+}
+
+impl<'a, 'i> Names<'a, 'i> {
+    /// Reads `states`, `parameters`, `inputs` and the `[outputs]` keys; checks each name is
+    /// valid and used once.
+    pub(super) fn read(r: &Reader<'_>, doc: &'a DeTable<'i>) -> Result<Self, ModelError> {
+        let (states, states_at) = read_states(r, doc)?;
+        let parameters = match doc.get("parameters") {
+            Some(v) => r.names(v, "parameters")?,
+            None => Vec::new(),
+        };
+        let (inputs, input_mode) = match doc.get("inputs") {
+            None => (Vec::new(), Interpolation::Linear),
+            Some(v) => read_inputs(r, v)?,
+        };
+        let outputs: Vec<Entry<'a, 'i>> = match doc.get("outputs") {
+            Some(v) => r.table(v, "[outputs]")?.iter().collect(),
+            None => Vec::new(),
+        };
+        let names = Self { states, states_at, parameters, inputs, input_mode, outputs };
+        names.check_unique(r)?;
+        Ok(names)
+    }
+
+    /// Checks the output names are valid identifiers and no name is used twice across
+    /// states, parameters, inputs and outputs.
+    fn check_unique(&self, r: &Reader<'_>) -> Result<(), ModelError> {
+        let mut seen: Vec<(&str, &str)> = Vec::new();
+        let outputs_named: Vec<(String, usize)> =
+            self.outputs.iter().map(|(k, _)| (k.get_ref().to_string(), k.span().start)).collect();
+        for (kind, list) in [
+            ("a state", &self.states),
+            ("a parameter", &self.parameters),
+            ("an input", &self.inputs),
+            ("an output", &outputs_named),
+        ] {
+            for (name, at) in list {
+                if kind == "an output" {
+                    r.identifier(name, *at)?;
+                }
+                if let Some((_, first)) = seen.iter().find(|(n, _)| n == name) {
+                    return Err(r.err(
+                        *at,
+                        format!("the name `{name}` is used twice (as {first} and as {kind})"),
+                    ));
+                }
+                seen.push((name, kind));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Reads `states`: required, a non-empty list of names; returns them and the list's offset.
+fn read_states(
+    r: &Reader<'_>,
+    doc: &DeTable<'_>,
+) -> Result<(Vec<(String, usize)>, usize), ModelError> {
+    let value =
+        doc.get("states").ok_or_else(|| r.file_err("`states` is missing: list the state names"))?;
+    let states = r.names(value, "states")?;
+    if states.is_empty() {
+        return Err(
+            r.err(value.span().start, "`states` is empty: a model needs at least one state")
+        );
+    }
+    Ok((states, value.span().start))
+}
+
+/// Reads `inputs`: a list of names (linear between samples) or a table `{ names, mode }`.
+fn read_inputs(
+    r: &Reader<'_>,
+    value: &Spanned<DeValue<'_>>,
+) -> Result<(Vec<(String, usize)>, Interpolation), ModelError> {
+    match value.get_ref() {
+        DeValue::Array(_) => Ok((r.names(value, "inputs")?, Interpolation::Linear)),
+        DeValue::Table(t) => read_inputs_table(r, value, t),
+        _ => Err(
+            r.err(value.span().start, "`inputs` must be a list of names or a table {names, mode}")
+        ),
+    }
+}
+
+/// Reads the `[inputs]` table: `names` is required, `mode` is checked before stray keys.
+fn read_inputs_table(
+    r: &Reader<'_>,
+    value: &Spanned<DeValue<'_>>,
+    t: &DeTable<'_>,
+) -> Result<(Vec<(String, usize)>, Interpolation), ModelError> {
+    let names = match t.get("names") {
+        Some(n) => r.names(n, "inputs.names")?,
+        None => return Err(r.err(value.span().start, "[inputs] needs `names = [...]`")),
+    };
+    let mode = match t.get("mode") {
+        None => Interpolation::Linear,
+        Some(m) => read_input_mode(r, m)?,
+    };
+    for (key, _) in t.iter() {
+        if !["names", "mode"].contains(&key.get_ref().as_ref()) {
+            return Err(r.err(
+                key.span().start,
+                format!("unknown key `{}` in [inputs] (keys: names, mode)", key.get_ref()),
+            ));
+        }
+    }
+    Ok((names, mode))
+}
+
+/// Reads `inputs.mode`: "linear" or "step".
+fn read_input_mode(r: &Reader<'_>, m: &Spanned<DeValue<'_>>) -> Result<Interpolation, ModelError> {
+    match r.string(m, "inputs.mode")? {
+        "linear" => Ok(Interpolation::Linear),
+        "step" => Ok(Interpolation::Step),
+        other => Err(r.err(
+            m.span().start,
+            format!("inputs.mode must be \"linear\" or \"step\", got \"{other}\""),
+        )),
+    }
+}
+
+/// The names an expression may use: states, parameters, inputs and `t`.
+pub(super) struct Scope {
+    /// State names, in state order.
+    pub(super) states: Vec<String>,
+    /// Parameter names.
+    pub(super) parameters: Vec<String>,
+    /// Input names.
+    pub(super) inputs: Vec<String>,
+    /// Every name, listed for an error about an unknown one.
+    pub(super) listed: String,
+}
+
+impl Scope {
+    /// The scope of the declared states, parameters and inputs.
+    pub(super) fn new(names: &Names<'_, '_>) -> Self {
+        let plain = |list: &[(String, usize)]| list.iter().map(|s| s.0.clone()).collect();
+        let states: Vec<String> = plain(&names.states);
+        let parameters: Vec<String> = plain(&names.parameters);
+        let inputs: Vec<String> = plain(&names.inputs);
+        let listed = states
+            .iter()
+            .chain(&parameters)
+            .chain(&inputs)
+            .map(String::as_str)
+            .chain(["t"])
+            .collect::<Vec<_>>()
+            .join(", ");
+        Self { states, parameters, inputs, listed }
+    }
+
+    /// The slot a name refers to, if any.
+    pub(super) fn resolve(&self, name: &str) -> Option<Slot> {
+        if name == "t" {
+            return Some(Slot::Time);
+        }
+        self.states
+            .iter()
+            .position(|s| s == name)
+            .map(Slot::State)
+            .or_else(|| self.parameters.iter().position(|s| s == name).map(Slot::Parameter))
+            .or_else(|| self.inputs.iter().position(|s| s == name).map(Slot::Input))
+    }
+}

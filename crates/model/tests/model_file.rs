@@ -1,0 +1,645 @@
+//! Every mistake in a model file, with its exact message, line and column. These pin the
+//! behaviour of `ModelFile::parse` section by section, including which of two mistakes
+//! is reported first; and a file that uses every section, read value by value.
+
+use std::path::Path;
+
+use sysid_core::Unknown;
+use sysid_model::expr::{Program, Slot, parse};
+use sysid_model::{DataSpec, ModelFile, RecordKind};
+use sysid_ode::{Integrator, Interpolation, Scheme};
+
+/// The start of most cases: two states and a parameter.
+const HEAD: &str = "states = [\"x\", \"y\"]\nparameters = [\"k\"]\n";
+/// An equation for each state.
+const EQ: &str = "[equations]\nx = \"-k * x\"\ny = \"k * x\"\n";
+/// Both initial values known.
+const INIT: &str = "[initial]\nx = 1.0\ny = 0.0\n";
+/// A complete, valid model (11 lines), to which the cases append a section.
+const OK: &str = "states = [\"x\", \"y\"]\nparameters = [\"k\"]\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n[unknowns]\nk = 0.5\n";
+
+/// Checks that each model fails with exactly the expected `file:line:column: message`.
+#[track_caller]
+fn check(cases: &[(String, &str)]) {
+    for (model, expected) in cases {
+        match ModelFile::parse(model, Path::new("models/m.toml")) {
+            Ok(_) => panic!("accepted:\n{model}"),
+            Err(e) => assert_eq!(e.to_string(), *expected, "model:\n{model}"),
+        }
+    }
+}
+
+/// TOML syntax, unknown top-level keys (checked before anything else) and a missing `states`.
+#[test]
+fn toml_syntax_and_top_level_keys() {
+    check(&[
+        (
+            String::from("states = [\"x\"\n"),
+            "models/m.toml:1:14: TOML syntax error: unclosed array, expected `]`",
+        ),
+        (
+            String::from("states = [\"x\"]\ncolour = \"red\"\n"),
+            "models/m.toml:2:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, integrator)",
+        ),
+        (
+            String::from("parameters = [\"k\"]\n"),
+            "models/m.toml: `states` is missing: list the state names",
+        ),
+        (
+            String::from("colour = 1\nparameters = [\"k\"]\n"),
+            "models/m.toml:1:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, integrator)",
+        ),
+        (
+            format!("{OK}[solver]\nmethod = \"x\"\n"),
+            "models/m.toml:11:2: unknown key `solver` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, integrator)",
+        ),
+    ]);
+}
+
+/// The name lists: shape, valid identifiers, reserved words, emptiness and uniqueness.
+#[test]
+fn state_parameter_and_input_names() {
+    check(&[
+        (
+            String::from("states = \"x\"\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"),
+            "models/m.toml:1:10: `states` must be a list of names, like [\"x\", \"y\"]",
+        ),
+        (
+            String::from("states = [1]\n"),
+            "models/m.toml:1:11: each entry of `states` must be a string",
+        ),
+        (
+            String::from("states = [\"x\", \"1y\"]\n"),
+            "models/m.toml:1:16: `1y` is not a valid name (letters, digits and _, not starting with a digit)",
+        ),
+        (
+            String::from("states = [\"x\", \"exp\"]\n"),
+            "models/m.toml:1:16: `exp` is reserved (the time or a function)",
+        ),
+        (
+            String::from("states = [\"t\"]\n"),
+            "models/m.toml:1:11: `t` is reserved (the time or a function)",
+        ),
+        (
+            String::from("states = []\n"),
+            "models/m.toml:1:10: `states` is empty: a model needs at least one state",
+        ),
+        (
+            String::from("states = [\"α\", \"β γ\"]\n"),
+            "models/m.toml:1:16: `β γ` is not a valid name (letters, digits and _, not starting with a digit)",
+        ),
+        (
+            String::from(
+                "states = [\"x\", \"y\"]\nparameters = \"k\"\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n",
+            ),
+            "models/m.toml:2:14: `parameters` must be a list of names, like [\"x\", \"y\"]",
+        ),
+        (
+            String::from("states = [\"x\", \"x\"]\n"),
+            "models/m.toml:1:16: the name `x` is used twice (as a state and as a state)",
+        ),
+        (
+            String::from("states = [\"x\", \"y\"]\nparameters = [\"y\"]\n"),
+            "models/m.toml:2:15: the name `y` is used twice (as a state and as a parameter)",
+        ),
+        (
+            String::from("states = [\"x\"]\ninputs = [\"x\"]\n"),
+            "models/m.toml:2:11: the name `x` is used twice (as a state and as an input)",
+        ),
+        (
+            String::from("states = [\"x\"]\nparameters = [\"k\"]\ninputs = [\"k\"]\n"),
+            "models/m.toml:3:11: the name `k` is used twice (as a parameter and as an input)",
+        ),
+    ]);
+}
+
+/// `inputs` as a list or a `{ names, mode }` table; `mode` is checked before stray keys.
+#[test]
+fn inputs() {
+    check(&[
+        (
+            format!("{HEAD}inputs = 3\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"),
+            "models/m.toml:3:10: `inputs` must be a list of names or a table {names, mode}",
+        ),
+        (
+            format!("{HEAD}inputs = [\"u\", 2]\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"),
+            "models/m.toml:3:16: each entry of `inputs` must be a string",
+        ),
+        (
+            format!(
+                "{HEAD}inputs = {{ mode = \"step\" }}\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"
+            ),
+            "models/m.toml:3:10: [inputs] needs `names = [...]`",
+        ),
+        (
+            format!("{HEAD}[inputs]\nnames = \"u\"\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"),
+            "models/m.toml:4:9: `inputs.names` must be a list of names, like [\"x\", \"y\"]",
+        ),
+        (
+            format!(
+                "{HEAD}[inputs]\nnames = [\"u\"]\nmode = \"ramp\"\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"
+            ),
+            "models/m.toml:5:8: inputs.mode must be \"linear\" or \"step\", got \"ramp\"",
+        ),
+        (
+            format!(
+                "{HEAD}[inputs]\nnames = [\"u\"]\nmode = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"
+            ),
+            "models/m.toml:5:8: inputs.mode must be a string",
+        ),
+        (
+            format!(
+                "{HEAD}[inputs]\nnames = [\"u\"]\nshape = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"
+            ),
+            "models/m.toml:5:1: unknown key `shape` in [inputs] (keys: names, mode)",
+        ),
+        (
+            format!(
+                "{HEAD}[inputs]\nshape = 1\nnames = [\"u\"]\nmode = \"ramp\"\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"
+            ),
+            "models/m.toml:6:8: inputs.mode must be \"linear\" or \"step\", got \"ramp\"",
+        ),
+        (
+            format!("{HEAD}[inputs]\nshape = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"),
+            "models/m.toml:3:1: [inputs] needs `names = [...]`",
+        ),
+    ]);
+}
+
+/// `[outputs]`: a table of valid, unique names whose expressions compile after the equations.
+#[test]
+fn outputs() {
+    check(&[
+        (
+            format!(
+                "{HEAD}outputs = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n[unknowns]\nk = 0.5\n"
+            ),
+            "models/m.toml:3:11: [outputs] must be a table",
+        ),
+        (
+            format!("{OK}[outputs]\n\"1z\" = \"x\"\n"),
+            "models/m.toml:12:1: `1z` is not a valid name (letters, digits and _, not starting with a digit)",
+        ),
+        (
+            format!("{OK}[outputs]\ny = \"x\"\n"),
+            "models/m.toml:12:1: the name `y` is used twice (as a state and as an output)",
+        ),
+        (
+            format!("{OK}[outputs]\nz = \"x +\"\n"),
+            "models/m.toml:12:9: output z: expected a number, a name or `(`, found the end",
+        ),
+        (
+            format!("{OK}[outputs]\nz = \"x + q\"\n"),
+            "models/m.toml:12:10: output z: unknown name `q` (names: x, y, k, t)",
+        ),
+        (format!("{OK}[outputs]\nz = 2\n"), "models/m.toml:12:5: output z must be a string"),
+        (
+            format!("{HEAD}[equations]\nx = \"-k * x\"\ny = \"k * q\"\n[outputs]\nz = \"x + q\"\n"),
+            "models/m.toml:5:10: equation of y: unknown name `q` (names: x, y, k, t)",
+        ),
+        (
+            format!("{HEAD}[outputs]\n\"1z\" = \"x\"\n"),
+            "models/m.toml:4:1: `1z` is not a valid name (letters, digits and _, not starting with a digit)",
+        ),
+    ]);
+}
+
+/// `[equations]`: one compiled expression per state, errors at the expression's character.
+#[test]
+fn equations() {
+    check(&[
+        (
+            HEAD.to_string(),
+            "models/m.toml:1:10: [equations] is missing: give d(state)/dt for every state",
+        ),
+        (format!("{HEAD}\n\nequations = 1\n"), "models/m.toml:5:13: [equations] must be a table"),
+        (
+            format!("{HEAD}{EQ}z = \"1\"\n"),
+            "models/m.toml:6:1: [equations]: `z` is not a state (states: x, y)",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = 1\ny = \"x\"\n"),
+            "models/m.toml:4:5: equation of x must be a string",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"-k * \"\ny = \"x\"\n"),
+            "models/m.toml:4:11: equation of x: expected a number, a name or `(`, found the end",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"-k * q\"\ny = \"x\"\n"),
+            "models/m.toml:4:11: equation of x: unknown name `q` (names: x, y, k, t)",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"\"\"-k * q\"\"\"\ny = \"x\"\n"),
+            "models/m.toml:4:13: equation of x: unknown name `q` (names: x, y, k, t)",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = '-k ** x'\ny = \"x\"\n"),
+            "models/m.toml:4:10: equation of x: expected a number, a name or `(`, found `*`",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = '''\n-k * x\n  + q'''\ny = \"x\"\n"),
+            "models/m.toml:6:4: equation of x: unknown name `q` (names: x, y, k, t)",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"α + β * q\"\ny = \"x\"\n"),
+            "models/m.toml:4:6: equation of x: unknown name `α` (names: x, y, k, t)",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"foo(x)\"\ny = \"x\"\n"),
+            "models/m.toml:4:6: equation of x: unknown function `foo` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max)",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"min(x)\"\ny = \"x\"\n"),
+            "models/m.toml:4:6: equation of x: min takes 2 argument(s), got 1",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"x # 2\"\ny = \"x\"\n"),
+            "models/m.toml:4:8: equation of x: unexpected character `#`",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"-k * x\"\n"),
+            "models/m.toml:1:16: state `y` has no equation in [equations]",
+        ),
+        (
+            format!("{HEAD}[equations]\n"),
+            "models/m.toml:1:11: state `x` has no equation in [equations]",
+        ),
+        (
+            String::from("states = [\"x\"]\ninputs = [\"u\"]\n[equations]\nx = \"q\"\n"),
+            "models/m.toml:4:6: equation of x: unknown name `q` (names: x, u, t)",
+        ),
+    ]);
+}
+
+/// `[initial]` and `[known]`: finite numbers for states and parameters; `[initial]` is read first.
+#[test]
+fn initial_and_known() {
+    check(&[
+        (
+            format!("{HEAD}initial = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n"),
+            "models/m.toml:3:11: [initial] must be a table",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nz = 1\n"),
+            "models/m.toml:7:1: [initial]: `z` is not a state (names: x, y)",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nk = 1\n"),
+            "models/m.toml:7:1: [initial]: `k` is not a state (names: x, y)",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nx = \"one\"\n"),
+            "models/m.toml:7:5: [initial] x must be a number",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nx = inf\n"),
+            "models/m.toml:7:5: [initial] x must be a finite number, got inf",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nx = -nan\n"),
+            "models/m.toml:7:5: [initial] x must be a finite number, got NaN",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nx = 1e400\n"),
+            "models/m.toml:7:5: [initial] x must be a finite number, got inf",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nx = 99999999999999999999\n"),
+            "models/m.toml:7:5: [initial] x must be a number",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nx = true\n"),
+            "models/m.toml:7:5: [initial] x must be a number",
+        ),
+        (
+            format!("{HEAD}{EQ}[known]\nx = 1\n"),
+            "models/m.toml:7:1: [known]: `x` is not a parameter (names: k)",
+        ),
+        (
+            format!("{HEAD}{EQ}[known]\nk = \"a\"\n"),
+            "models/m.toml:7:5: [known] k must be a number",
+        ),
+        (
+            format!("{HEAD}{EQ}[known]\nz = 1\n[initial]\nq = 1\n"),
+            "models/m.toml:9:1: [initial]: `q` is not a state (names: x, y)",
+        ),
+        (
+            format!(
+                "{HEAD}known = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n"
+            ),
+            "models/m.toml:3:9: [known] must be a table",
+        ),
+    ]);
+}
+
+/// `[unknowns]`: a number or a `{ guess, min, max, log }` table, each name given once.
+#[test]
+fn unknowns() {
+    check(&[
+        (
+            format!(
+                "{HEAD}unknowns = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n"
+            ),
+            "models/m.toml:3:12: [unknowns] must be a table",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nz = 1\n"),
+            "models/m.toml:10:1: [unknowns]: `z` is not a state or parameter (names: x, y, k)",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nx = 1\n"),
+            "models/m.toml:10:1: `x` is given twice (in [initial] and in [unknowns])",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[known]\nk = 1\n[unknowns]\nk = 1\n"),
+            "models/m.toml:12:1: `k` is given twice (in [known] and in [unknowns])",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = 1\nk2 = 2\n"),
+            "models/m.toml:11:1: [unknowns]: `k2` is not a state or parameter (names: x, y, k)",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ min = 0 }}\n"),
+            "models/m.toml:10:5: [unknowns] k: an unknown needs `guess`",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns.k]\nmin = 0\n"),
+            "models/m.toml:9:1: [unknowns] k: an unknown needs `guess`",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = \"a\" }}\n"),
+            "models/m.toml:10:15: [unknowns] k.guess must be a number",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, min = \"a\" }}\n"),
+            "models/m.toml:10:24: [unknowns] k.min must be a number",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, max = nan }}\n"),
+            "models/m.toml:10:24: [unknowns] k.max must be a finite number, got NaN",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, log = 1 }}\n"),
+            "models/m.toml:10:24: [unknowns] k.log must be true or false",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, scale = 1 }}\n"),
+            "models/m.toml:10:18: [unknowns] k: unknown key `scale` (keys: guess, min, max, log)",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ scale = 1, guess = \"a\" }}\n"),
+            "models/m.toml:10:26: [unknowns] k.guess must be a number",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = \"a\"\n"),
+            "models/m.toml:10:5: [unknowns] k must be a number",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}[unknowns]\nk = [1]\n"),
+            "models/m.toml:10:5: [unknowns] k must be a number",
+        ),
+    ]);
+}
+
+/// Every state and parameter is known or unknown; states are checked first.
+#[test]
+fn every_state_and_parameter_given() {
+    check(&[
+        (
+            format!("{HEAD}{EQ}[initial]\nx = 1\n[unknowns]\nk = 0.5\n"),
+            "models/m.toml:1:16: state `y` is neither in [initial] nor in [unknowns]",
+        ),
+        (
+            format!("{HEAD}{EQ}{INIT}"),
+            "models/m.toml:2:15: parameter `k` is neither in [known] nor in [unknowns]",
+        ),
+        (
+            format!("{HEAD}{EQ}"),
+            "models/m.toml:1:11: state `x` is neither in [initial] nor in [unknowns]",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\ny = 1\n"),
+            "models/m.toml:1:11: state `x` is neither in [initial] nor in [unknowns]",
+        ),
+    ]);
+}
+
+/// `[data]` and `[data.weights]`, read after the names are complete.
+#[test]
+fn data() {
+    check(&[
+        (
+            format!(
+                "{HEAD}data = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n[unknowns]\nk = 0.5\n"
+            ),
+            "models/m.toml:3:8: [data] must be a table",
+        ),
+        (format!("{OK}[data]\nfile = 1\n"), "models/m.toml:12:8: [data] file must be a string"),
+        (format!("{OK}[data]\nt0 = \"a\"\n"), "models/m.toml:12:6: [data] t0 must be a number"),
+        (
+            format!("{OK}[data]\nrecord = \"sampled\"\n"),
+            "models/m.toml:12:10: [data] record must be \"discrete\" or \"continuous\", got \"sampled\"",
+        ),
+        (
+            format!("{OK}[data]\nrecord = 1\n"),
+            "models/m.toml:12:10: [data] record must be a string",
+        ),
+        (
+            format!("{OK}[data]\nweights = 1\n"),
+            "models/m.toml:12:11: [data.weights] must be a table",
+        ),
+        (
+            format!("{OK}[data.weights]\nx = \"a\"\n"),
+            "models/m.toml:12:5: [data.weights] x must be a number",
+        ),
+        (
+            format!("{OK}[data.weights]\nx = 0\n"),
+            "models/m.toml:12:5: [data.weights] x must be positive, got 0",
+        ),
+        (
+            format!("{OK}[data.weights]\nx = -1.5\n"),
+            "models/m.toml:12:5: [data.weights] x must be positive, got -1.5",
+        ),
+        (
+            format!("{OK}[data]\nformat = \"csv\"\n"),
+            "models/m.toml:12:1: unknown key `format` in [data] (keys: file, t0, record, weights)",
+        ),
+        (
+            format!("{OK}[data]\nformat = \"csv\"\nt0 = \"a\"\n"),
+            "models/m.toml:12:1: unknown key `format` in [data] (keys: file, t0, record, weights)",
+        ),
+        (
+            format!("{HEAD}{EQ}[initial]\nx = 1.0\n[data]\nt0 = \"a\"\n[unknowns]\nk = 0.5\n"),
+            "models/m.toml:1:16: state `y` is neither in [initial] nor in [unknowns]",
+        ),
+    ]);
+}
+
+/// `[integrator]`: its keys, then the options' own validation located at the table.
+#[test]
+fn integrator() {
+    check(&[
+        (
+            format!(
+                "{HEAD}integrator = 1\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n[unknowns]\nk = 0.5\n"
+            ),
+            "models/m.toml:3:14: [integrator] must be a table",
+        ),
+        (
+            format!("{OK}[integrator]\nmethod = \"euler\"\n"),
+            "models/m.toml:12:10: [integrator] method must be \"dopri5\", \"rk4\", \"rodas4\" or \"auto\", got \"euler\"",
+        ),
+        (
+            format!("{OK}[integrator]\nmethod = 1\n"),
+            "models/m.toml:12:10: [integrator] method must be a string",
+        ),
+        (
+            format!("{OK}[integrator]\nrtol = \"a\"\n"),
+            "models/m.toml:12:8: [integrator] rtol must be a number",
+        ),
+        (
+            format!("{OK}[integrator]\natol = \"a\"\n"),
+            "models/m.toml:12:8: [integrator] atol must be a number",
+        ),
+        (
+            format!("{OK}[integrator]\nstep = \"a\"\n"),
+            "models/m.toml:12:8: [integrator] step must be a number",
+        ),
+        (
+            format!("{OK}[integrator]\nmax_steps = \"a\"\n"),
+            "models/m.toml:12:13: [integrator] max_steps must be a number",
+        ),
+        (
+            format!("{OK}[integrator]\nrtol = -1\n"),
+            "models/m.toml:11:1: [integrator]: rtol must be positive, got -1",
+        ),
+        (
+            format!("{OK}[integrator]\natol = -1\n"),
+            "models/m.toml:11:1: [integrator]: atol must be non-negative, got -1",
+        ),
+        (
+            format!("{OK}[integrator]\nmethod = \"rk4\"\n"),
+            "models/m.toml:11:1: [integrator]: RK4 needs a fixed step",
+        ),
+        (
+            format!("{OK}[integrator]\nmethod = \"auto\"\nstep = 0.1\n"),
+            "models/m.toml:11:1: [integrator]: the automatic choice needs error control, not a fixed step",
+        ),
+        (
+            format!("{OK}[integrator]\nstep = 0\n"),
+            "models/m.toml:11:1: [integrator]: the fixed step must be positive, got 0",
+        ),
+        (
+            format!("{OK}[integrator]\nmax_steps = 0\n"),
+            "models/m.toml:11:1: [integrator]: max_steps must be at least 1",
+        ),
+        (
+            format!("{OK}[integrator]\nmax_steps = -5\n"),
+            "models/m.toml:11:1: [integrator]: max_steps must be at least 1",
+        ),
+        (
+            format!("{OK}[integrator]\norder = 5\n"),
+            "models/m.toml:12:1: unknown key `order` in [integrator] (keys: method, rtol, atol, step, max_steps)",
+        ),
+        (
+            format!("{OK}[integrator]\norder = 5\nrtol = -1\n"),
+            "models/m.toml:12:1: unknown key `order` in [integrator] (keys: method, rtol, atol, step, max_steps)",
+        ),
+        (
+            format!(
+                "{HEAD}integrator = {{ rtol = -1 }}\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n[unknowns]\nk = 0.5\n"
+            ),
+            "models/m.toml:3:14: [integrator]: rtol must be positive, got -1",
+        ),
+        (
+            format!("{OK}[integrator]\nrtol = -1\n[data]\nt0 = \"a\"\n"),
+            "models/m.toml:14:6: [data] t0 must be a number",
+        ),
+    ]);
+}
+
+/// A model file with every section, keys out of order, and TOML's number forms.
+const FULL: &str = r#"# every section
+states = ["x", "y"]
+parameters = ["k", "c"]
+inputs = { names = ["u", "w"], mode = "step" }
+
+[equations]
+y = "k * x - c * y + w"
+x = """-k * x + u^2 / (1 + t)"""
+
+[outputs]
+total = 'x + y'
+ratio = "x / max(y, 1e-3)"
+
+[known]
+c = 0x10
+
+[initial]
+x = 1_000
+y = 2.5e-1
+
+[unknowns]
+k = { log = true, guess = 0.5, min = 1e-3, max = 1_0 }
+
+[data]
+record = "continuous"
+file = "sub/data.csv"
+t0 = -1
+[data.weights]
+y = 4
+total = 0.25
+
+[integrator]
+method = "rodas4"
+rtol = 1e-6
+atol = 1e-9
+max_steps = 5000.9
+"#;
+
+/// Every value of a file that uses every section is read as written.
+#[test]
+fn a_file_with_every_section_reads_every_value() {
+    let file = ModelFile::parse(FULL, Path::new("models/m.toml")).unwrap();
+    let at = |needle: &str| FULL.find(needle).unwrap();
+    assert_eq!(
+        (file.states, file.parameters),
+        (vec!["x".into(), "y".into()], vec!["k".into(), "c".into()])
+    );
+    assert_eq!((file.inputs, file.input_mode), (vec!["u".into(), "w".into()], Interpolation::Step));
+    let resolve = |name: &str| match name {
+        "x" => Some(Slot::State(0)),
+        "y" => Some(Slot::State(1)),
+        "k" => Some(Slot::Parameter(0)),
+        "c" => Some(Slot::Parameter(1)),
+        "u" => Some(Slot::Input(0)),
+        "w" => Some(Slot::Input(1)),
+        "t" => Some(Slot::Time),
+        _ => None,
+    };
+    let program = |text: &str| Program::compile(&parse(text).unwrap(), &resolve).unwrap();
+    assert_eq!(file.equations, [program("-k * x + u^2 / (1 + t)"), program("k * x - c * y + w")]);
+    assert_eq!(
+        file.outputs,
+        [("total".into(), program("x + y")), ("ratio".into(), program("x / max(y, 1e-3)"))]
+    );
+    assert_eq!(file.known, [("x".into(), 1000.0), ("y".into(), 0.25), ("c".into(), 16.0)]);
+    assert_eq!(file.unknowns, [Unknown::new("k", 0.5).min(1e-3).max(10.0).log()]);
+    let data = DataSpec {
+        file: Some("models/sub/data.csv".into()),
+        t0: -1.0,
+        record: RecordKind::Continuous,
+        weights: vec![("y".into(), 4.0, at("y = 4")), ("total".into(), 0.25, at("total = 0.25"))],
+    };
+    assert_eq!(file.data, data);
+    let integrator = Integrator {
+        scheme: Scheme::Rodas4,
+        rtol: 1e-6,
+        atol: 1e-9,
+        max_steps: 5000,
+        ..Integrator::default()
+    };
+    assert_eq!(file.integrator, integrator);
+    assert_eq!(file.states_at, at("[\"x\", \"y\"]"));
+}
