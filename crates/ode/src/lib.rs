@@ -74,14 +74,15 @@ mod rodas;
 mod signal;
 mod system;
 pub mod testing;
+mod wrt;
 
 pub use driver::{Counts, Rhs, integrate};
 pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError};
 pub use implicit::IterationMatrix;
 pub use interpolant::{DenseSolution, Interpolant};
 pub use ivp::{
-    Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory, Wrt,
-    check_times, wrt_name,
+    Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory,
+    check_times,
 };
 pub use jacobian::{Function, JacobianProducts};
 pub use lu::{FactorError, Lu};
@@ -89,3 +90,4 @@ pub use options::{Integrator, Scheme};
 pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput};
 pub use signal::{Inputs, Interpolation, Side, Signal};
 pub use system::{Observable, Scalar, Signature, System};
+pub use wrt::{Wrt, wrt_name};
