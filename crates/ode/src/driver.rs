@@ -1,74 +1,14 @@
 //! The stepping loop shared by every explicit scheme: segments between discontinuities,
 //! direction, step-size control, step budget, and one interpolant per accepted step.
 
-use serde::{Deserialize, Serialize};
-
+use crate::counts::Counts;
 use crate::error::{BLOW_UP_GROWTH, OdeError};
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
 use crate::options::{Integrator, Scheme};
+use crate::rhs::Rhs;
 use crate::rodas;
 use crate::signal::Side;
-
-/// A first-order system dx/dt = f(t, x) on a flat state vector: the level the integrators
-/// work at. [`System`](crate::System)s are turned into an `Rhs` with or without their
-/// sensitivities by this crate; implement it directly for anything else.
-pub trait Rhs {
-    /// Length of x.
-    fn dim(&self) -> usize;
-    /// dx = f(t, x); at a discontinuity of the inputs, the limit from `side`.
-    fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]);
-    /// A readable name of component i, for error messages.
-    fn describe(&self, i: usize) -> String {
-        format!("component {i}")
-    }
-    /// How many leading components are the model's states (the others being sensitivities
-    /// or other derived quantities): a blow-up is reported on a state when one grew.
-    fn states(&self) -> usize {
-        self.dim()
-    }
-    /// For implicit (Rosenbrock) steps: evaluates the Jacobian ∂f/∂x at (t, x) exactly and
-    /// factorises E = I·`inv_gamma_h` − ∂f/∂x. Default: unsupported (explicit schemes only).
-    fn factor(
-        &mut self,
-        t: f64,
-        side: Side,
-        x: &[f64],
-        inv_gamma_h: f64,
-    ) -> Result<(), FactorError> {
-        let _ = (t, side, x, inv_gamma_h);
-        Err(FactorError::Unsupported)
-    }
-    /// Overwrites r with E⁻¹ r, E from the last [`factor`](Self::factor).
-    fn solve(&mut self, r: &mut [f64]) {
-        let _ = r;
-    }
-}
-
-/// Work done by one or more integrations: the counts to compare methods by.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Counts {
-    /// Accepted steps.
-    pub steps: u64,
-    /// Rejected steps.
-    pub rejected_steps: u64,
-    /// Evaluations of the (possibly augmented) right-hand side f(t, x).
-    pub rhs_evaluations: u64,
-    /// Integrations started.
-    pub integrations: u64,
-    /// Jacobians evaluated and LU-factorised (implicit steps).
-    pub jacobians: u64,
-}
-
-impl std::ops::AddAssign for Counts {
-    fn add_assign(&mut self, o: Self) {
-        self.steps += o.steps;
-        self.rejected_steps += o.rejected_steps;
-        self.rhs_evaluations += o.rhs_evaluations;
-        self.integrations += o.integrations;
-        self.jacobians += o.jacobians;
-    }
-}
 
 // Dormand & Prince (1980), coefficients as in Hairer, Nørsett & Wanner, Solving ODE I, Table 5.2.
 const C2: f64 = 1.0 / 5.0;

@@ -3,13 +3,15 @@
 
 use nalgebra::{DMatrix, DMatrixView, Dyn};
 
-use crate::driver::{Counts, Rhs, integrate, integrate_selected};
+use crate::counts::Counts;
+use crate::driver::{integrate, integrate_selected};
 use crate::error::OdeError;
 use crate::implicit::{AugmentedMatrix, IterationMatrix};
 use crate::interpolant::{DenseSolution, Interpolant};
 use crate::jacobian::{Function, JacobianProducts};
 use crate::lu::FactorError;
 use crate::options::Integrator;
+use crate::rhs::Rhs;
 use crate::signal::Side;
 use crate::system::{Observable, System};
 use crate::wrt::{Wrt, wrt_name};

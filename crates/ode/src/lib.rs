@@ -61,6 +61,7 @@
 //! ```
 #![warn(missing_docs)]
 
+mod counts;
 mod driver;
 mod error;
 mod implicit;
@@ -70,13 +71,15 @@ mod jacobian;
 mod lu;
 mod options;
 mod quadrature;
+mod rhs;
 mod rodas;
 mod signal;
 mod system;
 pub mod testing;
 mod wrt;
 
-pub use driver::{Counts, Rhs, integrate};
+pub use counts::Counts;
+pub use driver::integrate;
 pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError};
 pub use implicit::IterationMatrix;
 pub use interpolant::{DenseSolution, Interpolant};
@@ -88,6 +91,7 @@ pub use jacobian::{Function, JacobianProducts};
 pub use lu::{FactorError, Lu};
 pub use options::{Integrator, Scheme};
 pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput};
+pub use rhs::Rhs;
 pub use signal::{Inputs, Interpolation, Side, Signal};
 pub use system::{Observable, Scalar, Signature, System};
 pub use wrt::{Wrt, wrt_name};

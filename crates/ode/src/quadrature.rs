@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::driver::Counts;
+use crate::counts::Counts;
 use crate::error::OdeError;
 use crate::interpolant::Interpolant;
 use crate::ivp::{Ivp, ObservableGradient};

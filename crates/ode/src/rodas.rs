@@ -73,8 +73,9 @@ pub(crate) const SAFETY: f64 = 0.9;
 pub(crate) const MIN_FACTOR: f64 = 0.2;
 pub(crate) const MAX_FACTOR: f64 = 6.0;
 
-use crate::driver::{Rhs, Stepper, Work};
+use crate::driver::{Stepper, Work};
 use crate::lu::FactorError;
+use crate::rhs::Rhs;
 
 /// Fills the interpolant of a Rodas4 step from the stage increments in `w.k`:
 /// r₁ = x, r₂ = x_new − x, r₃ = K₁, r₄ = K₂, r₅ = 0 (the form of [`crate::Interpolant`]).
