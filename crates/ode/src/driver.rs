@@ -7,7 +7,7 @@ use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
 use crate::options::{Integrator, Scheme};
 use crate::rhs::Rhs;
-use crate::rodas;
+use crate::rodas4 as rodas;
 use crate::signal::Side;
 
 // Dormand & Prince (1980), coefficients as in Hairer, Nørsett & Wanner, Solving ODE I, Table 5.2.
@@ -226,7 +226,7 @@ impl<R: Rhs> Stepper<'_, R> {
     /// Fills the interpolant of the step just taken by `scheme` from (t, x) to (t_next, x_new).
     fn dense(w: &mut Work, scheme: Scheme, t: f64, t_next: f64) {
         if scheme == Scheme::Rodas4 {
-            crate::rodas::dense(w);
+            rodas::dense(w);
             w.interpolant.set_span(t, t_next);
             return;
         }

@@ -72,7 +72,7 @@ mod lu;
 mod options;
 mod quadrature;
 mod rhs;
-mod rodas;
+mod rodas4;
 mod signal;
 mod system;
 pub mod testing;
