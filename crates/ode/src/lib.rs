@@ -61,7 +61,9 @@
 //! ```
 #![warn(missing_docs)]
 
+mod control;
 mod counts;
+mod dopri5;
 mod driver;
 mod error;
 mod implicit;
@@ -72,10 +74,14 @@ mod lu;
 mod options;
 mod quadrature;
 mod rhs;
+mod rk4;
 mod rodas4;
 mod signal;
+mod stepper;
+mod stiffness;
 mod system;
 pub mod testing;
+mod work;
 mod wrt;
 
 pub use counts::Counts;
