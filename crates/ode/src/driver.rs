@@ -2,7 +2,7 @@
 //! accepting and rejecting steps by the scheme's controller, the automatic switch to Rodas4,
 //! and one interpolant per accepted step. Schemes are reached only through [`Stepper`].
 
-use crate::control::{MIN_FACTOR, initial_step};
+use crate::control::{Control, MIN_FACTOR, initial_step};
 use crate::counts::Counts;
 use crate::dopri5::Dopri5;
 use crate::error::{BLOW_UP_GROWTH, OdeError};
@@ -15,23 +15,6 @@ use crate::rodas4::Rodas4;
 use crate::stepper::Stepper;
 use crate::stiffness::Stiffness;
 use crate::work::{Evaluator, Work};
-
-/// The error to report for a failed integration whose state at t is x: a blow-up when a
-/// component overflowed or grew beyond [`BLOW_UP_GROWTH`] times `start`, `e` otherwise.
-fn explain<R: Rhs>(rhs: &R, e: OdeError, start: f64, t: f64, x: &[f64]) -> OdeError {
-    let largest = |from: usize, to: usize| {
-        (from..to.min(x.len()))
-            .filter(|&i| !x[i].is_nan())
-            .max_by(|&a, &b| x[a].abs().total_cmp(&x[b].abs()))
-            .filter(|&i| x[i].abs() > BLOW_UP_GROWTH * start)
-    };
-    // A state that grew is the news; sensitivities grow with it, and faster.
-    let states = rhs.states();
-    match largest(0, states).or_else(|| largest(states, x.len())) {
-        Some(i) => OdeError::BlowUp { t, what: rhs.describe(i), value: x[i], start },
-        None => e,
-    }
-}
 
 /// Integrates dx/dt = f(t, x) from (t0, x0) to t_end (either direction), stopping exactly on
 /// every time in `stops` strictly between them, and calls `on_step` with the interpolant of
@@ -59,6 +42,25 @@ pub(crate) fn integrate_selected<R: Rhs>(
     mut wants: impl FnMut(f64, f64) -> bool,
     mut on_step: impl FnMut(&Interpolant),
 ) -> Result<(Counts, Vec<f64>), OdeError> {
+    check_inputs(cfg, rhs, (t0, x0), t_end)?;
+    let mut run = Run::new(cfg, rhs, (t0, x0), t_end, &mut wants, &mut on_step);
+    if t_end - t0 == 0.0 {
+        return Ok((run.ev.counts, x0.to_vec()));
+    }
+    for seg_end in segment_ends(t0, t_end, stops) {
+        run.segment(seg_end)?;
+    }
+    Ok((run.ev.counts, run.work.x))
+}
+
+/// Rejects what no integration can start from: an initial state of the wrong length, invalid
+/// settings, non-finite ends or initial values.
+fn check_inputs<R: Rhs>(
+    cfg: &Integrator,
+    rhs: &R,
+    (t0, x0): (f64, &[f64]),
+    t_end: f64,
+) -> Result<(), OdeError> {
     let n = rhs.dim();
     if x0.len() != n {
         return Err(OdeError::Dimension { what: "initial state", actual: x0.len(), expected: n });
@@ -72,22 +74,13 @@ pub(crate) fn integrate_selected<R: Rhs>(
     if let Some(i) = x0.iter().position(|v| !v.is_finite()) {
         return Err(OdeError::NonFinite { t: t0, what: format!("initial {}", rhs.describe(i)) });
     }
-    let mut work = Work::new(n);
-    work.x.copy_from_slice(x0);
-    // The largest magnitude at the start (at least 1): what a blow-up is measured against.
-    let start = x0.iter().fold(1.0f64, |m, v| m.max(v.abs()));
-    let mut st = Evaluator {
-        rhs,
-        cfg: *cfg,
-        counts: Counts { integrations: 1, ..Counts::default() },
-        seg: (t0, t_end),
-    };
-    if t_end - t0 == 0.0 {
-        return Ok((st.counts, x0.to_vec()));
-    }
+    Ok(())
+}
+
+/// Segment ends in the direction of integration, t_end last: the stops strictly between t0
+/// and t_end, except those too close to either to take a step in between (merged with it).
+fn segment_ends(t0: f64, t_end: f64, stops: &[f64]) -> Vec<f64> {
     let dir = (t_end - t0).signum();
-    // Segment ends in the direction of integration; stops too close to a segment end to
-    // take a step in between are merged with it.
     let resolution = |t: f64| 64.0 * f64::EPSILON * t.abs().max(1.0);
     let mut ends: Vec<f64> = stops
         .iter()
@@ -98,132 +91,12 @@ pub(crate) fn integrate_selected<R: Rhs>(
         ends.reverse();
     }
     ends.push(t_end);
-
-    let mut t = t0;
-    let mut h = cfg.initial_step.unwrap_or(0.0).abs();
-    // ln of the previous accepted error (Hairer's facold, at least 1e-4).
-    let mut ln_err_old: f64 = 1e-4f64.ln();
-    // The scheme stepping now: `auto` starts explicit and may switch to Rodas4.
-    let mut current = stepper::<R>(cfg.scheme);
-    let mut stiffness = Stiffness::default();
-    // Where DOPRI5's stiffness test fired, if it did and the scheme stays explicit.
-    let mut stiff_since: Option<f64> = None;
-    for &seg_end in &ends {
-        st.seg = (t, seg_end);
-        st.f(t, &work.x, &mut work.k[0]);
-
-        if let Some(fixed) = cfg.fixed_step {
-            let length = seg_end - t;
-            let count = ((length.abs() / fixed) - 1e-9).ceil().max(1.0) as usize;
-            let hs = length / count as f64;
-            for i in 0..count {
-                if (st.counts.steps + st.counts.rejected_steps) as usize >= cfg.max_steps {
-                    let e = OdeError::TooManySteps { t, t_end, steps: cfg.max_steps };
-                    return Err(explain(st.rhs, e, start, t, &work.x));
-                }
-                let t_next = if i + 1 == count { seg_end } else { t + hs };
-                current
-                    .step(&mut st, &mut work, t, t_next - t)
-                    .map_err(|e| implicit_error(e, t))?;
-                accept(&mut st, &mut work, current, (t, t_next), &mut wants, &mut on_step)
-                    .map_err(|e| explain(st.rhs, e, start, t_next, &work.x_new))?;
-                t = t_next;
-            }
-            continue;
-        }
-
-        if h == 0.0 {
-            h = initial_step(&mut st, &mut work, t, dir);
-        }
-        let mut last_rejected = false;
-        // The component that was NaN or infinite in the last rejected trial step, if any:
-        // when the step size then underflows, that is the reason to report.
-        let mut non_finite: Option<usize> = None;
-        let mut reached = false;
-        while !reached {
-            if (st.counts.steps + st.counts.rejected_steps) as usize >= cfg.max_steps {
-                let steps = cfg.max_steps;
-                let e = match stiff_since {
-                    Some(since) => OdeError::Stiff { t, since, steps },
-                    None => OdeError::TooManySteps { t, t_end, steps },
-                };
-                return Err(explain(st.rhs, e, start, t, &work.x));
-            }
-            let remaining = seg_end - t;
-            let mut hs = h.min(cfg.max_step);
-            let lands = hs * 1.01 >= remaining.abs();
-            if lands {
-                hs = remaining.abs();
-            }
-            // Hairer's test: the step no longer changes t in floating point.
-            if hs <= 16.0 * f64::EPSILON * t.abs() || hs < f64::MIN_POSITIVE {
-                let e = match non_finite {
-                    Some(i) => OdeError::NonFinite { t, what: st.rhs.describe(i) },
-                    None => OdeError::StepSizeTooSmall { t, h: hs * dir },
-                };
-                return Err(explain(st.rhs, e, start, t, &work.x));
-            }
-            let t_next = if lands { seg_end } else { t + dir * hs };
-            let err = match current.step(&mut st, &mut work, t, t_next - t) {
-                Ok(err) => err,
-                // A singular iteration matrix: a shorter step changes it.
-                Err(FactorError::Singular) => f64::NAN,
-                Err(e) => return Err(implicit_error(e, t)),
-            };
-            let h_lambda = if stiffness.due(cfg.scheme == Scheme::Auto, st.counts.steps) {
-                current.stiffness_estimate(&work, hs)
-            } else {
-                None
-            };
-            if !err.is_finite() {
-                // The trial step left the region where f is defined: retry much shorter.
-                st.counts.rejected_steps += 1;
-                h = hs * MIN_FACTOR;
-                last_rejected = true;
-                non_finite = work.x_new.iter().chain(&work.k[6]).position(|v| !v.is_finite());
-                non_finite = non_finite.map(|i| i % n).or(Some(0));
-                continue;
-            }
-            non_finite = None;
-            let ln_err = err.max(f64::MIN_POSITIVE).ln();
-            if err <= 1.0 {
-                accept(&mut st, &mut work, current, (t, t_next), &mut wants, &mut on_step)
-                    .map_err(|e| explain(st.rhs, e, start, t_next, &work.x_new))?;
-                t = t_next;
-                reached = lands;
-                let fac = control(current).accepted(ln_err, ln_err_old);
-                ln_err_old = ln_err.max(1e-4f64.ln());
-                h = hs / fac;
-                if last_rejected {
-                    h = h.min(hs);
-                }
-                last_rejected = false;
-                if let Some(h_lambda) = h_lambda
-                    && stiffness.observe(h_lambda)
-                {
-                    match cfg.scheme {
-                        Scheme::Auto if st.rhs.factor(t, st.side(t), &work.x, 1.0).is_ok() => {
-                            current = stepper(Scheme::Rodas4);
-                            st.counts.jacobians += 1;
-                        }
-                        _ => {
-                            stiff_since.get_or_insert(t);
-                        }
-                    }
-                }
-            } else {
-                st.counts.rejected_steps += 1;
-                h = hs / control(current).rejected(ln_err);
-                last_rejected = true;
-            }
-        }
-    }
-    Ok((st.counts, work.x))
+    ends
 }
 
 /// The scheme that steps first for `scheme` (the automatic choice starts with DOPRI5): the
 /// one place a [`Scheme`] is mapped to its [`Stepper`].
-pub(crate) fn stepper<'s, R: Rhs + 's>(scheme: Scheme) -> &'s dyn Stepper<R> {
+fn stepper<'s, R: Rhs + 's>(scheme: Scheme) -> &'s dyn Stepper<R> {
     match scheme {
         Scheme::Dopri5 | Scheme::Auto => &Dopri5,
         Scheme::Rk4 => &Rk4,
@@ -231,11 +104,266 @@ pub(crate) fn stepper<'s, R: Rhs + 's>(scheme: Scheme) -> &'s dyn Stepper<R> {
     }
 }
 
-/// The step-size controller of an error-controlled scheme.
-fn control<R: Rhs>(scheme: &dyn Stepper<R>) -> crate::control::Control {
-    scheme
-        .control()
-        .expect("Integrator::validate allows schemes without error control only with a fixed step")
+/// One integration under way: where it is, the scheme stepping, the step-size controller's
+/// memory, the stiffness test, and where accepted steps go.
+struct Run<'r, R: Rhs> {
+    ev: Evaluator<'r, R>,
+    work: Work,
+    /// The scheme stepping now: `auto` starts explicit and may switch to Rodas4.
+    stepper: &'r dyn Stepper<R>,
+    t: f64,
+    t_end: f64,
+    /// The direction of integration, ±1.
+    dir: f64,
+    /// The next trial step size (a magnitude); 0 until the first adaptive segment chooses it.
+    h: f64,
+    /// ln of the previous accepted error (Hairer's facold, at least 1e-4).
+    ln_err_old: f64,
+    /// The largest magnitude at the start (at least 1): what a blow-up is measured against.
+    start: f64,
+    stiffness: Stiffness,
+    /// Where DOPRI5's stiffness test fired, if it did and the scheme stays explicit.
+    stiff_since: Option<f64>,
+    wants: &'r mut dyn FnMut(f64, f64) -> bool,
+    on_step: &'r mut dyn FnMut(&Interpolant),
+}
+
+impl<'r, R: Rhs> Run<'r, R> {
+    fn new(
+        cfg: &Integrator,
+        rhs: &'r mut R,
+        (t0, x0): (f64, &[f64]),
+        t_end: f64,
+        wants: &'r mut dyn FnMut(f64, f64) -> bool,
+        on_step: &'r mut dyn FnMut(&Interpolant),
+    ) -> Self {
+        let mut work = Work::new(x0.len());
+        work.x.copy_from_slice(x0);
+        let counts = Counts { integrations: 1, ..Counts::default() };
+        Self {
+            ev: Evaluator { rhs, cfg: *cfg, counts, seg: (t0, t_end) },
+            work,
+            stepper: stepper(cfg.scheme),
+            t: t0,
+            t_end,
+            dir: (t_end - t0).signum(),
+            h: cfg.initial_step.unwrap_or(0.0).abs(),
+            ln_err_old: 1e-4f64.ln(),
+            start: x0.iter().fold(1.0f64, |m, v| m.max(v.abs())),
+            stiffness: Stiffness::default(),
+            stiff_since: None,
+            wants,
+            on_step,
+        }
+    }
+
+    /// Integrates from t to `seg_end`, inside which the right-hand side is smooth.
+    fn segment(&mut self, seg_end: f64) -> Result<(), OdeError> {
+        self.ev.seg = (self.t, seg_end);
+        // A fresh first stage: there is none yet at t0, and at a discontinuity the last step's
+        // f(t, x) is the limit from the other side.
+        self.ev.f(self.t, &self.work.x, &mut self.work.k[0]);
+        match self.ev.cfg.fixed_step {
+            Some(fixed) => self.fixed_segment(fixed, seg_end),
+            None => self.adaptive_segment(seg_end),
+        }
+    }
+
+    /// Equal steps of at most `fixed` across the segment, without error control.
+    fn fixed_segment(&mut self, fixed: f64, seg_end: f64) -> Result<(), OdeError> {
+        let length = seg_end - self.t;
+        let count = ((length.abs() / fixed) - 1e-9).ceil().max(1.0) as usize;
+        let hs = length / count as f64;
+        for i in 0..count {
+            self.check_budget()?;
+            let t = self.t;
+            let t_next = if i + 1 == count { seg_end } else { t + hs };
+            self.stepper
+                .step(&mut self.ev, &mut self.work, t, t_next - t)
+                .map_err(|e| implicit_error(e, t))?;
+            self.accept(t_next)?;
+        }
+        Ok(())
+    }
+
+    /// Error-controlled steps to the end of the segment, the last landing on it exactly.
+    fn adaptive_segment(&mut self, seg_end: f64) -> Result<(), OdeError> {
+        if self.h == 0.0 {
+            self.h = initial_step(&mut self.ev, &mut self.work, self.t, self.dir);
+        }
+        let mut last_rejected = false;
+        // The component that was NaN or infinite in the last rejected trial step, if any:
+        // when the step size then underflows, that is the reason to report.
+        let mut non_finite: Option<usize> = None;
+        loop {
+            self.check_budget()?;
+            let remaining = seg_end - self.t;
+            let mut hs = self.h.min(self.ev.cfg.max_step);
+            let lands = hs * 1.01 >= remaining.abs();
+            if lands {
+                hs = remaining.abs();
+            }
+            self.check_step_size(hs, non_finite)?;
+            let t_next = if lands { seg_end } else { self.t + self.dir * hs };
+            let err = self.trial_step(t_next)?;
+            if !err.is_finite() {
+                // The trial step left the region where f is defined: retry much shorter.
+                self.ev.counts.rejected_steps += 1;
+                self.h = hs * MIN_FACTOR;
+                last_rejected = true;
+                non_finite = Some(self.first_non_finite());
+                continue;
+            }
+            non_finite = None;
+            let ln_err = err.max(f64::MIN_POSITIVE).ln();
+            if err > 1.0 {
+                self.ev.counts.rejected_steps += 1;
+                self.h = hs / self.control().rejected(ln_err);
+                last_rejected = true;
+                continue;
+            }
+            let h_lambda = self.stiffness_estimate(hs);
+            self.accept(t_next)?;
+            self.next_step_size(hs, ln_err, last_rejected);
+            last_rejected = false;
+            if let Some(h_lambda) = h_lambda {
+                self.observe_stiffness(h_lambda);
+            }
+            if lands {
+                return Ok(());
+            }
+        }
+    }
+
+    /// Fails once accepted and rejected steps together reach the budget: as `Stiff` where
+    /// DOPRI5's stiffness test has fired, the likely reason.
+    fn check_budget(&self) -> Result<(), OdeError> {
+        let (steps, t) = (self.ev.cfg.max_steps, self.t);
+        if ((self.ev.counts.steps + self.ev.counts.rejected_steps) as usize) < steps {
+            return Ok(());
+        }
+        let e = match self.stiff_since {
+            Some(since) => OdeError::Stiff { t, since, steps },
+            None => OdeError::TooManySteps { t, t_end: self.t_end, steps },
+        };
+        Err(self.explain(e, t, &self.work.x))
+    }
+
+    /// Hairer's test: fails when a step of `hs` no longer changes t in floating point, giving
+    /// as the reason the component that was non-finite in the last rejected trial, if any.
+    fn check_step_size(&self, hs: f64, non_finite: Option<usize>) -> Result<(), OdeError> {
+        let t = self.t;
+        if hs <= 16.0 * f64::EPSILON * t.abs() || hs < f64::MIN_POSITIVE {
+            let e = match non_finite {
+                Some(i) => OdeError::NonFinite { t, what: self.ev.rhs.describe(i) },
+                None => OdeError::StepSizeTooSmall { t, h: hs * self.dir },
+            };
+            return Err(self.explain(e, t, &self.work.x));
+        }
+        Ok(())
+    }
+
+    /// A trial step from t to t_next and its error norm: NaN (reject, retry shorter) for a
+    /// singular iteration matrix, which a shorter step changes.
+    fn trial_step(&mut self, t_next: f64) -> Result<f64, OdeError> {
+        let t = self.t;
+        match self.stepper.step(&mut self.ev, &mut self.work, t, t_next - t) {
+            Ok(err) => Ok(err),
+            Err(FactorError::Singular) => Ok(f64::NAN),
+            Err(e) => Err(implicit_error(e, t)),
+        }
+    }
+
+    /// The component whose new value or last-stage derivative is not finite after a failed
+    /// trial step; 0 when both are finite (an inner stage or a singular matrix failed).
+    fn first_non_finite(&self) -> usize {
+        let n = self.work.x.len();
+        let w = &self.work;
+        w.x_new.iter().chain(&w.k[6]).position(|v| !v.is_finite()).map_or(0, |i| i % n)
+    }
+
+    /// The step-size controller of the scheme stepping now.
+    fn control(&self) -> Control {
+        self.stepper.control().expect(
+            "Integrator::validate allows schemes without error control only with a fixed step",
+        )
+    }
+
+    /// The next trial step after accepting one of size `hs`: as the controller says, but no
+    /// larger right after a rejection (Hairer).
+    fn next_step_size(&mut self, hs: f64, ln_err: f64, last_rejected: bool) {
+        let fac = self.control().accepted(ln_err, self.ln_err_old);
+        self.ln_err_old = ln_err.max(1e-4f64.ln());
+        self.h = hs / fac;
+        if last_rejected {
+            self.h = self.h.min(hs);
+        }
+    }
+
+    /// The scheme's h·λ for the trial step just taken, when the stiffness test is due and
+    /// the scheme gives one.
+    fn stiffness_estimate(&self, hs: f64) -> Option<f64> {
+        let every_step = self.ev.cfg.scheme == Scheme::Auto;
+        if !self.stiffness.due(every_step, self.ev.counts.steps) {
+            return None;
+        }
+        self.stepper.stiffness_estimate(&self.work, hs)
+    }
+
+    /// Records an accepted step's h·λ. Once the test fires, the automatic choice switches to
+    /// Rodas4 (if the right-hand side has a Jacobian to factorise); any other choice notes
+    /// where, to explain a step budget that runs out later.
+    fn observe_stiffness(&mut self, h_lambda: f64) {
+        if !self.stiffness.observe(h_lambda) {
+            return;
+        }
+        let t = self.t;
+        let auto = self.ev.cfg.scheme == Scheme::Auto;
+        if auto && self.ev.rhs.factor(t, self.ev.side(t), &self.work.x, 1.0).is_ok() {
+            self.stepper = stepper(Scheme::Rodas4);
+            self.ev.counts.jacobians += 1;
+        } else {
+            self.stiff_since.get_or_insert(t);
+        }
+    }
+
+    /// Accepts the step from t to t_next held in `work`: interpolant and callback (if
+    /// wanted), advance.
+    fn accept(&mut self, t_next: f64) -> Result<(), OdeError> {
+        let t = self.t;
+        if let Some(i) = self.work.x_new.iter().position(|v| !v.is_finite()) {
+            let e = OdeError::NonFinite { t, what: self.ev.rhs.describe(i) };
+            return Err(self.explain(e, t_next, &self.work.x_new));
+        }
+        self.ev.counts.steps += 1;
+        if (self.wants)(t, t_next) {
+            self.stepper.dense(&mut self.work, t, t_next);
+            (self.on_step)(&self.work.interpolant);
+        }
+        std::mem::swap(&mut self.work.x, &mut self.work.x_new);
+        // The explicit schemes' last stage is f(t_next, x_next): the next step's first.
+        self.work.k.swap(0, 6);
+        self.t = t_next;
+        Ok(())
+    }
+
+    /// The error to report for a failed integration whose state at t is x: a blow-up when a
+    /// component overflowed or grew beyond [`BLOW_UP_GROWTH`] times `start`, `e` otherwise.
+    fn explain(&self, e: OdeError, t: f64, x: &[f64]) -> OdeError {
+        let start = self.start;
+        let largest = |from: usize, to: usize| {
+            (from..to.min(x.len()))
+                .filter(|&i| !x[i].is_nan())
+                .max_by(|&a, &b| x[a].abs().total_cmp(&x[b].abs()))
+                .filter(|&i| x[i].abs() > BLOW_UP_GROWTH * start)
+        };
+        // A state that grew is the news; sensitivities grow with it, and faster.
+        let states = self.ev.rhs.states();
+        match largest(0, states).or_else(|| largest(states, x.len())) {
+            Some(i) => OdeError::BlowUp { t, what: self.ev.rhs.describe(i), value: x[i], start },
+            None => e,
+        }
+    }
 }
 
 fn implicit_error(e: FactorError, t: f64) -> OdeError {
@@ -245,28 +373,4 @@ fn implicit_error(e: FactorError, t: f64) -> OdeError {
         ),
         FactorError::Singular => OdeError::SingularJacobian { t },
     }
-}
-
-/// Accepts the step from t to t_next held in `work`: interpolant and callback (if wanted),
-/// advance.
-fn accept<R: Rhs>(
-    st: &mut Evaluator<'_, R>,
-    work: &mut Work,
-    scheme: &dyn Stepper<R>,
-    (t, t_next): (f64, f64),
-    wants: &mut impl FnMut(f64, f64) -> bool,
-    on_step: &mut impl FnMut(&Interpolant),
-) -> Result<(), OdeError> {
-    if let Some(i) = work.x_new.iter().position(|v| !v.is_finite()) {
-        return Err(OdeError::NonFinite { t, what: st.rhs.describe(i) });
-    }
-    st.counts.steps += 1;
-    if wants(t, t_next) {
-        scheme.dense(work, t, t_next);
-        on_step(&work.interpolant);
-    }
-    std::mem::swap(&mut work.x, &mut work.x_new);
-    // The explicit schemes' last stage is f(t_next, x_next): the next step's first.
-    work.k.swap(0, 6);
-    Ok(())
 }
