@@ -41,7 +41,7 @@ impl Control {
 }
 
 /// Hairer's starting step size for a given direction (Solving ODE I, Section II.4), from
-/// (t, w.x) with w.k[0] = f(t, x); one evaluation of f, into w.k[1].
+/// (t, w.x) with `w.k[0]` = f(t, x); one evaluation of f, into `w.k[1]`.
 pub(crate) fn initial_step<R: Rhs>(
     ev: &mut Evaluator<'_, R>,
     w: &mut Work,

@@ -57,8 +57,8 @@ const CONTROL: Control = Control { exponent: 0.2 - BETA * 0.75, beta: BETA, max_
 pub(crate) struct Dopri5;
 
 impl<R: Rhs> Stepper<R> for Dopri5 {
-    /// One DOPRI5 step from (t, w.x) with k[0] = f(t, x). Leaves the solution in w.x_new,
-    /// the sixth stage's argument x₆ in w.tmp, f(t + h, x_new) in k[6], and returns the
+    /// One DOPRI5 step from (t, w.x) with `k[0]` = f(t, x). Leaves the solution in w.x_new,
+    /// the sixth stage's argument x₆ in w.tmp, f(t + h, x_new) in `k[6]`, and returns the
     /// error norm.
     fn step(
         &self,
@@ -136,7 +136,7 @@ impl<R: Rhs> Stepper<R> for Dopri5 {
     }
 
     /// h ‖f(x_new) − f(x₆)‖ / ‖x_new − x₆‖, both at t + h: the stages that
-    /// [`step`](Self::step) leaves in k[6], k[5], x_new and tmp.
+    /// [`step`](Self::step) leaves in `k[6]`, `k[5]`, x_new and tmp.
     fn stiffness_estimate(&self, w: &Work, h: f64) -> Option<f64> {
         let (mut num, mut den) = (0.0, 0.0);
         for i in 0..w.x.len() {

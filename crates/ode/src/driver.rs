@@ -366,6 +366,9 @@ impl<'r, R: Rhs> Run<'r, R> {
     }
 }
 
+/// The error for an implicit step whose matrix could not be factorised at t and that no
+/// shorter step will cure: a right-hand side without a Jacobian, or a singular matrix in a
+/// fixed-step integration.
 fn implicit_error(e: FactorError, t: f64) -> OdeError {
     match e {
         FactorError::Unsupported => OdeError::InvalidSetup(

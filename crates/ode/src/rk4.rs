@@ -12,7 +12,7 @@ use crate::work::{Evaluator, Work};
 pub(crate) struct Rk4;
 
 impl<R: Rhs> Stepper<R> for Rk4 {
-    /// One classical RK4 step; f(t + h, x_new) in k[6] for the Hermite dense output. No error
+    /// One classical RK4 step; f(t + h, x_new) in `k[6]` for the Hermite dense output. No error
     /// estimate: NaN.
     fn step(
         &self,
