@@ -6,10 +6,10 @@
 use nalgebra::DMatrix;
 use num_dual::HyperDual64;
 
-use crate::ivp::Wrt;
 use crate::jacobian::{Function, JacobianProducts};
 use crate::lu::{FactorError, Lu};
 use crate::system::System;
+use crate::wrt::Wrt;
 
 /// E = I/(γh) − ∂g/∂y at one point, factorised, for a system at fixed parameters.
 pub struct IterationMatrix {

@@ -29,6 +29,31 @@ impl Interpolant {
         self.h = t_end - t;
     }
 
+    /// Sets the interpolant on [t, t_end] to the cubic Hermite one through x and x_end with
+    /// slopes f and f_end (r₅ = 0): RK4's dense output, and DOPRI5's before its r₅.
+    pub(crate) fn set_hermite(
+        &mut self,
+        (t, t_end): (f64, f64),
+        (x, x_end): (&[f64], &[f64]),
+        (f, f_end): (&[f64], &[f64]),
+    ) {
+        let h = t_end - t;
+        let n = self.dim;
+        let [r1, r2, r3, r4, r5] = self.coefficients_mut();
+        // Slices of one length: the loop below runs without bounds checks.
+        let (r1, r2, r3, r4, r5) =
+            (&mut r1[..n], &mut r2[..n], &mut r3[..n], &mut r4[..n], &mut r5[..n]);
+        let (x, x_end, f, f_end) = (&x[..n], &x_end[..n], &f[..n], &f_end[..n]);
+        for i in 0..n {
+            r1[i] = x[i];
+            r2[i] = x_end[i] - x[i];
+            r3[i] = h * f[i] - r2[i];
+            r4[i] = r2[i] - h * f_end[i] - r3[i];
+            r5[i] = 0.0;
+        }
+        self.set_span(t, t_end);
+    }
+
     pub(crate) fn coefficients_mut(&mut self) -> [&mut [f64]; 5] {
         let (r1, rest) = self.coefficients.split_at_mut(self.dim);
         let (r2, rest) = rest.split_at_mut(self.dim);

@@ -3,25 +3,18 @@
 
 use nalgebra::{DMatrix, DMatrixView, Dyn};
 
-use crate::driver::{Counts, Rhs, integrate, integrate_selected};
+use crate::counts::Counts;
+use crate::driver::{integrate, integrate_selected};
 use crate::error::OdeError;
 use crate::implicit::{AugmentedMatrix, IterationMatrix};
 use crate::interpolant::{DenseSolution, Interpolant};
 use crate::jacobian::{Function, JacobianProducts};
 use crate::lu::FactorError;
 use crate::options::Integrator;
+use crate::rhs::Rhs;
 use crate::signal::Side;
 use crate::system::{Observable, System};
-
-/// What one sensitivity column is a derivative with respect to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Wrt {
-    /// The initial value y_i(t0) of state i: S(t0) = e_i, dS/dt = J_y S.
-    InitialValue(usize),
-    /// Parameter α_k: S(t0) = 0, dS/dt = J_y S + ∂g/∂α_k (Goodman's eq. 4 treats it as a
-    /// state with zero derivative; the forcing term is the same thing written out).
-    Parameter(usize),
-}
+use crate::wrt::{Wrt, wrt_name};
 
 /// An initial-value problem: a system, the initial time t0, the state y(t0) and the
 /// parameters. The solution may be asked for at times before and after t0.
@@ -289,14 +282,6 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         if let Some(matrix) = &mut self.implicit {
             matrix.solve(self.sys, self.wrt, r);
         }
-    }
-}
-
-/// The name of a sensitivity column: a parameter's name, or `y(t0)` for an initial value.
-pub fn wrt_name(sig: &crate::Signature, wrt: Wrt) -> String {
-    match wrt {
-        Wrt::InitialValue(i) => format!("{}(t0)", sig.states()[i]),
-        Wrt::Parameter(k) => sig.parameters()[k].clone(),
     }
 }
 

@@ -61,6 +61,9 @@
 //! ```
 #![warn(missing_docs)]
 
+mod control;
+mod counts;
+mod dopri5;
 mod driver;
 mod error;
 mod implicit;
@@ -70,22 +73,31 @@ mod jacobian;
 mod lu;
 mod options;
 mod quadrature;
-mod rodas;
+mod rhs;
+mod rk4;
+mod rodas4;
 mod signal;
+mod stepper;
+mod stiffness;
 mod system;
 pub mod testing;
+mod work;
+mod wrt;
 
-pub use driver::{Counts, Rhs, integrate};
+pub use counts::Counts;
+pub use driver::integrate;
 pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError};
 pub use implicit::IterationMatrix;
 pub use interpolant::{DenseSolution, Interpolant};
 pub use ivp::{
-    Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory, Wrt,
-    check_times, wrt_name,
+    Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory,
+    check_times,
 };
 pub use jacobian::{Function, JacobianProducts};
 pub use lu::{FactorError, Lu};
 pub use options::{Integrator, Scheme};
 pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput};
+pub use rhs::Rhs;
 pub use signal::{Inputs, Interpolation, Side, Signal};
 pub use system::{Observable, Scalar, Signature, System};
+pub use wrt::{Wrt, wrt_name};

@@ -17,13 +17,14 @@ use std::sync::Arc;
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::driver::Counts;
+use crate::counts::Counts;
 use crate::error::OdeError;
 use crate::interpolant::Interpolant;
-use crate::ivp::{Ivp, ObservableGradient, Wrt};
+use crate::ivp::{Ivp, ObservableGradient};
 use crate::options::Integrator;
 use crate::signal::{Side, Signal};
 use crate::system::{Observable, System};
+use crate::wrt::Wrt;
 
 /// A continuous record b(t) of one measured quantity.
 #[derive(Clone)]

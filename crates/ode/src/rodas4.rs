@@ -21,90 +21,86 @@
 //! it cannot be a dual; it is exactly zero for autonomous systems and enters as h·d_i·∂f/∂t,
 //! so its error (~1e-8 relative) stays far below any tolerance used.
 
+use crate::control::Control;
+use crate::lu::FactorError;
+use crate::rhs::Rhs;
+use crate::stepper::Stepper;
+use crate::work::{Evaluator, Work};
+
 // Hairer's RODAS coefficients (METH = 1), as published; verified against the order
 // conditions in the tests below.
-pub(crate) const GAMMA: f64 = 0.25;
-pub(crate) const C2: f64 = 0.386;
-pub(crate) const C3: f64 = 0.21;
-pub(crate) const C4: f64 = 0.63;
-pub(crate) const D1: f64 = 0.25;
-pub(crate) const D2: f64 = -0.1043;
-pub(crate) const D3: f64 = 0.1035;
-pub(crate) const D4: f64 = -0.036_200_000_000_000_23;
-pub(crate) const A21: f64 = 1.544;
-pub(crate) const A31: f64 = 0.946_678_528_081_582_6;
-pub(crate) const A32: f64 = 0.255_701_169_898_328_4;
-pub(crate) const A41: f64 = 3.314_825_187_068_521;
-pub(crate) const A42: f64 = 2.896_124_015_972_201;
-pub(crate) const A43: f64 = 0.998_641_913_997_781_7;
-pub(crate) const A51: f64 = 1.221_224_509_226_641;
-pub(crate) const A52: f64 = 6.019_134_481_288_629;
-pub(crate) const A53: f64 = 12.537_083_329_320_87;
-pub(crate) const A54: f64 = -0.687_886_036_105_895;
-pub(crate) const C21: f64 = -5.6688;
-pub(crate) const C31: f64 = -2.430_093_356_833_875;
-pub(crate) const C32: f64 = -0.206_359_915_709_191_5;
-pub(crate) const C41: f64 = -0.107_352_905_815_137_5;
-pub(crate) const C42: f64 = -9.594_562_251_023_355;
-pub(crate) const C43: f64 = -20.470_286_148_096_16;
-pub(crate) const C51: f64 = 7.496_443_313_967_647;
-pub(crate) const C52: f64 = -10.246_804_314_643_52;
-pub(crate) const C53: f64 = -33.999_903_528_199_05;
-pub(crate) const C54: f64 = 11.708_908_932_061_6;
-pub(crate) const C61: f64 = 8.083_246_795_921_522;
-pub(crate) const C62: f64 = -7.981_132_988_064_893;
-pub(crate) const C63: f64 = -31.521_594_328_743_71;
-pub(crate) const C64: f64 = 16.319_305_431_231_36;
-pub(crate) const C65: f64 = -6.058_818_238_834_054;
+const GAMMA: f64 = 0.25;
+const C2: f64 = 0.386;
+const C3: f64 = 0.21;
+const C4: f64 = 0.63;
+const D1: f64 = 0.25;
+const D2: f64 = -0.1043;
+const D3: f64 = 0.1035;
+const D4: f64 = -0.036_200_000_000_000_23;
+const A21: f64 = 1.544;
+const A31: f64 = 0.946_678_528_081_582_6;
+const A32: f64 = 0.255_701_169_898_328_4;
+const A41: f64 = 3.314_825_187_068_521;
+const A42: f64 = 2.896_124_015_972_201;
+const A43: f64 = 0.998_641_913_997_781_7;
+const A51: f64 = 1.221_224_509_226_641;
+const A52: f64 = 6.019_134_481_288_629;
+const A53: f64 = 12.537_083_329_320_87;
+const A54: f64 = -0.687_886_036_105_895;
+const C21: f64 = -5.6688;
+const C31: f64 = -2.430_093_356_833_875;
+const C32: f64 = -0.206_359_915_709_191_5;
+const C41: f64 = -0.107_352_905_815_137_5;
+const C42: f64 = -9.594_562_251_023_355;
+const C43: f64 = -20.470_286_148_096_16;
+const C51: f64 = 7.496_443_313_967_647;
+const C52: f64 = -10.246_804_314_643_52;
+const C53: f64 = -33.999_903_528_199_05;
+const C54: f64 = 11.708_908_932_061_6;
+const C61: f64 = 8.083_246_795_921_522;
+const C62: f64 = -7.981_132_988_064_893;
+const C63: f64 = -31.521_594_328_743_71;
+const C64: f64 = 16.319_305_431_231_36;
+const C65: f64 = -6.058_818_238_834_054;
 // Dense output: x(θ) = (1 − θ) x + θ (x_new + (1 − θ)(K₁ + θ K₂)), K = Σ h_ij k_j.
-pub(crate) const H21: f64 = 10.126_235_083_445_86;
-pub(crate) const H22: f64 = -7.487_995_877_610_167;
-pub(crate) const H23: f64 = -34.800_918_615_557_47;
-pub(crate) const H24: f64 = -7.992_771_707_568_823;
-pub(crate) const H25: f64 = 1.025_137_723_295_662;
-pub(crate) const H31: f64 = -0.676_280_339_280_125_3;
-pub(crate) const H32: f64 = 6.087_714_651_680_015;
-pub(crate) const H33: f64 = 16.430_843_208_924_78;
-pub(crate) const H34: f64 = 24.767_225_114_183_86;
-pub(crate) const H35: f64 = -6.594_389_125_716_872;
+const H21: f64 = 10.126_235_083_445_86;
+const H22: f64 = -7.487_995_877_610_167;
+const H23: f64 = -34.800_918_615_557_47;
+const H24: f64 = -7.992_771_707_568_823;
+const H25: f64 = 1.025_137_723_295_662;
+const H31: f64 = -0.676_280_339_280_125_3;
+const H32: f64 = 6.087_714_651_680_015;
+const H33: f64 = 16.430_843_208_924_78;
+const H34: f64 = 24.767_225_114_183_86;
+const H35: f64 = -6.594_389_125_716_872;
 
-/// Step-size control of RODAS: h_new = h / clamp(err^{1/4} / 0.9, 1/6, 5).
-pub(crate) const SAFETY: f64 = 0.9;
-pub(crate) const MIN_FACTOR: f64 = 0.2;
-pub(crate) const MAX_FACTOR: f64 = 6.0;
+/// Step-size control of RODAS: h_new = h / clamp(err^{1/4} / 0.9, 1/6, 5), plain control
+/// (the order-3 estimate's exponent, no memory of the previous error).
+const CONTROL: Control = Control { exponent: 0.25, beta: 0.0, max_factor: 6.0 };
 
-use crate::driver::{Rhs, Stepper, Work};
-use crate::lu::FactorError;
+/// The Rodas4 scheme.
+pub(crate) struct Rodas4;
 
-/// Fills the interpolant of a Rodas4 step from the stage increments in `w.k`:
-/// r₁ = x, r₂ = x_new − x, r₃ = K₁, r₄ = K₂, r₅ = 0 (the form of [`crate::Interpolant`]).
-pub(crate) fn dense(w: &mut Work) {
-    let n = w.x.len();
-    let [r1, r2, r3, r4, r5] = w.interpolant.coefficients_mut();
-    let k = &w.k;
-    for i in 0..n {
-        r1[i] = w.x[i];
-        r2[i] = w.x_new[i] - w.x[i];
-        r3[i] = H21 * k[0][i] + H22 * k[1][i] + H23 * k[2][i] + H24 * k[3][i] + H25 * k[4][i];
-        r4[i] = H31 * k[0][i] + H32 * k[1][i] + H33 * k[2][i] + H34 * k[3][i] + H35 * k[4][i];
-        r5[i] = 0.0;
-    }
-}
-
-impl<R: Rhs> Stepper<'_, R> {
+impl<R: Rhs> Stepper<R> for Rodas4 {
     /// One Rodas4 step from (t, w.x) of size h: the solution in w.x_new, the stage increments
     /// k₁..k₆ in w.k[0..6], and the error norm (of k₆).
-    pub(crate) fn rodas4(&mut self, w: &mut Work, t: f64, h: f64) -> Result<f64, FactorError> {
+    fn step(
+        &self,
+        ev: &mut Evaluator<'_, R>,
+        w: &mut Work,
+        t: f64,
+        h: f64,
+    ) -> Result<f64, FactorError> {
         let n = w.x.len();
-        let side = self.side(t);
-        self.counts.jacobians += 1;
-        self.rhs.factor(t, side, &w.x, 1.0 / (GAMMA * h))?;
+        let side = ev.side(t);
+        ev.counts.jacobians += 1;
+        ev.rhs.factor(t, side, &w.x, 1.0 / (GAMMA * h))?;
         // f(t, x), and ∂f/∂t by a difference quotient inside the step.
-        self.f(t, &w.x, &mut w.f0);
+        ev.f(t, &w.x, &mut w.f0);
         let delta = (1e-7 * t.abs().max(1.0)).min(0.5 * h.abs()) * h.signum();
         let t_delta = t + delta;
         let delta = t_delta - t;
-        self.f(t_delta, &w.x, &mut w.ft);
+        ev.f(t_delta, &w.x, &mut w.ft);
         for (ft, f0) in w.ft.iter_mut().zip(&w.f0) {
             *ft = (*ft - f0) / delta;
         }
@@ -114,56 +110,76 @@ impl<R: Rhs> Stepper<'_, R> {
         for i in 0..n {
             k1[i] = f0[i] + h * D1 * ft[i];
         }
-        self.rhs.solve(k1);
+        ev.rhs.solve(k1);
         // Stage 2.
         for i in 0..n {
             y[i] = x[i] + A21 * k1[i];
         }
-        self.f(t + C2 * h, y, k2);
+        ev.f(t + C2 * h, y, k2);
         for i in 0..n {
             k2[i] += C21 / h * k1[i] + h * D2 * ft[i];
         }
-        self.rhs.solve(k2);
+        ev.rhs.solve(k2);
         // Stage 3.
         for i in 0..n {
             y[i] = x[i] + A31 * k1[i] + A32 * k2[i];
         }
-        self.f(t + C3 * h, y, k3);
+        ev.f(t + C3 * h, y, k3);
         for i in 0..n {
             k3[i] += (C31 * k1[i] + C32 * k2[i]) / h + h * D3 * ft[i];
         }
-        self.rhs.solve(k3);
+        ev.rhs.solve(k3);
         // Stage 4.
         for i in 0..n {
             y[i] = x[i] + A41 * k1[i] + A42 * k2[i] + A43 * k3[i];
         }
-        self.f(t + C4 * h, y, k4);
+        ev.f(t + C4 * h, y, k4);
         for i in 0..n {
             k4[i] += (C41 * k1[i] + C42 * k2[i] + C43 * k3[i]) / h + h * D4 * ft[i];
         }
-        self.rhs.solve(k4);
+        ev.rhs.solve(k4);
         // Stage 5, at t + h (d₅ = 0).
         for i in 0..n {
             y[i] = x[i] + A51 * k1[i] + A52 * k2[i] + A53 * k3[i] + A54 * k4[i];
         }
-        self.f(t + h, y, k5);
+        ev.f(t + h, y, k5);
         for i in 0..n {
             k5[i] += (C51 * k1[i] + C52 * k2[i] + C53 * k3[i] + C54 * k4[i]) / h;
         }
-        self.rhs.solve(k5);
+        ev.rhs.solve(k5);
         // Stage 6: its input is the embedded order-3 solution.
         for i in 0..n {
             y[i] += k5[i];
         }
-        self.f(t + h, y, k6);
+        ev.f(t + h, y, k6);
         for i in 0..n {
             k6[i] += (C61 * k1[i] + C62 * k2[i] + C63 * k3[i] + C64 * k4[i] + C65 * k5[i]) / h;
         }
-        self.rhs.solve(k6);
+        ev.rhs.solve(k6);
         for i in 0..n {
             w.x_new[i] = y[i] + k6[i];
         }
-        Ok(self.error_norm(k6, x, &w.x_new))
+        Ok(ev.error_norm(k6, x, &w.x_new))
+    }
+
+    /// From the stage increments in `w.k`: r₁ = x, r₂ = x_new − x, r₃ = K₁, r₄ = K₂, r₅ = 0
+    /// (the form of [`crate::Interpolant`]).
+    fn dense(&self, w: &mut Work, t: f64, t_next: f64) {
+        let n = w.x.len();
+        let [r1, r2, r3, r4, r5] = w.interpolant.coefficients_mut();
+        let k = &w.k;
+        for i in 0..n {
+            r1[i] = w.x[i];
+            r2[i] = w.x_new[i] - w.x[i];
+            r3[i] = H21 * k[0][i] + H22 * k[1][i] + H23 * k[2][i] + H24 * k[3][i] + H25 * k[4][i];
+            r4[i] = H31 * k[0][i] + H32 * k[1][i] + H33 * k[2][i] + H34 * k[3][i] + H35 * k[4][i];
+            r5[i] = 0.0;
+        }
+        w.interpolant.set_span(t, t_next);
+    }
+
+    fn control(&self) -> Option<Control> {
+        Some(CONTROL)
     }
 }
 

@@ -1,0 +1,75 @@
+//! Step-size control for the error-controlled schemes: the safety factor and the smallest
+//! step ratio they share, the controller each parameterises, and the first step.
+//! Here, not in a scheme's file, so that neither the loop nor another scheme imports a scheme
+//! for its constants.
+
+use crate::rhs::Rhs;
+use crate::work::{Evaluator, Work};
+
+/// The next step aims at 0.9 of the size the error estimate allows (DOPRI5 and RODAS alike).
+pub(crate) const SAFETY: f64 = 0.9;
+/// The smallest ratio h_new/h after one step (DOPRI5 and RODAS alike); also the ratio after
+/// a trial step that left the region where f is defined.
+pub(crate) const MIN_FACTOR: f64 = 0.2;
+
+/// The controller h_new = h / fac with fac = err^`exponent` / err_old^`beta` / [`SAFETY`],
+/// kept within [1/`max_factor`, 1/[`MIN_FACTOR`]]; err_old is the previous accepted error.
+/// `beta` > 0 is PI control (Gustafsson), `beta` = 0 plain (I) control.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Control {
+    pub(crate) exponent: f64,
+    pub(crate) beta: f64,
+    /// The largest growth of the step size in one accepted step.
+    pub(crate) max_factor: f64,
+}
+
+impl Control {
+    /// The divisor of h after an accepted step with ln(err) = `ln_err`, the previous accepted
+    /// one having `ln_err_old`.
+    pub(crate) fn accepted(&self, ln_err: f64, ln_err_old: f64) -> f64 {
+        // err^exponent / err_old^beta as one exp. With beta = 0 (RODAS) the subtracted term
+        // is ±0, err_old being finite, which changes no bit of the result.
+        ((self.exponent * ln_err - self.beta * ln_err_old).exp() / SAFETY)
+            .clamp(1.0 / self.max_factor, 1.0 / MIN_FACTOR)
+    }
+
+    /// The divisor of h after a rejected step (err > 1): never more than 1/[`MIN_FACTOR`],
+    /// and without the previous error, which belongs to an accepted step.
+    pub(crate) fn rejected(&self, ln_err: f64) -> f64 {
+        ((self.exponent * ln_err).exp() / SAFETY).min(1.0 / MIN_FACTOR)
+    }
+}
+
+/// Hairer's starting step size for a given direction (Solving ODE I, Section II.4), from
+/// (t, w.x) with `w.k[0]` = f(t, x); one evaluation of f, into `w.k[1]`.
+pub(crate) fn initial_step<R: Rhs>(
+    ev: &mut Evaluator<'_, R>,
+    w: &mut Work,
+    t: f64,
+    dir: f64,
+) -> f64 {
+    let n = w.x.len() as f64;
+    let (rtol, atol) = (ev.cfg.rtol, ev.cfg.atol);
+    let (mut dnf, mut dny) = (0.0, 0.0);
+    for (x, f) in w.x.iter().zip(&w.k[0]) {
+        let sk = atol + rtol * x.abs();
+        dnf += (f / sk) * (f / sk);
+        dny += (x / sk) * (x / sk);
+    }
+    let (dnf, dny) = ((dnf / n).sqrt(), (dny / n).sqrt());
+    let mut h = if dnf <= 1e-5 || dny <= 1e-5 { 1e-6 } else { 0.01 * dny / dnf };
+    h = h.min(ev.cfg.max_step);
+    for i in 0..w.x.len() {
+        w.tmp[i] = w.x[i] + dir * h * w.k[0][i];
+    }
+    ev.f(t + dir * h, &w.tmp, &mut w.k[1]);
+    let mut der2 = 0.0;
+    for i in 0..w.x.len() {
+        let sk = atol + rtol * w.x[i].abs();
+        der2 += ((w.k[1][i] - w.k[0][i]) / sk).powi(2);
+    }
+    let der2 = (der2 / n).sqrt() / h;
+    let der12 = der2.abs().max(dnf);
+    let h1 = if der12 <= 1e-15 { (h * 1e-3).max(1e-6) } else { (0.01 / der12).powf(0.2) };
+    (100.0 * h).min(h1).min(ev.cfg.max_step)
+}

@@ -1,0 +1,40 @@
+//! The level the integrators work at: a first-order system dx/dt = f(t, x) on a flat state
+//! vector, with the Jacobian solves an implicit scheme asks of it.
+
+use crate::lu::FactorError;
+use crate::signal::Side;
+
+/// A first-order system dx/dt = f(t, x) on a flat state vector: the level the integrators
+/// work at. [`System`](crate::System)s are turned into an `Rhs` with or without their
+/// sensitivities by this crate; implement it directly for anything else.
+pub trait Rhs {
+    /// Length of x.
+    fn dim(&self) -> usize;
+    /// dx = f(t, x); at a discontinuity of the inputs, the limit from `side`.
+    fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]);
+    /// A readable name of component i, for error messages.
+    fn describe(&self, i: usize) -> String {
+        format!("component {i}")
+    }
+    /// How many leading components are the model's states (the others being sensitivities
+    /// or other derived quantities): a blow-up is reported on a state when one grew.
+    fn states(&self) -> usize {
+        self.dim()
+    }
+    /// For implicit (Rosenbrock) steps: evaluates the Jacobian ∂f/∂x at (t, x) exactly and
+    /// factorises E = I·`inv_gamma_h` − ∂f/∂x. Default: unsupported (explicit schemes only).
+    fn factor(
+        &mut self,
+        t: f64,
+        side: Side,
+        x: &[f64],
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        let _ = (t, side, x, inv_gamma_h);
+        Err(FactorError::Unsupported)
+    }
+    /// Overwrites r with E⁻¹ r, E from the last [`factor`](Self::factor).
+    fn solve(&mut self, r: &mut [f64]) {
+        let _ = r;
+    }
+}

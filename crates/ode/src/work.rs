@@ -1,0 +1,75 @@
+//! What a step works with: the right-hand side as a scheme calls it (counted, evaluated on
+//! the inside of the current segment) and the stage vectors, allocated once per integration.
+
+use crate::counts::Counts;
+use crate::interpolant::Interpolant;
+use crate::options::Integrator;
+use crate::rhs::Rhs;
+use crate::signal::Side;
+
+/// Preallocated stage vectors: nothing is allocated inside the step loop.
+pub(crate) struct Work {
+    pub(crate) k: [Vec<f64>; 7],
+    pub(crate) tmp: Vec<f64>,
+    pub(crate) x: Vec<f64>,
+    pub(crate) x_new: Vec<f64>,
+    /// Rosenbrock: f(t, x) and ∂f/∂t at the start of the step.
+    pub(crate) f0: Vec<f64>,
+    pub(crate) ft: Vec<f64>,
+    pub(crate) interpolant: Interpolant,
+}
+
+impl Work {
+    pub(crate) fn new(n: usize) -> Self {
+        Self {
+            k: std::array::from_fn(|_| vec![0.0; n]),
+            tmp: vec![0.0; n],
+            x: vec![0.0; n],
+            x_new: vec![0.0; n],
+            f0: vec![0.0; n],
+            ft: vec![0.0; n],
+            interpolant: Interpolant::new(n),
+        }
+    }
+}
+
+/// Which one-sided limit a stage at time s in the segment between a and b takes: the one
+/// from inside the segment, since discontinuities lie only on segment ends.
+fn side_in(a: f64, b: f64, s: f64) -> Side {
+    let (lo, hi) = (a.min(b), a.max(b));
+    if s - lo <= hi - s { Side::After } else { Side::Before }
+}
+
+/// The right-hand side as the schemes see it: every evaluation counted, and taken from the
+/// inside of the segment being integrated; with the tolerances the error norm weighs by.
+pub(crate) struct Evaluator<'r, R: Rhs> {
+    pub(crate) rhs: &'r mut R,
+    pub(crate) cfg: Integrator,
+    pub(crate) counts: Counts,
+    /// Start and end of the current segment, in the direction of integration.
+    pub(crate) seg: (f64, f64),
+}
+
+impl<R: Rhs> Evaluator<'_, R> {
+    pub(crate) fn f(&mut self, t: f64, x: &[f64], dx: &mut [f64]) {
+        self.counts.rhs_evaluations += 1;
+        let side = self.side(t);
+        self.rhs.eval(t, side, x, dx);
+    }
+
+    pub(crate) fn side(&self, t: f64) -> Side {
+        side_in(self.seg.0, self.seg.1, t)
+    }
+
+    /// The error norm sqrt(mean((e_i / (atol + rtol·max(|x_i|, |x̂_i|)))²)).
+    pub(crate) fn error_norm(&self, e: &[f64], x: &[f64], xn: &[f64]) -> f64 {
+        let (rtol, atol) = (self.cfg.rtol, self.cfg.atol);
+        let n = e.len();
+        let mut sum = 0.0;
+        for i in 0..n {
+            let sk = atol + rtol * x[i].abs().max(xn[i].abs());
+            sum += (e[i] / sk) * (e[i] / sk);
+        }
+        (sum / n as f64).sqrt()
+    }
+}
