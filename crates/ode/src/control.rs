@@ -26,6 +26,7 @@ pub(crate) struct Control {
 impl Control {
     /// The divisor of h after an accepted step with ln(err) = `ln_err`, the previous accepted
     /// one having `ln_err_old`.
+    #[inline]
     pub(crate) fn accepted(&self, ln_err: f64, ln_err_old: f64) -> f64 {
         // err^exponent / err_old^beta as one exp. With beta = 0 (RODAS) the subtracted term
         // is ±0, err_old being finite, which changes no bit of the result.
@@ -35,6 +36,7 @@ impl Control {
 
     /// The divisor of h after a rejected step (err > 1): never more than 1/[`MIN_FACTOR`],
     /// and without the previous error, which belongs to an accepted step.
+    #[inline]
     pub(crate) fn rejected(&self, ln_err: f64) -> f64 {
         ((self.exponent * ln_err).exp() / SAFETY).min(1.0 / MIN_FACTOR)
     }

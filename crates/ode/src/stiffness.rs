@@ -27,16 +27,19 @@ impl Stiffness {
     /// Whether to test the next step, `steps` having been accepted so far. The automatic
     /// choice (`every_step`) tests every step; plain DOPRI5, whose test only explains a later
     /// failure, every 64th step and every step once one looked stiff, as Hairer's code does.
+    #[inline]
     pub(crate) fn due(&self, every_step: bool, steps: u64) -> bool {
         every_step || self.suspected() || steps.is_multiple_of(STIFF_CHECK_EVERY)
     }
 
     /// Whether a recent test looked stiff.
+    #[inline]
     fn suspected(&self) -> bool {
         self.stiff > 0
     }
 
     /// Records a step; true when the integration looks stiff.
+    #[inline]
     pub(crate) fn observe(&mut self, h_lambda: f64) -> bool {
         if h_lambda > STIFF_H_LAMBDA {
             self.non_stiff = 0;

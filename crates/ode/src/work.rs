@@ -35,6 +35,7 @@ impl Work {
 
 /// Which one-sided limit a stage at time s in the segment between a and b takes: the one
 /// from inside the segment, since discontinuities lie only on segment ends.
+#[inline]
 fn side_in(a: f64, b: f64, s: f64) -> Side {
     let (lo, hi) = (a.min(b), a.max(b));
     if s - lo <= hi - s { Side::After } else { Side::Before }
@@ -51,12 +52,14 @@ pub(crate) struct Evaluator<'r, R: Rhs> {
 }
 
 impl<R: Rhs> Evaluator<'_, R> {
+    #[inline]
     pub(crate) fn f(&mut self, t: f64, x: &[f64], dx: &mut [f64]) {
         self.counts.rhs_evaluations += 1;
         let side = self.side(t);
         self.rhs.eval(t, side, x, dx);
     }
 
+    #[inline]
     pub(crate) fn side(&self, t: f64) -> Side {
         side_in(self.seg.0, self.seg.1, t)
     }
