@@ -10,7 +10,6 @@ mod integrator;
 mod methods;
 mod predict;
 mod report;
-mod report_bench;
 mod simulate;
 mod source;
 mod study;

@@ -1,4 +1,8 @@
-//! The figures of the sysid comparison report, drawn with plotters into PNG and SVG.
+//! The sysid comparison report: the engine that runs the catalogue through the registry's
+//! methods and writes it ([`write_report`]: fits from the default start, Monte-Carlo studies,
+//! basin maps, predictions, the benchmark section from criterion's results, and the
+//! README.md whose every sentence comes from the numbers next to it), and its figures, drawn
+//! with plotters into PNG and SVG.
 //!
 //! Each figure is a plain data structure ([`Convergence`], [`Accuracy`], [`Basin`],
 //! [`Prediction`], [`Cost`]) that knows how to draw itself on any plotters backend;
@@ -13,6 +17,8 @@
 
 mod accuracy;
 mod basin;
+mod bench;
+mod catalogue;
 mod convergence;
 mod cost;
 mod look;
@@ -25,6 +31,7 @@ use plotters::prelude::*;
 
 pub use accuracy::{Accuracy, Spread};
 pub use basin::{Basin, BasinPanel, Cell};
+pub use catalogue::{Observer, Quiet, ReportOptions, write_report};
 pub use convergence::{Convergence, History};
 pub use cost::{Cost, CostBar};
 pub use look::{Look, look};
