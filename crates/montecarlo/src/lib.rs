@@ -17,8 +17,8 @@
 //! `summary.json`, `summary.md`), resumes a killed one and merges shards.
 //!
 //! ```no_run
-//! use sysid_goodman::Goodman;
 //! use sysid_montecarlo::{Scenario, Study, StudySpec, files};
+//! use sysid_registry::{Registry, Settings};
 //!
 //! let case = sysid_systems::van_der_pol::van_der_pol();
 //! let spec = StudySpec {
@@ -32,12 +32,13 @@
 //!     fixed: Vec::new(),
 //!     driver: Default::default(),
 //! };
-//! let halving = sysid_goodman::GoodmanOptions::default().with_step_halving(true);
+//! let registry = Registry::standard();
+//! let method = |name| registry.build(name, &Settings::default()).expect("a registered name");
 //! let study = Study::new(
 //!     spec,
 //!     Scenario::from_case(&case)?,
-//!     vec![Box::new(Goodman::default())],
-//!     Box::new(Goodman::new(halving)),
+//!     vec![method("goodman")],
+//!     method("goodman-halving"),
 //! )?;
 //! let summary = files::run(&study, "vdp-study".as_ref(), None, false, &|_, _| {})?;
 //! println!("{}", summary.markdown());
