@@ -99,5 +99,5 @@ pub fn method<S: System>(name: &str, common: &Common) -> anyhow::Result<Boxed<S>
 
 /// Checks a comma-separated list of method names.
 pub fn parse_list(list: &str) -> anyhow::Result<Vec<String>> {
-    Ok(Registry::<sysid_ode::testing::Decay>::standard().parse_list(list)?)
+    Ok(sysid_registry::parse_list(list)?)
 }

@@ -135,6 +135,11 @@ pub fn methods() -> Vec<(&'static str, &'static str)> {
     entries::<Decay>().iter().map(|e| (e.name, e.description)).collect()
 }
 
+/// A comma-separated list of names of [`entries`], each checked (no system needed).
+pub fn parse_list(list: &str) -> Result<Vec<String>, RegistryError> {
+    Registry::<Decay>::standard().parse_list(list)
+}
+
 /// The methods available for problems of system `S`: [`entries`], and any added with
 /// [`with`](Self::with).
 pub struct Registry<S> {

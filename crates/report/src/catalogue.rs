@@ -102,7 +102,7 @@ pub fn write_report(args: &ReportOptions, observer: &dyn Observer) -> anyhow::Re
             anyhow::bail!("unknown system `{name}` (systems: {})", sysid_systems::NAMES.join(", "));
         }
     }
-    let methods = Registry::<sysid_ode::testing::Decay>::standard().parse_list(&args.methods)?;
+    let methods = sysid_registry::parse_list(&args.methods)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
     let started = Instant::now();

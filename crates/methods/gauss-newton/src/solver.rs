@@ -329,7 +329,8 @@ impl Adapter<'_> {
         step: Vector,
         resolution: f64,
     ) -> Result<Option<Vec<f64>>, Failure> {
-        let predicted = -(r.dot(&(jacobian * &step)) + 0.5 * (jacobian * &step).norm_squared());
+        let jd = jacobian * &step;
+        let predicted = -(r.dot(&jd) + 0.5 * jd.norm_squared());
         if predicted > resolution {
             return Ok(None);
         }
