@@ -2,22 +2,10 @@
 
 use sysid_core::{Data, Problem, ProblemError, Unknown};
 use sysid_ode::testing::assert_close;
-use sysid_ode::{Scalar, Signature, System};
+use sysid_systems::FallingBody;
 
-#[derive(Clone, Debug)]
-struct Fall(Signature);
-impl System for Fall {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = y[1];
-        dy[1] = p[0];
-    }
-}
-
-fn fall() -> Fall {
-    Fall(Signature::new(&["y", "v"], &["g"]))
+fn fall() -> FallingBody {
+    FallingBody::default()
 }
 
 fn table() -> Data {
@@ -25,7 +13,7 @@ fn table() -> Data {
 }
 
 fn error(
-    f: impl FnOnce(sysid_core::ProblemBuilder<Fall>) -> sysid_core::ProblemBuilder<Fall>,
+    f: impl FnOnce(sysid_core::ProblemBuilder<FallingBody>) -> sysid_core::ProblemBuilder<FallingBody>,
 ) -> String {
     let b = Problem::builder(fall()).data(table());
     f(b).build().unwrap_err().to_string()

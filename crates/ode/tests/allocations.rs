@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 mod common;
 
-use common::VanDerPol;
 use sysid_ode::{Integrator, Ivp, Wrt};
+use sysid_systems::VanDerPol;
 
 struct Counting;
 static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
@@ -29,7 +29,7 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn allocations_do_not_grow_with_the_number_of_steps() {
-    let sys = VanDerPol::new();
+    let sys = VanDerPol::default();
     let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
     let ivp = Ivp::new(&sys, 0.0, &[2.0, 0.0], &[1.0]);
     for integrator in [Integrator::dopri5(1e-8, 1e-10), Integrator::rodas4(1e-6, 1e-8)] {

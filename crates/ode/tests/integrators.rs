@@ -3,12 +3,13 @@
 
 mod common;
 
-use common::{FallingBody, Oscillator};
+use common::Oscillator;
 use sysid_ode::testing::Decay;
 use sysid_ode::testing::{assert_close, assert_close_abs};
 use sysid_ode::{
     Inputs, Integrator, Ivp, OdeError, Scalar, Side, Signal, Signature, System, integrate,
 };
+use sysid_systems::FallingBody;
 
 /// Tight tolerances for closed-form checks; the claim is 1e-9 relative.
 fn tight() -> Integrator {
@@ -41,7 +42,7 @@ fn harmonic_oscillator_matches_closed_form() {
 #[test]
 fn falling_body_is_exact() {
     // A quadratic: DOPRI5 integrates it without truncation error.
-    let sys = FallingBody::new();
+    let sys = FallingBody::default();
     let times = [0.0, 1.0, 2.0, 3.0, 10.0];
     let sol = Ivp::new(&sys, 0.0, &[1.0, -2.0], &[32.0]).solve(&tight(), &times).unwrap();
     for (m, &t) in times.iter().enumerate() {
@@ -269,7 +270,7 @@ fn every_output_time_is_filled_even_when_t_plus_h_rounds_past_it() {
     // The configuration that exposed it: 4-point Gauss–Legendre nodes on 256 panels of [0, 3]
     // around t0 = 1, where the backward pass ends on the first node and t + h misses it by
     // one ulp. Each row must hold the solution, including the last of each direction.
-    let sys = FallingBody::new();
+    let sys = FallingBody::default();
     let h = 3.0 / 256.0;
     let nodes = [
         -0.861_136_311_594_052_6,

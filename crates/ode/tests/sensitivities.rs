@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{LotkaVolterra, Oscillator, VanDerPol};
+use common::Oscillator;
 use nalgebra::DMatrix;
 use proptest::prelude::*;
 use sysid_ode::testing::Decay;
@@ -12,6 +12,7 @@ use sysid_ode::{
     Integrator, Interpolation, Ivp, Observable, ObservableGradient, Record, RecordedOutput, Signal,
     System, Wrt,
 };
+use sysid_systems::{LotkaVolterra, VanDerPol};
 
 fn tight() -> Integrator {
     Integrator::dopri5(1e-12, 1e-14)
@@ -98,7 +99,7 @@ fn central_differences<S: System>(
 /// solution agree with them to the difference error O(δ²) plus rounding O(ε/δ).
 #[test]
 fn van_der_pol_sensitivities_match_central_differences() {
-    let sys = VanDerPol::new();
+    let sys = VanDerPol::default();
     let integrator = Integrator::default().with_fixed_step(0.01);
     let times = [0.7, 3.0, 9.5, 20.0];
     let (y0, p) = ([2.0, 0.0], [1.0]);
@@ -119,7 +120,7 @@ fn van_der_pol_sensitivities_match_central_differences() {
 /// the tolerance: compare with central differences of tightly integrated solutions.
 #[test]
 fn adaptive_sensitivities_match_central_differences() {
-    let sys = LotkaVolterra::new();
+    let sys = LotkaVolterra::with_total();
     let (y0, p) = ([1.0, 1.0], [1.5, 1.0, 3.0, 1.0]);
     let times = [1.0, 4.0, 10.0];
     let wrt: Vec<Wrt> = (0..4).map(Wrt::Parameter).chain([Wrt::InitialValue(1)]).collect();
@@ -139,7 +140,7 @@ fn adaptive_sensitivities_match_central_differences() {
 
 #[test]
 fn output_gradients_follow_the_chain_rule() {
-    let sys = LotkaVolterra::new();
+    let sys = LotkaVolterra::with_total();
     let (y0, p) = ([1.0, 1.0], [1.5, 1.0, 3.0, 1.0]);
     let wrt = [Wrt::Parameter(0), Wrt::Parameter(2), Wrt::InitialValue(0)];
     let sol = Ivp::new(&sys, 0.0, &y0, &p).solve_sensitivities(&tight(), &wrt, &[2.5]).unwrap();
@@ -205,8 +206,8 @@ proptest! {
         x in -3.0..3.0f64, y in 0.1..3.0f64, a in 0.1..3.0f64, b in 0.1..3.0f64,
         g in 0.1..3.0f64, d in 0.1..3.0f64, mu in 0.0..5.0f64,
     ) {
-        check_jacobians(&LotkaVolterra::new(), &[x.abs(), y], &[a, b, g, d])?;
-        check_jacobians(&VanDerPol::new(), &[x, y], &[mu])?;
+        check_jacobians(&LotkaVolterra::with_total(), &[x.abs(), y], &[a, b, g, d])?;
+        check_jacobians(&VanDerPol::default(), &[x, y], &[mu])?;
     }
 }
 

@@ -6,10 +6,11 @@
 
 mod common;
 
-use common::{Oscillator, Robertson, VanDerPol, stiff_reference};
+use common::{Oscillator, robertson_rates, stiff_reference};
 use sysid_ode::testing::Decay;
 use sysid_ode::testing::{assert_close, assert_close_abs};
 use sysid_ode::{Integrator, Ivp, OdeError, Wrt};
+use sysid_systems::{Robertson, VanDerPol};
 
 const ROBERTSON_Y0: [f64; 3] = [1.0, 0.0, 0.0];
 
@@ -27,7 +28,7 @@ fn robertson_matches_the_reference_at_40_and_4e5() {
     let (rtol, atol) = (1e-10, 1e-14);
     let times = [40.0, 4e5];
     for integrator in [Integrator::rodas4(rtol, atol), Integrator::auto(rtol, atol)] {
-        let sol = Ivp::new(&Robertson::new(), 0.0, &ROBERTSON_Y0, &Robertson::RATES)
+        let sol = Ivp::new(&Robertson::default(), 0.0, &ROBERTSON_Y0, &robertson_rates())
             .solve(&integrator, &times)
             .unwrap();
         for (m, &t) in times.iter().enumerate() {
@@ -49,7 +50,7 @@ fn van_der_pol_with_mu_1000_over_one_period() {
     // The slow phases after the first and the second fast jump (t ≈ 807 and 1614).
     let rtol = 1e-10;
     let times = [1000.0, 2000.0];
-    let sol = Ivp::new(&VanDerPol::new(), 0.0, &[2.0, 0.0], &[1000.0])
+    let sol = Ivp::new(&VanDerPol::default(), 0.0, &[2.0, 0.0], &[1000.0])
         .solve(&Integrator::rodas4(rtol, rtol), &times)
         .unwrap();
     for (m, &t) in times.iter().enumerate() {
@@ -66,18 +67,18 @@ fn van_der_pol_with_mu_1000_over_one_period() {
 /// for the initial values, each from two tight Rodas4 integrations.
 #[test]
 fn robertson_sensitivities_match_central_differences() {
-    let sys = Robertson::new();
+    let sys = Robertson::default();
     let wrt = [Wrt::Parameter(0), Wrt::Parameter(1), Wrt::Parameter(2), Wrt::InitialValue(0)];
     let times = [0.01, 1.0, 40.0, 1e3];
     let integrator = Integrator::rodas4(1e-10, 1e-16);
-    let sol = Ivp::new(&sys, 0.0, &ROBERTSON_Y0, &Robertson::RATES)
+    let sol = Ivp::new(&sys, 0.0, &ROBERTSON_Y0, &robertson_rates())
         .solve_sensitivities(&integrator, &wrt, &times)
         .unwrap();
     let reference = Integrator::rodas4(1e-12, 1e-18).with_max_steps(1_000_000);
     let delta = 1e-4;
     for (j, w) in wrt.iter().enumerate() {
         let solve = |s: f64| {
-            let (mut y0, mut p) = (ROBERTSON_Y0, Robertson::RATES);
+            let (mut y0, mut p) = (ROBERTSON_Y0, robertson_rates());
             match *w {
                 Wrt::Parameter(k) => p[k] *= s.exp(),
                 Wrt::InitialValue(i) => y0[i] += s,
@@ -86,7 +87,7 @@ fn robertson_sensitivities_match_central_differences() {
         };
         let (plus, minus) = (solve(delta), solve(-delta));
         let scale = match *w {
-            Wrt::Parameter(k) => Robertson::RATES[k],
+            Wrt::Parameter(k) => robertson_rates()[k],
             Wrt::InitialValue(_) => 1.0,
         };
         for m in 0..times.len() {
@@ -105,7 +106,7 @@ fn robertson_sensitivities_match_central_differences() {
 #[test]
 fn rodas4_with_sensitivities_agrees_with_dopri5_on_a_non_stiff_problem() {
     // Same variational equations, different schemes: agreement to the tolerances.
-    let sys = VanDerPol::new();
+    let sys = VanDerPol::default();
     let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
     let times = [0.5, 3.0, 7.0, 12.0];
     let ivp = Ivp::new(&sys, 0.0, &[2.0, 0.0], &[1.0]);
@@ -192,8 +193,10 @@ fn dense_output_and_backward_integration() {
 
 #[test]
 fn the_automatic_choice_switches_only_on_stiff_problems() {
-    let (rob, vdp, oscillator) = (Robertson::new(), VanDerPol::new(), Oscillator::new(false));
-    let robertson = Ivp::new(&rob, 0.0, &ROBERTSON_Y0, &Robertson::RATES);
+    let (rob, vdp, oscillator) =
+        (Robertson::default(), VanDerPol::default(), Oscillator::new(false));
+    let rates = robertson_rates();
+    let robertson = Ivp::new(&rob, 0.0, &ROBERTSON_Y0, &rates);
     let auto = robertson.solve(&Integrator::auto(1e-8, 1e-14), &[40.0]).unwrap();
     assert!(auto.counts().jacobians > 0, "{:?}", auto.counts());
     let explicit = robertson.solve(&Integrator::dopri5(1e-8, 1e-14), &[40.0]).unwrap();

@@ -200,57 +200,7 @@ impl Visit for SystemReport<'_> {
         let truth = case.expected_values().unwrap_or_default();
         let (study, basin_numbers) = match Scenario::from_case(&case) {
             Ok(scenario) => {
-                let spec = StudySpec {
-                    system: case.name.to_string(),
-                    methods: self.methods.to_vec(),
-                    reference: REFERENCE.into(),
-                    trials: args.trials,
-                    noise: 1.0,
-                    perturb: args.perturb,
-                    seed: args.seed,
-                    fixed: Vec::new(),
-                    driver: Default::default(),
-                };
-                let fits =
-                    self.methods.iter().map(|m| method::<S>(m)).collect::<anyhow::Result<_>>()?;
-                let study = Study::new(spec, scenario, fits, method::<S>(REFERENCE)?)?;
-                let summary = run_study(&study, &dir.join("study"), self.observer)?;
-                draw_study(&case, &summary, &dir)?;
-                figures.push((
-                    "accuracy".into(),
-                    format!(
-                        "Estimates over the successful trials of {} (box: quartiles, whiskers: \
-                         2.5–97.5 %), the truth (dashed) and truth ± σ_CRB (grey).",
-                        summary.trials
-                    ),
-                ));
-                figures.push((
-                    "cost".into(),
-                    "Time per fit (median, 90th percentile) and success rate with its Wilson \
-                     95 % interval."
-                        .into(),
-                ));
-                let basin_spec =
-                    StudySpec { perturb: args.basin_spread, trials: 1, ..study.spec().clone() };
-                let fits =
-                    self.methods.iter().map(|m| method::<S>(m)).collect::<anyhow::Result<_>>()?;
-                let basin_study = Study::new(
-                    basin_spec,
-                    study.scenario().clone(),
-                    fits,
-                    method::<S>(REFERENCE)?,
-                )?;
-                let numbers = draw_basin(&case, &basin_study, args.grid, &dir, self.observer)?;
-                figures.push((
-                    "basin".into(),
-                    format!(
-                        "Starts on a {g} × {g} grid of {} and {} (the other unknowns at the \
-                         truth), on the data of trial 0.",
-                        numbers.axes[0],
-                        numbers.axes[1],
-                        g = args.grid
-                    ),
-                ));
+                let (summary, numbers) = self.study(&case, scenario, &dir, &mut figures)?;
                 (Ok(summary), Some(numbers))
             }
             Err(e) => (Err(e.to_string()), None),
@@ -268,6 +218,66 @@ impl Visit for SystemReport<'_> {
             figures,
             seconds: started.elapsed().as_secs_f64(),
         })
+    }
+}
+
+impl SystemReport<'_> {
+    /// The Monte-Carlo study of `case` (written under `dir/study`, drawn as accuracy and cost)
+    /// and the basin map on its first trial's data; appends the figures' captions.
+    fn study<S: System + Clone + Send + Sync + 'static>(
+        &self,
+        case: &Case<S>,
+        scenario: Scenario<S>,
+        dir: &Path,
+        figures: &mut Vec<(String, String)>,
+    ) -> anyhow::Result<(Summary, BasinNumbers)> {
+        let args = self.args;
+        let spec = StudySpec {
+            system: case.name.to_string(),
+            methods: self.methods.to_vec(),
+            reference: REFERENCE.into(),
+            trials: args.trials,
+            noise: 1.0,
+            perturb: args.perturb,
+            seed: args.seed,
+            fixed: Vec::new(),
+            driver: Default::default(),
+        };
+        let fits = self.methods.iter().map(|m| method::<S>(m)).collect::<anyhow::Result<_>>()?;
+        let study = Study::new(spec, scenario, fits, method::<S>(REFERENCE)?)?;
+        let summary = run_study(&study, &dir.join("study"), self.observer)?;
+        draw_study(case, &summary, dir)?;
+        figures.push((
+            "accuracy".into(),
+            format!(
+                "Estimates over the successful trials of {} (box: quartiles, whiskers: \
+                 2.5–97.5 %), the truth (dashed) and truth ± σ_CRB (grey).",
+                summary.trials
+            ),
+        ));
+        figures.push((
+            "cost".into(),
+            "Time per fit (median, 90th percentile) and success rate with its Wilson \
+             95 % interval."
+                .into(),
+        ));
+        let basin_spec =
+            StudySpec { perturb: args.basin_spread, trials: 1, ..study.spec().clone() };
+        let fits = self.methods.iter().map(|m| method::<S>(m)).collect::<anyhow::Result<_>>()?;
+        let basin_study =
+            Study::new(basin_spec, study.scenario().clone(), fits, method::<S>(REFERENCE)?)?;
+        let numbers = draw_basin(case, &basin_study, args.grid, dir, self.observer)?;
+        figures.push((
+            "basin".into(),
+            format!(
+                "Starts on a {g} × {g} grid of {} and {} (the other unknowns at the \
+                 truth), on the data of trial 0.",
+                numbers.axes[0],
+                numbers.axes[1],
+                g = args.grid
+            ),
+        ));
+        Ok((summary, numbers))
     }
 }
 

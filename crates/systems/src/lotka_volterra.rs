@@ -15,6 +15,14 @@ impl Default for LotkaVolterra {
     }
 }
 
+impl LotkaVolterra {
+    /// The same system with one output, `total` = x + y: both populations counted together,
+    /// for measuring what is not a state.
+    pub fn with_total() -> Self {
+        Self(Signature::new(&["x", "y"], &["a", "b", "g", "d"]).with_outputs(&["total"]))
+    }
+}
+
 impl System for LotkaVolterra {
     fn signature(&self) -> &Signature {
         &self.0
@@ -24,6 +32,9 @@ impl System for LotkaVolterra {
         let (a, b, g, d) = (p[0], p[1], p[2], p[3]);
         dy[0] = a * x - b * x * z;
         dy[1] = d * x * z - g * z;
+    }
+    fn outputs<T: Scalar>(&self, _t: f64, y: &[T], _p: &[T], _u: &[f64], h: &mut [T]) {
+        h[0] = y[0] + y[1];
     }
 }
 

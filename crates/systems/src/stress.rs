@@ -81,24 +81,8 @@ pub fn rate_on_bound() -> Case<Branching> {
     }
 }
 
-/// x' = −k x.
-#[derive(Clone, Debug)]
-pub struct Decay(Signature);
-
-impl Default for Decay {
-    fn default() -> Self {
-        Self(Signature::new(&["x"], &["k"]))
-    }
-}
-
-impl System for Decay {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = -p[0] * y[0];
-    }
-}
+/// x' = −k x, the ode crate's closed-form test system (one declaration for the workspace).
+pub use sysid_ode::testing::Decay;
 
 /// `outlier`: 2 e^{−0.8 t} with σ = 0.01 (deterministic pseudo-noise) and 1e3 added to the
 /// sample at t = 5; weight 1/σ² = 1e4, so the outlier's weighted residual is about 1e5.

@@ -5,7 +5,7 @@ use sysid_core::{Data, Failure, FitError, Method, Problem, Termination, Unknown}
 use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_ode::testing::{Decay, assert_close};
 use sysid_ode::{Integrator, Ivp, OdeError, Scalar, Signature, System};
-use sysid_systems::VanDerPol;
+use sysid_systems::{LotkaVolterra, VanDerPol};
 
 fn tight() -> Integrator {
     Integrator::dopri5(1e-12, 1e-14)
@@ -238,24 +238,9 @@ fn step_halving_keeps_the_cost_from_rising() {
 }
 
 /// Lotka–Volterra measured only through the total x + y, an output function.
-#[derive(Clone)]
-struct Lv(Signature);
-impl System for Lv {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = p[0] * y[0] - p[1] * y[0] * y[1];
-        dy[1] = p[3] * y[0] * y[1] - p[2] * y[1];
-    }
-    fn outputs<T: Scalar>(&self, _t: f64, y: &[T], _p: &[T], _u: &[f64], h: &mut [T]) {
-        h[0] = y[0] + y[1];
-    }
-}
-
 #[test]
 fn measured_outputs_that_are_not_states() {
-    let sys = Lv(Signature::new(&["x", "y"], &["a", "b", "g", "d"]).with_outputs(&["total"]));
+    let sys = LotkaVolterra::with_total();
     let times: Vec<f64> = (1..=40).map(|i| 0.25 * i as f64).collect();
     let sol =
         Ivp::new(&sys, 0.0, &[1.0, 1.0], &[1.5, 1.0, 3.0, 1.0]).solve(&tight(), &times).unwrap();

@@ -1,4 +1,5 @@
-//! Test systems with closed-form solutions.
+//! Test systems with closed-form solutions, and reference data. The catalogue's systems come
+//! from sysid-systems (a dev-dependency only: the ode library itself knows no system).
 #![allow(dead_code)]
 
 use nalgebra::DMatrix;
@@ -48,80 +49,9 @@ impl System for Oscillator {
     }
 }
 
-/// y' = v, v' = g (Goodman's falling body).
-pub struct FallingBody(pub Signature);
-impl FallingBody {
-    pub fn new() -> Self {
-        Self(Signature::new(&["y", "v"], &["g"]))
-    }
-}
-impl System for FallingBody {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = y[1];
-        dy[1] = p[0];
-    }
-}
-
-/// x' = v, v' = −x + μ (1 − x²) v.
-pub struct VanDerPol(pub Signature);
-impl VanDerPol {
-    pub fn new() -> Self {
-        Self(Signature::new(&["x", "v"], &["mu"]))
-    }
-}
-impl System for VanDerPol {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = y[1];
-        dy[1] = -y[0] + p[0] * (-(y[0] * y[0]) + 1.0) * y[1];
-    }
-}
-
-/// x' = a x − b x y, y' = d x y − g y, with an output "total" = x + y.
-pub struct LotkaVolterra(pub Signature);
-impl LotkaVolterra {
-    pub fn new() -> Self {
-        Self(Signature::new(&["x", "y"], &["a", "b", "g", "d"]).with_outputs(&["total"]))
-    }
-}
-impl System for LotkaVolterra {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        dy[0] = p[0] * y[0] - p[1] * y[0] * y[1];
-        dy[1] = p[3] * y[0] * y[1] - p[2] * y[1];
-    }
-    fn outputs<T: Scalar>(&self, _t: f64, y: &[T], _p: &[T], _u: &[f64], h: &mut [T]) {
-        h[0] = y[0] + y[1];
-    }
-}
-
-/// Robertson's chemical kinetics (Hairer & Wanner, Solving ODE II, IV.1):
-/// y1' = −k1 y1 + k3 y2 y3, y2' = k1 y1 − k2 y2² − k3 y2 y3, y3' = k2 y2².
-pub struct Robertson(pub Signature);
-impl Robertson {
-    pub fn new() -> Self {
-        Self(Signature::new(&["y1", "y2", "y3"], &["k1", "k2", "k3"]))
-    }
-    /// The classical rate constants.
-    pub const RATES: [f64; 3] = [0.04, 3e7, 1e4];
-}
-impl System for Robertson {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
-        let (fast, slow) = (p[1] * y[1] * y[1], p[2] * y[1] * y[2]);
-        dy[0] = -p[0] * y[0] + slow;
-        dy[1] = p[0] * y[0] - fast - slow;
-        dy[2] = fast;
-    }
+/// Robertson's classical rate constants k1, k2, k3, from the catalogue.
+pub fn robertson_rates() -> [f64; 3] {
+    sysid_systems::robertson::RATES.map(|(_, k)| k)
 }
 
 /// One value of tests/data/stiff_reference.csv (independent scipy Radau IIA solutions):
