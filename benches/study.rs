@@ -22,6 +22,7 @@ fn study(c: &mut Criterion) {
         seed: 1,
         fixed: Vec::new(),
         driver: Default::default(),
+        settings: Default::default(),
     };
     // The methods as `sysid study` builds them: from the registry, default settings.
     let registry = Registry::standard();
@@ -47,7 +48,7 @@ fn study(c: &mut Criterion) {
                     let _ = std::fs::remove_dir_all(&dir);
                 },
                 |()| {
-                    pool.install(|| files::run(&study, &dir, None, false, &|_, _| {}))
+                    pool.install(|| files::run(&study, &dir, Default::default(), &|_, _| {}))
                         .expect("the study runs")
                 },
                 BatchSize::PerIteration,

@@ -38,6 +38,11 @@ pub struct ReportArgs {
     /// Seed of the data, the trials and the default-start fits.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Replace files at the report's paths that no report wrote. Without it such files are
+    /// refused; the files an earlier report wrote (listed in OUT/.sysid-report) are always
+    /// replaced, and nothing else in OUT is touched.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Runs `sysid report`.
@@ -62,6 +67,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
         grid: args.grid,
         basin_spread: args.basin_spread,
         seed: args.seed,
+        force: args.force,
     };
     write_report(&options, &Bars::default())?;
     Ok(Outcome::Success)

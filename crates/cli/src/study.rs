@@ -1,12 +1,13 @@
 //! `sysid study` and `sysid merge`: Monte-Carlo robustness studies.
 
-use std::path::PathBuf;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use sysid_model::Model;
-use sysid_montecarlo::files::{self, Shard};
+use sysid_montecarlo::files::{self, RunOptions, Shard};
 use sysid_montecarlo::{Scenario, Study, StudySpec, basin};
 use sysid_ode::System;
 use sysid_systems::{Case, Visit};
@@ -57,9 +58,16 @@ pub struct StudyArgs {
     #[arg(long, value_name = "I/N")]
     shard: Option<Shard>,
     /// Continue a study that was interrupted, keeping its finished trials (or start it, if
-    /// --out holds none yet: batch jobs can always pass --resume).
+    /// --out holds none yet: batch jobs can always pass --resume). Every setting that
+    /// changes results (methods, options, integrator, the model and data files' contents)
+    /// must be the one the study was started with.
     #[arg(long)]
     resume: bool,
+    /// Write into an --out that holds files sysid did not write. sysid still writes only
+    /// its own files (study.json, trials.jsonl, summary.json, summary.md, basin.json,
+    /// basin.md, .sysid.lock), replacing any of those names it finds, and leaves the rest.
+    #[arg(long)]
+    force: bool,
     /// Instead of trials: a basin map over a grid of starts for these two unknowns (the
     /// others at the truth), spread by --perturb.
     #[arg(long, value_name = "U1,U2")]
@@ -79,9 +87,13 @@ pub struct MergeArgs {
     /// The shard directories of one study.
     #[arg(required = true, value_name = "DIR")]
     shards: Vec<PathBuf>,
-    /// The merged study's directory (new).
+    /// The merged study's directory: new, empty, or holding this same merge (merging again
+    /// rewrites the same files).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
+    /// Write into an --out that holds files sysid did not write (see `sysid study --help`).
+    #[arg(long)]
+    force: bool,
 }
 
 /// Runs `sysid study`.
@@ -94,12 +106,20 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     }
     match (&args.system, &args.model) {
         (Some(name), _) => {
-            sysid_systems::visit(name, FromCase { args, methods }).ok_or_else(|| {
+            let settings = method_settings(args);
+            sysid_systems::visit(name, FromCase { args, methods, settings }).ok_or_else(|| {
                 anyhow!("unknown system `{name}` (systems: {})", sysid_systems::NAMES.join(", "))
             })?
         }
         (None, Some(path)) => {
             let model = Model::load(path)?;
+            let data = match &args.data {
+                Some(data) => data.clone(),
+                None => model.data_path()?.to_path_buf(),
+            };
+            let mut settings = method_settings(args);
+            settings.insert("model".into(), sha256(path)?);
+            settings.insert("data".into(), sha256(&data)?);
             let problem =
                 prepare(model.problem(args.data.as_deref())?, &args.integrator, &args.options)?;
             // The truth of a model file: its fit to its own data.
@@ -112,7 +132,7 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
                 );
             }
             let scenario = Scenario::from_residuals(problem, fitted.values)?;
-            run_scenario(args, &path.display().to_string(), scenario, methods)
+            run_scenario(args, &path.display().to_string(), scenario, methods, settings)
         }
         (None, None) => bail!("give --system NAME or --model FILE"),
     }
@@ -121,6 +141,21 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
 struct FromCase<'a> {
     args: &'a StudyArgs,
     methods: Vec<String>,
+    settings: BTreeMap<String, String>,
+}
+
+/// The method options beyond the driver's that change results, for study.json.
+fn method_settings(args: &StudyArgs) -> BTreeMap<String, String> {
+    let ql_start = format!("{:?}", args.options.ql_start).to_lowercase();
+    BTreeMap::from([("ql_start".to_string(), ql_start)])
+}
+
+/// "sha256:…" of a file's contents.
+fn sha256(path: &Path) -> anyhow::Result<String> {
+    use sha2::{Digest, Sha256};
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let digest = Sha256::digest(&bytes);
+    Ok(format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>()))
 }
 
 impl Visit for FromCase<'_> {
@@ -130,7 +165,7 @@ impl Visit for FromCase<'_> {
         let scenario = Scenario::from_case(&case)
             .and_then(|s| s.with_fixed(&self.args.options.fix))
             .with_context(|| format!("system {}", case.name))?;
-        run_scenario(self.args, case.name, scenario, self.methods)
+        run_scenario(self.args, case.name, scenario, self.methods, self.settings)
     }
 }
 
@@ -139,6 +174,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
     system: &str,
     scenario: Scenario<S>,
     methods: Vec<String>,
+    settings: BTreeMap<String, String>,
 ) -> anyhow::Result<Outcome> {
     let common = args.options.common();
     let spec = StudySpec {
@@ -151,6 +187,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         seed: args.seed,
         fixed: args.options.fix.clone(),
         driver: common.driver,
+        settings,
     };
     let fits =
         methods.iter().map(|m| method::<S>(m, &common)).collect::<anyhow::Result<Vec<_>>>()?;
@@ -173,13 +210,14 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
             bar.set_position(done as u64)
         })?;
         bar.finish_and_clear();
-        map.write(&args.out)?;
+        map.write(&args.out, args.force)?;
         crate::emit(&map.markdown())?;
         return Ok(Outcome::Success);
     }
     let total = study.spec().trials;
     let bar = progress_bar(total as u64, "trials");
-    let summary = files::run(&study, &args.out, args.shard, args.resume, &|done, todo| {
+    let options = RunOptions { shard: args.shard, resume: args.resume, force: args.force };
+    let summary = files::run(&study, &args.out, options, &|done, todo| {
         bar.set_length(todo as u64);
         bar.set_position(done as u64);
     })?;
@@ -199,7 +237,7 @@ pub(crate) fn progress_bar(total: u64, unit: &str) -> ProgressBar {
 
 /// Runs `sysid merge`.
 pub fn merge(args: &MergeArgs) -> anyhow::Result<Outcome> {
-    let summary = files::merge(&args.shards, &args.out)?;
+    let summary = files::merge(&args.shards, &args.out, args.force)?;
     crate::emit(&summary.markdown())?;
     eprintln!(
         "{} shards merged into {} ({} trials)",

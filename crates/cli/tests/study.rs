@@ -99,9 +99,129 @@ fn shards_merge_into_the_unsharded_study() {
     let merge = sysid(&["merge", &one, &two, "--out", &merged]);
     assert_eq!(merge.status.code(), Some(0), "{}", text(&merge.stderr));
     assert_eq!(untimed_trials(&merged), untimed_trials(&whole));
-    // Merging again into an existing directory is refused rather than mixed.
+    // Merging again (a requeued merge job) rewrites the same files; a different study in
+    // the directory is refused rather than mixed.
     let again = sysid(&["merge", &one, &two, "--out", &merged]);
-    assert_eq!(again.status.code(), Some(2));
+    assert_eq!(again.status.code(), Some(0), "{}", text(&again.stderr));
+    assert_eq!(untimed_trials(&merged), untimed_trials(&whole));
+    let mixed = sysid(&["merge", &one, &two, "--out", &scratch.path("other")]);
+    assert_eq!(mixed.status.code(), Some(0));
+    let other = scratch.path("other");
+    std::fs::write(Path::new(&other).join("study.json"), "{}").unwrap();
+    let refused = sysid(&["merge", &one, &two, "--out", &other]);
+    assert_eq!(refused.status.code(), Some(2));
+
+    // Shards run with settings that change results do not merge: the setting is named.
+    let steps = scratch.path("steps");
+    assert_eq!(study(&steps, &["--shard", "2/2", "--max-steps", "700"]).status.code(), Some(0));
+    let mixed = sysid(&["merge", &one, &steps, "--out", &scratch.path("never")]);
+    assert_eq!(mixed.status.code(), Some(2));
+    let err = text(&mixed.stderr);
+    assert!(err.contains("integrator.max_steps 100000 vs 700"), "{err}");
+    assert!(!Path::new(&scratch.path("never")).exists(), "a refused merge writes nothing");
+}
+
+#[test]
+fn settings_that_change_results_travel_with_the_study() {
+    let scratch = Scratch::new("settings");
+    let out = scratch.path("vdp");
+    let short = ["study", "--system", "van-der-pol", "--trials", "2", "--out", &out];
+    assert_eq!(sysid(&short).status.code(), Some(0));
+    for (extra, needle) in [
+        (vec!["--max-steps", "700"], "integrator.max_steps 100000 vs 700"),
+        (vec!["--rtol", "1e-6"], "integrator.rtol 1e-8 vs 1e-6"),
+        (vec!["--integrator", "rodas4"], "integrator.scheme dopri5 vs rodas4"),
+        (vec!["--ql-start", "data"], "settings.ql_start guess vs data"),
+        (vec!["--gtol", "1e-4"], "driver.gtol (not recorded) vs 0.0001"),
+        (vec!["--max-iterations", "7"], "driver.max_iterations 50 vs 7"),
+    ] {
+        let mut args = short.to_vec();
+        args.push("--resume");
+        args.extend(&extra);
+        let run = sysid(&args);
+        assert_eq!(run.status.code(), Some(2), "{extra:?}");
+        let err = text(&run.stderr);
+        assert!(
+            err.contains(needle) && err.contains("holds a different study"),
+            "{extra:?}: {err}"
+        );
+    }
+
+    // A model file's study records the model's and the data's SHA-256.
+    let dir = Path::new(&scratch.0).join("model");
+    std::fs::create_dir_all(&dir).unwrap();
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/falling-body");
+    for entry in std::fs::read_dir(&example).unwrap() {
+        let path = entry.unwrap().path();
+        std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
+    }
+    let model = dir.join("model.toml").display().to_string();
+    let out = scratch.path("model-study");
+    let args = ["study", "--model", &model, "--trials", "2", "--resume", "--out", &out];
+    let first = sysid(&args);
+    assert_eq!(first.status.code(), Some(0), "{}", text(&first.stderr));
+    let header = std::fs::read_to_string(Path::new(&out).join("study.json")).unwrap();
+    assert!(
+        header.contains("\"model\": \"sha256:") && header.contains("\"data\": \"sha256:"),
+        "{header}"
+    );
+    let text_model = std::fs::read_to_string(&model).unwrap();
+    std::fs::write(&model, format!("{text_model}\n# edited\n")).unwrap();
+    let edited = sysid(&args);
+    assert_eq!(edited.status.code(), Some(2));
+    assert!(text(&edited.stderr).contains("settings.model sha256:"), "{}", text(&edited.stderr));
+}
+
+#[test]
+fn user_files_are_never_replaced() {
+    let scratch = Scratch::new("owned");
+    let out = scratch.path("mine");
+    std::fs::create_dir_all(&out).unwrap();
+    std::fs::write(Path::new(&out).join("summary.md"), "my notes").unwrap();
+    let run = study(&out, &[]);
+    assert_eq!(run.status.code(), Some(2));
+    let err = text(&run.stderr);
+    assert!(
+        err.contains("holds files sysid did not write (summary.md)") && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(Path::new(&out).join("summary.md")).unwrap(), "my notes");
+    std::fs::write(Path::new(&out).join("keep.txt"), "mine").unwrap();
+    let forced = study(&out, &["--force"]);
+    assert_eq!(forced.status.code(), Some(0), "{}", text(&forced.stderr));
+    assert_eq!(std::fs::read_to_string(Path::new(&out).join("keep.txt")).unwrap(), "mine");
+
+    // The report replaces what a report wrote, and nothing else.
+    let reports = scratch.path("reports");
+    let report = |extra: &[&str]| {
+        let mut args = vec!["report", "--out", &reports, "--systems", "falling-body"];
+        args.extend(["--trials", "4", "--grid", "3"]);
+        args.extend(extra);
+        sysid(&args)
+    };
+    std::fs::create_dir_all(Path::new(&reports).join("falling-body")).unwrap();
+    std::fs::write(Path::new(&reports).join("falling-body/data.csv"), "mine").unwrap();
+    std::fs::write(Path::new(&reports).join("falling-body/notes.md"), "mine").unwrap();
+    let refused = report(&[]);
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(text(&refused.stderr).contains("falling-body/data.csv"), "{}", text(&refused.stderr));
+    assert_eq!(
+        std::fs::read_to_string(Path::new(&reports).join("falling-body/data.csv")).unwrap(),
+        "mine"
+    );
+    let forced = report(&["--force"]);
+    assert_eq!(forced.status.code(), Some(0), "{}", text(&forced.stderr));
+    let again = report(&[]);
+    assert_eq!(
+        again.status.code(),
+        Some(0),
+        "a report replaces its own files: {}",
+        text(&again.stderr)
+    );
+    assert_eq!(
+        std::fs::read_to_string(Path::new(&reports).join("falling-body/notes.md")).unwrap(),
+        "mine"
+    );
 }
 
 #[test]

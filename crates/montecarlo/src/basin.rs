@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use sysid_ode::System;
 
 use crate::error::StudyError;
+use crate::files;
 use crate::stats::significant;
 use crate::trial::{Study, StudySpec, TrialRecord, perturb};
 
@@ -170,13 +171,13 @@ impl Basin {
         out
     }
 
-    /// Writes `basin.json` and `basin.md` into `dir`.
-    pub fn write(&self, dir: &Path) -> Result<(), StudyError> {
-        std::fs::create_dir_all(dir).map_err(StudyError::io(dir))?;
+    /// Writes `basin.json` and `basin.md` into `dir`, under its lock; `force` as in
+    /// [`RunOptions`](crate::files::RunOptions).
+    pub fn write(&self, dir: &Path, force: bool) -> Result<(), StudyError> {
+        files::check_owned(dir, force)?;
+        let _lock = files::DirLock::acquire(dir)?;
         let json = serde_json::to_string_pretty(self).expect("serialisable") + "\n";
-        let path = dir.join("basin.json");
-        std::fs::write(&path, json).map_err(StudyError::io(&path))?;
-        let path = dir.join("basin.md");
-        std::fs::write(&path, self.markdown()).map_err(StudyError::io(&path))
+        files::write_atomically(&dir.join(files::BASIN_FILE), &json)?;
+        files::write_atomically(&dir.join(files::BASIN_MD), &self.markdown())
     }
 }

@@ -11,12 +11,13 @@ pub enum StudyError {
     #[error("{0}")]
     Setup(String),
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
+    #[error("{}: {error}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
-        /// What the system said.
-        source: std::io::Error,
+        /// What the system said (part of the message, so not also a `source`: printed
+        /// once).
+        error: std::io::Error,
     },
     /// A results file is not what a study writes (a line, with its number).
     #[error("{path}:{line}: {message}")]
@@ -31,6 +32,41 @@ pub enum StudyError {
     /// The output directory holds a different study, or the shards do not belong together.
     #[error("{0}")]
     Mismatch(String),
+    /// The output directory holds files sysid did not write.
+    #[error(
+        "{} holds files sysid did not write ({}): choose another --out, or give --force to \
+         write there anyway (replacing any of sysid's own files it holds: study.json, \
+         trials.jsonl, summary.json, summary.md, basin.json, basin.md)",
+        dir.display(),
+        list(files)
+    )]
+    Foreign {
+        /// The directory.
+        dir: PathBuf,
+        /// The files, sorted.
+        files: Vec<String>,
+    },
+    /// Another run is writing the directory.
+    #[error(
+        "another sysid is writing to {} ({holder}): wait for it to end, or choose another --out",
+        dir.display()
+    )]
+    Busy {
+        /// The directory.
+        dir: PathBuf,
+        /// Who holds it.
+        holder: String,
+    },
+}
+
+/// "a, b, c and 4 more".
+fn list(files: &[String]) -> String {
+    const SHOWN: usize = 4;
+    let mut text = files.iter().take(SHOWN).cloned().collect::<Vec<_>>().join(", ");
+    if files.len() > SHOWN {
+        text += &format!(" and {} more", files.len() - SHOWN);
+    }
+    text
 }
 
 impl From<ProblemError> for StudyError {
@@ -42,6 +78,6 @@ impl From<ProblemError> for StudyError {
 impl StudyError {
     pub(crate) fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Self {
         let path = path.into();
-        move |source| StudyError::Io { path, source }
+        move |error| StudyError::Io { path, error }
     }
 }

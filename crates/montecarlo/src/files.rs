@@ -1,5 +1,13 @@
 //! A study's directory: `study.json` (the settings and the truth), `trials.jsonl` (one line
-//! per trial and method, appended as trials finish), `summary.json` and `summary.md`.
+//! per trial and method, appended as trials finish), `summary.json` and `summary.md`, and
+//! `.sysid.lock`, held while a run writes there.
+//!
+//! sysid writes and replaces only these files (and `basin.json`, `basin.md` of a basin map):
+//! a directory that holds anything else is refused unless the caller forces it, and a
+//! second run into a directory another run holds is refused at once, naming the holder.
+//! `study.json` records every setting that decides a trial's result (the integrator, the
+//! driver's budgets, method options, the model and data files' SHA-256); `--resume` and
+//! `merge` compare them and name the setting that differs.
 //!
 //! A killed study loses nothing already written: each trial's lines go out in one write, and
 //! `--resume` keeps every complete trial (a torn last line is dropped) and runs the rest. At
@@ -7,9 +15,9 @@
 //! the thread count, on interruptions, or on how it was split into shards and merged; only
 //! the measured times differ.
 
-use std::collections::BTreeMap;
-use std::fs::{File, OpenOptions};
-use std::io::Write;
+use std::collections::{BTreeMap, BTreeSet};
+use std::fs::{File, OpenOptions, TryLockError};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::sync::Mutex;
@@ -17,7 +25,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use sysid_ode::System;
+use serde_json::Value;
+use sysid_ode::{Integrator, System};
 
 use crate::error::StudyError;
 use crate::stats::{Summary, summarise};
@@ -31,6 +40,15 @@ pub const TRIALS_FILE: &str = "trials.jsonl";
 pub const SUMMARY_FILE: &str = "summary.json";
 /// The statistics as tables.
 pub const SUMMARY_MD: &str = "summary.md";
+/// A basin map's numbers.
+pub const BASIN_FILE: &str = "basin.json";
+/// A basin map as text.
+pub const BASIN_MD: &str = "basin.md";
+/// Held (flock) by the run that writes the directory; names it.
+pub const LOCK_FILE: &str = ".sysid.lock";
+/// Every file sysid writes into a study directory (besides its own temporary files).
+pub const OWNED: [&str; 7] =
+    [STUDY_FILE, TRIALS_FILE, SUMMARY_FILE, SUMMARY_MD, BASIN_FILE, BASIN_MD, LOCK_FILE];
 
 /// Part i of n of a study's trials (1 ≤ i ≤ n): the trials t with t mod n = i − 1.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -69,6 +87,10 @@ pub struct Header {
     pub spec: StudySpec,
     /// The shard this directory holds, if it is one.
     pub shard: Option<Shard>,
+    /// The integrator every trial's fits ran with (absent in studies written before it was
+    /// recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub integrator: Option<Integrator>,
     /// Names of the unknowns.
     pub unknowns: Vec<String>,
     /// Their true values.
@@ -87,6 +109,7 @@ impl Header {
         Ok(Self {
             spec: study.spec().clone(),
             shard,
+            integrator: Some(*study.scenario().problem().integrator()),
             unknowns: study.scenario().problem().names(),
             truth: study.scenario().truth().to_vec(),
             crb_sd: (0..crb.nrows()).map(|i| crb[(i, i)].sqrt()).collect(),
@@ -108,23 +131,36 @@ impl Header {
     }
 }
 
+/// Where and how a study run writes.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RunOptions {
+    /// Run only this part of the trials.
+    pub shard: Option<Shard>,
+    /// Continue the study the directory holds, keeping its complete trials (or start it, if
+    /// it holds none: batch jobs can always pass it).
+    pub resume: bool,
+    /// Write into a directory that holds files sysid did not write (sysid still replaces
+    /// only the files it names in [`OWNED`]).
+    pub force: bool,
+}
+
 /// Runs `study` (or one shard of it) into `dir` and returns its summary. With `resume`, a
 /// directory that holds a study must hold the same one, and its complete trials are kept; one
-/// without a study starts it. Without `resume`, a directory that holds a study is refused. `progress(done, total)`
-/// is called as trials finish.
+/// without a study starts it. Without `resume`, a directory that holds a study is refused.
+/// `progress(done, total)` is called as trials finish.
 pub fn run<S: System + Clone + Send + Sync>(
     study: &Study<S>,
     dir: &Path,
-    shard: Option<Shard>,
-    resume: bool,
+    options: RunOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Summary, StudyError> {
-    let header = Header::of(study, shard)?;
-    std::fs::create_dir_all(dir).map_err(StudyError::io(dir))?;
+    let header = Header::of(study, options.shard)?;
+    check_owned(dir, options.force)?;
+    let _lock = DirLock::acquire(dir)?;
     let study_file = dir.join(STUDY_FILE);
     let mut records = Vec::new();
     if study_file.exists() {
-        if !resume {
+        if !options.resume {
             return Err(StudyError::Mismatch(format!(
                 "{} already holds a study: give --resume to continue it, or another --out",
                 dir.display()
@@ -133,7 +169,8 @@ pub fn run<S: System + Clone + Send + Sync>(
         let existing = read_header(&study_file)?;
         if existing != header {
             return Err(StudyError::Mismatch(format!(
-                "{} holds a different study ({}); resume it with its own settings",
+                "{} holds a different study: {} (its setting first); resume it with its own \
+                 settings, or give another --out",
                 dir.display(),
                 difference(&existing, &header)
             )));
@@ -146,7 +183,7 @@ pub fn run<S: System + Clone + Send + Sync>(
         write_atomically(&study_file, &json(&header))?;
         write_lines(&dir.join(TRIALS_FILE), &[])?;
     }
-    let done: std::collections::BTreeSet<usize> = records.iter().map(|r| r.trial).collect();
+    let done: BTreeSet<usize> = records.iter().map(|r| r.trial).collect();
     let todo: Vec<usize> = header.trials().into_iter().filter(|t| !done.contains(t)).collect();
     let trials_path = dir.join(TRIALS_FILE);
     let file =
@@ -200,14 +237,23 @@ fn finish(
 }
 
 /// Merges the shard directories `dirs` of one study into `out`: the same files an unsharded
-/// run writes.
-pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<Summary, StudyError> {
+/// run writes. Merging again into an `out` that holds the same study rewrites the same
+/// files, so a repeated merge job succeeds; one holding another study is refused. `force`
+/// as in [`RunOptions`].
+pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, StudyError> {
     let Some(first) = dirs.first() else {
         return Err(StudyError::Setup("no shard directories to merge".into()));
     };
     let mut headers = Vec::new();
+    let mut locks = BTreeMap::new();
     for dir in dirs {
         headers.push(read_header(&dir.join(STUDY_FILE))?);
+        // A shard still being written is not merged (a shard given twice is locked once,
+        // and refused below).
+        let key = dir.canonicalize().map_err(StudyError::io(dir))?;
+        if let std::collections::btree_map::Entry::Vacant(slot) = locks.entry(key) {
+            slot.insert(DirLock::acquire(dir)?);
+        }
     }
     let whole = Header { shard: None, ..headers[0].clone() };
     let mut records = Vec::new();
@@ -215,7 +261,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<Summary, StudyError> {
     for (dir, header) in dirs.iter().zip(&headers) {
         if (Header { shard: None, ..header.clone() }) != whole {
             return Err(StudyError::Mismatch(format!(
-                "{} and {} hold different studies ({})",
+                "{} and {} hold different studies: {}",
                 first.display(),
                 dir.display(),
                 difference(&headers[0], header)
@@ -223,7 +269,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<Summary, StudyError> {
         }
         let complete = read_complete(dir, header)?;
         let expected = header.trials().len();
-        let got: std::collections::BTreeSet<usize> = complete.iter().map(|r| r.trial).collect();
+        let got: BTreeSet<usize> = complete.iter().map(|r| r.trial).collect();
         if got.len() != expected {
             return Err(StudyError::Mismatch(format!(
                 "{} is incomplete: {} of its {expected} trials; finish it with --resume first",
@@ -249,15 +295,114 @@ pub fn merge(dirs: &[PathBuf], out: &Path) -> Result<Summary, StudyError> {
             whole.spec.trials
         )));
     }
-    if out.join(STUDY_FILE).exists() {
-        return Err(StudyError::Mismatch(format!(
-            "{} already holds a study: merge into a new directory",
-            out.display()
-        )));
+    check_owned(out, force)?;
+    let _lock = DirLock::acquire(out)?;
+    drop(locks);
+    let out_file = out.join(STUDY_FILE);
+    if out_file.exists() {
+        let existing = read_header(&out_file)?;
+        if existing != whole {
+            return Err(StudyError::Mismatch(format!(
+                "{} already holds another study: {} (its setting first); merge into a new \
+                 directory",
+                out.display(),
+                difference(&existing, &whole)
+            )));
+        }
     }
-    std::fs::create_dir_all(out).map_err(StudyError::io(out))?;
-    write_atomically(&out.join(STUDY_FILE), &json(&whole))?;
+    write_atomically(&out_file, &json(&whole))?;
     finish(out, &whole, records)
+}
+
+/// Refuses `dir` when it holds files sysid did not write, unless `force`. A directory is
+/// sysid's when it holds a study, a basin map or a lock file; then the files of [`OWNED`]
+/// (and sysid's temporary files) are its own. A missing or empty directory is fine.
+pub fn check_owned(dir: &Path, force: bool) -> Result<(), StudyError> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(StudyError::io(dir)(e)),
+    };
+    let mut names = Vec::new();
+    for entry in entries {
+        names.push(entry.map_err(StudyError::io(dir))?.file_name().to_string_lossy().into_owned());
+    }
+    let ours = names.iter().any(|n| [STUDY_FILE, BASIN_FILE, LOCK_FILE].contains(&n.as_str()));
+    let mut foreign: Vec<String> = names.into_iter().filter(|n| !(ours && is_owned(n))).collect();
+    if force || foreign.is_empty() {
+        return Ok(());
+    }
+    foreign.sort();
+    Err(StudyError::Foreign { dir: dir.into(), files: foreign })
+}
+
+/// A file sysid writes into a study directory, or one of its temporary files.
+fn is_owned(name: &str) -> bool {
+    if OWNED.contains(&name) {
+        return true;
+    }
+    // `.summary.json.123.partial` (and the `summary.partial` of earlier versions).
+    let Some(stem) = name.strip_suffix(".partial") else { return false };
+    let stem = stem.trim_start_matches('.');
+    OWNED.iter().any(|o| stem.starts_with(o) || o.split('.').next() == Some(stem))
+}
+
+/// An exclusive hold on a directory for as long as it lives: a second sysid that wants to
+/// write there is refused at once, naming the holder. The lock is the operating system's
+/// (`flock`), so it goes with the process however that ends; the file stays.
+pub struct DirLock {
+    _file: File,
+}
+
+impl DirLock {
+    /// Creates `dir` if needed and takes its lock, or says who holds it.
+    pub fn acquire(dir: &Path) -> Result<Self, StudyError> {
+        std::fs::create_dir_all(dir).map_err(StudyError::io(dir))?;
+        let path = dir.join(LOCK_FILE);
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(StudyError::io(&path))?;
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(TryLockError::WouldBlock) => {
+                let mut holder = String::new();
+                // The holder's line is informative only: an unreadable one still refuses.
+                let _ = file.read_to_string(&mut holder);
+                return Err(StudyError::Busy { dir: dir.into(), holder: describe(&holder) });
+            }
+            Err(TryLockError::Error(e)) => return Err(StudyError::io(&path)(e)),
+        }
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs());
+        let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
+        let command: Vec<String> = std::env::args().collect();
+        let line =
+            format!("{}\t{now}\t{}\t{}\n", std::process::id(), host.trim(), command.join(" "));
+        file.set_len(0).map_err(StudyError::io(&path))?;
+        file.write_all(line.as_bytes()).map_err(StudyError::io(&path))?;
+        Ok(Self { _file: file })
+    }
+}
+
+/// "pid 123 on node7, for 42 s: sysid study …" from a lock file's line.
+fn describe(line: &str) -> String {
+    let fields: Vec<&str> = line.trim_end().splitn(4, '\t').collect();
+    let [pid, since, host, command] = fields[..] else {
+        return "a process that has not written its name yet".into();
+    };
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let age = since
+        .parse::<u64>()
+        .map_or(String::new(), |s| format!(", for {} s", now.saturating_sub(s)));
+    let host = if host.is_empty() { String::new() } else { format!(" on {host}") };
+    format!("pid {pid}{host}{age}: {command}")
 }
 
 /// Reads a directory's `study.json`.
@@ -278,7 +423,7 @@ pub fn read_complete(dir: &Path, header: &Header) -> Result<Vec<TrialRecord>, St
     let text = match std::fs::read_to_string(&path) {
         Ok(text) => text,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
-        Err(e) => return Err(StudyError::Io { path, source: e }),
+        Err(e) => return Err(StudyError::Io { path, error: e }),
     };
     let order = header.line_order();
     let lines: Vec<&str> = text.lines().collect();
@@ -336,34 +481,69 @@ fn write_lines(path: &Path, records: &[TrialRecord]) -> Result<(), StudyError> {
 }
 
 /// Writes through a temporary file and a rename: the file is either old or new, never half.
-fn write_atomically(path: &Path, text: &str) -> Result<(), StudyError> {
-    let tmp = path.with_extension("partial");
-    let mut file = File::create(&tmp).map_err(StudyError::io(&tmp))?;
-    file.write_all(text.as_bytes()).map_err(StudyError::io(&tmp))?;
-    file.sync_all().map_err(StudyError::io(&tmp))?;
-    std::fs::rename(&tmp, path).map_err(StudyError::io(path))
+/// The temporary file's name carries the process id, and errors name `path`.
+pub(crate) fn write_atomically(path: &Path, text: &str) -> Result<(), StudyError> {
+    let name = path.file_name().map_or_else(Default::default, |n| n.to_string_lossy());
+    let tmp = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
+    let written = File::create(&tmp).and_then(|mut file| {
+        file.write_all(text.as_bytes())?;
+        file.sync_all()
+    });
+    let renamed = written.and_then(|()| std::fs::rename(&tmp, path));
+    if renamed.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    renamed.map_err(StudyError::io(path))
 }
 
-/// Which setting differs between two headers, for messages.
+/// Which settings differ between two headers, for messages: "perturb 0.3 vs 0.5,
+/// integrator.rtol 1e-8 vs 1e-6". The truth and the Cramér–Rao bound follow from the
+/// settings and the data, so they are named only when nothing else differs.
 fn difference(a: &Header, b: &Header) -> String {
-    let (x, y) = (&a.spec, &b.spec);
+    let value = |h: &Header| serde_json::to_value(h).expect("headers serialise");
     let mut diffs = Vec::new();
-    let mut note = |what: &str, p: String, q: String| {
-        if p != q {
-            diffs.push(format!("{what} {p} vs {q}"));
-        }
-    };
-    note("system", x.system.clone(), y.system.clone());
-    note("methods", x.methods.join(","), y.methods.join(","));
-    note("reference", x.reference.clone(), y.reference.clone());
-    note("trials", x.trials.to_string(), y.trials.to_string());
-    note("noise", x.noise.to_string(), y.noise.to_string());
-    note("perturb", x.perturb.to_string(), y.perturb.to_string());
-    note("seed", x.seed.to_string(), y.seed.to_string());
-    let shard = |s: Option<Shard>| s.map_or("none".into(), |s| format!("{}/{}", s.index, s.count));
-    note("shard", shard(a.shard), shard(b.shard));
-    if diffs.is_empty() {
-        diffs.push("the truth or the Cramér–Rao bound".into());
+    differ("", &value(a), &value(b), &mut diffs);
+    let derived = |d: &String| ["unknowns ", "truth ", "crb_sd "].iter().any(|k| d.starts_with(k));
+    let settings: Vec<&String> = diffs.iter().filter(|d| !derived(d)).collect();
+    if settings.is_empty() {
+        "the truth or the Cramér–Rao bound (the data or the model differ)".into()
+    } else {
+        settings.iter().map(|d| d.as_str()).collect::<Vec<_>>().join(", ")
     }
-    diffs.join(", ")
+}
+
+/// Appends "key x vs y" for every leaf where `x` and `y` differ (`spec.` left out of keys).
+fn differ(key: &str, x: &Value, y: &Value, out: &mut Vec<String>) {
+    let empty = Value::Object(Default::default());
+    let (x, y) = match (x, y) {
+        (Value::Null, Value::Object(_)) => (&empty, y),
+        (Value::Object(_), Value::Null) => (x, &empty),
+        _ => (x, y),
+    };
+    match (x, y) {
+        (Value::Object(p), Value::Object(q)) => {
+            let keys: BTreeSet<&String> = p.keys().chain(q.keys()).collect();
+            for k in keys {
+                let child = match key {
+                    "" | "spec" => k.clone(),
+                    _ => format!("{key}.{k}"),
+                };
+                differ(
+                    &child,
+                    p.get(k).unwrap_or(&Value::Null),
+                    q.get(k).unwrap_or(&Value::Null),
+                    out,
+                );
+            }
+        }
+        _ if x != y => {
+            let show = |v: &Value| match v {
+                Value::Null => "(not recorded)".to_string(),
+                Value::String(s) => s.clone(),
+                v => v.to_string(),
+            };
+            out.push(format!("{key} {} vs {}", show(x), show(y)));
+        }
+        _ => {}
+    }
 }

@@ -31,6 +31,7 @@
 //!     seed: 1,
 //!     fixed: Vec::new(),
 //!     driver: Default::default(),
+//!     settings: Default::default(),
 //! };
 //! let registry = Registry::standard();
 //! let method = |name| registry.build(name, &Settings::default()).expect("a registered name");
@@ -40,7 +41,7 @@
 //!     vec![method("goodman")],
 //!     method("goodman-halving"),
 //! )?;
-//! let summary = files::run(&study, "vdp-study".as_ref(), None, false, &|_, _| {})?;
+//! let summary = files::run(&study, "vdp-study".as_ref(), Default::default(), &|_, _| {})?;
 //! println!("{}", summary.markdown());
 //! # Ok::<(), sysid_montecarlo::StudyError>(())
 //! ```

@@ -1,6 +1,8 @@
 //! One trial: a noise realisation and a start drawn from the trial's own random stream, a
 //! reference fit from the truth, and every method from the start, on the same data.
 
+use std::collections::BTreeMap;
+
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
@@ -48,6 +50,11 @@ pub struct StudySpec {
     /// decides what converged means).
     #[serde(default)]
     pub driver: DriverOptions,
+    /// Whatever else decides the trials' results, by name: method options beyond the
+    /// driver's (`ql_start`), the SHA-256 of a model file and of its data. `--resume` and
+    /// `merge` refuse a study whose settings differ, naming the setting.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub settings: BTreeMap<String, String>,
 }
 
 impl StudySpec {

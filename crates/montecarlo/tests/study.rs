@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::DMatrix;
 use serde_json::Value;
-use sysid_montecarlo::{Scenario, SharedMethod, Study, StudySpec, files, files::Shard};
+use sysid_montecarlo::files::{self, DirLock, RunOptions, Shard};
+use sysid_montecarlo::{Scenario, SharedMethod, Study, StudySpec};
 use sysid_ode::System;
 use sysid_registry::{Registry, Settings};
 use sysid_systems::Case;
@@ -30,6 +31,7 @@ fn study<S: System + Clone + Send + Sync>(
         seed: 7,
         fixed: Vec::new(),
         driver: Default::default(),
+        settings: Default::default(),
     };
     let methods = methods.iter().map(|m| method(m)).collect();
     Study::new(spec, Scenario::from_case(case).unwrap(), methods, method("goodman-halving"))
@@ -86,6 +88,16 @@ fn results(dir: &Path) -> (Vec<Value>, Value, Value) {
     )
 }
 
+/// A new study: neither resumed nor forced.
+fn fresh() -> RunOptions {
+    RunOptions::default()
+}
+
+/// Continue (or start) the study.
+fn resume() -> RunOptions {
+    RunOptions { resume: true, ..RunOptions::default() }
+}
+
 fn pool(threads: usize) -> rayon::ThreadPool {
     rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap()
 }
@@ -99,9 +111,9 @@ fn results_do_not_depend_on_threads_shards_or_interruptions() {
 
     // One thread and two threads.
     let one = scratch.join("one");
-    pool(1).install(|| files::run(&study, &one, None, false, &quiet)).unwrap();
+    pool(1).install(|| files::run(&study, &one, fresh(), &quiet)).unwrap();
     let two = scratch.join("two");
-    pool(2).install(|| files::run(&study, &two, None, false, &quiet)).unwrap();
+    pool(2).install(|| files::run(&study, &two, fresh(), &quiet)).unwrap();
     let reference = results(&one);
     assert_eq!(reference.0.len(), 12 * 3, "a line per trial and method, the reference included");
     assert_eq!(results(&two), reference);
@@ -116,16 +128,24 @@ fn results_do_not_depend_on_threads_shards_or_interruptions() {
     let shards: Vec<PathBuf> = (1..=3).map(|i| scratch.join(&format!("shard{i}"))).collect();
     for (i, dir) in shards.iter().enumerate() {
         let shard = Shard { index: i + 1, count: 3 };
-        files::run(&study, dir, Some(shard), false, &quiet).unwrap();
+        files::run(&study, dir, RunOptions { shard: Some(shard), ..fresh() }, &quiet).unwrap();
     }
     let merged = scratch.join("merged");
-    files::merge(&shards, &merged).unwrap();
+    files::merge(&shards, &merged, false).unwrap();
     assert_eq!(results(&merged), reference);
+    // Merging again (a requeued merge job) gives the same files; into another study, no.
+    files::merge(&shards, &merged, false).unwrap();
+    assert_eq!(results(&merged), reference);
+    let other = scratch.join("other");
+    let different = crate::study(&case, &["goodman", "gauss-newton-ls"], 2, 0.3);
+    files::run(&different, &other, fresh(), &quiet).unwrap();
+    let e = files::merge(&shards, &other, false).unwrap_err().to_string();
+    assert!(e.contains("already holds another study: trials 2 vs 12"), "{e}");
     // A missing shard and a shard given twice are refused.
-    let e = files::merge(&shards[..2], &scratch.join("partial")).unwrap_err().to_string();
+    let e = files::merge(&shards[..2], &scratch.join("partial"), false).unwrap_err().to_string();
     assert!(e.contains("in none of the shards"), "{e}");
     let twice = [shards[0].clone(), shards[0].clone(), shards[1].clone(), shards[2].clone()];
-    let e = files::merge(&twice, &scratch.join("twice")).unwrap_err().to_string();
+    let e = files::merge(&twice, &scratch.join("twice"), false).unwrap_err().to_string();
     assert!(e.contains("twice"), "{e}");
 
     // A killed run: keep the first 14 lines (4 trials and part of a fifth) and half of the
@@ -141,7 +161,7 @@ fn results_do_not_depend_on_threads_shards_or_interruptions() {
     let count = |n: usize, _: usize| {
         done.fetch_max(n, std::sync::atomic::Ordering::Relaxed);
     };
-    files::run(&study, &killed, None, true, &count).unwrap();
+    files::run(&study, &killed, resume(), &count).unwrap();
     assert_eq!(done.into_inner(), 12 - 4, "only the trials not complete run again");
     assert_eq!(results(&killed), reference);
 }
@@ -153,11 +173,82 @@ fn directories_are_never_overwritten_or_mixed() {
     let dir = scratch.join("a");
     let quiet = |_: usize, _: usize| {};
     // Resuming where nothing was started starts the study.
-    files::run(&study(&case, &["goodman"], 3, 0.1), &dir, None, true, &quiet).unwrap();
-    let e = files::run(&study(&case, &["goodman"], 3, 0.1), &dir, None, false, &quiet).unwrap_err();
+    files::run(&study(&case, &["goodman"], 3, 0.1), &dir, resume(), &quiet).unwrap();
+    let e = files::run(&study(&case, &["goodman"], 3, 0.1), &dir, fresh(), &quiet).unwrap_err();
     assert!(e.to_string().contains("already holds a study"), "{e}");
-    let e = files::run(&study(&case, &["goodman"], 5, 0.1), &dir, None, true, &quiet).unwrap_err();
+    let e = files::run(&study(&case, &["goodman"], 5, 0.1), &dir, resume(), &quiet).unwrap_err();
     assert!(e.to_string().contains("trials 3 vs 5"), "{e}");
+
+    // Settings that change results are recorded and named: the integrator, method options,
+    // the inputs' hashes.
+    let mut loose = sysid_systems::falling_body::falling_body();
+    loose.integrator.rtol = 1e-6;
+    let spec = study(&case, &["goodman"], 3, 0.1).spec().clone();
+    let other = Study::new(
+        spec.clone(),
+        Scenario::from_case(&loose).unwrap(),
+        vec![method("goodman")],
+        method("goodman-halving"),
+    )
+    .unwrap();
+    let e = files::run(&other, &dir, resume(), &quiet).unwrap_err().to_string();
+    assert!(e.contains("integrator.rtol 1e-8 vs 1e-6"), "{e}");
+    let mut with_model = spec.clone();
+    with_model.settings.insert("model".into(), "sha256:ab12".into());
+    let with_model = Study::new(
+        with_model,
+        Scenario::from_case(&case).unwrap(),
+        vec![method("goodman")],
+        method("goodman-halving"),
+    )
+    .unwrap();
+    let e = files::run(&with_model, &dir, resume(), &quiet).unwrap_err().to_string();
+    assert!(e.contains("settings.model (not recorded) vs sha256:ab12"), "{e}");
+    let mut gtol = spec;
+    gtol.driver.gtol = Some(1e-3);
+    let gtol = Study::new(
+        gtol,
+        Scenario::from_case(&case).unwrap(),
+        vec![method("goodman")],
+        method("goodman-halving"),
+    )
+    .unwrap();
+    let e = files::run(&gtol, &dir, resume(), &quiet).unwrap_err().to_string();
+    assert!(e.contains("driver.gtol (not recorded) vs 0.001"), "{e}");
+
+    // A second run into a directory another holds is refused at once, naming the holder.
+    let held = DirLock::acquire(&dir).unwrap();
+    let e = files::run(&study(&case, &["goodman"], 3, 0.1), &dir, resume(), &quiet).unwrap_err();
+    let pid = format!("pid {}", std::process::id());
+    assert!(
+        e.to_string().contains("another sysid is writing to") && e.to_string().contains(&pid),
+        "{e}"
+    );
+    drop(held);
+    files::run(&study(&case, &["goodman"], 3, 0.1), &dir, resume(), &quiet).unwrap();
+
+    // Files sysid did not write are never replaced: refused unless forced, and then kept.
+    let user = scratch.join("user");
+    std::fs::create_dir_all(&user).unwrap();
+    std::fs::write(user.join("summary.md"), "my notes").unwrap();
+    let e = files::run(&study(&case, &["goodman"], 3, 0.1), &user, fresh(), &quiet).unwrap_err();
+    assert!(e.to_string().contains("holds files sysid did not write (summary.md)"), "{e}");
+    assert_eq!(std::fs::read_to_string(user.join("summary.md")).unwrap(), "my notes");
+    std::fs::write(dir.join("notes.txt"), "mine").unwrap();
+    let e = files::run(&study(&case, &["goodman"], 3, 0.1), &dir, resume(), &quiet).unwrap_err();
+    assert!(e.to_string().contains("(notes.txt)"), "{e}");
+    let forced = RunOptions { force: true, ..resume() };
+    files::run(&study(&case, &["goodman"], 3, 0.1), &dir, forced, &quiet).unwrap();
+    assert_eq!(std::fs::read_to_string(dir.join("notes.txt")).unwrap(), "mine");
+
+    // An I/O error names the user's path and says the system's words once.
+    let file = scratch.join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let e = files::run(&study(&case, &["goodman"], 3, 0.1), &file, fresh(), &quiet).unwrap_err();
+    let e = format!("{:#}", anyhow::Error::from(e));
+    assert!(e.starts_with(&file.display().to_string()), "{e}");
+    assert_eq!(e.matches("os error").count(), 1, "{e}");
+
     assert_eq!("2/4".parse::<Shard>(), Ok(Shard { index: 2, count: 4 }));
     for bad in ["0/4", "5/4", "2", "a/b"] {
         assert!(bad.parse::<Shard>().is_err(), "{bad}");
@@ -195,7 +286,7 @@ fn goodman_is_efficient_for_mu_on_van_der_pol() {
     let case = sysid_systems::van_der_pol::van_der_pol();
     let study = study(&case, &["goodman"], 200, 0.1);
     let scratch = Scratch::new("efficiency");
-    let summary = files::run(&study, &scratch.join("vdp"), None, false, &|_, _| {}).unwrap();
+    let summary = files::run(&study, &scratch.join("vdp"), fresh(), &|_, _| {}).unwrap();
     let goodman = &summary.methods[1];
     assert_eq!(goodman.method, "goodman");
     assert!(goodman.success_rate > 0.99, "{}", goodman.success_rate);
@@ -217,7 +308,7 @@ fn intervals_with_one_degree_of_freedom_cover_95_percent() {
     let case = sysid_systems::falling_body::falling_body();
     let study = study(&case, &["goodman"], 2000, 0.3);
     let scratch = Scratch::new("coverage");
-    let summary = files::run(&study, &scratch.join("fb"), None, false, &|_, _| {}).unwrap();
+    let summary = files::run(&study, &scratch.join("fb"), fresh(), &|_, _| {}).unwrap();
     let goodman = &summary.methods[1];
     assert_eq!(goodman.successes, 2000);
     for a in &goodman.accuracy {

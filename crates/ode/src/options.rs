@@ -36,12 +36,27 @@ pub struct Integrator {
     pub atol: f64,
     /// A fixed step size: required for RK4; for DOPRI5 it switches error control off.
     pub fixed_step: Option<f64>,
-    /// Largest step size allowed (default unlimited).
+    /// Largest step size allowed (default unlimited; JSON writes unlimited as `null`).
+    #[serde(with = "unlimited")]
     pub max_step: f64,
     /// First trial step size (default: Hairer's estimate).
     pub initial_step: Option<f64>,
     /// Step budget for one integration, accepted and rejected steps together (default 100 000).
     pub max_steps: usize,
+}
+
+/// An upper limit that may be infinite, written `null` in JSON (which has no infinity) and
+/// read back as +∞.
+mod unlimited {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(value: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if value.is_finite() { s.serialize_some(value) } else { s.serialize_none() }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+    }
 }
 
 impl Default for Integrator {

@@ -26,7 +26,8 @@ use crate::{
 /// What a report covers (the defaults are `sysid report`'s).
 #[derive(Clone, Debug)]
 pub struct ReportOptions {
-    /// The report's directory: README.md and one directory per system (each replaced).
+    /// The report's directory: README.md and one directory per system. A report replaces
+    /// the files an earlier report wrote there (listed in its `.sysid-report`) and no others.
     pub out: PathBuf,
     /// Catalogue systems (empty: all).
     pub systems: Vec<String>,
@@ -42,6 +43,8 @@ pub struct ReportOptions {
     pub basin_spread: f64,
     /// Seed of the data, the trials and the default-start fits.
     pub seed: u64,
+    /// Replace files at the report's paths that no report wrote (refused otherwise).
+    pub force: bool,
 }
 
 impl Default for ReportOptions {
@@ -55,6 +58,7 @@ impl Default for ReportOptions {
             grid: 25,
             basin_spread: 0.9,
             seed: 1,
+            force: false,
         }
     }
 }
@@ -103,23 +107,115 @@ pub fn write_report(args: &ReportOptions, observer: &dyn Observer) -> anyhow::Re
         }
     }
     let methods = sysid_registry::parse_list(&args.methods)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+    let manifest = Manifest::prepare(&args.out, &systems, args.force)?;
+    let written = write_sections(args, &systems, &methods, observer);
+    manifest.close()?;
+    let path = written?;
+    let seconds = manifest.started.elapsed().as_secs_f64();
+    observer.note(&format!("report written to {} in {seconds:.0} s", path.display()));
+    Ok(path)
+}
+
+fn write_sections(
+    args: &ReportOptions,
+    systems: &[String],
+    methods: &[String],
+    observer: &dyn Observer,
+) -> anyhow::Result<PathBuf> {
     let started = Instant::now();
     let mut sections = Vec::new();
-    for name in &systems {
+    for name in systems {
         let t = Instant::now();
-        let report = SystemReport { args, methods: &methods, observer };
+        let report = SystemReport { args, methods, observer };
         let section = sysid_systems::visit(name, report).expect("a catalogue name")?;
         observer.note(&format!("{name}: done in {:.1} s", t.elapsed().as_secs_f64()));
         sections.push(section);
     }
-    let readme = markdown(args, &methods, &sections, started.elapsed().as_secs_f64());
-    let path = args.out.join("README.md");
-    std::fs::write(&path, readme).with_context(|| format!("cannot write {}", path.display()))?;
-    let seconds = started.elapsed().as_secs_f64();
-    observer.note(&format!("report written to {} in {seconds:.0} s", path.display()));
+    let readme = markdown(args, methods, &sections, started.elapsed().as_secs_f64());
+    let path = args.out.join(README);
+    write(&path, &readme)?;
     Ok(path)
+}
+
+/// The report's README, at the top of its directory.
+const README: &str = "README.md";
+
+/// `.sysid-report`: what reports wrote into their directory, a relative path a line. A report
+/// removes and replaces these files and no others, so whatever else the directory holds is
+/// never touched.
+const MANIFEST: &str = ".sysid-report";
+
+/// The files a report may write for one system, relative to the report's directory.
+fn system_files(system: &str) -> Vec<String> {
+    let figures = ["convergence", "prediction", "accuracy", "cost", "basin"];
+    let mut paths: Vec<String> = figures
+        .iter()
+        .flat_map(|f| ["png", "svg"].map(|ext| format!("{system}/{f}.{ext}")))
+        .collect();
+    paths.extend(["convergence", "prediction", "data"].map(|f| format!("{system}/{f}.csv")));
+    for sub in ["study", "basin"] {
+        paths.extend(files::OWNED.iter().map(|f| format!("{system}/{sub}/{f}")));
+    }
+    paths
+}
+
+/// The report directory's ledger of its own files, open while a report writes.
+struct Manifest {
+    out: PathBuf,
+    /// What earlier reports wrote and this one does not replace.
+    kept: std::collections::BTreeSet<String>,
+    /// What this report may write.
+    planned: Vec<String>,
+    started: Instant,
+}
+
+impl Manifest {
+    /// Checks that the report replaces only files a report wrote (or `force`), and removes
+    /// those of the systems it is about to write, stale figures included.
+    fn prepare(out: &Path, systems: &[String], force: bool) -> anyhow::Result<Self> {
+        let path = out.join(MANIFEST);
+        let earlier: std::collections::BTreeSet<String> = match std::fs::read_to_string(&path) {
+            Ok(text) => text.lines().map(str::to_string).collect(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Default::default(),
+            Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
+        };
+        let mut planned = vec![README.to_string()];
+        planned.extend(systems.iter().flat_map(|s| system_files(s)));
+        let foreign: Vec<&String> =
+            planned.iter().filter(|f| out.join(f).exists() && !earlier.contains(*f)).collect();
+        if !foreign.is_empty() && !force {
+            let shown: Vec<&str> = foreign.iter().take(4).map(|f| f.as_str()).collect();
+            let more = foreign.len().saturating_sub(shown.len());
+            anyhow::bail!(
+                "{} holds files that no report wrote at the report's paths ({}{}): choose \
+                 another --out, or give --force to replace them",
+                out.display(),
+                shown.join(", "),
+                if more > 0 { format!(" and {more} more") } else { String::new() }
+            );
+        }
+        std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+        for f in &planned {
+            match std::fs::remove_file(out.join(f)) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => {
+                    return Err(e)
+                        .with_context(|| format!("cannot replace {}", out.join(f).display()));
+                }
+            }
+        }
+        let kept = earlier.into_iter().filter(|f| !planned.contains(f)).collect();
+        Ok(Self { out: out.into(), kept, planned, started: Instant::now() })
+    }
+
+    /// Records what the report wrote (also after a failure: what exists is the report's).
+    fn close(&self) -> anyhow::Result<()> {
+        let mut lines: Vec<&str> = self.kept.iter().map(String::as_str).collect();
+        lines.extend(self.planned.iter().filter(|f| self.out.join(f).exists()).map(String::as_str));
+        lines.sort_unstable();
+        write(&self.out.join(MANIFEST), &(lines.join("\n") + "\n"))
+    }
 }
 
 /// What the README says about one system.
@@ -154,10 +250,6 @@ impl Visit for SystemReport<'_> {
         let started = Instant::now();
         let args = self.args;
         let dir = args.out.join(case.name);
-        if dir.exists() {
-            std::fs::remove_dir_all(&dir)
-                .with_context(|| format!("cannot replace {}", dir.display()))?;
-        }
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("cannot create {}", dir.display()))?;
         let problem = case.problem(args.seed).with_context(|| format!("system {}", case.name))?;
@@ -242,6 +334,7 @@ impl SystemReport<'_> {
             seed: args.seed,
             fixed: Vec::new(),
             driver: Default::default(),
+            settings: Default::default(),
         };
         let fits = self.methods.iter().map(|m| method::<S>(m)).collect::<anyhow::Result<_>>()?;
         let study = Study::new(spec, scenario, fits, method::<S>(REFERENCE)?)?;
@@ -396,9 +489,12 @@ fn run_study<S: System + Clone + Send + Sync>(
     observer: &dyn Observer,
 ) -> anyhow::Result<Summary> {
     observer.begin(&format!("{} trials", study.spec().system), study.spec().trials as u64);
-    let summary = files::run(study, dir, None, false, &|done, todo| {
-        observer.advance(done as u64, todo as u64)
-    });
+    let summary = files::run(
+        study,
+        dir,
+        files::RunOptions { force: true, ..Default::default() },
+        &|done, todo| observer.advance(done as u64, todo as u64),
+    );
     observer.end();
     let summary = summary?;
     Ok(summary)
@@ -465,7 +561,7 @@ fn draw_basin<S: System + Clone + Send + Sync>(
     let map = basin(study, (0, 1), grid, &|done, _| observer.advance(done as u64, total));
     observer.end();
     let map = map?;
-    map.write(&dir.join("basin"))?;
+    map.write(&dir.join("basin"), true)?;
     let truth = study.scenario().truth();
     let panels = map
         .maps
