@@ -72,6 +72,10 @@ pub struct StudyArgs {
     /// others at the truth), spread by --perturb.
     #[arg(long, value_name = "U1,U2")]
     basin: Option<String>,
+    /// When stderr is not a terminal (a batch job's log), print a plain line with the
+    /// count of trials done every this many seconds (0: never).
+    #[arg(long, default_value_t = 60.0, value_name = "SECONDS", allow_negative_numbers = true)]
+    log_every: f64,
     /// Points per axis of the basin map.
     #[arg(long, default_value_t = 41, value_name = "G", requires = "basin")]
     grid: usize,
@@ -89,8 +93,12 @@ pub struct MergeArgs {
     shards: Vec<PathBuf>,
     /// The merged study's directory: new, empty, or holding this same merge (merging again
     /// rewrites the same files).
-    #[arg(long, value_name = "DIR")]
-    out: PathBuf,
+    #[arg(long, value_name = "DIR", required_unless_present = "check")]
+    out: Option<PathBuf>,
+    /// Only tell how many trials each shard has done (from its files, while it runs too):
+    /// exit 0 when every shard of the study is complete, 1 when not.
+    #[arg(long, conflicts_with = "out")]
+    check: bool,
     /// Write into an --out that holds files sysid did not write (see `sysid study --help`).
     #[arg(long)]
     force: bool,
@@ -216,15 +224,50 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
     }
     let total = study.spec().trials;
     let bar = progress_bar(total as u64, "trials");
+    let label = match args.shard {
+        Some(s) => format!("{system} shard {}/{}", s.index, s.count),
+        None => system.to_string(),
+    };
+    let log = LogLines::new(label, args.log_every);
     let options = RunOptions { shard: args.shard, resume: args.resume, force: args.force };
     let summary = files::run(&study, &args.out, options, &|done, todo| {
         bar.set_length(todo as u64);
         bar.set_position(done as u64);
+        log.tick(done, todo);
     })?;
     bar.finish_and_clear();
     crate::emit(&summary.markdown())?;
     eprintln!("{}: {} trials written to {}", system, summary.trials, args.out.display());
     Ok(Outcome::Success)
+}
+
+/// Plain progress lines on stderr for batch logs, where the progress bar is hidden: one
+/// every `every` seconds while trials run.
+struct LogLines {
+    label: String,
+    every: Option<std::time::Duration>,
+    started: std::time::Instant,
+    last: std::sync::Mutex<std::time::Instant>,
+}
+
+impl LogLines {
+    fn new(label: String, every: f64) -> Self {
+        use std::io::IsTerminal;
+        let on = every > 0.0 && !std::io::stderr().is_terminal();
+        let now = std::time::Instant::now();
+        let every = on.then(|| std::time::Duration::from_secs_f64(every));
+        Self { label, every, started: now, last: std::sync::Mutex::new(now) }
+    }
+
+    fn tick(&self, done: usize, todo: usize) {
+        let Some(every) = self.every else { return };
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        if done > 0 && done < todo && last.elapsed() >= every {
+            *last = std::time::Instant::now();
+            let secs = self.started.elapsed().as_secs_f64();
+            eprintln!("{}: {done}/{todo} trials done, {secs:.0} s", self.label);
+        }
+    }
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).
@@ -237,13 +280,46 @@ pub(crate) fn progress_bar(total: u64, unit: &str) -> ProgressBar {
 
 /// Runs `sysid merge`.
 pub fn merge(args: &MergeArgs) -> anyhow::Result<Outcome> {
-    let summary = files::merge(&args.shards, &args.out, args.force)?;
+    let Some(out) = &args.out else { return check(&args.shards) };
+    let summary = files::merge(&args.shards, out, args.force)?;
     crate::emit(&summary.markdown())?;
-    eprintln!(
-        "{} shards merged into {} ({} trials)",
-        args.shards.len(),
-        args.out.display(),
-        summary.trials
-    );
+    eprintln!("{} shards merged into {} ({} trials)", args.shards.len(), out.display(), summary.trials);
     Ok(Outcome::Success)
+}
+
+/// `sysid merge --check`: a line per shard, the shards not given, and a last line
+/// `incomplete: 3,7` (shard indices) or `complete`.
+fn check(dirs: &[PathBuf]) -> anyhow::Result<Outcome> {
+    let shards = files::progress(dirs)?;
+    let mut text = String::new();
+    let mut incomplete = std::collections::BTreeSet::new();
+    for s in &shards {
+        text += &format!(
+            "{:<12} {}/{} trials  {}\n",
+            files::shard_name(s.shard),
+            s.done,
+            s.expected,
+            s.dir.display()
+        );
+        if s.done < s.expected {
+            incomplete.insert(s.shard.map_or(1, |s| s.index));
+        }
+    }
+    if let Some(count) = shards.first().and_then(|s| s.shard).map(|s| s.count) {
+        let given: std::collections::BTreeSet<usize> =
+            shards.iter().filter_map(|s| s.shard.map(|s| s.index)).collect();
+        for index in (1..=count).filter(|i| !given.contains(i)) {
+            text += &format!("{:<12} no directory given\n", format!("{index}/{count}"));
+            incomplete.insert(index);
+        }
+    }
+    if incomplete.is_empty() {
+        text += "complete\n";
+        crate::emit(&text)?;
+        return Ok(Outcome::Success);
+    }
+    let list: Vec<String> = incomplete.iter().map(usize::to_string).collect();
+    text += &format!("incomplete: {}\n", list.join(","));
+    crate::emit(&text)?;
+    Ok(Outcome::NotConverged)
 }

@@ -32,6 +32,9 @@ pub enum StudyError {
     /// The output directory holds a different study, or the shards do not belong together.
     #[error("{0}")]
     Mismatch(String),
+    /// Shards to merge are missing or have not finished.
+    #[error("{0}")]
+    Incomplete(String),
     /// The output directory holds files sysid did not write.
     #[error(
         "{} holds files sysid did not write ({}): choose another --out, or give --force to \

@@ -256,8 +256,6 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
         }
     }
     let whole = Header { shard: None, ..headers[0].clone() };
-    let mut records = Vec::new();
-    let mut seen = BTreeMap::new();
     for (dir, header) in dirs.iter().zip(&headers) {
         if (Header { shard: None, ..header.clone() }) != whole {
             return Err(StudyError::Mismatch(format!(
@@ -267,15 +265,21 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
                 difference(&headers[0], header)
             )));
         }
+    }
+    let mut records = Vec::new();
+    let mut seen = BTreeMap::new();
+    let mut lacking = Vec::new();
+    for (dir, header) in dirs.iter().zip(&headers) {
         let complete = read_complete(dir, header)?;
-        let expected = header.trials().len();
         let got: BTreeSet<usize> = complete.iter().map(|r| r.trial).collect();
+        let expected = header.trials().len();
         if got.len() != expected {
-            return Err(StudyError::Mismatch(format!(
-                "{} is incomplete: {} of its {expected} trials; finish it with --resume first",
-                dir.display(),
-                got.len()
-            )));
+            lacking.push(format!(
+                "{} ({} of {expected} trials in {})",
+                shard_name(header.shard),
+                got.len(),
+                dir.display()
+            ));
         }
         for t in got {
             if let Some(other) = seen.insert(t, dir.clone()) {
@@ -288,11 +292,20 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
         }
         records.extend(complete);
     }
-    if seen.len() != whole.spec.trials {
+    let count = headers[0].shard.map_or(1, |s| s.count);
+    let given: BTreeSet<usize> = headers.iter().filter_map(|h| h.shard.map(|s| s.index)).collect();
+    if headers[0].shard.is_some() {
+        for index in (1..=count).filter(|i| !given.contains(i)) {
+            lacking.push(format!("{index}/{count} (no directory given)"));
+        }
+    }
+    if !lacking.is_empty() || seen.len() != whole.spec.trials {
         let missing = (0..whole.spec.trials).filter(|t| !seen.contains_key(t)).count();
-        return Err(StudyError::Mismatch(format!(
-            "{missing} of {} trials are in none of the shards: is a shard missing?",
-            whole.spec.trials
+        return Err(StudyError::Incomplete(format!(
+            "{missing} of {} trials are in none of the shards; shards missing or incomplete: \
+             {}. Finish them (study --resume with the same --shard) and merge again",
+            whole.spec.trials,
+            lacking.join(", ")
         )));
     }
     check_owned(out, force)?;
@@ -312,6 +325,41 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
     }
     write_atomically(&out_file, &json(&whole))?;
     finish(out, &whole, records)
+}
+
+/// How far one shard directory has come, from its files alone.
+#[derive(Clone, Debug)]
+pub struct ShardProgress {
+    /// The directory.
+    pub dir: PathBuf,
+    /// Its shard (None for a whole study).
+    pub shard: Option<Shard>,
+    /// Complete trials written.
+    pub done: usize,
+    /// Trials it is responsible for.
+    pub expected: usize,
+}
+
+/// The progress of each of `dirs` (shards of one study, or any studies), read without
+/// locking: a running shard shows what it has written so far.
+pub fn progress(dirs: &[PathBuf]) -> Result<Vec<ShardProgress>, StudyError> {
+    let mut out = Vec::new();
+    for dir in dirs {
+        let header = read_header(&dir.join(STUDY_FILE))?;
+        let done: BTreeSet<usize> = read_complete(dir, &header)?.iter().map(|r| r.trial).collect();
+        out.push(ShardProgress {
+            dir: dir.clone(),
+            shard: header.shard,
+            done: done.len(),
+            expected: header.trials().len(),
+        });
+    }
+    Ok(out)
+}
+
+/// "3/16", or "whole study".
+pub fn shard_name(shard: Option<Shard>) -> String {
+    shard.map_or("whole study".into(), |s| format!("{}/{}", s.index, s.count))
 }
 
 /// Refuses `dir` when it holds files sysid did not write, unless `force`. A directory is
