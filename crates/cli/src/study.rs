@@ -283,7 +283,12 @@ pub fn merge(args: &MergeArgs) -> anyhow::Result<Outcome> {
     let Some(out) = &args.out else { return check(&args.shards) };
     let summary = files::merge(&args.shards, out, args.force)?;
     crate::emit(&summary.markdown())?;
-    eprintln!("{} shards merged into {} ({} trials)", args.shards.len(), out.display(), summary.trials);
+    eprintln!(
+        "{} shards merged into {} ({} trials)",
+        args.shards.len(),
+        out.display(),
+        summary.trials
+    );
     Ok(Outcome::Success)
 }
 

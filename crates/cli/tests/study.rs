@@ -82,6 +82,10 @@ fn a_study_writes_its_files_and_prints_the_table() {
     )
     .unwrap();
     assert_eq!(summary["trials"], 12);
+    // A batch log gets plain progress lines (here after every trial), no bar.
+    let logged = study(&scratch.path("logged"), &["--log-every", "1e-9"]);
+    let lines = text(&logged.stderr);
+    assert!(lines.contains("van-der-pol: 1/12 trials done") && !lines.contains('\r'), "{lines}");
     // No progress bar when stderr is not a terminal: one closing line only.
     assert_eq!(text(&run.stderr).lines().count(), 1, "{}", text(&run.stderr));
     // The table on stdout is summary.md.
@@ -110,6 +114,30 @@ fn shards_merge_into_the_unsharded_study() {
     std::fs::write(Path::new(&other).join("study.json"), "{}").unwrap();
     let refused = sysid(&["merge", &one, &two, "--out", &other]);
     assert_eq!(refused.status.code(), Some(2));
+
+    // merge --check tells each shard's count of trials, from the files alone.
+    let check = sysid(&["merge", "--check", &one, &two]);
+    assert_eq!(check.status.code(), Some(0), "{}", text(&check.stderr));
+    let report = text(&check.stdout);
+    assert!(
+        report.contains("1/2          6/6 trials") && report.ends_with("complete\n"),
+        "{report}"
+    );
+    let check = sysid(&["merge", "--check", &one]);
+    assert_eq!(check.status.code(), Some(1), "one shard of two is not the study");
+    let report = text(&check.stdout);
+    assert!(
+        report.contains("2/2          no directory given") && report.ends_with("incomplete: 2\n"),
+        "{report}"
+    );
+    let lonely = sysid(&["merge", &one, "--out", &scratch.path("lonely")]);
+    assert_eq!(lonely.status.code(), Some(2));
+    let err = text(&lonely.stderr);
+    assert!(
+        err.contains("6 of 12 trials are in none of the shards")
+            && err.contains("2/2 (no directory given)"),
+        "{err}"
+    );
 
     // Shards run with settings that change results do not merge: the setting is named.
     let steps = scratch.path("steps");

@@ -143,7 +143,11 @@ fn results_do_not_depend_on_threads_shards_or_interruptions() {
     assert!(e.contains("already holds another study: trials 2 vs 12"), "{e}");
     // A missing shard and a shard given twice are refused.
     let e = files::merge(&shards[..2], &scratch.join("partial"), false).unwrap_err().to_string();
-    assert!(e.contains("4 of 12 trials are in none of the shards") && e.contains("3/3 (no directory given)"), "{e}");
+    assert!(
+        e.contains("4 of 12 trials are in none of the shards")
+            && e.contains("3/3 (no directory given)"),
+        "{e}"
+    );
     let twice = [shards[0].clone(), shards[0].clone(), shards[1].clone(), shards[2].clone()];
     let e = files::merge(&twice, &scratch.join("twice"), false).unwrap_err().to_string();
     assert!(e.contains("twice"), "{e}");
