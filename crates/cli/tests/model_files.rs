@@ -276,6 +276,45 @@ fn unknowns_the_data_cannot_identify() {
 }
 
 #[test]
+fn an_expression_ten_thousand_deep_is_refused_not_a_stack_overflow() {
+    let message = "equation of x: the expression nests more than 200 levels deep (parentheses, signs, function calls and operators)";
+    // The expression starts at column 6 after `-k * `: the 202nd open level, at
+    // character 206, is refused.
+    let parens = format!("-k * {}x{}", "(".repeat(10_000), ")".repeat(10_000));
+    let minuses = format!("-k * {}x", "-".repeat(10_000));
+    for (tag, equation) in [("deep-parens", parens), ("deep-minuses", minuses)] {
+        let model = DECAY.replace("-k * x", &equation);
+        bad(tag, &model, DECAY_DATA, &format!("model.toml:4:212: {message}"));
+    }
+}
+
+#[test]
+fn an_expression_at_the_depth_limit_fits_and_studies_on_worker_threads() {
+    // −k·x at the limit twice over: x inside 200 parentheses, and a chain of 198 zero terms
+    // after it (200 operations deep).
+    let equation =
+        format!("-k * {}x{}{}", "(".repeat(200), ")".repeat(200), " + 0 * x".repeat(198));
+    let case = Case::new("deep-limit", &DECAY.replace("-k * x", &equation), DECAY_DATA);
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let k = json["estimates"]["k"].as_f64().unwrap();
+    assert!((k - 0.8).abs() < 0.02, "k = {k}");
+    // A study fits its trials on rayon's worker threads (2 MiB stacks).
+    let dir = case.path("study");
+    let out = sysid(&[
+        "study",
+        "--model",
+        &case.model(),
+        "--trials",
+        "4",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}
+
+#[test]
 fn a_model_that_blows_up() {
     let model = DECAY.replace("-k * x", "k * x^2");
     bad(

@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
-use sysid_core::Unknown;
-use sysid_model::expr::{Program, Slot, parse};
-use sysid_model::{DataSpec, ModelFile, RecordKind};
-use sysid_ode::{Integrator, Interpolation, Scheme};
+use sysid_core::{Data, Problem, Unknown};
+use sysid_model::expr::{MAX_DEPTH, Program, Slot, parse};
+use sysid_model::{DataSpec, Model, ModelFile, RecordKind};
+use sysid_ode::{Inputs, Integrator, Interpolation, Scheme};
 
 /// The start of most cases: two states and a parameter.
 const HEAD: &str = "states = [\"x\", \"y\"]\nparameters = [\"k\"]\n";
@@ -270,6 +270,90 @@ fn equations() {
             "models/m.toml:4:6: equation of x: unknown name `q` (names: x, u, t)",
         ),
     ]);
+}
+
+/// An expression nested deeper than [`MAX_DEPTH`] is refused where the limit is crossed:
+/// parentheses, signs, calls and exponents at the innermost operand, a chain of operations
+/// at the operator that makes it too long.
+#[test]
+fn expressions_nested_too_deeply() {
+    let deep = |expression: String| format!("{HEAD}[equations]\nx = \"{expression}\"\ny = \"x\"\n");
+    let message = "equation of x: the expression nests more than 200 levels deep (parentheses, signs, function calls and operators)";
+    check(&[
+        // The expression starts at column 6; 201 parentheses put `x` at column 207.
+        (
+            deep(format!("{}x{}", "(".repeat(201), ")".repeat(201))),
+            &format!("models/m.toml:4:207: {message}"),
+        ),
+        (deep(format!("{}x", "-".repeat(201))), &format!("models/m.toml:4:207: {message}")),
+        (
+            deep(format!("{}x{}", "sin(".repeat(201), ")".repeat(201))),
+            &format!("models/m.toml:4:810: {message}"),
+        ),
+        (deep(format!("x{}", "^x".repeat(201))), &format!("models/m.toml:4:408: {message}")),
+        // 202 terms: the 201st `+` (character 402) makes the chain 201 deep.
+        (deep(format!("x{}", "+x".repeat(201))), &format!("models/m.toml:4:407: {message}")),
+        (deep(format!("x{}", "*x".repeat(201))), &format!("models/m.toml:4:407: {message}")),
+        (deep(format!("{}x", "-(".repeat(201))), &format!("models/m.toml:4:207: {message}")),
+    ]);
+}
+
+/// One expression of every shape exactly at the depth limit: parentheses, signs, calls of
+/// one and of two arguments, exponents, sums, products, and parentheses around a chain.
+fn at_the_depth_limit() -> Vec<String> {
+    let n = MAX_DEPTH;
+    vec![
+        format!("{}x{}", "(".repeat(n), ")".repeat(n)),
+        format!("{}x", "-".repeat(n)),
+        format!("{}x{}", "sin(".repeat(n), ")".repeat(n)),
+        format!("{}x{}", "max(y, ".repeat(n), ")".repeat(n)),
+        format!("x{}", "^x".repeat(n)),
+        format!("x{}", " + x".repeat(n)),
+        format!("x{}", " * x".repeat(n)),
+        format!("{}x{}{}", "(".repeat(n), " - y".repeat(n), ")".repeat(n)),
+    ]
+}
+
+/// Every pass over an expression at the depth limit fits in the 2 MiB stack of a worker
+/// thread (rayon's, where studies fit): parsing, printing, compiling with its constant folding,
+/// evaluating (recursively, as the trees have more nodes than the evaluation's slots) in f64
+/// and in the dual numbers of the explicit and the implicit integrators' sensitivities,
+/// and dropping the tree.
+#[test]
+fn every_pass_at_the_depth_limit_fits_a_worker_threads_stack() {
+    let passes = || {
+        for expression in at_the_depth_limit() {
+            assert!(!parse(&expression).unwrap().to_string().is_empty());
+            let model = format!(
+                "states = [\"x\", \"y\"]\nparameters = [\"k\"]\n[equations]\nx = \"{expression}\"\ny = \"-k * y\"\n[initial]\nx = 0.5\ny = 1.0\n[unknowns]\nk = 0.5\n"
+            );
+            let file = ModelFile::parse(&model, Path::new("deep.toml")).unwrap();
+            assert!(!file.equations[0].is_constant(), "{expression}");
+            let system = Model { file }.system(Inputs::default());
+            let times = [0.01, 0.02, 0.03];
+            let data =
+                Data::discrete().series("x", &times, &[0.5; 3]).series("y", &times, &[1.0; 3]);
+            for integrator in [Integrator::default(), Integrator::rodas4(1e-8, 1e-10)] {
+                let problem = Problem::builder(system.clone())
+                    .known("x", 0.5)
+                    .known("y", 1.0)
+                    .unknown("k", 0.5)
+                    .data(data.clone())
+                    .integrator(integrator)
+                    .build()
+                    .unwrap();
+                let linearization = problem.linearize(&[0.5]).unwrap();
+                let (cost, _) = problem.cost(&[0.5]).unwrap();
+                assert!(cost.is_finite(), "{expression}: {linearization:?}");
+            }
+        }
+    };
+    std::thread::Builder::new()
+        .stack_size(2 << 20)
+        .spawn(passes)
+        .unwrap()
+        .join()
+        .expect("every pass at the depth limit within 2 MiB");
 }
 
 /// `[initial]` and `[known]`: finite numbers for states and parameters; `[initial]` is read first.
