@@ -211,6 +211,27 @@ fn simulate_writes_reproducible_csv() {
 }
 
 #[test]
+fn a_step_that_asks_for_too_many_times_is_refused() {
+    // 3·10¹² times would need tens of terabytes: refused before anything runs.
+    for (args, needle) in [
+        (
+            &["predict", "--system", "falling-body", "--until", "3", "--step", "1e-12"][..],
+            "error: --step 1e-12 from t0 = 0 to --until 3 asks for 3.0e12 times, more than the 10000000 a command writes",
+        ),
+        (
+            &["simulate", "--system", "falling-body-continuous", "--step", "1e-12"][..],
+            "error: --step 1e-12 over the record [0, 3] asks for 3.0e12 times, more than the 10000000 a command writes",
+        ),
+    ] {
+        let out = sysid(args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(out.stdout.is_empty(), "{args:?} printed to stdout");
+        assert_eq!(stderr.trim_end(), needle, "{args:?}");
+    }
+}
+
+#[test]
 fn quasilinearization_from_the_cli() {
     let out = sysid(&[
         "fit",
