@@ -23,7 +23,7 @@ pub struct PredictArgs {
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     until: f64,
     /// Spacing of the predicted times (default: 200 intervals from t0 to T).
-    #[arg(long, value_name = "H")]
+    #[arg(long, value_name = "H", allow_negative_numbers = true)]
     step: Option<f64>,
     /// The method that fits first.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]

@@ -21,20 +21,20 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "FILE", requires = "times")]
     model: Option<PathBuf>,
     /// Output times a:b:step, e.g. 0:10:0.1 (model files).
-    #[arg(long, value_name = "A:B:STEP")]
+    #[arg(long, value_name = "A:B:STEP", allow_hyphen_values = true)]
     times: Option<String>,
     /// Set an unknown (or known) value, e.g. --set k1=0.8; unknowns are at their guesses
     /// otherwise. Repeat for several.
-    #[arg(long = "set", value_name = "NAME=VALUE")]
+    #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
     set: Vec<String>,
     /// The data file whose input columns drive the model (default: the model's data file).
     #[arg(long, value_name = "CSV", requires = "model")]
     data: Option<PathBuf>,
     /// Seed of the synthetic noise (catalogue systems): the same seed gives the same data.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     seed: u64,
     /// Sample spacing for a catalogue record given as a function (continuous systems).
-    #[arg(long, default_value_t = 0.001, value_name = "DT")]
+    #[arg(long, default_value_t = 0.001, value_name = "DT", allow_negative_numbers = true)]
     step: f64,
     /// Write to this file instead of standard output.
     #[arg(long, value_name = "FILE")]

@@ -22,7 +22,7 @@ pub struct SourceArgs {
     #[arg(long, value_name = "CSV", requires = "model")]
     pub data: Option<PathBuf>,
     /// Seed of a catalogue system's synthetic data (fixed data ignore it).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
 }
 
