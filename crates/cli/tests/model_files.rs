@@ -120,6 +120,30 @@ fn the_workflow_fits_simulates_and_predicts() {
 }
 
 #[test]
+fn a_byte_order_mark_at_the_start_of_a_file_is_skipped() {
+    // As Excel ("CSV UTF-8") and Notepad write them.
+    let case = Case::new("bom", &format!("\u{feff}{DECAY}"), &format!("\u{feff}{DECAY_DATA}"));
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let k = json["estimates"]["k"].as_f64().unwrap();
+    assert!((k - 0.8).abs() < 0.02, "k = {k}");
+    // Errors are located as without the mark.
+    bad(
+        "bom-cell",
+        &format!("\u{feff}{DECAY}"),
+        "\u{feff}t,x\n0,2\n1,abc\n2,0.4\n",
+        "data.csv:3:3: column `x`: `abc` is not a number",
+    );
+    bad(
+        "bom-time",
+        DECAY,
+        "\u{feff}x\n2\n0.9\n",
+        "data.csv:1: the first column must be the time, named `t` or `time`; found `x`",
+    );
+}
+
+#[test]
 fn toml_syntax_error() {
     bad(
         "toml",

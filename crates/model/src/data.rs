@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use crate::table::{Table, TableError, cell_position};
+use crate::table::{Table, TableError, cell_position, without_bom};
 use sysid_core::Data;
 use sysid_ode::{Inputs, Signal};
 
@@ -57,16 +57,18 @@ fn table_error(e: TableError) -> ModelError {
 }
 
 /// Reads `path` against `model`: the time column first (named `t` or `time`), then columns
-/// named after states, outputs or inputs; empty cells are missing values.
+/// named after states, outputs or inputs; empty cells are missing values. A leading
+/// byte-order mark is skipped.
 pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ModelError::file(&file, e.to_string()))?;
-    check_time_column(&text, &file)?;
-    let table = Table::parse(&text, &file).map_err(table_error)?;
+    let text = without_bom(&text);
+    check_time_column(text, &file)?;
+    let table = Table::parse(text, &file).map_err(table_error)?;
     check_columns(model, &table, &file)?;
     check_weights(model, &table, &file)?;
     let signals = input_signals(model, &table, &file)?;
-    let data = measured_series(model, &table, &text, &file)?;
+    let data = measured_series(model, &table, text, &file)?;
     Ok(ModelData { data, inputs: Inputs::new(signals), rows: table.time().len() })
 }
 

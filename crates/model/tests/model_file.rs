@@ -682,6 +682,22 @@ atol = 1e-9
 max_steps = 5000.9
 "#;
 
+/// A leading byte-order mark is skipped: the file reads as without it, and its errors are
+/// located as without it.
+#[test]
+fn a_leading_byte_order_mark_is_skipped() {
+    let with = ModelFile::parse(&format!("\u{feff}{FULL}"), Path::new("models/m.toml")).unwrap();
+    let without = ModelFile::parse(FULL, Path::new("models/m.toml")).unwrap();
+    assert_eq!(
+        (with.states, with.equations, with.data),
+        (without.states, without.equations, without.data)
+    );
+    check(&[(
+        format!("\u{feff}{HEAD}[equations]\nx = \"-k * q\"\ny = \"x\"\n"),
+        "models/m.toml:4:11: equation of x: unknown name `q` (names: x, y, k, t)",
+    )]);
+}
+
 /// Every value of a file that uses every section is read as written.
 #[test]
 fn a_file_with_every_section_reads_every_value() {

@@ -105,8 +105,9 @@ impl ModelFile {
     /// The sections are checked in a fixed order, whatever their order in the file, and the
     /// first mistake is reported: TOML syntax and top-level keys; the names, which every
     /// expression and value refers to; `[equations]`, `[outputs]`, `[initial]`, `[known]`,
-    /// `[unknowns]`, `[data]` and `[integrator]`.
+    /// `[unknowns]`, `[data]` and `[integrator]`. A leading byte-order mark is skipped.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ModelError> {
+        let text = crate::table::without_bom(text);
         let r = Reader::new(path, text);
         let doc = r.document()?;
         let doc = doc.get_ref();
