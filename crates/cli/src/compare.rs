@@ -23,7 +23,7 @@ pub struct CompareArgs {
     #[arg(long, value_name = "FILE", conflicts_with = "all")]
     model: Option<PathBuf>,
     /// The data file for --model (default: the model's `[data] file`).
-    #[arg(long, value_name = "CSV", requires = "model")]
+    #[arg(long, value_name = "CSV", requires = "model", conflicts_with_all = ["system", "all"])]
     data: Option<PathBuf>,
     /// Every catalogue system, one table each.
     #[arg(long)]

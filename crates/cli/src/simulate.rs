@@ -28,7 +28,7 @@ pub struct SimulateArgs {
     #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
     set: Vec<String>,
     /// The data file whose input columns drive the model (default: the model's data file).
-    #[arg(long, value_name = "CSV", requires = "model")]
+    #[arg(long, value_name = "CSV", requires = "model", conflicts_with = "system")]
     data: Option<PathBuf>,
     /// Seed of the synthetic noise (catalogue systems): the same seed gives the same data.
     #[arg(long, default_value_t = 1, allow_negative_numbers = true)]

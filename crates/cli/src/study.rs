@@ -29,7 +29,7 @@ pub struct StudyArgs {
     #[arg(long, value_name = "FILE")]
     model: Option<PathBuf>,
     /// The data file for --model (default: the model's `[data] file`).
-    #[arg(long, value_name = "CSV", requires = "model")]
+    #[arg(long, value_name = "CSV", requires = "model", conflicts_with = "system")]
     data: Option<PathBuf>,
     /// Comma-separated methods (default: goodman, quasilinearization, gauss-newton-ls).
     #[arg(long, value_name = "A,B,C")]

@@ -226,6 +226,35 @@ fn a_negative_number_reaches_the_options_own_check() {
 }
 
 #[test]
+fn data_with_a_catalogue_system_is_refused_not_ignored() {
+    // A catalogue system has its own data; --data belongs to --model.
+    let dir = std::env::temp_dir().join(format!("sysid-cli-data-{}", std::process::id()));
+    let out = dir.join("never").display().to_string();
+    for args in [
+        &["fit", "--system", "falling-body"][..],
+        &["compare", "--system", "falling-body"],
+        &["compare", "--all"],
+        &["predict", "--system", "falling-body", "--until", "3"],
+        &["simulate", "--system", "falling-body"],
+        &["study", "--system", "falling-body", "--trials", "2", "--out", &out],
+    ] {
+        let args = [args, &["--data", "data.csv"]].concat();
+        let run = sysid(&args);
+        let stderr = text(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(run.stdout.is_empty(), "{args:?} printed to stdout");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(
+            stderr.starts_with("error: the argument '-")
+                && stderr.contains("cannot be used with")
+                && stderr.contains("'--data <CSV>'"),
+            "{args:?}: {stderr}"
+        );
+    }
+    assert!(!Path::new(&out).exists());
+}
+
+#[test]
 fn systems_lists_the_catalogue() {
     let out = sysid(&["systems"]);
     assert_eq!(out.status.code(), Some(0));
