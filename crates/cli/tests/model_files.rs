@@ -339,6 +339,18 @@ fn an_expression_at_the_depth_limit_fits_and_studies_on_worker_threads() {
 }
 
 #[test]
+fn data_before_t0_are_refused_at_the_first_sample() {
+    // t0 after all the data: integrated backward, the decay grew until the data could not
+    // identify k. Refused at the first sample, saying where t0 is set.
+    let model = DECAY.replace("file = \"data.csv\"", "file = \"data.csv\"\nt0 = 5");
+    let message = "data.csv:2:3: column `x`: a sample at t = 0 lies before t0 = 5 (";
+    bad("t0-after", &model, DECAY_DATA, message);
+    let message =
+        "model.toml:11:6), the time of the initial values: the data must start at t0 or later";
+    bad("t0-after-line", &model, DECAY_DATA, message);
+}
+
+#[test]
 fn a_model_that_blows_up() {
     let model = DECAY.replace("-k * x", "k * x^2");
     bad(

@@ -560,6 +560,59 @@ fn data() {
     ]);
 }
 
+/// Data before t0, where the initial values are given, are refused at the first such sample
+/// (its cell in the data file), saying where t0 is set.
+#[test]
+fn data_before_t0() {
+    let dir = std::env::temp_dir().join(format!("sysid-model-t0-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (model, data) = (dir.join("m.toml"), dir.join("d.csv"));
+    let (m, d) = (model.display(), data.display());
+    let problem = |data_table: &str, csv: &str| {
+        std::fs::write(&model, format!("{OK}[data]\nfile = \"d.csv\"\n{data_table}")).unwrap();
+        std::fs::write(&data, csv).unwrap();
+        Model::load(&model).and_then(|model| model.problem(None)).map(|_| ())
+    };
+    let tail = "the time of the initial values: the data must start at t0 or later";
+    let cases = [
+        // t0 after all the data.
+        (
+            "t0 = 5\n",
+            "t,y\n0,0.1\n1,0.3\n",
+            format!("{d}:2:3: column `y`: a sample at t = 0 lies before t0 = 5 ({m}:13:6), {tail}"),
+        ),
+        // The first sample before t0, whichever its column.
+        (
+            "t0 = 1.5\n",
+            "t,x,y\n0,,0.1\n1,0.5,0.3\n2,0.2,0.5\n",
+            format!(
+                "{d}:2:4: column `y`: a sample at t = 0 lies before t0 = 1.5 ({m}:13:6), {tail}"
+            ),
+        ),
+        (
+            "",
+            "t, y\n-1, 0\n0, 0.1\n1, 0.3\n",
+            format!(
+                "{d}:2:5: column `y`: a sample at t = -1 lies before t0 = 0 (the default: {m} has no [data] t0), {tail}"
+            ),
+        ),
+        // A continuous record spans every row.
+        (
+            "t0 = 0.5\nrecord = \"continuous\"\n",
+            "t,y\n0,\n1,0.3\n2,0.5\n",
+            format!(
+                "{d}:2:1: column `t`: the continuous record at t = 0 lies before t0 = 0.5 ({m}:13:6), {tail}"
+            ),
+        ),
+    ];
+    for (data_table, csv, expected) in cases {
+        assert_eq!(problem(data_table, csv).unwrap_err().to_string(), expected, "{csv}");
+    }
+    // Discrete data from t0 on, a row before t0 without a measured value, are accepted.
+    assert_eq!(problem("t0 = 0.5\n", "t,x,y\n0,,\n0.5,1,0\n1,0.6,0.4\n2,0.4,0.6\n"), Ok(()));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// `[integrator]`: its keys, then the options' own validation located at the table.
 #[test]
 fn integrator() {
@@ -729,6 +782,7 @@ fn a_file_with_every_section_reads_every_value() {
     let data = DataSpec {
         file: Some("models/sub/data.csv".into()),
         t0: -1.0,
+        t0_at: Some(at("t0 = -1") + 5),
         record: RecordKind::Continuous,
         weights: vec![("y".into(), 4.0, at("y = 4")), ("total".into(), 0.25, at("total = 0.25"))],
     };

@@ -38,8 +38,10 @@ pub enum RecordKind {
 pub struct DataSpec {
     /// The data file, relative to the model file.
     pub file: Option<PathBuf>,
-    /// Time of the initial values (default 0).
+    /// Time of the initial values (default 0); the data start there or later.
     pub t0: f64,
+    /// Byte offset of the `t0` value in the model file, if it is given.
+    pub t0_at: Option<usize>,
     /// Discrete or continuous.
     pub record: RecordKind,
     /// Weight per measured column (default 1).
