@@ -144,6 +144,29 @@ fn a_byte_order_mark_at_the_start_of_a_file_is_skipped() {
 }
 
 #[test]
+fn a_file_that_cannot_be_read_says_why_once() {
+    // The system's reason appears once, after the path: the CLI prints the whole error
+    // chain, so an error that also kept the reason as its source would repeat it.
+    let case = Case::new("unreadable", DECAY, DECAY_DATA);
+    let dir = case.dir.display().to_string();
+    let missing = case.path("missing.toml").display().to_string();
+    let model = case.model();
+    for (args, path) in [
+        (vec!["fit", "--model", &dir], &dir),
+        (vec!["fit", "--model", &missing], &missing),
+        (vec!["compare", "--model", &model, "--data", &dir], &dir),
+        (vec!["predict", "--model", &missing, "--until", "5"], &missing),
+        (vec!["simulate", "--model", &dir, "--times", "0:1:1"], &dir),
+    ] {
+        let out = sysid(&args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.starts_with(&format!("error: {path}: ")), "{args:?}: {stderr}");
+        assert_eq!(stderr.matches("(os error").count(), 1, "{args:?}: {stderr}");
+    }
+}
+
+#[test]
 fn toml_syntax_error() {
     bad(
         "toml",
