@@ -23,7 +23,7 @@ pub struct CompareArgs {
     #[arg(long, value_name = "FILE", conflicts_with = "all")]
     model: Option<PathBuf>,
     /// The data file for --model (default: the model's `[data] file`).
-    #[arg(long, value_name = "CSV", requires = "model")]
+    #[arg(long, value_name = "CSV", requires = "model", conflicts_with_all = ["system", "all"])]
     data: Option<PathBuf>,
     /// Every catalogue system, one table each.
     #[arg(long)]
@@ -32,7 +32,7 @@ pub struct CompareArgs {
     #[arg(long, value_name = "A,B,C")]
     methods: Option<String>,
     /// Seed of the synthetic data.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     seed: u64,
     /// Output format: tables, or a JSON list of fit objects (one per method, converged or
     /// not).

@@ -42,16 +42,17 @@ pub struct IntegratorArgs {
     #[arg(long, value_name = "ATOL", allow_negative_numbers = true)]
     pub atol: Option<f64>,
     /// A fixed step size (required by rk4; turns error control off for the others).
-    #[arg(long = "fixed-step", value_name = "H")]
+    #[arg(long = "fixed-step", value_name = "H", allow_negative_numbers = true)]
     pub fixed_step: Option<f64>,
     /// Step budget of one integration (default 100000).
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
     pub max_steps: Option<usize>,
 }
 
 impl IntegratorArgs {
     /// `integrator` with the settings given on the command line.
     pub fn apply_to(&self, integrator: Integrator) -> anyhow::Result<Integrator> {
+        self.validate()?;
         let mut out = integrator;
         if let Some(scheme) = self.integrator {
             out.scheme = scheme.into();
@@ -69,6 +70,30 @@ impl IntegratorArgs {
         }
         out.validate().map_err(|e| anyhow::anyhow!("integrator: {e}"))?;
         Ok(out)
+    }
+
+    /// Checks each value given, naming its option (the combination with the system's or
+    /// model file's settings is checked once applied).
+    fn validate(&self) -> anyhow::Result<()> {
+        if let Some(rtol) = self.rtol
+            && !(rtol > 0.0 && rtol.is_finite())
+        {
+            anyhow::bail!("--rtol must be positive, got {rtol}");
+        }
+        if let Some(atol) = self.atol
+            && !(atol >= 0.0 && atol.is_finite())
+        {
+            anyhow::bail!("--atol must be non-negative, got {atol}");
+        }
+        if let Some(h) = self.fixed_step
+            && !(h > 0.0 && h.is_finite())
+        {
+            anyhow::bail!("--fixed-step must be positive, got {h}");
+        }
+        if self.max_steps == Some(0) {
+            anyhow::bail!("--max-steps must be at least 1");
+        }
+        Ok(())
     }
 
     /// The problem with its integrator changed as given on the command line.

@@ -11,7 +11,7 @@ use crate::Outcome;
 use crate::fit::{fit, prepare};
 use crate::integrator::IntegratorArgs;
 use crate::methods::MethodArgs;
-use crate::simulate::write_output;
+use crate::simulate::{spaced, write_output};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 
 /// Arguments of `sysid predict`.
@@ -23,7 +23,7 @@ pub struct PredictArgs {
     #[arg(long, value_name = "T", allow_negative_numbers = true)]
     until: f64,
     /// Spacing of the predicted times (default: 200 intervals from t0 to T).
-    #[arg(long, value_name = "H")]
+    #[arg(long, value_name = "H", allow_negative_numbers = true)]
     step: Option<f64>,
     /// The method that fits first.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]
@@ -68,6 +68,15 @@ impl WithProblem for Predict<'_> {
         if !(step > 0.0 && step.is_finite()) {
             bail!("--step must be positive, got {step}");
         }
+        let mut times = spaced(
+            t0,
+            args.until,
+            step,
+            &format!("--step {step:e} from t0 = {t0} to --until {}", args.until),
+        )?;
+        if times.last().is_some_and(|&t| t < args.until) {
+            times.push(args.until);
+        }
         let estimate = fit(&problem, &args.method, args.options.common())?;
         if !estimate.converged() {
             eprintln!(
@@ -78,11 +87,6 @@ impl WithProblem for Predict<'_> {
                 estimate.termination
             );
             return Ok(Outcome::NotConverged);
-        }
-        let n = ((args.until - t0) / step + 1e-9).floor() as usize;
-        let mut times: Vec<f64> = (0..=n).map(|i| t0 + step * i as f64).collect();
-        if times.last().is_some_and(|&t| t < args.until) {
-            times.push(args.until);
         }
         // The trajectory and its sensitivities to the unknowns (as values) at the estimate.
         let (y0, p) = problem.point(&problem.unknowns().coordinates(&estimate.values));

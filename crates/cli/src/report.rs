@@ -24,19 +24,19 @@ pub struct ReportArgs {
     #[arg(long, default_value = "goodman,quasilinearization,gauss-newton-ls", value_name = "A,B")]
     methods: String,
     /// Trials of each system's study.
-    #[arg(long, default_value_t = 500, value_name = "N")]
+    #[arg(long, default_value_t = 500, value_name = "N", allow_negative_numbers = true)]
     trials: usize,
     /// Start perturbation ρ of the studies (see `sysid study --help`).
-    #[arg(long, default_value_t = 0.3, value_name = "RHO")]
+    #[arg(long, default_value_t = 0.3, value_name = "RHO", allow_negative_numbers = true)]
     perturb: f64,
     /// Points per axis of the basin maps.
-    #[arg(long, default_value_t = 25, value_name = "G")]
+    #[arg(long, default_value_t = 25, value_name = "G", allow_negative_numbers = true)]
     grid: usize,
     /// Spread of the basin maps: starts from truth·(1 − s) to truth·(1 + s).
-    #[arg(long, default_value_t = 0.9, value_name = "S")]
+    #[arg(long, default_value_t = 0.9, value_name = "S", allow_negative_numbers = true)]
     basin_spread: f64,
     /// Seed of the data, the trials and the default-start fits.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     seed: u64,
     /// Replace files at the report's paths that no report wrote. Without it such files are
     /// refused; the files an earlier report wrote (listed in OUT/.sysid-report) are always

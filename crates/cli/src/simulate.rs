@@ -21,20 +21,20 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "FILE", requires = "times")]
     model: Option<PathBuf>,
     /// Output times a:b:step, e.g. 0:10:0.1 (model files).
-    #[arg(long, value_name = "A:B:STEP")]
+    #[arg(long, value_name = "A:B:STEP", allow_hyphen_values = true)]
     times: Option<String>,
     /// Set an unknown (or known) value, e.g. --set k1=0.8; unknowns are at their guesses
     /// otherwise. Repeat for several.
-    #[arg(long = "set", value_name = "NAME=VALUE")]
+    #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
     set: Vec<String>,
     /// The data file whose input columns drive the model (default: the model's data file).
-    #[arg(long, value_name = "CSV", requires = "model")]
+    #[arg(long, value_name = "CSV", requires = "model", conflicts_with = "system")]
     data: Option<PathBuf>,
     /// Seed of the synthetic noise (catalogue systems): the same seed gives the same data.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     seed: u64,
     /// Sample spacing for a catalogue record given as a function (continuous systems).
-    #[arg(long, default_value_t = 0.001, value_name = "DT")]
+    #[arg(long, default_value_t = 0.001, value_name = "DT", allow_negative_numbers = true)]
     step: f64,
     /// Write to this file instead of standard output.
     #[arg(long, value_name = "FILE")]
@@ -55,7 +55,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
                         sysid_systems::NAMES.join(", ")
                     )
                 })??;
-            data_csv(&data, args.step)
+            data_csv(&data, args.step)?
         }
         (None, Some(path)) => model_csv(path, args)?,
         (None, None) => bail!("give --system NAME or --model FILE"),
@@ -77,6 +77,10 @@ pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The most output times (CSV rows) a command writes. More is a step given in the wrong
+/// unit, and would not fit in memory (predict asked for 40 TB at --step 1e-12).
+pub const MAX_TIMES: usize = 10_000_000;
+
 /// Parses `a:b:step` into the times a, a + step, …, up to b (inclusive within rounding).
 pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
     let parts: Vec<&str> = spec.split(':').collect();
@@ -92,11 +96,26 @@ pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
     if h <= 0.0 || b < a {
         bail!("--times a:b:step needs a ≤ b and step > 0, got {spec}");
     }
-    let n = ((b - a) / h + 1e-9).floor() as usize;
-    if n > 10_000_000 {
-        bail!("--times {spec} asks for {n} times");
-    }
+    spaced(a, b, h, &format!("--times {spec}"))
+}
+
+/// The times a, a + h, …, up to b (inclusive within rounding), for a ≤ b and h > 0; `what`
+/// names the options that asked for them in the error when they are more than [`MAX_TIMES`].
+pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
+    let n = intervals((b - a) / h + 1e-9, what)?;
     Ok((0..=n).map(|i| a + h * i as f64).collect())
+}
+
+/// The number of intervals `count` (rounded down), refused when the times would be more
+/// than [`MAX_TIMES`]; `what` names the options that asked for them.
+pub fn intervals(count: f64, what: &str) -> anyhow::Result<usize> {
+    if count.is_nan() || count >= MAX_TIMES as f64 {
+        bail!(
+            "{what} asks for {:.1e} times, more than the {MAX_TIMES} a command writes",
+            count + 1.0
+        );
+    }
+    Ok(count.floor() as usize)
 }
 
 fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
@@ -183,8 +202,9 @@ impl Visit for DataOf {
 }
 
 /// The data as CSV: a header row `t,<series...>`, one row per time, empty cells where a
-/// series has no sample. Every digit is kept (shortest round-trip representation).
-fn data_csv(data: &Data, step: f64) -> String {
+/// series has no sample. Every digit is kept (shortest round-trip representation). A record
+/// given as a function is sampled every `step` (rounded to divide the record evenly).
+fn data_csv(data: &Data, step: f64) -> anyhow::Result<String> {
     let columns: Vec<(String, Vec<(f64, f64)>)> = data
         .series
         .iter()
@@ -194,7 +214,8 @@ fn data_csv(data: &Data, step: f64) -> String {
                     times.iter().copied().zip(values.iter().copied()).collect()
                 }
                 (Samples::Function(f), Record::Continuous { t_lo, t_hi }) => {
-                    let n = ((t_hi - t_lo) / step).round() as usize;
+                    let what = format!("--step {step:e} over the record [{t_lo}, {t_hi}]");
+                    let n = intervals(((t_hi - t_lo) / step).round(), &what)?;
                     (0..=n)
                         .map(|i| t_lo + (t_hi - t_lo) * i as f64 / n as f64)
                         .map(|t| (t, f(t)))
@@ -202,9 +223,9 @@ fn data_csv(data: &Data, step: f64) -> String {
                 }
                 (Samples::Function(_), Record::Discrete) => Vec::new(),
             };
-            (s.name.clone(), points)
+            Ok((s.name.clone(), points))
         })
-        .collect();
+        .collect::<anyhow::Result<_>>()?;
     let mut times: Vec<f64> = columns.iter().flat_map(|c| c.1.iter().map(|p| p.0)).collect();
     times.sort_by(f64::total_cmp);
     times.dedup();
@@ -225,5 +246,5 @@ fn data_csv(data: &Data, step: f64) -> String {
         }
         out += "\n";
     }
-    out
+    Ok(out)
 }

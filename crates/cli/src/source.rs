@@ -18,11 +18,14 @@ pub struct SourceArgs {
     /// A model file (TOML; its keys in docs/model-files.md).
     #[arg(long, value_name = "FILE")]
     pub model: Option<PathBuf>,
+    // A catalogue system has data of its own: --data with --system is an error, not ignored.
+    // `requires = "model"` alone does not refuse it: clap drops a requirement that conflicts
+    // with an argument given (--model conflicts with --system).
     /// The data file (CSV) to use instead of the model file's `[data] file`.
-    #[arg(long, value_name = "CSV", requires = "model")]
+    #[arg(long, value_name = "CSV", requires = "model", conflicts_with = "system")]
     pub data: Option<PathBuf>,
     /// Seed of a catalogue system's synthetic data (fixed data ignore it).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
 }
 

@@ -30,7 +30,7 @@ pub struct StudyArgs {
     #[arg(long, value_name = "FILE")]
     model: Option<PathBuf>,
     /// The data file for --model (default: the model's `[data] file`).
-    #[arg(long, value_name = "CSV", requires = "model")]
+    #[arg(long, value_name = "CSV", requires = "model", conflicts_with = "system")]
     data: Option<PathBuf>,
     /// Comma-separated methods (default: goodman, quasilinearization, gauss-newton-ls).
     #[arg(long, value_name = "A,B,C")]
@@ -39,23 +39,23 @@ pub struct StudyArgs {
     #[arg(long, default_value = "goodman-halving", value_name = "METHOD")]
     reference: String,
     /// Number of trials.
-    #[arg(long, default_value_t = 100, value_name = "N")]
+    #[arg(long, default_value_t = 100, value_name = "N", allow_negative_numbers = true)]
     trials: usize,
     /// Noise level, a multiple of the system's σ.
-    #[arg(long, default_value_t = 1.0, value_name = "K")]
+    #[arg(long, default_value_t = 1.0, value_name = "K", allow_negative_numbers = true)]
     noise: f64,
     /// Start perturbation ρ: each unknown starts at truth·(1 + ρu), u uniform on [−1, 1]
     /// (truth·(1 + ρ)^u on a log scale, truth + ρu for a truth of 0).
-    #[arg(long, default_value_t = 0.2, value_name = "RHO")]
+    #[arg(long, default_value_t = 0.2, value_name = "RHO", allow_negative_numbers = true)]
     perturb: f64,
     /// Seed: trial i draws from the random stream i of this seed.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     seed: u64,
     /// The study's directory: trials.jsonl, summary.json, summary.md (basin.json, basin.md).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Run only part i of n of the trials (1 ≤ i ≤ n); `sysid merge` combines the parts.
-    #[arg(long, value_name = "I/N")]
+    #[arg(long, value_name = "I/N", allow_hyphen_values = true)]
     shard: Option<Shard>,
     /// Continue a study that was interrupted, keeping its finished trials (or start it, if
     /// --out holds none yet: batch jobs can always pass --resume). Every setting that
@@ -77,7 +77,13 @@ pub struct StudyArgs {
     #[arg(long, default_value_t = 60.0, value_name = "SECONDS", allow_negative_numbers = true)]
     log_every: f64,
     /// Points per axis of the basin map.
-    #[arg(long, default_value_t = 41, value_name = "G", requires = "basin")]
+    #[arg(
+        long,
+        default_value_t = 41,
+        value_name = "G",
+        requires = "basin",
+        allow_negative_numbers = true
+    )]
     grid: usize,
     #[command(flatten)]
     options: MethodArgs,

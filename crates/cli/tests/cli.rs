@@ -1,5 +1,6 @@
 //! The `sysid` binary as a user runs it: output, the JSON contract, exit codes, errors.
 
+use std::path::Path;
 use std::process::{Command, Output};
 
 fn sysid(args: &[&str]) -> Output {
@@ -102,6 +103,155 @@ fn bad_input_exits_2_with_one_line() {
         assert!(stderr.contains(needle), "{args:?}: {stderr}");
         assert!(stderr.starts_with("error: "), "{args:?}: {stderr}");
     }
+}
+
+/// The value names of options that take numbers (`--times a:b:step`, `--shard i/n` and
+/// `--fix name=value` among them).
+const NUMERIC: &[&str] = &[
+    "N",
+    "K",
+    "RHO",
+    "SEED",
+    "I/N",
+    "G",
+    "S",
+    "TOL",
+    "RTOL",
+    "ATOL",
+    "H",
+    "T",
+    "DT",
+    "A:B:STEP",
+    "NAME=VALUE",
+];
+
+/// The options of a subcommand whose value names are in [`NUMERIC`], from its --help.
+fn numeric_options(command: &str) -> Vec<String> {
+    let help = text(&sysid(&[command, "--help"]).stdout);
+    let mut options: Vec<String> = help
+        .lines()
+        .filter_map(|l| {
+            let l = l.trim_start().strip_prefix("-h, ").unwrap_or(l.trim_start());
+            let (name, value) = l.strip_prefix("--")?.split_once(" <")?;
+            let value = value.split_once('>')?.0;
+            NUMERIC.contains(&value).then(|| format!("--{name}"))
+        })
+        .collect();
+    options.sort();
+    options
+}
+
+/// Whether `message` names `option` (and not a longer option that starts like it).
+fn names(message: &str, option: &str) -> bool {
+    message.match_indices(option).any(|(i, _)| {
+        !message[i + option.len()..].starts_with(|c: char| c.is_alphanumeric() || c == '-')
+    })
+}
+
+#[test]
+fn a_negative_number_reaches_the_options_own_check() {
+    let dir = std::env::temp_dir().join(format!("sysid-cli-negative-{}", std::process::id()));
+    let out = dir.join("never").display().to_string();
+    let model =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/falling-body/model.toml");
+    let model = model.to_str().unwrap();
+    let fitting = [
+        "--seed",
+        "--max-iterations",
+        "--gtol",
+        "--max-integrations",
+        "--fix",
+        "--rtol",
+        "--atol",
+        "--fixed-step",
+        "--max-steps",
+    ];
+    let study_options = [&fitting[..], &["--trials", "--noise", "--perturb", "--shard"]].concat();
+    // Each subcommand: the arguments that make the rest valid, and the options to try.
+    let cases: Vec<(&str, Vec<&str>, Vec<&str>)> = vec![
+        ("fit", vec!["--system", "falling-body"], fitting.to_vec()),
+        ("compare", vec!["--system", "falling-body", "--methods", "goodman"], fitting.to_vec()),
+        (
+            "predict",
+            vec!["--system", "falling-body", "--until", "3"],
+            [&fitting[..], &["--step", "--until"]].concat(),
+        ),
+        ("simulate", vec!["--system", "falling-body-continuous"], vec!["--seed", "--step"]),
+        ("simulate", vec!["--model", model, "--times", "0:1:1"], vec!["--times", "--set"]),
+        ("study", vec!["--system", "falling-body", "--out", &out], study_options.clone()),
+        (
+            "study",
+            vec!["--system", "falling-body", "--out", &out, "--basin", "y,g"],
+            vec!["--grid"],
+        ),
+        (
+            "report",
+            vec!["--out", &out, "--systems", "falling-body"],
+            vec!["--trials", "--perturb", "--grid", "--basin-spread", "--seed"],
+        ),
+        ("merge", vec![&out, "--out", &out], vec![]),
+    ];
+    for command in ["fit", "compare", "predict", "simulate", "study", "report", "merge"] {
+        let mut tried: Vec<String> = cases
+            .iter()
+            .filter(|c| c.0 == command)
+            .flat_map(|c| c.2.iter().map(|o| o.to_string()))
+            .collect();
+        tried.sort();
+        tried.dedup();
+        assert_eq!(tried, numeric_options(command), "the numeric options of {command}");
+    }
+    for (command, base, options) in &cases {
+        for option in options {
+            let value = match *option {
+                "--shard" => "-1/2",
+                "--times" => "-1:-2:1",
+                _ => "-1",
+            };
+            for args in [
+                [&[*command][..], base, &[option, value]].concat(),
+                [&[*command][..], base, &[&format!("{option}={value}")]].concat(),
+            ] {
+                let run = sysid(&args);
+                let stderr = text(&run.stderr);
+                assert_eq!(run.status.code(), Some(2), "{args:?}: {stderr}");
+                assert!(run.stdout.is_empty(), "{args:?} printed to stdout");
+                assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+                assert!(!stderr.contains("unexpected argument"), "{args:?}: {stderr}");
+                assert!(names(&stderr, option), "{args:?} does not name {option}: {stderr}");
+            }
+        }
+    }
+    assert!(!Path::new(&out).exists(), "a refused command left {out}");
+}
+
+#[test]
+fn data_with_a_catalogue_system_is_refused_not_ignored() {
+    // A catalogue system has its own data; --data belongs to --model.
+    let dir = std::env::temp_dir().join(format!("sysid-cli-data-{}", std::process::id()));
+    let out = dir.join("never").display().to_string();
+    for args in [
+        &["fit", "--system", "falling-body"][..],
+        &["compare", "--system", "falling-body"],
+        &["compare", "--all"],
+        &["predict", "--system", "falling-body", "--until", "3"],
+        &["simulate", "--system", "falling-body"],
+        &["study", "--system", "falling-body", "--trials", "2", "--out", &out],
+    ] {
+        let args = [args, &["--data", "data.csv"]].concat();
+        let run = sysid(&args);
+        let stderr = text(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(run.stdout.is_empty(), "{args:?} printed to stdout");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(
+            stderr.starts_with("error: the argument '-")
+                && stderr.contains("cannot be used with")
+                && stderr.contains("'--data <CSV>'"),
+            "{args:?}: {stderr}"
+        );
+    }
+    assert!(!Path::new(&out).exists());
 }
 
 #[test]
@@ -208,6 +358,27 @@ fn simulate_writes_reproducible_csv() {
     std::fs::remove_dir_all(&dir).unwrap();
     assert!(written.starts_with("t,alpha,q\n"));
     assert_eq!(written.lines().count(), 1 + 201);
+}
+
+#[test]
+fn a_step_that_asks_for_too_many_times_is_refused() {
+    // 3·10¹² times would need tens of terabytes: refused before anything runs.
+    for (args, needle) in [
+        (
+            &["predict", "--system", "falling-body", "--until", "3", "--step", "1e-12"][..],
+            "error: --step 1e-12 from t0 = 0 to --until 3 asks for 3.0e12 times, more than the 10000000 a command writes",
+        ),
+        (
+            &["simulate", "--system", "falling-body-continuous", "--step", "1e-12"][..],
+            "error: --step 1e-12 over the record [0, 3] asks for 3.0e12 times, more than the 10000000 a command writes",
+        ),
+    ] {
+        let out = sysid(args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(out.stdout.is_empty(), "{args:?} printed to stdout");
+        assert_eq!(stderr.trim_end(), needle, "{args:?}");
+    }
 }
 
 #[test]

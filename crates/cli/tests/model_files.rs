@@ -120,6 +120,53 @@ fn the_workflow_fits_simulates_and_predicts() {
 }
 
 #[test]
+fn a_byte_order_mark_at_the_start_of_a_file_is_skipped() {
+    // As Excel ("CSV UTF-8") and Notepad write them.
+    let case = Case::new("bom", &format!("\u{feff}{DECAY}"), &format!("\u{feff}{DECAY_DATA}"));
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let k = json["estimates"]["k"].as_f64().unwrap();
+    assert!((k - 0.8).abs() < 0.02, "k = {k}");
+    // Errors are located as without the mark.
+    bad(
+        "bom-cell",
+        &format!("\u{feff}{DECAY}"),
+        "\u{feff}t,x\n0,2\n1,abc\n2,0.4\n",
+        "data.csv:3:3: column `x`: `abc` is not a number",
+    );
+    bad(
+        "bom-time",
+        DECAY,
+        "\u{feff}x\n2\n0.9\n",
+        "data.csv:1: the first column must be the time, named `t` or `time`; found `x`",
+    );
+}
+
+#[test]
+fn a_file_that_cannot_be_read_says_why_once() {
+    // The system's reason appears once, after the path: the CLI prints the whole error
+    // chain, so an error that also kept the reason as its source would repeat it.
+    let case = Case::new("unreadable", DECAY, DECAY_DATA);
+    let dir = case.dir.display().to_string();
+    let missing = case.path("missing.toml").display().to_string();
+    let model = case.model();
+    for (args, path) in [
+        (vec!["fit", "--model", &dir], &dir),
+        (vec!["fit", "--model", &missing], &missing),
+        (vec!["compare", "--model", &model, "--data", &dir], &dir),
+        (vec!["predict", "--model", &missing, "--until", "5"], &missing),
+        (vec!["simulate", "--model", &dir, "--times", "0:1:1"], &dir),
+    ] {
+        let out = sysid(&args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.starts_with(&format!("error: {path}: ")), "{args:?}: {stderr}");
+        assert_eq!(stderr.matches("(os error").count(), 1, "{args:?}: {stderr}");
+    }
+}
+
+#[test]
 fn toml_syntax_error() {
     bad(
         "toml",
@@ -273,6 +320,57 @@ fn unknowns_the_data_cannot_identify() {
         DECAY_DATA,
         "the data cannot identify a, b at the starting guess (singular normal matrix, condition inf; the combination",
     );
+}
+
+#[test]
+fn an_expression_ten_thousand_deep_is_refused_not_a_stack_overflow() {
+    let message = "equation of x: the expression nests more than 200 levels deep (parentheses, signs, function calls and operators)";
+    // The expression starts at column 6 after `-k * `: the 202nd open level, at
+    // character 206, is refused.
+    let parens = format!("-k * {}x{}", "(".repeat(10_000), ")".repeat(10_000));
+    let minuses = format!("-k * {}x", "-".repeat(10_000));
+    for (tag, equation) in [("deep-parens", parens), ("deep-minuses", minuses)] {
+        let model = DECAY.replace("-k * x", &equation);
+        bad(tag, &model, DECAY_DATA, &format!("model.toml:4:212: {message}"));
+    }
+}
+
+#[test]
+fn an_expression_at_the_depth_limit_fits_and_studies_on_worker_threads() {
+    // −k·x at the limit twice over: x inside 200 parentheses, and a chain of 198 zero terms
+    // after it (200 operations deep).
+    let equation =
+        format!("-k * {}x{}{}", "(".repeat(200), ")".repeat(200), " + 0 * x".repeat(198));
+    let case = Case::new("deep-limit", &DECAY.replace("-k * x", &equation), DECAY_DATA);
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let k = json["estimates"]["k"].as_f64().unwrap();
+    assert!((k - 0.8).abs() < 0.02, "k = {k}");
+    // A study fits its trials on rayon's worker threads (2 MiB stacks).
+    let dir = case.path("study");
+    let out = sysid(&[
+        "study",
+        "--model",
+        &case.model(),
+        "--trials",
+        "4",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}
+
+#[test]
+fn data_before_t0_are_refused_at_the_first_sample() {
+    // t0 after all the data: integrated backward, the decay grew until the data could not
+    // identify k. Refused at the first sample, saying where t0 is set.
+    let model = DECAY.replace("file = \"data.csv\"", "file = \"data.csv\"\nt0 = 5");
+    let message = "data.csv:2:3: column `x`: a sample at t = 0 lies before t0 = 5 (";
+    bad("t0-after", &model, DECAY_DATA, message);
+    let message =
+        "model.toml:11:6), the time of the initial values: the data must start at t0 or later";
+    bad("t0-after-line", &model, DECAY_DATA, message);
 }
 
 #[test]

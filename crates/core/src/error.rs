@@ -117,7 +117,37 @@ pub enum FitError {
         /// What it cannot do.
         what: String,
     },
-    /// The method's options are invalid.
+    /// The method's options are invalid. The options error is in the message and not also
+    /// the `source`, which a report of the whole chain (anyhow's `{:#}`) would print again.
     #[error("invalid options: {0}")]
-    InvalidOptions(#[from] crate::options::OptionsError),
+    InvalidOptions(crate::options::OptionsError),
+}
+
+impl From<crate::options::OptionsError> for FitError {
+    fn from(e: crate::options::OptionsError) -> Self {
+        FitError::InvalidOptions(e)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::options::OptionsError;
+
+    /// The error and its sources as anyhow's `{:#}` prints them.
+    fn chain(e: &dyn std::error::Error) -> String {
+        let mut out = e.to_string();
+        let mut source = e.source();
+        while let Some(s) = source {
+            out += &format!(": {s}");
+            source = s.source();
+        }
+        out
+    }
+
+    #[test]
+    fn an_invalid_option_is_told_once() {
+        let e = FitError::from(OptionsError::Zero { name: "max_iterations" });
+        assert_eq!(chain(&e), "invalid options: max_iterations must be at least 1");
+    }
 }

@@ -2,11 +2,11 @@
 
 use std::path::Path;
 
-use crate::table::{Table, TableError, cell_position};
+use crate::table::{Table, TableError, cell_position, without_bom};
 use sysid_core::Data;
 use sysid_ode::{Inputs, Signal};
 
-use crate::error::ModelError;
+use crate::error::{ModelError, line_column};
 use crate::file::{ModelFile, RecordKind};
 
 /// The measurements and input signals of a data file.
@@ -57,16 +57,19 @@ fn table_error(e: TableError) -> ModelError {
 }
 
 /// Reads `path` against `model`: the time column first (named `t` or `time`), then columns
-/// named after states, outputs or inputs; empty cells are missing values.
+/// named after states, outputs or inputs; empty cells are missing values. A leading
+/// byte-order mark is skipped.
 pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ModelError::file(&file, e.to_string()))?;
-    check_time_column(&text, &file)?;
-    let table = Table::parse(&text, &file).map_err(table_error)?;
+    let text = without_bom(&text);
+    check_time_column(text, &file)?;
+    let table = Table::parse(text, &file).map_err(table_error)?;
     check_columns(model, &table, &file)?;
     check_weights(model, &table, &file)?;
     let signals = input_signals(model, &table, &file)?;
-    let data = measured_series(model, &table, &text, &file)?;
+    let data = measured_series(model, &table, text, &file)?;
+    check_start(model, &table, text)?;
     Ok(ModelData { data, inputs: Inputs::new(signals), rows: table.time().len() })
 }
 
@@ -147,6 +150,44 @@ fn input_signals(model: &ModelFile, table: &Table, file: &str) -> Result<Vec<Sig
                 .map_err(|e| ModelError::file(file, format!("input `{name}`: {e}")))
         })
         .collect()
+}
+
+/// Refuses data before t0, at the first such sample: the initial values are given at t0 and
+/// the model is integrated forward from there. (A continuous record spans every row, so
+/// its first row must not lie before t0 either, measured or not.)
+fn check_start(model: &ModelFile, table: &Table, text: &str) -> Result<(), ModelError> {
+    let t0 = model.data.t0;
+    let continuous = model.data.record == RecordKind::Continuous;
+    let measured: Vec<&String> = table.names().iter().filter(|n| measurable(model, n)).collect();
+    for (row, &t) in table.time().iter().enumerate().take_while(|(_, t)| **t < t0) {
+        let column = measured
+            .iter()
+            .position(|n| table.column(n).expect("a column")[row].is_some())
+            .map(|c| measured[c].as_str());
+        let (name, what) = match column {
+            Some(name) => (name, "a sample"),
+            None if continuous => (table.time_name(), "the continuous record"),
+            None => continue,
+        };
+        let field = table.names().iter().position(|n| n == name).map_or(0, |i| i + 1);
+        let t0_in = match model.data.t0_at {
+            Some(at) => {
+                let (line, column) = line_column(&model.text, at);
+                format!("{}:{line}:{column}", model.path.display())
+            }
+            None => format!("the default: {} has no [data] t0", model.path.display()),
+        };
+        let line = table.line(row);
+        return Err(ModelError {
+            file: table.source().to_string(),
+            line: line.map(|l| l as usize),
+            column: line.and_then(|l| cell_position(text, l, field)),
+            message: format!(
+                "column `{name}`: {what} at t = {t} lies before t0 = {t0} ({t0_in}), the time of the initial values: the data must start at t0 or later"
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// The measured series, weighted, in column order; at least one, none empty, none

@@ -13,7 +13,8 @@
 //! ```
 //!
 //! Functions: exp log sqrt sin cos tan tanh abs (one argument), min max (two). Names are the
-//! model's states, parameters and inputs, and `t`.
+//! model's states, parameters and inputs, and `t`. An expression nests at most
+//! [`MAX_DEPTH`] levels deep.
 //!
 //! Expressions are parsed once and compiled into a [`Program`]: a tree in one vector, names
 //! resolved to slots, constant subexpressions folded, integer powers specialised. It is
@@ -38,6 +39,15 @@ impl fmt::Display for ExprError {
         write!(f, "{} (character {})", self.message, self.position + 1)
     }
 }
+
+/// The deepest an expression may nest: parentheses, signs, function calls and exponents
+/// nest at most this deep, and so do the operations of the parsed tree (a sum or a product
+/// is a chain, `a + b + c` being `(a + b) + c`: 2 deep). Parsing, compiling, evaluating,
+/// printing and dropping an expression each recurse once per level. At 200 levels the
+/// deepest of them, parsing nested calls, takes about 0.2 MiB of stack in the workspace's
+/// debug build (opt-level 1) and 1.4 MiB unoptimised: inside the 2 MiB of a worker thread,
+/// where studies evaluate models (and parsing runs on the main thread's 8 MiB).
+pub const MAX_DEPTH: usize = 200;
 
 /// A binary operator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -189,7 +199,13 @@ struct Parser {
     tokens: Vec<(Token, usize)>,
     at: usize,
     end: usize,
+    /// How many `unary` calls are open: every recursion of the grammar passes through one,
+    /// and the outermost is open around any expression, so up to `MAX_DEPTH + 1`.
+    open: usize,
 }
+
+/// A parsed subexpression and the depth of its tree (a name or number is 0 deep).
+type Parsed = (Expr, usize);
 
 impl Parser {
     fn peek(&self) -> Option<&Token> {
@@ -201,6 +217,15 @@ impl Parser {
     fn error<T>(&self, message: impl Into<String>) -> Result<T, ExprError> {
         Err(ExprError { position: self.position(), message: message.into() })
     }
+    /// The depth of a node over children `depth` deep (a name or number is 0 deep), refused
+    /// beyond [`MAX_DEPTH`] at `position` (the node's operator, sign or function name).
+    fn nest(&self, depth: usize, position: usize) -> Result<usize, ExprError> {
+        if depth >= MAX_DEPTH {
+            return Err(too_deep(position));
+        }
+        Ok(depth + 1)
+    }
+
     fn found(&self) -> String {
         match self.peek() {
             None => "the end".into(),
@@ -213,118 +238,174 @@ impl Parser {
         }
     }
 
-    fn expr(&mut self) -> Result<Expr, ExprError> {
-        let mut left = self.term()?;
+    fn expr(&mut self) -> Result<Parsed, ExprError> {
+        let (mut left, mut depth) = self.term()?;
         while let Some(Token::Op(c @ ('+' | '-'))) = self.peek() {
             let op = if *c == '+' { Op::Add } else { Op::Sub };
+            let position = self.position();
             self.at += 1;
-            left = Expr::Bin(op, Box::new(left), Box::new(self.term()?));
+            let (right, d) = self.term()?;
+            depth = self.nest(depth.max(d), position)?;
+            left = Expr::Bin(op, Box::new(left), Box::new(right));
         }
-        Ok(left)
+        Ok((left, depth))
     }
 
-    fn term(&mut self) -> Result<Expr, ExprError> {
-        let mut left = self.unary()?;
+    fn term(&mut self) -> Result<Parsed, ExprError> {
+        let (mut left, mut depth) = self.unary()?;
         while let Some(Token::Op(c @ ('*' | '/'))) = self.peek() {
             let op = if *c == '*' { Op::Mul } else { Op::Div };
+            let position = self.position();
             self.at += 1;
-            left = Expr::Bin(op, Box::new(left), Box::new(self.unary()?));
+            let (right, d) = self.unary()?;
+            depth = self.nest(depth.max(d), position)?;
+            left = Expr::Bin(op, Box::new(left), Box::new(right));
         }
-        Ok(left)
+        Ok((left, depth))
     }
 
-    fn unary(&mut self) -> Result<Expr, ExprError> {
-        match self.peek() {
+    /// A signed operand. Every recursion of the grammar (parentheses, calls, signs,
+    /// exponents) comes through here, so counting the open calls bounds the parser's own
+    /// stack, also for parentheses, which add no node.
+    fn unary(&mut self) -> Result<Parsed, ExprError> {
+        if self.open > MAX_DEPTH {
+            return Err(too_deep(self.position()));
+        }
+        self.open += 1;
+        let parsed = match self.peek() {
             Some(Token::Op('-')) => {
+                let position = self.position();
                 self.at += 1;
-                Ok(Expr::Neg(Box::new(self.unary()?)))
+                let (inner, depth) = self.unary()?;
+                (Expr::Neg(Box::new(inner)), self.nest(depth, position)?)
             }
             Some(Token::Op('+')) => {
                 self.at += 1;
-                self.unary()
+                self.unary()?
             }
-            _ => self.power(),
-        }
+            _ => self.power()?,
+        };
+        self.open -= 1;
+        Ok(parsed)
     }
 
-    fn power(&mut self) -> Result<Expr, ExprError> {
-        let base = self.primary()?;
+    fn power(&mut self) -> Result<Parsed, ExprError> {
+        let (base, depth) = self.primary()?;
         if let Some(Token::Op('^')) = self.peek() {
+            let position = self.position();
             self.at += 1;
             // Right-associative, and the exponent may carry its own sign: 2^-x.
-            return Ok(Expr::Bin(Op::Pow, Box::new(base), Box::new(self.unary()?)));
+            let (exponent, d) = self.unary()?;
+            let depth = self.nest(depth.max(d), position)?;
+            return Ok((Expr::Bin(Op::Pow, Box::new(base), Box::new(exponent)), depth));
         }
-        Ok(base)
+        Ok((base, depth))
     }
 
-    fn primary(&mut self) -> Result<Expr, ExprError> {
+    // `primary` and `call` recurse once per parenthesis or call: their frames are kept
+    // small (the error messages are built in functions of their own) so that the parser's
+    // stack at MAX_DEPTH stays well inside a worker thread's, also unoptimised.
+    fn primary(&mut self) -> Result<Parsed, ExprError> {
         let position = self.position();
-        match self.peek().cloned() {
-            Some(Token::Num(v)) => {
+        match self.peek() {
+            Some(&Token::Num(v)) => {
                 self.at += 1;
-                Ok(Expr::Num(v))
+                Ok((Expr::Num(v), 0))
             }
             Some(Token::Name(name)) => {
+                let name = name.clone();
                 self.at += 1;
                 if self.peek() != Some(&Token::Open) {
-                    return Ok(Expr::Name(name, position));
+                    return Ok((Expr::Name(name, position), 0));
                 }
-                let Some(func) = Func::from_name(&name) else {
-                    return Err(ExprError {
-                        position,
-                        message: format!(
-                            "unknown function `{name}` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max)"
-                        ),
-                    });
-                };
-                self.at += 1;
-                let mut args = vec![self.expr()?];
-                while self.peek() == Some(&Token::Comma) {
-                    self.at += 1;
-                    args.push(self.expr()?);
-                }
-                if self.peek() != Some(&Token::Close) {
-                    return self.error(format!(
-                        "expected `,` or `)` in the call of {name}, found {}",
-                        self.found()
-                    ));
-                }
-                self.at += 1;
-                if args.len() != func.arity() {
-                    return Err(ExprError {
-                        position,
-                        message: format!(
-                            "{name} takes {} argument(s), got {}",
-                            func.arity(),
-                            args.len()
-                        ),
-                    });
-                }
-                Ok(Expr::Call(func, args, position))
+                self.call(name, position)
             }
             Some(Token::Open) => {
                 self.at += 1;
                 let inner = self.expr()?;
                 if self.peek() != Some(&Token::Close) {
-                    return self.error(format!("expected `)`, found {}", self.found()));
+                    return Err(self.expected("`)`"));
                 }
                 self.at += 1;
                 Ok(inner)
             }
-            _ => self.error(format!("expected a number, a name or `(`, found {}", self.found())),
+            _ => Err(self.expected("a number, a name or `(`")),
+        }
+    }
+
+    /// The call of function `name` (at `position`), from its `(`.
+    fn call(&mut self, name: String, position: usize) -> Result<Parsed, ExprError> {
+        let Some(func) = Func::from_name(&name) else {
+            return Err(unknown_function(&name, position));
+        };
+        self.at += 1;
+        let (first, mut depth) = self.expr()?;
+        let mut args = vec![first];
+        while self.peek() == Some(&Token::Comma) {
+            self.at += 1;
+            let (arg, d) = self.expr()?;
+            depth = depth.max(d);
+            args.push(arg);
+        }
+        if self.peek() != Some(&Token::Close) {
+            return Err(self.expected(&format!("`,` or `)` in the call of {name}")));
+        }
+        self.at += 1;
+        if args.len() != func.arity() {
+            return Err(wrong_arity(&name, func, args.len(), position));
+        }
+        Ok((Expr::Call(func, args, position), self.nest(depth, position)?))
+    }
+
+    /// "expected `what`, found …" at the current token.
+    #[cold]
+    #[inline(never)]
+    fn expected(&self, what: &str) -> ExprError {
+        ExprError {
+            position: self.position(),
+            message: format!("expected {what}, found {}", self.found()),
         }
     }
 }
 
-/// Parses an expression.
+#[cold]
+#[inline(never)]
+fn unknown_function(name: &str, position: usize) -> ExprError {
+    ExprError {
+        position,
+        message: format!(
+            "unknown function `{name}` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max)"
+        ),
+    }
+}
+
+#[cold]
+#[inline(never)]
+fn wrong_arity(name: &str, func: Func, got: usize, position: usize) -> ExprError {
+    ExprError { position, message: format!("{name} takes {} argument(s), got {got}", func.arity()) }
+}
+
+/// The error of an expression that nests deeper than [`MAX_DEPTH`], at `position`.
+#[cold]
+#[inline(never)]
+fn too_deep(position: usize) -> ExprError {
+    ExprError {
+        position,
+        message: format!(
+            "the expression nests more than {MAX_DEPTH} levels deep (parentheses, signs, function calls and operators)"
+        ),
+    }
+}
+
+/// Parses an expression (at most [`MAX_DEPTH`] levels deep).
 pub fn parse(text: &str) -> Result<Expr, ExprError> {
     let tokens = lex(text)?;
     let end = text.chars().count();
-    let mut parser = Parser { tokens, at: 0, end };
+    let mut parser = Parser { tokens, at: 0, end, open: 0 };
     if parser.peek().is_none() {
         return parser.error("empty expression");
     }
-    let expr = parser.expr()?;
+    let (expr, _) = parser.expr()?;
     if parser.peek().is_some() {
         return parser.error(format!("unexpected {} after the expression", parser.found()));
     }

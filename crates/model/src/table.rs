@@ -63,8 +63,9 @@ impl Table {
         Self::parse(&text, &source)
     }
 
-    /// Parses CSV text; `source` names it in errors.
+    /// Parses CSV text; `source` names it in errors. A leading byte-order mark is skipped.
     pub fn parse(text: &str, source: &str) -> Result<Self, TableError> {
+        let text = without_bom(text);
         let err = |line: Option<u64>, column: Option<&str>, message: String| TableError {
             source: source.to_string(),
             line,
@@ -185,6 +186,12 @@ impl Table {
     }
 }
 
+/// The text without a leading UTF-8 byte-order mark, which some programs write at the start
+/// of a file (Excel's "CSV UTF-8", Notepad): it is not part of the first name.
+pub fn without_bom(text: &str) -> &str {
+    text.strip_prefix('\u{feff}').unwrap_or(text)
+}
+
 /// The 1-based character position of field `field` (0-based) on line `line` of `text`:
 /// after `field` commas, past leading blanks (a numeric table has no quoted commas).
 pub fn cell_position(text: &str, line: u64, field: usize) -> Option<usize> {
@@ -231,5 +238,14 @@ mod tests {
         assert_eq!(e("t,y,y\n0,1,2\n"), "data.csv:1: column `y`: the name is used twice");
         assert_eq!(e("t,y\n"), "data.csv: no data rows");
         assert!(e("t,y\n0,1\n1,2,3\n").starts_with("data.csv:3: "), "{}", e("t,y\n0,1\n1,2,3\n"));
+    }
+
+    #[test]
+    fn a_leading_byte_order_mark_is_skipped() {
+        let t = Table::parse("\u{feff}t, y\n0, 1.5\n1, 2\n", "mem").unwrap();
+        assert_eq!((t.time_name(), t.names()), ("t", &["y".to_string()][..]));
+        assert_eq!(t.samples("y").unwrap(), (vec![0.0, 1.0], vec![1.5, 2.0]));
+        let e = Table::parse("\u{feff}t,y\n0,1\n1,abc\n", "data.csv").unwrap_err();
+        assert_eq!(e.to_string(), "data.csv:3:3: column `y`: `abc` is not a number");
     }
 }

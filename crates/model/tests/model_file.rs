@@ -4,10 +4,10 @@
 
 use std::path::Path;
 
-use sysid_core::Unknown;
-use sysid_model::expr::{Program, Slot, parse};
-use sysid_model::{DataSpec, ModelFile, RecordKind};
-use sysid_ode::{Integrator, Interpolation, Scheme};
+use sysid_core::{Data, Problem, Unknown};
+use sysid_model::expr::{MAX_DEPTH, Program, Slot, parse};
+use sysid_model::{DataSpec, Model, ModelFile, RecordKind};
+use sysid_ode::{Inputs, Integrator, Interpolation, Scheme};
 
 /// The start of most cases: two states and a parameter.
 const HEAD: &str = "states = [\"x\", \"y\"]\nparameters = [\"k\"]\n";
@@ -272,6 +272,90 @@ fn equations() {
     ]);
 }
 
+/// An expression nested deeper than [`MAX_DEPTH`] is refused where the limit is crossed:
+/// parentheses, signs, calls and exponents at the innermost operand, a chain of operations
+/// at the operator that makes it too long.
+#[test]
+fn expressions_nested_too_deeply() {
+    let deep = |expression: String| format!("{HEAD}[equations]\nx = \"{expression}\"\ny = \"x\"\n");
+    let message = "equation of x: the expression nests more than 200 levels deep (parentheses, signs, function calls and operators)";
+    check(&[
+        // The expression starts at column 6; 201 parentheses put `x` at column 207.
+        (
+            deep(format!("{}x{}", "(".repeat(201), ")".repeat(201))),
+            &format!("models/m.toml:4:207: {message}"),
+        ),
+        (deep(format!("{}x", "-".repeat(201))), &format!("models/m.toml:4:207: {message}")),
+        (
+            deep(format!("{}x{}", "sin(".repeat(201), ")".repeat(201))),
+            &format!("models/m.toml:4:810: {message}"),
+        ),
+        (deep(format!("x{}", "^x".repeat(201))), &format!("models/m.toml:4:408: {message}")),
+        // 202 terms: the 201st `+` (character 402) makes the chain 201 deep.
+        (deep(format!("x{}", "+x".repeat(201))), &format!("models/m.toml:4:407: {message}")),
+        (deep(format!("x{}", "*x".repeat(201))), &format!("models/m.toml:4:407: {message}")),
+        (deep(format!("{}x", "-(".repeat(201))), &format!("models/m.toml:4:207: {message}")),
+    ]);
+}
+
+/// One expression of every shape exactly at the depth limit: parentheses, signs, calls of
+/// one and of two arguments, exponents, sums, products, and parentheses around a chain.
+fn at_the_depth_limit() -> Vec<String> {
+    let n = MAX_DEPTH;
+    vec![
+        format!("{}x{}", "(".repeat(n), ")".repeat(n)),
+        format!("{}x", "-".repeat(n)),
+        format!("{}x{}", "sin(".repeat(n), ")".repeat(n)),
+        format!("{}x{}", "max(y, ".repeat(n), ")".repeat(n)),
+        format!("x{}", "^x".repeat(n)),
+        format!("x{}", " + x".repeat(n)),
+        format!("x{}", " * x".repeat(n)),
+        format!("{}x{}{}", "(".repeat(n), " - y".repeat(n), ")".repeat(n)),
+    ]
+}
+
+/// Every pass over an expression at the depth limit fits in the 2 MiB stack of a worker
+/// thread (rayon's, where studies fit): parsing, printing, compiling with its constant folding,
+/// evaluating (recursively, as the trees have more nodes than the evaluation's slots) in f64
+/// and in the dual numbers of the explicit and the implicit integrators' sensitivities,
+/// and dropping the tree.
+#[test]
+fn every_pass_at_the_depth_limit_fits_a_worker_threads_stack() {
+    let passes = || {
+        for expression in at_the_depth_limit() {
+            assert!(!parse(&expression).unwrap().to_string().is_empty());
+            let model = format!(
+                "states = [\"x\", \"y\"]\nparameters = [\"k\"]\n[equations]\nx = \"{expression}\"\ny = \"-k * y\"\n[initial]\nx = 0.5\ny = 1.0\n[unknowns]\nk = 0.5\n"
+            );
+            let file = ModelFile::parse(&model, Path::new("deep.toml")).unwrap();
+            assert!(!file.equations[0].is_constant(), "{expression}");
+            let system = Model { file }.system(Inputs::default());
+            let times = [0.01, 0.02, 0.03];
+            let data =
+                Data::discrete().series("x", &times, &[0.5; 3]).series("y", &times, &[1.0; 3]);
+            for integrator in [Integrator::default(), Integrator::rodas4(1e-8, 1e-10)] {
+                let problem = Problem::builder(system.clone())
+                    .known("x", 0.5)
+                    .known("y", 1.0)
+                    .unknown("k", 0.5)
+                    .data(data.clone())
+                    .integrator(integrator)
+                    .build()
+                    .unwrap();
+                let linearization = problem.linearize(&[0.5]).unwrap();
+                let (cost, _) = problem.cost(&[0.5]).unwrap();
+                assert!(cost.is_finite(), "{expression}: {linearization:?}");
+            }
+        }
+    };
+    std::thread::Builder::new()
+        .stack_size(2 << 20)
+        .spawn(passes)
+        .unwrap()
+        .join()
+        .expect("every pass at the depth limit within 2 MiB");
+}
+
 /// `[initial]` and `[known]`: finite numbers for states and parameters; `[initial]` is read first.
 #[test]
 fn initial_and_known() {
@@ -476,6 +560,59 @@ fn data() {
     ]);
 }
 
+/// Data before t0, where the initial values are given, are refused at the first such sample
+/// (its cell in the data file), saying where t0 is set.
+#[test]
+fn data_before_t0() {
+    let dir = std::env::temp_dir().join(format!("sysid-model-t0-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (model, data) = (dir.join("m.toml"), dir.join("d.csv"));
+    let (m, d) = (model.display(), data.display());
+    let problem = |data_table: &str, csv: &str| {
+        std::fs::write(&model, format!("{OK}[data]\nfile = \"d.csv\"\n{data_table}")).unwrap();
+        std::fs::write(&data, csv).unwrap();
+        Model::load(&model).and_then(|model| model.problem(None)).map(|_| ())
+    };
+    let tail = "the time of the initial values: the data must start at t0 or later";
+    let cases = [
+        // t0 after all the data.
+        (
+            "t0 = 5\n",
+            "t,y\n0,0.1\n1,0.3\n",
+            format!("{d}:2:3: column `y`: a sample at t = 0 lies before t0 = 5 ({m}:13:6), {tail}"),
+        ),
+        // The first sample before t0, whichever its column.
+        (
+            "t0 = 1.5\n",
+            "t,x,y\n0,,0.1\n1,0.5,0.3\n2,0.2,0.5\n",
+            format!(
+                "{d}:2:4: column `y`: a sample at t = 0 lies before t0 = 1.5 ({m}:13:6), {tail}"
+            ),
+        ),
+        (
+            "",
+            "t, y\n-1, 0\n0, 0.1\n1, 0.3\n",
+            format!(
+                "{d}:2:5: column `y`: a sample at t = -1 lies before t0 = 0 (the default: {m} has no [data] t0), {tail}"
+            ),
+        ),
+        // A continuous record spans every row.
+        (
+            "t0 = 0.5\nrecord = \"continuous\"\n",
+            "t,y\n0,\n1,0.3\n2,0.5\n",
+            format!(
+                "{d}:2:1: column `t`: the continuous record at t = 0 lies before t0 = 0.5 ({m}:13:6), {tail}"
+            ),
+        ),
+    ];
+    for (data_table, csv, expected) in cases {
+        assert_eq!(problem(data_table, csv).unwrap_err().to_string(), expected, "{csv}");
+    }
+    // Discrete data from t0 on, a row before t0 without a measured value, are accepted.
+    assert_eq!(problem("t0 = 0.5\n", "t,x,y\n0,,\n0.5,1,0\n1,0.6,0.4\n2,0.4,0.6\n"), Ok(()));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 /// `[integrator]`: its keys, then the options' own validation located at the table.
 #[test]
 fn integrator() {
@@ -598,6 +735,22 @@ atol = 1e-9
 max_steps = 5000.9
 "#;
 
+/// A leading byte-order mark is skipped: the file reads as without it, and its errors are
+/// located as without it.
+#[test]
+fn a_leading_byte_order_mark_is_skipped() {
+    let with = ModelFile::parse(&format!("\u{feff}{FULL}"), Path::new("models/m.toml")).unwrap();
+    let without = ModelFile::parse(FULL, Path::new("models/m.toml")).unwrap();
+    assert_eq!(
+        (with.states, with.equations, with.data),
+        (without.states, without.equations, without.data)
+    );
+    check(&[(
+        format!("\u{feff}{HEAD}[equations]\nx = \"-k * q\"\ny = \"x\"\n"),
+        "models/m.toml:4:11: equation of x: unknown name `q` (names: x, y, k, t)",
+    )]);
+}
+
 /// Every value of a file that uses every section is read as written.
 #[test]
 fn a_file_with_every_section_reads_every_value() {
@@ -629,6 +782,7 @@ fn a_file_with_every_section_reads_every_value() {
     let data = DataSpec {
         file: Some("models/sub/data.csv".into()),
         t0: -1.0,
+        t0_at: Some(at("t0 = -1") + 5),
         record: RecordKind::Continuous,
         weights: vec![("y".into(), 4.0, at("y = 4")), ("total".into(), 0.25, at("total = 0.25"))],
     };

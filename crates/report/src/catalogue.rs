@@ -63,6 +63,26 @@ impl Default for ReportOptions {
     }
 }
 
+impl ReportOptions {
+    /// Checks the options, named as `sysid report` spells them (a study's own check would
+    /// name the basin spread `--perturb`, and run only after the studies before it).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if self.trials == 0 {
+            anyhow::bail!("--trials must be at least 1");
+        }
+        if !(self.perturb >= 0.0 && self.perturb.is_finite()) {
+            anyhow::bail!("--perturb must be non-negative, got {}", self.perturb);
+        }
+        if self.grid < 2 {
+            anyhow::bail!("--grid must be at least 2, got {}", self.grid);
+        }
+        if !(self.basin_spread >= 0.0 && self.basin_spread.is_finite()) {
+            anyhow::bail!("--basin-spread must be non-negative, got {}", self.basin_spread);
+        }
+        Ok(())
+    }
+}
+
 /// Who watches a report being written: long studies and basin maps report their progress,
 /// each finished system a line.
 pub trait Observer: Sync {
@@ -96,6 +116,7 @@ const REFERENCE: &str = "goodman-halving";
 
 /// Writes the report under `args.out` and returns the path of its README.md.
 pub fn write_report(args: &ReportOptions, observer: &dyn Observer) -> anyhow::Result<PathBuf> {
+    args.validate()?;
     let systems = if args.systems.is_empty() {
         sysid_systems::NAMES.iter().map(|s| s.to_string()).collect()
     } else {

@@ -16,8 +16,13 @@ pub(super) fn read_data(
     value: Option<&Spanned<DeValue<'_>>>,
     path: &Path,
 ) -> Result<DataSpec, ModelError> {
-    let mut spec =
-        DataSpec { file: None, t0: 0.0, record: RecordKind::Discrete, weights: Vec::new() };
+    let mut spec = DataSpec {
+        file: None,
+        t0: 0.0,
+        t0_at: None,
+        record: RecordKind::Discrete,
+        weights: Vec::new(),
+    };
     let Some(value) = value else {
         return Ok(spec);
     };
@@ -28,7 +33,10 @@ pub(super) fn read_data(
                 let base = path.parent().unwrap_or(Path::new(""));
                 spec.file = Some(base.join(f));
             }
-            "t0" => spec.t0 = r.number(value, "[data] t0")?,
+            "t0" => {
+                spec.t0 = r.number(value, "[data] t0")?;
+                spec.t0_at = Some(value.span().start);
+            }
             "record" => spec.record = read_record(r, value)?,
             "weights" => spec.weights = read_weights(r, value)?,
             other => {

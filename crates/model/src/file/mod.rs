@@ -38,8 +38,10 @@ pub enum RecordKind {
 pub struct DataSpec {
     /// The data file, relative to the model file.
     pub file: Option<PathBuf>,
-    /// Time of the initial values (default 0).
+    /// Time of the initial values (default 0); the data start there or later.
     pub t0: f64,
+    /// Byte offset of the `t0` value in the model file, if it is given.
+    pub t0_at: Option<usize>,
     /// Discrete or continuous.
     pub record: RecordKind,
     /// Weight per measured column (default 1).
@@ -105,8 +107,9 @@ impl ModelFile {
     /// The sections are checked in a fixed order, whatever their order in the file, and the
     /// first mistake is reported: TOML syntax and top-level keys; the names, which every
     /// expression and value refers to; `[equations]`, `[outputs]`, `[initial]`, `[known]`,
-    /// `[unknowns]`, `[data]` and `[integrator]`.
+    /// `[unknowns]`, `[data]` and `[integrator]`. A leading byte-order mark is skipped.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ModelError> {
+        let text = crate::table::without_bom(text);
         let r = Reader::new(path, text);
         let doc = r.document()?;
         let doc = doc.get_ref();
