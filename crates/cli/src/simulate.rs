@@ -68,9 +68,15 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
 pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
     match out {
         Some(path) => {
-            let tmp = path.with_extension("partial");
-            std::fs::write(&tmp, text).map_err(|e| anyhow!("{}: {e}", tmp.display()))?;
-            std::fs::rename(&tmp, path).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            // Through a temporary file of our own beside it (never a user's `out.partial`),
+            // renamed: the file is old or new, never half; errors name the user's path.
+            let name = path.file_name().map_or_else(Default::default, |n| n.to_string_lossy());
+            let tmp = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
+            let written = std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path));
+            if let Err(e) = written {
+                let _ = std::fs::remove_file(&tmp);
+                bail!("{}: {e}", path.display());
+            }
         }
         None => crate::emit(text)?,
     }

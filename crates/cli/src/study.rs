@@ -113,6 +113,12 @@ pub struct MergeArgs {
 /// Runs `sysid study`.
 pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
+    if !(args.log_every >= 0.0 && args.log_every.is_finite()) {
+        bail!(
+            "--log-every must be a non-negative number of seconds (0: never), got {}",
+            args.log_every
+        );
+    }
     let methods = parse_list(args.methods.as_deref().unwrap_or(DEFAULT_METHODS))?;
     parse_list(&args.reference)?;
     if args.basin.is_some() && (args.shard.is_some() || args.resume) {

@@ -123,6 +123,7 @@ const NUMERIC: &[&str] = &[
     "DT",
     "A:B:STEP",
     "NAME=VALUE",
+    "SECONDS",
 ];
 
 /// The options of a subcommand whose value names are in [`NUMERIC`], from its --help.
@@ -166,7 +167,8 @@ fn a_negative_number_reaches_the_options_own_check() {
         "--fixed-step",
         "--max-steps",
     ];
-    let study_options = [&fitting[..], &["--trials", "--noise", "--perturb", "--shard"]].concat();
+    let study_options =
+        [&fitting[..], &["--trials", "--noise", "--perturb", "--shard", "--log-every"]].concat();
     // Each subcommand: the arguments that make the rest valid, and the options to try.
     let cases: Vec<(&str, Vec<&str>, Vec<&str>)> = vec![
         ("fit", vec!["--system", "falling-body"], fitting.to_vec()),
@@ -506,4 +508,17 @@ fn fix_holds_an_unknown_for_one_run() {
         assert_eq!(out.status.code(), Some(2), "{args:?}");
         assert!(text(&out.stderr).contains(needle), "{args:?}: {}", text(&out.stderr));
     }
+}
+
+#[test]
+fn an_unwritable_out_is_named_as_given() {
+    let out = std::env::temp_dir()
+        .join(format!("sysid-cli-no-such-dir-{}", std::process::id()))
+        .join("data.csv");
+    let out = out.display().to_string();
+    let run = sysid(&["simulate", "--system", "falling-body", "--out", &out]);
+    assert_eq!(run.status.code(), Some(2));
+    let err = text(&run.stderr);
+    assert!(err.contains(&format!("{out}: ")) && !err.contains("partial"), "{err}");
+    assert_eq!(err.matches("os error").count(), 1, "{err}");
 }
