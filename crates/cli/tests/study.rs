@@ -316,6 +316,10 @@ fn bad_study_input_exits_2_with_one_line() {
         ),
         (vec!["study", "--system", "van-der-pol", "--shard", "3/2", "--out", &out], "3/2"),
         (
+            vec!["study", "--system", "van-der-pol", "--noise", "0", "--out", &out],
+            "--noise must be a positive multiple of σ, got 0",
+        ),
+        (
             vec!["study", "--system", "van-der-pol", "--basin", "mu,k", "--out", &out],
             "`k` is not an unknown",
         ),

@@ -66,9 +66,10 @@ impl StudySpec {
         if self.trials == 0 {
             return Err(StudyError::Setup("--trials must be at least 1".into()));
         }
-        if !(self.noise >= 0.0 && self.noise.is_finite()) {
+        if !(self.noise > 0.0 && self.noise.is_finite()) {
             return Err(StudyError::Setup(format!(
-                "--noise must be a non-negative multiple of σ, got {}",
+                "--noise must be a positive multiple of σ, got {}: without noise every trial \
+                 fits the truth's own data, whose Cramér–Rao bound is zero",
                 self.noise
             )));
         }
