@@ -8,6 +8,8 @@
 //! * [`goodman`] (`sysid-goodman`): Goodman's 1966 Newton iteration;
 //! * [`gauss_newton`] (`sysid-gauss-newton`): the Gauss–Newton baseline on argmin;
 //! * [`quasilinearization`] (`sysid-quasilinearization`): Bellman–Kagiwada–Kalaba's method;
+//! * [`levenberg_marquardt`] (`sysid-levenberg-marquardt`): Moré's trust-region
+//!   Levenberg–Marquardt, bounds inside the step;
 //! * [`model`] (`sysid-model`): model files (TOML + expressions) and CSV data;
 //! * [`systems`] (`sysid-systems`): the benchmark catalogue.
 #![warn(missing_docs)]
@@ -15,6 +17,7 @@
 pub use sysid_core as core;
 pub use sysid_gauss_newton as gauss_newton;
 pub use sysid_goodman as goodman;
+pub use sysid_levenberg_marquardt as levenberg_marquardt;
 pub use sysid_model as model;
 pub use sysid_montecarlo as montecarlo;
 pub use sysid_ode as ode;
@@ -27,6 +30,7 @@ pub mod prelude {
     pub use sysid_core::{Data, Estimate, Method, Problem, Termination, Unknown};
     pub use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions};
     pub use sysid_goodman::{Goodman, GoodmanOptions};
+    pub use sysid_levenberg_marquardt::{LevenbergMarquardt, LevenbergMarquardtOptions};
     pub use sysid_ode::{Integrator, Scalar, Signature, System};
     pub use sysid_quasilinearization::{Quasilinearization, QuasilinearizationOptions};
 }

@@ -300,6 +300,7 @@ fn compare_lists_every_method_as_json() {
             "gauss-newton",
             "gauss-newton-ls",
             "gauss-newton-fd",
+            "levenberg-marquardt",
             "quasilinearization",
             "quasilinearization-data"
         ]

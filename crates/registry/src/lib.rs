@@ -21,6 +21,7 @@
 use sysid_core::{DriverOptions, Method};
 use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
 use sysid_goodman::{Goodman, GoodmanOptions};
+use sysid_levenberg_marquardt::{LevenbergMarquardt, LevenbergMarquardtOptions};
 use sysid_ode::System;
 use sysid_ode::testing::Decay;
 pub use sysid_quasilinearization::Start;
@@ -113,6 +114,16 @@ pub fn entries<S: System>() -> Vec<Entry<S>> {
                     line_search: true,
                     jacobian: JacobianSource::FiniteDifferences,
                     ..gauss_newton(s)
+                }))
+            },
+        },
+        Entry {
+            name: "levenberg-marquardt",
+            description: "Levenberg–Marquardt, Moré's scaled trust region, bounds inside the step",
+            build: |s| {
+                Box::new(LevenbergMarquardt::new(LevenbergMarquardtOptions {
+                    driver: s.driver,
+                    ..LevenbergMarquardtOptions::default()
                 }))
             },
         },
