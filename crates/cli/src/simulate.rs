@@ -67,17 +67,9 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
 /// Writes to a file (through a temporary, so a failure leaves no partial file) or stdout.
 pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
     match out {
-        Some(path) => {
-            // Through a temporary file of our own beside it (never a user's `out.partial`),
-            // renamed: the file is old or new, never half; errors name the user's path.
-            let name = path.file_name().map_or_else(Default::default, |n| n.to_string_lossy());
-            let tmp = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
-            let written = std::fs::write(&tmp, text).and_then(|()| std::fs::rename(&tmp, path));
-            if let Err(e) = written {
-                let _ = std::fs::remove_file(&tmp);
-                bail!("{}: {e}", path.display());
-            }
-        }
+        // Through a temporary file of our own beside it (never a user's `out.partial`),
+        // renamed: the file is old or new, never half; errors name the user's path.
+        Some(path) => sysid_montecarlo::files::write_atomically(path, text)?,
         None => crate::emit(text)?,
     }
     Ok(())

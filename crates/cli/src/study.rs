@@ -322,13 +322,10 @@ fn check(dirs: &[PathBuf]) -> anyhow::Result<Outcome> {
             incomplete.insert(s.shard.map_or(1, |s| s.index));
         }
     }
-    if let Some(count) = shards.first().and_then(|s| s.shard).map(|s| s.count) {
-        let given: std::collections::BTreeSet<usize> =
-            shards.iter().filter_map(|s| s.shard.map(|s| s.index)).collect();
-        for index in (1..=count).filter(|i| !given.contains(i)) {
-            text += &format!("{:<12} no directory given\n", format!("{index}/{count}"));
-            incomplete.insert(index);
-        }
+    for index in files::missing_shards(shards.iter().map(|s| s.shard)) {
+        let count = shards[0].shard.map_or(1, |s| s.count);
+        text += &format!("{:<12} no directory given\n", format!("{index}/{count}"));
+        incomplete.insert(index);
     }
     if incomplete.is_empty() {
         text += "complete\n";

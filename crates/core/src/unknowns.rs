@@ -146,6 +146,27 @@ impl Unknowns {
     pub fn values(&self, z: &[f64]) -> Vec<f64> {
         self.list.iter().zip(z).map(|(u, &z)| u.value(z)).collect()
     }
+    /// The box of corrections δ that keep z + δ within the bounds: (lo − z, hi − z), infinite
+    /// where an unknown has no bound. Every bounded step minimises its model over it.
+    pub fn step_box(&self, z: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        self.list
+            .iter()
+            .zip(z)
+            .map(|(u, z)| {
+                let (lo, hi) = u.coordinate_bounds();
+                (lo - z, hi - z)
+            })
+            .unzip()
+    }
+    /// z + s·δ, on the bounds exactly where it reaches them (a δ from [`step_box`] keeps z
+    /// inside; this only removes rounding).
+    ///
+    /// [`step_box`]: Self::step_box
+    pub fn moved(&self, z: &[f64], delta: &[f64], s: f64) -> Vec<f64> {
+        let mut out: Vec<f64> = z.iter().zip(delta).map(|(z, d)| z + s * d).collect();
+        self.project(&mut out);
+        out
+    }
     /// Moves coordinates onto the bounds they are outside of (rounding, or a start given
     /// outside); returns whether any moved.
     pub fn project(&self, z: &mut [f64]) -> bool {

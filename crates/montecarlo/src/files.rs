@@ -292,12 +292,9 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
         }
         records.extend(complete);
     }
-    let count = headers[0].shard.map_or(1, |s| s.count);
-    let given: BTreeSet<usize> = headers.iter().filter_map(|h| h.shard.map(|s| s.index)).collect();
-    if headers[0].shard.is_some() {
-        for index in (1..=count).filter(|i| !given.contains(i)) {
-            lacking.push(format!("{index}/{count} (no directory given)"));
-        }
+    for index in missing_shards(headers.iter().map(|h| h.shard)) {
+        let count = headers[0].shard.map_or(1, |s| s.count);
+        lacking.push(format!("{index}/{count} (no directory given)"));
     }
     if !lacking.is_empty() || seen.len() != whole.spec.trials {
         let missing = (0..whole.spec.trials).filter(|t| !seen.contains_key(t)).count();
@@ -355,6 +352,15 @@ pub fn progress(dirs: &[PathBuf]) -> Result<Vec<ShardProgress>, StudyError> {
         });
     }
     Ok(out)
+}
+
+/// The shard indices of the study that none of `given` (the shards at hand, of one study) is:
+/// 1..=n less those given, n from the first; none for a whole study.
+pub fn missing_shards(mut given: impl Iterator<Item = Option<Shard>>) -> Vec<usize> {
+    let Some(Some(first)) = given.next() else { return Vec::new() };
+    let present: BTreeSet<usize> =
+        std::iter::once(first.index).chain(given.flatten().map(|s| s.index)).collect();
+    (1..=first.count).filter(|i| !present.contains(i)).collect()
 }
 
 /// "3/16", or "whole study".
@@ -424,9 +430,7 @@ impl DirLock {
             }
             Err(TryLockError::Error(e)) => return Err(StudyError::io(&path)(e)),
         }
-        let now = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_secs());
+        let now = unix_seconds();
         let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
         let command: Vec<String> = std::env::args().collect();
         let line =
@@ -437,15 +441,18 @@ impl DirLock {
     }
 }
 
+/// Seconds since 1970 (0 for a clock before it).
+fn unix_seconds() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs())
+}
+
 /// "pid 123 on node7, for 42 s: sysid study …" from a lock file's line.
 fn describe(line: &str) -> String {
     let fields: Vec<&str> = line.trim_end().splitn(4, '\t').collect();
     let [pid, since, host, command] = fields[..] else {
         return "a process that has not written its name yet".into();
     };
-    let now = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
+    let now = unix_seconds();
     let age = since
         .parse::<u64>()
         .map_or(String::new(), |s| format!(", for {} s", now.saturating_sub(s)));
@@ -530,7 +537,7 @@ fn write_lines(path: &Path, records: &[TrialRecord]) -> Result<(), StudyError> {
 
 /// Writes through a temporary file and a rename: the file is either old or new, never half.
 /// The temporary file's name carries the process id, and errors name `path`.
-pub(crate) fn write_atomically(path: &Path, text: &str) -> Result<(), StudyError> {
+pub fn write_atomically(path: &Path, text: &str) -> Result<(), StudyError> {
     let name = path.file_name().map_or_else(Default::default, |n| n.to_string_lossy());
     let tmp = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
     let written = File::create(&tmp).and_then(|mut file| {

@@ -188,35 +188,22 @@ fn directories_are_never_overwritten_or_mixed() {
     let mut loose = sysid_systems::falling_body::falling_body();
     loose.integrator.rtol = 1e-6;
     let spec = study(&case, &["goodman"], 3, 0.1).spec().clone();
-    let other = Study::new(
-        spec.clone(),
-        Scenario::from_case(&loose).unwrap(),
-        vec![method("goodman")],
-        method("goodman-halving"),
-    )
-    .unwrap();
+    // Goodman against the reference, with these settings, on this case.
+    let goodman = |spec: StudySpec, case: &Case<_>| {
+        let scenario = Scenario::from_case(case).unwrap();
+        Study::new(spec, scenario, vec![method("goodman")], method("goodman-halving")).unwrap()
+    };
+    let other = goodman(spec.clone(), &loose);
     let e = files::run(&other, &dir, resume(), &quiet).unwrap_err().to_string();
     assert!(e.contains("integrator.rtol 1e-8 vs 1e-6"), "{e}");
     let mut with_model = spec.clone();
     with_model.settings.insert("model".into(), "sha256:ab12".into());
-    let with_model = Study::new(
-        with_model,
-        Scenario::from_case(&case).unwrap(),
-        vec![method("goodman")],
-        method("goodman-halving"),
-    )
-    .unwrap();
+    let with_model = goodman(with_model, &case);
     let e = files::run(&with_model, &dir, resume(), &quiet).unwrap_err().to_string();
     assert!(e.contains("settings.model (not recorded) vs sha256:ab12"), "{e}");
     let mut gtol = spec;
     gtol.driver.gtol = Some(1e-3);
-    let gtol = Study::new(
-        gtol,
-        Scenario::from_case(&case).unwrap(),
-        vec![method("goodman")],
-        method("goodman-halving"),
-    )
-    .unwrap();
+    let gtol = goodman(gtol, &case);
     let e = files::run(&gtol, &dir, resume(), &quiet).unwrap_err().to_string();
     assert!(e.contains("driver.gtol (not recorded) vs 0.001"), "{e}");
 

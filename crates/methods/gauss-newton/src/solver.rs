@@ -135,16 +135,7 @@ impl Adapter<'_> {
     fn hold<S: System>(&mut self, problem: &Problem<S>, here: &Evaluation) {
         let Some(jacobian) = &here.jacobian else { return };
         let (normal, gradient) = (jacobian.tr_mul(jacobian), jacobian.tr_mul(&here.r));
-        let (lo, hi): (Vec<f64>, Vec<f64>) = problem
-            .unknowns()
-            .list()
-            .iter()
-            .zip(&here.z)
-            .map(|(u, z)| {
-                let (lo, hi) = u.coordinate_bounds();
-                (lo - z, hi - z)
-            })
-            .unzip();
+        let (lo, hi) = problem.unknowns().step_box(&here.z);
         let model = Quadratic { h: &normal, c: &gradient };
         let k = here.z.len();
         let Ok(step) =

@@ -56,16 +56,7 @@ impl<S: System> Step<S> for Newton<'_> {
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
         let problem = ev.problem();
         let lin = current.linearization.as_ref().expect("Goodman's iterates are linearized");
-        let (lo, hi): (Vec<f64>, Vec<f64>) = problem
-            .unknowns()
-            .list()
-            .iter()
-            .zip(&current.z)
-            .map(|(u, z)| {
-                let (lo, hi) = u.coordinate_bounds();
-                (lo - z, hi - z)
-            })
-            .unzip();
+        let (lo, hi) = problem.unknowns().step_box(&current.z);
         let step = newton_step(lin, (&lo, &hi), self.options.driver.max_condition)
             .map_err(|s| Failure::singular(&s, &problem.names()))?;
         // The decrease the quadratic model predicts, ε − ε_lin(z + δ) = −(2Uᵀδ + δᵀAδ)
@@ -75,7 +66,7 @@ impl<S: System> Step<S> for Newton<'_> {
         let cost_tolerance = self.options.cost_tolerance;
         let stop = (cost_tolerance > 0.0 && predicted <= cost_tolerance * lin.cost)
             .then_some(Rule::PredictedDecrease);
-        let z = inside(problem, &current.z, &step.delta, 1.0);
+        let z = problem.unknowns().moved(&current.z, step.delta.as_slice(), 1.0);
         self.delta = step.delta;
         Ok(Proposal { z, condition: Some(step.condition), gradient_norm: None, stop })
     }
@@ -111,7 +102,7 @@ impl<S: System> Step<S> for Newton<'_> {
                 // Shrunk below the step tolerance without reducing the cost.
                 return Ok(Advance::Stop(Rule::Step));
             }
-            let trial = inside(problem, z, &self.delta, scale);
+            let trial = problem.unknowns().moved(z, self.delta.as_slice(), scale);
             match ev.linearize(&trial) {
                 // A step is taken on an actual decrease of the cost; or, where the model
                 // itself expects a change below ε's accuracy (about rtol relative: the
@@ -131,12 +122,4 @@ impl<S: System> Step<S> for Newton<'_> {
         }
         Ok(Advance::Stop(Rule::NoDescent))
     }
-}
-
-/// z + s·δ, on the bounds exactly where it reaches them (δ keeps z inside; this only
-/// removes rounding).
-fn inside<S: System>(problem: &Problem<S>, z: &[f64], delta: &DVector<f64>, s: f64) -> Vec<f64> {
-    let mut trial: Vec<f64> = z.iter().zip(delta).map(|(z, d)| z + s * d).collect();
-    problem.unknowns().project(&mut trial);
-    trial
 }

@@ -50,18 +50,25 @@ impl<S: System> Method<S> for LevenbergMarquardt {
 
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         self.options.validate()?;
-        let mut step =
-            TrustRegion { options: &self.options, scale: Vec::new(), radius: 0.0, lambda: 0.0 };
+        let mut step = TrustRegion {
+            options: &self.options,
+            scale: Vec::new(),
+            radius: 0.0,
+            lambda: 0.0,
+            proposed: None,
+        };
         drive(problem, "levenberg-marquardt", &self.options.driver, &mut step, start)
     }
 }
 
-/// The state of the iteration: the scaling D, the radius Δ and the last λ.
+/// The state of the iteration: the scaling D, the radius Δ, the last λ, and the step of the
+/// last proposal (which the advance evaluates first).
 struct TrustRegion<'o> {
     options: &'o LevenbergMarquardtOptions,
     scale: Vec<f64>,
     radius: f64,
     lambda: f64,
+    proposed: Option<Trial>,
 }
 
 /// A trial step with what the decision needs.
@@ -81,12 +88,8 @@ impl TrustRegion<'_> {
         let k = lin.gradient.len();
         self.scale.resize(k, 0.0);
         for (i, d) in self.scale.iter_mut().enumerate() {
-            *d = d.max(lin.normal[(i, i)].max(0.0).sqrt());
-        }
-        for d in &mut self.scale {
-            if *d == 0.0 {
-                *d = 1.0;
-            }
+            let largest = d.max(lin.normal[(i, i)].max(0.0).sqrt());
+            *d = if largest == 0.0 { 1.0 } else { largest };
         }
     }
 
@@ -123,16 +126,7 @@ impl TrustRegion<'_> {
         problem: &Problem<S>,
         lin: &Linearization,
     ) -> Result<Trial, Failure> {
-        let (lo, hi): (Vec<f64>, Vec<f64>) = problem
-            .unknowns()
-            .list()
-            .iter()
-            .zip(&lin.z)
-            .map(|(u, z)| {
-                let (lo, hi) = u.coordinate_bounds();
-                (lo - z, hi - z)
-            })
-            .unzip();
+        let (lo, hi) = problem.unknowns().step_box(&lin.z);
         let bounds = (lo.as_slice(), hi.as_slice());
         let radius = self.radius;
         let gauss_newton = self.solve(lin, bounds, 0.0);
@@ -214,8 +208,10 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         let lin = current.linearization.as_ref().expect("the iterates are linearized");
         self.rescale(lin);
         let trial = self.step(ev.problem(), lin)?;
-        let z = inside(ev.problem(), &current.z, &trial.delta);
-        Ok(Proposal { z, condition: Some(trial.condition), gradient_norm: None, stop: None })
+        let z = ev.problem().unknowns().moved(&current.z, trial.delta.as_slice(), 1.0);
+        let condition = Some(trial.condition);
+        self.proposed = Some(trial);
+        Ok(Proposal { z, condition, gradient_norm: None, stop: None })
     }
 
     fn advance(
@@ -230,9 +226,10 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         let step_tolerance = problem.resolvable_step(self.options.driver.step_tolerance);
         let z_norm = current.z.iter().map(|v| v * v).sum::<f64>().sqrt();
         let negligible = step_tolerance * (z_norm + step_tolerance);
-        // The proposal's step, computed again with the same radius and scaling (cheap: a k×k
-        // solve) rather than carried between the calls.
-        let mut trial = self.step(problem, lin)?;
+        let mut trial = match self.proposed.take() {
+            Some(trial) => trial,
+            None => self.step(problem, lin)?,
+        };
         let mut z = proposal.z;
         for _ in 0..=self.options.max_rejections {
             let evaluated = match ev.linearize(&z) {
@@ -262,16 +259,8 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 return Ok(Advance::Stop(Rule::Step));
             }
             trial = self.step(problem, lin)?;
-            z = inside(problem, &current.z, &trial.delta);
+            z = problem.unknowns().moved(&current.z, trial.delta.as_slice(), 1.0);
         }
         Ok(Advance::Stop(Rule::NoDescent))
     }
-}
-
-/// z + δ, on the bounds exactly where it reaches them (δ keeps z inside; this only removes
-/// rounding).
-fn inside<S: System>(problem: &Problem<S>, z: &[f64], delta: &DVector<f64>) -> Vec<f64> {
-    let mut trial: Vec<f64> = z.iter().zip(delta).map(|(z, d)| z + d).collect();
-    problem.unknowns().project(&mut trial);
-    trial
 }
