@@ -10,6 +10,8 @@
 //! * [`quasilinearization`] (`sysid-quasilinearization`): Bellman–Kagiwada–Kalaba's method;
 //! * [`levenberg_marquardt`] (`sysid-levenberg-marquardt`): Moré's trust-region
 //!   Levenberg–Marquardt, bounds inside the step;
+//! * [`multiple_shooting`] (`sysid-multiple-shooting`): Bock's multiple shooting with
+//!   condensing and an exact-penalty line search;
 //! * [`model`] (`sysid-model`): model files (TOML + expressions) and CSV data;
 //! * [`systems`] (`sysid-systems`): the benchmark catalogue.
 #![warn(missing_docs)]
@@ -20,6 +22,7 @@ pub use sysid_goodman as goodman;
 pub use sysid_levenberg_marquardt as levenberg_marquardt;
 pub use sysid_model as model;
 pub use sysid_montecarlo as montecarlo;
+pub use sysid_multiple_shooting as multiple_shooting;
 pub use sysid_ode as ode;
 pub use sysid_quasilinearization as quasilinearization;
 pub use sysid_registry as registry;
@@ -31,6 +34,7 @@ pub mod prelude {
     pub use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions};
     pub use sysid_goodman::{Goodman, GoodmanOptions};
     pub use sysid_levenberg_marquardt::{LevenbergMarquardt, LevenbergMarquardtOptions};
+    pub use sysid_multiple_shooting::{MultipleShooting, MultipleShootingOptions};
     pub use sysid_ode::{Integrator, Scalar, Signature, System};
     pub use sysid_quasilinearization::{Quasilinearization, QuasilinearizationOptions};
 }

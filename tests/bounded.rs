@@ -148,9 +148,12 @@ fn every_method_reaches_the_bounded_optimum_or_says_it_did_not() {
     for name in CASES {
         let reached = visit(name, Check(&references[name]));
         println!("{name}: reached by {}", reached.join(", "));
-        // The step-halving Goodman, a quasilinearization and the line-search baseline must
+        // The step-halving Goodman, a quasilinearization, the line-search baseline and the
+        // two globalised methods (Levenberg–Marquardt, multiple shooting) must
         // reach every one.
-        for needed in ["goodman-halving", "gauss-newton-ls"] {
+        for needed in
+            ["goodman-halving", "gauss-newton-ls", "levenberg-marquardt", "multiple-shooting"]
+        {
             assert!(reached.iter().any(|m| m == needed), "{name}: {needed} did not reach it");
         }
         assert!(reached.iter().any(|m| m.starts_with("quasilinearization")), "{name}: no QL");

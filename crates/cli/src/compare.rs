@@ -6,12 +6,13 @@ use clap::Args;
 use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
 
-use crate::fit::prepare;
+use crate::fit::{fit_from_starts, prepare, with_starts};
 use crate::format::significant;
 use crate::integrator::IntegratorArgs;
-use crate::methods::{MethodArgs, default_methods, method, parse_list};
+use crate::methods::{MethodArgs, StartsArgs, default_methods, describe_starts, parse_list};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
+use sysid_montecarlo::multistart::Starts;
 
 /// Arguments of `sysid compare`.
 #[derive(Args, Debug)]
@@ -41,18 +42,21 @@ pub struct CompareArgs {
     #[command(flatten)]
     options: MethodArgs,
     #[command(flatten)]
+    starts: StartsArgs,
+    #[command(flatten)]
     integrator: IntegratorArgs,
 }
 
 /// One method's outcome on one system.
 pub struct Row {
     method: String,
-    result: Result<Estimate, String>,
+    result: Result<(Estimate, Option<Starts>), String>,
 }
 
 /// Runs `sysid compare`.
 pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
+    args.starts.options()?;
     let methods = match &args.methods {
         Some(list) => parse_list(list)?,
         None => default_methods().into_iter().map(String::from).collect(),
@@ -107,16 +111,22 @@ impl WithProblem for CompareProblem<'_> {
         let common = self.args.options.common();
         let mut rows = Vec::with_capacity(self.methods.len());
         for name in self.methods {
-            let m = method::<S>(name, &common)?;
-            rows.push(Row {
-                method: name.clone(),
-                result: m.fit(&problem).map_err(|e| e.to_string()),
-            });
+            crate::methods::method::<S>(name, &common)?;
+            let result = if self.args.starts.starts.is_some() {
+                fit_from_starts(&problem, name, common.clone(), &self.args.starts)
+                    .map_err(|e| e.to_string())
+            } else {
+                crate::methods::method::<S>(name, &common)?
+                    .fit(&problem)
+                    .map(|e| (e, None))
+                    .map_err(|e| e.to_string())
+            };
+            rows.push(Row { method: name.clone(), result });
         }
         let json = rows
             .iter()
             .map(|row| match &row.result {
-                Ok(e) => serde_json::to_value(e.record(&context.name)).expect("serialisable"),
+                Ok((e, starts)) => with_starts(e.record(&context.name), starts.as_ref()),
                 Err(message) => serde_json::json!({
                     "system": context.name, "method": row.method, "converged": false, "error": message,
                 }),
@@ -152,7 +162,7 @@ fn table<S: System>(problem: &Problem<S>, context: &Context, rows: &[Row]) -> St
     out += "\n";
     for row in rows {
         match &row.result {
-            Ok(e) => {
+            Ok((e, starts)) => {
                 let mut line = format!(
                     "  {:<24} {:>5} {:>5} {:>18} {:>10.3}",
                     row.method,
@@ -168,6 +178,9 @@ fn table<S: System>(problem: &Problem<S>, context: &Context, rows: &[Row]) -> St
                 out += "\n";
                 if !e.converged() {
                     out += &format!("  {:<24} └ {}\n", "", e.termination);
+                }
+                if let Some(s) = starts {
+                    out += &format!("  {:<24} └ {}\n", "", describe_starts(s));
                 }
             }
             Err(message) => out += &format!("  {:<24} error: {message}\n", row.method),

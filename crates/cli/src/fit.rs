@@ -6,9 +6,10 @@ use sysid_ode::System;
 
 use crate::format::significant;
 use crate::integrator::IntegratorArgs;
-use crate::methods::{Common, MethodArgs, method, methods};
+use crate::methods::{Common, MethodArgs, StartsArgs, describe_starts, method, methods};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
+use sysid_montecarlo::multistart::Starts;
 
 /// Arguments of `sysid fit`.
 #[derive(Args, Debug)]
@@ -16,7 +17,7 @@ pub struct FitArgs {
     #[command(flatten)]
     source: SourceArgs,
     /// The method: goodman, goodman-halving, gauss-newton, gauss-newton-ls, gauss-newton-fd,
-    /// quasilinearization, quasilinearization-data.
+    /// levenberg-marquardt, multiple-shooting, quasilinearization, quasilinearization-data.
     #[arg(long, default_value = "goodman", value_name = "METHOD")]
     method: String,
     /// Output format: a readable table, or the JSON object of docs/json.md (printed
@@ -26,12 +27,15 @@ pub struct FitArgs {
     #[command(flatten)]
     options: MethodArgs,
     #[command(flatten)]
+    starts: StartsArgs,
+    #[command(flatten)]
     integrator: IntegratorArgs,
 }
 
 /// Runs `sysid fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
+    args.starts.options()?;
     with_problem(&args.source, FitProblem { args })
 }
 
@@ -49,13 +53,20 @@ impl WithProblem for FitProblem<'_> {
     ) -> anyhow::Result<Outcome> {
         let args = self.args;
         let problem = prepare(problem, &args.integrator, &args.options)?;
-        let estimate = fit(&problem, &args.method, args.options.common())?;
+        let (estimate, starts) =
+            fit_from_starts(&problem, &args.method, args.options.common(), &args.starts)?;
         match args.format {
-            Format::Json => crate::emit(&format!(
-                "{}\n",
-                serde_json::to_string_pretty(&estimate.record(&context.name))?
-            ))?,
-            Format::Table => crate::emit(&table(&problem, &context, &estimate))?,
+            Format::Json => {
+                let record = with_starts(estimate.record(&context.name), starts.as_ref());
+                crate::emit(&format!("{}\n", serde_json::to_string_pretty(&record)?))?
+            }
+            Format::Table => {
+                let mut text = table(&problem, &context, &estimate);
+                if let Some(s) = &starts {
+                    text += &format!("\n  starts       {}\n", describe_starts(s));
+                }
+                crate::emit(&text)?
+            }
         }
         Ok(if estimate.converged() { Outcome::Success } else { Outcome::NotConverged })
     }
@@ -83,6 +94,37 @@ pub fn fit<S: System>(
         anyhow::bail!(message);
     }
     Ok(estimate)
+}
+
+/// Fits with the named method from the problem's guess, or from the starts of `--starts`
+/// (the best fit, and what the starts found). The start is unusable only when every start is.
+pub fn fit_from_starts<S: System + Sync>(
+    problem: &Problem<S>,
+    name: &str,
+    common: Common,
+    starts: &StartsArgs,
+) -> anyhow::Result<(Estimate, Option<Starts>)> {
+    let Some(options) = starts.options()? else {
+        return Ok((fit(problem, name, common)?, None));
+    };
+    let m = method::<S>(name, &common)?;
+    let run = sysid_montecarlo::multistart(&*m, problem, &options)?;
+    if let Some(message) = unusable_start(problem, &run.best) {
+        anyhow::bail!("every start fails; the best: {message}");
+    }
+    Ok((run.best, Some(run.starts)))
+}
+
+/// A fit's JSON object with the `starts` object of a multistart run.
+pub fn with_starts(
+    record: sysid_core::FitRecord<'_>,
+    starts: Option<&Starts>,
+) -> serde_json::Value {
+    let mut value = serde_json::to_value(record).expect("a fit record serialises");
+    if let (Some(s), Some(map)) = (starts, value.as_object_mut()) {
+        map.insert("starts".into(), serde_json::to_value(s).expect("starts serialise"));
+    }
+    value
 }
 
 /// Why the start cannot be used, if it cannot.

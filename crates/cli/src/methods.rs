@@ -40,6 +40,9 @@ pub struct MethodArgs {
     /// First trajectory of quasilinearization: the model from the guess, or the data.
     #[arg(long, value_enum, default_value_t = QlStart::Guess)]
     pub ql_start: QlStart,
+    /// Shooting intervals of multiple-shooting (default: one per 5 sample times, at most 10).
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub shooting_intervals: Option<usize>,
     /// Hold an unknown at a value for this run, without editing the model file; it then
     /// counts as known (degrees of freedom, certificate). Repeatable.
     #[arg(long = "fix", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
@@ -59,11 +62,14 @@ impl MethodArgs {
             QlStart::Guess => Start::Guess,
             QlStart::Data => Start::Data,
         };
-        Common { driver, ql_start }
+        Common { driver, ql_start, shooting_intervals: self.shooting_intervals }
     }
 
     /// Checks the options before anything runs.
     pub fn validate(&self) -> anyhow::Result<()> {
+        if self.shooting_intervals == Some(0) {
+            anyhow::bail!("--shooting-intervals must be at least 1");
+        }
         self.common().driver.validate().map_err(|e| anyhow::anyhow!("{}", cli_names(e)))
     }
 }
@@ -100,4 +106,77 @@ pub fn method<S: System>(name: &str, common: &Common) -> anyhow::Result<Boxed<S>
 /// Checks a comma-separated list of method names.
 pub fn parse_list(list: &str) -> anyhow::Result<Vec<String>> {
     Ok(sysid_registry::parse_list(list)?)
+}
+
+/// `--starts`: multistart for `fit` and `compare`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct StartsArgs {
+    /// Fit from N starts instead of one, in parallel: the guess, then a Latin hypercube of
+    /// N − 1 starts within the bounds of unknowns bounded on both sides, ±ρ (--start-spread)
+    /// around the guess for the others. Prints the best fit and how many starts reached it,
+    /// with the distinct minima found.
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub starts: Option<usize>,
+    /// Seed of the starts' Latin hypercube (default 1).
+    #[arg(long, value_name = "SEED", allow_negative_numbers = true)]
+    pub starts_seed: Option<u64>,
+    /// ρ of --starts for unknowns without two bounds: guess·(1 + ρu), u uniform on [−1, 1]
+    /// (guess·(1 + ρ)^u on a log scale, ρu for a guess of 0). Default 0.5.
+    #[arg(long, value_name = "RHO", allow_hyphen_values = true)]
+    pub start_spread: Option<f64>,
+}
+
+impl StartsArgs {
+    /// The multistart options, when --starts was given.
+    pub fn options(&self) -> anyhow::Result<Option<sysid_montecarlo::MultistartOptions>> {
+        let defaults = sysid_montecarlo::MultistartOptions::default();
+        let spread = self.start_spread.unwrap_or(defaults.spread);
+        if !(spread > 0.0 && spread.is_finite()) {
+            anyhow::bail!("--start-spread must be a positive number, got {spread}");
+        }
+        let Some(starts) = self.starts else {
+            if self.start_spread.is_some() || self.starts_seed.is_some() {
+                let option =
+                    if self.start_spread.is_some() { "--start-spread" } else { "--starts-seed" };
+                anyhow::bail!("{option} needs --starts N");
+            }
+            return Ok(None);
+        };
+        if starts == 0 {
+            anyhow::bail!("--starts must be at least 1");
+        }
+        Ok(Some(sysid_montecarlo::MultistartOptions {
+            starts,
+            seed: self.starts_seed.unwrap_or(defaults.seed),
+            spread,
+        }))
+    }
+}
+
+/// The text of a multistart's `starts` object.
+pub fn describe_starts(s: &sysid_montecarlo::multistart::Starts) -> String {
+    let plural = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+    let minima: Vec<String> = s
+        .minima
+        .iter()
+        .map(|m| {
+            format!("ε = {} ({})", crate::format::significant(m.cost, 10), plural(m.count, "start"))
+        })
+        .collect();
+    format!(
+        "{} in {:.1} ms (the guess, then a Latin hypercube, seed {}, ρ {}): {} converged, {} reached the best (start {}); {}: {}",
+        plural(s.count, "start"),
+        s.elapsed_ms,
+        s.seed,
+        s.spread,
+        s.converged,
+        s.reached_best,
+        s.best_start,
+        if s.minima.len() == 1 {
+            "1 distinct minimum".to_string()
+        } else {
+            format!("{} distinct minima", s.minima.len())
+        },
+        if minima.is_empty() { "none".to_string() } else { minima.join(", ") }
+    )
 }

@@ -167,7 +167,11 @@ struct FromCase<'a> {
 /// The method options beyond the driver's that change results, for study.json.
 fn method_settings(args: &StudyArgs) -> BTreeMap<String, String> {
     let ql_start = format!("{:?}", args.options.ql_start).to_lowercase();
-    BTreeMap::from([("ql_start".to_string(), ql_start)])
+    let intervals = args.options.shooting_intervals.map_or("data".to_string(), |m| m.to_string());
+    BTreeMap::from([
+        ("ql_start".to_string(), ql_start),
+        ("shooting_intervals".to_string(), intervals),
+    ])
 }
 
 /// "sha256:…" of a file's contents.

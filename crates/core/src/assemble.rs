@@ -56,6 +56,7 @@ impl<S: System> Record<'_, S> {
             gradient_norm: None,
             linearization: None,
             linear_cost: None,
+            defect: None,
         };
         let certificate = Certificate::failed(k, self.gtol);
         let termination = match failure {

@@ -69,6 +69,7 @@ pub fn drive<S: System>(
             optimality: measure,
             values: problem.unknowns().values(&current.z),
             linear_cost: current.linear_cost,
+            defect: current.defect,
         });
         if let Some(rule) = pending.take() {
             let judged = record.judge(&ev, &current);

@@ -33,6 +33,9 @@ pub struct Iteration {
     /// Quasilinearization: ε of the linear family whose optimum gave this iterate (ε above
     /// is that of the nonlinear model re-integrated from the iterate). None for other methods.
     pub linear_cost: Option<f64>,
+    /// Multiple shooting: ‖d‖, the Euclidean norm of the matching defects of the node values
+    /// at this iterate. None for other methods.
+    pub defect: Option<f64>,
 }
 
 /// The estimate of the unknowns with its uncertainty and the record of the run.
@@ -160,6 +163,9 @@ impl Serialize for Iteration {
         st.serialize_field("optimality", &self.optimality.map(Num))?;
         if let Some(c) = self.linear_cost {
             st.serialize_field("linear_cost", &Num(c))?;
+        }
+        if let Some(d) = self.defect {
+            st.serialize_field("defect", &Num(d))?;
         }
         st.end()
     }

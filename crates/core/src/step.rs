@@ -22,6 +22,8 @@ pub struct Iterate {
     pub linearization: Option<Linearization>,
     /// Quasilinearization: ε of the linear family whose optimum z is.
     pub linear_cost: Option<f64>,
+    /// Multiple shooting: ‖d‖, the Euclidean norm of the matching defects at the iterate.
+    pub defect: Option<f64>,
 }
 
 impl Iterate {
@@ -33,6 +35,7 @@ impl Iterate {
             gradient_norm: Some(lin.gradient.norm()),
             linearization: Some(lin),
             linear_cost: None,
+            defect: None,
         }
     }
 }

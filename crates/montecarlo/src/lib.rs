@@ -50,12 +50,14 @@
 mod basin;
 mod error;
 pub mod files;
+pub mod multistart;
 mod scenario;
 mod stats;
 mod trial;
 
 pub use basin::{Basin, BasinMap, basin};
 pub use error::StudyError;
+pub use multistart::{Multistart, MultistartOptions, multistart};
 pub use scenario::Scenario;
 pub use stats::{
     Accuracy, Count, MethodSummary, Percentiles, Summary, Z95, quantile, summarise, wilson,

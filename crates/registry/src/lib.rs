@@ -22,6 +22,7 @@ use sysid_core::{DriverOptions, Method};
 use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
 use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_levenberg_marquardt::{LevenbergMarquardt, LevenbergMarquardtOptions};
+use sysid_multiple_shooting::{MultipleShooting, MultipleShootingOptions};
 use sysid_ode::System;
 use sysid_ode::testing::Decay;
 pub use sysid_quasilinearization::Start;
@@ -38,6 +39,8 @@ pub struct Settings {
     pub driver: DriverOptions,
     /// The first trajectory of `quasilinearization`.
     pub ql_start: Start,
+    /// The number of shooting intervals of `multiple-shooting` (None: chosen from the data).
+    pub shooting_intervals: Option<usize>,
 }
 
 /// One method of the registry.
@@ -124,6 +127,16 @@ pub fn entries<S: System>() -> Vec<Entry<S>> {
                 Box::new(LevenbergMarquardt::new(LevenbergMarquardtOptions {
                     driver: s.driver,
                     ..LevenbergMarquardtOptions::default()
+                }))
+            },
+        },
+        Entry {
+            name: "multiple-shooting",
+            description: "Bock's multiple shooting: node values from the data, condensing, exact-penalty line search",
+            build: |s| {
+                Box::new(MultipleShooting::new(MultipleShootingOptions {
+                    driver: s.driver,
+                    intervals: s.shooting_intervals,
                 }))
             },
         },

@@ -123,6 +123,7 @@ impl Adapter<'_> {
             gradient_norm,
             linearization: e.linearization,
             linear_cost: None,
+            defect: None,
         }
     }
 

@@ -115,7 +115,14 @@ impl<S: System> Step<S> for Quasi<'_> {
         let trajectory = ev.run(&z, || Trajectory::start(problem, &z, &self.options.start))?;
         self.trajectory = Some(trajectory);
         let cost = nonlinear_cost(ev, &z)?;
-        Ok(Iterate { z, cost, gradient_norm: None, linearization: None, linear_cost: None })
+        Ok(Iterate {
+            z,
+            cost,
+            gradient_norm: None,
+            linearization: None,
+            linear_cost: None,
+            defect: None,
+        })
     }
 
     /// Integrates p and Φ around x_k and chooses c by least squares (QR), projected on the
@@ -161,6 +168,7 @@ impl<S: System> Step<S> for Quasi<'_> {
             gradient_norm: None,
             linearization: None,
             linear_cost: Some(linear_cost),
+            defect: None,
         }))
     }
 }

@@ -1,0 +1,204 @@
+//! Multistart: one method from many starts on one problem, the best fit kept, and the minima
+//! the starts found.
+//!
+//! The starts are a Latin hypercube of N points (ChaCha8 seeded by [`MultistartOptions::seed`]):
+//! each unknown's range is cut into N strata of equal width and every stratum holds one start.
+//! The range of an unknown with both bounds is its box (in its coordinates: between the logs
+//! of the bounds on a log scale); any other unknown spreads ±ρ around its guess, as a study's
+//! starts spread around the truth: guess·(1 + ρu) with u on [−1, 1], guess·(1 + ρ)^u on a log
+//! scale, ρu for a guess of 0, then moved onto a one-sided bound it falls outside of. The
+//! problem's own guess is the first start, so that N starts never do worse than one.
+//!
+//! The fits run on rayon. The best fit is the converged one with the least cost (the least
+//! cost of all when none converged). A start reached the best minimum when its fit converged
+//! to a cost within [`SAME_MINIMUM_RTOL`] of the best; the distinct minima are the converged
+//! fits grouped by cost the same way, least cost first.
+
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+use serde::Serialize;
+use sysid_core::{Estimate, FitError, Method, Problem, Unknown};
+use sysid_ode::System;
+
+/// Two converged costs within this relative distance are one minimum.
+pub const SAME_MINIMUM_RTOL: f64 = 1e-6;
+
+/// How many starts, drawn how.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MultistartOptions {
+    /// N, the number of starts (the guess included).
+    pub starts: usize,
+    /// Seed of the Latin hypercube.
+    pub seed: u64,
+    /// ρ, the spread around the guess of unknowns without two bounds.
+    pub spread: f64,
+}
+
+impl Default for MultistartOptions {
+    fn default() -> Self {
+        Self { starts: 10, seed: 1, spread: 0.5 }
+    }
+}
+
+/// The outcome of a multistart run.
+#[derive(Clone, Debug)]
+pub struct Multistart {
+    /// The best fit.
+    pub best: Estimate,
+    /// What the starts found.
+    pub starts: Starts,
+}
+
+/// What the starts found: the `starts` object of the fit JSON.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Starts {
+    /// N.
+    pub count: usize,
+    /// The Latin hypercube's seed.
+    pub seed: u64,
+    /// ρ.
+    pub spread: f64,
+    /// The start of the best fit (0 is the problem's guess).
+    pub best_start: usize,
+    /// Starts whose fit converged.
+    pub converged: usize,
+    /// Starts whose fit converged to the best minimum.
+    pub reached_best: usize,
+    /// The distinct minima the converged fits reached, least cost first.
+    pub minima: Vec<Minimum>,
+    /// Wall-clock time of all the fits, in milliseconds.
+    pub elapsed_ms: f64,
+}
+
+/// One minimum the starts reached.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Minimum {
+    /// The least cost among the fits that reached it.
+    pub cost: f64,
+    /// How many starts reached it.
+    pub count: usize,
+    /// The first start (in order) that reached it.
+    pub start: usize,
+    /// The estimates of that fit, by name, in the problem's order.
+    pub estimates: serde_json::Map<String, serde_json::Value>,
+}
+
+/// The N starts of `problem` (values, in the problem's order), the guess first.
+pub fn starts<S: System>(problem: &Problem<S>, options: &MultistartOptions) -> Vec<Vec<f64>> {
+    let n = options.starts.max(1);
+    let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+    let unknowns = problem.unknowns().list();
+    let mut columns: Vec<Vec<f64>> = Vec::with_capacity(unknowns.len());
+    for u in unknowns {
+        let mut strata: Vec<usize> = (0..n - 1).collect();
+        strata.shuffle(&mut rng);
+        let column = strata
+            .into_iter()
+            .map(|s| {
+                let fraction = (s as f64 + rng.random::<f64>()) / (n - 1) as f64;
+                draw(u, fraction, options.spread)
+            })
+            .collect();
+        columns.push(column);
+    }
+    let mut starts = vec![problem.guesses()];
+    starts.extend((0..n - 1).map(|j| columns.iter().map(|c| c[j]).collect()));
+    starts
+}
+
+/// The value of an unknown at `fraction` ∈ [0, 1] of its range.
+fn draw(u: &Unknown, fraction: f64, spread: f64) -> f64 {
+    let (lo, hi) = u.coordinate_bounds();
+    if lo.is_finite() && hi.is_finite() {
+        return u.value(lo + fraction * (hi - lo));
+    }
+    let t = 2.0 * fraction - 1.0;
+    let value = if u.log {
+        u.guess * (1.0 + spread).powf(t)
+    } else if u.guess == 0.0 {
+        spread * t
+    } else {
+        u.guess * (1.0 + spread * t)
+    };
+    value.clamp(u.min.unwrap_or(f64::NEG_INFINITY), u.max.unwrap_or(f64::INFINITY))
+}
+
+/// Fits `problem` with `method` from the starts of `options`, on rayon.
+pub fn multistart<S, M>(
+    method: &M,
+    problem: &Problem<S>,
+    options: &MultistartOptions,
+) -> Result<Multistart, FitError>
+where
+    S: System + Sync,
+    M: Method<S> + Sync + ?Sized,
+{
+    let started = std::time::Instant::now();
+    let starts = starts(problem, options);
+    let fits: Vec<Estimate> =
+        starts.par_iter().map(|start| method.fit_from(problem, start)).collect::<Result<_, _>>()?;
+    let mut summary = summarise(&fits, options);
+    summary.elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
+    let best = fits.into_iter().nth(summary.best_start).expect("the best start's fit");
+    Ok(Multistart { best, starts: summary })
+}
+
+/// Whether two converged fits are at one minimum: costs within [`SAME_MINIMUM_RTOL`], or
+/// both exact fits (ε = 0 to rounding, where the relative difference of the costs is noise).
+fn same_minimum(a: &Estimate, b: &Estimate) -> bool {
+    (a.certificate.exact_fit && b.certificate.exact_fit)
+        || (a.cost - b.cost).abs() <= SAME_MINIMUM_RTOL * a.cost.abs().max(b.cost.abs())
+}
+
+fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
+    let least = |converged: bool| {
+        fits.iter()
+            .enumerate()
+            .filter(|(_, f)| !converged || f.converged())
+            .filter(|(_, f)| !f.cost.is_nan())
+            .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
+            .map(|(i, _)| i)
+    };
+    let best_start = least(true).or_else(|| least(false)).unwrap_or(0);
+    let mut order: Vec<usize> = (0..fits.len()).filter(|&i| fits[i].converged()).collect();
+    order.sort_by(|&a, &b| fits[a].cost.total_cmp(&fits[b].cost).then(a.cmp(&b)));
+    // Each minimum is represented by its least-cost fit.
+    let mut minima: Vec<(usize, Minimum)> = Vec::new();
+    for i in order {
+        let fit = &fits[i];
+        match minima.last_mut() {
+            Some((least, m)) if same_minimum(fit, &fits[*least]) => {
+                m.count += 1;
+                if i < m.start {
+                    m.start = i;
+                    m.estimates = named(fit);
+                }
+            }
+            _ => minima
+                .push((i, Minimum { cost: fit.cost, count: 1, start: i, estimates: named(fit) })),
+        }
+    }
+    let minima = minima.into_iter().map(|(_, m)| m).collect();
+    let best = &fits[best_start];
+    let reached_best = if best.converged() {
+        fits.iter().filter(|f| f.converged() && same_minimum(f, best)).count()
+    } else {
+        0
+    };
+    Starts {
+        count: fits.len(),
+        seed: options.seed,
+        spread: options.spread,
+        best_start,
+        converged: fits.iter().filter(|f| f.converged()).count(),
+        reached_best,
+        minima,
+        elapsed_ms: 0.0,
+    }
+}
+
+fn named(fit: &Estimate) -> serde_json::Map<String, serde_json::Value> {
+    fit.names.iter().cloned().zip(fit.values.iter().map(|&v| serde_json::json!(v))).collect()
+}

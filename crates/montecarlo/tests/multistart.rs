@@ -1,0 +1,91 @@
+//! Multistart: the Latin hypercube's design, and the minima of lotka-volterra, whose
+//! catalogue start leads the line-search methods to a spurious minimum (ε ≈ 56 116).
+
+use sysid_core::Unknown;
+use sysid_montecarlo::multistart::{SAME_MINIMUM_RTOL, starts};
+use sysid_montecarlo::{MultistartOptions, multistart};
+use sysid_ode::testing::assert_close;
+use sysid_registry::{Registry, Settings};
+
+#[test]
+fn the_latin_hypercube_puts_one_start_in_every_stratum() {
+    // compartment-chain: 23 unknowns bounded below only, spread ±ρ around the guess.
+    let case = sysid_systems::compartment_chain::compartment_chain();
+    let problem = case.problem(1).unwrap();
+    let options = MultistartOptions { starts: 21, seed: 7, spread: 0.5 };
+    let list = starts(&problem, &options);
+    assert_eq!(list.len(), 21);
+    assert_eq!(list[0], problem.guesses(), "the guess is the first start");
+    for (i, u) in problem.unknowns().list().iter().enumerate() {
+        // u = (value/guess − 1)/ρ lies in [−1, 1]; its 20 strata of width 0.1 hold one each.
+        let mut strata: Vec<usize> = list[1..]
+            .iter()
+            .map(|s| {
+                assert!(s[i] >= u.min.unwrap_or(f64::NEG_INFINITY), "{} below its bound", u.name);
+                let t = if u.guess == 0.0 { s[i] / 0.5 } else { (s[i] / u.guess - 1.0) / 0.5 };
+                assert!((-1.0..=1.0).contains(&t), "{}: {t}", u.name);
+                (((t + 1.0) / 2.0 * 20.0).floor() as usize).min(19)
+            })
+            .collect();
+        if u.guess != 0.0 && u.min.is_none_or(|m| m <= u.guess * 0.5) {
+            strata.sort_unstable();
+            assert_eq!(strata, (0..20).collect::<Vec<_>>(), "{}", u.name);
+        }
+    }
+    assert_eq!(starts(&problem, &options), list, "seeded: the same starts again");
+    let other = starts(&problem, &MultistartOptions { seed: 8, ..options });
+    assert_ne!(other, list, "another seed, other starts");
+}
+
+#[test]
+fn an_unknown_with_two_bounds_is_drawn_from_its_box_on_its_scale() {
+    let mut case = sysid_systems::lotka_volterra::lotka_volterra();
+    case.unknowns[0] = Unknown::new("a", 1.2).min(0.5).max(2.5);
+    case.unknowns[1] = Unknown::new("b", 0.8).min(0.01).max(100.0).log();
+    let problem = case.problem(1).unwrap();
+    let list = starts(&problem, &MultistartOptions { starts: 11, seed: 3, spread: 0.5 });
+    let mut a: Vec<usize> =
+        list[1..].iter().map(|s| ((s[0] - 0.5) / 2.0 * 10.0) as usize).collect();
+    let mut b: Vec<usize> =
+        list[1..].iter().map(|s| ((s[1] / 0.01).log10() / 4.0 * 10.0) as usize).collect();
+    a.sort_unstable();
+    b.sort_unstable();
+    assert_eq!(a, (0..10).collect::<Vec<_>>(), "a: one start per tenth of [0.5, 2.5]");
+    assert_eq!(b, (0..10).collect::<Vec<_>>(), "b: one start per tenth of [ln 0.01, ln 100]");
+}
+
+#[test]
+fn lotka_volterra_multistart_finds_the_true_minimum_and_counts_the_others() {
+    let case = sysid_systems::lotka_volterra::lotka_volterra();
+    let problem = case.problem(1).unwrap();
+    let registry = Registry::standard();
+    let method = registry.build("gauss-newton-ls", &Settings::default()).unwrap();
+    // The independent reference: Goodman's method from the truth.
+    let goodman = registry.build("goodman", &Settings::default()).unwrap();
+    let truth = goodman.fit_from(&problem, &case.expected_values().unwrap()).unwrap();
+    assert!(truth.converged());
+    let single = method.fit(&problem).unwrap();
+    assert!(single.cost > 1e4, "from the guess alone: the spurious minimum, ε = {}", single.cost);
+
+    let options = MultistartOptions { starts: 12, seed: 1, spread: 0.5 };
+    let run = multistart(&*method, &problem, &options).unwrap();
+    let s = &run.starts;
+    assert!(run.best.converged());
+    assert_close(run.best.cost, truth.cost, 1e-9);
+    assert_eq!(s.count, 12);
+    assert_eq!(
+        s.minima[0].cost.to_bits(),
+        run.best.cost.to_bits(),
+        "the best is the first minimum"
+    );
+    assert_eq!(s.minima[0].count, s.reached_best);
+    assert!(s.reached_best >= 1 && s.reached_best < s.converged, "{s:?}");
+    assert!(s.minima.len() >= 2, "the spurious minimum of the guess is among them: {s:?}");
+    assert!(s.minima.windows(2).all(|w| w[0].cost * (1.0 + SAME_MINIMUM_RTOL) < w[1].cost));
+    assert_eq!(s.minima.iter().map(|m| m.count).sum::<usize>(), s.converged);
+    let spurious = s.minima.iter().find(|m| m.start == 0).expect("the guess's minimum");
+    assert_close(spurious.cost, single.cost, 1e-9);
+    // Fits run on rayon, results do not depend on it.
+    let again = multistart(&*method, &problem, &options).unwrap();
+    assert_eq!(again.starts.minima, s.minima);
+}
