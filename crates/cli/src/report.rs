@@ -21,7 +21,7 @@ pub struct ReportArgs {
     #[arg(long, value_name = "A,B")]
     systems: Option<String>,
     /// The methods compared.
-    #[arg(long, default_value = "goodman,quasilinearization,gauss-newton-ls", value_name = "A,B")]
+    #[arg(long, default_value = sysid_report::DEFAULT_METHODS, value_name = "A,B")]
     methods: String,
     /// Trials of each system's study.
     #[arg(long, default_value_t = 500, value_name = "N", allow_negative_numbers = true)]
@@ -35,7 +35,10 @@ pub struct ReportArgs {
     /// Spread of the basin maps: starts from truth·(1 − s) to truth·(1 + s).
     #[arg(long, default_value_t = 0.9, value_name = "S", allow_negative_numbers = true)]
     basin_spread: f64,
-    /// Seed of the data, the trials and the default-start fits.
+    /// Starts of each method's multistart on the default data.
+    #[arg(long, default_value_t = 20, value_name = "N", allow_negative_numbers = true)]
+    starts: usize,
+    /// Seed of the data, the trials, the default-start fits and the multistarts.
     #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     seed: u64,
     /// Replace files at the report's paths that no report wrote. Without it such files are
@@ -66,6 +69,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
         perturb: args.perturb,
         grid: args.grid,
         basin_spread: args.basin_spread,
+        starts: args.starts,
         seed: args.seed,
         force: args.force,
     };

@@ -195,7 +195,7 @@ fn a_negative_number_reaches_the_options_own_check() {
         (
             "report",
             vec!["--out", &out, "--systems", "falling-body"],
-            vec!["--trials", "--perturb", "--grid", "--basin-spread", "--seed"],
+            vec!["--trials", "--perturb", "--grid", "--basin-spread", "--seed", "--starts"],
         ),
         ("merge", vec![&out, "--out", &out], vec![]),
     ];

@@ -13,14 +13,17 @@ use std::time::Instant;
 use anyhow::Context as _;
 use sysid_core::{Estimate, Problem, Samples};
 use sysid_montecarlo::files;
-use sysid_montecarlo::{Scenario, Study, StudySpec, Summary, TrialRecord, basin};
+use sysid_montecarlo::multistart::Starts;
+use sysid_montecarlo::{
+    MultistartOptions, Scenario, Study, StudySpec, Summary, TrialRecord, basin,
+};
 use sysid_ode::System;
 use sysid_registry::{Boxed, Registry, Settings};
 use sysid_systems::{Case, Visit};
 
 use crate::{
-    Accuracy, Basin, BasinPanel, Cell, Convergence, Cost, CostBar, History, Prediction,
-    PredictionPanel, Spread, save,
+    Accuracy, Basin, BasinPanel, Cell, Convergence, Cost, CostBar, History, MethodMinima, Minima,
+    Prediction, PredictionPanel, Spread, save,
 };
 
 /// What a report covers (the defaults are `sysid report`'s).
@@ -41,22 +44,29 @@ pub struct ReportOptions {
     pub grid: usize,
     /// Spread of the basin maps: starts from truth·(1 − s) to truth·(1 + s).
     pub basin_spread: f64,
-    /// Seed of the data, the trials and the default-start fits.
+    /// Starts of each method's multistart on the default data.
+    pub starts: usize,
+    /// Seed of the data, the trials, the default-start fits and the multistarts.
     pub seed: u64,
     /// Replace files at the report's paths that no report wrote (refused otherwise).
     pub force: bool,
 }
+
+/// The methods a report compares by default.
+pub const DEFAULT_METHODS: &str =
+    "goodman,quasilinearization,gauss-newton-ls,levenberg-marquardt,multiple-shooting";
 
 impl Default for ReportOptions {
     fn default() -> Self {
         Self {
             out: PathBuf::from("reports"),
             systems: Vec::new(),
-            methods: "goodman,quasilinearization,gauss-newton-ls".into(),
+            methods: DEFAULT_METHODS.into(),
             trials: 500,
             perturb: 0.3,
             grid: 25,
             basin_spread: 0.9,
+            starts: 20,
             seed: 1,
             force: false,
         }
@@ -72,6 +82,9 @@ impl ReportOptions {
         }
         if !(self.perturb >= 0.0 && self.perturb.is_finite()) {
             anyhow::bail!("--perturb must be non-negative, got {}", self.perturb);
+        }
+        if self.starts == 0 {
+            anyhow::bail!("--starts must be at least 1");
         }
         if self.grid < 2 {
             anyhow::bail!("--grid must be at least 2, got {}", self.grid);
@@ -168,12 +181,13 @@ const MANIFEST: &str = ".sysid-report";
 
 /// The files a report may write for one system, relative to the report's directory.
 fn system_files(system: &str) -> Vec<String> {
-    let figures = ["convergence", "prediction", "accuracy", "cost", "basin"];
+    let figures = ["convergence", "minima", "prediction", "accuracy", "cost", "basin"];
     let mut paths: Vec<String> = figures
         .iter()
         .flat_map(|f| ["png", "svg"].map(|ext| format!("{system}/{f}.{ext}")))
         .collect();
     paths.extend(["convergence", "prediction", "data"].map(|f| format!("{system}/{f}.csv")));
+    paths.push(format!("{system}/multistart.json"));
     for sub in ["study", "basin"] {
         paths.extend(files::OWNED.iter().map(|f| format!("{system}/{sub}/{f}")));
     }
@@ -247,6 +261,7 @@ struct Section {
     truth: Vec<f64>,
     start: Vec<f64>,
     fits: Vec<(String, Result<Estimate, String>)>,
+    multistart: Vec<(String, Result<Starts, String>)>,
     study: Result<Summary, String>,
     basin: Option<BasinNumbers>,
     figures: Vec<(String, String)>,
@@ -296,6 +311,8 @@ impl Visit for SystemReport<'_> {
             "Cost ε and step norm per iteration from the default start, same data.".into(),
         ));
 
+        let multistart = self.multistart(&problem, &dir, &mut figures)?;
+
         // Fit and prediction, by the reference method.
         let fitted = method::<S>(REFERENCE)?.fit(&problem)?;
         if fitted.converged() {
@@ -326,6 +343,7 @@ impl Visit for SystemReport<'_> {
             truth,
             start: problem.guesses(),
             fits,
+            multistart,
             study,
             basin: basin_numbers,
             figures,
@@ -335,6 +353,54 @@ impl Visit for SystemReport<'_> {
 }
 
 impl SystemReport<'_> {
+    /// Every method from `--starts` starts on the default data (written to
+    /// `dir/multistart.json`, drawn as the minima figure); appends the figure's caption.
+    fn multistart<S: System + Sync>(
+        &self,
+        problem: &Problem<S>,
+        dir: &Path,
+        figures: &mut Vec<(String, String)>,
+    ) -> anyhow::Result<Vec<(String, Result<Starts, String>)>> {
+        let options =
+            MultistartOptions { starts: self.args.starts, seed: self.args.seed, spread: 0.5 };
+        let mut runs = Vec::new();
+        for m in self.methods {
+            let run = sysid_montecarlo::multistart(&*method::<S>(m)?, problem, &options);
+            runs.push((m.clone(), run.map(|r| r.starts).map_err(|e| e.to_string())));
+        }
+        let json: Vec<serde_json::Value> = runs
+            .iter()
+            .map(|(m, run)| match run {
+                Ok(s) => serde_json::json!({ "method": m, "starts": s }),
+                Err(e) => serde_json::json!({ "method": m, "error": e }),
+            })
+            .collect();
+        write(&dir.join("multistart.json"), &serde_json::to_string_pretty(&json)?)?;
+        let figure = Minima {
+            title: format!("{}: minima from {} starts", problem_name(dir), options.starts),
+            methods: runs
+                .iter()
+                .filter_map(|(m, run)| run.as_ref().ok().map(|s| (m, s)))
+                .map(|(m, s)| MethodMinima {
+                    method: m.clone(),
+                    starts: s.count,
+                    minima: s.minima.iter().map(|x| (x.cost, x.count)).collect(),
+                })
+                .collect(),
+        };
+        save(&figure, &dir.join("minima"))?;
+        figures.push((
+            "minima".into(),
+            format!(
+                "The distinct minima each method converged to from {} starts (the default \
+                 start, then a Latin hypercube ±50 % around it); the dashed line is the least \
+                 cost found.",
+                options.starts
+            ),
+        ));
+        Ok(runs)
+    }
+
     /// The Monte-Carlo study of `case` (written under `dir/study`, drawn as accuracy and cost)
     /// and the basin map on its first trial's data; appends the figures' captions.
     fn study<S: System + Clone + Send + Sync + 'static>(
@@ -417,6 +483,11 @@ fn write_convergence(
         }
     }
     write(&dir.join("convergence.csv"), &csv)
+}
+
+/// The system's name: the last component of its report directory.
+fn problem_name(dir: &Path) -> String {
+    dir.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned())
 }
 
 fn write(path: &Path, text: &str) -> anyhow::Result<()> {
@@ -648,6 +719,8 @@ fn markdown(
          Methods compared: {}. Each system's section shows\n\n\
          * **convergence** from the catalogue's default start on the default data (seed {}): \
          the cost ε = Σ w r² and the step norm per iteration;\n\
+         * **multistart**: every method from {} starts on the same data, and the distinct \
+         minima they reach;\n\
          * **accuracy** over a Monte-Carlo study of {} trials: each trial draws new noise \
          (1σ of the system) and a new start (each unknown at truth·(1 + ρu), u uniform on \
          [−1, 1], ρ = {}); a method succeeds when it converges to the cost of a reference fit \
@@ -663,6 +736,7 @@ fn markdown(
         seconds,
         methods.join(", "),
         args.seed,
+        args.starts,
         args.trials,
         args.perturb,
         g = args.grid,
@@ -746,6 +820,7 @@ fn system_markdown(s: &Section) -> String {
         }
     }
     md += &default_start_paragraph(s);
+    md += &multistart_table(s);
     for (file, caption) in &s.figures {
         let _ = writeln!(md, "\n![{file}]({}/{file}.png)\n\n*{caption}*", s.name);
     }
@@ -779,6 +854,39 @@ fn system_markdown(s: &Section) -> String {
         );
     }
     let _ = writeln!(md, "\n*This section took {:.1} s to compute.*", s.seconds);
+    md
+}
+
+fn multistart_table(s: &Section) -> String {
+    let Some(count) = s.multistart.iter().find_map(|(_, r)| r.as_ref().ok().map(|x| x.count))
+    else {
+        return String::new();
+    };
+    let mut md = format!(
+        "\n### Multistart\n\nEach method from {count} starts on the same data: the default \
+         start, then a Latin hypercube ±50 % around it (`--starts {count}`). Reached best: \
+         starts whose fit converged to the least cost that method found (within 1e-6 \
+         relative).\n\n| method | converged | reached best | distinct minima | best ε | wall ms |\n\
+         |---|---|---|---|---|---|\n"
+    );
+    for (m, run) in &s.multistart {
+        match run {
+            Ok(x) => {
+                let best = x.minima.first().map_or("—".into(), |b| num(b.cost));
+                let _ = writeln!(
+                    md,
+                    "| {m} | {} | {} | {} | {best} | {:.1} |",
+                    x.converged,
+                    x.reached_best,
+                    x.minima.len(),
+                    x.elapsed_ms
+                );
+            }
+            Err(e) => {
+                let _ = writeln!(md, "| {m} | error: {e} | | | | |");
+            }
+        }
+    }
     md
 }
 

@@ -22,6 +22,7 @@ mod catalogue;
 mod convergence;
 mod cost;
 mod look;
+mod minima;
 mod prediction;
 
 use std::path::{Path, PathBuf};
@@ -31,10 +32,11 @@ use plotters::prelude::*;
 
 pub use accuracy::{Accuracy, Spread};
 pub use basin::{Basin, BasinPanel, Cell};
-pub use catalogue::{Observer, Quiet, ReportOptions, write_report};
+pub use catalogue::{DEFAULT_METHODS, Observer, Quiet, ReportOptions, write_report};
 pub use convergence::{Convergence, History};
 pub use cost::{Cost, CostBar};
 pub use look::{Look, look};
+pub use minima::{MethodMinima, Minima};
 pub use prediction::{Prediction, PredictionPanel};
 
 /// A figure that can draw itself on any plotters backend.

@@ -28,16 +28,23 @@
 //! φ(x + αΔ) ≤ φ(x) + 10⁻⁴ α Dφ; near the minimum, where |Dφ| is below φ's accuracy (rtol·φ),
 //! a step that stays within that accuracy is taken.
 //!
-//! What the driver sees: the iterate's z; as its cost, single shooting's ε at z (the same
-//! measure as every other method's, NaN where the model cannot be integrated from z over the
-//! whole horizon); its defect ‖d‖; and, once the nodes match (every node's
-//! ‖d_j‖∞ ≤ max(10⁻⁶, 100 rtol)·(1 + ‖s_{j+1}‖∞)), single shooting's linearization at z, so
-//! that the gradient rule and the certificate judge the original problem.
+//! What the driver sees: the iterate's z and its defect ‖d‖. Until the nodes match, nothing
+//! else: single shooting's ε at z is not evaluated (NaN), because z alone may not even be
+//! integrable over the horizon, which is why the nodes are there. Once every node matches
+//! (‖d_j‖∞ ≤ max(10⁻⁶, 100 rtol)·(1 + ‖s_{j+1}‖∞)), the iterate carries single shooting's
+//! linearization at z, so that the cost, the gradient rule and the certificate are those of
+//! the original problem, as for every other method.
+//!
+//! The nodes then merge into the trajectory (s_j = y(τ_j) of z, d = 0): with no defects the
+//! condensed step is single shooting's Gauss–Newton step, so the iteration takes it from that
+//! linearization, with the same bounded subproblem and line search (μ no longer matters),
+//! instead of sweeping the intervals again. This needs residual rows, so a continuous record
+//! stays with the nodes to the end.
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, Estimate, Evaluations, Failure, FitError, Iterate, LinearLeastSquares, Method,
-    Problem, Proposal, Rule, Step, drive, minimise_in_box,
+    Advance, BoxSolution, Estimate, Evaluations, Failure, FitError, Iterate, LinearLeastSquares,
+    Method, Problem, Proposal, Rule, Step, drive, minimise_in_box,
 };
 use sysid_ode::System;
 
@@ -72,6 +79,7 @@ impl<S: System> Method<S> for MultipleShooting {
             shot: None,
             penalty: 0.0,
             proposed: None,
+            merged: false,
         };
         drive(problem, "multiple-shooting", &self.options.driver, &mut step, start)
     }
@@ -92,6 +100,8 @@ struct Shooting {
     shot: Option<Shot>,
     penalty: f64,
     proposed: Option<Direction>,
+    /// The nodes have merged into the trajectory: the iteration goes on as single shooting.
+    merged: bool,
 }
 
 /// A step of the variables with what the line search needs.
@@ -138,23 +148,27 @@ impl Shooting {
         })
     }
 
-    /// The driver's iterate at z with the node values and sweep now current.
-    fn iterate<S: System>(&self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
+    /// The driver's iterate at z with the node values and sweep now current. Once the nodes
+    /// match, single shooting's linearization at z, and the nodes merge into the trajectory
+    /// (for discrete data: a record's linearization has no residual rows to step with).
+    fn iterate<S: System>(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        z: Vec<f64>,
+    ) -> Result<Iterate, Failure> {
         let shot = self.shot.as_ref().expect("a sweep at the iterate");
         let defect = Some(shot.defects.norm());
         if self.matched(ev.problem(), shot) {
             match ev.linearize(&z) {
-                Ok(lin) => return Ok(Iterate { defect, ..Iterate::linearized(lin) }),
+                Ok(lin) => {
+                    self.merged = lin.residuals.is_some();
+                    return Ok(Iterate { defect, ..Iterate::linearized(lin) });
+                }
                 Err(budget @ Failure::Budget { .. }) => return Err(budget),
                 Err(_) => {}
             }
         }
-        let cost = match ev.residuals(&z) {
-            Ok(r) => r.norm_squared(),
-            Err(budget @ Failure::Budget { .. }) => return Err(budget),
-            Err(_) => f64::NAN,
-        };
-        Ok(Iterate { z, cost, gradient_norm: None, linearization: None, linear_cost: None, defect })
+        Ok(unevaluated(z, defect))
     }
 
     /// Bock's condensing of the step problem at z (see the module's documentation).
@@ -210,6 +224,9 @@ impl<S: System> Step<S> for Shooting {
     }
 
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
+        if self.merged {
+            return self.propose_merged(ev, current);
+        }
         let problem = ev.problem();
         let z = &current.z;
         if self.shot.as_ref().is_none_or(|s| s.derivatives.is_none()) {
@@ -217,12 +234,7 @@ impl<S: System> Step<S> for Shooting {
         }
         let shot = self.shot.as_ref().expect("a sweep at the iterate");
         let condensed = self.condense(problem, z, shot);
-        let (lo, hi) = problem.unknowns().step_box(z);
-        let subproblem = LinearLeastSquares { b: &condensed.jacobian, a: &condensed.r };
-        let solution =
-            minimise_in_box(&subproblem, (&lo, &hi), &vec![0.0; z.len()], self.max_condition)
-                .map_err(|s| Failure::singular(&s, &problem.names()))?;
-        let dz = DVector::from_column_slice(&solution.x);
+        let (solution, dz) = self.bounded_step(problem, z, &condensed.jacobian, &condensed.r)?;
         let n = self.grid.states;
         let mut dnodes = Vec::with_capacity(self.nodes.len());
         for j in 1..self.grid.len() {
@@ -244,14 +256,7 @@ impl<S: System> Step<S> for Shooting {
             dz: solution.x,
             dnodes,
         };
-        let next = problem.unknowns().moved(z, &direction.dz, 1.0);
-        self.proposed = Some(direction);
-        Ok(Proposal {
-            z: next,
-            condition: Some(solution.condition),
-            gradient_norm: None,
-            stop: None,
-        })
+        Ok(self.proposal(problem, current, direction, solution.condition))
     }
 
     fn advance(
@@ -262,45 +267,152 @@ impl<S: System> Step<S> for Shooting {
     ) -> Result<Advance, Failure> {
         let problem = ev.problem();
         let direction = self.proposed.take().expect("a proposal to follow");
-        let resolution = problem.integrator().rtol * direction.merit;
-        let mut alpha = 1.0;
-        for tried in 0..MAX_BACKTRACKS {
-            let full = tried == 0;
-            let z = if full {
+        let trial_z = |alpha: f64, full: bool| {
+            if full {
                 proposal.z.clone()
             } else {
                 problem.unknowns().moved(&current.z, &direction.dz, alpha)
-            };
+            }
+        };
+        if self.merged {
+            // Single shooting: the full step with sensitivities (accepted, it is the next
+            // linearization), shorter ones without.
+            let accepted = line_search(problem, &direction, |alpha, full| {
+                let z = trial_z(alpha, full);
+                let evaluated = if full {
+                    ev.linearize(&z).map(|l| (l.cost, Some(l)))
+                } else {
+                    ev.residuals(&z).map(|r| (r.norm_squared(), None))
+                };
+                Ok(tolerate(evaluated)?.map(|(cost, lin)| (cost, (z, cost, lin))))
+            })?;
+            let Some((z, cost, lin)) = accepted else { return Ok(Advance::Stop(Rule::NoDescent)) };
+            let merged = Some(0.0);
+            return Ok(Advance::Moved(match lin {
+                Some(lin) => Iterate { defect: merged, ..Iterate::linearized(lin) },
+                None => Iterate { cost, ..unevaluated(z, merged) },
+            }));
+        }
+        let accepted = line_search(problem, &direction, |alpha, full| {
+            let z = trial_z(alpha, full);
             let nodes: Vec<f64> =
                 self.nodes.iter().zip(&direction.dnodes).map(|(s, d)| s + alpha * d).collect();
             // The full step is evaluated with sensitivities: accepted, it is the next
             // linearization; shorter steps without.
-            let shot = match self.sweep(ev, (&z, &nodes), full) {
-                Ok(shot) => Some(shot),
-                Err(budget @ Failure::Budget { .. }) => return Err(budget),
-                // An integration that fails at the trial point: a step too long.
-                Err(_) => None,
-            };
-            let merit = shot.as_ref().map_or(f64::INFINITY, |s| self.merit(s));
-            let armijo = merit <= direction.merit + ARMIJO * alpha * direction.slope;
-            let floor = -direction.slope <= resolution && merit <= direction.merit + resolution;
-            if let Some(shot) = shot.filter(|_| armijo || floor) {
-                self.nodes = nodes;
-                self.shot = Some(shot);
-                return Ok(Advance::Moved(self.iterate(ev, z)?));
-            }
-            let quadratic = if merit.is_finite() {
-                let curvature = merit - direction.merit - direction.slope * alpha;
-                -direction.slope * alpha * alpha / (2.0 * curvature)
-            } else {
-                0.0
-            };
-            alpha = if quadratic.is_finite() {
-                quadratic.clamp(0.1 * alpha, 0.5 * alpha)
-            } else {
-                0.5 * alpha
-            };
-        }
-        Ok(Advance::Stop(Rule::NoDescent))
+            let shot = tolerate(self.sweep(ev, (&z, &nodes), full))?;
+            Ok(shot.map(|shot| (self.merit(&shot), (z, nodes, shot))))
+        })?;
+        let Some((z, nodes, shot)) = accepted else { return Ok(Advance::Stop(Rule::NoDescent)) };
+        self.nodes = nodes;
+        self.shot = Some(shot);
+        Ok(Advance::Moved(self.iterate(ev, z)?))
     }
+}
+
+impl Shooting {
+    /// Once the nodes have merged into the trajectory: single shooting's bounded Gauss–Newton
+    /// step (what condensing gives with no defects), from the iterate's linearization.
+    fn propose_merged<S: System>(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        current: &Iterate,
+    ) -> Result<Proposal, Failure> {
+        let problem = ev.problem();
+        let lin = match &current.linearization {
+            Some(lin) => lin.clone(),
+            None => ev.linearize(&current.z)?,
+        };
+        let w = lin.residuals.as_ref().expect("merged only with residual rows");
+        let (solution, dz) = self.bounded_step(problem, &current.z, &w.jacobian, &w.r)?;
+        let slope = 2.0 * w.r.dot(&(&w.jacobian * &dz));
+        let direction = Direction { merit: lin.cost, slope, dz: solution.x, dnodes: Vec::new() };
+        Ok(self.proposal(problem, current, direction, solution.condition))
+    }
+
+    /// The minimiser of ‖r + JΔz‖² over the box the bounds leave around z.
+    fn bounded_step<S: System>(
+        &self,
+        problem: &Problem<S>,
+        z: &[f64],
+        jacobian: &DMatrix<f64>,
+        r: &DVector<f64>,
+    ) -> Result<(BoxSolution, DVector<f64>), Failure> {
+        let (lo, hi) = problem.unknowns().step_box(z);
+        let subproblem = LinearLeastSquares { b: jacobian, a: r };
+        let solution =
+            minimise_in_box(&subproblem, (&lo, &hi), &vec![0.0; z.len()], self.max_condition)
+                .map_err(|s| Failure::singular(&s, &problem.names()))?;
+        let dz = DVector::from_column_slice(&solution.x);
+        Ok((solution, dz))
+    }
+
+    /// The driver's proposal for `direction`, kept for the advance.
+    fn proposal<S: System>(
+        &mut self,
+        problem: &Problem<S>,
+        current: &Iterate,
+        direction: Direction,
+        condition: f64,
+    ) -> Proposal {
+        let next = problem.unknowns().moved(&current.z, &direction.dz, 1.0);
+        self.proposed = Some(direction);
+        Proposal { z: next, condition: Some(condition), gradient_norm: None, stop: None }
+    }
+}
+
+/// An iterate whose single-shooting ε was not evaluated (the nodes do not match yet).
+fn unevaluated(z: Vec<f64>, defect: Option<f64>) -> Iterate {
+    Iterate {
+        z,
+        cost: f64::NAN,
+        gradient_norm: None,
+        linearization: None,
+        linear_cost: None,
+        defect,
+    }
+}
+
+/// An evaluation that failed at a trial point is a step too long (None); the budget ends the
+/// run.
+fn tolerate<T>(evaluated: Result<T, Failure>) -> Result<Option<T>, Failure> {
+    match evaluated {
+        Ok(value) => Ok(Some(value)),
+        Err(budget @ Failure::Budget { .. }) => Err(budget),
+        Err(_) => Ok(None),
+    }
+}
+
+/// Backtracking from α = 1 along `direction`: `trial(α, full)` evaluates the merit there
+/// (None where it cannot be evaluated) with what the caller keeps of an accepted point.
+/// Armijo's condition, or, where |Dφ| is below φ's accuracy (rtol·φ), a merit within that
+/// accuracy, accepts; otherwise α shrinks by safeguarded quadratic interpolation (factor 0.1
+/// to 0.5). None after [`MAX_BACKTRACKS`] step lengths.
+fn line_search<S: System, T>(
+    problem: &Problem<S>,
+    direction: &Direction,
+    mut trial: impl FnMut(f64, bool) -> Result<Option<(f64, T)>, Failure>,
+) -> Result<Option<T>, Failure> {
+    let resolution = problem.integrator().rtol * direction.merit;
+    let mut alpha = 1.0;
+    for tried in 0..MAX_BACKTRACKS {
+        let evaluated = trial(alpha, tried == 0)?;
+        let merit = evaluated.as_ref().map_or(f64::INFINITY, |e| e.0);
+        let armijo = merit <= direction.merit + ARMIJO * alpha * direction.slope;
+        let floor = -direction.slope <= resolution && merit <= direction.merit + resolution;
+        if let Some((_, kept)) = evaluated.filter(|_| armijo || floor) {
+            return Ok(Some(kept));
+        }
+        let quadratic = if merit.is_finite() {
+            let curvature = merit - direction.merit - direction.slope * alpha;
+            -direction.slope * alpha * alpha / (2.0 * curvature)
+        } else {
+            0.0
+        };
+        alpha = if quadratic.is_finite() {
+            quadratic.clamp(0.1 * alpha, 0.5 * alpha)
+        } else {
+            0.5 * alpha
+        };
+    }
+    Ok(None)
 }
