@@ -218,22 +218,31 @@ fn table<S: System>(problem: &Problem<S>, context: &Context, e: &Estimate) -> St
         e.counts.rhs_evaluations,
         e.elapsed.as_secs_f64() * 1e3
     );
+    // Multiple shooting's matching defect, where the method has one.
+    let shooting = e.history.iter().any(|h| h.defect.is_some());
     out += &format!(
-        "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}\n",
-        "iteration", "cost ε", "|U|", "step", "condition", "optimality"
+        "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}{}\n",
+        "iteration",
+        "cost ε",
+        "|U|",
+        "step",
+        "condition",
+        "optimality",
+        if shooting { format!(" {:>12}", "defect") } else { String::new() }
     );
     let dash = |v: Option<f64>| {
         v.filter(|v| v.is_finite()).map_or("—".to_string(), |v| format!("{v:.3e}"))
     };
     for h in &e.history {
         out += &format!(
-            "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}\n",
+            "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}{}\n",
             h.iteration,
             significant(h.cost, 10),
             dash(Some(h.gradient_norm)),
             dash(h.step_norm),
             dash(h.condition),
-            dash(h.optimality)
+            dash(h.optimality),
+            if shooting { format!(" {:>12}", dash(h.defect)) } else { String::new() }
         );
     }
     out

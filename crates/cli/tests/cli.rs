@@ -571,3 +571,28 @@ fn starts_return_the_best_fit_and_count_the_minima() {
     let table = text(&table.stdout);
     assert_eq!(table.matches("└ 4 starts in").count(), 2, "{table}");
 }
+
+#[test]
+fn multiple_shooting_reaches_lotka_volterras_minimum_and_shows_its_defects() {
+    // The number: ε = 199.0124698 (Goodman from the truth gives the same, in
+    // crates/methods/multiple-shooting/tests/catalogue.rs), from the catalogue start where
+    // single shooting stops at 56 116 or diverges.
+    let args = ["fit", "--system", "lotka-volterra", "--method", "multiple-shooting"];
+    let out = sysid(&[&args[..], &["--format", "json"]].concat());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let cost = json["cost"].as_f64().unwrap();
+    assert!((cost / 199.012_469_8 - 1.0).abs() < 1e-8, "{cost}");
+    let history = json["history"].as_array().unwrap();
+    // The start's nodes come from the data and do not match; its single-shooting ε is not
+    // evaluated. The nodes have merged into the trajectory by the end.
+    assert!(history[0]["cost"].is_null());
+    assert!(history[0]["defect"].as_f64().unwrap() > 1.0);
+    assert_eq!(history.last().unwrap()["defect"].as_f64(), Some(0.0));
+    let table = text(&sysid(&args).stdout);
+    assert!(table.lines().any(|l| l.trim_end().ends_with("defect")), "{table}");
+    // Other methods have no defect.
+    let goodman = sysid(&["fit", "--system", "van-der-pol", "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&goodman.stdout).unwrap();
+    assert!(json["history"][0].get("defect").is_none());
+}

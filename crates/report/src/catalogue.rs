@@ -1,6 +1,6 @@
 //! The comparison report of the whole catalogue (`sysid report`), figures and data included.
 //!
-//! For every catalogue system: the three classical methods from the default start
+//! For every catalogue system: the methods compared (by default five) from the default start
 //! (convergence), a Monte-Carlo study (accuracy against the Cramér–Rao bound, cost, success),
 //! a basin map over the first two unknowns, and the fit with its prediction band. Everything
 //! is written under `--out` (one directory per system, replaced on every run) with
@@ -464,7 +464,13 @@ impl SystemReport<'_> {
 fn history(method: &str, e: &Estimate) -> History {
     History {
         method: method.into(),
-        costs: e.history.iter().map(|h| (h.iteration, h.cost)).collect(),
+        // Multiple shooting evaluates ε only once its nodes match.
+        costs: e
+            .history
+            .iter()
+            .filter(|h| h.cost.is_finite())
+            .map(|h| (h.iteration, h.cost))
+            .collect(),
         steps: e.history.iter().filter_map(|h| h.step_norm.map(|s| (h.iteration, s))).collect(),
     }
 }
@@ -473,12 +479,16 @@ fn write_convergence(
     dir: &Path,
     fits: &[(String, Result<Estimate, String>)],
 ) -> anyhow::Result<()> {
-    let mut csv = String::from("method,iteration,cost,step_norm,gradient_norm\n");
+    let mut csv = String::from("method,iteration,cost,step_norm,gradient_norm,defect\n");
+    // Empty where a method did not evaluate the quantity.
+    let cell =
+        |v: Option<f64>| v.filter(|v| v.is_finite()).map_or(String::new(), |v| format!("{v:e}"));
     for (m, fit) in fits {
         if let Ok(e) = fit {
             for h in &e.history {
-                let step = h.step_norm.map_or(String::new(), |s| format!("{s:e}"));
-                writeln!(csv, "{m},{},{:e},{step},{:e}", h.iteration, h.cost, h.gradient_norm)?;
+                let (cost, step) = (cell(Some(h.cost)), cell(h.step_norm));
+                let (gradient, defect) = (cell(Some(h.gradient_norm)), cell(h.defect));
+                writeln!(csv, "{m},{},{cost},{step},{gradient},{defect}", h.iteration)?;
             }
         }
     }

@@ -5,7 +5,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::look::look;
-use crate::{DrawResult, FONT, Figure, log_range, one_two_five};
+use crate::{DrawResult, FONT, Figure, column_labels, log_range, one_two_five};
 
 /// One method's cost.
 #[derive(Clone, Debug)]
@@ -43,15 +43,7 @@ impl Figure for Cost {
         let root = root.titled(&self.title, (FONT, 22))?;
         let panels = root.split_evenly((1, 2));
         let m = self.methods.len();
-        let names: Vec<String> = self.methods.iter().map(|b| b.method.clone()).collect();
-        let name_of = move |v: &f64| {
-            let i = v.round();
-            if (v - i).abs() < 1e-9 && i >= 0.0 && (i as usize) < names.len() {
-                names[i as usize].clone()
-            } else {
-                String::new()
-            }
-        };
+        let name_of = column_labels(self.methods.iter().map(|b| b.method.clone()).collect());
         let (lo, hi) = log_range(self.methods.iter().flat_map(|b| [b.median_ms, b.p90_ms]));
         let mut time = ChartBuilder::on(&panels[0])
             .caption("time per fit (bar: median, tick: 90th percentile)", (FONT, 15))

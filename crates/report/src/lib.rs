@@ -106,6 +106,19 @@ fn init_fonts() {
 
 /// `[lo, hi]` widened by `margin` of its width on each side (a width of 0 becomes ±1 or
 /// ±10 % of the value), never empty.
+/// The x-axis labels of a chart with one column per name at x = 0, 1, …: the name at a whole
+/// x, nothing between.
+fn column_labels(names: Vec<String>) -> impl Fn(&f64) -> String {
+    move |v: &f64| {
+        let i = v.round();
+        if (v - i).abs() < 1e-9 && i >= 0.0 && (i as usize) < names.len() {
+            names[i as usize].clone()
+        } else {
+            String::new()
+        }
+    }
+}
+
 fn padded(lo: f64, hi: f64, margin: f64) -> (f64, f64) {
     if !(lo.is_finite() && hi.is_finite()) {
         return (0.0, 1.0);

@@ -1,4 +1,4 @@
-//! How each method looks: a colour of the Okabe–Ito palette (chosen so the three differ in
+//! How each method looks: a colour of the Okabe–Ito palette (the first three chosen to differ in
 //! lightness too), a dash pattern and a marker, so lines stay apart in grey print.
 
 use plotters::coord::CoordTranslate;
@@ -31,7 +31,7 @@ pub struct Look {
 
 /// The look of the method at position `index` of a figure (cycling after four).
 pub fn look(index: usize) -> Look {
-    const LOOKS: [Look; 4] = [
+    const LOOKS: [Look; 8] = [
         // Black, solid, circles.
         Look { color: RGBColor(0, 0, 0), dash: None, marker: Marker::Circle },
         // Vermillion, dashed, triangles.
@@ -40,6 +40,14 @@ pub fn look(index: usize) -> Look {
         Look { color: RGBColor(86, 180, 233), dash: Some((3, 4)), marker: Marker::Cross },
         // Bluish green, long dashes.
         Look { color: RGBColor(0, 158, 115), dash: Some((16, 6)), marker: Marker::Circle },
+        // Reddish purple, dash-gap, triangles.
+        Look { color: RGBColor(204, 121, 167), dash: Some((6, 3)), marker: Marker::Triangle },
+        // Blue, solid, crosses.
+        Look { color: RGBColor(0, 114, 178), dash: None, marker: Marker::Cross },
+        // Orange, long dashes, triangles.
+        Look { color: RGBColor(230, 159, 0), dash: Some((16, 6)), marker: Marker::Triangle },
+        // Yellow, dotted, circles.
+        Look { color: RGBColor(240, 228, 66), dash: Some((3, 4)), marker: Marker::Circle },
     ];
     LOOKS[index % LOOKS.len()]
 }

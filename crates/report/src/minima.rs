@@ -6,7 +6,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use crate::look::look;
-use crate::{DrawResult, FONT, Figure, decade, log_range};
+use crate::{DrawResult, FONT, Figure, column_labels, decade, log_range};
 
 /// One method's multistart.
 #[derive(Clone, Debug)]
@@ -39,15 +39,7 @@ impl Figure for Minima {
     {
         let root = root.titled(&self.title, (FONT, 22))?;
         let m = self.methods.len();
-        let names: Vec<String> = self.methods.iter().map(|b| b.method.clone()).collect();
-        let name_of = move |v: &f64| {
-            let i = v.round();
-            if (v - i).abs() < 1e-9 && i >= 0.0 && (i as usize) < names.len() {
-                names[i as usize].clone()
-            } else {
-                String::new()
-            }
-        };
+        let name_of = column_labels(self.methods.iter().map(|b| b.method.clone()).collect());
         let costs = || self.methods.iter().flat_map(|b| b.minima.iter().map(|p| p.0));
         let (lo, hi) = log_range(costs());
         let mut chart = ChartBuilder::on(&root)
