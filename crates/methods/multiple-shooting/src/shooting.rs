@@ -161,20 +161,34 @@ impl Grid {
     /// The node values of a start z: s_0 = y(t0), and for j ≥ 1 the data where a state is
     /// measured (linear interpolation of its samples, held constant beyond them) and
     /// otherwise the state integrated over interval j − 1 from s_{j−1} (s_{j−1} itself where
-    /// that integration fails).
-    pub(crate) fn initial_nodes<S: System>(&self, problem: &Problem<S>, z: &[f64]) -> Vec<f64> {
+    /// that integration fails), with the work of those integrations (one integration of the
+    /// horizon, none when every state is measured).
+    pub(crate) fn initial_nodes<S: System>(
+        &self,
+        problem: &Problem<S>,
+        z: &[f64],
+    ) -> (Vec<f64>, Counts) {
         let n = self.states;
         let (y0, p) = problem.point(z);
         let measured = measured_states(problem, n);
+        let all_measured = measured.iter().all(Option::is_some);
         let mut nodes = Vec::with_capacity(n * self.len().saturating_sub(1));
+        let mut counts = Counts::default();
         let mut previous = y0;
         for j in 1..self.len() {
             let from = &self.intervals[j - 1];
             let end = self.intervals[j].start;
             let ivp = Ivp::new(problem.system(), from.start, &previous, &p);
-            let integrated = match ivp.solve(problem.integrator(), &[end]) {
-                Ok(t) if t.state(0).iter().all(|v| v.is_finite()) => t.state(0).to_vec(),
-                _ => previous.clone(),
+            let integrated = if all_measured {
+                previous.clone()
+            } else {
+                match ivp.solve(problem.integrator(), &[end]) {
+                    Ok(t) if t.state(0).iter().all(|v| v.is_finite()) => {
+                        counts += t.counts();
+                        t.state(0).to_vec()
+                    }
+                    _ => previous.clone(),
+                }
             };
             let node: Vec<f64> = (0..n)
                 .map(|i| match &measured[i] {
@@ -185,7 +199,8 @@ impl Grid {
             nodes.extend_from_slice(&node);
             previous = node;
         }
-        nodes
+        counts.integrations = counts.integrations.min(1);
+        (nodes, counts)
     }
 
     /// One sweep at z and the node values `nodes` (s_1 … s_{M−1}), with sensitivities when

@@ -218,7 +218,9 @@ impl<S: System> Step<S> for Shooting {
     /// Node values from the data and the start (see [`Grid::initial_nodes`]), and the first
     /// sweep with sensitivities.
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
-        self.nodes = self.grid.initial_nodes(ev.problem(), &z);
+        let (nodes, counts) = self.grid.initial_nodes(ev.problem(), &z);
+        ev.add(counts);
+        self.nodes = nodes;
         self.shot = Some(self.sweep(ev, (&z, &self.nodes), true)?);
         self.iterate(ev, z)
     }
