@@ -6,10 +6,12 @@ use clap::Args;
 use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
 
-use crate::fit::{fit_from_starts, prepare, with_starts};
+use crate::fit::{best_of_starts, prepare, with_starts};
 use crate::format::significant;
 use crate::integrator::IntegratorArgs;
-use crate::methods::{MethodArgs, StartsArgs, default_methods, describe_starts, parse_list};
+use crate::methods::{
+    MethodArgs, StartsArgs, default_methods, describe_starts, method, parse_list,
+};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
 use sysid_montecarlo::multistart::Starts;
@@ -109,17 +111,15 @@ impl WithProblem for CompareProblem<'_> {
     ) -> anyhow::Result<Self::Output> {
         let problem = prepare(problem, &self.args.integrator, &self.args.options)?;
         let common = self.args.options.common();
+        let starts = self.args.starts.options()?;
         let mut rows = Vec::with_capacity(self.methods.len());
         for name in self.methods {
-            crate::methods::method::<S>(name, &common)?;
-            let result = if self.args.starts.starts.is_some() {
-                fit_from_starts(&problem, name, common.clone(), &self.args.starts)
-                    .map_err(|e| e.to_string())
-            } else {
-                crate::methods::method::<S>(name, &common)?
-                    .fit(&problem)
-                    .map(|e| (e, None))
-                    .map_err(|e| e.to_string())
+            let m = method::<S>(name, &common)?;
+            let result = match &starts {
+                Some(options) => best_of_starts(&problem, &*m, options)
+                    .map(|(e, s)| (e, Some(s)))
+                    .map_err(|e| e.to_string()),
+                None => m.fit(&problem).map(|e| (e, None)).map_err(|e| e.to_string()),
             };
             rows.push(Row { method: name.clone(), result });
         }

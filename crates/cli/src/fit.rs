@@ -9,6 +9,7 @@ use crate::integrator::IntegratorArgs;
 use crate::methods::{Common, MethodArgs, StartsArgs, describe_starts, method, methods};
 use crate::source::{Context, SourceArgs, WithProblem, with_problem};
 use crate::{Format, Outcome};
+use sysid_montecarlo::MultistartOptions;
 use sysid_montecarlo::multistart::Starts;
 
 /// Arguments of `sysid fit`.
@@ -107,12 +108,26 @@ pub fn fit_from_starts<S: System + Sync>(
     let Some(options) = starts.options()? else {
         return Ok((fit(problem, name, common)?, None));
     };
-    let m = method::<S>(name, &common)?;
-    let run = sysid_montecarlo::multistart(&*m, problem, &options)?;
+    let (best, starts) = best_of_starts(problem, &*method::<S>(name, &common)?, &options)?;
+    Ok((best, Some(starts)))
+}
+
+/// `m` from the starts of `options`: the best fit and what the starts found. The start is
+/// unusable only when every start is.
+pub fn best_of_starts<S, M>(
+    problem: &Problem<S>,
+    m: &M,
+    options: &MultistartOptions,
+) -> anyhow::Result<(Estimate, Starts)>
+where
+    S: System + Sync,
+    M: sysid_core::Method<S> + Sync + ?Sized,
+{
+    let run = sysid_montecarlo::multistart(m, problem, options)?;
     if let Some(message) = unusable_start(problem, &run.best) {
         anyhow::bail!("every start fails; the best: {message}");
     }
-    Ok((run.best, Some(run.starts)))
+    Ok((run.best, run.starts))
 }
 
 /// A fit's JSON object with the `starts` object of a multistart run.

@@ -164,7 +164,8 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
     let best_start = least(true).or_else(|| least(false)).unwrap_or(0);
     let mut order: Vec<usize> = (0..fits.len()).filter(|&i| fits[i].converged()).collect();
     order.sort_by(|&a, &b| fits[a].cost.total_cmp(&fits[b].cost).then(a.cmp(&b)));
-    // Each minimum is represented by its least-cost fit.
+    // A fit joins a minimum when it matches that minimum's least-cost fit (the first in cost
+    // order); the minimum's start and estimates are those of the earliest start that reached it.
     let mut minima: Vec<(usize, Minimum)> = Vec::new();
     for i in order {
         let fit = &fits[i];

@@ -311,7 +311,7 @@ impl Visit for SystemReport<'_> {
             "Cost ε and step norm per iteration from the default start, same data.".into(),
         ));
 
-        let multistart = self.multistart(&problem, &dir, &mut figures)?;
+        let multistart = self.multistart(case.name, &problem, &dir, &mut figures)?;
 
         // Fit and prediction, by the reference method.
         let fitted = method::<S>(REFERENCE)?.fit(&problem)?;
@@ -357,6 +357,7 @@ impl SystemReport<'_> {
     /// `dir/multistart.json`, drawn as the minima figure); appends the figure's caption.
     fn multistart<S: System + Sync>(
         &self,
+        system: &str,
         problem: &Problem<S>,
         dir: &Path,
         figures: &mut Vec<(String, String)>,
@@ -377,7 +378,7 @@ impl SystemReport<'_> {
             .collect();
         write(&dir.join("multistart.json"), &serde_json::to_string_pretty(&json)?)?;
         let figure = Minima {
-            title: format!("{}: minima from {} starts", problem_name(dir), options.starts),
+            title: format!("{system}: minima from {} starts", options.starts),
             methods: runs
                 .iter()
                 .filter_map(|(m, run)| run.as_ref().ok().map(|s| (m, s)))
@@ -493,11 +494,6 @@ fn write_convergence(
         }
     }
     write(&dir.join("convergence.csv"), &csv)
-}
-
-/// The system's name: the last component of its report directory.
-fn problem_name(dir: &Path) -> String {
-    dir.file_name().map_or(String::new(), |n| n.to_string_lossy().into_owned())
 }
 
 fn write(path: &Path, text: &str) -> anyhow::Result<()> {
