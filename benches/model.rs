@@ -1,79 +1,94 @@
-//! A model file against the same system written in Rust: `model/<system>/{rust,file}`, one
-//! Goodman fit each, same data (seed 1), start and integrator.
+//! Model files against the same systems written in Rust.
+//!
+//! * `model/<system>/{rust,file,file-dual}`: one Goodman fit each, from the catalogue's
+//!   default start on its seed-1 data, with the same integrator. `file` is the system's
+//!   model-file twin (`tests/twins/`) as sysid runs it: symbolic Jacobians in one
+//!   straight-line program, compiled by Cranelift; `file-dual` is the same model file
+//!   differentiated by dual numbers, the reference path (and how model files ran before).
+//! * `products/<system>/{rust,file}`: 1000 evaluations of the right-hand side with
+//!   J_y S + J_α, the kernel of the sensitivity equations, at one point (K = n_α columns).
 
 use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use sysid::core::{Method, Samples};
+use sysid::core::{Method, Problem};
 use sysid::goodman::Goodman;
-use sysid::model::Model;
-use sysid::systems::fitzhugh_nagumo::fitzhugh_nagumo;
+use sysid::ode::System;
+use sysid::systems::{fitzhugh_nagumo, lotka_volterra, robertson, short_period, van_der_pol};
 
-const FHN: &str = r#"states = ["V", "R"]
-parameters = ["a", "b", "c"]
-[equations]
-V = "c * (V - V^3 / 3 + R)"
-R = "-(V - a + b * R) / c"
-[initial]
-V = -1.0
-R = 1.0
-[unknowns]
-a = 0.3
-b = 0.3
-c = 2.5
-[data]
-file = "data.csv"
-[data.weights]
-V = 400.0
-R = 400.0
-[integrator]
-rtol = 1e-8
-atol = 1e-10
-"#;
+#[path = "../tests/twins/mod.rs"]
+mod twins;
 
-fn fitzhugh_nagumo_file(c: &mut Criterion) {
-    let case = fitzhugh_nagumo();
-    let rust = case.problem(1).expect("catalogue problem");
-    // The same data as a CSV file next to the model file.
-    let data = case.data(1).expect("catalogue data");
-    let dir = std::env::temp_dir().join(format!("sysid-bench-model-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("a temporary directory");
-    let columns: Vec<(&String, &Vec<f64>, &Vec<f64>)> = data
-        .series
-        .iter()
-        .map(|s| match &s.samples {
-            Samples::Points { times, values } => (&s.name, times, values),
-            Samples::Function(_) => unreachable!("sampled catalogue data"),
-        })
-        .collect();
-    let mut csv = String::from("t,V,R\n");
-    for m in 0..columns[0].1.len() {
-        csv += &format!("{},{},{}\n", columns[0].1[m], columns[0].2[m], columns[1].2[m]);
-    }
-    std::fs::write(dir.join("data.csv"), csv).expect("writing data");
-    std::fs::write(dir.join("model.toml"), FHN).expect("writing the model");
-    let file = Model::load(&dir.join("model.toml"))
-        .expect("a valid model")
-        .problem(None)
-        .expect("a valid problem");
-    std::fs::remove_dir_all(&dir).ok();
-
+fn compare<S: System>(c: &mut Criterion, name: &str, rust: Problem<S>) {
+    let file = twins::file_problem(name, 1, false);
+    let dual = twins::file_problem(name, 1, true);
     let goodman = Goodman::default();
-    // Both fits reach the same answer.
-    let (a, b) = (goodman.fit(&rust).unwrap(), goodman.fit(&file).unwrap());
-    assert!((a.cost - b.cost).abs() <= 1e-8 * a.cost, "{} vs {}", a.cost, b.cost);
-
+    // All three fits reach the same answer.
+    let reference = goodman.fit(&rust).expect("the Rust fit").cost;
+    for problem in [&file, &dual] {
+        let cost = goodman.fit(problem).expect("the model-file fit").cost;
+        assert!((cost - reference).abs() <= 1e-8 * reference, "{name}: {cost} vs {reference}");
+    }
     let mut group = c.benchmark_group("model");
     group.warm_up_time(Duration::from_millis(500)).measurement_time(Duration::from_secs(3));
-    group.bench_function("fitzhugh-nagumo/rust", |bench| {
-        bench.iter(|| goodman.fit(black_box(&rust)).unwrap())
-    });
-    group.bench_function("fitzhugh-nagumo/file", |bench| {
-        bench.iter(|| goodman.fit(black_box(&file)).unwrap())
-    });
+    group.bench_function(format!("{name}/rust"), |b| b.iter(|| goodman.fit(black_box(&rust))));
+    group.bench_function(format!("{name}/file"), |b| b.iter(|| goodman.fit(black_box(&file))));
+    group.bench_function(format!("{name}/file-dual"), |b| b.iter(|| goodman.fit(black_box(&dual))));
     group.finish();
 }
 
-criterion_group!(benches, fitzhugh_nagumo_file);
-criterion_main!(benches);
+fn model_files(c: &mut Criterion) {
+    let problem = "a catalogue problem";
+    compare(c, "van-der-pol", van_der_pol::van_der_pol().problem(1).expect(problem));
+    compare(c, "lotka-volterra", lotka_volterra::lotka_volterra().problem(1).expect(problem));
+    compare(c, "fitzhugh-nagumo", fitzhugh_nagumo::fitzhugh_nagumo().problem(1).expect(problem));
+    compare(c, "short-period", short_period::short_period().problem(1).expect(problem));
+    compare(c, "robertson", robertson::robertson().problem(1).expect(problem));
+}
+
+fn products<S: System>(c: &mut Criterion, name: &str, rust: &S) {
+    use sysid::ode::{Function, JacobianProducts};
+    let file = twins::file_problem(name, 1, false);
+    let sys = file.system();
+    let sig = sys.signature();
+    let (n, np) = (sig.n_states(), sig.n_parameters());
+    let k = np;
+    let mut vp = vec![0.0; np * k];
+    for q in 0..np {
+        vp[q * k + q] = 1.0;
+    }
+    let y: Vec<f64> = (0..n).map(|i| 0.3 + 0.1 * i as f64).collect();
+    let p: Vec<f64> = (0..np).map(|i| 0.5 + 0.2 * i as f64).collect();
+    let u = vec![0.1; sig.n_inputs()];
+    let vy: Vec<f64> = (0..n * k).map(|i| 0.1 * i as f64).collect();
+    let (mut value, mut out) = (vec![0.0; n], vec![0.0; n * k]);
+    let mut a = JacobianProducts::new(n, &p, &vp, n, k);
+    c.bench_function(&format!("products/{name}/rust"), |b| {
+        b.iter(|| {
+            for _ in 0..1000 {
+                a.eval(rust, Function::Rhs, (0.0, black_box(&y), &u), &vy, &mut value, &mut out);
+            }
+            out[0]
+        })
+    });
+    let mut a = JacobianProducts::new(n, &p, &vp, n, k);
+    c.bench_function(&format!("products/{name}/file"), |b| {
+        b.iter(|| {
+            for _ in 0..1000 {
+                a.eval(sys, Function::Rhs, (0.0, black_box(&y), &u), &vy, &mut value, &mut out);
+            }
+            out[0]
+        })
+    });
+}
+
+fn kernels(c: &mut Criterion) {
+    products(c, "van-der-pol", &van_der_pol::van_der_pol().system);
+    products(c, "fitzhugh-nagumo", &fitzhugh_nagumo::fitzhugh_nagumo().system);
+    products(c, "lotka-volterra", &lotka_volterra::lotka_volterra().system);
+    products(c, "robertson", &robertson::robertson().system);
+}
+criterion_group!(fits, model_files);
+criterion_group!(products_group, kernels);
+criterion_main!(fits, products_group);

@@ -65,7 +65,7 @@ pub enum Op {
 }
 
 /// A function of the language.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Func {
     /// eˣ
     Exp,
@@ -413,7 +413,7 @@ pub fn parse(text: &str) -> Result<Expr, ExprError> {
 }
 
 /// What a name refers to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Slot {
     /// State i.
     State(usize),
@@ -427,7 +427,7 @@ pub enum Slot {
 
 /// An argument of an operation: a value read directly (no call), or another node.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Operand {
+pub(crate) enum Operand {
     Node(u32),
     Var(Slot),
     Const(f64),
@@ -436,7 +436,7 @@ enum Operand {
 /// An operation. Operations with a constant argument have scalar forms, which skip the
 /// arithmetic on a dual constant's zero derivative.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Node {
+pub(crate) enum Node {
     Neg(Operand),
     Add(Operand, Operand),
     Sub(Operand, Operand),
@@ -585,6 +585,16 @@ impl Program {
         operand(self.root, &slots, t, y, p, u)
     }
 
+    /// The operations, children first.
+    pub(crate) fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+
+    /// The operand of the value.
+    pub(crate) fn root(&self) -> Operand {
+        self.root
+    }
+
     /// Whether the value is a constant (does not depend on t, states, parameters or inputs).
     pub fn is_constant(&self) -> bool {
         matches!(self.root, Operand::Const(_))
@@ -667,7 +677,7 @@ fn compute<T: Scalar>(node: Node, get: impl Fn(Operand) -> T) -> T {
     }
 }
 
-fn eval_func(f: Func, x: f64) -> f64 {
+pub(crate) fn eval_func(f: Func, x: f64) -> f64 {
     match f {
         Func::Exp => x.exp(),
         Func::Log => x.ln(),

@@ -30,8 +30,11 @@
 //! `[integrator]` sets `method` ("dopri5" | "rk4" | "rodas4" for stiff models | "auto"),
 //! `rtol`, `atol`, `step`, `max_steps`.
 //!
-//! Expressions are compiled once ([`expr::Program`]) and evaluated for any scalar, so the
-//! sensitivities of a model file are exact dual numbers, as for a model written in Rust.
+//! Expressions are compiled once ([`expr::Program`]) and evaluated for any scalar. At load
+//! time they are also differentiated symbolically ([`symbolic`]): the right-hand side, the
+//! outputs and their sparse Jacobians become one straight-line program over f64, from which
+//! the sensitivities are formed. The dual-number evaluation stays as the reference
+//! ([`ModelSystem::with_dual_numbers`]); the two agree to rounding.
 //! Every error names the file, the line and the column.
 #![warn(missing_docs)]
 
@@ -39,6 +42,9 @@ pub mod data;
 mod error;
 pub mod expr;
 pub mod file;
+#[cfg(feature = "jit")]
+mod jit;
+pub mod symbolic;
 mod system;
 pub mod table;
 

@@ -2,34 +2,59 @@
 
 use std::sync::Arc;
 
-use sysid_ode::{Inputs, Scalar, Side, Signature, System};
+use sysid_ode::{Function, Inputs, Scalar, Side, Signature, SparseJacobian, System};
 
 use crate::expr::Program;
+use crate::symbolic::Linearized;
 
-/// A model read from a file: compiled right-hand sides and outputs, and its input signals.
-/// Cheap to clone (the programs are shared).
+/// A model read from a file: compiled right-hand sides and outputs, their symbolic
+/// Jacobians, and its input signals. Cheap to clone (the programs are shared).
 #[derive(Clone, Debug)]
 pub struct ModelSystem {
     signature: Signature,
     equations: Arc<Vec<Program>>,
     outputs: Arc<Vec<Program>>,
+    /// The right-hand side and the outputs with their Jacobians, or `None` to differentiate
+    /// by dual numbers.
+    symbolic: Option<Arc<(Linearized, Linearized)>>,
     inputs: Inputs,
 }
 
 impl ModelSystem {
-    /// The system of compiled equations and outputs, driven by `inputs`.
+    /// The system of compiled equations and outputs, driven by `inputs`; its Jacobians are
+    /// derived symbolically here, once.
     pub fn new(
         signature: Signature,
         equations: Vec<Program>,
         outputs: Vec<Program>,
         inputs: Inputs,
     ) -> Self {
-        Self { signature, equations: Arc::new(equations), outputs: Arc::new(outputs), inputs }
+        let dims = (signature.n_states(), signature.n_parameters(), signature.n_inputs());
+        let symbolic =
+            (Linearized::with_curvature(&equations, dims), Linearized::new(&outputs, dims));
+        Self {
+            signature,
+            equations: Arc::new(equations),
+            outputs: Arc::new(outputs),
+            symbolic: Some(Arc::new(symbolic)),
+            inputs,
+        }
     }
 
     /// The same equations with other input signals.
     pub fn with_inputs(&self, inputs: Inputs) -> Self {
         Self { inputs, ..self.clone() }
+    }
+
+    /// The same system differentiated by dual numbers instead of its symbolic Jacobians:
+    /// the reference the symbolic derivatives are tested against.
+    pub fn with_dual_numbers(&self) -> Self {
+        Self { symbolic: None, ..self.clone() }
+    }
+
+    /// The right-hand side with its symbolic Jacobian, unless differentiated by dual numbers.
+    pub fn symbolic_rhs(&self) -> Option<&Linearized> {
+        self.symbolic.as_deref().map(|s| &s.0)
     }
 }
 
@@ -52,5 +77,12 @@ impl System for ModelSystem {
     }
     fn discontinuities(&self) -> &[f64] {
         self.inputs.jumps()
+    }
+    fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
+        let symbolic = self.symbolic.as_deref()?;
+        Some(match function {
+            Function::Rhs => &symbolic.0,
+            Function::Outputs => &symbolic.1,
+        })
     }
 }

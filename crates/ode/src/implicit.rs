@@ -8,6 +8,7 @@ use num_dual::HyperDual64;
 
 use crate::jacobian::{Function, JacobianProducts};
 use crate::lu::{FactorError, Lu};
+use crate::sparse::SparseJacobian;
 use crate::system::System;
 use crate::wrt::Wrt;
 
@@ -113,9 +114,15 @@ impl IterationMatrix {
 /// ∂(J s_j + ∂g/∂α_j)/∂y = M_j, the second derivative of g in the direction s_j (and α_j for
 /// a parameter column). So E_aug k = r is solved by one back-substitution with E for k_y, and
 /// one for every column, (I/(γh) − J) k_sj = r_sj + M_j k_y, M_j k_y from one hyper-dual
-/// evaluation of g (ε₁ along s_j and α_j, ε₂ along k_y).
+/// evaluation of g (ε₁ along s_j and α_j, ε₂ along k_y). A system whose sparse Jacobian has
+/// a [curvature](SparseJacobian::curvature) gives M_j k_y from its second derivatives
+/// instead, evaluated once per factorisation: (M_j k_y)_i = Σ_e (Σ_l ∂J_e/∂y_l k_y,l) v_j,c(e)
+/// over the entries e = (i, c) of J, with v_j the column's direction (s_j, and the unit seed
+/// of its parameter).
 pub(crate) struct AugmentedMatrix {
     matrix: IterationMatrix,
+    /// The second derivatives at the factorisation's point, for systems that have them.
+    curvature: Option<Curvature>,
     /// The point of the factorisation: t, u, y, S.
     t: f64,
     u: Vec<f64>,
@@ -133,6 +140,10 @@ impl AugmentedMatrix {
         let zero = HyperDual64::from_re(0.0);
         Self {
             matrix: IterationMatrix::new(sys, p, k),
+            curvature: sys
+                .sparse_jacobian(Function::Rhs)
+                .and_then(|j| j.curvature())
+                .map(|c| Curvature { work: c.workspace(), along: vec![0.0; c.values().len()] }),
             t: 0.0,
             u: vec![0.0; sig.n_inputs()],
             x: vec![0.0; n * (1 + k)],
@@ -154,6 +165,11 @@ impl AugmentedMatrix {
         self.u.copy_from_slice(u);
         self.x.copy_from_slice(x);
         let n = self.yd.len();
+        if let Some(curvature) = &mut self.curvature
+            && let Some(second) = sys.sparse_jacobian(Function::Rhs).and_then(|j| j.curvature())
+        {
+            second.eval(t, &x[..n], &self.p, u, &mut curvature.work);
+        }
         self.matrix.factor(sys, (t, &x[..n], &self.p, u), inv_gamma_h)
     }
 
@@ -167,6 +183,14 @@ impl AugmentedMatrix {
             return;
         }
         let (y, s) = self.x.split_at(n);
+        if let Some(curvature) = &mut self.curvature
+            && let Some(jacobian) = sys.sparse_jacobian(Function::Rhs)
+            && let Some(second) = jacobian.curvature()
+        {
+            curvature.couple(jacobian, second, (s, ry), wrt, rs);
+            self.matrix.solve_rows(rs, k);
+            return;
+        }
         for (j, w) in wrt.iter().enumerate() {
             for i in 0..n {
                 self.yd[i] = HyperDual64::new(y[i], s[i * k + j], ry[i], 0.0);
@@ -181,5 +205,44 @@ impl AugmentedMatrix {
             }
         }
         self.matrix.solve_rows(rs, k);
+    }
+}
+
+/// The second derivatives of a sparse Jacobian at the factorisation's point.
+struct Curvature {
+    work: Vec<f64>,
+    /// Per entry e of J: Σ_l ∂J_e/∂y_l k_y,l.
+    along: Vec<f64>,
+}
+
+impl Curvature {
+    /// rs += (M_j k_y)_j for every column j, with S (row by row) and k_y.
+    fn couple(
+        &mut self,
+        jacobian: &dyn SparseJacobian,
+        second: &dyn SparseJacobian,
+        (s, ky): (&[f64], &[f64]),
+        wrt: &[Wrt],
+        rs: &mut [f64],
+    ) {
+        self.along.fill(0.0);
+        for (&(e, l), &r) in second.pattern().iter().zip(second.entries()) {
+            self.along[e as usize] += self.work[r as usize] * ky[l as usize];
+        }
+        let (n, k) = (ky.len(), wrt.len());
+        for (&(i, c), &a) in jacobian.pattern().iter().zip(&self.along) {
+            if a == 0.0 {
+                continue;
+            }
+            let (i, c) = (i as usize, c as usize);
+            let row = &mut rs[i * k..(i + 1) * k];
+            if c < n {
+                for (o, v) in row.iter_mut().zip(&s[c * k..(c + 1) * k]) {
+                    *o += a * v;
+                }
+            } else if let Some(j) = wrt.iter().position(|w| *w == Wrt::Parameter(c - n)) {
+                row[j] += a;
+            }
+        }
     }
 }

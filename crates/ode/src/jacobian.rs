@@ -6,10 +6,15 @@
 //! Jacobian is never formed and nothing is allocated per call. The sensitivity equations
 //! use the columns of S as directions; quasilinearization uses the columns of Φ and the
 //! displacement from the previous trajectory.
+//!
+//! A system that supplies its own sparse Jacobian ([`System::sparse_jacobian`], model
+//! files) is evaluated once per call instead, and the products are summed over the nonzero
+//! entries: one multiply-add per entry and direction.
 
 use nalgebra::{Const, SVector, U1};
 use num_dual::{Derivative, DualSVec64};
 
+use crate::sparse::SparseJacobian;
 use crate::system::System;
 
 /// Which function of the system to differentiate.
@@ -31,13 +36,42 @@ pub struct JacobianProducts {
     duals: Duals,
     /// The parameter values, for evaluations without directions.
     p: Vec<f64>,
+    /// The parameter directions n_α × K, row by row, for systems with a sparse Jacobian.
+    vp: Vec<f64>,
+    /// Number of directions K.
+    k: usize,
+    /// Work space of the sparse Jacobian, allocated on its first use.
+    sparse: Option<SparseWork>,
+}
+
+/// A sparse Jacobian's work space and the plan of its products with the directions.
+struct SparseWork {
+    work: Vec<f64>,
+    /// The registers of the function values.
+    values: Vec<u32>,
+    /// Per row of the products: the end of its terms in `states` and in `parameters`.
+    rows: Vec<(u32, u32)>,
+    /// Per state entry: its register and the offset of its column in the state directions
+    /// (column c: c·K).
+    states: Vec<(u32, u32)>,
+    /// Per parameter entry and nonzero direction component: its register, the direction,
+    /// and the component.
+    parameters: Vec<(u32, u32, f64)>,
+    /// Whether the plan is for the current parameter directions.
+    planned: bool,
 }
 
 impl JacobianProducts {
     /// Work space for `n` states, the parameters `p` with directions `vp` (n_α × K, row by
     /// row), `m` function values and K = `directions` directions.
     pub fn new(n: usize, p: &[f64], vp: &[f64], m: usize, directions: usize) -> Self {
-        let mut products = Self { duals: Duals::new(n, p.len(), m, directions), p: p.to_vec() };
+        let mut products = Self {
+            duals: Duals::new(n, p.len(), m, directions),
+            p: p.to_vec(),
+            vp: vp.to_vec(),
+            k: directions,
+            sparse: None,
+        };
         products.set_parameters(p, vp);
         products
     }
@@ -45,6 +79,11 @@ impl JacobianProducts {
     /// New parameter values and directions.
     pub fn set_parameters(&mut self, p: &[f64], vp: &[f64]) {
         self.p.copy_from_slice(p);
+        self.vp.copy_from_slice(vp);
+        if let Some(sparse) = &mut self.sparse {
+            // Planned again for the new directions on the next evaluation.
+            sparse.planned = false;
+        }
         self.duals.set_parameters(p, vp);
     }
 
@@ -60,7 +99,131 @@ impl JacobianProducts {
         value: &mut [f64],
         out: &mut [f64],
     ) {
+        if self.k > 0
+            && let Some(jacobian) = sys.sparse_jacobian(function)
+        {
+            let (vp, k) = (&self.vp, self.k);
+            let sparse =
+                self.sparse.get_or_insert_with(|| SparseWork::new(jacobian, y.len(), vp, k));
+            if !sparse.planned {
+                sparse.plan(jacobian, y.len(), vp, k);
+            }
+            sparse.products(jacobian, (t, y, &self.p, u), (vy, k), value, out);
+            return;
+        }
         self.duals.eval(sys, function, (t, y, &self.p, u), vy, value, out);
+    }
+}
+
+impl SparseWork {
+    fn new(jacobian: &dyn SparseJacobian, n: usize, vp: &[f64], k: usize) -> Self {
+        let mut work = Self {
+            work: jacobian.workspace(),
+            values: jacobian.values().to_vec(),
+            rows: Vec::new(),
+            states: Vec::new(),
+            parameters: Vec::new(),
+            planned: false,
+        };
+        work.plan(jacobian, n, vp, k);
+        work
+    }
+
+    /// The products' plan for parameter directions `vp` (n_α × K, row by row).
+    fn plan(&mut self, jacobian: &dyn SparseJacobian, n: usize, vp: &[f64], k: usize) {
+        self.planned = true;
+        self.rows.clear();
+        self.states.clear();
+        self.parameters.clear();
+        let mut entries = jacobian.pattern().iter().zip(jacobian.entries()).peekable();
+        for row in 0..self.values.len() as u32 {
+            while let Some((&(_, column), &register)) = entries.next_if(|e| e.0.0 == row) {
+                let column = column as usize;
+                if column < n {
+                    self.states.push((register, (column * k) as u32));
+                    continue;
+                }
+                let q = column - n;
+                for (j, &v) in vp[q * k..(q + 1) * k].iter().enumerate() {
+                    if v != 0.0 {
+                        self.parameters.push((register, j as u32, v));
+                    }
+                }
+            }
+            self.rows.push((self.states.len() as u32, self.parameters.len() as u32));
+        }
+    }
+
+    /// value = f and out = J_y vy + J_α vp (K columns, row by row) from one evaluation of
+    /// the function and its nonzero Jacobian entries.
+    fn products(
+        &mut self,
+        jacobian: &dyn SparseJacobian,
+        (t, y, p, u): (f64, &[f64], &[f64], &[f64]),
+        (vy, k): (&[f64], usize),
+        value: &mut [f64],
+        out: &mut [f64],
+    ) {
+        jacobian.eval(t, y, p, u, &mut self.work);
+        for (v, &r) in value.iter_mut().zip(&self.values) {
+            *v = self.work[r as usize];
+        }
+        match k {
+            1 => self.accumulate::<1>(vy, out),
+            2 => self.accumulate::<2>(vy, out),
+            3 => self.accumulate::<3>(vy, out),
+            4 => self.accumulate::<4>(vy, out),
+            5 => self.accumulate::<5>(vy, out),
+            6 => self.accumulate::<6>(vy, out),
+            7 => self.accumulate::<7>(vy, out),
+            8 => self.accumulate::<8>(vy, out),
+            _ => self.accumulate_any(k, vy, out),
+        }
+    }
+
+    /// The products row by row for K directions known at compile time: each row's K sums
+    /// stay in registers until they are stored.
+    #[inline(always)]
+    fn accumulate<const K: usize>(&self, vy: &[f64], out: &mut [f64]) {
+        let work = &self.work;
+        let (mut s, mut q) = (0, 0);
+        for (row, &(s_end, q_end)) in out.chunks_exact_mut(K).zip(&self.rows) {
+            let mut sums = [0.0; K];
+            for &(r, column) in &self.states[s..s_end as usize] {
+                let a = work[r as usize];
+                let column = column as usize;
+                let direction: &[f64; K] = vy[column..column + K].try_into().expect("K values");
+                for j in 0..K {
+                    sums[j] += a * direction[j];
+                }
+            }
+            // The parameters' terms after the store: indexing the sums by a run-time
+            // column would keep them in memory instead of registers.
+            row.copy_from_slice(&sums);
+            for &(r, j, v) in &self.parameters[q..q_end as usize] {
+                row[j as usize] += work[r as usize] * v;
+            }
+            (s, q) = (s_end as usize, q_end as usize);
+        }
+    }
+
+    /// The products for any number of directions.
+    fn accumulate_any(&self, k: usize, vy: &[f64], out: &mut [f64]) {
+        let work = &self.work;
+        let (mut s, mut q) = (0, 0);
+        for (row, &(s_end, q_end)) in out.chunks_exact_mut(k).zip(&self.rows) {
+            row.fill(0.0);
+            for &(r, column) in &self.states[s..s_end as usize] {
+                let (a, column) = (work[r as usize], column as usize);
+                for (o, v) in row.iter_mut().zip(&vy[column..column + k]) {
+                    *o += a * v;
+                }
+            }
+            for &(r, j, v) in &self.parameters[q..q_end as usize] {
+                row[j as usize] += work[r as usize] * v;
+            }
+            (s, q) = (s_end as usize, q_end as usize);
+        }
     }
 }
 

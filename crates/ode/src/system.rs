@@ -4,7 +4,9 @@ use nalgebra::DMatrix;
 use num_dual::{Dual64, DualNum};
 
 use crate::error::SignatureError;
+use crate::jacobian::Function;
 use crate::signal::Side;
+use crate::sparse::SparseJacobian;
 
 /// The scalar a right-hand side is written for: `f64`, or a forward-mode dual number
 /// (`num_dual::Dual64`) carrying one directional derivative.
@@ -153,6 +155,10 @@ pub enum Observable {
 /// * A system may supply analytic Jacobians by overriding [`jacobians`](System::jacobians) and
 ///   returning `true` from [`analytic_jacobians`](System::analytic_jacobians); sensitivities
 ///   are then formed as J_y S + J_α instead of with dual numbers.
+/// * A system that differentiates itself (model files do, symbolically) may return its
+///   right-hand side and outputs with their sparse Jacobians from
+///   [`sparse_jacobian`](System::sparse_jacobian); every Jacobian product is then taken from
+///   it instead of from dual numbers.
 ///
 /// ```
 /// use sysid_ode::{Scalar, Signature, System};
@@ -187,6 +193,13 @@ pub trait System: Sync {
     /// Times where an input (or the right-hand side) is discontinuous, ascending.
     fn discontinuities(&self) -> &[f64] {
         &[]
+    }
+
+    /// The right-hand side (or the outputs) with the nonzero entries of its Jacobian, for
+    /// systems that can evaluate them directly (default: none, dual numbers are used).
+    fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
+        let _ = function;
+        None
     }
 
     /// Whether [`jacobians`](System::jacobians) is hand-written and should be used for
@@ -245,6 +258,9 @@ impl<S: System> System for &S {
     }
     fn discontinuities(&self) -> &[f64] {
         (**self).discontinuities()
+    }
+    fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
+        (**self).sparse_jacobian(function)
     }
     fn analytic_jacobians(&self) -> bool {
         (**self).analytic_jacobians()

@@ -1,0 +1,848 @@
+//! Symbolic derivatives of a model's expressions, and one straight-line program that
+//! evaluates the functions together with their Jacobian.
+//!
+//! At load time the compiled expressions ([`Program`]) of the right-hand side (or of the
+//! outputs) are put into one [`Graph`] in which every subexpression is stored once
+//! (hash-consing): building a term that already exists returns it, so subexpressions common
+//! to several equations and to their derivatives are computed once. Each function is
+//! differentiated with respect to every state and every parameter by the rules of
+//! calculus, and each new term is simplified as it is built: constants folded, zero and
+//! unit terms dropped (x + 0, x·1, x·0, 0/x, …), and commutative operands put in a fixed
+//! order so that a·b and b·a are one term. A derivative that simplifies to the constant 0
+//! is a structural zero of the Jacobian.
+//!
+//! The functions and the nonzero Jacobian entries are then emitted, children first, as one
+//! [`Tape`]: a straight-line program over f64 registers (t, y, α, u, the constants, then one
+//! register per operation), evaluated by one loop without recursion or allocation. Its
+//! derivatives are those of the dual numbers ([`Program::eval`] with `num_dual` scalars),
+//! term by term: min and max follow the branch that the value takes, |x| has the
+//! derivative sign(x) (+1 at +0, as `num_dual` has it), so the two agree to rounding.
+
+use std::collections::HashMap;
+
+use sysid_ode::SparseJacobian;
+
+use crate::expr::{Func, Node, Operand, Program, Slot, eval_func};
+
+/// The index of a term in a [`Graph`].
+type Id = u32;
+
+/// A term of the graph; children are terms built before it (smaller ids).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum Term {
+    /// A constant, by its bits.
+    Const(u64),
+    Var(Slot),
+    Neg(Id),
+    Add(Id, Id),
+    Sub(Id, Id),
+    Mul(Id, Id),
+    Div(Id, Id),
+    PowI(Id, i32),
+    /// x^c for a constant term c.
+    PowF(Id, Id),
+    Pow(Id, Id),
+    /// A function of one argument.
+    Func(Func, Id),
+    /// sign(x): +1 for x ≥ +0, −1 for x ≤ −0.
+    Signum(Id),
+    /// min(a, b) = b if b < a, else a (as [`Program::eval`] has it).
+    Min(Id, Id),
+    /// max(a, b) = b if b > a, else a.
+    Max(Id, Id),
+    /// c if a < b, else d: the derivative of min and max.
+    Less(Id, Id, Id, Id),
+}
+
+/// Expressions with every subexpression stored once.
+#[derive(Debug, Default)]
+struct Graph {
+    terms: Vec<Term>,
+    ids: HashMap<Term, Id>,
+}
+
+impl Graph {
+    /// The id of `term`, added if new.
+    fn intern(&mut self, term: Term) -> Id {
+        if let Some(&id) = self.ids.get(&term) {
+            return id;
+        }
+        let id = self.terms.len() as Id;
+        self.terms.push(term);
+        self.ids.insert(term, id);
+        id
+    }
+
+    fn constant(&mut self, c: f64) -> Id {
+        self.intern(Term::Const(c.to_bits()))
+    }
+
+    /// The value of a constant term.
+    fn value(&self, id: Id) -> Option<f64> {
+        match self.terms[id as usize] {
+            Term::Const(bits) => Some(f64::from_bits(bits)),
+            _ => None,
+        }
+    }
+
+    fn is(&self, id: Id, c: f64) -> bool {
+        self.value(id) == Some(c)
+    }
+
+    fn is_zero(&self, id: Id) -> bool {
+        self.is(id, 0.0)
+    }
+
+    fn neg(&mut self, a: Id) -> Id {
+        match (self.terms[a as usize], self.value(a)) {
+            (_, Some(x)) => self.constant(-x),
+            (Term::Neg(x), _) => x,
+            _ => self.intern(Term::Neg(a)),
+        }
+    }
+
+    fn add(&mut self, a: Id, b: Id) -> Id {
+        match (self.value(a), self.value(b)) {
+            (Some(x), Some(y)) => self.constant(x + y),
+            (Some(0.0), _) => b,
+            (_, Some(0.0)) => a,
+            // Addition is commutative in floating point too: one order for both.
+            _ => self.intern(Term::Add(a.min(b), a.max(b))),
+        }
+    }
+
+    fn sub(&mut self, a: Id, b: Id) -> Id {
+        match (self.value(a), self.value(b)) {
+            (Some(x), Some(y)) => self.constant(x - y),
+            (_, Some(0.0)) => a,
+            (Some(0.0), _) => self.neg(b),
+            _ => self.intern(Term::Sub(a, b)),
+        }
+    }
+
+    fn mul(&mut self, a: Id, b: Id) -> Id {
+        match (self.value(a), self.value(b)) {
+            (Some(x), Some(y)) => self.constant(x * y),
+            (Some(0.0), _) | (_, Some(0.0)) => self.constant(0.0),
+            (Some(1.0), _) => b,
+            (_, Some(1.0)) => a,
+            (Some(-1.0), _) => self.neg(b),
+            (_, Some(-1.0)) => self.neg(a),
+            _ => self.intern(Term::Mul(a.min(b), a.max(b))),
+        }
+    }
+
+    /// a/b: by a constant an exact division, else a·(1/b) as dual numbers divide, with 1/b
+    /// shared by every quotient of the same denominator.
+    fn div(&mut self, a: Id, b: Id) -> Id {
+        match (self.value(a), self.value(b)) {
+            (Some(x), Some(y)) => self.constant(x / y),
+            (Some(0.0), _) => self.constant(0.0),
+            (_, Some(1.0)) => a,
+            (_, Some(-1.0)) => self.neg(a),
+            (_, Some(_)) => self.intern(Term::Div(a, b)),
+            _ => {
+                let inverse = self.recip(b);
+                self.mul(a, inverse)
+            }
+        }
+    }
+
+    /// 1/b.
+    fn recip(&mut self, b: Id) -> Id {
+        match self.value(b) {
+            Some(y) => self.constant(1.0 / y),
+            None => {
+                let one = self.constant(1.0);
+                self.intern(Term::Div(one, b))
+            }
+        }
+    }
+
+    fn powi(&mut self, a: Id, n: i32) -> Id {
+        match (self.value(a), n) {
+            (Some(x), _) => self.constant(x.powi(n)),
+            (_, 0) => self.constant(1.0),
+            (_, 1) => a,
+            _ => self.intern(Term::PowI(a, n)),
+        }
+    }
+
+    fn powf(&mut self, a: Id, c: f64) -> Id {
+        match self.value(a) {
+            Some(x) => self.constant(x.powf(c)),
+            None => {
+                let c = self.constant(c);
+                self.intern(Term::PowF(a, c))
+            }
+        }
+    }
+
+    fn pow(&mut self, a: Id, b: Id) -> Id {
+        match (self.value(a), self.value(b)) {
+            (Some(x), Some(y)) => self.constant(x.powf(y)),
+            _ => self.intern(Term::Pow(a, b)),
+        }
+    }
+
+    fn func(&mut self, f: Func, a: Id) -> Id {
+        match self.value(a) {
+            Some(x) => self.constant(eval_func(f, x)),
+            None => self.intern(Term::Func(f, a)),
+        }
+    }
+
+    fn signum(&mut self, a: Id) -> Id {
+        match self.value(a) {
+            Some(x) => self.constant(x.signum()),
+            None => self.intern(Term::Signum(a)),
+        }
+    }
+
+    fn min(&mut self, a: Id, b: Id) -> Id {
+        match (self.value(a), self.value(b)) {
+            (Some(x), Some(y)) => self.constant(if y < x { y } else { x }),
+            _ => self.intern(Term::Min(a, b)),
+        }
+    }
+
+    fn max(&mut self, a: Id, b: Id) -> Id {
+        match (self.value(a), self.value(b)) {
+            (Some(x), Some(y)) => self.constant(if y > x { y } else { x }),
+            _ => self.intern(Term::Max(a, b)),
+        }
+    }
+
+    /// c if a < b, else d.
+    fn less(&mut self, a: Id, b: Id, c: Id, d: Id) -> Id {
+        if c == d {
+            return c;
+        }
+        match (self.value(a), self.value(b)) {
+            (Some(x), Some(y)) => {
+                if x < y {
+                    c
+                } else {
+                    d
+                }
+            }
+            _ => self.intern(Term::Less(a, b, c, d)),
+        }
+    }
+
+    /// The graph of a compiled expression; returns its root.
+    fn program(&mut self, program: &Program) -> Id {
+        let mut ids: Vec<Id> = Vec::with_capacity(program.nodes().len());
+        let operand = |g: &mut Graph, ids: &[Id], o: Operand| match o {
+            Operand::Node(i) => ids[i as usize],
+            Operand::Var(slot) => g.intern(Term::Var(slot)),
+            Operand::Const(c) => g.constant(c),
+        };
+        for node in program.nodes() {
+            let mut get = |o: Operand| operand(self, &ids, o);
+            let id = match *node {
+                Node::Neg(a) => {
+                    let a = get(a);
+                    self.neg(a)
+                }
+                Node::Add(a, b) => {
+                    let (a, b) = (get(a), get(b));
+                    self.add(a, b)
+                }
+                Node::Sub(a, b) => {
+                    let (a, b) = (get(a), get(b));
+                    self.sub(a, b)
+                }
+                Node::Mul(a, b) => {
+                    let (a, b) = (get(a), get(b));
+                    self.mul(a, b)
+                }
+                Node::Div(a, b) => {
+                    let (a, b) = (get(a), get(b));
+                    self.div(a, b)
+                }
+                Node::AddC(a, c) => {
+                    let (a, c) = (get(a), self.constant(c));
+                    self.add(a, c)
+                }
+                Node::SubC(c, a) => {
+                    let (a, c) = (get(a), self.constant(c));
+                    self.sub(c, a)
+                }
+                Node::MulC(a, c) => {
+                    let (a, c) = (get(a), self.constant(c));
+                    self.mul(a, c)
+                }
+                Node::DivC(a, c) => {
+                    let (a, c) = (get(a), self.constant(c));
+                    self.div(a, c)
+                }
+                Node::CDiv(c, a) => {
+                    let (a, c) = (get(a), self.constant(c));
+                    self.div(c, a)
+                }
+                Node::PowI(a, n) => {
+                    let a = get(a);
+                    self.powi(a, n)
+                }
+                Node::PowF(a, c) => {
+                    let a = get(a);
+                    self.powf(a, c)
+                }
+                Node::Pow(a, b) => {
+                    let (a, b) = (get(a), get(b));
+                    self.pow(a, b)
+                }
+                Node::Func(f, a) => {
+                    let a = get(a);
+                    self.func(f, a)
+                }
+                Node::Min(a, b) => {
+                    let (a, b) = (get(a), get(b));
+                    self.min(a, b)
+                }
+                Node::Max(a, b) => {
+                    let (a, b) = (get(a), get(b));
+                    self.max(a, b)
+                }
+            };
+            ids.push(id);
+        }
+        operand(self, &ids, program.root())
+    }
+
+    /// The terms that `roots` depend on, ascending (children before parents).
+    fn reachable(&self, roots: &[Id]) -> Vec<Id> {
+        let mut seen = vec![false; self.terms.len()];
+        let mut stack: Vec<Id> = roots.to_vec();
+        while let Some(id) = stack.pop() {
+            if std::mem::replace(&mut seen[id as usize], true) {
+                continue;
+            }
+            stack.extend(children(self.terms[id as usize]));
+        }
+        (0..self.terms.len() as Id).filter(|&id| seen[id as usize]).collect()
+    }
+
+    /// ∂root/∂`wrt` for every root, built in the graph (forward mode over the terms the
+    /// roots depend on, children first: no recursion).
+    fn derivatives(&mut self, roots: &[Id], wrt: Slot) -> Vec<Id> {
+        let zero = self.constant(0.0);
+        let mut d: HashMap<Id, Id> = HashMap::new();
+        for id in self.reachable(roots) {
+            let term = self.terms[id as usize];
+            let dx = |x: Id| d[&x];
+            let derivative = match term {
+                Term::Const(_) | Term::Signum(_) => zero,
+                Term::Var(slot) => {
+                    if slot == wrt {
+                        self.constant(1.0)
+                    } else {
+                        zero
+                    }
+                }
+                Term::Neg(a) => self.neg(dx(a)),
+                Term::Add(a, b) => self.add(dx(a), dx(b)),
+                Term::Sub(a, b) => self.sub(dx(a), dx(b)),
+                Term::Mul(a, b) => {
+                    let (da, db) = (dx(a), dx(b));
+                    let left = self.mul(da, b);
+                    let right = self.mul(a, db);
+                    self.add(left, right)
+                }
+                Term::Div(a, b) => {
+                    // (da − (a/b)·db) / b, with a/b the term itself (b is a constant, or
+                    // a = 1 and the term is 1/b).
+                    let (da, db) = (dx(a), dx(b));
+                    let q = self.mul(id, db);
+                    let top = self.sub(da, q);
+                    self.div(top, b)
+                }
+                Term::PowI(a, n) => {
+                    let da = dx(a);
+                    if self.is_zero(da) {
+                        zero
+                    } else {
+                        let (c, power) = (self.constant(f64::from(n)), self.powi(a, n - 1));
+                        let slope = self.mul(c, power);
+                        self.mul(slope, da)
+                    }
+                }
+                Term::PowF(a, c) => {
+                    let da = dx(a);
+                    if self.is_zero(da) {
+                        zero
+                    } else {
+                        let c = self.value(c).expect("a constant exponent");
+                        let (k, power) = (self.constant(c), self.powf(a, c - 1.0));
+                        let slope = self.mul(k, power);
+                        self.mul(slope, da)
+                    }
+                }
+                Term::Pow(a, b) => {
+                    // a^b (db ln a + b da / a)
+                    let (da, db) = (dx(a), dx(b));
+                    let along_b = if self.is_zero(db) {
+                        zero
+                    } else {
+                        let ln = self.func(Func::Log, a);
+                        self.mul(db, ln)
+                    };
+                    let along_a = if self.is_zero(da) {
+                        zero
+                    } else {
+                        let scaled = self.mul(b, da);
+                        self.div(scaled, a)
+                    };
+                    let rate = self.add(along_b, along_a);
+                    self.mul(id, rate)
+                }
+                Term::Func(f, a) => {
+                    let da = dx(a);
+                    if self.is_zero(da) { zero } else { self.chain(f, id, a, da) }
+                }
+                Term::Min(a, b) => {
+                    let (da, db) = (dx(a), dx(b));
+                    self.less(b, a, db, da)
+                }
+                Term::Max(a, b) => {
+                    let (da, db) = (dx(a), dx(b));
+                    self.less(a, b, db, da)
+                }
+                Term::Less(a, b, c, e) => {
+                    let (dc, de) = (dx(c), dx(e));
+                    self.less(a, b, dc, de)
+                }
+            };
+            d.insert(id, derivative);
+        }
+        roots.iter().map(|r| d[r]).collect()
+    }
+
+    /// The derivative of f(a) (the term `fa`) given da ≠ 0.
+    fn chain(&mut self, f: Func, fa: Id, a: Id, da: Id) -> Id {
+        let one = self.constant(1.0);
+        match f {
+            Func::Exp => self.mul(fa, da),
+            Func::Log => self.div(da, a),
+            Func::Sqrt => {
+                let half = self.constant(0.5);
+                let top = self.mul(half, da);
+                self.div(top, fa)
+            }
+            Func::Sin => {
+                let cos = self.func(Func::Cos, a);
+                self.mul(cos, da)
+            }
+            Func::Cos => {
+                let sin = self.func(Func::Sin, a);
+                let slope = self.neg(sin);
+                self.mul(slope, da)
+            }
+            Func::Tan => {
+                let square = self.mul(fa, fa);
+                let slope = self.add(one, square);
+                self.mul(slope, da)
+            }
+            Func::Tanh => {
+                let square = self.mul(fa, fa);
+                let slope = self.sub(one, square);
+                self.mul(slope, da)
+            }
+            Func::Abs => {
+                let sign = self.signum(a);
+                self.mul(sign, da)
+            }
+            Func::Min | Func::Max => unreachable!("min and max are terms of their own"),
+        }
+    }
+}
+
+/// The children of a term.
+fn children(term: Term) -> impl Iterator<Item = Id> {
+    let (list, len): ([Id; 4], usize) = match term {
+        Term::Const(_) | Term::Var(_) => ([0; 4], 0),
+        Term::Neg(a) | Term::PowI(a, _) | Term::Func(_, a) | Term::Signum(a) => ([a, 0, 0, 0], 1),
+        Term::Add(a, b)
+        | Term::PowF(a, b)
+        | Term::Sub(a, b)
+        | Term::Mul(a, b)
+        | Term::Div(a, b)
+        | Term::Pow(a, b)
+        | Term::Min(a, b)
+        | Term::Max(a, b) => ([a, b, 0, 0], 2),
+        Term::Less(a, b, c, d) => ([a, b, c, d], 4),
+    };
+    list.into_iter().take(len)
+}
+
+/// One operation of a [`Tape`], on registers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum Instr {
+    Neg(u32),
+    Add(u32, u32),
+    Sub(u32, u32),
+    Mul(u32, u32),
+    Div(u32, u32),
+    /// x² (as `powi(2)` computes it).
+    Square(u32),
+    /// x³ (as `powi(3)` computes it: x·x²).
+    Cube(u32),
+    PowI(u32, i32),
+    /// x^c, c in a register.
+    PowF(u32, u32),
+    Pow(u32, u32),
+    Exp(u32),
+    Log(u32),
+    Sqrt(u32),
+    Sin(u32),
+    Cos(u32),
+    Tan(u32),
+    Tanh(u32),
+    Abs(u32),
+    Signum(u32),
+    Min(u32, u32),
+    Max(u32, u32),
+    Less(u32, u32, u32, u32),
+}
+
+/// A straight-line program over f64 registers: register 0 holds t, then the n states, the
+/// parameters, the inputs and the constants; instruction i writes register `first + i`,
+/// reading only registers before it.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Tape {
+    n: usize,
+    np: usize,
+    nu: usize,
+    constants: Vec<f64>,
+    code: Vec<Instr>,
+}
+
+impl Tape {
+    /// The program computing the terms `outputs` of `graph`, and the register of each.
+    fn new(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (Self, Vec<u32>) {
+        let order = graph.reachable(outputs);
+        let mut register: HashMap<Id, u32> = HashMap::with_capacity(order.len());
+        let mut constants = Vec::new();
+        let first_constant = 1 + n + np + nu;
+        for &id in &order {
+            let r = match graph.terms[id as usize] {
+                Term::Var(Slot::Time) => 0,
+                Term::Var(Slot::State(i)) => 1 + i,
+                Term::Var(Slot::Parameter(q)) => 1 + n + q,
+                Term::Var(Slot::Input(j)) => 1 + n + np + j,
+                Term::Const(bits) => {
+                    constants.push(f64::from_bits(bits));
+                    first_constant + constants.len() - 1
+                }
+                _ => continue,
+            };
+            register.insert(id, r as u32);
+        }
+        let first = first_constant + constants.len();
+        let mut code = Vec::new();
+        for &id in &order {
+            let r = |x: Id| register[&x];
+            let instr = match graph.terms[id as usize] {
+                Term::Const(_) | Term::Var(_) => continue,
+                Term::Neg(a) => Instr::Neg(r(a)),
+                Term::Add(a, b) => Instr::Add(r(a), r(b)),
+                Term::Sub(a, b) => Instr::Sub(r(a), r(b)),
+                Term::Mul(a, b) => Instr::Mul(r(a), r(b)),
+                Term::Div(a, b) => Instr::Div(r(a), r(b)),
+                Term::PowI(a, 2) => Instr::Square(r(a)),
+                Term::PowI(a, 3) => Instr::Cube(r(a)),
+                Term::PowI(a, k) => Instr::PowI(r(a), k),
+                Term::PowF(a, c) => Instr::PowF(r(a), r(c)),
+                Term::Pow(a, b) => Instr::Pow(r(a), r(b)),
+                Term::Func(f, a) => {
+                    let a = r(a);
+                    match f {
+                        Func::Exp => Instr::Exp(a),
+                        Func::Log => Instr::Log(a),
+                        Func::Sqrt => Instr::Sqrt(a),
+                        Func::Sin => Instr::Sin(a),
+                        Func::Cos => Instr::Cos(a),
+                        Func::Tan => Instr::Tan(a),
+                        Func::Tanh => Instr::Tanh(a),
+                        Func::Abs => Instr::Abs(a),
+                        Func::Min | Func::Max => unreachable!("min and max are terms of their own"),
+                    }
+                }
+                Term::Signum(a) => Instr::Signum(r(a)),
+                Term::Min(a, b) => Instr::Min(r(a), r(b)),
+                Term::Max(a, b) => Instr::Max(r(a), r(b)),
+                Term::Less(a, b, c, d) => Instr::Less(r(a), r(b), r(c), r(d)),
+            };
+            register.insert(id, (first + code.len()) as u32);
+            code.push(instr);
+        }
+        let registers = outputs.iter().map(|id| register[id]).collect();
+        (Self { n, np, nu, constants, code }, registers)
+    }
+
+    /// The first register written by an instruction.
+    pub(crate) fn first(&self) -> usize {
+        1 + self.n + self.np + self.nu + self.constants.len()
+    }
+
+    /// The numbers of states, parameters and inputs.
+    #[cfg(feature = "jit")]
+    pub(crate) fn dims(&self) -> (usize, usize, usize) {
+        (self.n, self.np, self.nu)
+    }
+
+    /// The number of registers.
+    pub(crate) fn len(&self) -> usize {
+        self.first() + self.code.len()
+    }
+
+    /// The value of register `r` if it holds a constant.
+    #[cfg(feature = "jit")]
+    pub(crate) fn constant(&self, r: usize) -> Option<f64> {
+        r.checked_sub(1 + self.n + self.np + self.nu).and_then(|c| self.constants.get(c).copied())
+    }
+
+    /// The instructions; instruction i writes register `first() + i`.
+    #[cfg(feature = "jit")]
+    pub(crate) fn code(&self) -> &[Instr] {
+        &self.code
+    }
+
+    /// Registers with the constants loaded.
+    fn registers(&self) -> Vec<f64> {
+        let mut r = vec![0.0; self.len()];
+        let at = 1 + self.n + self.np + self.nu;
+        r[at..at + self.constants.len()].copy_from_slice(&self.constants);
+        r
+    }
+
+    /// Sets the registers of (t, y, α, u).
+    fn load(&self, t: f64, y: &[f64], p: &[f64], u: &[f64], r: &mut [f64]) {
+        let (n, np) = (self.n, self.np);
+        r[0] = t;
+        r[1..1 + n].copy_from_slice(y);
+        r[1 + n..1 + n + np].copy_from_slice(p);
+        r[1 + n + np..1 + n + np + self.nu].copy_from_slice(u);
+    }
+
+    /// Interprets the program on registers from [`registers`](Self::registers) whose inputs
+    /// are [loaded](Self::load).
+    fn interpret(&self, r: &mut [f64]) {
+        // Cells: every instruction reads registers before its own and writes its own.
+        let r = std::cell::Cell::from_mut(r).as_slice_of_cells();
+        for (instr, out) in self.code.iter().zip(&r[self.first()..]) {
+            let x = |a: u32| r[a as usize].get();
+            let value = match *instr {
+                Instr::Neg(a) => -x(a),
+                Instr::Add(a, b) => x(a) + x(b),
+                Instr::Sub(a, b) => x(a) - x(b),
+                Instr::Mul(a, b) => x(a) * x(b),
+                Instr::Div(a, b) => x(a) / x(b),
+                Instr::Square(a) => x(a) * x(a),
+                Instr::Cube(a) => x(a) * (x(a) * x(a)),
+                Instr::PowI(a, k) => x(a).powi(k),
+                Instr::PowF(a, c) => x(a).powf(x(c)),
+                Instr::Pow(a, b) => x(a).powf(x(b)),
+                Instr::Exp(a) => x(a).exp(),
+                Instr::Log(a) => x(a).ln(),
+                Instr::Sqrt(a) => x(a).sqrt(),
+                Instr::Sin(a) => x(a).sin(),
+                Instr::Cos(a) => x(a).cos(),
+                Instr::Tan(a) => x(a).tan(),
+                Instr::Tanh(a) => x(a).tanh(),
+                Instr::Abs(a) => x(a).abs(),
+                Instr::Signum(a) => x(a).signum(),
+                Instr::Min(a, b) => {
+                    if x(b) < x(a) {
+                        x(b)
+                    } else {
+                        x(a)
+                    }
+                }
+                Instr::Max(a, b) => {
+                    if x(b) > x(a) {
+                        x(b)
+                    } else {
+                        x(a)
+                    }
+                }
+                Instr::Less(a, b, c, d) => {
+                    if x(a) < x(b) {
+                        x(c)
+                    } else {
+                        x(d)
+                    }
+                }
+            };
+            out.set(value);
+        }
+    }
+}
+
+/// Functions f(t, y, α, u) (a model's right-hand side or its outputs) with their symbolic
+/// Jacobian [∂f/∂y | ∂f/∂α], evaluated as one [`Tape`]: compiled to machine code with the
+/// `jit` feature (where Cranelift supports the host), else interpreted.
+#[derive(Clone, Debug)]
+pub struct Linearized {
+    tape: Tape,
+    #[cfg(feature = "jit")]
+    compiled: Option<std::sync::Arc<crate::jit::Compiled>>,
+    /// The registers of the function values.
+    values: Vec<u32>,
+    /// The registers of the nonzero entries, in pattern order.
+    entries: Vec<u32>,
+    /// The nonzero entries (row, column), row by row, states' columns first.
+    pattern: Vec<(u32, u32)>,
+    /// The entries' derivatives with respect to the states, where built.
+    curvature: Option<std::sync::Arc<Linearized>>,
+}
+
+impl Linearized {
+    /// Differentiates `functions` of n states, n_α parameters and n_u inputs.
+    pub fn new(functions: &[Program], dims: (usize, usize, usize)) -> Self {
+        let mut graph = Graph::default();
+        let roots: Vec<Id> = functions.iter().map(|f| graph.program(f)).collect();
+        Self::build(&mut graph, &roots, dims, true).0
+    }
+
+    /// The same, with the [curvature](SparseJacobian::curvature): the Jacobian's entries
+    /// differentiated once more with respect to the states (for implicit integrators).
+    pub fn with_curvature(functions: &[Program], dims: (usize, usize, usize)) -> Self {
+        let mut graph = Graph::default();
+        let roots: Vec<Id> = functions.iter().map(|f| graph.program(f)).collect();
+        let (mut first, entries) = Self::build(&mut graph, &roots, dims, true);
+        let (second, _) = Self::build(&mut graph, &entries, dims, false);
+        first.curvature = Some(std::sync::Arc::new(second));
+        first
+    }
+
+    /// The program of `roots` and their derivatives with respect to the n states and, if
+    /// `parameters`, the n_α parameters (all columns share the graph), and the ids of the
+    /// nonzero entries.
+    fn build(
+        graph: &mut Graph,
+        roots: &[Id],
+        (n, np, nu): (usize, usize, usize),
+        parameters: bool,
+    ) -> (Self, Vec<Id>) {
+        let columns = if parameters { np } else { 0 };
+        let slots = (0..n).map(Slot::State).chain((0..columns).map(Slot::Parameter));
+        let columns: Vec<Vec<Id>> = slots.map(|s| graph.derivatives(roots, s)).collect();
+        let mut pattern = Vec::new();
+        let mut outputs = roots.to_vec();
+        for row in 0..roots.len() {
+            for (column, derivatives) in columns.iter().enumerate() {
+                if !graph.is_zero(derivatives[row]) {
+                    pattern.push((row as u32, column as u32));
+                    outputs.push(derivatives[row]);
+                }
+            }
+        }
+        let (tape, registers) = Tape::new(graph, &outputs, (n, np, nu));
+        let (values, entries) = registers.split_at(roots.len());
+        let linearized = Self {
+            #[cfg(feature = "jit")]
+            compiled: crate::jit::compile(&tape, &registers).map(std::sync::Arc::new),
+            tape,
+            values: values.to_vec(),
+            entries: entries.to_vec(),
+            pattern,
+            curvature: None,
+        };
+        (linearized, outputs[roots.len()..].to_vec())
+    }
+
+    /// The same functions, always interpreted (the reference of the compiled code).
+    pub fn interpreted(&self) -> Self {
+        Self {
+            #[cfg(feature = "jit")]
+            compiled: None,
+            ..self.clone()
+        }
+    }
+
+    /// Whether the program runs as machine code.
+    pub fn is_compiled(&self) -> bool {
+        #[cfg(feature = "jit")]
+        return self.compiled.is_some();
+        #[cfg(not(feature = "jit"))]
+        false
+    }
+
+    /// Number of operations of the program (functions and Jacobian together).
+    pub fn operations(&self) -> usize {
+        self.tape.code.len()
+    }
+}
+
+impl SparseJacobian for Linearized {
+    fn pattern(&self) -> &[(u32, u32)] {
+        &self.pattern
+    }
+
+    fn values(&self) -> &[u32] {
+        &self.values
+    }
+
+    fn entries(&self) -> &[u32] {
+        &self.entries
+    }
+
+    fn workspace(&self) -> Vec<f64> {
+        self.tape.registers()
+    }
+
+    fn curvature(&self) -> Option<&dyn SparseJacobian> {
+        self.curvature.as_deref().map(|c| c as &dyn SparseJacobian)
+    }
+
+    fn eval(&self, t: f64, y: &[f64], p: &[f64], u: &[f64], work: &mut [f64]) {
+        #[cfg(feature = "jit")]
+        if let Some(compiled) = &self.compiled {
+            compiled.run(t, y, p, u, work);
+            return;
+        }
+        self.tape.load(t, y, p, u, work);
+        self.tape.interpret(work);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::expr::parse;
+
+    fn compile(texts: &[&str]) -> Vec<Program> {
+        let resolve = |name: &str| match name {
+            "V" => Some(Slot::State(0)),
+            "R" => Some(Slot::State(1)),
+            "a" => Some(Slot::Parameter(0)),
+            "b" => Some(Slot::Parameter(1)),
+            "c" => Some(Slot::Parameter(2)),
+            "t" => Some(Slot::Time),
+            _ => None,
+        };
+        texts.iter().map(|t| Program::compile(&parse(t).unwrap(), &resolve).unwrap()).collect()
+    }
+
+    /// FitzHugh–Nagumo's Jacobian has the structure read off its equations, and the program
+    /// shares what the functions and derivatives have in common: V² once, 1/c once.
+    #[test]
+    fn fitzhugh_nagumo_program() {
+        let f = Linearized::new(
+            &compile(&["c * (V - V^3 / 3 + R)", "-(V - a + b * R) / c"]),
+            (2, 3, 0),
+        );
+        // Columns: V, R, a, b, c. dV'/da = dV'/db = 0 and dR'/dc ≠ 0.
+        let pattern = [(0, 0), (0, 1), (0, 4), (1, 0), (1, 1), (1, 2), (1, 3), (1, 4)];
+        assert_eq!(f.pattern, pattern);
+        let count = |p: fn(&Instr) -> bool| f.tape.code.iter().filter(|i| p(i)).count();
+        assert_eq!(count(|i| matches!(i, Instr::Square(_))), 1, "{:?}", f.tape.code);
+        // c is register 5 (t, V, R, a, b, c): one division by it, the rest multiply by 1/c.
+        assert_eq!(count(|i| matches!(i, Instr::Div(_, 5))), 1, "{:?}", f.tape.code);
+        // dV'/dR = c and dR'/da = 1/c are registers the program already has: 10 operations
+        // for the values, 13 for the eight entries.
+        assert!(f.operations() <= 23, "{} operations: {:?}", f.operations(), f.tape.code);
+    }
+}

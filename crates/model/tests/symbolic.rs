@@ -1,0 +1,242 @@
+//! The symbolic Jacobians of model files against the dual-number reference: the example
+//! models and random expressions, at random points; the compiled program against the
+//! interpreted one, bit for bit.
+
+use std::path::Path;
+
+use num_dual::{Dual64, HyperDual64};
+use proptest::prelude::*;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use sysid_model::expr::{Expr, Func, Op, Program, Slot, parse};
+use sysid_model::symbolic::Linearized;
+use sysid_model::{Model, ModelSystem};
+use sysid_ode::{Function, Inputs, JacobianProducts, SparseJacobian, System};
+
+/// A function's values and its Jacobian [J_y | J_α] (row by row) at a point, through
+/// [`JacobianProducts`] with unit directions: by the symbolic program, or by dual numbers
+/// for a system built `with_dual_numbers`.
+fn jacobians(
+    sys: &ModelSystem,
+    function: Function,
+    x: (f64, &[f64], &[f64], &[f64]),
+) -> (Vec<f64>, Vec<f64>) {
+    let (t, y, p, u) = x;
+    let sig = sys.signature();
+    let (n, np) = (sig.n_states(), sig.n_parameters());
+    let m = match function {
+        Function::Rhs => n,
+        Function::Outputs => sig.outputs().len(),
+    };
+    // Unit directions for every state and parameter: the products are the Jacobian.
+    let k = n + np;
+    let mut vy = vec![0.0; n * k];
+    let mut vp = vec![0.0; np * k];
+    for i in 0..n {
+        vy[i * k + i] = 1.0;
+    }
+    for q in 0..np {
+        vp[q * k + n + q] = 1.0;
+    }
+    let mut products = JacobianProducts::new(n, p, &vp, m, k);
+    let (mut value, mut jacobian) = (vec![0.0; m], vec![0.0; m * k]);
+    products.eval(sys, function, (t, y, u), &vy, &mut value, &mut jacobian);
+    (value, jacobian)
+}
+
+/// Whether `a` and `b` agree to rounding: 1e-13 relative, or both NaN.
+fn rounding(a: f64, b: f64) -> bool {
+    a.to_bits() == b.to_bits()
+        || (a - b).abs() <= 1e-13 * a.abs().max(b.abs())
+        || (a.is_nan() && b.is_nan())
+}
+
+/// The symbolic and the dual-number derivatives of `model` at `points` random points
+/// (states, parameters and inputs drawn from [0.1, 2]): the right-hand side's and the
+/// outputs' Jacobians, the right-hand side's second derivatives ∂²g/∂y∂z against hyper-dual
+/// numbers, and the compiled program against the interpreted one, bit for bit.
+fn agree(model: &Model, points: usize, seed: u64) {
+    let name = model.file.path.display().to_string();
+    let sig = model.system(Inputs::new(Vec::new())).signature().clone();
+    let (n, np, nu) = (sig.n_states(), sig.n_parameters(), sig.n_inputs());
+    let constant = || sysid_ode::Signal::steps(0.0, &[]).expect("a constant signal");
+    let symbolic = model.system(Inputs::new((0..nu).map(|_| constant()).collect()));
+    let dual = symbolic.with_dual_numbers();
+    let rhs = symbolic.symbolic_rhs().expect("symbolic derivatives");
+    let interpreted = rhs.interpreted();
+    let second = rhs.curvature().expect("second derivatives");
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for _ in 0..points {
+        let mut draw =
+            |len: usize| (0..len).map(|_| rng.random_range(0.1..2.0)).collect::<Vec<f64>>();
+        let (y, p, u, t) = (draw(n), draw(np), draw(nu), draw(1)[0]);
+        for function in [Function::Rhs, Function::Outputs] {
+            let a = jacobians(&symbolic, function, (t, &y, &p, &u));
+            let b = jacobians(&dual, function, (t, &y, &p, &u));
+            for (x, z) in a.0.iter().chain(&a.1).zip(b.0.iter().chain(&b.1)) {
+                assert!(rounding(*x, *z), "{name}: {function:?} {x} vs {z} at y={y:?} p={p:?}");
+            }
+        }
+
+        let (mut w1, mut w2) = (rhs.workspace(), interpreted.workspace());
+        rhs.eval(t, &y, &p, &u, &mut w1);
+        interpreted.eval(t, &y, &p, &u, &mut w2);
+        for &r in rhs.values().iter().chain(rhs.entries()) {
+            let (a, b) = (w1[r as usize], w2[r as usize]);
+            assert!(
+                a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                "{name}: register {r}: {a} vs {b}"
+            );
+        }
+
+        // ∂J_e/∂y_l for every entry e = (i, c) and state l: ε₁ along y_l, ε₂ along z_c.
+        let mut w = second.workspace();
+        second.eval(t, &y, &p, &u, &mut w);
+        let mut hessian = vec![0.0; rhs.pattern().len() * n];
+        for (&(e, l), &r) in second.pattern().iter().zip(second.entries()) {
+            hessian[e as usize * n + l as usize] = w[r as usize];
+        }
+        for (e, &(i, c)) in rhs.pattern().iter().enumerate() {
+            for l in 0..n {
+                let yd: Vec<HyperDual64> = (0..n)
+                    .map(|m| {
+                        let along_c = if m == c as usize { 1.0 } else { 0.0 };
+                        HyperDual64::new(y[m], if m == l { 1.0 } else { 0.0 }, along_c, 0.0)
+                    })
+                    .collect();
+                let pd: Vec<HyperDual64> = (0..np)
+                    .map(|q| {
+                        HyperDual64::new(
+                            p[q],
+                            0.0,
+                            if n + q == c as usize { 1.0 } else { 0.0 },
+                            0.0,
+                        )
+                    })
+                    .collect();
+                let mut g = vec![HyperDual64::from_re(0.0); n];
+                dual.rhs(t, &yd, &pd, &u, &mut g);
+                let (x, z) = (hessian[e * n + l], g[i as usize].eps1eps2);
+                assert!(rounding(x, z), "{name}: ∂²g_{i}/∂y_{l}∂z_{c}: {x} vs {z}");
+            }
+        }
+    }
+}
+
+/// The example models, and the model-file twins of five catalogue systems (the nonlinear
+/// ones exercise the second derivatives).
+#[test]
+fn example_models_and_catalogue_twins() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let mut paths: Vec<_> = ["falling-body", "short-period", "kinetics"]
+        .iter()
+        .map(|name| root.join("examples").join(name).join("model.toml"))
+        .collect();
+    let twins = std::fs::read_dir(root.join("tests/twins")).expect("the twins' directory");
+    paths.extend(
+        twins
+            .map(|e| e.expect("an entry").path())
+            .filter(|p| p.extension().is_some_and(|e| e == "toml")),
+    );
+    paths.sort();
+    assert_eq!(paths.len(), 8, "{paths:?}");
+    for path in paths {
+        let model = Model::load(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        agree(&model, 200, 1);
+    }
+}
+
+const NAMES: [&str; 4] = ["x", "y", "k", "t"];
+
+fn resolve(name: &str) -> Option<Slot> {
+    match name {
+        "x" => Some(Slot::State(0)),
+        "y" => Some(Slot::State(1)),
+        "k" => Some(Slot::Parameter(0)),
+        "t" => Some(Slot::Time),
+        _ => None,
+    }
+}
+
+/// Random expressions of x, y, k and t with every operator and function of the language,
+/// kinks included (abs, min, max: both sides take the branch the value takes).
+fn expressions() -> impl Strategy<Value = Expr> {
+    let leaf = prop_oneof![
+        (-3.0..3.0f64).prop_map(|v| Expr::Num((v * 4.0).round() / 4.0)),
+        (0..4usize).prop_map(|i| Expr::Name(NAMES[i].to_string(), 0)),
+    ];
+    leaf.prop_recursive(4, 24, 2, |inner| {
+        prop_oneof![
+            inner.clone().prop_map(|a| Expr::Neg(Box::new(a))),
+            (inner.clone(), inner.clone(), 0..5usize).prop_map(|(a, b, op)| {
+                Expr::Bin(
+                    [Op::Add, Op::Sub, Op::Mul, Op::Div, Op::Pow][op],
+                    Box::new(a),
+                    Box::new(b),
+                )
+            }),
+            (inner.clone(), -2..5i32).prop_map(|(a, n)| {
+                Expr::Bin(Op::Pow, Box::new(a), Box::new(Expr::Num(n as f64)))
+            }),
+            (inner.clone(), 0..8usize).prop_map(|(a, f)| {
+                let f = [
+                    Func::Exp,
+                    Func::Log,
+                    Func::Sqrt,
+                    Func::Sin,
+                    Func::Cos,
+                    Func::Tan,
+                    Func::Tanh,
+                    Func::Abs,
+                ][f];
+                Expr::Call(f, vec![a], 0)
+            }),
+            (inner.clone(), inner.clone(), any::<bool>()).prop_map(|(a, b, min)| {
+                Expr::Call(if min { Func::Min } else { Func::Max }, vec![a, b], 0)
+            }),
+        ]
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(512))]
+
+    /// The program's value and its three partial derivatives (x, y, k) against a dual-number
+    /// evaluation of the same compiled expression, to rounding where the value and the
+    /// derivatives are moderate (below 1e6: where they are huge, equally valid evaluation
+    /// orders differ by more than rounding of the result); the compiled program against the
+    /// interpreted one, bit for bit, everywhere.
+    #[test]
+    fn symbolic_derivatives_equal_dual_numbers(
+        e in expressions(),
+        x in 0.2..2.0f64, y in -1.5..1.5f64, k in 0.3..1.7f64, t in 0.0..2.0f64,
+    ) {
+        let text = e.to_string();
+        let program = Program::compile(&parse(&text).unwrap(), &resolve).unwrap();
+        let linearized = Linearized::new(std::slice::from_ref(&program), (2, 1, 0));
+        let interpreted = linearized.interpreted();
+        let (mut a, mut b) = (linearized.workspace(), interpreted.workspace());
+        linearized.eval(t, &[x, y], &[k], &[], &mut a);
+        interpreted.eval(t, &[x, y], &[k], &[], &mut b);
+        for &r in linearized.values().iter().chain(linearized.entries()) {
+            let (u, v) = (a[r as usize], b[r as usize]);
+            prop_assert!(u.to_bits() == v.to_bits() || (u.is_nan() && v.is_nan()), "{text}: {u} vs {v}");
+        }
+
+        let mut gradient = [0.0; 3];
+        for (&(_, column), &r) in linearized.pattern().iter().zip(linearized.entries()) {
+            gradient[column as usize] = a[r as usize];
+        }
+        let value = a[linearized.values()[0] as usize];
+        for (column, &symbolic) in gradient.iter().enumerate() {
+            let seed = |c: usize, v: f64| Dual64::new(v, if c == column { 1.0 } else { 0.0 });
+            let dual = program.eval::<Dual64>(t, &[seed(0, x), seed(1, y)], &[seed(2, k)], &[]);
+            prop_assume!(dual.re.abs() < 1e6 && dual.eps.abs() < 1e6 && symbolic.abs() < 1e6);
+            prop_assert!((value - dual.re).abs() <= 1e-12 * dual.re.abs().max(1.0), "{text}: {value} vs {}", dual.re);
+            prop_assert!(
+                (symbolic - dual.eps).abs() <= 1e-12 * dual.eps.abs().max(1.0),
+                "{text}: ∂/∂{} {symbolic} vs {}", ["x", "y", "k"][column], dual.eps
+            );
+        }
+    }
+}

@@ -1,0 +1,41 @@
+//! Functions that come with their own sparse Jacobian.
+//!
+//! A system that can differentiate itself symbolically (a model file) evaluates f(t, y, α, u)
+//! together with the nonzero entries of [∂f/∂y | ∂f/∂α] in one pass over f64 and hands them
+//! out through [`System::sparse_jacobian`](crate::System::sparse_jacobian). Jacobian products
+//! J_y V_y + J_α V_α then cost one multiply-add per nonzero entry and direction
+//! ([`JacobianProducts`](crate::JacobianProducts)), instead of a dual-number evaluation of the
+//! whole model per chunk of directions.
+
+/// A function f(t, y, α, u) of m values evaluated with the nonzero entries of its Jacobian.
+///
+/// The contract: [`eval`](Self::eval) fills a work space from which f_i is read at
+/// `work[values()[i]]` and the e-th entry of [`pattern`](Self::pattern) at
+/// `work[entries()[e]]`; every entry not listed is zero at every point. The values are those
+/// of the system's [`rhs`](crate::System::rhs) (or [`outputs`](crate::System::outputs)) and
+/// the entries its exact derivatives, equal to a dual-number evaluation to rounding.
+pub trait SparseJacobian: Send + Sync {
+    /// The nonzero entries as (row, column): row i < m is f_i; column c < n is state c and
+    /// column n + q is parameter q.
+    fn pattern(&self) -> &[(u32, u32)];
+
+    /// Where [`eval`](Self::eval) leaves the m function values in the work space.
+    fn values(&self) -> &[u32];
+
+    /// Where [`eval`](Self::eval) leaves the pattern's entries in the work space.
+    fn entries(&self) -> &[u32];
+
+    /// A work space for [`eval`](Self::eval), set up for it (allocate once, reuse).
+    fn workspace(&self) -> Vec<f64>;
+
+    /// Evaluates f(t, y, α, u) and the Jacobian's entries into `work`.
+    fn eval(&self, t: f64, y: &[f64], p: &[f64], u: &[f64], work: &mut [f64]);
+
+    /// The Jacobian's entries (in pattern order) as functions in their own right, with
+    /// their sparse Jacobian with respect to the states (its columns are states only): the
+    /// second derivatives that couple the sensitivities into an implicit step. Default:
+    /// none (the implicit solver then uses hyper-dual numbers).
+    fn curvature(&self) -> Option<&dyn SparseJacobian> {
+        None
+    }
+}
