@@ -1,21 +1,12 @@
 //! Random expressions: printed, parsed back and compiled, they evaluate as an independent
 //! tree walk does, and their dual-number derivatives agree with finite differences.
 
+mod common;
+
+use common::{expressions, resolve};
 use num_dual::Dual64;
 use proptest::prelude::*;
-use sysid_model::expr::{Expr, Func, Op, Program, Slot, parse};
-
-const NAMES: [&str; 4] = ["x", "y", "k", "t"];
-
-fn resolve(name: &str) -> Option<Slot> {
-    match name {
-        "x" => Some(Slot::State(0)),
-        "y" => Some(Slot::State(1)),
-        "k" => Some(Slot::Parameter(0)),
-        "t" => Some(Slot::Time),
-        _ => None,
-    }
-}
+use sysid_model::expr::{Expr, Func, Op, Program, parse};
 
 /// The reference: a direct walk of the tree in f64.
 fn reference(e: &Expr, x: f64, y: f64, k: f64, t: f64) -> f64 {
@@ -74,29 +65,7 @@ fn moderate_throughout(e: &Expr, x: f64, y: f64, k: f64, t: f64) -> bool {
 
 /// Smooth expressions (no abs, min, max: their kinks defeat finite differences).
 fn smooth() -> impl Strategy<Value = Expr> {
-    let leaf = prop_oneof![
-        (-3.0..3.0f64).prop_map(|v| Expr::Num((v * 4.0).round() / 4.0)),
-        (0..4usize).prop_map(|i| Expr::Name(NAMES[i].to_string(), 0)),
-    ];
-    leaf.prop_recursive(4, 24, 2, |inner| {
-        prop_oneof![
-            inner.clone().prop_map(|a| Expr::Neg(Box::new(a))),
-            (inner.clone(), inner.clone(), 0..4usize).prop_map(|(a, b, op)| {
-                Expr::Bin([Op::Add, Op::Sub, Op::Mul, Op::Div][op], Box::new(a), Box::new(b))
-            }),
-            (inner.clone(), 0..4i32).prop_map(|(a, n)| Expr::Bin(
-                Op::Pow,
-                Box::new(a),
-                Box::new(Expr::Num(n as f64))
-            )),
-            (inner.clone(), 0..7usize).prop_map(|(a, f)| {
-                let f =
-                    [Func::Exp, Func::Log, Func::Sqrt, Func::Sin, Func::Cos, Func::Tan, Func::Tanh]
-                        [f];
-                Expr::Call(f, vec![a], 0)
-            }),
-        ]
-    })
+    expressions(false)
 }
 
 proptest! {
