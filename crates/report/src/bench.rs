@@ -163,6 +163,36 @@ fn compare(
     })
 }
 
+/// The model-file table: a Goodman fit through each twin model file (symbolic Jacobians,
+/// compiled; and on dual numbers, as model files ran before) against the Rust system.
+fn model_files(model: &[(String, f64)]) -> String {
+    let mut md = String::from(
+        "\n**Model files against Rust** (`--bench model`): one Goodman fit from the default \
+         start on the seed-1 data, through the system written in Rust, through its model-file \
+         twin (`tests/twins/`) as sysid runs it (symbolic Jacobians compiled by Cranelift), \
+         and through the same file on dual numbers (how model files ran before). The ratios \
+         are to the Rust system's time.\n\n\
+         | system | Rust | model file | ratio | file on dual numbers | ratio |\n|---|---|---|---|---|---|\n",
+    );
+    for system in sysid_systems::NAMES {
+        let at = |what: &str| lookup(model, &format!("{system}/{what}"));
+        let Some(rust) = at("rust") else { continue };
+        let cell = |t: Option<f64>| t.map_or("—".into(), time);
+        let ratio = |t: Option<f64>| t.map_or("—".into(), |t| format!("{:.2}×", t / rust));
+        let (file, dual) = (at("file"), at("file-dual"));
+        let _ = writeln!(
+            md,
+            "| {system} | {} | {} | {} | {} | {} |",
+            time(rust),
+            cell(file),
+            ratio(file),
+            cell(dual),
+            ratio(dual)
+        );
+    }
+    md
+}
+
 /// Least-squares slope of log(time) against log(size): the exponent p of time ∝ size^p.
 pub fn exponent(points: &[(f64, f64)]) -> Option<f64> {
     if points.len() < 2 {
@@ -192,7 +222,8 @@ pub fn section() -> String {
     let fits = medians("fit");
     let scaling = medians("scaling");
     let ode = medians("ode");
-    if fits.is_empty() && scaling.is_empty() && ode.is_empty() {
+    let model = medians("model");
+    if fits.is_empty() && scaling.is_empty() && ode.is_empty() && model.is_empty() {
         md += "No criterion results were found in `target/criterion`: run `cargo bench -p sysid` \
                and regenerate the report to fill this section.\n";
         return md;
@@ -209,6 +240,9 @@ pub fn section() -> String {
     }
     if !ode.is_empty() {
         md += &integration(&ode);
+    }
+    if !model.is_empty() {
+        md += &model_files(&model);
     }
     if !scaling.is_empty() {
         md += "\n**Scaling of one Goodman iteration** (`--bench scaling`, Lorenz-96; one \
