@@ -3,11 +3,11 @@
 //!
 //! The compiled function reads t, y, α and u where they are, keeps every intermediate value
 //! in machine registers (or Cranelift's spill slots), and writes only the registers of the
-//! work space that are read afterwards (the function values and the Jacobian's entries). Each operation is the one the
-//! interpreter performs, in the same order: no contraction into fused multiply-adds, no
-//! reassociation, and the library functions (exp, ln, sin, …, powi, powf) are the same Rust
-//! functions called through the C ABI, so the compiled program's results are bitwise those
-//! of the interpreted one (tested).
+//! work space that are read afterwards (the function values and the Jacobian's entries).
+//! Each operation is the one the interpreter performs, in the same order: no contraction
+//! into fused multiply-adds, no reassociation, and the library functions (exp, ln, sin, …,
+//! powi, powf) are the same Rust functions called through the C ABI, so the compiled
+//! program's results are bitwise those of the interpreted one (tested).
 //!
 //! Unsafe code is confined to this module: turning the finalized code's address into a
 //! function pointer (sound because the code was compiled from a signature that matches it,
@@ -24,7 +24,7 @@ use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
 use cranelift_jit::{JITBuilder, JITModule};
 use cranelift_module::{FuncId, Linkage, Module, default_libcall_names};
 
-use crate::symbolic::{Instr, Tape};
+use crate::tape::{Instr, Tape};
 
 /// The compiled function: (t, y, α, u, work space).
 type Function = extern "C" fn(f64, *const f64, *const f64, *const f64, *mut f64);

@@ -47,6 +47,7 @@ mod jit;
 pub mod symbolic;
 mod system;
 pub mod table;
+mod tape;
 
 use std::path::Path;
 

@@ -16,13 +16,18 @@
 //! register per operation), evaluated by one loop without recursion or allocation. Its
 //! derivatives are those of the dual numbers ([`Program::eval`] with `num_dual` scalars),
 //! term by term: min and max follow the branch that the value takes, |x| has the
-//! derivative sign(x) (+1 at +0, as `num_dual` has it), so the two agree to rounding.
+//! derivative sign(x) (+1 at +0, as `num_dual` has it), so the two agree to rounding
+//! wherever the subexpressions are finite. At infinities, NaN and signed zeros the
+//! simplifications are those of algebra, not of IEEE arithmetic: x·0 is 0 where dual
+//! numbers would give NaN for an infinite x, and 0 − x is −x, which is −0 at x = +0 (so
+//! |0 − x| has the derivative −1 there, not +1).
 
 use std::collections::HashMap;
 
 use sysid_ode::SparseJacobian;
 
 use crate::expr::{Func, Node, Operand, Program, Slot, eval_func};
+use crate::tape::{Instr, Tape};
 
 /// The index of a term in a [`Graph`].
 type Id = u32;
@@ -476,208 +481,66 @@ fn children(term: Term) -> impl Iterator<Item = Id> {
     list.into_iter().take(len)
 }
 
-/// One operation of a [`Tape`], on registers.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) enum Instr {
-    Neg(u32),
-    Add(u32, u32),
-    Sub(u32, u32),
-    Mul(u32, u32),
-    Div(u32, u32),
-    /// x² (as `powi(2)` computes it).
-    Square(u32),
-    /// x³ (as `powi(3)` computes it: x·x²).
-    Cube(u32),
-    PowI(u32, i32),
-    /// x^c, c in a register.
-    PowF(u32, u32),
-    Pow(u32, u32),
-    Exp(u32),
-    Log(u32),
-    Sqrt(u32),
-    Sin(u32),
-    Cos(u32),
-    Tan(u32),
-    Tanh(u32),
-    Abs(u32),
-    Signum(u32),
-    Min(u32, u32),
-    Max(u32, u32),
-    Less(u32, u32, u32, u32),
-}
-
-/// A straight-line program over f64 registers: register 0 holds t, then the n states, the
-/// parameters, the inputs and the constants; instruction i writes register `first + i`,
-/// reading only registers before it.
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) struct Tape {
-    n: usize,
-    np: usize,
-    nu: usize,
-    constants: Vec<f64>,
-    code: Vec<Instr>,
-}
-
-impl Tape {
-    /// The program computing the terms `outputs` of `graph`, and the register of each.
-    fn new(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (Self, Vec<u32>) {
-        let order = graph.reachable(outputs);
-        let mut register: HashMap<Id, u32> = HashMap::with_capacity(order.len());
-        let mut constants = Vec::new();
-        let first_constant = 1 + n + np + nu;
-        for &id in &order {
-            let r = match graph.terms[id as usize] {
-                Term::Var(Slot::Time) => 0,
-                Term::Var(Slot::State(i)) => 1 + i,
-                Term::Var(Slot::Parameter(q)) => 1 + n + q,
-                Term::Var(Slot::Input(j)) => 1 + n + np + j,
-                Term::Const(bits) => {
-                    constants.push(f64::from_bits(bits));
-                    first_constant + constants.len() - 1
+/// The program computing the terms `outputs` of `graph`, and the register of each.
+fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (Tape, Vec<u32>) {
+    let order = graph.reachable(outputs);
+    let mut register: HashMap<Id, u32> = HashMap::with_capacity(order.len());
+    let mut constants = Vec::new();
+    let first_constant = 1 + n + np + nu;
+    for &id in &order {
+        let r = match graph.terms[id as usize] {
+            Term::Var(Slot::Time) => 0,
+            Term::Var(Slot::State(i)) => 1 + i,
+            Term::Var(Slot::Parameter(q)) => 1 + n + q,
+            Term::Var(Slot::Input(j)) => 1 + n + np + j,
+            Term::Const(bits) => {
+                constants.push(f64::from_bits(bits));
+                first_constant + constants.len() - 1
+            }
+            _ => continue,
+        };
+        register.insert(id, r as u32);
+    }
+    let first = first_constant + constants.len();
+    let mut code = Vec::new();
+    for &id in &order {
+        let r = |x: Id| register[&x];
+        let instr = match graph.terms[id as usize] {
+            Term::Const(_) | Term::Var(_) => continue,
+            Term::Neg(a) => Instr::Neg(r(a)),
+            Term::Add(a, b) => Instr::Add(r(a), r(b)),
+            Term::Sub(a, b) => Instr::Sub(r(a), r(b)),
+            Term::Mul(a, b) => Instr::Mul(r(a), r(b)),
+            Term::Div(a, b) => Instr::Div(r(a), r(b)),
+            Term::PowI(a, 2) => Instr::Square(r(a)),
+            Term::PowI(a, 3) => Instr::Cube(r(a)),
+            Term::PowI(a, k) => Instr::PowI(r(a), k),
+            Term::PowF(a, c) => Instr::PowF(r(a), r(c)),
+            Term::Pow(a, b) => Instr::Pow(r(a), r(b)),
+            Term::Func(f, a) => {
+                let a = r(a);
+                match f {
+                    Func::Exp => Instr::Exp(a),
+                    Func::Log => Instr::Log(a),
+                    Func::Sqrt => Instr::Sqrt(a),
+                    Func::Sin => Instr::Sin(a),
+                    Func::Cos => Instr::Cos(a),
+                    Func::Tan => Instr::Tan(a),
+                    Func::Tanh => Instr::Tanh(a),
+                    Func::Abs => Instr::Abs(a),
+                    Func::Min | Func::Max => unreachable!("min and max are terms of their own"),
                 }
-                _ => continue,
-            };
-            register.insert(id, r as u32);
-        }
-        let first = first_constant + constants.len();
-        let mut code = Vec::new();
-        for &id in &order {
-            let r = |x: Id| register[&x];
-            let instr = match graph.terms[id as usize] {
-                Term::Const(_) | Term::Var(_) => continue,
-                Term::Neg(a) => Instr::Neg(r(a)),
-                Term::Add(a, b) => Instr::Add(r(a), r(b)),
-                Term::Sub(a, b) => Instr::Sub(r(a), r(b)),
-                Term::Mul(a, b) => Instr::Mul(r(a), r(b)),
-                Term::Div(a, b) => Instr::Div(r(a), r(b)),
-                Term::PowI(a, 2) => Instr::Square(r(a)),
-                Term::PowI(a, 3) => Instr::Cube(r(a)),
-                Term::PowI(a, k) => Instr::PowI(r(a), k),
-                Term::PowF(a, c) => Instr::PowF(r(a), r(c)),
-                Term::Pow(a, b) => Instr::Pow(r(a), r(b)),
-                Term::Func(f, a) => {
-                    let a = r(a);
-                    match f {
-                        Func::Exp => Instr::Exp(a),
-                        Func::Log => Instr::Log(a),
-                        Func::Sqrt => Instr::Sqrt(a),
-                        Func::Sin => Instr::Sin(a),
-                        Func::Cos => Instr::Cos(a),
-                        Func::Tan => Instr::Tan(a),
-                        Func::Tanh => Instr::Tanh(a),
-                        Func::Abs => Instr::Abs(a),
-                        Func::Min | Func::Max => unreachable!("min and max are terms of their own"),
-                    }
-                }
-                Term::Signum(a) => Instr::Signum(r(a)),
-                Term::Min(a, b) => Instr::Min(r(a), r(b)),
-                Term::Max(a, b) => Instr::Max(r(a), r(b)),
-                Term::Less(a, b, c, d) => Instr::Less(r(a), r(b), r(c), r(d)),
-            };
-            register.insert(id, (first + code.len()) as u32);
-            code.push(instr);
-        }
-        let registers = outputs.iter().map(|id| register[id]).collect();
-        (Self { n, np, nu, constants, code }, registers)
+            }
+            Term::Signum(a) => Instr::Signum(r(a)),
+            Term::Min(a, b) => Instr::Min(r(a), r(b)),
+            Term::Max(a, b) => Instr::Max(r(a), r(b)),
+            Term::Less(a, b, c, d) => Instr::Less(r(a), r(b), r(c), r(d)),
+        };
+        register.insert(id, (first + code.len()) as u32);
+        code.push(instr);
     }
-
-    /// The first register written by an instruction.
-    pub(crate) fn first(&self) -> usize {
-        1 + self.n + self.np + self.nu + self.constants.len()
-    }
-
-    /// The numbers of states, parameters and inputs.
-    #[cfg(feature = "jit")]
-    pub(crate) fn dims(&self) -> (usize, usize, usize) {
-        (self.n, self.np, self.nu)
-    }
-
-    /// The number of registers.
-    pub(crate) fn len(&self) -> usize {
-        self.first() + self.code.len()
-    }
-
-    /// The value of register `r` if it holds a constant.
-    #[cfg(feature = "jit")]
-    pub(crate) fn constant(&self, r: usize) -> Option<f64> {
-        r.checked_sub(1 + self.n + self.np + self.nu).and_then(|c| self.constants.get(c).copied())
-    }
-
-    /// The instructions; instruction i writes register `first() + i`.
-    #[cfg(feature = "jit")]
-    pub(crate) fn code(&self) -> &[Instr] {
-        &self.code
-    }
-
-    /// Registers with the constants loaded.
-    fn registers(&self) -> Vec<f64> {
-        let mut r = vec![0.0; self.len()];
-        let at = 1 + self.n + self.np + self.nu;
-        r[at..at + self.constants.len()].copy_from_slice(&self.constants);
-        r
-    }
-
-    /// Sets the registers of (t, y, α, u).
-    fn load(&self, t: f64, y: &[f64], p: &[f64], u: &[f64], r: &mut [f64]) {
-        let (n, np) = (self.n, self.np);
-        r[0] = t;
-        r[1..1 + n].copy_from_slice(y);
-        r[1 + n..1 + n + np].copy_from_slice(p);
-        r[1 + n + np..1 + n + np + self.nu].copy_from_slice(u);
-    }
-
-    /// Interprets the program on registers from [`registers`](Self::registers) whose inputs
-    /// are [loaded](Self::load).
-    fn interpret(&self, r: &mut [f64]) {
-        // Cells: every instruction reads registers before its own and writes its own.
-        let r = std::cell::Cell::from_mut(r).as_slice_of_cells();
-        for (instr, out) in self.code.iter().zip(&r[self.first()..]) {
-            let x = |a: u32| r[a as usize].get();
-            let value = match *instr {
-                Instr::Neg(a) => -x(a),
-                Instr::Add(a, b) => x(a) + x(b),
-                Instr::Sub(a, b) => x(a) - x(b),
-                Instr::Mul(a, b) => x(a) * x(b),
-                Instr::Div(a, b) => x(a) / x(b),
-                Instr::Square(a) => x(a) * x(a),
-                Instr::Cube(a) => x(a) * (x(a) * x(a)),
-                Instr::PowI(a, k) => x(a).powi(k),
-                Instr::PowF(a, c) => x(a).powf(x(c)),
-                Instr::Pow(a, b) => x(a).powf(x(b)),
-                Instr::Exp(a) => x(a).exp(),
-                Instr::Log(a) => x(a).ln(),
-                Instr::Sqrt(a) => x(a).sqrt(),
-                Instr::Sin(a) => x(a).sin(),
-                Instr::Cos(a) => x(a).cos(),
-                Instr::Tan(a) => x(a).tan(),
-                Instr::Tanh(a) => x(a).tanh(),
-                Instr::Abs(a) => x(a).abs(),
-                Instr::Signum(a) => x(a).signum(),
-                Instr::Min(a, b) => {
-                    if x(b) < x(a) {
-                        x(b)
-                    } else {
-                        x(a)
-                    }
-                }
-                Instr::Max(a, b) => {
-                    if x(b) > x(a) {
-                        x(b)
-                    } else {
-                        x(a)
-                    }
-                }
-                Instr::Less(a, b, c, d) => {
-                    if x(a) < x(b) {
-                        x(c)
-                    } else {
-                        x(d)
-                    }
-                }
-            };
-            out.set(value);
-        }
-    }
+    let registers = outputs.iter().map(|id| register[id]).collect();
+    (Tape::new((n, np, nu), constants, code), registers)
 }
 
 /// Functions f(t, y, α, u) (a model's right-hand side or its outputs) with their symbolic
@@ -739,7 +602,7 @@ impl Linearized {
                 }
             }
         }
-        let (tape, registers) = Tape::new(graph, &outputs, (n, np, nu));
+        let (tape, registers) = emit(graph, &outputs, (n, np, nu));
         let (values, entries) = registers.split_at(roots.len());
         let linearized = Self {
             #[cfg(feature = "jit")]
@@ -753,11 +616,13 @@ impl Linearized {
         (linearized, outputs[roots.len()..].to_vec())
     }
 
-    /// The same functions, always interpreted (the reference of the compiled code).
+    /// The same functions, second derivatives included, always interpreted (the reference
+    /// of the compiled code).
     pub fn interpreted(&self) -> Self {
         Self {
             #[cfg(feature = "jit")]
             compiled: None,
+            curvature: self.curvature.as_ref().map(|c| std::sync::Arc::new(c.interpreted())),
             ..self.clone()
         }
     }
@@ -772,7 +637,7 @@ impl Linearized {
 
     /// Number of operations of the program (functions and Jacobian together).
     pub fn operations(&self) -> usize {
-        self.tape.code.len()
+        self.tape.code().len()
     }
 }
 
@@ -837,12 +702,12 @@ mod tests {
         // Columns: V, R, a, b, c. dV'/da = dV'/db = 0 and dR'/dc ≠ 0.
         let pattern = [(0, 0), (0, 1), (0, 4), (1, 0), (1, 1), (1, 2), (1, 3), (1, 4)];
         assert_eq!(f.pattern, pattern);
-        let count = |p: fn(&Instr) -> bool| f.tape.code.iter().filter(|i| p(i)).count();
-        assert_eq!(count(|i| matches!(i, Instr::Square(_))), 1, "{:?}", f.tape.code);
+        let count = |p: fn(&Instr) -> bool| f.tape.code().iter().filter(|i| p(i)).count();
+        assert_eq!(count(|i| matches!(i, Instr::Square(_))), 1, "{:?}", f.tape.code());
         // c is register 5 (t, V, R, a, b, c): one division by it, the rest multiply by 1/c.
-        assert_eq!(count(|i| matches!(i, Instr::Div(_, 5))), 1, "{:?}", f.tape.code);
+        assert_eq!(count(|i| matches!(i, Instr::Div(_, 5))), 1, "{:?}", f.tape.code());
         // dV'/dR = c and dR'/da = 1/c are registers the program already has: 10 operations
         // for the values, 13 for the eight entries.
-        assert!(f.operations() <= 23, "{} operations: {:?}", f.operations(), f.tape.code);
+        assert!(f.operations() <= 23, "{} operations: {:?}", f.operations(), f.tape.code());
     }
 }

@@ -6,10 +6,10 @@
 use nalgebra::DMatrix;
 use num_dual::HyperDual64;
 
-use crate::jacobian::{Function, JacobianProducts};
+use crate::jacobian::JacobianProducts;
 use crate::lu::{FactorError, Lu};
 use crate::sparse::SparseJacobian;
-use crate::system::System;
+use crate::system::{Function, System};
 use crate::wrt::Wrt;
 
 /// E = I/(γh) − ∂g/∂y at one point, factorised, for a system at fixed parameters.
@@ -165,7 +165,9 @@ impl AugmentedMatrix {
         self.u.copy_from_slice(u);
         self.x.copy_from_slice(x);
         let n = self.yd.len();
+        // Second derivatives only couple sensitivities: none without them.
         if let Some(curvature) = &mut self.curvature
+            && x.len() > n
             && let Some(second) = sys.sparse_jacobian(Function::Rhs).and_then(|j| j.curvature())
         {
             second.eval(t, &x[..n], &self.p, u, &mut curvature.work);

@@ -8,12 +8,12 @@ use crate::driver::{integrate, integrate_selected};
 use crate::error::OdeError;
 use crate::implicit::{AugmentedMatrix, IterationMatrix};
 use crate::interpolant::{DenseSolution, Interpolant};
-use crate::jacobian::{Function, JacobianProducts};
+use crate::jacobian::JacobianProducts;
 use crate::lu::FactorError;
 use crate::options::Integrator;
 use crate::rhs::Rhs;
 use crate::signal::Side;
-use crate::system::{Observable, System};
+use crate::system::{Function, Observable, System};
 use crate::wrt::{Wrt, wrt_name};
 
 /// An initial-value problem: a system, the initial time t0, the state y(t0) and the

@@ -15,16 +15,7 @@ use nalgebra::{Const, SVector, U1};
 use num_dual::{Derivative, DualSVec64};
 
 use crate::sparse::SparseJacobian;
-use crate::system::System;
-
-/// Which function of the system to differentiate.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Function {
-    /// The right-hand side g (length n).
-    Rhs,
-    /// The outputs h (length of the signature's outputs).
-    Outputs,
-}
+use crate::system::{Function, System};
 
 /// Preallocated work space for g and J·V with K directions.
 ///
@@ -46,6 +37,8 @@ pub struct JacobianProducts {
 
 /// A sparse Jacobian's work space and the plan of its products with the directions.
 struct SparseWork {
+    /// The function the work space is for.
+    function: Function,
     work: Vec<f64>,
     /// The registers of the function values.
     values: Vec<u32>,
@@ -103,8 +96,13 @@ impl JacobianProducts {
             && let Some(jacobian) = sys.sparse_jacobian(function)
         {
             let (vp, k) = (&self.vp, self.k);
-            let sparse =
-                self.sparse.get_or_insert_with(|| SparseWork::new(jacobian, y.len(), vp, k));
+            // A work space is for one function (a caller alternating would reallocate).
+            if self.sparse.as_ref().is_some_and(|s| s.function != function) {
+                self.sparse = None;
+            }
+            let sparse = self
+                .sparse
+                .get_or_insert_with(|| SparseWork::new(jacobian, function, y.len(), vp, k));
             if !sparse.planned {
                 sparse.plan(jacobian, y.len(), vp, k);
             }
@@ -116,8 +114,15 @@ impl JacobianProducts {
 }
 
 impl SparseWork {
-    fn new(jacobian: &dyn SparseJacobian, n: usize, vp: &[f64], k: usize) -> Self {
+    fn new(
+        jacobian: &dyn SparseJacobian,
+        function: Function,
+        n: usize,
+        vp: &[f64],
+        k: usize,
+    ) -> Self {
         let mut work = Self {
+            function,
             work: jacobian.workspace(),
             values: jacobian.values().to_vec(),
             rows: Vec::new(),

@@ -94,12 +94,12 @@ pub use ivp::{
     Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory,
     check_times,
 };
-pub use jacobian::{Function, JacobianProducts};
+pub use jacobian::JacobianProducts;
 pub use lu::{FactorError, Lu};
 pub use options::{Integrator, Scheme};
 pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput};
 pub use rhs::Rhs;
 pub use signal::{Inputs, Interpolation, Side, Signal};
 pub use sparse::SparseJacobian;
-pub use system::{Observable, Scalar, Signature, System};
+pub use system::{Function, Observable, Scalar, Signature, System};
 pub use wrt::{Wrt, wrt_name};

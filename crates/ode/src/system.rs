@@ -4,7 +4,6 @@ use nalgebra::DMatrix;
 use num_dual::{Dual64, DualNum};
 
 use crate::error::SignatureError;
-use crate::jacobian::Function;
 use crate::signal::Side;
 use crate::sparse::SparseJacobian;
 
@@ -129,6 +128,15 @@ impl Signature {
             Observable::Output(j) => &self.outputs[j],
         }
     }
+}
+
+/// Which function of the system to differentiate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Function {
+    /// The right-hand side g (length n).
+    Rhs,
+    /// The outputs h (length of the signature's outputs).
+    Outputs,
 }
 
 /// A measurable quantity: one state, or one output function h_o(t, y, α, u).
