@@ -564,19 +564,23 @@ pub struct Linearized {
 impl Linearized {
     /// Differentiates `functions` of n states, n_α parameters and n_u inputs.
     pub fn new(functions: &[Program], dims: (usize, usize, usize)) -> Self {
-        let mut graph = Graph::default();
-        let roots: Vec<Id> = functions.iter().map(|f| graph.program(f)).collect();
-        Self::build(&mut graph, &roots, dims, true).0
+        Self::differentiate(functions, dims, false)
     }
 
     /// The same, with the [curvature](SparseJacobian::curvature): the Jacobian's entries
     /// differentiated once more with respect to the states (for implicit integrators).
     pub fn with_curvature(functions: &[Program], dims: (usize, usize, usize)) -> Self {
+        Self::differentiate(functions, dims, true)
+    }
+
+    fn differentiate(functions: &[Program], dims: (usize, usize, usize), curvature: bool) -> Self {
         let mut graph = Graph::default();
         let roots: Vec<Id> = functions.iter().map(|f| graph.program(f)).collect();
         let (mut first, entries) = Self::build(&mut graph, &roots, dims, true);
-        let (second, _) = Self::build(&mut graph, &entries, dims, false);
-        first.curvature = Some(std::sync::Arc::new(second));
+        if curvature {
+            let (second, _) = Self::build(&mut graph, &entries, dims, false);
+            first.curvature = Some(std::sync::Arc::new(second));
+        }
         first
     }
 

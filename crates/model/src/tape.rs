@@ -53,9 +53,14 @@ impl Tape {
         Self { n, np, nu, constants, code }
     }
 
+    /// The first register holding a constant.
+    fn first_constant(&self) -> usize {
+        1 + self.n + self.np + self.nu
+    }
+
     /// The first register written by an instruction.
     pub(crate) fn first(&self) -> usize {
-        1 + self.n + self.np + self.nu + self.constants.len()
+        self.first_constant() + self.constants.len()
     }
 
     /// The numbers of states, parameters and inputs.
@@ -72,7 +77,7 @@ impl Tape {
     /// The value of register `r` if it holds a constant.
     #[cfg(feature = "jit")]
     pub(crate) fn constant(&self, r: usize) -> Option<f64> {
-        r.checked_sub(1 + self.n + self.np + self.nu).and_then(|c| self.constants.get(c).copied())
+        r.checked_sub(self.first_constant()).and_then(|c| self.constants.get(c).copied())
     }
 
     /// The instructions; instruction i writes register `first() + i`.
@@ -83,7 +88,7 @@ impl Tape {
     /// Registers with the constants loaded.
     pub(crate) fn registers(&self) -> Vec<f64> {
         let mut r = vec![0.0; self.len()];
-        let at = 1 + self.n + self.np + self.nu;
+        let at = self.first_constant();
         r[at..at + self.constants.len()].copy_from_slice(&self.constants);
         r
     }

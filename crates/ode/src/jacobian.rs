@@ -100,9 +100,7 @@ impl JacobianProducts {
             if self.sparse.as_ref().is_some_and(|s| s.function != function) {
                 self.sparse = None;
             }
-            let sparse = self
-                .sparse
-                .get_or_insert_with(|| SparseWork::new(jacobian, function, y.len(), vp, k));
+            let sparse = self.sparse.get_or_insert_with(|| SparseWork::new(jacobian, function));
             if !sparse.planned {
                 sparse.plan(jacobian, y.len(), vp, k);
             }
@@ -114,14 +112,9 @@ impl JacobianProducts {
 }
 
 impl SparseWork {
-    fn new(
-        jacobian: &dyn SparseJacobian,
-        function: Function,
-        n: usize,
-        vp: &[f64],
-        k: usize,
-    ) -> Self {
-        let mut work = Self {
+    /// The work space of `function`'s sparse Jacobian, planned on its first evaluation.
+    fn new(jacobian: &dyn SparseJacobian, function: Function) -> Self {
+        Self {
             function,
             work: jacobian.workspace(),
             values: jacobian.values().to_vec(),
@@ -129,9 +122,7 @@ impl SparseWork {
             states: Vec::new(),
             parameters: Vec::new(),
             planned: false,
-        };
-        work.plan(jacobian, n, vp, k);
-        work
+        }
     }
 
     /// The products' plan for parameter directions `vp` (n_α × K, row by row).
