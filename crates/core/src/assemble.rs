@@ -50,14 +50,7 @@ impl<S: System> Record<'_, S> {
         failure: Failure,
     ) -> Estimate {
         let k = z.len();
-        let point = Iterate {
-            z,
-            cost: f64::NAN,
-            gradient_norm: None,
-            linearization: None,
-            linear_cost: None,
-            defect: None,
-        };
+        let point = Iterate::new(z, f64::NAN);
         let certificate = Certificate::failed(k, self.gtol);
         let termination = match failure {
             Failure::Budget { integrations } => Termination::IntegrationBudget { integrations },

@@ -48,6 +48,8 @@ pub struct NullSpace {
     /// The combination of coordinate changes δz the data do not constrain (largest
     /// component ±1), one entry per unknown.
     pub direction: Vec<f64>,
+    /// The coordinate of each unknown by name: its own name, "ln k" on a log scale.
+    pub coordinates: Vec<String>,
 }
 
 /// The verdict on a returned point.
@@ -134,10 +136,15 @@ pub fn certify<S: System>(
     let null_space = if lin.normal.iter().all(|v| v.is_finite()) {
         NormalFactor::new(&lin.normal, max_condition).err().map(|s| {
             let names = problem.names();
+            let coordinates = problem.unknowns().list().iter().map(|u| match u.log {
+                true => format!("ln {}", u.name),
+                false => u.name.clone(),
+            });
             NullSpace {
                 unknowns: s.unknowns.iter().map(|&i| names[i].clone()).collect(),
                 condition: s.condition,
                 direction: s.direction,
+                coordinates: coordinates.collect(),
             }
         })
     } else {
@@ -155,13 +162,12 @@ pub fn certify<S: System>(
 impl NullSpace {
     /// The combination as a readable sum, "ln k1 − 0.98·ln k2" (coordinates: ln of log-scale
     /// unknowns), terms below 1 % of the largest left out.
-    pub fn combination<S: System>(&self, problem: &Problem<S>) -> String {
+    pub fn combination(&self) -> String {
         let mut out = String::new();
-        for (u, &c) in problem.unknowns().list().iter().zip(&self.direction) {
+        for (name, &c) in self.coordinates.iter().zip(&self.direction) {
             if c.abs() < 0.01 {
                 continue;
             }
-            let name = if u.log { format!("ln {}", u.name) } else { u.name.clone() };
             let sign = if c < 0.0 { "−" } else { "+" };
             let magnitude = if (c.abs() - 1.0).abs() < 5e-3 {
                 String::new()

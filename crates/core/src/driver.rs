@@ -68,8 +68,7 @@ pub fn drive<S: System>(
             condition: None,
             optimality: measure,
             values: problem.unknowns().values(&current.z),
-            linear_cost: current.linear_cost,
-            defect: current.defect,
+            diagnostics: current.diagnostics.clone(),
         });
         if let Some(rule) = pending.take() {
             let judged = record.judge(&ev, &current);

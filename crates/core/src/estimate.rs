@@ -1,6 +1,5 @@
 //! The result of a fit: values, uncertainty, and how the method got there.
 
-use std::fmt;
 use std::time::Duration;
 
 use nalgebra::DMatrix;
@@ -10,6 +9,8 @@ use sysid_ode::Counts;
 
 use crate::certificate::{Bound, Certificate};
 use crate::confidence::t95;
+use crate::format::shortest;
+use crate::step::Diagnostics;
 use crate::termination::Termination;
 
 /// One row of the iteration history, for the iterate z_i.
@@ -30,12 +31,16 @@ pub struct Iteration {
     pub optimality: Option<f64>,
     /// The unknowns at the iterate (values).
     pub values: Vec<f64>,
-    /// Quasilinearization: ε of the linear family whose optimum gave this iterate (ε above
-    /// is that of the nonlinear model re-integrated from the iterate). None for other methods.
-    pub linear_cost: Option<f64>,
-    /// Multiple shooting: ‖d‖, the Euclidean norm of the matching defects of the node values
-    /// at this iterate. None for other methods.
-    pub defect: Option<f64>,
+    /// What the method measured at the iterate besides ε, by name
+    /// ([`Iterate::diagnostics`](crate::Iterate::diagnostics)).
+    pub diagnostics: Diagnostics,
+}
+
+impl Iteration {
+    /// The method's diagnostic `name` at this iterate, if it attached one.
+    pub fn diagnostic(&self, name: &str) -> Option<f64> {
+        self.diagnostics.get(name)
+    }
 }
 
 /// The estimate of the unknowns with its uncertainty and the record of the run.
@@ -161,11 +166,8 @@ impl Serialize for Iteration {
         st.serialize_field("gradient_norm", &Num(self.gradient_norm))?;
         st.serialize_field("condition", &self.condition.map(Num))?;
         st.serialize_field("optimality", &self.optimality.map(Num))?;
-        if let Some(c) = self.linear_cost {
-            st.serialize_field("linear_cost", &Num(c))?;
-        }
-        if let Some(d) = self.defect {
-            st.serialize_field("defect", &Num(d))?;
+        for (name, value) in self.diagnostics.iter() {
+            st.serialize_field(name, &Num(value))?;
         }
         st.end()
     }
@@ -249,71 +251,9 @@ impl Estimate {
             self.names
                 .iter()
                 .zip(at)
-                .map(|(n, v)| format!("{n} = {}", format_value(*v)))
+                .map(|(n, v)| format!("{n} = {}", shortest(*v)))
                 .collect::<Vec<_>>()
                 .join(", "),
         )
     }
-}
-
-impl fmt::Display for Estimate {
-    /// A readable table: estimates with standard errors and intervals, then the run.
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let width = self.names.iter().map(|n| n.chars().count()).max().unwrap_or(0).max(7);
-        writeln!(
-            f,
-            "{:<width$}  {:>22}  {:>12}  {:>30}",
-            "unknown", "estimate", "std. error", "95 % interval"
-        )?;
-        for (i, name) in self.names.iter().enumerate() {
-            let se = match &self.std_errors {
-                Some(s) => format!("{:.6e}", s[i]),
-                None => "—".into(),
-            };
-            let interval = match &self.intervals {
-                Some(list) if list[i][0].is_finite() => {
-                    format!("[{:.6e}, {:.6e}]", list[i][0], list[i][1])
-                }
-                Some(_) => "on a bound".into(),
-                None => "—".into(),
-            };
-            let bound = match self.certificate.active[i] {
-                Some(Bound::Lower) => "  on its lower bound",
-                Some(Bound::Upper) => "  on its upper bound",
-                None => "",
-            };
-            writeln!(
-                f,
-                "{name:<width$}  {:>22}  {se:>12}  {interval:>30}{bound}",
-                format_value(self.values[i])
-            )?;
-        }
-        writeln!(f)?;
-        writeln!(f, "method       {}", self.method)?;
-        writeln!(f, "converged    {}", self.verdict())?;
-        writeln!(f, "termination  {}", self.termination)?;
-        if let Some(at) = self.failed_at() {
-            writeln!(f, "failed at    {at}")?;
-        }
-        writeln!(
-            f,
-            "iterations   {} (reported: iterate {})",
-            self.iterations, self.best_iteration
-        )?;
-        writeln!(f, "cost ε       {}", format_value(self.cost))?;
-        write!(
-            f,
-            "work         {} integrations, {} steps ({} rejected), {:.3} ms",
-            self.counts.integrations,
-            self.counts.steps,
-            self.counts.rejected_steps,
-            self.elapsed.as_secs_f64() * 1e3
-        )
-    }
-}
-
-/// Shortest representation that reads back to the same f64.
-fn format_value(v: f64) -> String {
-    let a = v.abs();
-    if a != 0.0 && !(1e-4..1e9).contains(&a) { format!("{v:e}") } else { format!("{v}") }
 }

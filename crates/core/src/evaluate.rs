@@ -258,6 +258,44 @@ impl<S: System> Problem<S> {
         band: Option<(&DMatrix<f64>, f64)>,
         times: &[f64],
     ) -> Result<Vec<Observed>, OdeError> {
+        let signature = self.system.signature();
+        let quantities: Vec<(String, Observable)> = self
+            .sampled()
+            .series
+            .iter()
+            .map(|series| {
+                let name = match series.observable {
+                    Observable::State(i) => signature.states()[i].clone(),
+                    Observable::Output(i) => signature.outputs()[i].clone(),
+                };
+                (name, series.observable)
+            })
+            .collect();
+        self.along(values, band, times, &quantities)
+    }
+
+    /// Every state of the model at `values` of the unknowns, at `times`, with the
+    /// half-width of its 95 % band, as [`observed`](Self::observed) gives the measured
+    /// quantities: the trajectory a fit predicts.
+    pub fn trajectory(
+        &self,
+        values: &[f64],
+        band: Option<(&DMatrix<f64>, f64)>,
+        times: &[f64],
+    ) -> Result<Vec<Observed>, OdeError> {
+        let states = self.system.signature().states();
+        let quantities: Vec<(String, Observable)> =
+            states.iter().enumerate().map(|(i, n)| (n.clone(), Observable::State(i))).collect();
+        self.along(values, band, times, &quantities)
+    }
+
+    fn along(
+        &self,
+        values: &[f64],
+        band: Option<(&DMatrix<f64>, f64)>,
+        times: &[f64],
+        quantities: &[(String, Observable)],
+    ) -> Result<Vec<Observed>, OdeError> {
         let z = self.unknowns.coordinates(values);
         let (y0, p) = self.point(&z);
         let wrt = self.unknowns.wrt();
@@ -266,23 +304,18 @@ impl<S: System> Problem<S> {
             wrt,
             times,
         )?;
-        let signature = self.system.signature();
         let mut og = ObservableGradient::new(&self.system, &p, wrt);
         let mut grad = vec![0.0; wrt.len()];
         let mut out = Vec::new();
-        for series in &self.sampled().series {
-            let name = match series.observable {
-                Observable::State(i) => signature.states()[i].clone(),
-                Observable::Output(i) => signature.outputs()[i].clone(),
-            };
+        for (name, observable) in quantities {
             let mut observed = Observed {
-                name,
+                name: name.clone(),
                 values: Vec::with_capacity(times.len()),
                 half_width: band.map(|_| Vec::with_capacity(times.len())),
             };
             for (m, &t) in times.iter().enumerate() {
                 let s = sol.sensitivity_slice(m);
-                let h = og.eval(t, sol.state(m), s, series.observable, &mut grad);
+                let h = og.eval(t, sol.state(m), s, *observable, &mut grad);
                 observed.values.push(h);
                 if let (Some((cov, q)), Some(w)) = (band, observed.half_width.as_mut()) {
                     w.push(band_half_width(q, &DVector::from_column_slice(&grad), cov));

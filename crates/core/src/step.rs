@@ -20,23 +20,67 @@ pub struct Iterate {
     /// The model's linearization at z, when the method computed it (Goodman, the
     /// Gauss–Newton baseline): the gradient rule and the certificate use it.
     pub linearization: Option<Linearization>,
-    /// Quasilinearization: ε of the linear family whose optimum z is.
-    pub linear_cost: Option<f64>,
-    /// Multiple shooting: ‖d‖, the Euclidean norm of the matching defects at the iterate.
-    pub defect: Option<f64>,
+    /// What the method measures at the iterate besides ε, in its own terms: the method's
+    /// hook into the history. The driver copies it into the iteration's row unread.
+    pub diagnostics: Diagnostics,
 }
 
 impl Iterate {
+    /// An iterate at z with cost ε and nothing else known there.
+    pub fn new(z: Vec<f64>, cost: f64) -> Self {
+        Self {
+            z,
+            cost,
+            gradient_norm: None,
+            linearization: None,
+            diagnostics: Diagnostics::default(),
+        }
+    }
+
     /// An iterate from the model's linearization at it.
     pub fn linearized(lin: Linearization) -> Self {
         Self {
-            z: lin.z.clone(),
-            cost: lin.cost,
             gradient_norm: Some(lin.gradient.norm()),
-            linearization: Some(lin),
-            linear_cost: None,
-            defect: None,
+            ..Self::new(lin.z.clone(), lin.cost).with_linearization(lin)
         }
+    }
+
+    fn with_linearization(self, lin: Linearization) -> Self {
+        Self { linearization: Some(lin), ..self }
+    }
+
+    /// The same iterate with one more named value in its diagnostics.
+    pub fn with(mut self, name: &'static str, value: f64) -> Self {
+        self.diagnostics.push(name, value);
+        self
+    }
+}
+
+/// Named values a method attaches to an iterate (quasilinearization's `linear_cost`, multiple
+/// shooting's `defect`): recorded in the history row of the iterate and written into its
+/// JSON under their names (docs/json.md). The driver treats them alike for every method.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Diagnostics(Vec<(&'static str, f64)>);
+
+impl Diagnostics {
+    /// Adds (or replaces) `name`.
+    pub fn push(&mut self, name: &'static str, value: f64) {
+        match self.0.iter_mut().find(|(n, _)| *n == name) {
+            Some(entry) => entry.1 = value,
+            None => self.0.push((name, value)),
+        }
+    }
+    /// The value called `name`, if the method attached one.
+    pub fn get(&self, name: &str) -> Option<f64> {
+        self.0.iter().find(|(n, _)| *n == name).map(|e| e.1)
+    }
+    /// The names and values, in the order they were attached.
+    pub fn iter(&self) -> impl Iterator<Item = (&'static str, f64)> + '_ {
+        self.0.iter().copied()
+    }
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
     }
 }
 

@@ -281,15 +281,9 @@ fn number(v: Option<f64>, decimals: usize) -> String {
     v.map_or("—".into(), |v| format!("{v:.decimals$}"))
 }
 
-/// Four significant digits, in exponent form outside [1e-3, 1e5).
+/// Four significant digits, as the summaries' tables give them.
 pub(crate) fn significant(v: f64) -> String {
-    let a = v.abs();
-    if a == 0.0 || (1e-3..1e5).contains(&a) {
-        let digits = if a == 0.0 { 3 } else { (3 - a.log10().floor() as i32).max(0) as usize };
-        format!("{v:.digits$}")
-    } else {
-        format!("{v:.3e}")
-    }
+    sysid_core::format::significant(v, 4)
 }
 
 #[cfg(test)]

@@ -117,14 +117,7 @@ impl Adapter<'_> {
     fn iterate(&self, e: Evaluation) -> Iterate {
         let norm = e.r.norm();
         let gradient_norm = e.jacobian.as_ref().map(|j| j.tr_mul(&e.r).norm());
-        Iterate {
-            z: e.z,
-            cost: norm * norm,
-            gradient_norm,
-            linearization: e.linearization,
-            linear_cost: None,
-            defect: None,
-        }
+        Iterate { gradient_norm, linearization: e.linearization, ..Iterate::new(e.z, norm * norm) }
     }
 
     /// Chooses the unknowns to hold on their bounds for this step, from the Gauss–Newton

@@ -35,3 +35,8 @@ pub use solver::MultipleShooting;
 
 /// The most shooting intervals the data choose by default.
 pub const DEFAULT_MAX_INTERVALS: usize = 10;
+
+/// The history's diagnostic of multiple shooting: ‖d‖, the Euclidean norm of the matching
+/// defects of the node values at an iterate, 0 once the nodes have merged into the
+/// trajectory ([`Iteration::diagnostic`](sysid_core::Iteration::diagnostic)).
+pub const DEFECT: &str = "defect";

@@ -48,6 +48,7 @@ use sysid_core::{
 };
 use sysid_ode::System;
 
+use crate::DEFECT;
 use crate::options::MultipleShootingOptions;
 use crate::shooting::{Grid, Shot};
 
@@ -157,12 +158,12 @@ impl Shooting {
         z: Vec<f64>,
     ) -> Result<Iterate, Failure> {
         let shot = self.shot.as_ref().expect("a sweep at the iterate");
-        let defect = Some(shot.defects.norm());
+        let defect = shot.defects.norm();
         if self.matched(ev.problem(), shot) {
             match ev.linearize(&z) {
                 Ok(lin) => {
                     self.merged = lin.residuals.is_some();
-                    return Ok(Iterate { defect, ..Iterate::linearized(lin) });
+                    return Ok(Iterate::linearized(lin).with(DEFECT, defect));
                 }
                 Err(budget @ Failure::Budget { .. }) => return Err(budget),
                 Err(_) => {}
@@ -289,11 +290,13 @@ impl<S: System> Step<S> for Shooting {
                 Ok(tolerate(evaluated)?.map(|(cost, lin)| (cost, (z, cost, lin))))
             })?;
             let Some((z, cost, lin)) = accepted else { return Ok(Advance::Stop(Rule::NoDescent)) };
-            let merged = Some(0.0);
-            return Ok(Advance::Moved(match lin {
-                Some(lin) => Iterate { defect: merged, ..Iterate::linearized(lin) },
-                None => Iterate { cost, ..unevaluated(z, merged) },
-            }));
+            return Ok(Advance::Moved(
+                match lin {
+                    Some(lin) => Iterate::linearized(lin),
+                    None => Iterate::new(z, cost),
+                }
+                .with(DEFECT, 0.0),
+            ));
         }
         let accepted = line_search(problem, &direction, |alpha, full| {
             let z = trial_z(alpha, full);
@@ -363,15 +366,8 @@ impl Shooting {
 }
 
 /// An iterate whose single-shooting ε was not evaluated (the nodes do not match yet).
-fn unevaluated(z: Vec<f64>, defect: Option<f64>) -> Iterate {
-    Iterate {
-        z,
-        cost: f64::NAN,
-        gradient_norm: None,
-        linearization: None,
-        linear_cost: None,
-        defect,
-    }
+fn unevaluated(z: Vec<f64>, defect: f64) -> Iterate {
+    Iterate::new(z, f64::NAN).with(DEFECT, defect)
 }
 
 /// An evaluation that failed at a trial point is a step too long (None); the budget ends the

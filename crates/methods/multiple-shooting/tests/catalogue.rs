@@ -6,7 +6,7 @@
 
 use sysid_core::Method;
 use sysid_goodman::{Goodman, GoodmanOptions};
-use sysid_multiple_shooting::{MultipleShooting, MultipleShootingOptions};
+use sysid_multiple_shooting::{DEFECT, MultipleShooting, MultipleShootingOptions};
 use sysid_ode::System;
 use sysid_ode::testing::assert_close;
 use sysid_systems::{Case, Visit};
@@ -24,7 +24,7 @@ impl Visit for BothMethods {
             .fit_from(&problem, &truth)
             .unwrap();
         assert!(reference.converged(), "{}: {}", case.name, reference.termination);
-        let defect = ms.history.last().and_then(|row| row.defect).unwrap();
+        let defect = ms.history.last().and_then(|row| row.diagnostic(DEFECT)).unwrap();
         assert!(defect.is_finite(), "{}: the history carries the defect", case.name);
         (ms.cost, reference.cost, ms.active_bounds().is_empty())
     }
@@ -56,8 +56,12 @@ fn lotka_volterra_from_the_catalogue_start_reaches_the_true_minimum() {
     // The value is given to 10 significant digits.
     assert_close(ms.cost, 199.012_469_8, 1e-8);
     // The first iterate starts from the data: its nodes do not match yet.
-    assert!(ms.history[0].defect.unwrap() > 1.0, "{:?}", ms.history[0].defect);
-    assert!(ms.history.last().unwrap().defect.unwrap() < 1e-6);
+    assert!(
+        ms.history[0].diagnostic(DEFECT).unwrap() > 1.0,
+        "{:?}",
+        ms.history[0].diagnostic(DEFECT)
+    );
+    assert!(ms.history.last().unwrap().diagnostic(DEFECT).unwrap() < 1e-6);
 }
 
 #[test]
@@ -75,7 +79,7 @@ fn one_interval_is_single_shooting() {
     let goodman = Goodman::default().fit(&problem).unwrap();
     assert!(ms.converged() && goodman.converged());
     assert_close(ms.cost, goodman.cost, 1e-10);
-    assert!(ms.history.iter().all(|row| row.defect == Some(0.0)));
+    assert!(ms.history.iter().all(|row| row.diagnostic(DEFECT) == Some(0.0)));
     let zero = MultipleShootingOptions { intervals: Some(0), ..Default::default() };
     assert!(MultipleShooting::new(zero).fit(&problem).is_err());
 }

@@ -59,5 +59,10 @@ pub mod step;
 pub mod trajectory;
 
 pub use options::{QuasilinearizationOptions, Start, StateFunction};
+
+/// The history's diagnostic of quasilinearization: ε of the linear family whose optimum an
+/// iterate is (its `cost` is the nonlinear model's, re-integrated from the iterate)
+/// ([`Iteration::diagnostic`](sysid_core::Iteration::diagnostic)).
+pub const LINEAR_COST: &str = "linear_cost";
 pub use solver::{Quasilinearization, QuasilinearizationRun};
 pub use trajectory::Trajectory;

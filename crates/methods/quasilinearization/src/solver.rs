@@ -7,6 +7,7 @@ use sysid_core::{
 };
 use sysid_ode::{Counts, System};
 
+use crate::LINEAR_COST;
 use crate::options::{QuasilinearizationOptions, Start};
 use crate::step::{Family, LeastSquares, integrate_family, next_trajectory};
 use crate::trajectory::{Layout, Trajectory};
@@ -115,14 +116,7 @@ impl<S: System> Step<S> for Quasi<'_> {
         let trajectory = ev.run(&z, || Trajectory::start(problem, &z, &self.options.start))?;
         self.trajectory = Some(trajectory);
         let cost = nonlinear_cost(ev, &z)?;
-        Ok(Iterate {
-            z,
-            cost,
-            gradient_norm: None,
-            linearization: None,
-            linear_cost: None,
-            defect: None,
-        })
+        Ok(Iterate::new(z, cost))
     }
 
     /// Integrates p and Φ around x_k and chooses c by least squares (QR), projected on the
@@ -162,13 +156,6 @@ impl<S: System> Step<S> for Quasi<'_> {
         let (family, z, linear_cost) = self.proposed.take().expect("a proposal to take");
         self.trajectory = Some(next_trajectory(&self.layout, &family, &z));
         let cost = nonlinear_cost(ev, &z)?;
-        Ok(Advance::Moved(Iterate {
-            z,
-            cost,
-            gradient_norm: None,
-            linearization: None,
-            linear_cost: Some(linear_cost),
-            defect: None,
-        }))
+        Ok(Advance::Moved(Iterate::new(z, cost).with(LINEAR_COST, linear_cost)))
     }
 }

@@ -1,0 +1,50 @@
+//! Numbers for people: the one formatter of every table sysid prints (the command line's,
+//! the studies' summaries, the report's), and the shortest exact form.
+
+/// `v` in `digits` significant digits: fixed-point in [1e-3, 1e5), exponent form outside
+/// (3.000e7 rather than 30000000), "—" for NaN. Tables print ten digits where estimates are
+/// compared with published values and four where numbers are only read; JSON output keeps
+/// every digit.
+pub fn significant(v: f64, digits: usize) -> String {
+    let digits = digits.max(1);
+    if v.is_nan() {
+        return "—".into();
+    }
+    if v.is_infinite() {
+        return format!("{v}");
+    }
+    let a = v.abs();
+    if a == 0.0 || (1e-3..1e5).contains(&a) {
+        let before = if a == 0.0 { 1 } else { a.log10().floor() as i64 + 1 };
+        let decimals = (digits as i64 - before).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.*e}", digits - 1)
+    }
+}
+
+/// The shortest representation that reads back to the same f64, in exponent form outside
+/// [1e-4, 1e9).
+pub fn shortest(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-4..1e9).contains(&a) { format!("{v:e}") } else { format!("{v}") }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn significant_digits() {
+        assert_eq!(significant(32.5, 10), "32.50000000");
+        assert_eq!(significant(-0.25, 4), "-0.2500");
+        assert_eq!(significant(0.0, 4), "0.000");
+        assert_eq!(significant(3e7, 4), "3.000e7");
+        assert_eq!(significant(56116.2, 4), "56116");
+        assert_eq!(significant(1.2345e-5, 3), "1.23e-5");
+        assert_eq!(significant(f64::NAN, 4), "—");
+        assert_eq!(significant(f64::INFINITY, 4), "inf");
+        assert_eq!(shortest(0.1 + 0.2), "0.30000000000000004");
+        assert_eq!(shortest(2.5e-7), "2.5e-7");
+    }
+}

@@ -1,0 +1,153 @@
+//! A fit as people read it: the estimates with their uncertainty next to what was expected,
+//! then how the run went and its history (what `sysid fit` prints; `{estimate}` prints the
+//! same without expected values).
+
+use std::fmt;
+
+use crate::certificate::Bound;
+use crate::estimate::Estimate;
+use crate::format::significant;
+
+/// What a fit is compared with: a published reference answer, or the truth the data were
+/// made from.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Expected {
+    /// "reference" or "truth": the column's heading.
+    pub label: &'static str,
+    /// Expected values of unknowns, by name (some unknowns may have none).
+    pub values: Vec<(String, f64)>,
+    /// The expected cost ε and where it comes from.
+    pub cost: Option<(f64, &'static str)>,
+}
+
+impl Expected {
+    /// The expected value of the unknown `name`, if there is one.
+    pub fn value(&self, name: &str) -> Option<f64> {
+        self.values.iter().find(|(n, _)| n == name).map(|p| p.1)
+    }
+}
+
+impl Estimate {
+    /// The readable report: estimates, standard errors and 95 % intervals (with a column of
+    /// `expected` values where given), then the verdict, the termination, the iterations,
+    /// the cost, the degrees of freedom, the work, and one row per iterate.
+    pub fn table(&self, expected: Option<&Expected>) -> String {
+        let mut out = String::new();
+        // A column of expected values only where there are some.
+        let column = |v: &str| expected.map_or(String::new(), |_| format!(" {v:>24}"));
+        out += &format!(
+            "  {:<10} {:>24} {:>14} {:>34}{}\n",
+            "unknown",
+            "estimate",
+            "std. error",
+            "95 % interval (Student's t)",
+            column(expected.map_or("", |e| e.label))
+        );
+        for (i, name) in self.names.iter().enumerate() {
+            let on_bound = self.certificate.active[i].is_some();
+            let se = match &self.std_errors {
+                _ if on_bound => "on bound".to_string(),
+                Some(s) => significant(s[i], 5),
+                None => "—".to_string(),
+            };
+            let interval = match &self.intervals {
+                Some(list) if !on_bound => {
+                    format!("[{}, {}]", significant(list[i][0], 6), significant(list[i][1], 6))
+                }
+                _ => "—".to_string(),
+            };
+            let value =
+                expected.and_then(|e| e.value(name)).map_or(String::new(), |v| format!("{v}"));
+            let bound = match self.certificate.active[i] {
+                Some(Bound::Lower) => "   on its lower bound",
+                Some(Bound::Upper) => "   on its upper bound",
+                None => "",
+            };
+            out += &format!(
+                "  {name:<10} {:>24} {se:>14} {interval:>34}{}{bound}\n",
+                significant(self.values[i], 10),
+                column(&value)
+            );
+        }
+        out += "\n";
+        out += &format!("  converged    {}\n", self.verdict());
+        out += &format!("  termination  {}\n", self.termination);
+        if let Some(at) = self.failed_at() {
+            out += &format!("  failed at    {at}\n");
+        }
+        if let Some(space) = &self.certificate.null_space {
+            out += &format!(
+                "  identifiability  the data cannot identify {} here (condition {:.1e}): the combination {} is not seen by the data\n",
+                space.unknowns.join(", "),
+                space.condition,
+                space.combination()
+            );
+        }
+        let reported = if self.best_iteration == self.iterations {
+            String::new()
+        } else {
+            format!(" (the best, iterate {}, is reported)", self.best_iteration)
+        };
+        out += &format!("  iterations   {}{reported}\n", self.iterations);
+        let reference = expected
+            .and_then(|e| e.cost)
+            .map_or(String::new(), |(cost, source)| format!("   (reference {cost}, {source})"));
+        out += &format!("  cost ε       {}{reference}\n", significant(self.cost, 10));
+        let dof = self.dof.map_or("—".to_string(), |d| d.to_string());
+        out += &format!("  dof          {dof} (measured values − unknowns not held on a bound)\n");
+        out += &format!(
+            "  work         {} integrations, {} steps ({} rejected), {} right-hand-side evaluations, {:.3} ms\n\n",
+            self.counts.integrations,
+            self.counts.steps,
+            self.counts.rejected_steps,
+            self.counts.rhs_evaluations,
+            self.elapsed.as_secs_f64() * 1e3
+        );
+        out + &self.history_table()
+    }
+
+    /// One row per iterate: cost, |U|, step, condition, optimality, and a column for each
+    /// diagnostic the method attached (multiple shooting's defect, ...).
+    fn history_table(&self) -> String {
+        let mut diagnostics: Vec<&str> = Vec::new();
+        for (name, _) in self.history.iter().flat_map(|h| h.diagnostics.iter()) {
+            if !diagnostics.contains(&name) {
+                diagnostics.push(name);
+            }
+        }
+        let mut out = format!(
+            "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}",
+            "iteration", "cost ε", "|U|", "step", "condition", "optimality"
+        );
+        for name in &diagnostics {
+            out += &format!(" {name:>12}");
+        }
+        out += "\n";
+        let dash = |v: Option<f64>| {
+            v.filter(|v| v.is_finite()).map_or("—".to_string(), |v| format!("{v:.3e}"))
+        };
+        for h in &self.history {
+            out += &format!(
+                "  {:>9} {:>24} {:>12} {:>12} {:>12} {:>12}",
+                h.iteration,
+                significant(h.cost, 10),
+                dash(Some(h.gradient_norm)),
+                dash(h.step_norm),
+                dash(h.condition),
+                dash(h.optimality),
+            );
+            for name in &diagnostics {
+                out += &format!(" {:>12}", dash(h.diagnostic(name)));
+            }
+            out += "\n";
+        }
+        out
+    }
+}
+
+impl fmt::Display for Estimate {
+    /// [`table`](Estimate::table) without expected values.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.table(None))
+    }
+}
