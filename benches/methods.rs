@@ -11,13 +11,13 @@ use criterion::{
 };
 use sysid::core::Method;
 use sysid::ode::System;
-use sysid::registry::{Settings, entries};
+use sysid::registry::{Registry, Settings};
 use sysid::systems::{self, Case, Visit};
 
 /// Every method of the registry, by its command-line name, with the default settings.
 fn methods<S: System>() -> Vec<(&'static str, Box<dyn Method<S> + Send + Sync>)> {
     let settings = Settings::default();
-    entries::<S>().into_iter().map(|e| (e.name, (e.build)(&settings))).collect()
+    Registry::<S>::standard().build_all(&settings)
 }
 
 struct Bench<'g, 'c> {
@@ -64,11 +64,6 @@ fn bounds(c: &mut Criterion) {
     let unbounded = case.problem(1).expect("the chain builds without bounds");
     for (label, problem) in [("bounded", &bounded), ("unbounded", &unbounded)] {
         for (name, method) in methods() {
-            if !["goodman", "goodman-halving", "gauss-newton-ls", "quasilinearization"]
-                .contains(&name)
-            {
-                continue;
-            }
             let e = method.fit(problem).expect("valid problem");
             eprintln!(
                 "bounds/{label}/{name}: {} iterations, {} integrations, converged {}",

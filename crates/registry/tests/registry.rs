@@ -7,7 +7,7 @@ use sysid_core::{
     Proposal, Rule, Step, drive,
 };
 use sysid_ode::System;
-use sysid_registry::{Entry, Registry, RegistryError, Settings, entries, methods};
+use sysid_registry::{ENTRIES, Registry, RegistryError, Role, Settings, parse_list};
 use sysid_systems::falling_body::{FallingBody, falling_body};
 
 /// A method that never moves: it proposes its start and finds no descent, so the driver
@@ -43,11 +43,7 @@ impl<S: System> Method<S> for Stay {
 }
 
 fn with_stay() -> Registry<FallingBody> {
-    Registry::standard().with(Entry {
-        name: "stay",
-        description: "stays at its start (a test's throwaway method)",
-        build: |s: &Settings| Box::new(Stay(s.driver)),
-    })
+    Registry::standard().with("stay", |s: &Settings| Box::new(Stay(s.driver)))
 }
 
 #[test]
@@ -69,24 +65,38 @@ fn a_method_added_to_the_registry_is_listed_built_and_fitted() {
 #[test]
 fn unknown_names_and_empty_lists_are_refused_with_the_names_there_are() {
     let registry = Registry::<FallingBody>::standard();
-    let Err(RegistryError::Unknown { name, known }) = registry.entry("newton") else {
+    let Err(RegistryError::Unknown { name, known }) = registry.parse_list("goodman,newton") else {
         panic!("`newton` is not a method");
     };
     assert_eq!(name, "newton");
     assert!(known.starts_with("goodman, goodman-halving, gauss-newton"), "{known}");
-    assert_eq!(registry.parse_list(" , "), Err(RegistryError::Empty));
-    assert!(with_stay().entry("stay").is_ok() && registry.entry("stay").is_err());
+    for bad in [" , ", "", "goodman,,goodman", "goodman,", "goodman,goodman"] {
+        let Err(RegistryError::List(message)) = parse_list(bad) else {
+            panic!("`{bad}` is not a list of methods");
+        };
+        assert!(
+            message.contains("empty")
+                || message.contains("twice")
+                || message.contains("no methods"),
+            "{message}"
+        );
+    }
+    assert!(with_stay().parse_list("stay").is_ok() && registry.parse_list("stay").is_err());
 }
 
 #[test]
 fn every_entry_builds_the_method_its_name_says() {
     let settings = Settings::default();
-    let list = entries::<FallingBody>();
-    for entry in &list {
-        assert_eq!((entry.build)(&settings).name(), entry.name);
+    for (name, method) in Registry::<FallingBody>::standard().build_all(&settings) {
+        assert_eq!(method.name(), name);
     }
-    let names: Vec<_> = methods().into_iter().map(|m| m.0).collect();
-    assert_eq!(names, list.iter().map(|e| e.name).collect::<Vec<_>>());
+    let names: Vec<_> = ENTRIES.iter().map(|e| e.name).collect();
+    assert_eq!(Registry::<FallingBody>::standard().names(), names);
+    // One default method and one reference, each a method of the table.
+    for role in [Role::Default, Role::Reference] {
+        assert_eq!(role.methods().len(), 1, "{role:?}");
+    }
+    assert!(!Role::Study.methods().is_empty() && !Role::Report.methods().is_empty());
     let mut unique = names.clone();
     unique.sort_unstable();
     unique.dedup();

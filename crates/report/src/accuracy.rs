@@ -5,8 +5,8 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::chart::{DrawResult, FONT, Figure, padded, tick};
 use crate::look::look;
-use crate::{DrawResult, FONT, Figure, padded, tick};
 
 /// The estimates of one unknown.
 #[derive(Clone, Debug)]

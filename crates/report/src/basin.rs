@@ -6,7 +6,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::{DrawResult, FONT, Figure, tick};
+use crate::chart::{DrawResult, FONT, Figure, tick};
 
 /// The outcome from one start.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -4,8 +4,8 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::chart::{DrawResult, FONT, Figure, decade, log_range};
 use crate::look::{line, look};
-use crate::{DrawResult, FONT, Figure, decade, log_range};
 
 /// One method's iteration history.
 #[derive(Clone, Debug)]

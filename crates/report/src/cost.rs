@@ -4,8 +4,8 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::chart::{DrawResult, FONT, Figure, column_labels, log_range, one_two_five};
 use crate::look::look;
-use crate::{DrawResult, FONT, Figure, column_labels, log_range, one_two_five};
 
 /// One method's cost.
 #[derive(Clone, Debug)]

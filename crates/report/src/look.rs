@@ -5,7 +5,7 @@ use plotters::coord::CoordTranslate;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
-use crate::DrawResult;
+use crate::chart::DrawResult;
 
 /// The marker of a method's points.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

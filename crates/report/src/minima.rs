@@ -5,8 +5,8 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::chart::{DrawResult, FONT, Figure, column_labels, decade, log_range};
 use crate::look::look;
-use crate::{DrawResult, FONT, Figure, column_labels, decade, log_range};
 
 /// One method's multistart.
 #[derive(Clone, Debug)]

@@ -5,7 +5,7 @@ use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
-use crate::{DrawResult, FONT, Figure, padded, tick};
+use crate::chart::{DrawResult, FONT, Figure, padded, tick};
 
 /// One measured quantity.
 #[derive(Clone, Debug)]
