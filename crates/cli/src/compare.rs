@@ -1,42 +1,34 @@
 //! `sysid compare`: every chosen method on the same data from the same start.
 
-use std::path::PathBuf;
-
 use clap::Args;
+use sysid_core::format::significant;
 use sysid_core::{Estimate, Problem};
-use sysid_ode::System;
-
-use crate::fit::{best_of_starts, prepare, with_starts};
-use crate::format::significant;
-use crate::integrator::IntegratorArgs;
-use crate::methods::{
-    MethodArgs, StartsArgs, default_methods, describe_starts, method, parse_list,
-};
-use crate::source::{Context, SourceArgs, WithProblem, with_problem};
-use crate::{Format, Outcome};
 use sysid_montecarlo::multistart::Starts;
+use sysid_ode::System;
+use sysid_registry::ENTRIES;
+
+use crate::Outcome;
+use crate::options::{Format, IntegratorArgs, MethodArgs, SourceArgs, StartsArgs};
+use crate::output::{describe_starts, emit};
+use crate::problem::{
+    Context, WithProblem, best_of_starts, method, no_source, prepare, with_problem, with_starts,
+};
 
 /// Arguments of `sysid compare`.
 #[derive(Args, Debug)]
 pub struct CompareArgs {
-    /// The catalogue system (`sysid systems` lists them).
-    #[arg(long, value_name = "NAME", required_unless_present_any = ["all", "model"], conflicts_with_all = ["all", "model"])]
-    system: Option<String>,
-    /// A model file instead of a catalogue system.
-    #[arg(long, value_name = "FILE", conflicts_with = "all")]
-    model: Option<PathBuf>,
-    /// The data file for --model (default: the model's `[data] file`).
-    #[arg(long, value_name = "CSV", requires = "model", conflicts_with_all = ["system", "all"])]
-    data: Option<PathBuf>,
-    /// Every catalogue system, one table each.
-    #[arg(long)]
+    #[command(flatten)]
+    source: SourceArgs,
+    /// Every catalogue system, one after the other.
+    #[arg(long, conflicts_with_all = ["system", "model", "data"])]
     all: bool,
     /// Comma-separated methods (default: all of them).
     #[arg(long, value_name = "A,B,C")]
     methods: Option<String>,
-    /// Seed of the synthetic data.
-    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
-    seed: u64,
+    /// Per system, a table with each method's estimates next to the truth or reference
+    /// answer, its termination and its multistart, instead of one line per method.
+    #[arg(long)]
+    verbose: bool,
     /// Output format: tables, or a JSON list of fit objects (one per method, converged or
     /// not).
     #[arg(long, value_enum, default_value_t = Format::Table)]
@@ -60,26 +52,16 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
     args.starts.options()?;
     let methods = match &args.methods {
-        Some(list) => parse_list(list)?,
-        None => default_methods().into_iter().map(String::from).collect(),
+        Some(list) => sysid_registry::parse_list(list)?,
+        None => ENTRIES.iter().map(|e| e.name.to_string()).collect(),
     };
-    let sources: Vec<SourceArgs> = if args.all {
-        sysid_systems::NAMES
+    let sources: Vec<SourceArgs> = match (args.all, &args.source) {
+        (true, _) => sysid_systems::NAMES
             .iter()
-            .map(|n| SourceArgs {
-                system: Some(n.to_string()),
-                model: None,
-                data: None,
-                seed: args.seed,
-            })
-            .collect()
-    } else {
-        vec![SourceArgs {
-            system: args.system.clone(),
-            model: args.model.clone(),
-            data: args.data.clone(),
-            seed: args.seed,
-        }]
+            .map(|n| SourceArgs { system: Some(n.to_string()), ..args.source.clone() })
+            .collect(),
+        (false, SourceArgs { system: None, model: None, .. }) => return Err(no_source()),
+        (false, source) => vec![source.clone()],
     };
     let mut json = Vec::new();
     let mut tables = Vec::new();
@@ -90,8 +72,9 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         json.extend(records);
     }
     match args.format {
-        Format::Json => crate::emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?,
-        Format::Table => crate::emit(&tables.join("\n"))?,
+        Format::Json => emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?,
+        Format::Table if args.verbose => emit(&tables.join("\n"))?,
+        Format::Table => emit(&(compact_header() + &tables.concat()))?,
     }
     Ok(Outcome::Success)
 }
@@ -110,11 +93,11 @@ impl WithProblem for CompareProblem<'_> {
         context: Context,
     ) -> anyhow::Result<Self::Output> {
         let problem = prepare(problem, &self.args.integrator, &self.args.options)?;
-        let common = self.args.options.common();
+        let settings = self.args.options.settings();
         let starts = self.args.starts.options()?;
         let mut rows = Vec::with_capacity(self.methods.len());
         for name in self.methods {
-            let m = method::<S>(name, &common)?;
+            let m = method::<S>(name, &settings)?;
             let result = match &starts {
                 Some(options) => best_of_starts(&problem, &*m, options)
                     .map(|(e, s)| (e, Some(s)))
@@ -132,8 +115,45 @@ impl WithProblem for CompareProblem<'_> {
                 }),
             })
             .collect();
-        Ok((table(&problem, &context, &rows), json))
+        let text = match self.args.verbose {
+            true => table(&problem, &context, &rows),
+            false => compact(&context, &rows),
+        };
+        Ok((text, json))
     }
+}
+
+/// The header of the compact lines.
+fn compact_header() -> String {
+    format!(
+        "{:<24} {:<24} {:>4} {:>5} {:>18} {:>10}  {}\n",
+        "system", "method", "conv", "iter", "cost ε", "time ms", "termination"
+    )
+}
+
+/// One line per method: converged, iterations, cost, time and how it ended.
+fn compact(context: &Context, rows: &[Row]) -> String {
+    let mut out = String::new();
+    for row in rows {
+        out += &match &row.result {
+            Ok((e, starts)) => format!(
+                "{:<24} {:<24} {:>4} {:>5} {:>18} {:>10.3}  {}{}\n",
+                context.name,
+                row.method,
+                if e.converged() { "yes" } else { "no" },
+                e.iterations,
+                significant(e.cost, 10),
+                e.elapsed.as_secs_f64() * 1e3,
+                e.termination.code(),
+                starts.as_ref().map_or(String::new(), |s| format!(
+                    ", best of {} starts ({} reached it)",
+                    s.count, s.reached_best
+                )),
+            ),
+            Err(message) => format!("{:<24} {:<24} error: {message}\n", context.name, row.method),
+        };
+    }
+    out
 }
 
 /// One table: a row per method, the estimates under their unknowns with the truth or
@@ -141,7 +161,7 @@ impl WithProblem for CompareProblem<'_> {
 fn table<S: System>(problem: &Problem<S>, context: &Context, rows: &[Row]) -> String {
     let mut out = format!("{}: {}\n", context.name, context.summary);
     let unknowns = problem.names();
-    let label = context.expected_label;
+    let expected = context.expected.as_ref();
     let mut header = format!(
         "  {:<16} {:>5} {:>5} {:>18} {:>10}",
         "method", "conv", "iter", "cost ε", "time ms"
@@ -151,15 +171,19 @@ fn table<S: System>(problem: &Problem<S>, context: &Context, rows: &[Row]) -> St
     }
     out += &header;
     out += "\n";
-    let mut expected = format!("  {:<16} {:>5} {:>5} {:>18} {:>10}", label, "", "", "", "");
-    for name in &unknowns {
-        expected += &format!(
-            " {:>16}",
-            context.expected(name).map_or(String::new(), |v| significant(v, 8))
-        );
+    // The truth or reference answer under the header, where there is one.
+    if let Some(expected) = expected {
+        let mut line =
+            format!("  {:<16} {:>5} {:>5} {:>18} {:>10}", expected.label, "", "", "", "");
+        for name in &unknowns {
+            line += &format!(
+                " {:>16}",
+                expected.value(name).map_or(String::new(), |v| significant(v, 8))
+            );
+        }
+        out += &line;
+        out += "\n";
     }
-    out += &expected;
-    out += "\n";
     for row in rows {
         match &row.result {
             Ok((e, starts)) => {

@@ -5,18 +5,17 @@
 
 mod compare;
 mod fit;
-mod format;
-mod integrator;
-mod methods;
+mod options;
+mod output;
 mod predict;
+mod problem;
 mod report;
 mod simulate;
-mod source;
 mod study;
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Parser, Subcommand};
 
 /// sysid identifies dynamic systems: it finds the unknown parameters and initial values of
 /// an ODE model that fit measurements best in the least-squares sense (ε = Σ w r², no factor
@@ -58,16 +57,6 @@ enum Command {
     Systems,
 }
 
-/// Output format of reports.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
-pub enum Format {
-    /// A readable table.
-    #[default]
-    Table,
-    /// The JSON object documented in docs/json.md.
-    Json,
-}
-
 /// What a command ends with: success, or a method that did not converge.
 pub enum Outcome {
     /// Exit 0.
@@ -106,7 +95,7 @@ fn main() -> ExitCode {
                 .into_iter()
                 .map(|(name, summary)| format!("{name:<26} {summary}\n"))
                 .collect();
-            emit(&lines.concat()).map(|()| Outcome::Success)
+            output::emit(&lines.concat()).map(|()| Outcome::Success)
         }
     };
     match result {
@@ -116,17 +105,6 @@ fn main() -> ExitCode {
             eprintln!("error: {}", one_line(&format!("{e:#}")));
             ExitCode::from(2)
         }
-    }
-}
-
-/// Writes `text` to standard output. A reader that has gone away (`sysid ... | head`) is not
-/// an error: there is nobody left to tell.
-pub fn emit(text: &str) -> anyhow::Result<()> {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
-        _ => Ok(()),
     }
 }
 

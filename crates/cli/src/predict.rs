@@ -4,15 +4,13 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::Args;
-use sysid_core::{Problem, band_half_width};
-use sysid_ode::{Ivp, System};
+use sysid_core::Problem;
+use sysid_ode::System;
 
 use crate::Outcome;
-use crate::fit::{fit, prepare};
-use crate::integrator::IntegratorArgs;
-use crate::methods::MethodArgs;
-use crate::simulate::{spaced, write_output};
-use crate::source::{Context, SourceArgs, WithProblem, with_problem};
+use crate::options::{IntegratorArgs, MethodArg, MethodArgs, SourceArgs};
+use crate::output::{spaced, write_output};
+use crate::problem::{Context, WithProblem, fit, prepare, with_problem};
 
 /// Arguments of `sysid predict`.
 #[derive(Args, Debug)]
@@ -25,9 +23,8 @@ pub struct PredictArgs {
     /// Spacing of the predicted times (default: 200 intervals from t0 to T).
     #[arg(long, value_name = "H", allow_negative_numbers = true)]
     step: Option<f64>,
-    /// The method that fits first.
-    #[arg(long, default_value = "goodman", value_name = "METHOD")]
-    method: String,
+    #[command(flatten)]
+    method: MethodArg,
     #[command(flatten)]
     options: MethodArgs,
     /// Write to this file instead of standard output.
@@ -43,6 +40,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
         bail!("--until must be a finite time");
     }
     args.options.validate()?;
+    sysid_registry::parse_list(&args.method.method)?;
     with_problem(&args.source, Predict { args })
 }
 
@@ -68,16 +66,12 @@ impl WithProblem for Predict<'_> {
         if !(step > 0.0 && step.is_finite()) {
             bail!("--step must be positive, got {step}");
         }
-        let mut times = spaced(
-            t0,
-            args.until,
-            step,
-            &format!("--step {step:e} from t0 = {t0} to --until {}", args.until),
-        )?;
+        let what = format!("--step {step:e} from t0 = {t0} to --until {}", args.until);
+        let mut times = spaced(t0, args.until, step, &what)?;
         if times.last().is_some_and(|&t| t < args.until) {
             times.push(args.until);
         }
-        let estimate = fit(&problem, &args.method, args.options.common())?;
+        let estimate = fit(&problem, &args.method.method, &args.options.settings())?;
         if !estimate.converged() {
             eprintln!(
                 "{}: {} did not converge ({}; {}): no prediction written",
@@ -88,20 +82,6 @@ impl WithProblem for Predict<'_> {
             );
             return Ok(Outcome::NotConverged);
         }
-        // The trajectory and its sensitivities to the unknowns (as values) at the estimate.
-        let (y0, p) = problem.point(&problem.unknowns().coordinates(&estimate.values));
-        let wrt = problem.unknowns().wrt();
-        let sol = Ivp::new(problem.system(), t0, &y0, &p).solve_sensitivities(
-            problem.integrator(),
-            wrt,
-            &times,
-        )?;
-        let states = problem.system().signature().states();
-        let mut text = String::from("t");
-        for name in states {
-            text += &format!(",{name},{name}_lower,{name}_upper");
-        }
-        text += "\n";
         // The band: Student's t for the fit's N − k degrees of freedom.
         let band = estimate.band();
         if band.is_none() {
@@ -110,16 +90,19 @@ impl WithProblem for Predict<'_> {
                 context.name
             );
         }
+        let states = problem.trajectory(&estimate.values, band, &times)?;
+        let mut text = String::from("t");
+        for s in &states {
+            text += &format!(",{n},{n}_lower,{n}_upper", n = s.name);
+        }
+        text += "\n";
         for (m, t) in times.iter().enumerate() {
             text += &format!("{t}");
-            let s = sol.sensitivity(m);
-            for (i, y) in sol.state(m).iter().enumerate() {
-                match band {
-                    Some((cov, q)) => {
-                        let half = band_half_width(q, &s.row(i).transpose(), cov);
-                        text += &format!(",{y},{},{}", y - half, y + half);
-                    }
-                    _ => text += &format!(",{y},,"),
+            for s in &states {
+                let y = s.values[m];
+                match &s.half_width {
+                    Some(w) => text += &format!(",{y},{},{}", y - w[m], y + w[m]),
+                    None => text += &format!(",{y},,"),
                 }
             }
             text += "\n";

@@ -9,7 +9,7 @@ use indicatif::ProgressBar;
 use sysid_report::{Observer, ReportOptions, write_report};
 
 use crate::Outcome;
-use crate::study::progress_bar;
+use crate::output::progress_bar;
 
 /// Arguments of `sysid report`.
 #[derive(Args, Debug)]
@@ -20,9 +20,8 @@ pub struct ReportArgs {
     /// Comma-separated catalogue systems (default: all).
     #[arg(long, value_name = "A,B")]
     systems: Option<String>,
-    /// The methods compared.
-    #[arg(long, default_value = sysid_report::DEFAULT_METHODS, value_name = "A,B")]
-    methods: String,
+    #[arg(long, value_name = "A,B", help = methods_help())]
+    methods: Option<String>,
     /// Trials of each system's study.
     #[arg(long, default_value_t = 500, value_name = "N", allow_negative_numbers = true)]
     trials: usize,
@@ -48,6 +47,12 @@ pub struct ReportArgs {
     force: bool,
 }
 
+/// The help of `--methods`: the registry's report methods.
+fn methods_help() -> String {
+    let methods = sysid_registry::Role::Report.methods().join(", ");
+    format!("Comma-separated methods compared (default: {methods}).")
+}
+
 /// Runs `sysid report`.
 pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
     let systems = match &args.systems {
@@ -61,10 +66,14 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
             anyhow::bail!("unknown system `{name}` (systems: {})", sysid_systems::NAMES.join(", "));
         }
     }
+    let methods = match &args.methods {
+        Some(list) => sysid_registry::parse_list(list)?,
+        None => ReportOptions::default().methods,
+    };
     let options = ReportOptions {
         out: args.out.clone(),
         systems,
-        methods: args.methods.clone(),
+        methods,
         trials: args.trials,
         perturb: args.perturb,
         grid: args.grid,

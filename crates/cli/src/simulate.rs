@@ -1,6 +1,6 @@
 //! `sysid simulate`: a catalogue system's data, or a model's trajectory, as CSV.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
@@ -10,16 +10,17 @@ use sysid_ode::{Inputs, Ivp, System};
 use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
+use crate::options::SourceArgs;
+use crate::output::{decimal, intervals, parse_times, write_output};
+use crate::problem::{no_source, visit_system};
 
 /// Arguments of `sysid simulate`.
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
-    /// A catalogue system: write its data (with the seeded noise).
-    #[arg(long, value_name = "NAME", required_unless_present = "model", conflicts_with = "model")]
-    system: Option<String>,
-    /// A model file: write its trajectory (states, then outputs) at --times.
-    #[arg(long, value_name = "FILE", requires = "times")]
-    model: Option<PathBuf>,
+    /// A catalogue system: its data, with the seeded noise. A model file: its trajectory
+    /// (states, then outputs) at --times, inputs from the data file.
+    #[command(flatten)]
+    source: SourceArgs,
     /// Output times a:b:step, e.g. 0:10:0.1 (model files).
     #[arg(long, value_name = "A:B:STEP", allow_hyphen_values = true)]
     times: Option<String>,
@@ -27,12 +28,6 @@ pub struct SimulateArgs {
     /// otherwise. Repeat for several.
     #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
     set: Vec<String>,
-    /// The data file whose input columns drive the model (default: the model's data file).
-    #[arg(long, value_name = "CSV", requires = "model", conflicts_with = "system")]
-    data: Option<PathBuf>,
-    /// Seed of the synthetic noise (catalogue systems): the same seed gives the same data.
-    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
-    seed: u64,
     /// Sample spacing for a catalogue record given as a function (continuous systems).
     #[arg(long, default_value_t = 0.001, value_name = "DT", allow_negative_numbers = true)]
     step: f64,
@@ -43,87 +38,32 @@ pub struct SimulateArgs {
 
 /// Runs `sysid simulate`.
 pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
-    let text = match (&args.system, &args.model) {
+    let text = match (&args.source.system, &args.source.model) {
         (Some(name), _) => {
             if !(args.step > 0.0 && args.step.is_finite()) {
                 bail!("--step must be positive, got {}", args.step);
             }
-            let data =
-                sysid_systems::visit(name, DataOf { seed: args.seed }).ok_or_else(|| {
-                    anyhow!(
-                        "unknown system `{name}` (systems: {})",
-                        sysid_systems::NAMES.join(", ")
-                    )
-                })??;
+            let data = visit_system(name, DataOf { seed: args.source.seed })??;
             data_csv(&data, args.step)?
         }
         (None, Some(path)) => model_csv(path, args)?,
-        (None, None) => bail!("give --system NAME or --model FILE"),
+        (None, None) => return Err(no_source()),
     };
     write_output(args.out.as_deref(), &text)?;
     Ok(Outcome::Success)
 }
 
-/// Writes to a file (through a temporary, so a failure leaves no partial file) or stdout.
-pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
-    match out {
-        // Through a temporary file of our own beside it (never a user's `out.partial`),
-        // renamed: the file is old or new, never half; errors name the user's path.
-        Some(path) => sysid_montecarlo::files::write_atomically(path, text)?,
-        None => crate::emit(text)?,
-    }
-    Ok(())
-}
-
-/// The most output times (CSV rows) a command writes. More is a step given in the wrong
-/// unit, and would not fit in memory (predict asked for 40 TB at --step 1e-12).
-pub const MAX_TIMES: usize = 10_000_000;
-
-/// Parses `a:b:step` into the times a, a + step, …, up to b (inclusive within rounding).
-pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
-    let parts: Vec<&str> = spec.split(':').collect();
-    let [a, b, h] = parts[..] else { bail!("--times must be a:b:step, got `{spec}`") };
-    let number = |s: &str| -> anyhow::Result<f64> {
-        let v: f64 = s.trim().parse().map_err(|_| anyhow!("--times: `{s}` is not a number"))?;
-        if !v.is_finite() {
-            bail!("--times: `{s}` is not a finite number");
-        }
-        Ok(v)
-    };
-    let (a, b, h) = (number(a)?, number(b)?, number(h)?);
-    if h <= 0.0 || b < a {
-        bail!("--times a:b:step needs a ≤ b and step > 0, got {spec}");
-    }
-    spaced(a, b, h, &format!("--times {spec}"))
-}
-
-/// The times a, a + h, …, up to b (inclusive within rounding), for a ≤ b and h > 0; `what`
-/// names the options that asked for them in the error when they are more than [`MAX_TIMES`].
-pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
-    let n = intervals((b - a) / h + 1e-9, what)?;
-    Ok((0..=n).map(|i| a + h * i as f64).collect())
-}
-
-/// The number of intervals `count` (rounded down), refused when the times would be more
-/// than [`MAX_TIMES`]; `what` names the options that asked for them.
-pub fn intervals(count: f64, what: &str) -> anyhow::Result<usize> {
-    if count.is_nan() || count >= MAX_TIMES as f64 {
-        bail!(
-            "{what} asks for {:.1e} times, more than the {MAX_TIMES} a command writes",
-            count + 1.0
-        );
-    }
-    Ok(count.floor() as usize)
-}
-
-fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
+fn model_csv(path: &std::path::Path, args: &SimulateArgs) -> anyhow::Result<String> {
     let model = Model::load(path)?;
-    let times = parse_times(args.times.as_deref().unwrap_or_default())?;
+    let Some(times) = &args.times else {
+        bail!("a model's trajectory needs its times: add --times A:B:STEP, e.g. --times 0:10:0.1");
+    };
+    let times = parse_times(times)?;
     // Inputs come from a data file; a model without inputs needs none.
     let inputs = if model.file.inputs.is_empty() {
         Inputs::default()
     } else {
-        let data = match &args.data {
+        let data = match &args.source.data {
             Some(d) => d.as_path(),
             None => model.data_path()?,
         };
@@ -234,7 +174,8 @@ fn data_csv(data: &Data, step: f64) -> anyhow::Result<String> {
     out += "\n";
     let mut cursor = vec![0; columns.len()];
     for &t in &times {
-        out += &format!("{t}");
+        // The data's times as a person wrote them: 0.3, not 0.30000000000000004 (3 × 0.1).
+        out += &format!("{}", decimal(t));
         for (c, (_, points)) in columns.iter().enumerate() {
             out += ",";
             if points.get(cursor[c]).is_some_and(|p| p.0.total_cmp(&t).is_eq()) {

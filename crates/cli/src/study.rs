@@ -5,38 +5,34 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
-use indicatif::{ProgressBar, ProgressStyle};
 use sysid_model::Model;
 use sysid_montecarlo::files::{self, RunOptions, Shard};
 use sysid_montecarlo::{Scenario, Study, StudySpec, basin};
 use sysid_ode::System;
+use sysid_registry::Role;
 use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
-use crate::fit::{fit, prepare};
-use crate::integrator::IntegratorArgs;
-use crate::methods::{MethodArgs, method, parse_list};
+use crate::options::{IntegratorArgs, MethodArgs, SourceArgs};
+use crate::output::{emit, progress_bar};
+use crate::problem::{fit, method, no_source, prepare, visit_system};
 
-/// The methods a study compares unless told otherwise: the three classical ones.
-const DEFAULT_METHODS: &str = "goodman,quasilinearization,gauss-newton-ls";
+/// The help of `--methods`: the registry's study methods.
+fn methods_help() -> String {
+    format!("Comma-separated methods (default: {}).", Role::Study.methods().join(", "))
+}
 
 /// Arguments of `sysid study`.
 #[derive(Args, Debug)]
 pub struct StudyArgs {
-    /// A catalogue system (`sysid systems` lists them).
-    #[arg(long, value_name = "NAME", required_unless_present = "model", conflicts_with = "model")]
-    system: Option<String>,
-    /// A model file: the truth is its fit to its data, the noise what the fit leaves.
-    #[arg(long, value_name = "FILE")]
-    model: Option<PathBuf>,
-    /// The data file for --model (default: the model's `[data] file`).
-    #[arg(long, value_name = "CSV", requires = "model", conflicts_with = "system")]
-    data: Option<PathBuf>,
-    /// Comma-separated methods (default: goodman, quasilinearization, gauss-newton-ls).
-    #[arg(long, value_name = "A,B,C")]
+    /// A catalogue system, or a model file: then the truth is its fit to its data, and the
+    /// noise what that fit leaves.
+    #[command(flatten)]
+    source: SourceArgs,
+    #[arg(long, value_name = "A,B,C", help = methods_help())]
     methods: Option<String>,
     /// The method of the reference fit from the truth that decides success.
-    #[arg(long, default_value = "goodman-halving", value_name = "METHOD")]
+    #[arg(long, default_value = Role::Reference.method(), value_name = "METHOD")]
     reference: String,
     /// Number of trials.
     #[arg(long, default_value_t = 100, value_name = "N", allow_negative_numbers = true)]
@@ -48,9 +44,6 @@ pub struct StudyArgs {
     /// (truth·(1 + ρ)^u on a log scale, truth + ρu for a truth of 0).
     #[arg(long, default_value_t = 0.2, value_name = "RHO", allow_negative_numbers = true)]
     perturb: f64,
-    /// Seed: trial i draws from the random stream i of this seed.
-    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
-    seed: u64,
     /// The study's directory: trials.jsonl, summary.json, summary.md (basin.json, basin.md).
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -119,31 +112,35 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
             args.log_every
         );
     }
-    let methods = parse_list(args.methods.as_deref().unwrap_or(DEFAULT_METHODS))?;
-    parse_list(&args.reference)?;
+    let methods = match &args.methods {
+        Some(list) => sysid_registry::parse_list(list)?,
+        None => Role::Study.methods().into_iter().map(String::from).collect(),
+    };
+    sysid_registry::parse_list(&args.reference)?;
     if args.basin.is_some() && (args.shard.is_some() || args.resume) {
         bail!("a basin map runs in one go: --shard and --resume are for trials");
     }
-    match (&args.system, &args.model) {
+    match (&args.source.system, &args.source.model) {
         (Some(name), _) => {
             let settings = method_settings(args);
-            sysid_systems::visit(name, FromCase { args, methods, settings }).ok_or_else(|| {
-                anyhow!("unknown system `{name}` (systems: {})", sysid_systems::NAMES.join(", "))
-            })?
+            visit_system(name, FromCase { args, methods, settings })?
         }
         (None, Some(path)) => {
             let model = Model::load(path)?;
-            let data = match &args.data {
+            let data = match &args.source.data {
                 Some(data) => data.clone(),
                 None => model.data_path()?.to_path_buf(),
             };
             let mut settings = method_settings(args);
             settings.insert("model".into(), sha256(path)?);
             settings.insert("data".into(), sha256(&data)?);
-            let problem =
-                prepare(model.problem(args.data.as_deref())?, &args.integrator, &args.options)?;
+            let problem = prepare(
+                model.problem(args.source.data.as_deref())?,
+                &args.integrator,
+                &args.options,
+            )?;
             // The truth of a model file: its fit to its own data.
-            let fitted = fit(&problem, &args.reference, args.options.common())?;
+            let fitted = fit(&problem, &args.reference, &args.options.settings())?;
             if !fitted.converged() {
                 bail!(
                     "{}: the fit to the data that gives the study its truth did not converge ({})",
@@ -154,7 +151,7 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
             let scenario = Scenario::from_residuals(problem, fitted.values)?;
             run_scenario(args, &path.display().to_string(), scenario, methods, settings)
         }
-        (None, None) => bail!("give --system NAME or --model FILE"),
+        (None, None) => Err(no_source()),
     }
 }
 
@@ -200,7 +197,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
     methods: Vec<String>,
     settings: BTreeMap<String, String>,
 ) -> anyhow::Result<Outcome> {
-    let common = args.options.common();
+    let method_settings = args.options.settings();
     let spec = StudySpec {
         system: system.to_string(),
         methods: methods.clone(),
@@ -208,14 +205,14 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         trials: args.trials,
         noise: args.noise,
         perturb: args.perturb,
-        seed: args.seed,
+        seed: args.source.seed,
         fixed: args.options.fix.clone(),
-        driver: common.driver,
+        driver: method_settings.driver,
         settings,
     };
-    let fits =
-        methods.iter().map(|m| method::<S>(m, &common)).collect::<anyhow::Result<Vec<_>>>()?;
-    let study = Study::new(spec, scenario, fits, method::<S>(&args.reference, &common)?)?;
+    let build = |m: &str| method::<S>(m, &method_settings);
+    let fits = methods.iter().map(|m| build(m)).collect::<anyhow::Result<Vec<_>>>()?;
+    let study = Study::new(spec, scenario, fits, build(&args.reference)?)?;
     if let Some(axes) = &args.basin {
         let names = study.scenario().problem().names();
         let index = |n: &str| {
@@ -235,7 +232,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         })?;
         bar.finish_and_clear();
         map.write(&args.out, args.force)?;
-        crate::emit(&map.markdown())?;
+        emit(&map.markdown())?;
         return Ok(Outcome::Success);
     }
     let total = study.spec().trials;
@@ -252,7 +249,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         log.tick(done, todo);
     })?;
     bar.finish_and_clear();
-    crate::emit(&summary.markdown())?;
+    emit(&summary.markdown())?;
     eprintln!("{}: {} trials written to {}", system, summary.trials, args.out.display());
     Ok(Outcome::Success)
 }
@@ -286,19 +283,11 @@ impl LogLines {
     }
 }
 
-/// A progress bar on stderr (hidden when stderr is not a terminal).
-pub(crate) fn progress_bar(total: u64, unit: &str) -> ProgressBar {
-    let bar = ProgressBar::new(total);
-    let template = format!("{{bar:40}} {{pos}}/{{len}} {unit}, {{per_sec}}, {{eta}} left");
-    bar.set_style(ProgressStyle::with_template(&template).expect("a valid template"));
-    bar
-}
-
 /// Runs `sysid merge`.
 pub fn merge(args: &MergeArgs) -> anyhow::Result<Outcome> {
     let Some(out) = &args.out else { return check(&args.shards) };
     let summary = files::merge(&args.shards, out, args.force)?;
-    crate::emit(&summary.markdown())?;
+    emit(&summary.markdown())?;
     eprintln!(
         "{} shards merged into {} ({} trials)",
         args.shards.len(),
@@ -308,36 +297,9 @@ pub fn merge(args: &MergeArgs) -> anyhow::Result<Outcome> {
     Ok(Outcome::Success)
 }
 
-/// `sysid merge --check`: a line per shard, the shards not given, and a last line
-/// `incomplete: 3,7` (shard indices) or `complete`.
+/// `sysid merge --check`: exit 0 when every shard of the study is complete, 1 when not.
 fn check(dirs: &[PathBuf]) -> anyhow::Result<Outcome> {
-    let shards = files::progress(dirs)?;
-    let mut text = String::new();
-    let mut incomplete = std::collections::BTreeSet::new();
-    for s in &shards {
-        text += &format!(
-            "{:<12} {}/{} trials  {}\n",
-            files::shard_name(s.shard),
-            s.done,
-            s.expected,
-            s.dir.display()
-        );
-        if s.done < s.expected {
-            incomplete.insert(s.shard.map_or(1, |s| s.index));
-        }
-    }
-    for index in files::missing_shards(shards.iter().map(|s| s.shard)) {
-        let count = shards[0].shard.map_or(1, |s| s.count);
-        text += &format!("{:<12} no directory given\n", format!("{index}/{count}"));
-        incomplete.insert(index);
-    }
-    if incomplete.is_empty() {
-        text += "complete\n";
-        crate::emit(&text)?;
-        return Ok(Outcome::Success);
-    }
-    let list: Vec<String> = incomplete.iter().map(usize::to_string).collect();
-    text += &format!("incomplete: {}\n", list.join(","));
-    crate::emit(&text)?;
-    Ok(Outcome::NotConverged)
+    let (text, complete) = files::check(dirs)?;
+    emit(&text)?;
+    Ok(if complete { Outcome::Success } else { Outcome::NotConverged })
 }

@@ -323,9 +323,9 @@ fn compare_lists_every_method_as_json() {
 }
 
 #[test]
-fn compare_prints_a_table_per_system() {
-    let out =
-        sysid(&["compare", "--system", "short-period", "--methods", "goodman,gauss-newton-ls"]);
+fn compare_prints_a_line_per_method_or_a_table_per_system() {
+    let args = ["compare", "--system", "short-period", "--methods", "goodman,gauss-newton-ls"];
+    let out = sysid(&[&args[..], &["--verbose"]].concat());
     assert_eq!(out.status.code(), Some(0));
     let stdout = text(&out.stdout);
     assert!(
@@ -333,6 +333,16 @@ fn compare_prints_a_table_per_system() {
         "{stdout}"
     );
     assert_eq!(stdout.lines().filter(|l| l.trim_start().starts_with("goodman ")).count(), 1);
+    // Compact: a header and one line per method, each naming system, method and outcome.
+    let compact = text(&sysid(&args).stdout);
+    let lines: Vec<&str> = compact.lines().collect();
+    assert_eq!(lines.len(), 3, "{compact}");
+    assert!(lines[0].starts_with("system") && lines[0].contains("termination"), "{compact}");
+    for (line, method) in lines[1..].iter().zip(["goodman", "gauss-newton-ls"]) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(&words[..3], ["short-period", method, "yes"], "{compact}");
+        assert!(words.last().unwrap().starts_with("converged_"), "{compact}");
+    }
     for (args, needle) in [
         (&["compare"][..], "--system"),
         (
@@ -569,7 +579,19 @@ fn starts_return_the_best_fit_and_count_the_minima() {
         "4",
     ]);
     let table = text(&table.stdout);
-    assert_eq!(table.matches("└ 4 starts in").count(), 2, "{table}");
+    assert_eq!(table.matches("best of 4 starts").count(), 2, "{table}");
+    let verbose = sysid(&[
+        "compare",
+        "--system",
+        "lotka-volterra",
+        "--methods",
+        "gauss-newton-ls,multiple-shooting",
+        "--starts",
+        "4",
+        "--verbose",
+    ]);
+    let verbose = text(&verbose.stdout);
+    assert_eq!(verbose.matches("└ 4 starts in").count(), 2, "{verbose}");
 }
 
 #[test]

@@ -363,6 +363,32 @@ pub fn missing_shards(mut given: impl Iterator<Item = Option<Shard>>) -> Vec<usi
     (1..=first.count).filter(|i| !present.contains(i)).collect()
 }
 
+/// What `sysid merge --check` prints for the shard directories `dirs`: a line per shard
+/// with its trials done, a line per shard of the study that was not given, and a last line
+/// `complete` or `incomplete: 3,7` (shard indices); with whether the study is complete.
+pub fn check(dirs: &[PathBuf]) -> Result<(String, bool), StudyError> {
+    let shards = progress(dirs)?;
+    let mut text = String::new();
+    let mut incomplete = BTreeSet::new();
+    for s in &shards {
+        let name = shard_name(s.shard);
+        text += &format!("{name:<12} {}/{} trials  {}\n", s.done, s.expected, s.dir.display());
+        if s.done < s.expected {
+            incomplete.insert(s.shard.map_or(1, |s| s.index));
+        }
+    }
+    for index in missing_shards(shards.iter().map(|s| s.shard)) {
+        let count = shards[0].shard.map_or(1, |s| s.count);
+        text += &format!("{:<12} no directory given\n", format!("{index}/{count}"));
+        incomplete.insert(index);
+    }
+    if incomplete.is_empty() {
+        return Ok((text + "complete\n", true));
+    }
+    let list: Vec<String> = incomplete.iter().map(usize::to_string).collect();
+    Ok((text + &format!("incomplete: {}\n", list.join(",")), false))
+}
+
 /// "3/16", or "whole study".
 pub fn shard_name(shard: Option<Shard>) -> String {
     shard.map_or("whole study".into(), |s| format!("{}/{}", s.index, s.count))
@@ -403,9 +429,12 @@ fn is_owned(name: &str) -> bool {
 
 /// An exclusive hold on a directory for as long as it lives: a second sysid that wants to
 /// write there is refused at once, naming the holder. The lock is the operating system's
-/// (`flock`), so it goes with the process however that ends; the file stays.
+/// (`flock`), so it goes with the process however that ends. The lock file is removed when
+/// the hold ends normally; after a crash or a kill it stays, unlocked, and the next run takes
+/// it over.
 pub struct DirLock {
-    _file: File,
+    file: File,
+    path: PathBuf,
 }
 
 impl DirLock {
@@ -413,23 +442,30 @@ impl DirLock {
     pub fn acquire(dir: &Path) -> Result<Self, StudyError> {
         std::fs::create_dir_all(dir).map_err(StudyError::io(dir))?;
         let path = dir.join(LOCK_FILE);
-        let mut file = OpenOptions::new()
-            .read(true)
-            .write(true)
-            .create(true)
-            .truncate(false)
-            .open(&path)
-            .map_err(StudyError::io(&path))?;
-        match file.try_lock() {
-            Ok(()) => {}
-            Err(TryLockError::WouldBlock) => {
-                let mut holder = String::new();
-                // The holder's line is informative only: an unreadable one still refuses.
-                let _ = file.read_to_string(&mut holder);
-                return Err(StudyError::Busy { dir: dir.into(), holder: describe(&holder) });
+        let mut file = loop {
+            let mut file = OpenOptions::new()
+                .read(true)
+                .write(true)
+                .create(true)
+                .truncate(false)
+                .open(&path)
+                .map_err(StudyError::io(&path))?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(TryLockError::WouldBlock) => {
+                    let mut holder = String::new();
+                    // The holder's line is informative only: an unreadable one still refuses.
+                    let _ = file.read_to_string(&mut holder);
+                    return Err(StudyError::Busy { dir: dir.into(), holder: describe(&holder) });
+                }
+                Err(TryLockError::Error(e)) => return Err(StudyError::io(&path)(e)),
             }
-            Err(TryLockError::Error(e)) => return Err(StudyError::io(&path)(e)),
-        }
+            // The holder before us may have removed the file between our open and our lock:
+            // then we hold a file nobody else can find, and must lock the one at the path.
+            if same_file(&file, &path) {
+                break file;
+            }
+        };
         let now = unix_seconds();
         let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap_or_default();
         let command: Vec<String> = std::env::args().collect();
@@ -437,8 +473,33 @@ impl DirLock {
             format!("{}\t{now}\t{}\t{}\n", std::process::id(), host.trim(), command.join(" "));
         file.set_len(0).map_err(StudyError::io(&path))?;
         file.write_all(line.as_bytes()).map_err(StudyError::io(&path))?;
-        Ok(Self { _file: file })
+        Ok(Self { file, path })
     }
+}
+
+impl Drop for DirLock {
+    /// Removes the lock file while still holding it, so that no run finds it left behind.
+    fn drop(&mut self) {
+        if same_file(&self.file, &self.path) {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
+/// Whether `file` is the file at `path` (same device and inode).
+#[cfg(unix)]
+fn same_file(file: &File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (file.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+/// Elsewhere an open file cannot be removed: the path is the file.
+#[cfg(not(unix))]
+fn same_file(_: &File, path: &Path) -> bool {
+    path.exists()
 }
 
 /// Seconds since 1970 (0 for a clock before it).

@@ -137,7 +137,7 @@ fn results_do_not_depend_on_threads_shards_or_interruptions() {
     files::merge(&shards, &merged, false).unwrap();
     assert_eq!(results(&merged), reference);
     let other = scratch.join("other");
-    let different = crate::study(&case, &["goodman", "gauss-newton-ls"], 2, 0.3);
+    let different = self::study(&case, &["goodman", "gauss-newton-ls"], 2, 0.3);
     files::run(&different, &other, fresh(), &quiet).unwrap();
     let e = files::merge(&shards, &other, false).unwrap_err().to_string();
     assert!(e.contains("already holds another study: trials 2 vs 12"), "{e}");

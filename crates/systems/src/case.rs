@@ -3,7 +3,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sysid_core::{Data, Problem, ProblemError, Unknown};
+use sysid_core::{Data, Expected, Problem, ProblemError, Unknown};
 use sysid_ode::{Integrator, Ivp, OdeError, Scheme, System};
 
 /// A published or exact answer a fit must reproduce, with the tolerance that applies.
@@ -191,6 +191,23 @@ impl<S: System + Clone> Case<S> {
     pub fn expected(&self, name: &str) -> Option<f64> {
         let find = |list: &[(&str, f64)]| list.iter().find(|(n, _)| *n == name).map(|p| p.1);
         self.reference.as_ref().and_then(|r| find(&r.values)).or_else(|| find(&self.truth))
+    }
+
+    /// What a fit of this case is compared with in tables: the reference answer (with its
+    /// cost) if there is one, else the truth; None when neither is known.
+    pub fn expectation(&self) -> Option<Expected> {
+        let label = match (&self.reference, self.truth.is_empty()) {
+            (Some(_), _) => "reference",
+            (None, false) => "truth",
+            (None, true) => return None,
+        };
+        let values = self
+            .unknowns
+            .iter()
+            .filter_map(|u| self.expected(&u.name).map(|v| (u.name.clone(), v)))
+            .collect();
+        let cost = self.reference.as_ref().map(|r| (r.cost, r.source));
+        Some(Expected { label, values, cost })
     }
 
     /// The expected values of all unknowns in order, if every one is known.

@@ -1,0 +1,295 @@
+//! The option groups several commands share: where the problem comes from, the method and
+//! its budgets, multistart, the integrator, and the output format.
+
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+use sysid_core::DriverOptions;
+use sysid_ode::{Integrator, Scheme};
+use sysid_registry::{ENTRIES, Role, Settings, Start};
+
+/// Output format of reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum Format {
+    /// A readable table.
+    #[default]
+    Table,
+    /// The JSON object documented in docs/json.md.
+    Json,
+}
+
+/// `--system NAME` or `--model FILE [--data CSV]`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SourceArgs {
+    /// A catalogue system (`sysid systems` lists them).
+    #[arg(long, value_name = "NAME", conflicts_with = "model")]
+    pub system: Option<String>,
+    /// A model file (TOML; its keys in docs/model-files.md).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    // A catalogue system has data of its own: --data with --system is an error, not ignored.
+    // `requires = "model"` alone does not refuse it: clap drops a requirement that conflicts
+    // with an argument given (--model conflicts with --system).
+    /// The data file (CSV) to use instead of the model file's `[data] file`.
+    #[arg(long, value_name = "CSV", requires = "model", conflicts_with = "system")]
+    pub data: Option<PathBuf>,
+    /// Seed of the synthetic data: a catalogue system's noise (fixed data ignore it), and a
+    /// study's trials (trial i draws from the random stream i of this seed).
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    pub seed: u64,
+}
+
+/// The help of `--method`: every method of the registry, one line each.
+fn method_help() -> String {
+    let mut help = String::from("The method:");
+    for e in &ENTRIES {
+        help += &format!("\n  {:<24} {}", e.name, e.description);
+    }
+    help
+}
+
+/// `--method NAME` of the commands that fit with one method.
+#[derive(Args, Debug, Clone)]
+pub struct MethodArg {
+    #[arg(long, value_name = "METHOD", default_value = Role::Default.method(), help = method_help())]
+    pub method: String,
+}
+
+/// `--ql-start`: the first trajectory of quasilinearization.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
+pub enum QlStart {
+    /// The model integrated from the starting guess.
+    #[default]
+    Guess,
+    /// The data for measured states, the guess's trajectory for the others.
+    Data,
+}
+
+/// The command-line options every fitting command shares.
+#[derive(Args, Debug, Clone, Default)]
+pub struct MethodArgs {
+    /// Most updates of the unknowns (default 50).
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub max_iterations: Option<usize>,
+    /// The certificate's tolerance: a fit converged when the first-order optimality of the
+    /// point it returns (the largest cosine between the residual and a sensitivity of a free
+    /// unknown; 0 at a minimum, at most 1) is at most this (default 1e-6, or 100·rtol for an
+    /// integrator looser than rtol 1e-8).
+    #[arg(long, value_name = "TOL", allow_hyphen_values = true)]
+    pub gtol: Option<f64>,
+    /// Hard budget of model integrations per fit, line-search and halving trials included
+    /// (default 10·(k + 1)·(max iterations + 1) for k unknowns).
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub max_integrations: Option<u64>,
+    /// First trajectory of quasilinearization: the model from the guess, or the data.
+    #[arg(long, value_enum, default_value_t = QlStart::Guess)]
+    pub ql_start: QlStart,
+    /// Shooting intervals of multiple-shooting (default: one per 5 sample times, at most 10).
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub shooting_intervals: Option<usize>,
+    /// Hold an unknown at a value for this run, without editing the model file; it then
+    /// counts as known (degrees of freedom, certificate). Repeatable.
+    #[arg(long = "fix", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
+    pub fix: Vec<(String, f64)>,
+}
+
+impl MethodArgs {
+    /// The settings every method shares.
+    pub fn settings(&self) -> Settings {
+        let mut driver = DriverOptions::default();
+        if let Some(m) = self.max_iterations {
+            driver.max_iterations = m;
+        }
+        driver.gtol = self.gtol;
+        driver.max_integrations = self.max_integrations.or(driver.max_integrations);
+        let ql_start = match self.ql_start {
+            QlStart::Guess => Start::Guess,
+            QlStart::Data => Start::Data,
+        };
+        Settings { driver, ql_start, shooting_intervals: self.shooting_intervals }
+    }
+
+    /// Checks the options before anything runs.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if self.shooting_intervals == Some(0) {
+            anyhow::bail!("--shooting-intervals must be at least 1");
+        }
+        for (i, (name, _)) in self.fix.iter().enumerate() {
+            if self.fix[..i].iter().any(|(n, _)| n == name) {
+                anyhow::bail!("--fix {name}=… is given twice: fix each unknown once");
+            }
+        }
+        self.settings().driver.validate().map_err(|e| anyhow::anyhow!("{}", cli_names(e)))
+    }
+}
+
+/// An options error with the command line's spelling of the option.
+fn cli_names(e: sysid_core::OptionsError) -> String {
+    e.to_string()
+        .replace("gtol", "--gtol")
+        .replace("max_integrations", "--max-integrations")
+        .replace("max_iterations", "--max-iterations")
+}
+
+/// `NAME=VALUE` of `--fix`.
+fn parse_fix(s: &str) -> Result<(String, f64), String> {
+    let (name, value) =
+        s.split_once('=').ok_or_else(|| format!("`{s}`: expected NAME=VALUE, as in k1=0.5"))?;
+    let name = name.trim();
+    if name.is_empty() {
+        return Err(format!("`{s}`: the name before `=` is empty"));
+    }
+    let v: f64 =
+        value.trim().parse().map_err(|_| format!("`{s}`: `{}` is not a number", value.trim()))?;
+    if !v.is_finite() {
+        return Err(format!("`{s}`: the value must be a finite number"));
+    }
+    Ok((name.to_string(), v))
+}
+
+/// `--starts`: multistart for `fit` and `compare`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct StartsArgs {
+    /// Fit from N starts instead of one, in parallel: the guess, then a Latin hypercube of
+    /// N − 1 starts within the bounds of unknowns bounded on both sides, ±ρ (--start-spread)
+    /// around the guess for the others. Prints the best fit and how many starts reached it,
+    /// with the distinct minima found.
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub starts: Option<usize>,
+    /// Seed of the starts' Latin hypercube (default 1).
+    #[arg(long, value_name = "SEED", allow_negative_numbers = true)]
+    pub starts_seed: Option<u64>,
+    /// ρ of --starts for unknowns without two bounds: guess·(1 + ρu), u uniform on [−1, 1]
+    /// (guess·(1 + ρ)^u on a log scale, ρu for a guess of 0). Default 0.5.
+    #[arg(long, value_name = "RHO", allow_hyphen_values = true)]
+    pub start_spread: Option<f64>,
+}
+
+impl StartsArgs {
+    /// The multistart options, when --starts was given.
+    pub fn options(&self) -> anyhow::Result<Option<sysid_montecarlo::MultistartOptions>> {
+        let defaults = sysid_montecarlo::MultistartOptions::default();
+        let spread = self.start_spread.unwrap_or(defaults.spread);
+        if !(spread > 0.0 && spread.is_finite()) {
+            anyhow::bail!("--start-spread must be a positive number, got {spread}");
+        }
+        let Some(starts) = self.starts else {
+            if self.start_spread.is_some() || self.starts_seed.is_some() {
+                let option =
+                    if self.start_spread.is_some() { "--start-spread" } else { "--starts-seed" };
+                anyhow::bail!("{option} needs --starts N");
+            }
+            return Ok(None);
+        };
+        if starts == 0 {
+            anyhow::bail!("--starts must be at least 1");
+        }
+        Ok(Some(sysid_montecarlo::MultistartOptions {
+            starts,
+            seed: self.starts_seed.unwrap_or(defaults.seed),
+            spread,
+        }))
+    }
+}
+
+/// The integration scheme, by its command-line name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SchemeArg {
+    /// Dormand–Prince 5(4), adaptive (explicit; the default for non-stiff systems).
+    Dopri5,
+    /// Classical Runge–Kutta 4 with the fixed step --fixed-step (explicit).
+    Rk4,
+    /// Rodas4, a Rosenbrock method of order 4 with exact Jacobians (implicit, for stiff
+    /// systems).
+    Rodas4,
+    /// DOPRI5, switching to Rodas4 when the steps become limited by stability.
+    Auto,
+}
+
+impl From<SchemeArg> for Scheme {
+    fn from(s: SchemeArg) -> Self {
+        match s {
+            SchemeArg::Dopri5 => Scheme::Dopri5,
+            SchemeArg::Rk4 => Scheme::Rk4,
+            SchemeArg::Rodas4 => Scheme::Rodas4,
+            SchemeArg::Auto => Scheme::Auto,
+        }
+    }
+}
+
+/// Integrator settings that replace the system's or model file's where given.
+#[derive(Args, Debug, Clone, Copy, Default)]
+pub struct IntegratorArgs {
+    /// Integration scheme (default: the system's or model file's).
+    #[arg(long, value_enum, value_name = "SCHEME")]
+    pub integrator: Option<SchemeArg>,
+    /// Relative tolerance of the integrator (default: the system's).
+    #[arg(long, value_name = "RTOL", allow_negative_numbers = true)]
+    pub rtol: Option<f64>,
+    /// Absolute tolerance of the integrator (default: the system's).
+    #[arg(long, value_name = "ATOL", allow_negative_numbers = true)]
+    pub atol: Option<f64>,
+    /// A fixed step size (required by rk4; turns error control off for the others).
+    #[arg(long = "fixed-step", value_name = "H", allow_negative_numbers = true)]
+    pub fixed_step: Option<f64>,
+    /// Step budget of one integration (default 100000).
+    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    pub max_steps: Option<usize>,
+}
+
+impl IntegratorArgs {
+    /// Whether any integrator option was given.
+    pub fn given(&self) -> bool {
+        self.integrator.is_some()
+            || self.rtol.is_some()
+            || self.atol.is_some()
+            || self.fixed_step.is_some()
+            || self.max_steps.is_some()
+    }
+
+    /// `integrator` with the settings given on the command line.
+    pub fn apply_to(&self, integrator: Integrator) -> anyhow::Result<Integrator> {
+        self.validate()?;
+        let mut out = integrator;
+        if let Some(scheme) = self.integrator {
+            out.scheme = scheme.into();
+            // A fixed step belongs to the scheme it was given for.
+            out.fixed_step = None;
+        }
+        out.rtol = self.rtol.unwrap_or(out.rtol);
+        out.atol = self.atol.unwrap_or(out.atol);
+        if self.fixed_step.is_some() {
+            out.fixed_step = self.fixed_step;
+        }
+        out.max_steps = self.max_steps.unwrap_or(out.max_steps);
+        if out.scheme == Scheme::Rk4 && out.fixed_step.is_none() {
+            anyhow::bail!("--integrator rk4 needs a step size: add --fixed-step H");
+        }
+        out.validate().map_err(|e| anyhow::anyhow!("integrator: {e}"))?;
+        Ok(out)
+    }
+
+    /// Checks each value given, naming its option (the combination with the system's or
+    /// model file's settings is checked once applied).
+    fn validate(&self) -> anyhow::Result<()> {
+        if let Some(rtol) = self.rtol
+            && !(rtol > 0.0 && rtol.is_finite())
+        {
+            anyhow::bail!("--rtol must be positive, got {rtol}");
+        }
+        if let Some(atol) = self.atol
+            && !(atol >= 0.0 && atol.is_finite())
+        {
+            anyhow::bail!("--atol must be non-negative, got {atol}");
+        }
+        if let Some(h) = self.fixed_step
+            && !(h > 0.0 && h.is_finite())
+        {
+            anyhow::bail!("--fixed-step must be positive, got {h}");
+        }
+        if self.max_steps == Some(0) {
+            anyhow::bail!("--max-steps must be at least 1");
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,115 @@
+//! What the commands write: standard output that tolerates a closed pipe, files written
+//! whole and announced, progress bars, the times of CSV rows, and the multistart line.
+
+use std::path::Path;
+
+use anyhow::{anyhow, bail};
+use indicatif::{ProgressBar, ProgressStyle};
+use sysid_core::format::significant;
+use sysid_montecarlo::multistart::Starts;
+
+/// Writes `text` to standard output. A reader that has gone away (`sysid ... | head`) is not
+/// an error: there is nobody left to tell.
+pub fn emit(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e.into()),
+        _ => Ok(()),
+    }
+}
+
+/// Writes CSV `text` to standard output, or to `out` (through a temporary file of our own
+/// beside it, never a user's `out.partial`, renamed: the file is old or new, never half;
+/// errors name the user's path) and then says on stderr what was written where.
+pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
+    let Some(path) = out else { return emit(text) };
+    sysid_montecarlo::files::write_atomically(path, text)?;
+    let rows = text.lines().count().saturating_sub(1);
+    let columns = text.lines().next().map_or(0, |h| h.split(',').count());
+    eprintln!("wrote {rows} rows of {columns} columns (CSV) to {}", path.display());
+    Ok(())
+}
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+pub fn progress_bar(total: u64, unit: &str) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    let template = format!("{{bar:40}} {{pos}}/{{len}} {unit}, {{per_sec}}, {{eta}} left");
+    bar.set_style(ProgressStyle::with_template(&template).expect("a valid template"));
+    bar
+}
+
+/// The most output times (CSV rows) a command writes. More is a step given in the wrong
+/// unit, and would not fit in memory (predict asked for 40 TB at --step 1e-12).
+pub const MAX_TIMES: usize = 10_000_000;
+
+/// Parses `a:b:step` into the times a, a + step, …, up to b (inclusive within rounding).
+pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
+    let parts: Vec<&str> = spec.split(':').collect();
+    let [a, b, h] = parts[..] else { bail!("--times must be a:b:step, got `{spec}`") };
+    let number = |s: &str| -> anyhow::Result<f64> {
+        let v: f64 = s.trim().parse().map_err(|_| anyhow!("--times: `{s}` is not a number"))?;
+        if !v.is_finite() {
+            bail!("--times: `{s}` is not a finite number");
+        }
+        Ok(v)
+    };
+    let (a, b, h) = (number(a)?, number(b)?, number(h)?);
+    if h <= 0.0 || b < a {
+        bail!("--times a:b:step needs a ≤ b and step > 0, got {spec}");
+    }
+    spaced(a, b, h, &format!("--times {spec}"))
+}
+
+/// The times a, a + h, …, up to b (inclusive within rounding), for a ≤ b and h > 0; `what`
+/// names the options that asked for them in the error when they are more than [`MAX_TIMES`].
+/// Each time is rounded to 15 significant digits, so that 0 + 3·0.1 is the 0.3 a user wrote
+/// (printed `0.3`, not `0.30000000000000004`): the rounding moves it by at most 5e-16
+/// relative, below the error of the sum itself.
+pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
+    let n = intervals((b - a) / h + 1e-9, what)?;
+    Ok((0..=n).map(|i| decimal(a + h * i as f64)).collect())
+}
+
+/// `t` rounded to 15 significant digits: the float nearest to its short decimal form.
+pub fn decimal(t: f64) -> f64 {
+    format!("{t:.14e}").parse().unwrap_or(t)
+}
+
+/// The number of intervals `count` (rounded down), refused when the times would be more
+/// than [`MAX_TIMES`]; `what` names the options that asked for them.
+pub fn intervals(count: f64, what: &str) -> anyhow::Result<usize> {
+    if count.is_nan() || count >= MAX_TIMES as f64 {
+        bail!(
+            "{what} asks for {:.1e} times, more than the {MAX_TIMES} a command writes",
+            count + 1.0
+        );
+    }
+    Ok(count.floor() as usize)
+}
+
+/// The text of a multistart's `starts` object.
+pub fn describe_starts(s: &Starts) -> String {
+    let plural = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+    let minima: Vec<String> = s
+        .minima
+        .iter()
+        .map(|m| format!("ε = {} ({})", significant(m.cost, 10), plural(m.count, "start")))
+        .collect();
+    format!(
+        "{} in {:.1} ms (the guess, then a Latin hypercube, seed {}, ρ {}): {} converged, {} reached the best (start {}); {}: {}",
+        plural(s.count, "start"),
+        s.elapsed_ms,
+        s.seed,
+        s.spread,
+        s.converged,
+        s.reached_best,
+        s.best_start,
+        if s.minima.len() == 1 {
+            "1 distinct minimum".to_string()
+        } else {
+            format!("{} distinct minima", s.minima.len())
+        },
+        if minima.is_empty() { "none".to_string() } else { minima.join(", ") }
+    )
+}

@@ -1,0 +1,6 @@
+//! The integration tests of sysid-cli, one binary: a module per file (one link instead of one
+//! per file, and the generic methods instantiated once for all of them).
+
+mod cli;
+mod model_files;
+mod study;
