@@ -13,7 +13,7 @@ use std::path::PathBuf;
 use serde_json::{Value, json};
 use sysid::core::Samples;
 use sysid::ode::System;
-use sysid::registry::{Boxed, Settings, entries};
+use sysid::registry::{Boxed, Registry, Settings};
 use sysid::systems::{self, Case, Visit, stress};
 
 const CASES: [&str; 4] = ["rate-on-bound", "two-sided-bound", "compartment-chain", "slow-rates"];
@@ -78,7 +78,7 @@ fn write_reference_data() {
 /// The laboratory's methods, from the registry, with the default settings.
 fn methods<S: System>() -> Vec<Boxed<S>> {
     let settings = Settings::default();
-    entries::<S>().iter().map(|e| (e.build)(&settings)).collect()
+    Registry::<S>::standard().build_all(&settings).into_iter().map(|(_, m)| m).collect()
 }
 
 /// Every method from the case's default start against the reference.

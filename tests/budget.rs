@@ -5,7 +5,7 @@
 use proptest::prelude::*;
 use sysid::core::{Data, DriverOptions, Problem, Unknown};
 use sysid::ode::Integrator;
-use sysid::registry::{Boxed, Settings, entries};
+use sysid::registry::{Boxed, Registry, Settings};
 use sysid::systems::stress::Tracking;
 
 /// The hard budget of these tests: small, so that a runaway shows at once.
@@ -14,7 +14,7 @@ const BUDGET: u64 = 40;
 fn methods() -> Vec<Boxed<Tracking>> {
     let driver = DriverOptions { max_integrations: Some(BUDGET), ..DriverOptions::default() };
     let settings = Settings { driver, ..Settings::default() };
-    entries::<Tracking>().iter().map(|e| (e.build)(&settings)).collect()
+    Registry::<Tracking>::standard().build_all(&settings).into_iter().map(|(_, m)| m).collect()
 }
 
 /// A value m·10^e with e spread over the usable range.

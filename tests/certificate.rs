@@ -17,13 +17,13 @@ use rand_chacha::ChaCha8Rng;
 use sysid::core::{Problem, Termination};
 use sysid::montecarlo::perturb;
 use sysid::ode::{Integrator, System};
-use sysid::registry::{Boxed, Settings, entries};
+use sysid::registry::{Boxed, Registry, Settings};
 use sysid::systems::{self, Case, Visit, stress};
 
 /// The laboratory's methods, from the registry, with the default settings.
 fn methods<S: System>() -> Vec<Boxed<S>> {
     let settings = Settings::default();
-    entries::<S>().iter().map(|e| (e.build)(&settings)).collect()
+    Registry::<S>::standard().build_all(&settings).into_iter().map(|(_, m)| m).collect()
 }
 
 /// The cost an independent search may find below a certified point: 1e-6 relative, or the

@@ -12,7 +12,7 @@
 //! whose path after many iterations far from the minimum amplifies it likewise (LV's
 //! quasilinearization: 3e-11). There it is 1e-9.
 
-mod twins;
+use crate::twins;
 
 use sysid::core::{Estimate, Termination};
 use sysid::model::ModelSystem;
@@ -36,9 +36,8 @@ fn every_method_fits_the_twins_as_the_dual_path_does() {
         let dual = twins::file_problem(name, 1, true);
         let rhs = symbolic.system().symbolic_rhs().expect("symbolic derivatives");
         assert_eq!(rhs.is_compiled(), cfg!(feature = "jit"), "compiled by the jit feature");
-        for entry in registry.entries() {
-            let method = (entry.build)(&Settings::default());
-            let what = format!("{name}, {}", entry.name);
+        for (method_name, method) in registry.build_all(&Settings::default()) {
+            let what = format!("{name}, {method_name}");
             let (a, b) = match (method.fit(&symbolic), method.fit(&dual)) {
                 (Ok(a), Ok(b)) => (a, b),
                 (Err(a), Err(b)) => {
@@ -51,7 +50,7 @@ fn every_method_fits_the_twins_as_the_dual_path_does() {
             assert_eq!(kind(&a), kind(&b), "{what}: {:?} vs {:?}", a.termination, b.termination);
             assert_eq!(a.iterations, b.iterations, "{what}");
             let converged = matches!(a.termination, Termination::Converged(_));
-            let (cost, estimates) = match (converged, entry.name.starts_with("quasilinearization"))
+            let (cost, estimates) = match (converged, method_name.starts_with("quasilinearization"))
             {
                 (true, false) => (RTOL, RTOL),
                 (true, true) => (RTOL, AMPLIFIED),

@@ -1,7 +1,7 @@
 //! Random expressions: printed, parsed back and compiled, they evaluate as an independent
 //! tree walk does, and their dual-number derivatives agree with finite differences.
 
-mod common;
+use crate::common;
 
 use common::{expressions, resolve};
 use num_dual::Dual64;

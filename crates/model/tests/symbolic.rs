@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-mod common;
+use crate::common;
 
 use common::{expressions, resolve};
 use num_dual::{Dual64, HyperDual64};

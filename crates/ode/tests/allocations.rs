@@ -6,8 +6,6 @@
 use std::alloc::{GlobalAlloc, Layout, System as Heap};
 use std::cell::Cell;
 
-mod common;
-
 use sysid_ode::{Integrator, Ivp, Wrt};
 use sysid_systems::VanDerPol;
 

@@ -1,7 +1,7 @@
 //! Integrators against closed forms: accuracy, dense output, direction, order of
 //! convergence, discontinuities, and the errors that replace panics.
 
-mod common;
+use crate::common;
 
 use common::Oscillator;
 use sysid_ode::testing::Decay;

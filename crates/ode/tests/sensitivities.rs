@@ -1,7 +1,7 @@
 //! Forward sensitivities against closed forms and finite differences; Jacobians by dual
 //! numbers against finite differences (property tests); quadratures against closed forms.
 
-mod common;
+use crate::common;
 
 use common::Oscillator;
 use nalgebra::DMatrix;

@@ -4,7 +4,7 @@
 //! central differences, closed forms for order, dense output and direction, and the
 //! automatic choice.
 
-mod common;
+use crate::common;
 
 use common::{Oscillator, robertson_rates, stiff_reference};
 use sysid_ode::testing::Decay;

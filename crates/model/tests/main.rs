@@ -1,0 +1,9 @@
+//! The integration tests of sysid-model, one binary: a module per file (one link instead of one
+//! per file, and the generic methods instantiated once for all of them).
+
+mod common;
+
+mod allocations;
+mod expressions;
+mod model_file;
+mod symbolic;

@@ -1,0 +1,9 @@
+//! The integration tests of sysid-ode, one binary: a module per file (one link instead of one
+//! per file, and the generic methods instantiated once for all of them).
+
+mod common;
+
+mod allocations;
+mod integrators;
+mod sensitivities;
+mod stiff;
