@@ -1,15 +1,14 @@
 //! `sysid compare`: every chosen method on the same data from the same start.
 
 use clap::Args;
-use sysid_core::format::significant;
-use sysid_core::{Estimate, Problem};
+use sysid_core::{Compared, Estimate, Problem, compact, compact_header, comparison};
 use sysid_montecarlo::multistart::Starts;
 use sysid_ode::System;
 use sysid_registry::ENTRIES;
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArgs, SourceArgs, StartsArgs};
-use crate::output::{describe_starts, emit};
+use crate::output::emit;
 use crate::problem::{
     Context, WithProblem, best_of_starts, method, no_source, prepare, with_problem, with_starts,
 };
@@ -115,100 +114,30 @@ impl WithProblem for CompareProblem<'_> {
                 }),
             })
             .collect();
+        let compared: Vec<Compared<'_>> = rows
+            .iter()
+            .map(|row| Compared {
+                method: &row.method,
+                fit: row.result.as_ref().map(|r| &r.0).map_err(String::as_str),
+                note: row.result.as_ref().ok().and_then(|r| r.1.as_ref()).map(|s| {
+                    match self.args.verbose {
+                        true => s.to_string(),
+                        false => {
+                            format!("best of {} starts ({} reached it)", s.count, s.reached_best)
+                        }
+                    }
+                }),
+            })
+            .collect();
         let text = match self.args.verbose {
-            true => table(&problem, &context, &rows),
-            false => compact(&context, &rows),
+            true => format!(
+                "{}: {}\n{}",
+                context.name,
+                context.summary,
+                comparison(&problem.names(), context.expected.as_ref(), &compared)
+            ),
+            false => compact(&context.name, &compared),
         };
         Ok((text, json))
     }
-}
-
-/// The header of the compact lines.
-fn compact_header() -> String {
-    format!(
-        "{:<24} {:<24} {:>4} {:>5} {:>18} {:>10}  {}\n",
-        "system", "method", "conv", "iter", "cost ε", "time ms", "termination"
-    )
-}
-
-/// One line per method: converged, iterations, cost, time and how it ended.
-fn compact(context: &Context, rows: &[Row]) -> String {
-    let mut out = String::new();
-    for row in rows {
-        out += &match &row.result {
-            Ok((e, starts)) => format!(
-                "{:<24} {:<24} {:>4} {:>5} {:>18} {:>10.3}  {}{}\n",
-                context.name,
-                row.method,
-                if e.converged() { "yes" } else { "no" },
-                e.iterations,
-                significant(e.cost, 10),
-                e.elapsed.as_secs_f64() * 1e3,
-                e.termination.code(),
-                starts.as_ref().map_or(String::new(), |s| format!(
-                    ", best of {} starts ({} reached it)",
-                    s.count, s.reached_best
-                )),
-            ),
-            Err(message) => format!("{:<24} {:<24} error: {message}\n", context.name, row.method),
-        };
-    }
-    out
-}
-
-/// One table: a row per method, the estimates under their unknowns with the truth or
-/// reference in the header.
-fn table<S: System>(problem: &Problem<S>, context: &Context, rows: &[Row]) -> String {
-    let mut out = format!("{}: {}\n", context.name, context.summary);
-    let unknowns = problem.names();
-    let expected = context.expected.as_ref();
-    let mut header = format!(
-        "  {:<16} {:>5} {:>5} {:>18} {:>10}",
-        "method", "conv", "iter", "cost ε", "time ms"
-    );
-    for name in &unknowns {
-        header += &format!(" {:>16}", name);
-    }
-    out += &header;
-    out += "\n";
-    // The truth or reference answer under the header, where there is one.
-    if let Some(expected) = expected {
-        let mut line =
-            format!("  {:<16} {:>5} {:>5} {:>18} {:>10}", expected.label, "", "", "", "");
-        for name in &unknowns {
-            line += &format!(
-                " {:>16}",
-                expected.value(name).map_or(String::new(), |v| significant(v, 8))
-            );
-        }
-        out += &line;
-        out += "\n";
-    }
-    for row in rows {
-        match &row.result {
-            Ok((e, starts)) => {
-                let mut line = format!(
-                    "  {:<24} {:>5} {:>5} {:>18} {:>10.3}",
-                    row.method,
-                    if e.converged() { "yes" } else { "no" },
-                    e.iterations,
-                    significant(e.cost, 10),
-                    e.elapsed.as_secs_f64() * 1e3
-                );
-                for v in &e.values {
-                    line += &format!(" {:>16}", significant(*v, 8));
-                }
-                out += &line;
-                out += "\n";
-                if !e.converged() {
-                    out += &format!("  {:<24} └ {}\n", "", e.termination);
-                }
-                if let Some(s) = starts {
-                    out += &format!("  {:<24} └ {}\n", "", describe_starts(s));
-                }
-            }
-            Err(message) => out += &format!("  {:<24} error: {message}\n", row.method),
-        }
-    }
-    out
 }

@@ -6,7 +6,7 @@ use sysid_ode::System;
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
-use crate::output::{describe_starts, emit};
+use crate::output::emit;
 use crate::problem::{Context, WithProblem, fit_from_starts, prepare, with_problem, with_starts};
 
 /// Arguments of `sysid fit`.
@@ -61,7 +61,7 @@ impl WithProblem for FitProblem<'_> {
             Format::Table => {
                 let mut text = table(&context, &estimate);
                 if let Some(s) = &starts {
-                    text += &format!("\n  starts       {}\n", describe_starts(s));
+                    text += &format!("\n  starts       {}\n", s);
                 }
                 emit(&text)?
             }

@@ -5,8 +5,7 @@ use std::path::Path;
 
 use anyhow::{anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
-use sysid_core::format::significant;
-use sysid_montecarlo::multistart::Starts;
+use sysid_model::simulate::decimal;
 
 /// Writes `text` to standard output. A reader that has gone away (`sysid ... | head`) is not
 /// an error: there is nobody left to tell.
@@ -63,17 +62,10 @@ pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
 
 /// The times a, a + h, …, up to b (inclusive within rounding), for a ≤ b and h > 0; `what`
 /// names the options that asked for them in the error when they are more than [`MAX_TIMES`].
-/// Each time is rounded to 15 significant digits, so that 0 + 3·0.1 is the 0.3 a user wrote
-/// (printed `0.3`, not `0.30000000000000004`): the rounding moves it by at most 5e-16
-/// relative, below the error of the sum itself.
+/// Each time is the decimal a user would write ([`decimal`]): 0 + 3·0.1 is 0.3.
 pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
     let n = intervals((b - a) / h + 1e-9, what)?;
     Ok((0..=n).map(|i| decimal(a + h * i as f64)).collect())
-}
-
-/// `t` rounded to 15 significant digits: the float nearest to its short decimal form.
-pub fn decimal(t: f64) -> f64 {
-    format!("{t:.14e}").parse().unwrap_or(t)
 }
 
 /// The number of intervals `count` (rounded down), refused when the times would be more
@@ -86,30 +78,4 @@ pub fn intervals(count: f64, what: &str) -> anyhow::Result<usize> {
         );
     }
     Ok(count.floor() as usize)
-}
-
-/// The text of a multistart's `starts` object.
-pub fn describe_starts(s: &Starts) -> String {
-    let plural = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
-    let minima: Vec<String> = s
-        .minima
-        .iter()
-        .map(|m| format!("ε = {} ({})", significant(m.cost, 10), plural(m.count, "start")))
-        .collect();
-    format!(
-        "{} in {:.1} ms (the guess, then a Latin hypercube, seed {}, ρ {}): {} converged, {} reached the best (start {}); {}: {}",
-        plural(s.count, "start"),
-        s.elapsed_ms,
-        s.seed,
-        s.spread,
-        s.converged,
-        s.reached_best,
-        s.best_start,
-        if s.minima.len() == 1 {
-            "1 distinct minimum".to_string()
-        } else {
-            format!("{} distinct minima", s.minima.len())
-        },
-        if minima.is_empty() { "none".to_string() } else { minima.join(", ") }
-    )
 }

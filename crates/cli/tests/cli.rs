@@ -569,7 +569,7 @@ fn starts_return_the_best_fit_and_count_the_minima() {
     let alone = sysid(&[&args[..], &["--start-spread", "0.3"]].concat());
     assert_eq!(alone.status.code(), Some(2));
     assert!(text(&alone.stderr).contains("--start-spread needs --starts"));
-    let table = sysid(&[
+    let compare = [
         "compare",
         "--system",
         "lotka-volterra",
@@ -577,20 +577,10 @@ fn starts_return_the_best_fit_and_count_the_minima() {
         "gauss-newton-ls,multiple-shooting",
         "--starts",
         "4",
-    ]);
-    let table = text(&table.stdout);
+    ];
+    let table = text(&sysid(&compare).stdout);
     assert_eq!(table.matches("best of 4 starts").count(), 2, "{table}");
-    let verbose = sysid(&[
-        "compare",
-        "--system",
-        "lotka-volterra",
-        "--methods",
-        "gauss-newton-ls,multiple-shooting",
-        "--starts",
-        "4",
-        "--verbose",
-    ]);
-    let verbose = text(&verbose.stdout);
+    let verbose = text(&sysid(&[&compare[..], &["--verbose"]].concat()).stdout);
     assert_eq!(verbose.matches("└ 4 starts in").count(), 2, "{verbose}");
 }
 

@@ -57,6 +57,6 @@ pub use options::{DEFAULT_GTOL, DriverOptions, OptionsError};
 pub use plan::{PlannedSeries, RESIDUAL_PANELS, Sample, Sampled};
 pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL};
 pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};
-pub use table::Expected;
+pub use table::{Compared, Expected, compact, compact_header, comparison};
 pub use termination::{Failure, Rule, Termination};
 pub use unknowns::{Unknown, Unknowns};

@@ -145,6 +145,98 @@ impl Estimate {
     }
 }
 
+/// One method's line in a comparison of methods on one problem.
+pub struct Compared<'a> {
+    /// The method as asked for.
+    pub method: &'a str,
+    /// Its fit, or why there is none.
+    pub fit: Result<&'a Estimate, &'a str>,
+    /// A line about how the fit was found (a multistart's outcome), if any.
+    pub note: Option<String>,
+}
+
+/// The header of [`compact`]'s lines.
+pub fn compact_header() -> String {
+    format!(
+        "{:<24} {:<24} {:>4} {:>5} {:>18} {:>10}  {}\n",
+        "system", "method", "conv", "iter", "cost ε", "time ms", "termination"
+    )
+}
+
+/// A comparison in one line per method: system, method, converged, iterations, cost, time,
+/// the termination code and the note.
+pub fn compact(system: &str, rows: &[Compared<'_>]) -> String {
+    let mut out = String::new();
+    for row in rows {
+        out += &match &row.fit {
+            Ok(e) => format!(
+                "{system:<24} {:<24} {:>4} {:>5} {:>18} {:>10.3}  {}{}\n",
+                row.method,
+                if e.converged() { "yes" } else { "no" },
+                e.iterations,
+                significant(e.cost, 10),
+                e.elapsed.as_secs_f64() * 1e3,
+                e.termination.code(),
+                row.note.as_ref().map_or(String::new(), |n| format!(", {n}")),
+            ),
+            Err(message) => format!("{system:<24} {:<24} error: {message}\n", row.method),
+        };
+    }
+    out
+}
+
+/// A comparison as a table: a row per method with its estimates under the `unknowns`, the
+/// expected values under the header where known, and below a row why it did not converge
+/// and its note.
+pub fn comparison(
+    unknowns: &[String],
+    expected: Option<&Expected>,
+    rows: &[Compared<'_>],
+) -> String {
+    let lead = |a: &str, b: &str, c: &str, d: &str, e: &str| {
+        format!("  {a:<24} {b:>5} {c:>5} {d:>18} {e:>10}")
+    };
+    let mut out = lead("method", "conv", "iter", "cost ε", "time ms");
+    for name in unknowns {
+        out += &format!(" {name:>16}");
+    }
+    out += "\n";
+    if let Some(expected) = expected {
+        out += &lead(expected.label, "", "", "", "");
+        for name in unknowns {
+            let v = expected.value(name).map_or(String::new(), |v| significant(v, 8));
+            out += &format!(" {v:>16}");
+        }
+        out += "\n";
+    }
+    for row in rows {
+        match &row.fit {
+            Ok(e) => {
+                out += &format!(
+                    "  {:<24} {:>5} {:>5} {:>18} {:>10.3}",
+                    row.method,
+                    if e.converged() { "yes" } else { "no" },
+                    e.iterations,
+                    significant(e.cost, 10),
+                    e.elapsed.as_secs_f64() * 1e3
+                );
+                for v in &e.values {
+                    out += &format!(" {:>16}", significant(*v, 8));
+                }
+                out += "\n";
+                if !e.converged() {
+                    out += &format!("  {:<24} └ {}\n", "", e.termination);
+                }
+            }
+            Err(message) => out += &format!("  {:<24} error: {message}\n", row.method),
+        }
+        if let Some(note) = &row.note {
+            out += &format!("  {:<24} └ {note}\n", "");
+        }
+    }
+    out
+}
+
 impl fmt::Display for Estimate {
     /// [`table`](Estimate::table) without expected values.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

@@ -44,6 +44,7 @@ pub mod expr;
 pub mod file;
 #[cfg(feature = "jit")]
 mod jit;
+pub mod simulate;
 pub mod symbolic;
 mod system;
 pub mod table;

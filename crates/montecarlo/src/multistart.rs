@@ -19,6 +19,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
+use sysid_core::format::significant;
 use sysid_core::{Estimate, FitError, Method, Problem, Unknown};
 use sysid_ode::System;
 
@@ -70,6 +71,35 @@ pub struct Starts {
     pub minima: Vec<Minimum>,
     /// Wall-clock time of all the fits, in milliseconds.
     pub elapsed_ms: f64,
+}
+
+impl std::fmt::Display for Starts {
+    /// "20 starts in 31.2 ms (…): 18 converged, 12 reached the best (start 0); 2 distinct
+    /// minima: ε = … (12 starts), ε = … (6 starts)".
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let plural = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
+        let minima: Vec<String> = self
+            .minima
+            .iter()
+            .map(|m| format!("ε = {} ({})", significant(m.cost, 10), plural(m.count, "start")))
+            .collect();
+        write!(
+            f,
+            "{} in {:.1} ms (the guess, then a Latin hypercube, seed {}, ρ {}): {} converged, {} reached the best (start {}); {}: {}",
+            plural(self.count, "start"),
+            self.elapsed_ms,
+            self.seed,
+            self.spread,
+            self.converged,
+            self.reached_best,
+            self.best_start,
+            match self.minima.len() {
+                1 => "1 distinct minimum".to_string(),
+                n => format!("{n} distinct minima"),
+            },
+            if minima.is_empty() { "none".to_string() } else { minima.join(", ") }
+        )
+    }
 }
 
 /// One minimum the starts reached.
