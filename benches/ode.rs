@@ -31,7 +31,7 @@ impl Visit for Bench<'_, '_> {
     fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) {
         let problem = case.problem(1).expect("catalogue problems build");
         let (y0, p) = case.true_point();
-        let (times, wrt) = (&problem.sampled().times, problem.unknowns().wrt());
+        let (times, wrt) = (&problem.sampled().times, problem.experiments()[0].slots());
         let Integrator { rtol, atol, .. } = *problem.integrator();
         // An explicit integrator on a stiff case takes ~10⁵ steps: allow them.
         let ours = [

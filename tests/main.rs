@@ -8,5 +8,6 @@ mod bounded;
 mod budget;
 mod certificate;
 mod docs;
+mod experiments;
 mod model_twins;
 mod paper_goodman_1966;

@@ -27,6 +27,10 @@ pub struct PredictArgs {
     method: MethodArg,
     #[command(flatten)]
     options: MethodArgs,
+    /// Only this experiment (default: all; with several, a first column names each row's
+    /// experiment).
+    #[arg(long, value_name = "NAME")]
+    experiment: Option<String>,
     /// Write to this file instead of standard output.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
@@ -58,18 +62,24 @@ impl WithProblem for Predict<'_> {
     ) -> anyhow::Result<Outcome> {
         let args = self.args;
         let problem = prepare(problem, &args.integrator, &args.options)?;
-        let t0 = problem.t0();
-        if args.until <= t0 {
-            bail!("--until {} must lie after t0 = {t0}", args.until);
-        }
-        let step = args.step.unwrap_or((args.until - t0) / 200.0);
-        if !(step > 0.0 && step.is_finite()) {
-            bail!("--step must be positive, got {step}");
-        }
-        let what = format!("--step {step:e} from t0 = {t0} to --until {}", args.until);
-        let mut times = spaced(t0, args.until, step, &what)?;
-        if times.last().is_some_and(|&t| t < args.until) {
-            times.push(args.until);
+        let experiments: Vec<usize> = match &args.experiment {
+            None => (0..problem.experiments().len()).collect(),
+            Some(name) => match problem.experiments().iter().position(|e| e.name() == name) {
+                Some(i) => vec![i],
+                None => {
+                    let names: Vec<&str> = problem.experiments().iter().map(|e| e.name()).collect();
+                    bail!(
+                        "--experiment {name}: no such experiment (experiments: {})",
+                        names.join(", ")
+                    );
+                }
+            },
+        };
+        for &i in &experiments {
+            let (t0, name) = (problem.experiments()[i].t0(), problem.experiments()[i].name());
+            if args.until <= t0 {
+                bail!("--until {} must lie after t0 = {t0} (experiment `{name}`)", args.until);
+            }
         }
         let estimate = fit(&problem, &args.method.method, &args.options.settings())?;
         if !estimate.converged() {
@@ -90,22 +100,42 @@ impl WithProblem for Predict<'_> {
                 context.name
             );
         }
-        let states = problem.trajectory(&estimate.values, band, &times)?;
-        let mut text = String::from("t");
-        for s in &states {
-            text += &format!(",{n},{n}_lower,{n}_upper", n = s.name);
-        }
-        text += "\n";
-        for (m, t) in times.iter().enumerate() {
-            text += &format!("{t}");
-            for s in &states {
-                let y = s.values[m];
-                match &s.half_width {
-                    Some(w) => text += &format!(",{y},{},{}", y - w[m], y + w[m]),
-                    None => text += &format!(",{y},,"),
-                }
+        let several = experiments.len() > 1;
+        let mut text = String::new();
+        for i in experiments {
+            let e = &problem.experiments()[i];
+            let t0 = e.t0();
+            let step = args.step.unwrap_or((args.until - t0) / 200.0);
+            if !(step > 0.0 && step.is_finite()) {
+                bail!("--step must be positive, got {step}");
             }
-            text += "\n";
+            let what = format!("--step {step:e} from t0 = {t0} to --until {}", args.until);
+            let mut times = spaced(t0, args.until, step, &what)?;
+            if times.last().is_some_and(|&t| t < args.until) {
+                times.push(args.until);
+            }
+            let states = problem.trajectory(i, &estimate.values, band, &times)?;
+            if text.is_empty() {
+                text += if several { "experiment,t" } else { "t" };
+                for s in &states {
+                    text += &format!(",{n},{n}_lower,{n}_upper", n = s.name);
+                }
+                text += "\n";
+            }
+            for (m, t) in times.iter().enumerate() {
+                if several {
+                    text += &format!("{},", e.name());
+                }
+                text += &format!("{t}");
+                for s in &states {
+                    let y = s.values[m];
+                    match &s.half_width {
+                        Some(w) => text += &format!(",{y},{},{}", y - w[m], y + w[m]),
+                        None => text += &format!(",{y},,"),
+                    }
+                }
+                text += "\n";
+            }
         }
         write_output(args.out.as_deref(), &text)?;
         Ok(Outcome::Success)

@@ -28,6 +28,10 @@ pub struct SimulateArgs {
     /// otherwise. Repeat for several.
     #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
     set: Vec<String>,
+    /// Only this experiment of a model file with [[experiments]] (default: all, a first
+    /// column naming each row's experiment).
+    #[arg(long, value_name = "NAME")]
+    experiment: Option<String>,
     /// Sample spacing for a catalogue record given as a function (continuous systems).
     #[arg(long, default_value_t = 0.001, value_name = "DT", allow_negative_numbers = true)]
     step: f64,
@@ -70,7 +74,8 @@ fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
         }
         set.push((name.trim().to_string(), value));
     }
-    Ok(Model::load(path)?.simulate(&set, args.source.data.as_deref(), &times)?)
+    let model = Model::load(path)?;
+    Ok(model.simulate(&set, args.source.data.as_deref(), &times, args.experiment.as_deref())?)
 }
 
 struct DataOf {

@@ -148,6 +148,9 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
                     fitted.termination
                 );
             }
+            // The noise scales at the values the fit estimated them at.
+            let scales: Vec<f64> = fitted.scales.iter().map(|s| s.value).collect();
+            let problem = problem.with_scales(&scales);
             let scenario = Scenario::from_residuals(problem, fitted.values)?;
             run_scenario(args, &path.display().to_string(), scenario, methods, settings)
         }

@@ -545,3 +545,37 @@ fn assert_certified(fit: &serde_json::Value) {
     assert_eq!(fit["converged"], true, "{fit}");
     assert!(code.starts_with("converged_"), "{fit}");
 }
+
+/// The two-dose example from the command line: the JSON's likelihood keys, a prediction and
+/// a simulation per experiment, and an unknown experiment refused by name.
+#[test]
+fn several_experiments_from_the_command_line() {
+    let model =
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples/two-doses/model.toml").to_string();
+    let out = sysid(&["fit", "--model", &model, "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(json["nll"].as_f64().is_some() && json["aic"].as_f64().is_some());
+    let experiments = json["experiments"].as_array().unwrap();
+    assert_eq!(experiments.len(), 2);
+    assert_eq!(experiments[0]["name"], "low");
+    assert_eq!(experiments[1]["points"], 20);
+    // The noise scale is an estimate like the others.
+    assert!(json["estimates"]["sigma_B"].as_f64().is_some());
+    assert!(json["std_errors"]["sigma_B"].as_f64().is_some());
+    let table = text(&sysid(&["fit", "--model", &model]).stdout);
+    assert!(table.contains("nll") && table.contains("experiment   high"), "{table}");
+
+    let out = sysid(&["predict", "--model", &model, "--until", "12", "--experiment", "high"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).starts_with("t,A,A_lower,A_upper,"));
+    let both = text(&sysid(&["predict", "--model", &model, "--until", "12"]).stdout);
+    assert!(both.starts_with("experiment,t,") && both.contains("\nhigh,"), "{both}");
+
+    let sim = text(&sysid(&["simulate", "--model", &model, "--times", "0:2:1"]).stdout);
+    assert_eq!(sim.lines().next(), Some("experiment,t,A,B,C,Bm,Ct"));
+    assert_eq!(sim.lines().count(), 1 + 2 * 3);
+    let out = sysid(&["predict", "--model", &model, "--until", "12", "--experiment", "mid"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("no such experiment (experiments: low, high)"));
+}

@@ -9,7 +9,7 @@ use sysid_ode::System;
 
 use crate::certificate::{Certificate, certify};
 use crate::confidence::interval;
-use crate::estimate::{Estimate, Iteration};
+use crate::estimate::{Estimate, ExperimentFit, Iteration, ScaleEstimate};
 use crate::evaluate::Linearization;
 use crate::evaluations::Evaluations;
 use crate::linalg::NormalFactor;
@@ -163,7 +163,7 @@ impl<S: System> Record<'_, S> {
         let std_errors: Option<Vec<f64>> = covariance.as_ref().map(|c| {
             (0..c.nrows()).map(|i| if held[i] { f64::NAN } else { c[(i, i)].sqrt() }).collect()
         });
-        let dof = problem.n_observations().map(|n| n.saturating_sub(free));
+        let dof = problem.n_observations().map(|n| n.saturating_sub(free + problem.scales().len()));
         let intervals = match (&std_errors, dof) {
             (Some(se), Some(dof)) if dof > 0 => Some(
                 unknowns
@@ -194,25 +194,119 @@ impl<S: System> Record<'_, S> {
             history,
             elapsed: self.started.elapsed(),
             counts: ev.counts(),
+            nll: lin.and_then(|l| problem.nll(l)),
+            experiments: problem
+                .experiments()
+                .iter()
+                .enumerate()
+                .map(|(i, e)| ExperimentFit {
+                    name: e.name().to_string(),
+                    points: e.data().n_observations().unwrap_or(0),
+                    nll: lin.and_then(|l| problem.experiment_nlls(l)).map(|list| list[i]),
+                })
+                .collect(),
+            scales: Vec::new(),
+            noise_model: problem.has_noise_model(),
         }
     }
 }
 
+/// The estimate of a fit in rounds between closed-form updates of the noise scales (see
+/// [`drive`](crate::drive)): the last round's, on the whole history, with the scales at the
+/// values that round held (`held`) and their part of the certificate, `moved`, the largest
+/// relative change the closed form would still make.
+pub(crate) fn with_scales<S: System>(
+    problem: &Problem<S>,
+    held: &Problem<S>,
+    rounds: Vec<Estimate>,
+    moved: f64,
+    gtol: f64,
+) -> Estimate {
+    let (iterations, counts) = rounds.iter().fold((0, sysid_ode::Counts::default()), |acc, e| {
+        let mut c = acc.1;
+        c += e.counts;
+        (acc.0 + e.iterations, c)
+    });
+    let mut history = Vec::new();
+    let mut offset = 0;
+    let elapsed = rounds.iter().map(|e| e.elapsed).sum();
+    let mut last = None;
+    for (r, e) in rounds.into_iter().enumerate() {
+        // A round starts where the last one stopped: that row is there already.
+        history.extend(e.history.iter().skip(usize::from(r > 0)).cloned().map(|mut row| {
+            row.iteration += offset;
+            row
+        }));
+        offset += e.iterations;
+        last = Some(e);
+    }
+    let mut e = last.expect("at least one round");
+    e.best_iteration += offset - e.iterations;
+    e.iterations = iterations;
+    e.history = history;
+    e.counts = counts;
+    e.elapsed = elapsed;
+    let optimality = e.certificate.optimality.max(moved);
+    if !e.certificate.exact_fit
+        && optimality > gtol
+        && e.certificate.holds()
+        && let Termination::Converged(rule) = e.termination
+    {
+        e.termination = Termination::Stalled { rule, iteration: iterations, optimality };
+    }
+    e.certificate.optimality = optimality;
+    let converged = e.certificate.holds();
+    let counts_per_scale = held.scale_samples();
+    e.scales = held
+        .scales()
+        .iter()
+        .zip(counts_per_scale)
+        .map(|(&j, n)| {
+            let u = &problem.declared()[j];
+            let value =
+                held.scale_values()[held.scales().iter().position(|&s| s == j).expect("a scale")];
+            let (lo, hi) = (u.min.unwrap_or(f64::NEG_INFINITY), u.max.unwrap_or(f64::INFINITY));
+            let bound = if value <= lo {
+                Some(crate::certificate::Bound::Lower)
+            } else if value >= hi {
+                Some(crate::certificate::Bound::Upper)
+            } else {
+                None
+            };
+            // Fisher information of s: 2n/s² (n samples of normal noise).
+            let std_error =
+                (converged && bound.is_none() && n > 0).then(|| value / (2.0 * n as f64).sqrt());
+            let interval = match (std_error, e.dof) {
+                (Some(se), Some(dof)) if dof > 0 => interval(value, se, dof, u.log),
+                _ => None,
+            };
+            ScaleEstimate { name: u.name.clone(), value, std_error, interval, bound }
+        })
+        .collect();
+    e
+}
+
 impl<S: System> Problem<S> {
-    /// Covariance of the estimates (as values) from the normal matrix at the estimate, scaled
-    /// by the residual variance s² = ε / (N − k):  Cov = s² A⁻¹, transformed to values by the
-    /// delta method. Unknowns `held` on a bound are not estimated there: the covariance is
-    /// that of the free ones, s² (A_FF)⁻¹ with s² = ε / (N − k_free), and the held ones' rows
-    /// and columns are 0. `None` when there are no more data than free unknowns (no residual
-    /// variance), for a record given as a function (no count N), or when A_FF is singular.
+    /// Covariance of the estimates (as values) from the normal matrix at the estimate,
+    /// transformed to values by the delta method. With a noise model it is the inverse
+    /// Fisher information, A⁻¹ (σ given or estimated); with relative weights the noise's
+    /// scale is estimated from the residuals: s² A⁻¹, s² = ε / (N − k). Unknowns `held` on a
+    /// bound are not estimated there: the covariance is that of the free ones, with
+    /// N − k_free, and the held ones' rows and columns are 0. `None` when there are no more
+    /// data than free unknowns, for a record given as a function (no count N), or when A_FF
+    /// is singular.
     pub fn covariance(&self, lin: &Linearization, held: &[bool]) -> Option<DMatrix<f64>> {
         let k = self.unknowns.len();
         let free: Vec<usize> = (0..k).filter(|&i| !held.get(i).copied().unwrap_or(false)).collect();
         let n = self.n_observations()?;
-        if n <= free.len() || free.is_empty() {
+        let estimated = free.len() + self.scales().len();
+        if n <= estimated || free.is_empty() {
             return None;
         }
-        let s2 = lin.cost / (n - free.len()) as f64;
+        let s2 = match self.has_noise_model() {
+            true => 1.0,
+            false => lin.cost / (n - free.len()) as f64,
+        };
         let block = lin.normal.select_rows(&free).select_columns(&free);
         let inverse = NormalFactor::new(&block, f64::INFINITY).ok()?.inverse();
         let scale: Vec<f64> =

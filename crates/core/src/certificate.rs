@@ -93,7 +93,7 @@ pub fn optimality<S: System>(
     gtol: f64,
 ) -> (f64, Vec<Option<Bound>>) {
     let k = lin.gradient.len();
-    let norm_r = lin.cost.sqrt();
+    let norm_r = lin.norm;
     let finite = lin.cost.is_finite()
         && lin.gradient.iter().all(|v| v.is_finite())
         && lin.normal.iter().all(|v| v.is_finite());
@@ -132,7 +132,7 @@ pub fn certify<S: System>(
     max_condition: f64,
 ) -> Certificate {
     let (measure, active) = optimality(problem, lin, gtol);
-    let exact_fit = lin.cost.is_finite() && lin.cost.sqrt() <= EXACT_FIT * problem.data_norm();
+    let exact_fit = lin.cost.is_finite() && lin.norm <= EXACT_FIT * problem.data_norm();
     let null_space = if lin.normal.iter().all(|v| v.is_finite()) {
         NormalFactor::new(&lin.normal, max_condition).err().map(|s| {
             let names = problem.names();

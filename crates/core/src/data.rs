@@ -3,6 +3,8 @@
 
 use std::sync::Arc;
 
+use crate::noise::{Noise, Transform};
+
 /// Measured values of one quantity.
 #[derive(Clone)]
 pub enum Samples {
@@ -39,6 +41,11 @@ pub struct Series {
     /// Per-sample weights w_{o,m} multiplying w_o, for noise whose variance changes from
     /// sample to sample (relative noise); discrete data only. `None`: all 1.
     pub sample_weights: Option<Vec<f64>>,
+    /// The noise model (discrete data only). `None`: the weights above are relative weights
+    /// (σ = 1/√w for the likelihood, the covariance scaled by the residual variance).
+    pub noise: Option<Noise>,
+    /// The scale the residuals are formed on (discrete data only).
+    pub transform: Transform,
 }
 
 /// Whether the data are samples or a continuous record.
@@ -94,6 +101,28 @@ impl Data {
             weight,
             samples: Samples::Points { times: times.to_vec(), values: values.to_vec() },
             sample_weights: None,
+            noise: None,
+            transform: Transform::Lin,
+        });
+        self
+    }
+
+    /// Adds samples of `name` with a noise model, residuals on the scale `transform`.
+    pub fn series_with_noise(
+        mut self,
+        name: &str,
+        times: &[f64],
+        values: &[f64],
+        noise: Noise,
+        transform: Transform,
+    ) -> Self {
+        self.series.push(Series {
+            name: name.into(),
+            weight: 1.0,
+            samples: Samples::Points { times: times.to_vec(), values: values.to_vec() },
+            sample_weights: None,
+            noise: Some(noise),
+            transform,
         });
         self
     }
@@ -112,6 +141,8 @@ impl Data {
             weight: 1.0,
             samples: Samples::Points { times: times.to_vec(), values: values.to_vec() },
             sample_weights: Some(weights.to_vec()),
+            noise: None,
+            transform: Transform::Lin,
         });
         self
     }
@@ -128,8 +159,16 @@ impl Data {
             weight,
             samples: Samples::Function(Arc::new(b)),
             sample_weights: None,
+            noise: None,
+            transform: Transform::Lin,
         });
         self
+    }
+
+    /// Whether any series has a noise model (then the likelihood is the objective and the
+    /// covariance is the inverse Fisher information, not scaled by the residual variance).
+    pub fn has_noise_model(&self) -> bool {
+        self.series.iter().any(|s| s.noise.is_some())
     }
 
     /// Number of measured values: all samples of discrete data, the samples inside the span of

@@ -17,6 +17,14 @@
 //! failure, a budget) returns the best iterate so far, with its history. Either way the
 //! certificate is computed at the returned point and decides `converged`: a rule without the
 //! certificate is [`Termination::Stalled`].
+//!
+//! Noise scales (σ = s·f of a series, s an unknown used for nothing else) are not moved by
+//! the method: the driver holds them while the method fits the rest, then sets each to its
+//! closed form given the rest, ŝ² = mean over its samples of ((T(h) − T(b))/f)² (clamped to
+//! its bounds), and lets the method fit again from where it stopped (hierarchical
+//! optimisation, Loos et al., Bioinformatics 2018). The rounds end when a round's fit is
+//! certified and the scales move by less than 1e-3·gtol relative; the scales' part of the
+//! certificate is that relative move.
 use std::time::Instant;
 
 use sysid_ode::System;
@@ -32,9 +40,57 @@ use crate::problem::Problem;
 use crate::step::{Advance, Iterate, Step};
 use crate::termination::Rule;
 
-/// Runs `step` from `start` (values of the unknowns) on `problem` and returns the estimate
-/// of method `method`. `Err` only for misuse: invalid options or start.
+/// Runs `step` from `start` (values of the free unknowns) on `problem` and returns the
+/// estimate of method `method`. `Err` only for misuse: invalid options or start.
 pub fn drive<S: System>(
+    problem: &Problem<S>,
+    method: &str,
+    options: &DriverOptions,
+    step: &mut impl Step<S>,
+    start: &[f64],
+) -> Result<Estimate, FitError> {
+    if problem.scales().is_empty() {
+        return drive_once(problem, method, options, step, start);
+    }
+    options.validate()?;
+    let gtol = options.gtol_for(problem.integrator().rtol);
+    let mut sigma = problem.scale_values();
+    let mut z = start.to_vec();
+    let mut rounds: Vec<Estimate> = Vec::new();
+    loop {
+        let used: usize = rounds.iter().map(|e| e.iterations).sum();
+        let spent: u64 = rounds.iter().map(|e| e.counts.integrations).sum();
+        let round_options = DriverOptions {
+            max_iterations: options.max_iterations.saturating_sub(used),
+            max_integrations: Some(
+                options.integration_budget(problem.unknowns().len()).saturating_sub(spent).max(1),
+            ),
+            ..*options
+        };
+        let held = problem.with_scales(&sigma);
+        let estimate = drive_once(&held, method, &round_options, step, &z)?;
+        let next = held.optimal_scales(&estimate.values);
+        let moved = next.as_ref().map_or(f64::INFINITY, |next| {
+            next.iter().zip(&sigma).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max)
+        });
+        let last = estimate.start_failed()
+            || !estimate.converged()
+            || moved <= 1e-3 * gtol
+            || estimate.iterations >= round_options.max_iterations
+            || rounds.len() + 1 >= MAX_ROUNDS;
+        rounds.push(estimate);
+        if last {
+            return Ok(crate::assemble::with_scales(problem, &held, rounds, moved, gtol));
+        }
+        sigma = next.expect("a finite move");
+        z = rounds.last().expect("a round").values.clone();
+    }
+}
+
+/// The most rounds of fits between closed-form updates of the noise scales.
+const MAX_ROUNDS: usize = 50;
+
+fn drive_once<S: System>(
     problem: &Problem<S>,
     method: &str,
     options: &DriverOptions,

@@ -101,6 +101,9 @@ pub enum ProblemError {
     /// The integrator settings are invalid.
     #[error("integrator: {0}")]
     Integrator(String),
+    /// The experiments, their settings or the unknowns they use do not fit together.
+    #[error("{0}")]
+    Experiments(String),
 }
 
 /// Misuse of a method: a start of the wrong length, data the method cannot handle.

@@ -82,6 +82,43 @@ pub struct Estimate {
     pub elapsed: Duration,
     /// Work done by all integrations of the fit.
     pub counts: Counts,
+    /// The negative log-likelihood at the estimate, PEtab's constants included (None for a
+    /// continuous record). With relative weights w (no noise model) σ = 1/√w: ε/2 +
+    /// Σ ½ ln(2π/w).
+    pub nll: Option<f64>,
+    /// Each experiment's name, measured values and negative log-likelihood.
+    pub experiments: Vec<ExperimentFit>,
+    /// The noise scales set in closed form (σ = s·f), estimated with the rest.
+    pub scales: Vec<ScaleEstimate>,
+    /// Whether the problem has a noise model (tables then show the likelihood).
+    pub noise_model: bool,
+}
+
+/// One experiment's share of a fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExperimentFit {
+    /// Its name.
+    pub name: String,
+    /// Its measured values.
+    pub points: usize,
+    /// Its negative log-likelihood at the estimate.
+    pub nll: Option<f64>,
+}
+
+/// A noise scale's estimate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScaleEstimate {
+    /// The unknown's name.
+    pub name: String,
+    /// Its value.
+    pub value: f64,
+    /// Its standard error s/√(2n) from the Fisher information (n its samples), when the fit
+    /// converged.
+    pub std_error: Option<f64>,
+    /// Its 95 % interval (Student's t on the fit's degrees of freedom).
+    pub interval: Option<[f64; 2]>,
+    /// The bound it is held on, when the closed form falls outside its bounds.
+    pub bound: Option<Bound>,
 }
 
 impl Estimate {
@@ -96,13 +133,38 @@ impl Estimate {
         matches!(self.termination, Termination::StartFailed(_))
     }
 
-    /// The unknowns held on a bound, with which.
+    /// The unknowns held on a bound, with which (noise scales included).
     pub fn active_bounds(&self) -> Vec<(&str, Bound)> {
         self.names
             .iter()
             .zip(&self.certificate.active)
             .filter_map(|(n, b)| b.map(|b| (n.as_str(), b)))
+            .chain(self.scales.iter().filter_map(|s| s.bound.map(|b| (s.name.as_str(), b))))
             .collect()
+    }
+
+    /// Every estimated unknown's name: the free ones, then the noise scales.
+    pub fn all_names(&self) -> Vec<String> {
+        self.names.iter().cloned().chain(self.scales.iter().map(|s| s.name.clone())).collect()
+    }
+
+    /// The number of measured values N (None for a record given as a function).
+    fn n_observations(&self) -> Option<usize> {
+        self.experiments.iter().map(|e| Some(e.points)).sum::<Option<usize>>().filter(|&n| n > 0)
+    }
+
+    /// Akaike's information criterion 2k + 2·NLL, k every estimated unknown (noise scales
+    /// included, those held on a bound too).
+    pub fn aic(&self) -> Option<f64> {
+        let k = (self.names.len() + self.scales.len()) as f64;
+        self.nll.map(|nll| 2.0 * k + 2.0 * nll)
+    }
+
+    /// The Bayesian information criterion k ln N + 2·NLL.
+    pub fn bic(&self) -> Option<f64> {
+        let k = (self.names.len() + self.scales.len()) as f64;
+        let n = self.n_observations()? as f64;
+        self.nll.map(|nll| k * n.ln() + 2.0 * nll)
     }
     /// Same as [`converged`](Self::converged).
     pub fn succeeded(&self) -> bool {
@@ -176,19 +238,22 @@ impl Serialize for Iteration {
 impl Serialize for FitRecord<'_> {
     fn serialize<Z: Serializer>(&self, s: Z) -> Result<Z::Ok, Z::Error> {
         let e = self.estimate;
-        let mut st = s.serialize_struct("Fit", 22)?;
+        let mut st = s.serialize_struct("Fit", 26)?;
         st.serialize_field("system", self.system)?;
         st.serialize_field("method", &e.method)?;
         st.serialize_field("converged", &e.converged())?;
         st.serialize_field("iterations", &e.iterations)?;
         st.serialize_field("cost", &Num(e.cost))?;
-        let values: Vec<Num> = e.values.iter().map(|&v| Num(v)).collect();
-        st.serialize_field("estimates", &Named(&e.names, &values))?;
+        let names = e.all_names();
+        let values: Vec<Num> =
+            e.values.iter().chain(e.scales.iter().map(|s| &s.value)).map(|&v| Num(v)).collect();
+        st.serialize_field("estimates", &Named(&names, &values))?;
+        let scale_errors = e.scales.iter().map(|s| Num(s.std_error.unwrap_or(f64::NAN)));
         let errors: Vec<Num> = match &e.std_errors {
-            Some(se) => se.iter().map(|&v| Num(v)).collect(),
-            None => e.names.iter().map(|_| Num(f64::NAN)).collect(),
+            Some(se) => se.iter().map(|&v| Num(v)).chain(scale_errors).collect(),
+            None => names.iter().map(|_| Num(f64::NAN)).collect(),
         };
-        st.serialize_field("std_errors", &Named(&e.names, &errors))?;
+        st.serialize_field("std_errors", &Named(&names, &errors))?;
         st.serialize_field("history", &e.history)?;
         st.serialize_field("elapsed_ms", &(e.elapsed.as_secs_f64() * 1e3))?;
         st.serialize_field("termination", &e.termination.to_string())?;
@@ -201,14 +266,14 @@ impl Serialize for FitRecord<'_> {
             active.iter().map(|(n, b)| (n.to_string(), *b)).unzip();
         st.serialize_field("active_bounds", &Named(&names, &bounds))?;
         st.serialize_field("dof", &e.dof)?;
+        let finite =
+            |&[a, b]: &[f64; 2]| (a.is_finite() && b.is_finite()).then_some([Num(a), Num(b)]);
+        let scale_intervals = e.scales.iter().map(|s| s.interval.as_ref().and_then(finite));
         let intervals: Vec<Option<[Num; 2]>> = match &e.intervals {
-            Some(list) => list
-                .iter()
-                .map(|&[a, b]| (a.is_finite() && b.is_finite()).then_some([Num(a), Num(b)]))
-                .collect(),
-            None => e.names.iter().map(|_| None).collect(),
+            Some(list) => list.iter().map(finite).chain(scale_intervals).collect(),
+            None => names.iter().map(|_| None).collect(),
         };
-        st.serialize_field("intervals", &Named(&e.names, &intervals))?;
+        st.serialize_field("intervals", &Named(&names, &intervals))?;
         st.serialize_field("best_iteration", &e.best_iteration)?;
         if let Some(at) = e.termination.failure().and_then(|f| f.at()) {
             let at: Vec<Num> = at.iter().map(|&v| Num(v)).collect();
@@ -225,6 +290,21 @@ impl Serialize for FitRecord<'_> {
             )?;
         }
         st.serialize_field("counts", &e.counts)?;
+        st.serialize_field("nll", &e.nll.map(Num))?;
+        let experiments: Vec<serde_json::Value> = e
+            .experiments
+            .iter()
+            .map(|x| {
+                serde_json::json!({
+                    "name": x.name,
+                    "points": x.points,
+                    "nll": x.nll.filter(|v| v.is_finite()),
+                })
+            })
+            .collect();
+        st.serialize_field("experiments", &experiments)?;
+        st.serialize_field("aic", &e.aic().map(Num))?;
+        st.serialize_field("bic", &e.bic().map(Num))?;
         st.end()
     }
 }

@@ -1,12 +1,23 @@
-//! The evaluation kernels of a [`Problem`]: one integration of the model at the unknowns'
-//! coordinates z, turned into the least-squares quantities every method needs (ε, U, A, the
-//! weighted residuals and their Jacobian, predictions, the measured quantities with bands).
+//! The evaluation kernels of a [`Problem`]: one integration of each experiment at the
+//! unknowns' coordinates z, turned into the least-squares quantities every method needs (ε,
+//! U, A, the weighted residuals and their Jacobian, predictions, the measured quantities with
+//! bands), stacked over the experiments (integrated in parallel when there are several).
+//!
+//! A residual row is R = (T(h) − T(b))/σ on the series' scale T. A row whose σ is a function
+//! of the unknowns gets a second row √(2 ln σ + c) (c = [`NOISE_ROW_SHIFT`]), so that
+//! ε = Σ R² + Σ (2 ln σ + c) is twice the negative log-likelihood up to a constant and still a
+//! sum of squares; the normal matrix A is then the Fisher information
+//! Σ ∇T(h)∇T(h)ᵀ/σ² + 2 ∇ln σ ∇ln σᵀ, which the Gauss–Newton product JᵀJ of those rows
+//! underestimates.
 
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use sysid_ode::{Counts, Integrator, Ivp, Observable, ObservableGradient, OdeError, System};
 
 use crate::confidence::band_half_width;
-use crate::plan::{Plan, Sampled};
+use crate::experiment::Planned;
+use crate::noise::{LN_2PI, NOISE_ROW_SHIFT, NoiseArgs, NoiseGradient};
+use crate::plan::{Plan, PlannedNoise, Sampled};
 use crate::problem::Problem;
 
 /// A measured quantity as the model predicts it: see [`Problem::observed`].
@@ -21,12 +32,13 @@ pub struct Observed {
     pub half_width: Option<Vec<f64>>,
 }
 
-/// Residuals and Jacobian, each row scaled by the square root of its weight so that
-/// ε = ‖r‖², U = Jᵀr and A = JᵀJ. For a continuous record the rows are the record at
-/// Gauss–Legendre nodes (see [`Problem::residuals_and_jacobian`]).
+/// Residuals and Jacobian, each row scaled by 1/σ (the square root of its weight) so that
+/// ε = ‖r‖², U = Jᵀr and (without noise functions) A = JᵀJ. For a continuous record the rows
+/// are the record at Gauss–Legendre nodes (see [`Problem::residuals_and_jacobian`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct WeightedResiduals {
-    /// √w_o (h_o(y(t_m)) − b_{o,m}), series after series, in time order within a series.
+    /// (T(h_o(y(t_m))) − T(b_{o,m}))/σ, series after series, in time order within a series,
+    /// experiment after experiment (each followed by its noise rows).
     pub r: DVector<f64>,
     /// ∂r/∂z.
     pub jacobian: DMatrix<f64>,
@@ -41,112 +53,211 @@ pub struct Linearization {
     pub cost: f64,
     /// U (Goodman eq. 12, continuous eq. 22): half the gradient of ε.
     pub gradient: DVector<f64>,
-    /// A (eq. 15, continuous eq. 24): the Gauss–Newton normal matrix.
+    /// A (eq. 15, continuous eq. 24): the Gauss–Newton normal matrix, the Fisher
+    /// information (in units of ε/2) where σ is a function of the unknowns.
     pub normal: DMatrix<f64>,
     /// The weighted residuals and their Jacobian (discrete data only).
     pub residuals: Option<WeightedResiduals>,
+    /// ‖r‖ as the certificate measures it: the data rows, and each noise row at 1 (its
+    /// shifted size depends on an arbitrary constant).
+    pub norm: f64,
+    /// ε of each experiment's rows.
+    pub experiment_costs: Vec<f64>,
     /// Work done.
     pub counts: Counts,
 }
 
+/// One experiment's rows at a point.
+struct Rows {
+    r: Vec<f64>,
+    /// k entries per row of `r`, when asked for.
+    jacobian: Vec<f64>,
+    /// Fisher rows (k entries each) that replace the function-σ rows in A.
+    fisher: Vec<f64>,
+    /// Whether each row of `r` enters A directly.
+    in_normal: Vec<bool>,
+    /// Σ over data rows of R², and the number of noise rows.
+    data_cost: f64,
+    noise_rows: usize,
+    counts: Counts,
+}
+
+impl<S: System> Planned<S> {
+    /// The number of noise rows (samples whose σ is a function of the unknowns).
+    pub(crate) fn noise_rows(&self) -> usize {
+        self.sampled()
+            .series
+            .iter()
+            .filter(|s| matches!(s.noise, PlannedNoise::Function(_)))
+            .map(|s| s.samples.len())
+            .sum()
+    }
+
+    /// The number of residual rows: a row per sample and a noise row per function-σ sample.
+    pub fn n_rows(&self) -> usize {
+        self.sampled().series.iter().map(|s| s.samples.len()).sum::<usize>() + self.noise_rows()
+    }
+
+    /// The part of the negative log-likelihood that is not ½ ε: ½ ln 2π, ln σ of every
+    /// sample whose σ does not vary, and the log scale's ln b or ln(b ln 10) terms; less
+    /// c/2 per noise row. None for a continuous record.
+    pub fn nll_offset(&self) -> Option<f64> {
+        let Plan::Discrete(sampled) = &self.plan else { return None };
+        let mut offset = 0.0;
+        for s in &sampled.series {
+            for m in &s.samples {
+                offset += 0.5 * LN_2PI + s.transform.jacobian_term(m.measured);
+                offset += match s.noise {
+                    PlannedNoise::Function(_) => -0.5 * NOISE_ROW_SHIFT,
+                    _ => -m.sqrt_weight.ln(),
+                };
+            }
+        }
+        Some(offset)
+    }
+}
+
+/// What one experiment's evaluation needs from the problem at a point.
+struct At<'a> {
+    /// The declared unknowns' values.
+    v: &'a [f64],
+    free_index: &'a [Option<usize>],
+    /// d value / d z of the free unknowns.
+    chain: &'a [f64],
+    integrator: &'a Integrator,
+    jacobian: bool,
+}
+
 impl<S: System> Problem<S> {
-    /// Integrates the model and its sensitivities at z and forms ε, U and A: sums over the
-    /// samples of discrete data (Goodman's eq. 12, 15), integrals over a continuous record
+    /// Integrates every experiment with its sensitivities at z and forms ε, U and A: sums over
+    /// the samples of discrete data (Goodman's eq. 12, 15), integrals over a continuous record
     /// accumulated during the integration (eq. 22, 24).
     pub fn linearize(&self, z: &[f64]) -> Result<Linearization, OdeError> {
-        let (span, outputs) = match &self.plan {
-            Plan::Discrete(sampled) => return self.linearize_sampled(sampled, z),
-            Plan::Continuous { span, outputs, .. } => (*span, outputs),
+        if !self.is_continuous() {
+            return self.linearize_sampled(z);
+        }
+        let k = self.unknowns.len();
+        let (v, free_index, chain) = (self.values_at(z), self.free_index(), self.chain(z));
+        let mut total = Linearization {
+            z: z.to_vec(),
+            cost: 0.0,
+            gradient: DVector::zeros(k),
+            normal: DMatrix::zeros(k, k),
+            residuals: None,
+            norm: 0.0,
+            experiment_costs: Vec::new(),
+            counts: Counts::default(),
         };
-        let (y0, p) = self.point(z);
-        let wrt = self.unknowns.wrt();
-        let k = wrt.len();
-        let q = Ivp::new(&self.system, self.t0, &y0, &p).least_squares_integrals(
-            &self.integrator,
-            wrt,
-            outputs,
-            span,
-            self.quadrature_rtol,
-        )?;
-        let scale = self.chain(z);
-        let gradient = DVector::from_fn(k, |i, _| q.gradient[i] * scale[i]);
-        let normal = DMatrix::from_fn(k, k, |i, j| q.normal[(i, j)] * scale[i] * scale[j]);
-        if !q.cost.is_finite() || normal.iter().chain(gradient.iter()).any(|v| !v.is_finite()) {
+        for e in &self.experiments {
+            let (cost, gradient, normal, counts) = match &e.plan {
+                Plan::Continuous { span, outputs, .. } => {
+                    let (y0, p) = e.point(&v);
+                    let q = Ivp::new(e.system(), e.t0, &y0, &p).least_squares_integrals(
+                        &self.integrator,
+                        &e.slots,
+                        outputs,
+                        *span,
+                        self.quadrature_rtol,
+                    )?;
+                    let dz = slot_matrix(e, &v, &free_index, &chain, k);
+                    (q.cost, dz.tr_mul(&q.gradient), dz.tr_mul(&(&q.normal * &dz)), q.counts)
+                }
+                Plan::Discrete(_) => {
+                    let at = At {
+                        v: &v,
+                        free_index: &free_index,
+                        chain: &chain,
+                        integrator: &self.integrator,
+                        jacobian: true,
+                    };
+                    let rows = experiment_rows(e, &at, k)?;
+                    let (u, a) = rows.normal_equations(k);
+                    (rows.r.iter().map(|x| x * x).sum(), u, a, rows.counts)
+                }
+            };
+            total.cost += cost;
+            total.gradient += gradient;
+            total.normal += normal;
+            total.experiment_costs.push(cost);
+            total.counts += counts;
+        }
+        total.norm = total.cost.sqrt();
+        let span = self.span();
+        if !total.cost.is_finite()
+            || total.normal.iter().chain(total.gradient.iter()).any(|v| !v.is_finite())
+        {
             return Err(OdeError::NonFinite {
                 t: span.0,
                 what: "the least-squares integrals".into(),
             });
         }
-        Ok(Linearization {
-            z: z.to_vec(),
-            cost: q.cost,
-            gradient,
-            normal,
-            residuals: None,
-            counts: q.counts,
-        })
+        Ok(total)
     }
 
     /// The weighted residuals and their Jacobian at z, from one integration with
-    /// sensitivities: what a general least-squares solver works with. Discrete data give
-    /// one row per sample. A continuous record gives one row per node of a composite
+    /// sensitivities of each experiment: what a general least-squares solver works with.
+    /// Discrete data give one row per sample (and a noise row per sample whose σ is a
+    /// function of the unknowns). A continuous record gives one row per node of a composite
     /// Gauss–Legendre rule (4 nodes per panel; panels between the samples of a sampled
-    /// record, [`RESIDUAL_PANELS`] panels over the span for a record given as a function), so
-    /// that ‖r‖² is the quadrature of ε.
+    /// record, [`RESIDUAL_PANELS`](crate::RESIDUAL_PANELS) panels over the span for a record
+    /// given as a function), so that ‖r‖² is the quadrature of ε.
     pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, OdeError> {
-        self.linearize_sampled(self.sampled(), z)
+        self.linearize_sampled(z)
     }
 
-    /// The data in residual form (the rows of [`residuals`](Self::residuals)).
+    /// The data of the first experiment in residual form.
     pub fn sampled(&self) -> &Sampled {
-        match &self.plan {
-            Plan::Discrete(sampled) => sampled,
-            Plan::Continuous { nodes, .. } => nodes,
+        self.experiments[0].sampled()
+    }
+
+    fn evaluate_rows(
+        &self,
+        z: &[f64],
+        integrator: &Integrator,
+        jacobian: bool,
+    ) -> Result<Vec<Rows>, OdeError> {
+        let k = self.unknowns.len();
+        let (v, free_index, chain) = (self.values_at(z), self.free_index(), self.chain(z));
+        let at = At { v: &v, free_index: &free_index, chain: &chain, integrator, jacobian };
+        match self.experiments.len() {
+            1 => Ok(vec![experiment_rows(&self.experiments[0], &at, k)?]),
+            _ => self.experiments.par_iter().map(|e| experiment_rows(e, &at, k)).collect(),
         }
     }
 
-    fn linearize_sampled(&self, plan: &Sampled, z: &[f64]) -> Result<Linearization, OdeError> {
-        let (y0, p) = self.point(z);
-        let wrt = self.unknowns.wrt();
-        let k = wrt.len();
-        let scale = self.chain(z);
-        let times = &plan.times;
-        let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve_sensitivities(
-            &self.integrator,
-            wrt,
-            times,
-        )?;
-        let rows: usize = plan.series.iter().map(|s| s.samples.len()).sum();
+    fn linearize_sampled(&self, z: &[f64]) -> Result<Linearization, OdeError> {
+        let k = self.unknowns.len();
+        let all = self.evaluate_rows(z, &self.integrator, true)?;
+        let rows: usize = all.iter().map(|e| e.r.len()).sum();
         let mut r = DVector::zeros(rows);
         let mut jac = DMatrix::zeros(rows, k);
-        let mut og = ObservableGradient::new(&self.system, &p, wrt);
-        let mut grad = vec![0.0; k];
-        let mut row = 0;
-        for s in &plan.series {
-            for sample in &s.samples {
-                let m = sample.index;
-                let h = og.eval(
-                    times[m],
-                    sol.state(m),
-                    sol.sensitivity_slice(m),
-                    s.observable,
-                    &mut grad,
-                );
-                r[row] = sample.sqrt_weight * (h - sample.value);
+        let mut normal = DMatrix::zeros(k, k);
+        let mut counts = Counts::default();
+        let (mut data_cost, mut noise_rows) = (0.0, 0);
+        let mut at = 0;
+        for e in &all {
+            for (i, &ri) in e.r.iter().enumerate() {
+                r[at + i] = ri;
                 for j in 0..k {
-                    jac[(row, j)] = sample.sqrt_weight * grad[j] * scale[j];
+                    jac[(at + i, j)] = e.jacobian[i * k + j];
                 }
-                row += 1;
             }
+            normal += e.normal_equations(k).1;
+            at += e.r.len();
+            counts += e.counts;
+            data_cost += e.data_cost;
+            noise_rows += e.noise_rows;
         }
-        check_finite(&r, &jac, times)?;
+        let experiment_costs = all.iter().map(|e| e.r.iter().map(|x| x * x).sum()).collect();
         Ok(Linearization {
             z: z.to_vec(),
             cost: r.norm_squared(),
             gradient: jac.tr_mul(&r),
-            normal: jac.tr_mul(&jac),
+            normal,
             residuals: Some(WeightedResiduals { r, jacobian: jac }),
-            counts: sol.counts(),
+            norm: (data_cost + noise_rows as f64).sqrt(),
+            experiment_costs,
+            counts,
         })
     }
 
@@ -164,30 +275,125 @@ impl<S: System> Problem<S> {
     /// fits use, so that every method's iterates are compared on one accurate measure (the
     /// integral itself for a continuous record).
     pub fn cost(&self, z: &[f64]) -> Result<(f64, Counts), OdeError> {
-        let (span, outputs) = match &self.plan {
-            Plan::Discrete(_) => {
-                let (r, counts) = self.residuals_with(&self.cost_integrator(), z)?;
-                return Ok((r.norm_squared(), counts));
-            }
-            Plan::Continuous { span, outputs, .. } => (*span, outputs),
-        };
-        let (y0, p) = self.point(z);
-        let q = Ivp::new(&self.system, self.t0, &y0, &p).least_squares_integrals(
-            &self.cost_integrator(),
-            &[],
-            outputs,
-            span,
-            self.quadrature_rtol,
-        )?;
-        if !q.cost.is_finite() {
-            return Err(OdeError::NonFinite { t: span.0, what: "the cost".into() });
+        if !self.is_continuous() {
+            let (r, counts) = self.residuals_with(&self.cost_integrator(), z)?;
+            return Ok((r.norm_squared(), counts));
         }
-        Ok((q.cost, q.counts))
+        let v = self.values_at(z);
+        let (mut cost, mut counts) = (0.0, Counts::default());
+        for e in &self.experiments {
+            match &e.plan {
+                Plan::Continuous { span, outputs, .. } => {
+                    let (y0, p) = e.point(&v);
+                    let q = Ivp::new(e.system(), e.t0, &y0, &p).least_squares_integrals(
+                        &self.cost_integrator(),
+                        &[],
+                        outputs,
+                        *span,
+                        self.quadrature_rtol,
+                    )?;
+                    cost += q.cost;
+                    counts += q.counts;
+                }
+                Plan::Discrete(_) => {
+                    let at = At {
+                        v: &v,
+                        free_index: &self.free_index(),
+                        chain: &self.chain(z),
+                        integrator: &self.cost_integrator(),
+                        jacobian: false,
+                    };
+                    let rows = experiment_rows(e, &at, self.unknowns.len())?;
+                    cost += rows.r.iter().map(|x| x * x).sum::<f64>();
+                    counts += rows.counts;
+                }
+            }
+        }
+        if !cost.is_finite() {
+            return Err(OdeError::NonFinite { t: self.span().0, what: "the cost".into() });
+        }
+        Ok((cost, counts))
     }
 
     /// Number of rows of [`residuals`](Self::residuals).
     pub fn n_residuals(&self) -> usize {
-        self.sampled().series.iter().map(|s| s.samples.len()).sum()
+        self.experiments.iter().map(|e| e.n_rows()).sum()
+    }
+
+    /// The negative log-likelihood at a linearization's point: ½ ε plus every experiment's
+    /// [`nll_offset`](Planned::nll_offset). None for a continuous record.
+    pub fn nll(&self, lin: &Linearization) -> Option<f64> {
+        self.experiment_nlls(lin).map(|list| list.iter().sum())
+    }
+
+    /// The negative log-likelihood of each experiment at a linearization's point.
+    pub fn experiment_nlls(&self, lin: &Linearization) -> Option<Vec<f64>> {
+        self.experiments
+            .iter()
+            .zip(&lin.experiment_costs)
+            .map(|(e, c)| e.nll_offset().map(|o| 0.5 * c + o))
+            .collect()
+    }
+
+    /// ∂slot/∂z of experiment `experiment` at z: one row per slot, one column per free
+    /// unknown (the chain rule of the settings and of log scales applied).
+    pub fn slot_matrix(&self, experiment: usize, z: &[f64]) -> DMatrix<f64> {
+        let e = &self.experiments[experiment];
+        slot_matrix(e, &self.values_at(z), &self.free_index(), &self.chain(z), self.unknowns.len())
+    }
+
+    /// The number of samples whose σ is each noise scale, in the order of
+    /// [`scales`](Self::scales).
+    pub fn scale_samples(&self) -> Vec<usize> {
+        self.scales
+            .iter()
+            .map(|&j| {
+                self.experiments
+                    .iter()
+                    .flat_map(|e| &e.sampled().series)
+                    .filter(
+                        |s| matches!(s.noise, PlannedNoise::Scale { unknown, .. } if unknown == j),
+                    )
+                    .map(|s| s.samples.len())
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// Each noise scale's value given the free unknowns at `values`: ŝ² = mean over its
+    /// samples of ((T(h) − T(b))/f)², clamped to the scale's bounds. None where the model
+    /// cannot be evaluated.
+    pub fn optimal_scales(&self, values: &[f64]) -> Option<Vec<f64>> {
+        let z = self.unknowns.coordinates(values);
+        let (r, _) = self.residuals(&z).ok()?;
+        let mut sums = vec![(0.0, 0usize); self.scales.len()];
+        let mut row = 0;
+        for e in &self.experiments {
+            for s in &e.sampled().series {
+                if let PlannedNoise::Scale { unknown, .. } = s.noise
+                    && let Some(g) = self.scales.iter().position(|&j| j == unknown)
+                {
+                    // r = (T(h) − T(b))/(s f): (r s)² is the squared scaled residual.
+                    let scale = self.held[unknown];
+                    for i in row..row + s.samples.len() {
+                        sums[g].0 += (r[i] * scale).powi(2);
+                        sums[g].1 += 1;
+                    }
+                }
+                row += s.samples.len();
+            }
+            row += e.noise_rows();
+        }
+        let out: Vec<f64> = sums
+            .iter()
+            .zip(&self.scales)
+            .map(|(&(sum, n), &j)| {
+                let u = &self.declared[j];
+                let lo = u.min.unwrap_or(0.0).max(f64::MIN_POSITIVE);
+                (sum / n as f64).sqrt().clamp(lo, u.max.unwrap_or(f64::INFINITY))
+            })
+            .collect();
+        out.iter().all(|v| v.is_finite() && *v > 0.0).then_some(out)
     }
 
     /// The weighted residual vector at z, without sensitivities: the rows of
@@ -201,65 +407,108 @@ impl<S: System> Problem<S> {
         integrator: &Integrator,
         z: &[f64],
     ) -> Result<(DVector<f64>, Counts), OdeError> {
-        let (h, counts) = self.predictions_with(integrator, z)?;
-        let samples = self.sampled().series.iter().flat_map(|s| &s.samples);
-        let r = DVector::from_iterator(
-            h.len(),
-            h.iter().zip(samples).map(|(h, s)| s.sqrt_weight * (h - s.value)),
-        );
-        if let Some(i) = r.iter().position(|v| !v.is_finite()) {
-            let t = self.sampled().times[0];
-            return Err(OdeError::NonFinite { t, what: format!("residual {i}") });
+        let all = self.evaluate_rows(z, integrator, false)?;
+        let mut counts = Counts::default();
+        let mut r = Vec::with_capacity(self.n_residuals());
+        for e in all {
+            r.extend(e.r);
+            counts += e.counts;
         }
-        Ok((r, counts))
+        Ok((DVector::from_vec(r), counts))
     }
 
-    /// The model's values h_o(t_m) of every measured quantity at z, row by row as the
-    /// residuals (series after series, samples in time order; for a continuous record, at
-    /// the nodes of its residual form), from a plain integration 10 times tighter than the
-    /// fits use: what noise-free data at z would be.
+    /// The model's values h_o(t_m) of every measured quantity at z (untransformed), one per
+    /// sample in the order of the residual rows (without the noise rows), from a plain
+    /// integration 10 times tighter than the fits use: what noise-free data at z would be.
     pub fn predictions(&self, z: &[f64]) -> Result<Vec<f64>, OdeError> {
-        let (h, _) = self.predictions_with(&self.cost_integrator(), z)?;
+        let v = self.values_at(z);
+        let mut h = Vec::new();
+        for e in &self.experiments {
+            let (y0, p) = e.point(&v);
+            let sampled = e.sampled();
+            let sol = Ivp::new(e.system(), e.t0, &y0, &p)
+                .solve(&self.cost_integrator(), &sampled.times)?;
+            let mut og = ObservableGradient::new(e.system(), &p, &[]);
+            for s in &sampled.series {
+                for sample in &s.samples {
+                    let m = sample.index;
+                    h.push(og.eval(sampled.times[m], sol.state(m), &[], s.observable, &mut []));
+                }
+            }
+        }
         if let Some(i) = h.iter().position(|v| !v.is_finite()) {
-            let t = self.sampled().times[0];
-            return Err(OdeError::NonFinite { t, what: format!("prediction {i}") });
+            return Err(OdeError::NonFinite { t: self.span().0, what: format!("prediction {i}") });
         }
         Ok(h)
     }
 
-    fn predictions_with(
-        &self,
-        integrator: &Integrator,
-        z: &[f64],
-    ) -> Result<(Vec<f64>, Counts), OdeError> {
-        let plan = self.sampled();
-        let (y0, p) = self.point(z);
-        let times = &plan.times;
-        let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve(integrator, times)?;
-        let mut og = ObservableGradient::new(&self.system, &p, &[]);
-        let mut h = Vec::with_capacity(self.n_residuals());
-        for s in &plan.series {
-            for sample in &s.samples {
-                let m = sample.index;
-                h.push(og.eval(times[m], sol.state(m), &[], s.observable, &mut []));
+    /// The noise's σ of every sample at z, in the order of [`predictions`](Self::predictions):
+    /// 1/√w for relative weights, the known σ, the noise scale times its factor, or the noise
+    /// function evaluated at the model's states and value there.
+    pub fn sigmas(&self, z: &[f64]) -> Result<Vec<f64>, OdeError> {
+        let v = self.values_at(z);
+        let mut out = Vec::new();
+        for e in &self.experiments {
+            let (y0, p) = e.point(&v);
+            let sampled = e.sampled();
+            let functions =
+                sampled.series.iter().any(|s| matches!(s.noise, PlannedNoise::Function(_)));
+            let sol = match functions {
+                true => Some(
+                    Ivp::new(e.system(), e.t0, &y0, &p)
+                        .solve(&self.cost_integrator(), &sampled.times)?,
+                ),
+                false => None,
+            };
+            let mut og = ObservableGradient::new(e.system(), &p, &[]);
+            let (n, np) = (y0.len(), p.len());
+            for s in &sampled.series {
+                for sample in &s.samples {
+                    let sigma = match (&s.noise, &sol) {
+                        (PlannedNoise::Function(f), Some(sol)) => {
+                            let (t, y) = (sampled.times[sample.index], sol.state(sample.index));
+                            let h = og.eval(t, y, &[], s.observable, &mut []);
+                            let (mut dy, mut dp, mut dv) =
+                                (vec![0.0; n], vec![0.0; np], vec![0.0; v.len()]);
+                            let mut g =
+                                NoiseGradient { y: &mut dy, h: 0.0, p: &mut dp, v: &mut dv };
+                            f.eval(NoiseArgs { t, y, h, p: &p, v: &v }, &mut g)
+                        }
+                        _ => 1.0 / sample.sqrt_weight,
+                    };
+                    out.push(sigma);
+                }
             }
         }
-        Ok((h, sol.counts()))
+        Ok(out)
     }
 
-    /// Every measured quantity of the model at `values` of the unknowns, at `times` (sorted;
-    /// on either side of t0), with the half-width of its 95 % band from `band`, the
-    /// covariance of the values and the t quantile of the fit's degrees of freedom
-    /// ([`Estimate::band`](crate::Estimate::band)): t √(g Cov gᵀ), g = ∂h/∂(values) from the
-    /// sensitivities. What a fit predicts for the measurements, with its uncertainty.
+    /// Every measured quantity of the first experiment at `values` of the unknowns, at
+    /// `times` (sorted; on either side of t0), with the half-width of its 95 % band from
+    /// `band`, the covariance of the values and the t quantile of the fit's degrees of
+    /// freedom ([`Estimate::band`](crate::Estimate::band)): t √(g Cov gᵀ), g = ∂h/∂(values)
+    /// from the sensitivities. What a fit predicts for the measurements, with its
+    /// uncertainty.
     pub fn observed(
         &self,
         values: &[f64],
         band: Option<(&DMatrix<f64>, f64)>,
         times: &[f64],
     ) -> Result<Vec<Observed>, OdeError> {
-        let signature = self.system.signature();
-        let quantities: Vec<(String, Observable)> = self
+        self.observed_in(0, values, band, times)
+    }
+
+    /// [`observed`](Self::observed) for experiment `experiment`.
+    pub fn observed_in(
+        &self,
+        experiment: usize,
+        values: &[f64],
+        band: Option<(&DMatrix<f64>, f64)>,
+        times: &[f64],
+    ) -> Result<Vec<Observed>, OdeError> {
+        let e = &self.experiments[experiment];
+        let signature = e.system().signature();
+        let quantities: Vec<(String, Observable)> = e
             .sampled()
             .series
             .iter()
@@ -271,41 +520,47 @@ impl<S: System> Problem<S> {
                 (name, series.observable)
             })
             .collect();
-        self.along(values, band, times, &quantities)
+        self.along(experiment, values, band, times, &quantities)
     }
 
-    /// Every state of the model at `values` of the unknowns, at `times`, with the
-    /// half-width of its 95 % band, as [`observed`](Self::observed) gives the measured
+    /// Every state of experiment `experiment` at `values` of the unknowns, at `times`, with
+    /// the half-width of its 95 % band, as [`observed`](Self::observed) gives the measured
     /// quantities: the trajectory a fit predicts.
     pub fn trajectory(
         &self,
+        experiment: usize,
         values: &[f64],
         band: Option<(&DMatrix<f64>, f64)>,
         times: &[f64],
     ) -> Result<Vec<Observed>, OdeError> {
-        let states = self.system.signature().states();
+        let states = self.experiments[experiment].system.signature().states();
         let quantities: Vec<(String, Observable)> =
             states.iter().enumerate().map(|(i, n)| (n.clone(), Observable::State(i))).collect();
-        self.along(values, band, times, &quantities)
+        self.along(experiment, values, band, times, &quantities)
     }
 
     fn along(
         &self,
+        experiment: usize,
         values: &[f64],
         band: Option<(&DMatrix<f64>, f64)>,
         times: &[f64],
         quantities: &[(String, Observable)],
     ) -> Result<Vec<Observed>, OdeError> {
+        let e = &self.experiments[experiment];
         let z = self.unknowns.coordinates(values);
-        let (y0, p) = self.point(&z);
-        let wrt = self.unknowns.wrt();
-        let sol = Ivp::new(&self.system, self.t0, &y0, &p).solve_sensitivities(
+        let v = self.values_at(&z);
+        let k = self.unknowns.len();
+        let (y0, p) = e.point(&v);
+        let sol = Ivp::new(e.system(), e.t0, &y0, &p).solve_sensitivities(
             &self.integrator,
-            wrt,
+            &e.slots,
             times,
         )?;
-        let mut og = ObservableGradient::new(&self.system, &p, wrt);
-        let mut grad = vec![0.0; wrt.len()];
+        // ∂slot/∂value of the free unknowns (the band is in values, not coordinates).
+        let dv = slot_matrix(e, &v, &self.free_index(), &vec![1.0; k], k);
+        let mut og = ObservableGradient::new(e.system(), &p, &e.slots);
+        let mut grad_slots = vec![0.0; e.slots.len()];
         let mut out = Vec::new();
         for (name, observable) in quantities {
             let mut observed = Observed {
@@ -315,10 +570,11 @@ impl<S: System> Problem<S> {
             };
             for (m, &t) in times.iter().enumerate() {
                 let s = sol.sensitivity_slice(m);
-                let h = og.eval(t, sol.state(m), s, *observable, &mut grad);
+                let h = og.eval(t, sol.state(m), s, *observable, &mut grad_slots);
                 observed.values.push(h);
                 if let (Some((cov, q)), Some(w)) = (band, observed.half_width.as_mut()) {
-                    w.push(band_half_width(q, &DVector::from_column_slice(&grad), cov));
+                    let g = dv.tr_mul(&DVector::from_column_slice(&grad_slots));
+                    w.push(band_half_width(q, &g, cov));
                 }
             }
             out.push(observed);
@@ -327,18 +583,215 @@ impl<S: System> Problem<S> {
     }
 }
 
-fn check_finite(r: &DVector<f64>, jac: &DMatrix<f64>, times: &[f64]) -> Result<(), OdeError> {
-    if let Some(i) = r.iter().position(|v| !v.is_finite()) {
+/// ∂slot/∂z of experiment `e` as a dense slots × k matrix: the slot Jacobian times the chain
+/// of each free unknown.
+fn slot_matrix<S: System>(
+    e: &Planned<S>,
+    v: &[f64],
+    free_index: &[Option<usize>],
+    chain: &[f64],
+    k: usize,
+) -> DMatrix<f64> {
+    let sparse = e.slot_jacobian(v, free_index);
+    let mut d = DMatrix::zeros(sparse.len(), k);
+    for (s, row) in sparse.iter().enumerate() {
+        for &(f, x) in row {
+            d[(s, f)] += x * chain[f];
+        }
+    }
+    d
+}
+
+impl Rows {
+    /// U = Jᵀr and A: JᵀJ over the rows that enter it directly, plus the Fisher rows.
+    fn normal_equations(&self, k: usize) -> (DVector<f64>, DMatrix<f64>) {
+        let mut u = DVector::zeros(k);
+        let mut a = DMatrix::zeros(k, k);
+        let add = |row: &[f64], a: &mut DMatrix<f64>| {
+            for i in 0..k {
+                if row[i] == 0.0 {
+                    continue;
+                }
+                for j in 0..k {
+                    a[(i, j)] += row[i] * row[j];
+                }
+            }
+        };
+        for (i, &ri) in self.r.iter().enumerate() {
+            let row = &self.jacobian[i * k..(i + 1) * k];
+            for j in 0..k {
+                u[j] += ri * row[j];
+            }
+            if self.in_normal[i] {
+                add(row, &mut a);
+            }
+        }
+        for row in self.fisher.chunks(k) {
+            add(row, &mut a);
+        }
+        (u, a)
+    }
+}
+
+/// The rows of one experiment at a point: a row per sample (data rows, series after series)
+/// and then a noise row per function-σ sample; with their Jacobian in the free unknowns'
+/// coordinates when asked for.
+fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<Rows, OdeError> {
+    let (y0, p) = e.point(at.v);
+    let sampled = e.sampled();
+    let times = &sampled.times;
+    let ivp = Ivp::new(e.system(), e.t0, &y0, &p);
+    let n = y0.len();
+    let slots: &[sysid_ode::Wrt] = if at.jacobian { &e.slots } else { &[] };
+    let ns = slots.len();
+    // The states and (when asked) their sensitivities to the slots at every sample time.
+    let (states, sens, counts) = if at.jacobian {
+        let sol = ivp.solve_sensitivities(at.integrator, slots, times)?;
+        let states: Vec<f64> = (0..times.len()).flat_map(|m| sol.state(m).to_vec()).collect();
+        let sens: Vec<f64> =
+            (0..times.len()).flat_map(|m| sol.sensitivity_slice(m).to_vec()).collect();
+        (states, sens, sol.counts())
+    } else {
+        let sol = ivp.solve(at.integrator, times)?;
+        let states: Vec<f64> = (0..times.len()).flat_map(|m| sol.state(m).to_vec()).collect();
+        (states, Vec::new(), sol.counts())
+    };
+    // ∂slot/∂z; the identity (slot j is free unknown j) leaves the gradients as they are.
+    let dz = at.jacobian.then(|| slot_matrix(e, at.v, at.free_index, at.chain, k));
+    let identity = dz.as_ref().is_some_and(|d| {
+        d.nrows() == k
+            && (0..k).all(|i| (0..k).all(|j| if i == j { true } else { d[(i, j)] == 0.0 }))
+    });
+    let mut og = ObservableGradient::new(e.system(), &p, slots);
+    let mut grad_slots = vec![0.0; ns];
+    let mut grad = vec![0.0; k];
+    let total: usize = sampled.series.iter().map(|s| s.samples.len()).sum();
+    let mut out = Rows {
+        r: Vec::with_capacity(total),
+        jacobian: Vec::with_capacity(if at.jacobian { total * k } else { 0 }),
+        fisher: Vec::new(),
+        in_normal: Vec::with_capacity(total),
+        data_cost: 0.0,
+        noise_rows: 0,
+        counts,
+    };
+    let mut noise: Vec<(f64, Vec<f64>)> = Vec::new();
+    let np = p.len();
+    let (mut dy, mut dp, mut dv) = (vec![0.0; n], vec![0.0; np], vec![0.0; at.v.len()]);
+    for s in &sampled.series {
+        for sample in &s.samples {
+            let m = sample.index;
+            let (y, sm) = (
+                &states[m * n..(m + 1) * n],
+                if at.jacobian { &sens[m * n * ns..(m + 1) * n * ns] } else { &[][..] },
+            );
+            let h = og.eval(times[m], y, sm, s.observable, &mut grad_slots);
+            // ∂h/∂z.
+            if let Some(d) = &dz {
+                if identity {
+                    for j in 0..k {
+                        grad[j] = grad_slots[j] * d[(j, j)];
+                    }
+                } else {
+                    for (j, g) in grad.iter_mut().enumerate() {
+                        *g = (0..ns).map(|q| grad_slots[q] * d[(q, j)]).sum();
+                    }
+                }
+            }
+            let (th, slope) = (s.transform.apply(h), s.transform.derivative(h));
+            let PlannedNoise::Function(f) = &s.noise else {
+                let w = sample.sqrt_weight;
+                let r = w * (th - sample.value);
+                out.r.push(r);
+                out.data_cost += r * r;
+                out.in_normal.push(true);
+                if at.jacobian {
+                    out.jacobian.extend(grad.iter().map(|g| w * slope * g));
+                }
+                continue;
+            };
+            dy.iter_mut().for_each(|x| *x = 0.0);
+            dp.iter_mut().for_each(|x| *x = 0.0);
+            dv.iter_mut().for_each(|x| *x = 0.0);
+            let mut gradient = NoiseGradient { y: &mut dy, h: 0.0, p: &mut dp, v: &mut dv };
+            let args = NoiseArgs { t: times[m], y, h, p: &p, v: at.v };
+            let sigma = f.eval(args, &mut gradient);
+            let dh = gradient.h;
+            if !(sigma > 0.0 && sigma.is_finite()) {
+                return Err(OdeError::NonFinite {
+                    t: times[m],
+                    what: format!(
+                        "σ = {} of `{}` is {sigma}",
+                        f.describe(),
+                        s.observable_name(e.system())
+                    ),
+                });
+            }
+            let r = (th - sample.value) / sigma;
+            out.r.push(r);
+            out.data_cost += r * r;
+            out.in_normal.push(false);
+            let b2 = 2.0 * sigma.ln() + NOISE_ROW_SHIFT;
+            if b2.is_nan() || b2 <= 0.0 {
+                return Err(OdeError::NonFinite {
+                    t: times[m],
+                    what: format!(
+                        "σ = {sigma:e} of `{}`, below the likelihood's floor e^-25",
+                        s.observable_name(e.system())
+                    ),
+                });
+            }
+            let b = b2.sqrt();
+            let mut dsigma = vec![0.0; k];
+            if let Some(d) = &dz {
+                // ∂σ/∂z through the states, the value, the parameters and the unknowns.
+                for (j, ds) in dsigma.iter_mut().enumerate() {
+                    let mut x = dh * grad[j];
+                    for (q, w) in slots.iter().enumerate() {
+                        let ds_slot = match *w {
+                            sysid_ode::Wrt::InitialValue(_) => 0.0,
+                            sysid_ode::Wrt::Parameter(kp) => dp[kp],
+                        } + (0..n).map(|i| dy[i] * sm[i * ns + q]).sum::<f64>();
+                        x += ds_slot * d[(q, j)];
+                    }
+                    *ds = x;
+                }
+                let free: Vec<(usize, usize)> = at
+                    .free_index
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(decl, f)| f.map(|f| (decl, f)))
+                    .collect();
+                for (decl, f) in free {
+                    dsigma[f] += dv[decl] * at.chain[f];
+                }
+                out.jacobian.extend((0..k).map(|j| (slope * grad[j] - r * dsigma[j]) / sigma));
+                // Fisher rows: ∇T(h)/σ and √2 ∇ln σ.
+                out.fisher.extend((0..k).map(|j| slope * grad[j] / sigma));
+                out.fisher.extend((0..k).map(|j| std::f64::consts::SQRT_2 * dsigma[j] / sigma));
+            }
+            noise.push((b, dsigma.iter().map(|d| d / (sigma * b)).collect()));
+        }
+    }
+    out.noise_rows = noise.len();
+    for (b, row) in noise {
+        out.r.push(b);
+        out.in_normal.push(false);
+        if at.jacobian {
+            out.jacobian.extend(row);
+        }
+    }
+    if let Some(i) = out.r.iter().position(|v| !v.is_finite()) {
         return Err(OdeError::NonFinite {
-            t: times.first().copied().unwrap_or(0.0),
+            t: times.first().copied().unwrap_or(e.t0),
             what: format!("residual {i}"),
         });
     }
-    if jac.iter().any(|v| !v.is_finite()) {
+    if out.jacobian.iter().any(|v| !v.is_finite()) {
         return Err(OdeError::NonFinite {
-            t: times.first().copied().unwrap_or(0.0),
+            t: times.first().copied().unwrap_or(e.t0),
             what: "the residual Jacobian".into(),
         });
     }
-    Ok(())
+    Ok(out)
 }

@@ -1,11 +1,14 @@
 //! The measurements resolved against the system and checked: which state or output each
-//! series measures, with what weight, on one sorted time grid; a continuous record also as
-//! residual rows at the nodes of a composite Gauss–Legendre rule.
+//! series measures, on what scale, with what noise, on one sorted time grid; a continuous
+//! record also as residual rows at the nodes of a composite Gauss–Legendre rule.
+
+use std::sync::Arc;
 
 use sysid_ode::{Interpolation, Observable, Record, RecordedOutput, Signal, System};
 
 use crate::data::{Data, Record as Kind, Samples, Series};
 use crate::error::ProblemError;
+use crate::noise::{Noise, NoiseFunction, Transform};
 
 /// The measurements resolved against the system.
 #[derive(Clone, Debug)]
@@ -36,19 +39,87 @@ pub struct Sampled {
 pub struct PlannedSeries {
     /// What is measured.
     pub observable: Observable,
+    /// The scale its residuals are formed on.
+    pub transform: Transform,
+    /// Its noise.
+    pub noise: PlannedNoise,
     /// Its samples.
     pub samples: Vec<Sample>,
 }
 
-/// One measured value: row √w (h(t) − b) of the residual vector.
+impl PlannedSeries {
+    /// The name of what it measures.
+    pub fn name<'a>(&self, signature: &'a sysid_ode::Signature) -> &'a str {
+        match self.observable {
+            Observable::State(i) => &signature.states()[i],
+            Observable::Output(i) => &signature.outputs()[i],
+        }
+    }
+
+    pub(crate) fn observable_name<S: System>(&self, system: &S) -> String {
+        self.name(system.signature()).to_string()
+    }
+}
+
+/// The noise of a series, resolved against the problem's unknowns.
+#[derive(Clone)]
+pub enum PlannedNoise {
+    /// Relative weights (no noise model): √w of each sample is √(w_o w_m).
+    Weights,
+    /// σ known: √w = 1/σ.
+    Known,
+    /// σ_m = s·f_m with s the unknown of declared index `unknown`, eliminated in closed form:
+    /// √w = 1/(s f_m) at the current s.
+    Scale {
+        /// The declared index of s.
+        unknown: usize,
+        /// f_m, one per sample.
+        factors: Vec<f64>,
+    },
+    /// σ a function of the model and the unknowns, evaluated with each residual.
+    Function(Arc<dyn NoiseFunction>),
+}
+
+impl std::fmt::Debug for PlannedNoise {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PlannedNoise::Weights => write!(f, "Weights"),
+            PlannedNoise::Known => write!(f, "Known"),
+            PlannedNoise::Scale { unknown, .. } => write!(f, "Scale(unknown {unknown})"),
+            PlannedNoise::Function(n) => write!(f, "Function({})", n.describe()),
+        }
+    }
+}
+
+/// One measured value: row √w (T(h(t)) − T(b)) of the residual vector.
 #[derive(Clone, Copy, Debug)]
 pub struct Sample {
     /// Index into [`Sampled::times`].
     pub index: usize,
-    /// The measured value b.
+    /// The measured value on the series' scale, T(b).
     pub value: f64,
-    /// √w.
+    /// The measured value b itself.
+    pub measured: f64,
+    /// √w = 1/σ (unused for a noise function).
     pub sqrt_weight: f64,
+}
+
+impl Plan {
+    /// The data in residual form.
+    pub(crate) fn sampled(&self) -> &Sampled {
+        match self {
+            Plan::Discrete(sampled) => sampled,
+            Plan::Continuous { nodes, .. } => nodes,
+        }
+    }
+
+    /// The span of the data (the record's span for continuous data).
+    pub(crate) fn span(&self) -> (f64, f64) {
+        match self {
+            Plan::Discrete(s) => (s.times[0], s.times[s.times.len() - 1]),
+            Plan::Continuous { span, .. } => *span,
+        }
+    }
 }
 
 /// Panels per record span of a record given as a function, in its residual form.
@@ -62,8 +133,13 @@ const GL4: [(f64, f64); 4] = [
     (0.861_136_311_594_052_6, 0.347_854_845_137_453_9),
 ];
 
-/// Resolves and checks the measurements.
-pub(crate) fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan, ProblemError> {
+/// Resolves and checks the measurements; `unknown` gives the declared index of an unknown by
+/// name (for noise scales).
+pub(crate) fn plan<S: System>(
+    system: &S,
+    data: &Data,
+    unknown: &dyn Fn(&str) -> Option<usize>,
+) -> Result<Plan, ProblemError> {
     if data.series.is_empty() {
         return Err(ProblemError::NoData);
     }
@@ -79,8 +155,8 @@ pub(crate) fn plan<S: System>(system: &S, data: &Data, k: usize) -> Result<Plan,
         resolved.push(resolve(system, data, s)?);
     }
     match data.record {
-        Kind::Discrete => plan_discrete(data, &resolved, k),
-        Kind::Continuous { t_lo, t_hi } => plan_continuous(data, &resolved, k, (t_lo, t_hi)),
+        Kind::Discrete => plan_discrete(data, &resolved, unknown),
+        Kind::Continuous { t_lo, t_hi } => plan_continuous(data, &resolved, (t_lo, t_hi)),
     }
 }
 
@@ -140,18 +216,57 @@ fn resolve<S: System>(system: &S, data: &Data, s: &Series) -> Result<Observable,
             return Err(invalid("per-sample weights need discrete data".into()));
         }
     }
+    if (s.noise.is_some() || s.transform != Transform::Lin) && data.record != Kind::Discrete {
+        return Err(invalid("a noise model or a log scale needs discrete data".into()));
+    }
+    if let Samples::Points { times, values } = &s.samples {
+        if s.transform != Transform::Lin
+            && let Some(i) = values.iter().position(|v| *v <= 0.0)
+        {
+            return Err(invalid(format!(
+                "the {} scale needs positive measurements: {} at t = {}",
+                s.transform.name(),
+                values[i],
+                times[i]
+            )));
+        }
+        let per_sample = |what: &str, list: &[f64]| {
+            if list.len() != values.len() {
+                return Err(invalid(format!("{} {what} for {} samples", list.len(), values.len())));
+            }
+            match list.iter().position(|v| !(*v > 0.0 && v.is_finite())) {
+                Some(i) => Err(invalid(format!(
+                    "{what} at t = {} must be positive and finite, got {}",
+                    times[i], list[i]
+                ))),
+                None => Ok(()),
+            }
+        };
+        match &s.noise {
+            Some(Noise::Known(sigma)) => per_sample("σ", sigma)?,
+            Some(Noise::Scale { factors, .. }) => per_sample("σ factors", factors)?,
+            _ => {}
+        }
+    }
     Ok(observable)
 }
 
 /// Discrete data: one residual row per sample.
-fn plan_discrete(data: &Data, resolved: &[Observable], k: usize) -> Result<Plan, ProblemError> {
+fn plan_discrete(
+    data: &Data,
+    resolved: &[Observable],
+    unknown: &dyn Fn(&str) -> Option<usize>,
+) -> Result<Plan, ProblemError> {
     let mut points = Vec::with_capacity(data.series.len());
+    let mut noises = Vec::with_capacity(data.series.len());
     for s in &data.series {
         match &s.samples {
             Samples::Points { times, values } => {
-                let sqrt_weight = |m: usize| match &s.sample_weights {
-                    Some(w) => (s.weight * w[m]).sqrt(),
-                    None => s.weight.sqrt(),
+                let sqrt_weight = |m: usize| match (&s.noise, &s.sample_weights) {
+                    (Some(Noise::Known(sigma)), _) => 1.0 / sigma[m],
+                    (Some(_), _) => f64::NAN,
+                    (None, Some(w)) => (s.weight * w[m]).sqrt(),
+                    (None, None) => s.weight.sqrt(),
                 };
                 points.push(
                     times
@@ -161,6 +276,21 @@ fn plan_discrete(data: &Data, resolved: &[Observable], k: usize) -> Result<Plan,
                         .map(|(m, (&t, &v))| (t, v, sqrt_weight(m)))
                         .collect(),
                 );
+                noises.push((
+                    s.transform,
+                    match &s.noise {
+                        None => PlannedNoise::Weights,
+                        Some(Noise::Known(_)) => PlannedNoise::Known,
+                        Some(Noise::Scale { unknown: name, factors }) => PlannedNoise::Scale {
+                            unknown: unknown(name).ok_or_else(|| ProblemError::InvalidSeries {
+                                name: s.name.clone(),
+                                message: format!("its σ scale `{name}` is not an unknown"),
+                            })?,
+                            factors: factors.clone(),
+                        },
+                        Some(Noise::Function(f)) => PlannedNoise::Function(f.clone()),
+                    },
+                ));
             }
             Samples::Function(_) => {
                 return Err(ProblemError::InvalidSeries {
@@ -170,11 +300,7 @@ fn plan_discrete(data: &Data, resolved: &[Observable], k: usize) -> Result<Plan,
             }
         }
     }
-    let observations = data.n_observations().unwrap_or(0);
-    if observations < k {
-        return Err(ProblemError::TooFewData { observations, unknowns: k });
-    }
-    Ok(Plan::Discrete(gather(resolved, points)))
+    Ok(Plan::Discrete(gather(resolved, points, noises)))
 }
 
 /// A continuous record over `(t_lo, t_hi)`: the record itself for the integrals, and its
@@ -182,7 +308,6 @@ fn plan_discrete(data: &Data, resolved: &[Observable], k: usize) -> Result<Plan,
 fn plan_continuous(
     data: &Data,
     resolved: &[Observable],
-    k: usize,
     (t_lo, t_hi): (f64, f64),
 ) -> Result<Plan, ProblemError> {
     if !(t_lo.is_finite() && t_hi.is_finite() && t_lo < t_hi) {
@@ -210,31 +335,35 @@ fn plan_continuous(
             Ok(RecordedOutput { observable, weight: s.weight, record })
         })
         .collect::<Result<Vec<_>, ProblemError>>()?;
-    if let Some(observations) = data.n_observations()
-        && observations < k
-    {
-        return Err(ProblemError::TooFewData { observations, unknowns: k });
-    }
     let points = outputs.iter().map(|o| record_nodes(o, (t_lo, t_hi))).collect();
-    let nodes = gather(resolved, points);
+    let noises = vec![(Transform::Lin, PlannedNoise::Weights); resolved.len()];
+    let nodes = gather(resolved, points, noises);
     Ok(Plan::Continuous { span: (t_lo, t_hi), outputs, nodes })
 }
 
 /// Gathers per-series (time, value, √weight) points on one sorted time grid.
-fn gather(observables: &[Observable], points: Vec<Vec<(f64, f64, f64)>>) -> Sampled {
+fn gather(
+    observables: &[Observable],
+    points: Vec<Vec<(f64, f64, f64)>>,
+    noises: Vec<(Transform, PlannedNoise)>,
+) -> Sampled {
     let mut times: Vec<f64> = points.iter().flatten().map(|p| p.0).collect();
     times.sort_by(f64::total_cmp);
     times.dedup();
     let series = observables
         .iter()
         .zip(points)
-        .map(|(&observable, pts)| PlannedSeries {
+        .zip(noises)
+        .map(|((&observable, pts), (transform, noise))| PlannedSeries {
             observable,
+            transform,
+            noise,
             samples: pts
                 .into_iter()
-                .map(|(t, value, sqrt_weight)| Sample {
+                .map(|(t, measured, sqrt_weight)| Sample {
                     index: times.partition_point(|x| *x < t),
-                    value,
+                    value: transform.apply(measured),
+                    measured,
                     sqrt_weight,
                 })
                 .collect(),

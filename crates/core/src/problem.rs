@@ -1,32 +1,64 @@
-//! The identification problem: a model, what is known, what is unknown, and the data. It
-//! knows nothing of methods; it evaluates the least-squares quantities every method needs.
+//! The identification problem: a model, its experiments, what is known, what is unknown,
+//! and the data. It knows nothing of methods; it evaluates the least-squares quantities every
+//! method needs.
 
-use sysid_ode::{Integrator, Observable, System, Wrt};
+use sysid_ode::{Integrator, Observable, System};
 
 use crate::data::Data;
 use crate::error::ProblemError;
-use crate::plan::{Plan, plan};
+use crate::experiment::{Experiment, Planned, Resolved, Setting, slots};
+use crate::plan::{Plan, PlannedNoise, plan};
 use crate::unknowns::{Unknown, Unknowns};
 
 /// Default relative accuracy of the quadratures of a continuous record.
 pub const QUADRATURE_RTOL: f64 = 1e-10;
 
-/// A system, its known initial values and parameters, the unknowns with their starting
-/// guesses, the measurements, and how to integrate.
+/// The name of the one experiment of a problem built without experiments (the `[data]` of a
+/// model file, a catalogue system's data).
+pub const SINGLE_EXPERIMENT: &str = "data";
+
+/// A model, one or more experiments of it (each with its data, inputs, t0 and settings of
+/// the initial values and parameters), the unknowns with their starting guesses, and how to
+/// integrate.
 ///
-/// Build one with [`Problem::builder`]; every state needs its initial value either known or
-/// unknown, and every parameter likewise.
-#[derive(Clone, Debug)]
+/// Build one with [`Problem::builder`]: either as one experiment (every state and parameter
+/// known or unknown by name), or from [`Experiment`]s and the unknowns they use.
+///
+/// The unknowns the methods move (their coordinates z) are the *free* ones: not fixed with
+/// [`with_fixed`](Self::with_fixed), and not noise scales, which the driver sets in closed
+/// form (see [`drive`](crate::drive)).
+#[derive(Debug)]
 pub struct Problem<S> {
-    pub(crate) system: S,
-    pub(crate) t0: f64,
-    pub(crate) initial: Vec<f64>,
-    pub(crate) parameters: Vec<f64>,
+    /// Every unknown, in the order given.
+    pub(crate) declared: Vec<Unknown>,
+    /// The declared index of each free unknown, in the methods' order.
+    pub(crate) free: Vec<usize>,
+    /// The free unknowns.
     pub(crate) unknowns: Unknowns,
-    pub(crate) data: Data,
-    pub(crate) plan: Plan,
+    /// The value of every declared unknown that is not free (fixed ones, and noise scales at
+    /// their current value); the free ones' entries are their guesses.
+    pub(crate) held: Vec<f64>,
+    /// The declared indices of the noise scales set in closed form.
+    pub(crate) scales: Vec<usize>,
+    pub(crate) experiments: Vec<Planned<S>>,
     pub(crate) integrator: Integrator,
     pub(crate) quadrature_rtol: f64,
+}
+
+impl<S> Clone for Problem<S> {
+    /// A copy that shares the systems.
+    fn clone(&self) -> Self {
+        Self {
+            declared: self.declared.clone(),
+            free: self.free.clone(),
+            unknowns: self.unknowns.clone(),
+            held: self.held.clone(),
+            scales: self.scales.clone(),
+            experiments: self.experiments.clone(),
+            integrator: self.integrator,
+            quadrature_rtol: self.quadrature_rtol,
+        }
+    }
 }
 
 impl<S: System> Problem<S> {
@@ -38,51 +70,60 @@ impl<S: System> Problem<S> {
             values: Vec::new(),
             unknowns: Vec::new(),
             data: None,
+            experiments: Vec::new(),
             integrator: Integrator::default(),
             quadrature_rtol: QUADRATURE_RTOL,
         }
     }
 
-    /// The model.
+    /// The model (the first experiment's, with its inputs): the signature every experiment
+    /// shares.
     pub fn system(&self) -> &S {
-        &self.system
+        &self.experiments[0].system
     }
-    /// Time of the initial values.
+    /// The experiments.
+    pub fn experiments(&self) -> &[Planned<S>] {
+        &self.experiments
+    }
+    /// Time of the initial values of the first experiment.
     pub fn t0(&self) -> f64 {
-        self.t0
+        self.experiments[0].t0
     }
-    /// The unknowns.
+    /// The free unknowns: what the methods move.
     pub fn unknowns(&self) -> &Unknowns {
         &self.unknowns
     }
-    /// Names of the unknowns.
+    /// Names of the free unknowns.
     pub fn names(&self) -> Vec<String> {
         self.unknowns.names()
     }
-    /// The starting guesses (values).
+    /// The starting guesses of the free unknowns (values).
     pub fn guesses(&self) -> Vec<f64> {
         self.unknowns.guesses()
     }
-    /// The measurements.
-    pub fn data(&self) -> &Data {
-        &self.data
+    /// Every unknown as given, free or not.
+    pub fn declared(&self) -> &[Unknown] {
+        &self.declared
     }
-    /// Whether the data are a continuous record.
+    /// The noise scales set in closed form: declared indices.
+    pub fn scales(&self) -> &[usize] {
+        &self.scales
+    }
+    /// The measurements of the first experiment.
+    pub fn data(&self) -> &Data {
+        &self.experiments[0].data
+    }
+    /// Whether any experiment's data are a continuous record.
     pub fn is_continuous(&self) -> bool {
-        matches!(self.plan, Plan::Continuous { .. })
+        self.experiments.iter().any(|e| e.is_continuous())
     }
     /// The integrator.
     pub fn integrator(&self) -> &Integrator {
         &self.integrator
     }
-    /// The time span a fit integrates over: the data (the record's span for continuous
-    /// data) together with t0.
+    /// The time span the first experiment is integrated over: its data together with t0.
     pub fn span(&self) -> (f64, f64) {
-        let (lo, hi) = match &self.plan {
-            Plan::Discrete(s) => (s.times[0], s.times[s.times.len() - 1]),
-            Plan::Continuous { span, .. } => *span,
-        };
-        (lo.min(self.t0), hi.max(self.t0))
+        self.experiments[0].span()
     }
 
     /// A step tolerance as the methods apply it: not below the integrator's relative
@@ -93,9 +134,9 @@ impl<S: System> Problem<S> {
         step_tolerance.max(self.integrator.rtol)
     }
 
-    /// Number of measured values (None for a record given as a function).
+    /// Number of measured values over all experiments (None when a record is a function).
     pub fn n_observations(&self) -> Option<usize> {
-        self.data.n_observations()
+        self.experiments.iter().map(|e| e.data.n_observations()).sum()
     }
 
     /// Degrees of freedom N − k of the residual variance (None for a record given as a
@@ -104,33 +145,51 @@ impl<S: System> Problem<S> {
         self.n_observations().map(|n| n.saturating_sub(self.unknowns.len()))
     }
 
+    /// Whether the likelihood has a noise model (some series gives σ): then standard errors
+    /// come from the inverse Fisher information, not scaled by the residual variance.
+    pub fn has_noise_model(&self) -> bool {
+        self.experiments.iter().any(|e| e.data.has_noise_model())
+    }
+
     /// ‖W^½ b‖: the weighted data's norm (the record's for continuous data, by the
     /// quadrature of its residual form), the scale an exact fit is measured against.
     pub fn data_norm(&self) -> f64 {
-        self.sampled()
-            .series
+        self.experiments
             .iter()
-            .flat_map(|s| &s.samples)
-            .map(|m| (m.sqrt_weight * m.value).powi(2))
+            .flat_map(|e| &e.sampled().series)
+            .flat_map(|s| s.samples.iter().map(move |m| (s, m)))
+            .map(|(s, m)| match s.noise {
+                PlannedNoise::Function(_) => m.value.powi(2),
+                _ => (m.sqrt_weight * m.value).powi(2),
+            })
             .sum::<f64>()
             .sqrt()
     }
 
-    /// Row `row` of the residual vector in words: "`B` at t = 3 (sample 14 of `B`)".
+    /// Row `row` of the residual vector in words: "`B` at t = 3 (sample 14 of `B`)", with
+    /// the experiment's name when there are several.
     pub fn describe_row(&self, row: usize) -> String {
-        let sampled = self.sampled();
-        let signature = self.system.signature();
+        let signature = self.system().signature();
         let mut at = row;
-        for s in &sampled.series {
-            if at < s.samples.len() {
-                let name = match s.observable {
-                    Observable::State(i) => &signature.states()[i],
-                    Observable::Output(i) => &signature.outputs()[i],
-                };
-                let t = sampled.times[s.samples[at].index];
-                return format!("`{name}` at t = {t} (sample {} of `{name}`)", at + 1);
+        for e in &self.experiments {
+            let sampled = e.sampled();
+            for s in &sampled.series {
+                if at < s.samples.len() {
+                    let name = match s.observable {
+                        Observable::State(i) => &signature.states()[i],
+                        Observable::Output(i) => &signature.outputs()[i],
+                    };
+                    let t = sampled.times[s.samples[at].index];
+                    let of = if self.experiments.len() > 1 {
+                        format!(" in experiment `{}`", e.name)
+                    } else {
+                        String::new()
+                    };
+                    return format!("`{name}` at t = {t}{of} (sample {} of `{name}`)", at + 1);
+                }
+                at -= s.samples.len();
             }
-            at -= s.samples.len();
+            at = at.saturating_sub(e.noise_rows());
         }
         format!("row {row}")
     }
@@ -141,34 +200,40 @@ impl<S: System> Problem<S> {
         if fixed.is_empty() {
             return Ok(self);
         }
-        let mut list = self.unknowns.list().to_vec();
-        let mut wrt = self.unknowns.wrt().to_vec();
-        for (name, value) in fixed {
-            let Some(i) = list.iter().position(|u| &u.name == name) else {
-                return Err(ProblemError::NotAnUnknown {
-                    name: name.clone(),
-                    unknowns: self.unknowns.names().join(", "),
-                });
-            };
-            if !value.is_finite() {
+        for (i, (name, value)) in fixed.iter().enumerate() {
+            if fixed[..i].iter().any(|(n, _)| n == name) {
                 return Err(ProblemError::InvalidValue {
-                    what: format!("fixed `{name}`"),
+                    what: format!("`{name}`, fixed twice: fixed"),
                     value: *value,
                 });
             }
-            match wrt[i] {
-                Wrt::InitialValue(j) => self.initial[j] = *value,
-                Wrt::Parameter(j) => self.parameters[j] = *value,
+            let movable: Vec<usize> = self.free.iter().chain(&self.scales).copied().collect();
+            let Some(j) = movable.iter().copied().find(|&j| &self.declared[j].name == name) else {
+                let names: Vec<&str> =
+                    movable.iter().map(|&j| self.declared[j].name.as_str()).collect();
+                return Err(ProblemError::NotAnUnknown {
+                    name: name.clone(),
+                    unknowns: names.join(", "),
+                });
+            };
+            let u = &self.declared[j];
+            if !value.is_finite() || (u.log && *value <= 0.0) {
+                return Err(ProblemError::InvalidValue {
+                    what: match u.log {
+                        true => format!("fixed `{name}` (on a log scale: it must be positive)"),
+                        false => format!("fixed `{name}`"),
+                    },
+                    value: *value,
+                });
             }
-            list.remove(i);
-            wrt.remove(i);
+            self.held[j] = *value;
+            self.free.retain(|&f| f != j);
+            self.scales.retain(|&s| s != j);
         }
-        if list.is_empty() {
+        if self.free.is_empty() && self.scales.is_empty() {
             return Err(ProblemError::NoUnknowns);
         }
-        self.plan = plan(&self.system, &self.data, list.len())?;
-        self.unknowns = Unknowns::new(list, wrt);
-        Ok(self)
+        self.replan()
     }
 
     /// The same problem with another integrator.
@@ -178,28 +243,121 @@ impl<S: System> Problem<S> {
         Ok(self)
     }
 
-    /// The same problem with other measurements (of the same kind of quantities).
+    /// The same problem with other measurements for its one experiment (of the same kind of
+    /// quantities).
     pub fn with_data(mut self, data: Data) -> Result<Self, ProblemError> {
-        self.plan = plan(&self.system, &data, self.unknowns.len())?;
-        self.data = data;
+        if self.experiments.len() != 1 {
+            return Err(ProblemError::Experiments(
+                "new data for a problem of several experiments: give each experiment's".into(),
+            ));
+        }
+        self.experiments[0].data = data;
+        self.replan()
+    }
+
+    /// The same problem with other measurements for every experiment, in order.
+    pub fn with_experiment_data(mut self, data: Vec<Data>) -> Result<Self, ProblemError> {
+        if data.len() != self.experiments.len() {
+            return Err(ProblemError::Experiments(format!(
+                "{} data sets for {} experiments",
+                data.len(),
+                self.experiments.len()
+            )));
+        }
+        for (e, d) in self.experiments.iter_mut().zip(data) {
+            e.data = d;
+        }
+        self.replan()
+    }
+
+    /// The same problem with the noise scales at `sigma` (one per [`scales`](Self::scales)):
+    /// what the methods fit between two closed-form updates of the scales.
+    pub fn with_scales(&self, sigma: &[f64]) -> Self {
+        let mut out = self.clone();
+        for (&j, &s) in self.scales.iter().zip(sigma) {
+            out.held[j] = s;
+        }
+        out.weigh_scales();
+        out
+    }
+
+    /// The current values of the noise scales.
+    pub fn scale_values(&self) -> Vec<f64> {
+        self.scales.iter().map(|&j| self.held[j]).collect()
+    }
+
+    /// The value of every declared unknown at the free unknowns' coordinates z.
+    pub fn values_at(&self, z: &[f64]) -> Vec<f64> {
+        let mut v = self.held.clone();
+        for ((u, &j), &zi) in self.unknowns.list().iter().zip(&self.free).zip(z) {
+            v[j] = u.value(zi);
+        }
+        v
+    }
+
+    /// The free index of every declared unknown (None for one that is not free).
+    pub fn free_index(&self) -> Vec<Option<usize>> {
+        let mut index = vec![None; self.declared.len()];
+        for (f, &j) in self.free.iter().enumerate() {
+            index[j] = Some(f);
+        }
+        index
+    }
+
+    /// y(t0) and α of the first experiment at coordinates z.
+    pub fn point(&self, z: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        self.experiments[0].point(&self.values_at(z))
+    }
+
+    /// d value / d z for each free unknown at z: the chain rule of log-scale unknowns.
+    pub(crate) fn chain(&self, z: &[f64]) -> Vec<f64> {
+        self.unknowns.list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect()
+    }
+
+    /// Plans every experiment again (after the unknowns or the data changed) and checks
+    /// that there are enough data.
+    fn replan(mut self) -> Result<Self, ProblemError> {
+        let is_free: Vec<bool> = (0..self.declared.len()).map(|j| self.free.contains(&j)).collect();
+        let declared = &self.declared;
+        let find = |name: &str| declared.iter().position(|u| u.name == name);
+        for e in &mut self.experiments {
+            e.plan = plan(e.system.as_ref(), &e.data, &find)
+                .map_err(|err| in_experiment(&e.name, err))?;
+            e.slots = slots(&e.initial, &e.parameters, &is_free);
+        }
+        self.unknowns = Unknowns::new(self.free.iter().map(|&j| declared[j].clone()).collect());
+        let k = self.free.len() + self.scales.len();
+        if let Some(observations) = self.n_observations()
+            && observations < k
+        {
+            return Err(ProblemError::TooFewData { observations, unknowns: k });
+        }
+        self.weigh_scales();
         Ok(self)
     }
 
-    /// y(t0) and α at coordinates z.
-    pub fn point(&self, z: &[f64]) -> (Vec<f64>, Vec<f64>) {
-        let (mut y0, mut p) = (self.initial.clone(), self.parameters.clone());
-        for ((u, w), &zi) in self.unknowns.list().iter().zip(self.unknowns.wrt()).zip(z) {
-            match *w {
-                Wrt::InitialValue(i) => y0[i] = u.value(zi),
-                Wrt::Parameter(k) => p[k] = u.value(zi),
+    /// Sets √w of the samples whose σ is a noise scale from its held value.
+    fn weigh_scales(&mut self) {
+        let held = &self.held;
+        for e in &mut self.experiments {
+            if let Plan::Discrete(sampled) = &mut e.plan {
+                for series in &mut sampled.series {
+                    if let PlannedNoise::Scale { unknown, factors } = &series.noise {
+                        for (sample, f) in series.samples.iter_mut().zip(factors) {
+                            sample.sqrt_weight = 1.0 / (held[*unknown] * f);
+                        }
+                    }
+                }
             }
         }
-        (y0, p)
     }
+}
 
-    /// d value / d z for each unknown at z: the chain rule of log-scale unknowns.
-    pub(crate) fn chain(&self, z: &[f64]) -> Vec<f64> {
-        self.unknowns.list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect()
+/// An error of one experiment, named when there are several.
+fn in_experiment(name: &str, e: ProblemError) -> ProblemError {
+    match name {
+        SINGLE_EXPERIMENT => e,
+        _ => ProblemError::Experiments(format!("experiment `{name}`: {e}")),
     }
 }
 
@@ -211,22 +369,23 @@ pub struct ProblemBuilder<S> {
     values: Vec<(String, f64)>,
     unknowns: Vec<Unknown>,
     data: Option<Data>,
+    experiments: Vec<Experiment<S>>,
     integrator: Integrator,
     quadrature_rtol: f64,
 }
 
 impl<S: System> ProblemBuilder<S> {
-    /// Time of the initial values (default 0). Data may lie on both sides.
+    /// Time of the initial values (default 0). Data may lie on both sides. (One experiment.)
     pub fn t0(mut self, t0: f64) -> Self {
         self.t0 = t0;
         self
     }
-    /// A known initial value (state name) or parameter value.
+    /// A known initial value (state name) or parameter value. (One experiment.)
     pub fn known(mut self, name: &str, value: f64) -> Self {
         self.values.push((name.into(), value));
         self
     }
-    /// Known values for several names.
+    /// Known values for several names. (One experiment.)
     pub fn knowns(mut self, values: &[(&str, f64)]) -> Self {
         self.values.extend(values.iter().map(|(n, v)| (n.to_string(), *v)));
         self
@@ -235,14 +394,21 @@ impl<S: System> ProblemBuilder<S> {
     pub fn unknown(self, name: &str, guess: f64) -> Self {
         self.unknown_with(Unknown::new(name, guess))
     }
-    /// An unknown with bounds or a log scale.
+    /// An unknown with bounds or a log scale. With experiments, any name their settings and
+    /// noise models use; without, a state (its initial value) or a parameter.
     pub fn unknown_with(mut self, unknown: Unknown) -> Self {
         self.unknowns.push(unknown);
         self
     }
-    /// The measurements.
+    /// The measurements. (One experiment.)
     pub fn data(mut self, data: Data) -> Self {
         self.data = Some(data);
+        self
+    }
+    /// An experiment; a problem of experiments takes its data, t0, known values and
+    /// unknowns' places from them.
+    pub fn experiment(mut self, experiment: Experiment<S>) -> Self {
+        self.experiments.push(experiment);
         self
     }
     /// How to integrate (default: DOPRI5, rtol 1e-8, atol 1e-10).
@@ -258,10 +424,6 @@ impl<S: System> ProblemBuilder<S> {
 
     /// Checks everything and builds the problem.
     pub fn build(self) -> Result<Problem<S>, ProblemError> {
-        let sig = self.system.signature();
-        if !self.t0.is_finite() {
-            return Err(ProblemError::InvalidValue { what: "t0".into(), value: self.t0 });
-        }
         self.integrator.validate().map_err(ProblemError::Integrator)?;
         if !(self.quadrature_rtol > 0.0 && self.quadrature_rtol < 1.0) {
             return Err(ProblemError::InvalidValue {
@@ -269,87 +431,226 @@ impl<S: System> ProblemBuilder<S> {
                 value: self.quadrature_rtol,
             });
         }
-        let (n, np) = (sig.n_states(), sig.n_parameters());
-        let mut initial = vec![f64::NAN; n];
-        let mut parameters = vec![f64::NAN; np];
-        let mut given: Vec<Option<&'static str>> = vec![None; n + np];
-        let resolve = |name: &str| -> Result<Wrt, ProblemError> {
-            sig.state(name)
-                .map(Wrt::InitialValue)
-                .or_else(|| sig.parameter(name).map(Wrt::Parameter))
-                .ok_or_else(|| ProblemError::UnknownName {
-                    name: name.into(),
-                    states: sig.states().join(", "),
-                    parameters: sig.parameters().join(", "),
-                })
-        };
-        let slot = |w: Wrt| match w {
-            Wrt::InitialValue(i) => i,
-            Wrt::Parameter(k) => n + k,
-        };
-        let mark = |given: &mut Vec<Option<&'static str>>,
-                    name: &str,
-                    w: Wrt,
-                    how: &'static str| {
-            if let Some(first) = given[slot(w)] {
-                return Err(ProblemError::SpecifiedTwice { name: name.into(), first, second: how });
-            }
-            given[slot(w)] = Some(how);
-            Ok(())
-        };
-        for (name, value) in &self.values {
-            let w = resolve(name)?;
-            mark(&mut given, name, w, "known")?;
-            if !value.is_finite() {
-                return Err(ProblemError::InvalidValue {
-                    what: format!("known `{name}`"),
-                    value: *value,
-                });
-            }
-            match w {
-                Wrt::InitialValue(i) => initial[i] = *value,
-                Wrt::Parameter(k) => parameters[k] = *value,
-            }
+        let (integrator, quadrature_rtol) = (self.integrator, self.quadrature_rtol);
+        let mut experiments = self.experiments;
+        if experiments.is_empty() {
+            experiments.push(single(
+                self.system,
+                self.t0,
+                &self.values,
+                &self.unknowns,
+                self.data,
+            )?);
+        } else if self.data.is_some() || !self.values.is_empty() {
+            return Err(ProblemError::Experiments(
+                "known values and data belong to the experiments when there are experiments".into(),
+            ));
         }
-        let mut wrt = Vec::with_capacity(self.unknowns.len());
-        for u in &self.unknowns {
-            let w = resolve(&u.name)?;
-            mark(&mut given, &u.name, w, "unknown")?;
+        let declared = self.unknowns;
+        if declared.is_empty() {
+            return Err(ProblemError::NoUnknowns);
+        }
+        for (i, u) in declared.iter().enumerate() {
             u.validate().map_err(|message| ProblemError::InvalidUnknown {
                 name: u.name.clone(),
                 message,
             })?;
-            match w {
-                Wrt::InitialValue(i) => initial[i] = u.guess,
-                Wrt::Parameter(k) => parameters[k] = u.guess,
-            }
-            wrt.push(w);
-        }
-        for (i, g) in given.iter().enumerate() {
-            if g.is_none() {
-                let (kind, name) = if i < n {
-                    ("state", &sig.states()[i])
-                } else {
-                    ("parameter", &sig.parameters()[i - n])
-                };
-                return Err(ProblemError::NotSpecified { kind, name: name.clone() });
+            if declared[..i].iter().any(|v| v.name == u.name) {
+                return Err(ProblemError::SpecifiedTwice {
+                    name: u.name.clone(),
+                    first: "unknown",
+                    second: "unknown",
+                });
             }
         }
-        if self.unknowns.is_empty() {
-            return Err(ProblemError::NoUnknowns);
+        let experiments = resolve_experiments(&declared, experiments)?;
+        let (free, scales) = roles(&declared, &experiments)?;
+        let held = declared.iter().map(|u| u.guess).collect();
+        let problem = Problem {
+            unknowns: Unknowns::new(Vec::new()),
+            declared,
+            free,
+            held,
+            scales,
+            experiments,
+            integrator,
+            quadrature_rtol,
+        };
+        problem.replan()
+    }
+}
+
+/// The one experiment of a problem built without experiments: every state and parameter
+/// known or unknown by name.
+fn single<S: System>(
+    system: S,
+    t0: f64,
+    values: &[(String, f64)],
+    unknowns: &[Unknown],
+    data: Option<Data>,
+) -> Result<Experiment<S>, ProblemError> {
+    let sig = system.signature();
+    if !t0.is_finite() {
+        return Err(ProblemError::InvalidValue { what: "t0".into(), value: t0 });
+    }
+    let (n, np) = (sig.n_states(), sig.n_parameters());
+    let mut settings: Vec<Option<(Setting, &'static str)>> = vec![None; n + np];
+    let slot = |name: &str| -> Result<usize, ProblemError> {
+        sig.state(name).or_else(|| sig.parameter(name).map(|k| n + k)).ok_or_else(|| {
+            ProblemError::UnknownName {
+                name: name.into(),
+                states: sig.states().join(", "),
+                parameters: sig.parameters().join(", "),
+            }
+        })
+    };
+    let given = values.iter().map(|(name, v)| (name, Setting::Value(*v), "known"));
+    let unknown = unknowns.iter().map(|u| (&u.name, Setting::Unknown(u.name.clone()), "unknown"));
+    for (name, setting, how) in given.chain(unknown) {
+        let i = slot(name)?;
+        if let Some((_, first)) = &settings[i] {
+            return Err(ProblemError::SpecifiedTwice { name: name.clone(), first, second: how });
         }
-        let data = self.data.ok_or(ProblemError::NoData)?;
-        let plan = plan(&self.system, &data, self.unknowns.len())?;
-        Ok(Problem {
-            t0: self.t0,
+        if let Setting::Value(v) = setting
+            && !v.is_finite()
+        {
+            return Err(ProblemError::InvalidValue { what: format!("known `{name}`"), value: v });
+        }
+        settings[i] = Some((setting, how));
+    }
+    if let Some(i) = settings.iter().position(Option::is_none) {
+        let (kind, name) = if i < n {
+            ("state", &sig.states()[i])
+        } else {
+            ("parameter", &sig.parameters()[i - n])
+        };
+        return Err(ProblemError::NotSpecified { kind, name: name.clone() });
+    }
+    let mut initial: Vec<Setting> = settings.into_iter().map(|s| s.expect("checked").0).collect();
+    let parameters = initial.split_off(n);
+    Ok(Experiment {
+        name: SINGLE_EXPERIMENT.into(),
+        system,
+        t0,
+        initial,
+        parameters,
+        data: data.ok_or(ProblemError::NoData)?,
+    })
+}
+
+/// The experiments with their settings resolved against the unknowns, each checked.
+fn resolve_experiments<S: System>(
+    declared: &[Unknown],
+    experiments: Vec<Experiment<S>>,
+) -> Result<Vec<Planned<S>>, ProblemError> {
+    let mut out: Vec<Planned<S>> = Vec::with_capacity(experiments.len());
+    for e in experiments {
+        if out.iter().any(|o| o.name == e.name) {
+            return Err(ProblemError::Experiments(format!(
+                "two experiments are called `{}`",
+                e.name
+            )));
+        }
+        let fail = |message: String| {
+            ProblemError::Experiments(format!("experiment `{}`: {message}", e.name))
+        };
+        if !e.t0.is_finite() {
+            return Err(fail(format!("t0 is {}", e.t0)));
+        }
+        let sig = e.system.signature();
+        if e.initial.len() != sig.n_states() || e.parameters.len() != sig.n_parameters() {
+            return Err(fail(format!(
+                "{} initial values and {} parameters for a system of {} states and {} parameters",
+                e.initial.len(),
+                e.parameters.len(),
+                sig.n_states(),
+                sig.n_parameters()
+            )));
+        }
+        let resolve = |s: &Setting, what: &str| -> Result<Resolved, ProblemError> {
+            Ok(match s {
+                Setting::Value(v) if v.is_finite() => Resolved::Value(*v),
+                Setting::Value(v) => return Err(fail(format!("{what} is {v}"))),
+                Setting::Unknown(name) => {
+                    Resolved::Unknown(declared.iter().position(|u| &u.name == name).ok_or_else(
+                        || fail(format!("{what} is set to `{name}`, which is not an unknown")),
+                    )?)
+                }
+                Setting::Function(f) => {
+                    if let Some(&j) = f.uses().iter().find(|&&j| j >= declared.len()) {
+                        return Err(fail(format!(
+                            "{what}: `{}` uses unknown {j} of {}",
+                            f.describe(),
+                            declared.len()
+                        )));
+                    }
+                    Resolved::Function(f.clone())
+                }
+            })
+        };
+        let initial = e
+            .initial
+            .iter()
+            .zip(sig.states())
+            .map(|(s, name)| resolve(s, &format!("the initial value of `{name}`")))
+            .collect::<Result<Vec<_>, _>>()?;
+        let parameters = e
+            .parameters
+            .iter()
+            .zip(sig.parameters())
+            .map(|(s, name)| resolve(s, &format!("parameter `{name}`")))
+            .collect::<Result<Vec<_>, _>>()?;
+        let find = |name: &str| declared.iter().position(|u| u.name == name);
+        let plan = plan(&e.system, &e.data, &find).map_err(|err| in_experiment(&e.name, err))?;
+        out.push(Planned {
+            name: e.name,
+            system: std::sync::Arc::new(e.system),
+            t0: e.t0,
             initial,
             parameters,
-            unknowns: Unknowns::new(self.unknowns, wrt),
-            data,
+            data: e.data,
             plan,
-            integrator: self.integrator,
-            quadrature_rtol: self.quadrature_rtol,
-            system: self.system,
-        })
+            slots: Vec::new(),
+        });
     }
+    Ok(out)
+}
+
+/// Which unknowns the methods move (free) and which are noise scales set in closed form; an
+/// unknown that nothing uses is refused.
+fn roles<S: System>(
+    declared: &[Unknown],
+    experiments: &[Planned<S>],
+) -> Result<(Vec<usize>, Vec<usize>), ProblemError> {
+    let k = declared.len();
+    let (mut model, mut scale) = (vec![false; k], vec![false; k]);
+    for e in experiments {
+        for s in e.initial.iter().chain(&e.parameters) {
+            match s {
+                Resolved::Unknown(j) => model[*j] = true,
+                Resolved::Function(f) => f.uses().iter().for_each(|&j| model[j] = true),
+                Resolved::Value(_) => {}
+            }
+        }
+        for series in &e.sampled().series {
+            match &series.noise {
+                PlannedNoise::Scale { unknown, .. } => scale[*unknown] = true,
+                PlannedNoise::Function(f) => f.uses().iter().for_each(|&j| model[j] = true),
+                _ => {}
+            }
+        }
+    }
+    if let Some(j) = (0..k).find(|&j| model[j] && scale[j]) {
+        return Err(ProblemError::Experiments(format!(
+            "`{}` is a noise scale and also used by the model or a setting: a scale set in closed form must be nothing else",
+            declared[j].name
+        )));
+    }
+    if let Some(j) = (0..k).find(|&j| !model[j] && !scale[j]) {
+        return Err(ProblemError::Experiments(format!(
+            "the unknown `{}` is used nowhere (no initial value, parameter, setting or σ)",
+            declared[j].name
+        )));
+    }
+    Ok(((0..k).filter(|&j| model[j]).collect(), (0..k).filter(|&j| scale[j]).collect()))
 }

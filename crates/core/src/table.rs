@@ -69,6 +69,24 @@ impl Estimate {
                 column(&value)
             );
         }
+        for scale in &self.scales {
+            let se = scale.std_error.map_or("—".to_string(), |s| significant(s, 5));
+            let interval = match (scale.interval, scale.bound) {
+                (Some([a, b]), None) => format!("[{}, {}]", significant(a, 6), significant(b, 6)),
+                _ => "—".to_string(),
+            };
+            let bound = match scale.bound {
+                Some(Bound::Lower) => "   on its lower bound",
+                Some(Bound::Upper) => "   on its upper bound",
+                None => "",
+            };
+            out += &format!(
+                "  {:<10} {:>24} {se:>14} {interval:>34}{}{bound}   (noise scale, closed form)\n",
+                scale.name,
+                significant(scale.value, 10),
+                column(""),
+            );
+        }
         out += "\n";
         out += &format!("  converged    {}\n", self.verdict());
         out += &format!("  termination  {}\n", self.termination);
@@ -93,6 +111,25 @@ impl Estimate {
             .and_then(|e| e.cost)
             .map_or(String::new(), |(cost, source)| format!("   (reference {cost}, {source})"));
         out += &format!("  cost ε       {}{reference}\n", significant(self.cost, 10));
+        if let (true, Some(nll)) = (self.noise_model, self.nll) {
+            let criteria = match (self.aic(), self.bic()) {
+                (Some(a), Some(b)) => {
+                    format!("; AIC {}, BIC {}", significant(a, 8), significant(b, 8))
+                }
+                _ => String::new(),
+            };
+            out += &format!(
+                "  nll          {} (negative log-likelihood{criteria})\n",
+                significant(nll, 10)
+            );
+        }
+        if self.experiments.len() > 1 {
+            for x in &self.experiments {
+                let nll = x.nll.map_or("—".to_string(), |v| significant(v, 8));
+                out +=
+                    &format!("  experiment   {:<16} {:>5} values, nll {nll}\n", x.name, x.points);
+            }
+        }
         let dof = self.dof.map_or("—".to_string(), |d| d.to_string());
         out += &format!("  dof          {dof} (measured values − unknowns not held on a bound)\n");
         out += &format!(
@@ -177,7 +214,10 @@ pub fn compact(system: &str, rows: &[Compared<'_>]) -> String {
                 significant(e.cost, 10),
                 e.elapsed.as_secs_f64() * 1e3,
                 e.termination.code(),
-                row.note.as_ref().map_or(String::new(), |n| format!(", {n}")),
+                match (e.noise_model, e.nll) {
+                    (true, Some(nll)) => format!(", nll {}", significant(nll, 10)),
+                    _ => String::new(),
+                } + &row.note.as_ref().map_or(String::new(), |n| format!(", {n}")),
             ),
             Err(message) => format!("{system:<24} {:<24} error: {message}\n", row.method),
         };

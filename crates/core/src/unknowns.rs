@@ -2,7 +2,6 @@
 //! bounds and an optional logarithmic scale.
 
 use serde::{Deserialize, Serialize};
-use sysid_ode::Wrt;
 
 /// One quantity to identify: a parameter, or the initial value of a state (named after the
 /// state).
@@ -103,16 +102,15 @@ impl Unknown {
     }
 }
 
-/// The unknowns of a problem, in order, each resolved to a sensitivity column.
+/// The free unknowns of a problem, in order: what the methods move.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Unknowns {
     list: Vec<Unknown>,
-    wrt: Vec<Wrt>,
 }
 
 impl Unknowns {
-    pub(crate) fn new(list: Vec<Unknown>, wrt: Vec<Wrt>) -> Self {
-        Self { list, wrt }
+    pub(crate) fn new(list: Vec<Unknown>) -> Self {
+        Self { list }
     }
     /// Number of unknowns k.
     pub fn len(&self) -> usize {
@@ -129,10 +127,6 @@ impl Unknowns {
     /// Their names in order.
     pub fn names(&self) -> Vec<String> {
         self.list.iter().map(|u| u.name.clone()).collect()
-    }
-    /// The sensitivity column of each unknown.
-    pub fn wrt(&self) -> &[Wrt] {
-        &self.wrt
     }
     /// The starting guesses, as values.
     pub fn guesses(&self) -> Vec<f64> {

@@ -3,11 +3,11 @@
 use std::path::Path;
 
 use crate::table::{Table, TableError, cell_position, without_bom};
-use sysid_core::Data;
+use sysid_core::{Data, Noise, Transform};
 use sysid_ode::{Inputs, Signal};
 
 use crate::error::{ModelError, line_column};
-use crate::file::{ModelFile, RecordKind};
+use crate::file::{ModelFile, NoiseSpec, RecordKind};
 
 /// The measurements and input signals of a data file.
 pub struct ModelData {
@@ -17,6 +17,21 @@ pub struct ModelData {
     pub inputs: Inputs,
     /// Number of rows.
     pub rows: usize,
+    /// The series whose σ is an expression, with their output's index: the problem gives
+    /// them their noise function.
+    pub modelled: Vec<(usize, usize)>,
+}
+
+/// Where the initial values of a data file's experiment are given: t0, and where it is
+/// written (for the error of data before it).
+#[derive(Clone, Copy, Debug)]
+pub struct Start<'a> {
+    /// Time of the initial values.
+    pub t0: f64,
+    /// Byte offset of the `t0` value in the model file, if given.
+    pub at: Option<usize>,
+    /// Which table gives it: "[data]" or "experiment `low`".
+    pub table: &'a str,
 }
 
 /// The largest weighted magnitude whose square an f64 holds: a value beyond it makes the
@@ -60,6 +75,16 @@ fn table_error(e: TableError) -> ModelError {
 /// named after states, outputs or inputs; empty cells are missing values. A leading
 /// byte-order mark is skipped.
 pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
+    let start = Start { t0: model.data.t0, at: model.data.t0_at, table: "[data]" };
+    read_from(model, path, start)
+}
+
+/// Reads `path` against `model` as [`read`] does, for an experiment starting at `start`.
+pub fn read_from(
+    model: &ModelFile,
+    path: &Path,
+    start: Start<'_>,
+) -> Result<ModelData, ModelError> {
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|e| ModelError::file(&file, e.to_string()))?;
     let text = without_bom(&text);
@@ -68,14 +93,19 @@ pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
     check_columns(model, &table, &file)?;
     check_weights(model, &table, &file)?;
     let signals = input_signals(model, &table, &file)?;
-    let data = measured_series(model, &table, text, &file)?;
-    check_start(model, &table, text)?;
-    Ok(ModelData { data, inputs: Inputs::new(signals), rows: table.time().len() })
+    let (data, modelled) = measured_series(model, &table, text, &file)?;
+    check_start(model, &table, text, start)?;
+    Ok(ModelData { data, inputs: Inputs::new(signals), rows: table.time().len(), modelled })
 }
 
 /// Whether a column is measured: it names a state or an output.
 fn measurable(model: &ModelFile, name: &str) -> bool {
-    model.states.iter().any(|s| s == name) || model.outputs.iter().any(|o| o.0 == name)
+    model.states.iter().any(|s| s == name) || model.outputs.iter().any(|o| o.name == name)
+}
+
+/// Whether a column holds the σ of an output (`sigma = { column = "NAME" }`).
+fn sigma_column(model: &ModelFile, name: &str) -> bool {
+    model.outputs.iter().any(|o| matches!(&o.noise, NoiseSpec::Column(c) if c == name))
 }
 
 /// Checks the first column's name is `t` or `time`, before its values are read as times.
@@ -95,11 +125,14 @@ fn check_time_column(text: &str, file: &str) -> Result<(), ModelError> {
     Ok(())
 }
 
-/// Checks every column names a state, an output or an input.
+/// Checks every column names a state, an output, an input or an output's σ.
 fn check_columns(model: &ModelFile, table: &Table, file: &str) -> Result<(), ModelError> {
-    let outputs: Vec<&str> = model.outputs.iter().map(|o| o.0.as_str()).collect();
+    let outputs: Vec<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
     for name in table.names() {
-        if !measurable(model, name) && !model.inputs.iter().any(|i| i == name) {
+        if !measurable(model, name)
+            && !model.inputs.iter().any(|i| i == name)
+            && !sigma_column(model, name)
+        {
             return Err(ModelError {
                 file: file.to_string(),
                 line: Some(1),
@@ -155,8 +188,13 @@ fn input_signals(model: &ModelFile, table: &Table, file: &str) -> Result<Vec<Sig
 /// Refuses data before t0, at the first such sample: the initial values are given at t0 and
 /// the model is integrated forward from there. (A continuous record spans every row, so
 /// its first row must not lie before t0 either, measured or not.)
-fn check_start(model: &ModelFile, table: &Table, text: &str) -> Result<(), ModelError> {
-    let t0 = model.data.t0;
+fn check_start(
+    model: &ModelFile,
+    table: &Table,
+    text: &str,
+    start: Start<'_>,
+) -> Result<(), ModelError> {
+    let t0 = start.t0;
     let continuous = model.data.record == RecordKind::Continuous;
     let measured: Vec<&String> = table.names().iter().filter(|n| measurable(model, n)).collect();
     for (row, &t) in table.time().iter().enumerate().take_while(|(_, t)| **t < t0) {
@@ -170,12 +208,12 @@ fn check_start(model: &ModelFile, table: &Table, text: &str) -> Result<(), Model
             None => continue,
         };
         let field = table.names().iter().position(|n| n == name).map_or(0, |i| i + 1);
-        let t0_in = match model.data.t0_at {
+        let t0_in = match start.at {
             Some(at) => {
                 let (line, column) = line_column(&model.text, at);
                 format!("{}:{line}:{column}", model.path.display())
             }
-            None => format!("the default: {} has no [data] t0", model.path.display()),
+            None => format!("the default: {} has no {} t0", model.path.display(), start.table),
         };
         let line = table.line(row);
         return Err(ModelError {
@@ -190,35 +228,108 @@ fn check_start(model: &ModelFile, table: &Table, text: &str) -> Result<(), Model
     Ok(())
 }
 
-/// The measured series, weighted, in column order; at least one, none empty, none
-/// overflowing.
+/// An error at a cell of the table: column `name`, row `row`.
+fn at_cell(table: &Table, text: &str, name: &str, row: usize, message: String) -> ModelError {
+    let field = 1 + table.names().iter().position(|n| n == name).unwrap_or(0);
+    let line = table.line(row);
+    ModelError {
+        file: table.source().to_string(),
+        line: line.map(|l| l as usize),
+        column: line.and_then(|l| cell_position(text, l, field)),
+        message,
+    }
+}
+
+/// The measured series in column order, weighted or with their noise models; at least one,
+/// none empty, none overflowing; and the series whose σ is an expression.
 fn measured_series(
     model: &ModelFile,
     table: &Table,
     text: &str,
     file: &str,
-) -> Result<Data, ModelError> {
+) -> Result<(Data, Vec<(usize, usize)>), ModelError> {
     let times = table.time();
     let mut data = match model.data.record {
         RecordKind::Discrete => Data::discrete(),
         RecordKind::Continuous => Data::continuous(times[0], times[times.len() - 1]),
     };
-    let mut measured = 0;
+    let mut modelled = Vec::new();
     for name in table.names().iter().filter(|n| measurable(model, n)) {
         let (t, v) = table.samples(name).expect("a column of the table");
         if t.is_empty() {
             return Err(ModelError::file(file, format!("column `{name}` has no values")));
         }
-        let weight = model.data.weights.iter().find(|w| &w.0 == name).map_or(1.0, |w| w.1);
-        overflow(table, text, name, weight)?;
-        data = data.weighted_series(name, weight, &t, &v);
-        measured += 1;
+        let output = model.outputs.iter().position(|o| &o.name == name);
+        let (noise, transform) = output
+            .map(|o| (&model.outputs[o].noise, model.outputs[o].transform))
+            .unwrap_or((&NoiseSpec::Weights, Transform::Lin));
+        let cells = table.column(name).expect("a column");
+        let rows: Vec<usize> = (0..cells.len()).filter(|&i| cells[i].is_some()).collect();
+        if transform != Transform::Lin
+            && let Some(&row) = rows.iter().find(|&&i| cells[i].is_some_and(|v| v <= 0.0))
+        {
+            return Err(at_cell(
+                table,
+                text,
+                name,
+                row,
+                format!(
+                    "column `{name}`: {} is not positive, and `{name}` is measured on the {} scale",
+                    cells[row].unwrap_or_default(),
+                    transform.name()
+                ),
+            ));
+        }
+        let noise = match noise {
+            NoiseSpec::Weights => {
+                let weight = model.data.weights.iter().find(|w| &w.0 == name).map_or(1.0, |w| w.1);
+                overflow(table, text, name, weight)?;
+                data = data.weighted_series(name, weight, &t, &v);
+                continue;
+            }
+            NoiseSpec::Number(sigma) => Noise::Known(vec![*sigma; t.len()]),
+            NoiseSpec::Column(column) => {
+                let sigmas = table.column(column).ok_or_else(|| {
+                    ModelError::file(
+                        file,
+                        format!(
+                            "`{name}` takes its σ from column `{column}`, which this file lacks"
+                        ),
+                    )
+                })?;
+                let mut list = Vec::with_capacity(rows.len());
+                for &row in &rows {
+                    match sigmas[row] {
+                        Some(s) if s > 0.0 && s.is_finite() => list.push(s),
+                        other => {
+                            return Err(at_cell(
+                                table,
+                                text,
+                                column,
+                                row,
+                                format!(
+                                    "column `{column}`, the σ of `{name}`: {} at t = {}: σ must be a positive number where `{name}` is measured",
+                                    other.map_or("an empty cell".to_string(), |s| s.to_string()),
+                                    times[row]
+                                ),
+                            ));
+                        }
+                    }
+                }
+                Noise::Known(list)
+            }
+            NoiseSpec::Expression(_) => {
+                modelled.push((data.series.len(), output.expect("an output has the expression")));
+                Noise::Known(vec![1.0; t.len()])
+            }
+        };
+        data = data.series_with_noise(name, &t, &v, noise, transform);
     }
-    if measured == 0 {
+    if data.series.is_empty() {
         return Err(ModelError::file(
             file,
             "no measured column: name columns after states or outputs",
         ));
     }
-    Ok(data)
+    Ok((data, modelled))
 }

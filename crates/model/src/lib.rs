@@ -44,6 +44,7 @@ pub mod expr;
 pub mod file;
 #[cfg(feature = "jit")]
 mod jit;
+mod problem;
 pub mod simulate;
 pub mod symbolic;
 mod system;
@@ -52,11 +53,12 @@ mod tape;
 
 use std::path::Path;
 
-use sysid_core::{Problem, ProblemError};
 use sysid_ode::{Inputs, Signature};
 
 pub use error::{ModelError, line_column};
-pub use file::{DataSpec, ModelFile, RecordKind};
+pub use file::{
+    DataSpec, ExperimentSpec, Expression, ModelFile, NoiseSpec, OutputSpec, RecordKind, SetValue,
+};
 pub use system::ModelSystem;
 
 /// A model file, read and compiled.
@@ -78,14 +80,14 @@ impl Model {
             f.states.clone(),
             f.parameters.clone(),
             f.inputs.clone(),
-            f.outputs.iter().map(|o| o.0.clone()).collect(),
+            f.outputs.iter().map(|o| o.name.clone()).collect(),
         )
         .expect("names were checked when the file was read")
     }
 
     /// The system, with input signals.
     pub fn system(&self, inputs: Inputs) -> ModelSystem {
-        let outputs = self.file.outputs.iter().map(|o| o.1.clone()).collect();
+        let outputs = self.file.outputs.iter().map(|o| o.value.clone()).collect();
         ModelSystem::new(self.signature(), self.file.equations.clone(), outputs, inputs)
     }
 
@@ -97,34 +99,6 @@ impl Model {
     pub fn data_path(&self) -> Result<&Path, ModelError> {
         self.file.data.file.as_deref().ok_or_else(|| {
             self.located("no data file: give `[data] file = \"...\"` or --data".into())
-        })
-    }
-
-    /// The identification problem on the model's data file, or on `data` instead.
-    pub fn problem(&self, data: Option<&Path>) -> Result<Problem<ModelSystem>, ModelError> {
-        let path = match data {
-            Some(p) => p,
-            None => self.data_path()?,
-        };
-        let read = data::read(&self.file, path)?;
-        let file = path.display().to_string();
-        let mut builder = Problem::builder(self.system(read.inputs))
-            .t0(self.file.data.t0)
-            .integrator(self.file.integrator)
-            .data(read.data);
-        for (name, value) in &self.file.known {
-            builder = builder.known(name, *value);
-        }
-        for u in &self.file.unknowns {
-            builder = builder.unknown_with(u.clone());
-        }
-        builder.build().map_err(|e| match e {
-            ProblemError::TooFewData { observations, unknowns } => ModelError::file(
-                &file,
-                format!("{observations} data points for {unknowns} unknowns: need at least as many data as unknowns"),
-            ),
-            ProblemError::InvalidUnknown { .. } | ProblemError::NoUnknowns => self.located(e.to_string()),
-            other => ModelError::file(&file, other.to_string()),
         })
     }
 }

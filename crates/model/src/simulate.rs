@@ -17,70 +17,121 @@ pub fn decimal(t: f64) -> f64 {
 }
 
 impl Model {
-    /// The model's states and outputs at `times`, as CSV, with every unknown at its guess
-    /// unless `set` gives it (or a known value) another; inputs from `data` or the model's
-    /// data file (a model without inputs needs none).
+    /// The model's states and outputs at `times` (from each experiment's t0), as CSV, with
+    /// every unknown at its guess unless `set` gives it (or a known value, or an initial
+    /// value) another; inputs from each experiment's data file (`data` instead of a single
+    /// experiment's). `experiment` picks one experiment; with several, a first column names
+    /// the experiment of each row.
     pub fn simulate(
         &self,
         set: &[(String, f64)],
         data: Option<&Path>,
         times: &[f64],
+        experiment: Option<&str>,
     ) -> Result<String, ModelError> {
         let path = self.file.path.display().to_string();
-        let inputs = if self.file.inputs.is_empty() {
-            Inputs::default()
+        let f = &self.file;
+        // Experiments, inputs, initial values by expressions and unknowns of their own need
+        // the problem (its data files); a plain model is simulated from its values alone.
+        let plain = f.experiments.is_empty()
+            && f.inputs.is_empty()
+            && f.initial.is_empty()
+            && f.extras.is_empty();
+        let runs = if plain {
+            let mut v = Vec::new();
+            let known = f.known.iter().map(|(n, v)| (n, *v));
+            for (name, value) in known.chain(f.unknowns.iter().map(|u| (&u.name, u.guess))) {
+                v.push((name.clone(), value));
+            }
+            vec![(
+                sysid_core::SINGLE_EXPERIMENT.to_string(),
+                self.system(Inputs::default()),
+                f.data.t0,
+                self.point_from(&v)?,
+            )]
         } else {
-            let data = match data {
-                Some(d) => d,
-                None => self.data_path()?,
-            };
-            crate::data::read(&self.file, data)?.inputs
-        };
-        let system = self.system(inputs);
-        let sig = system.signature().clone();
-        let mut y0 = vec![f64::NAN; sig.n_states()];
-        let mut p = vec![f64::NAN; sig.n_parameters()];
-        let mut assign = |name: &str, value: f64| {
-            match (sig.state(name), sig.parameter(name)) {
-                (Some(i), _) => y0[i] = value,
-                (None, Some(k)) => p[k] = value,
-                (None, None) => {
-                    let message = format!("--set: `{name}` is not a state or parameter");
-                    return Err(ModelError::file(&path, message));
+            let problem = self.problem(data)?;
+            let mut values: Vec<f64> = problem.declared().iter().map(|u| u.guess).collect();
+            for (name, value) in set {
+                if let Some(j) = problem.declared().iter().position(|u| &u.name == name) {
+                    values[j] = *value;
                 }
             }
-            Ok(())
-        };
-        let guesses = self.file.unknowns.iter().map(|u| (u.name.as_str(), u.guess));
-        let known = self.file.known.iter().map(|(n, v)| (n.as_str(), *v));
-        for (name, value) in known.chain(guesses).chain(set.iter().map(|(n, v)| (n.as_str(), *v))) {
-            assign(name, value)?;
-        }
-        let sol = Ivp::new(&system, self.file.data.t0, &y0, &p)
-            .solve(&self.file.integrator, times)
-            .map_err(|e| ModelError::file(&path, format!("cannot be simulated: {e}")))?;
-        let mut h = vec![0.0; sig.outputs().len()];
-        let mut u = vec![0.0; sig.n_inputs()];
-        let mut text = String::from("t");
-        for name in sig.states().iter().chain(sig.outputs()) {
-            text += &format!(",{name}");
-        }
-        text += "\n";
-        for (m, &t) in times.iter().enumerate() {
-            text += &format!("{}", decimal(t));
-            for v in sol.state(m) {
-                text += &format!(",{v}");
+            if let Some(name) = experiment
+                && !problem.experiments().iter().any(|e| e.name() == name)
+            {
+                let names: Vec<&str> = problem.experiments().iter().map(|e| e.name()).collect();
+                return Err(ModelError::file(
+                    &path,
+                    format!(
+                        "--experiment {name}: no such experiment (experiments: {})",
+                        names.join(", ")
+                    ),
+                ));
             }
-            if !h.is_empty() {
-                system.input_values(t, Side::After, &mut u);
-                system.outputs(t, sol.state(m), &p, &u, &mut h);
-                for v in &h {
+            problem
+                .experiments()
+                .iter()
+                .filter(|e| experiment.is_none_or(|n| n == e.name()))
+                .map(|e| (e.name().to_string(), e.system().clone(), e.t0(), e.point(&values)))
+                .collect()
+        };
+        let several = runs.len() > 1;
+        let mut text = String::new();
+        for (name, system, t0, (mut y0, mut p)) in runs {
+            let sig = system.signature().clone();
+            for (key, value) in set {
+                match (sig.state(key), sig.parameter(key)) {
+                    (Some(i), _) => y0[i] = *value,
+                    (None, Some(k)) => p[k] = *value,
+                    (None, None) if f.unknowns.iter().any(|u| &u.name == key) => {}
+                    (None, None) => {
+                        let message =
+                            format!("--set: `{key}` is not a state, parameter or unknown");
+                        return Err(ModelError::file(&path, message));
+                    }
+                }
+            }
+            let sol = Ivp::new(&system, t0, &y0, &p)
+                .solve(&f.integrator, times)
+                .map_err(|e| ModelError::file(&path, format!("cannot be simulated: {e}")))?;
+            if text.is_empty() {
+                text += if several { "experiment,t" } else { "t" };
+                for n in sig.states().iter().chain(sig.outputs()) {
+                    text += &format!(",{n}");
+                }
+                text += "\n";
+            }
+            let mut h = vec![0.0; sig.outputs().len()];
+            let mut u = vec![0.0; sig.n_inputs()];
+            for (m, &t) in times.iter().enumerate() {
+                if several {
+                    text += &format!("{name},");
+                }
+                text += &format!("{}", decimal(t));
+                for v in sol.state(m) {
                     text += &format!(",{v}");
                 }
+                if !h.is_empty() {
+                    system.input_values(t, Side::After, &mut u);
+                    system.outputs(t, sol.state(m), &p, &u, &mut h);
+                    for v in &h {
+                        text += &format!(",{v}");
+                    }
+                }
+                text += "\n";
             }
-            text += "\n";
         }
         Ok(text)
+    }
+
+    /// y(t0) and α from values by name (every state and parameter given).
+    fn point_from(&self, values: &[(String, f64)]) -> Result<(Vec<f64>, Vec<f64>), ModelError> {
+        let f = &self.file;
+        let find = |name: &str| values.iter().find(|(n, _)| n == name).map(|p| p.1);
+        let y0 = f.states.iter().map(|s| find(s).unwrap_or(f64::NAN)).collect();
+        let p = f.parameters.iter().map(|s| find(s).unwrap_or(f64::NAN)).collect();
+        Ok((y0, p))
     }
 }
 

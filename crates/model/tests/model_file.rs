@@ -39,7 +39,7 @@ fn toml_syntax_and_top_level_keys() {
         ),
         (
             String::from("states = [\"x\"]\ncolour = \"red\"\n"),
-            "models/m.toml:2:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, integrator)",
+            "models/m.toml:2:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator)",
         ),
         (
             String::from("parameters = [\"k\"]\n"),
@@ -47,11 +47,11 @@ fn toml_syntax_and_top_level_keys() {
         ),
         (
             String::from("colour = 1\nparameters = [\"k\"]\n"),
-            "models/m.toml:1:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, integrator)",
+            "models/m.toml:1:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator)",
         ),
         (
             format!("{OK}[solver]\nmethod = \"x\"\n"),
-            "models/m.toml:11:2: unknown key `solver` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, integrator)",
+            "models/m.toml:11:2: unknown key `solver` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator)",
         ),
     ]);
 }
@@ -374,7 +374,7 @@ fn initial_and_known() {
         ),
         (
             format!("{HEAD}{EQ}[initial]\nx = \"one\"\n"),
-            "models/m.toml:7:5: [initial] x must be a number",
+            "models/m.toml:7:6: [initial] x: unknown name `one` (names: k)",
         ),
         (
             format!("{HEAD}{EQ}[initial]\nx = inf\n"),
@@ -429,7 +429,7 @@ fn unknowns() {
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nz = 1\n"),
-            "models/m.toml:10:1: [unknowns]: `z` is not a state or parameter (names: x, y, k)",
+            "models/m.toml:10:1: [unknowns]: `z` is used nowhere: it is no state or parameter, and no sigma, set or [initial] expression names it",
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nx = 1\n"),
@@ -441,7 +441,7 @@ fn unknowns() {
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nk = 1\nk2 = 2\n"),
-            "models/m.toml:11:1: [unknowns]: `k2` is not a state or parameter (names: x, y, k)",
+            "models/m.toml:11:1: [unknowns]: `k2` is used nowhere: it is no state or parameter, and no sigma, set or [initial] expression names it",
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ min = 0 }}\n"),
@@ -773,8 +773,10 @@ fn a_file_with_every_section_reads_every_value() {
     };
     let program = |text: &str| Program::compile(&parse(text).unwrap(), &resolve).unwrap();
     assert_eq!(file.equations, [program("-k * x + u^2 / (1 + t)"), program("k * x - c * y + w")]);
+    let outputs: Vec<(String, Program)> =
+        file.outputs.iter().map(|o| (o.name.clone(), o.value.clone())).collect();
     assert_eq!(
-        file.outputs,
+        outputs,
         [("total".into(), program("x + y")), ("ratio".into(), program("x / max(y, 1e-3)"))]
     );
     assert_eq!(file.known, [("x".into(), 1000.0), ("y".into(), 0.25), ("c".into(), 16.0)]);

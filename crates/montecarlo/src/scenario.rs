@@ -4,7 +4,7 @@
 use nalgebra::DMatrix;
 use rand::Rng;
 use rand_distr::StandardNormal;
-use sysid_core::{Data, NormalFactor, Problem, Samples, Series};
+use sysid_core::{Data, NormalFactor, Problem, Samples, Series, Transform};
 use sysid_ode::System;
 use sysid_systems::{Case, DataSource};
 
@@ -80,9 +80,17 @@ impl<S: System + Clone> Scenario<S> {
     }
 
     /// Noise as the data of `problem` show it around `truth` (for example a fit of a model
-    /// file): σ_m = s / √w_m, s² = ε(truth) / (N − k), so that the weights keep their
-    /// meaning of relative precisions.
+    /// file): with a noise model, each sample's σ from it at the truth (noise scales at the
+    /// values `problem` holds them at); with relative weights σ_m = s / √w_m,
+    /// s² = ε(truth) / (N − k), so that the weights keep their meaning of relative precisions.
     pub fn from_residuals(problem: Problem<S>, truth: Vec<f64>) -> Result<Self, StudyError> {
+        if problem.has_noise_model() {
+            let z = problem.unknowns().coordinates(&truth);
+            let sigma = problem.sigmas(&z).map_err(|e| {
+                StudyError::Setup(format!("the noise model cannot be evaluated at the truth: {e}"))
+            })?;
+            return Self::new(problem, truth, sigma);
+        }
         let k = problem.unknowns().len();
         let n = problem.n_residuals();
         if n <= k {
@@ -101,9 +109,9 @@ impl<S: System + Clone> Scenario<S> {
             ));
         }
         let sigma: Vec<f64> = problem
-            .sampled()
-            .series
+            .experiments()
             .iter()
+            .flat_map(|e| &e.sampled().series)
             .flat_map(|series| series.samples.iter().map(|m| s / m.sqrt_weight))
             .collect();
         Self::new(problem, truth, sigma)
@@ -145,25 +153,39 @@ impl<S: System + Clone> Scenario<S> {
         &self.clean
     }
 
-    /// Data with noise `noise`·σ_m drawn from `rng` (standard normal, sample after sample).
-    pub fn noisy_data(&self, noise: f64, rng: &mut impl Rng) -> Data {
-        let mut data = self.base.data().clone();
+    /// Every experiment's data with noise `noise`·σ_m drawn from `rng` (standard normal,
+    /// sample after sample, experiment after experiment), on each series' scale: a log-scale
+    /// measurement is the model's value times a log-normal factor.
+    pub fn noisy_data(&self, noise: f64, rng: &mut impl Rng) -> Vec<Data> {
         let mut at = 0;
-        for series in &mut data.series {
-            if let Samples::Points { values, .. } = &mut series.samples {
-                for v in values.iter_mut() {
-                    let e: f64 = rng.sample(StandardNormal);
-                    *v = self.clean[at] + noise * self.sigma[at] * e;
-                    at += 1;
+        self.base
+            .experiments()
+            .iter()
+            .map(|e| {
+                let mut data = e.data().clone();
+                for series in &mut data.series {
+                    let transform = series.transform;
+                    if let Samples::Points { values, .. } = &mut series.samples {
+                        for v in values.iter_mut() {
+                            let e: f64 = rng.sample(StandardNormal);
+                            let shift = noise * self.sigma[at] * e;
+                            *v = match transform {
+                                Transform::Lin => self.clean[at] + shift,
+                                Transform::Log => self.clean[at] * shift.exp(),
+                                Transform::Log10 => self.clean[at] * 10f64.powf(shift),
+                            };
+                            at += 1;
+                        }
+                    }
                 }
-            }
-        }
-        data
+                data
+            })
+            .collect()
     }
 
-    /// The problem on `data` (same times and weights as the template).
-    pub fn with_data(&self, data: Data) -> Result<Problem<S>, StudyError> {
-        Ok(self.base.clone().with_data(data)?)
+    /// The problem on `data`, one per experiment (same times and noise as the template).
+    pub fn with_data(&self, data: Vec<Data>) -> Result<Problem<S>, StudyError> {
+        Ok(self.base.clone().with_experiment_data(data)?)
     }
 
     /// The Cramér–Rao bound at the truth for noise `noise`·σ: the inverse Fisher information
@@ -175,19 +197,24 @@ impl<S: System + Clone> Scenario<S> {
         let lin = problem.residuals_and_jacobian(&z).map_err(|e| {
             StudyError::Setup(format!("the model cannot be integrated at the truth: {e}"))
         })?;
-        let jac = &lin.residuals.as_ref().expect("discrete data give residuals").jacobian;
-        // Row m of the weighted Jacobian is √w_m ∇h_m (in coordinates z).
-        let sqrt_w: Vec<f64> = problem
-            .sampled()
-            .series
-            .iter()
-            .flat_map(|s| s.samples.iter().map(|m| m.sqrt_weight))
-            .collect();
-        let mut g = jac.clone();
-        for (m, mut row) in g.row_iter_mut().enumerate() {
-            row /= sqrt_w[m] * noise * self.sigma[m];
-        }
-        let fisher = g.tr_mul(&g);
+        let fisher = if problem.has_noise_model() {
+            // The noise model's own Fisher information, for noise `noise` times its σ.
+            lin.normal.clone() / (noise * noise)
+        } else {
+            let jac = &lin.residuals.as_ref().expect("discrete data give residuals").jacobian;
+            // Row m of the weighted Jacobian is √w_m ∇h_m (in coordinates z).
+            let sqrt_w: Vec<f64> = problem
+                .experiments()
+                .iter()
+                .flat_map(|e| &e.sampled().series)
+                .flat_map(|s| s.samples.iter().map(|m| m.sqrt_weight))
+                .collect();
+            let mut g = jac.clone();
+            for (m, mut row) in g.row_iter_mut().enumerate() {
+                row /= sqrt_w[m] * noise * self.sigma[m];
+            }
+            g.tr_mul(&g)
+        };
         let factor = NormalFactor::new(&fisher, 1e14).map_err(|s| {
             let names = problem.names();
             let which: Vec<&str> = s.unknowns.iter().map(|&i| names[i].as_str()).collect();
@@ -203,18 +230,24 @@ impl<S: System + Clone> Scenario<S> {
         Ok(DMatrix::from_fn(k, k, |i, j| inverse[(i, j)] * scale[i] * scale[j]))
     }
 
-    /// The data without noise.
-    pub fn clean_data(&self) -> Data {
-        let mut data = self.base.data().clone();
+    /// Every experiment's data without noise.
+    pub fn clean_data(&self) -> Vec<Data> {
         let mut at = 0;
-        for series in &mut data.series {
-            if let Samples::Points { values, .. } = &mut series.samples {
-                let n = values.len();
-                values.copy_from_slice(&self.clean[at..at + n]);
-                at += n;
-            }
-        }
-        data
+        self.base
+            .experiments()
+            .iter()
+            .map(|e| {
+                let mut data = e.data().clone();
+                for series in &mut data.series {
+                    if let Samples::Points { values, .. } = &mut series.samples {
+                        let n = values.len();
+                        values.copy_from_slice(&self.clean[at..at + n]);
+                        at += n;
+                    }
+                }
+                data
+            })
+            .collect()
     }
 }
 

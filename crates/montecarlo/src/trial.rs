@@ -174,8 +174,8 @@ impl<S: System + Clone + Send + Sync> Study<S> {
     }
 
     /// The start of trial `index` and its data: the start's draws come first in the stream,
-    /// then the noise, sample after sample.
-    pub fn draw(&self, index: usize) -> (Vec<f64>, sysid_core::Data) {
+    /// then the noise, sample after sample (experiment after experiment).
+    pub fn draw(&self, index: usize) -> (Vec<f64>, Vec<sysid_core::Data>) {
         let mut rng = self.rng(index);
         let problem = self.scenario.problem();
         let start = problem

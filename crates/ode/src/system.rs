@@ -181,7 +181,7 @@ pub enum Observable {
 /// let decay = Decay(Signature::new(&["x"], &["k"]));
 /// assert_eq!(decay.signature().n_states(), 1);
 /// ```
-pub trait System: Sync {
+pub trait System: Send + Sync {
     /// Names and dimensions.
     fn signature(&self) -> &Signature;
 

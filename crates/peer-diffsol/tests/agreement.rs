@@ -20,7 +20,7 @@ impl Visit for Disagreement {
         let problem = case.problem(1).unwrap();
         let (y0, p) = case.true_point();
         let times = &problem.sampled().times;
-        let wrt = problem.unknowns().wrt();
+        let wrt = problem.experiments()[0].slots();
         // The reference: sysid far tighter than the peer, with the case's own scheme.
         let atol = problem.integrator().atol.min(self.rtol * 1e-2);
         let tight = Integrator { rtol: 1e-13, atol: atol * 1e-3, ..*problem.integrator() };

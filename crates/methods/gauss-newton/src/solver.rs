@@ -191,6 +191,8 @@ where
 
 impl<S: System> Step<S> for Adapter<'_> {
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
+        // A new start (the driver's next round with other noise scales) evaluates afresh.
+        *self.cache.borrow_mut() = Cache::default();
         self.space.w = self.space.maps.iter().zip(&z).map(|(m, &z)| m.w(z)).collect();
         self.typical = z.iter().map(|v| if *v == 0.0 { 1.0 } else { v.abs() }).collect();
         let z = self.space.current_z();

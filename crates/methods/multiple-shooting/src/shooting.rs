@@ -10,12 +10,15 @@
 //!   d_j = y(τ_{j+1}; τ_j, s_j, α) − s_{j+1},   j = 0 … M − 2.
 //!
 //! With sensitivities, each interval integrates ∂y/∂(s_j, α) for all n node values and the
-//! unknown parameters, so that the end of interval j gives G_j = ∂y(τ_{j+1})/∂s_j and
-//! P_j = ∂y(τ_{j+1})/∂α (in the unknowns' coordinates), and each residual row its gradient
-//! with respect to (s_j, α).
+//! parameters that depend on the unknowns (the experiment's parameter slots), so that the
+//! end of interval j gives G_j = ∂y(τ_{j+1})/∂s_j and P_j = ∂y(τ_{j+1})/∂α, and each
+//! residual row its gradient with respect to (s_j, α). Condensing maps them to the unknowns'
+//! coordinates through the experiment's slot matrix.
+//!
+//! Each experiment has a grid of its own; a problem's grids are shot one after the other.
 
 use nalgebra::{DMatrix, DVector};
-use sysid_core::Problem;
+use sysid_core::{Planned, Problem, Transform};
 use sysid_ode::{Counts, Integrator, Ivp, Observable, ObservableGradient, OdeError, System, Wrt};
 
 /// One shooting interval: its start τ_j and the times it is evaluated at (its samples, then
@@ -32,20 +35,23 @@ struct Row {
     interval: usize,
     local: usize,
     observable: Observable,
+    transform: Transform,
     value: f64,
     sqrt_weight: f64,
 }
 
-/// The shooting grid of a problem, and which sensitivity column is which.
+/// The shooting grid of one experiment, and which sensitivity column is which.
 #[derive(Clone, Debug)]
 pub(crate) struct Grid {
+    /// The experiment's index in the problem.
+    pub(crate) experiment: usize,
     pub(crate) intervals: Vec<Interval>,
     rows: Vec<Row>,
-    /// Every state's node value, then every unknown parameter.
+    /// Every state's node value, then every parameter slot.
     wrt: Vec<Wrt>,
-    /// (unknown, its column in `wrt`) for the unknown parameters.
+    /// (slot, its column in `wrt`) for the parameter slots.
     pub(crate) parameters: Vec<(usize, usize)>,
-    /// (unknown, state) for the unknown initial values.
+    /// (slot, state) for the initial-value slots.
     pub(crate) initial: Vec<(usize, usize)>,
     /// n.
     pub(crate) states: usize,
@@ -66,9 +72,9 @@ pub(crate) struct Shot {
 #[derive(Clone, Debug)]
 pub(crate) struct Derivatives {
     /// Row by row, ∂r/∂(s_j, α) of the row's interval j: n node columns, then one per
-    /// unknown parameter (in coordinates z).
+    /// parameter slot.
     pub(crate) rows: DMatrix<f64>,
-    /// For j = 0 … M − 2, [G_j | P_j] (n × (n + parameters), P_j in coordinates z).
+    /// For j = 0 … M − 2, [G_j | P_j] (n × (n + parameter slots)).
     pub(crate) ends: Vec<DMatrix<f64>>,
 }
 
@@ -83,11 +89,16 @@ impl Shot {
 const SAMPLES_PER_INTERVAL: usize = 5;
 
 impl Grid {
-    /// The grid of `problem` with `intervals` shooting intervals (or the default), fewer when
-    /// there are not enough distinct sample times after t0.
-    pub(crate) fn new<S: System>(problem: &Problem<S>, intervals: Option<usize>) -> Self {
-        let sampled = problem.sampled();
-        let t0 = problem.t0();
+    /// The grid of experiment `experiment` with `intervals` shooting intervals (or the
+    /// default), fewer when there are not enough distinct sample times after t0.
+    pub(crate) fn new<S: System>(
+        problem: &Problem<S>,
+        experiment: usize,
+        intervals: Option<usize>,
+    ) -> Self {
+        let e = &problem.experiments()[experiment];
+        let sampled = e.sampled();
+        let t0 = e.t0();
         let after: Vec<f64> = sampled.times.iter().copied().filter(|&t| t > t0).collect();
         let m = intervals
             .unwrap_or(
@@ -123,24 +134,29 @@ impl Grid {
                     interval: interval_of(sampled.times[sample.index]),
                     local: local[sample.index],
                     observable: s.observable,
+                    transform: s.transform,
                     value: sample.value,
                     sqrt_weight: sample.sqrt_weight,
                 })
             })
             .collect();
-        let n = problem.system().signature().n_states();
+        let n = e.system().signature().n_states();
         let mut wrt: Vec<Wrt> = (0..n).map(Wrt::InitialValue).collect();
         let (mut parameters, mut initial) = (Vec::new(), Vec::new());
-        for (i, w) in problem.unknowns().wrt().iter().enumerate() {
+        for (slot, w) in e.slots().iter().enumerate() {
             match *w {
                 Wrt::Parameter(_) => {
-                    parameters.push((i, wrt.len()));
+                    parameters.push((slot, wrt.len()));
                     wrt.push(*w);
                 }
-                Wrt::InitialValue(state) => initial.push((i, state)),
+                Wrt::InitialValue(state) => initial.push((slot, state)),
             }
         }
-        Self { intervals, rows, wrt, parameters, initial, states: n }
+        Self { experiment, intervals, rows, wrt, parameters, initial, states: n }
+    }
+
+    fn experiment<'p, S: System>(&self, problem: &'p Problem<S>) -> &'p Planned<S> {
+        &problem.experiments()[self.experiment]
     }
 
     /// M.
@@ -169,8 +185,9 @@ impl Grid {
         z: &[f64],
     ) -> (Vec<f64>, Counts) {
         let n = self.states;
-        let (y0, p) = problem.point(z);
-        let measured = measured_states(problem, n);
+        let e = self.experiment(problem);
+        let (y0, p) = e.point(&problem.values_at(z));
+        let measured = measured_states(e, n);
         let all_measured = measured.iter().all(Option::is_some);
         let mut nodes = Vec::with_capacity(n * self.len().saturating_sub(1));
         let mut counts = Counts::default();
@@ -178,7 +195,7 @@ impl Grid {
         for j in 1..self.len() {
             let from = &self.intervals[j - 1];
             let end = self.intervals[j].start;
-            let ivp = Ivp::new(problem.system(), from.start, &previous, &p);
+            let ivp = Ivp::new(e.system(), from.start, &previous, &p);
             let integrated = if all_measured {
                 previous.clone()
             } else {
@@ -215,20 +232,19 @@ impl Grid {
     ) -> Result<(Shot, Counts), OdeError> {
         let n = self.states;
         let c = self.columns();
-        let (y0, p) = problem.point(z);
-        let scale: Vec<f64> =
-            problem.unknowns().list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect();
+        let e = self.experiment(problem);
+        let (y0, p) = e.point(&problem.values_at(z));
         let mut r = DVector::zeros(self.rows.len());
         let mut defects = DVector::zeros(n * (self.len() - 1));
         let mut row_derivatives = derivatives.then(|| DMatrix::zeros(self.rows.len(), c));
         let mut ends = Vec::new();
         let mut counts = Counts::default();
         let mut grad = vec![0.0; c];
-        let mut og = ObservableGradient::new(problem.system(), &p, &self.wrt);
-        let mut plain = ObservableGradient::new(problem.system(), &p, &[]);
+        let mut og = ObservableGradient::new(e.system(), &p, &self.wrt);
+        let mut plain = ObservableGradient::new(e.system(), &p, &[]);
         for (j, interval) in self.intervals.iter().enumerate() {
             let start = if j == 0 { &y0[..] } else { &nodes[(j - 1) * n..j * n] };
-            let ivp = Ivp::new(problem.system(), interval.start, start, &p);
+            let ivp = Ivp::new(e.system(), interval.start, start, &p);
             let rows = self.rows.iter().enumerate().filter(|(_, row)| row.interval == j);
             let last = interval.times.len() - 1;
             if let Some(jac) = row_derivatives.as_mut() {
@@ -238,20 +254,14 @@ impl Grid {
                     let t = interval.times[row.local];
                     let s = sol.sensitivity_slice(row.local);
                     let h = og.eval(t, sol.state(row.local), s, row.observable, &mut grad);
-                    r[index] = row.sqrt_weight * (h - row.value);
+                    r[index] = row.sqrt_weight * (row.transform.apply(h) - row.value);
+                    let slope = row.sqrt_weight * row.transform.derivative(h);
                     for (col, g) in grad.iter().enumerate() {
-                        jac[(index, col)] = row.sqrt_weight * g;
-                    }
-                    for &(i, col) in &self.parameters {
-                        jac[(index, col)] *= scale[i];
+                        jac[(index, col)] = slope * g;
                     }
                 }
                 if j + 1 < self.len() {
-                    let mut end = sol.sensitivity(last).into_owned();
-                    for &(i, col) in &self.parameters {
-                        end.column_mut(col).scale_mut(scale[i]);
-                    }
-                    ends.push(end);
+                    ends.push(sol.sensitivity(last).into_owned());
                     self.defect(&mut defects, j, sol.state(last), nodes);
                 }
             } else {
@@ -263,7 +273,7 @@ impl Grid {
                         Observable::State(i) => sol.state(row.local)[i],
                         observable => plain.eval(t, sol.state(row.local), &[], observable, &mut []),
                     };
-                    r[index] = row.sqrt_weight * (h - row.value);
+                    r[index] = row.sqrt_weight * (row.transform.apply(h) - row.value);
                 }
                 if j + 1 < self.len() {
                     self.defect(&mut defects, j, sol.state(last), nodes);
@@ -272,7 +282,7 @@ impl Grid {
         }
         counts.integrations = 1;
         let finite = |m: &DMatrix<f64>| m.iter().all(|v| v.is_finite());
-        let t_end = self.intervals.last().map_or(problem.t0(), |i| i.times[i.times.len() - 1]);
+        let t_end = self.intervals.last().map_or(e.t0(), |i| i.times[i.times.len() - 1]);
         if !r.iter().chain(defects.iter()).all(|v| v.is_finite())
             || !row_derivatives.as_ref().is_none_or(finite)
             || !ends.iter().all(finite)
@@ -295,8 +305,8 @@ impl Grid {
 }
 
 /// For each state measured directly, its samples as (t, value) in time order.
-fn measured_states<S: System>(problem: &Problem<S>, n: usize) -> Vec<Option<Vec<(f64, f64)>>> {
-    let sampled = problem.sampled();
+fn measured_states<S: System>(e: &Planned<S>, n: usize) -> Vec<Option<Vec<(f64, f64)>>> {
+    let sampled = e.sampled();
     let mut measured = vec![None; n];
     for s in &sampled.series {
         if let Observable::State(i) = s.observable
@@ -304,7 +314,7 @@ fn measured_states<S: System>(problem: &Problem<S>, n: usize) -> Vec<Option<Vec<
             && !s.samples.is_empty()
         {
             let mut points: Vec<(f64, f64)> =
-                s.samples.iter().map(|x| (sampled.times[x.index], x.value)).collect();
+                s.samples.iter().map(|x| (sampled.times[x.index], x.measured)).collect();
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
             measured[i] = Some(points);
         }

@@ -44,7 +44,7 @@
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
     Advance, BoxSolution, Estimate, Evaluations, Failure, FitError, Iterate, LinearLeastSquares,
-    Method, Problem, Proposal, Rule, Step, drive, minimise_in_box,
+    Method, PlannedNoise, Problem, Proposal, Rule, Step, drive, minimise_in_box,
 };
 use sysid_ode::System;
 
@@ -73,11 +73,27 @@ impl<S: System> Method<S> for MultipleShooting {
 
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         self.options.validate()?;
+        for e in problem.experiments() {
+            if let Some(series) =
+                e.sampled().series.iter().find(|s| matches!(s.noise, PlannedNoise::Function(_)))
+            {
+                return Err(FitError::Unsupported {
+                    method: "multiple-shooting".into(),
+                    what: format!(
+                        "a σ of `{}` that depends on the model or the unknowns (its condensed least squares has a fixed weight per row)",
+                        series.name(e.system().signature())
+                    ),
+                });
+            }
+        }
+        let grids = (0..problem.experiments().len())
+            .map(|e| Grid::new(problem, e, self.options.intervals))
+            .collect();
         let mut step = Shooting {
-            grid: Grid::new(problem, self.options.intervals),
+            grids,
             max_condition: self.options.driver.max_condition,
             nodes: Vec::new(),
-            shot: None,
+            shots: None,
             penalty: 0.0,
             proposed: None,
             merged: false,
@@ -91,14 +107,14 @@ const MAX_BACKTRACKS: usize = 30;
 /// Armijo's constant.
 const ARMIJO: f64 = 1e-4;
 
-/// The state of the iteration: the grid, the node values at the current iterate and the
-/// sweep there, the penalty μ, and the direction of the last proposal.
+/// The state of the iteration: a grid per experiment, the node values at the current iterate
+/// and the sweeps there, the penalty μ, and the direction of the last proposal.
 struct Shooting {
-    grid: Grid,
+    grids: Vec<Grid>,
     max_condition: f64,
-    /// s_1 … s_{M−1}.
-    nodes: Vec<f64>,
-    shot: Option<Shot>,
+    /// s_1 … s_{M−1} of each experiment.
+    nodes: Vec<Vec<f64>>,
+    shots: Option<Vec<Shot>>,
     penalty: f64,
     proposed: Option<Direction>,
     /// The nodes have merged into the trajectory: the iteration goes on as single shooting.
@@ -108,44 +124,64 @@ struct Shooting {
 /// A step of the variables with what the line search needs.
 struct Direction {
     dz: Vec<f64>,
-    dnodes: Vec<f64>,
+    dnodes: Vec<Vec<f64>>,
     /// φ at the current point, with the penalty of this step.
     merit: f64,
     /// Dφ.
     slope: f64,
 }
 
-/// The condensed step problem: r̃, J̃, and Δs_j = a_j + B_j Δz.
+/// Δs_j = a_j + B_j Δz of one experiment's nodes: every a_j, then every B_j.
+type NodeSteps = (Vec<DVector<f64>>, Vec<DMatrix<f64>>);
+
+/// The condensed step problem: r̃, J̃ (every experiment's rows), and each experiment's
+/// [`NodeSteps`].
 struct Condensed {
     r: DVector<f64>,
     jacobian: DMatrix<f64>,
-    a: Vec<DVector<f64>>,
-    b: Vec<DMatrix<f64>>,
+    nodes: Vec<NodeSteps>,
+}
+
+/// ‖d‖₁ over every experiment's defects.
+fn defects_l1(shots: &[Shot]) -> f64 {
+    shots.iter().map(|s| s.defects.lp_norm(1)).sum()
 }
 
 impl Shooting {
     fn sweep<S: System>(
         &self,
         ev: &Evaluations<'_, S>,
-        (z, nodes): (&[f64], &[f64]),
+        (z, nodes): (&[f64], &[Vec<f64>]),
         derivatives: bool,
-    ) -> Result<Shot, Failure> {
+    ) -> Result<Vec<Shot>, Failure> {
         let problem = ev.problem();
-        ev.run(z, || self.grid.shoot(problem, problem.integrator(), (z, nodes), derivatives))
+        ev.run(z, || {
+            let mut counts = sysid_ode::Counts::default();
+            let mut shots = Vec::with_capacity(self.grids.len());
+            for (grid, nodes) in self.grids.iter().zip(nodes) {
+                let (shot, c) =
+                    grid.shoot(problem, problem.integrator(), (z, nodes), derivatives)?;
+                counts += c;
+                shots.push(shot);
+            }
+            Ok((shots, counts))
+        })
     }
 
     /// φ of a sweep with the current penalty.
-    fn merit(&self, shot: &Shot) -> f64 {
-        shot.cost() + self.penalty * shot.defects.lp_norm(1)
+    fn merit(&self, shots: &[Shot]) -> f64 {
+        shots.iter().map(Shot::cost).sum::<f64>() + self.penalty * defects_l1(shots)
     }
 
     /// Whether every node matches to the accuracy at which single shooting takes over.
-    fn matched<S: System>(&self, problem: &Problem<S>, shot: &Shot) -> bool {
-        let n = self.grid.states;
+    fn matched<S: System>(&self, problem: &Problem<S>, shots: &[Shot]) -> bool {
         let tol = (100.0 * problem.integrator().rtol).max(1e-6);
-        shot.defects.as_slice().chunks(n).zip(self.nodes.chunks(n)).all(|(d, s)| {
-            let size = s.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-            d.iter().all(|v| v.abs() <= tol * (1.0 + size))
+        self.grids.iter().zip(shots).zip(&self.nodes).all(|((grid, shot), nodes)| {
+            let n = grid.states;
+            shot.defects.as_slice().chunks(n).zip(nodes.chunks(n)).all(|(d, s)| {
+                let size = s.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+                d.iter().all(|v| v.abs() <= tol * (1.0 + size))
+            })
         })
     }
 
@@ -157,9 +193,9 @@ impl Shooting {
         ev: &Evaluations<'_, S>,
         z: Vec<f64>,
     ) -> Result<Iterate, Failure> {
-        let shot = self.shot.as_ref().expect("a sweep at the iterate");
-        let defect = shot.defects.norm();
-        if self.matched(ev.problem(), shot) {
+        let shots = self.shots.as_ref().expect("a sweep at the iterate");
+        let defect = shots.iter().map(|s| s.defects.norm_squared()).sum::<f64>().sqrt();
+        if self.matched(ev.problem(), shots) {
             match ev.linearize(&z) {
                 Ok(lin) => {
                     self.merged = lin.residuals.is_some();
@@ -172,46 +208,55 @@ impl Shooting {
         Ok(unevaluated(z, defect))
     }
 
-    /// Bock's condensing of the step problem at z (see the module's documentation).
-    fn condense<S: System>(&self, problem: &Problem<S>, z: &[f64], shot: &Shot) -> Condensed {
-        let grid = &self.grid;
-        let (n, k) = (grid.states, z.len());
-        let derivatives = shot.derivatives.as_ref().expect("a sweep with sensitivities");
-        let scale: Vec<f64> =
-            problem.unknowns().list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect();
-        let mut a = DVector::zeros(n);
-        let mut b = DMatrix::zeros(n, k);
-        for &(i, state) in &grid.initial {
-            b[(state, i)] = scale[i];
-        }
-        let (mut a_all, mut b_all) =
-            (Vec::with_capacity(grid.len()), Vec::with_capacity(grid.len()));
-        for j in 0..grid.len() {
-            if j > 0 {
-                let end = &derivatives.ends[j - 1];
-                let g = end.columns(0, n);
-                let mut next = g * &b;
-                for &(i, col) in &grid.parameters {
-                    next.column_mut(i).axpy(1.0, &end.column(col), 1.0);
+    /// Bock's condensing of the step problem at z (see the module's documentation), each
+    /// experiment's rows stacked.
+    fn condense<S: System>(&self, problem: &Problem<S>, z: &[f64], shots: &[Shot]) -> Condensed {
+        let k = z.len();
+        let rows: usize = shots.iter().map(|s| s.r.len()).sum();
+        let mut r = DVector::zeros(rows);
+        let mut jacobian = DMatrix::zeros(rows, k);
+        let mut nodes = Vec::with_capacity(self.grids.len());
+        let mut at = 0;
+        for (grid, shot) in self.grids.iter().zip(shots) {
+            let n = grid.states;
+            let derivatives = shot.derivatives.as_ref().expect("a sweep with sensitivities");
+            // ∂slot/∂z: the initial-value slots give ∂s_0/∂z, the parameter slots ∂α/∂z.
+            let dz = problem.slot_matrix(grid.experiment, z);
+            let mut a = DVector::zeros(n);
+            let mut b = DMatrix::zeros(n, k);
+            for &(slot, state) in &grid.initial {
+                b.row_mut(state).copy_from(&dz.row(slot));
+            }
+            let (mut a_all, mut b_all) =
+                (Vec::with_capacity(grid.len()), Vec::with_capacity(grid.len()));
+            for j in 0..grid.len() {
+                if j > 0 {
+                    let end = &derivatives.ends[j - 1];
+                    let g = end.columns(0, n);
+                    let mut next = g * &b;
+                    for &(slot, col) in &grid.parameters {
+                        next += end.column(col) * dz.row(slot);
+                    }
+                    a = shot.defects.rows((j - 1) * n, n) + g * &a;
+                    b = next;
                 }
-                a = shot.defects.rows((j - 1) * n, n) + g * &a;
-                b = next;
+                a_all.push(a.clone());
+                b_all.push(b.clone());
             }
-            a_all.push(a.clone());
-            b_all.push(b.clone());
-        }
-        let rows = &derivatives.rows;
-        let mut r = shot.r.clone();
-        let mut jacobian = DMatrix::zeros(rows.nrows(), k);
-        for (index, j) in grid.row_intervals().enumerate() {
-            let gs = rows.view((index, 0), (1, n));
-            r[index] += (gs * &a_all[j])[0];
-            jacobian.row_mut(index).copy_from(&(gs * &b_all[j]));
-            for &(i, col) in &grid.parameters {
-                jacobian[(index, i)] += rows[(index, col)];
+            let d_rows = &derivatives.rows;
+            for (index, j) in grid.row_intervals().enumerate() {
+                let gs = d_rows.view((index, 0), (1, n));
+                r[at + index] = shot.r[index] + (gs * &a_all[j])[0];
+                let mut row = gs * &b_all[j];
+                for &(slot, col) in &grid.parameters {
+                    row += d_rows[(index, col)] * dz.row(slot);
+                }
+                jacobian.row_mut(at + index).copy_from(&row);
             }
+            at += shot.r.len();
+            nodes.push((a_all, b_all));
         }
-        Condensed { r, jacobian, a: a_all, b: b_all }
+        Condensed { r, jacobian, nodes }
     }
 }
 
@@ -219,10 +264,14 @@ impl<S: System> Step<S> for Shooting {
     /// Node values from the data and the start (see [`Grid::initial_nodes`]), and the first
     /// sweep with sensitivities.
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
-        let (nodes, counts) = self.grid.initial_nodes(ev.problem(), &z);
-        ev.add(counts);
-        self.nodes = nodes;
-        self.shot = Some(self.sweep(ev, (&z, &self.nodes), true)?);
+        self.nodes.clear();
+        self.merged = false;
+        for grid in &self.grids {
+            let (nodes, counts) = grid.initial_nodes(ev.problem(), &z);
+            ev.add(counts);
+            self.nodes.push(nodes);
+        }
+        self.shots = Some(self.sweep(ev, (&z, &self.nodes), true)?);
         self.iterate(ev, z)
     }
 
@@ -232,29 +281,34 @@ impl<S: System> Step<S> for Shooting {
         }
         let problem = ev.problem();
         let z = &current.z;
-        if self.shot.as_ref().is_none_or(|s| s.derivatives.is_none()) {
-            self.shot = Some(self.sweep(ev, (z, &self.nodes), true)?);
+        if self.shots.as_ref().is_none_or(|s| s.iter().any(|s| s.derivatives.is_none())) {
+            self.shots = Some(self.sweep(ev, (z, &self.nodes), true)?);
         }
-        let shot = self.shot.as_ref().expect("a sweep at the iterate");
-        let condensed = self.condense(problem, z, shot);
+        let shots = self.shots.as_ref().expect("a sweep at the iterate");
+        let condensed = self.condense(problem, z, shots);
         let (solution, dz) = self.bounded_step(problem, z, &condensed.jacobian, &condensed.r)?;
-        let n = self.grid.states;
-        let mut dnodes = Vec::with_capacity(self.nodes.len());
-        for j in 1..self.grid.len() {
-            let step = &condensed.a[j] + &condensed.b[j] * &dz;
-            dnodes.extend_from_slice(&step.as_slice()[..n]);
+        let mut dnodes = Vec::with_capacity(self.grids.len());
+        for (grid, (a, b)) in self.grids.iter().zip(&condensed.nodes) {
+            let mut steps = Vec::with_capacity(grid.states * grid.len().saturating_sub(1));
+            for j in 1..grid.len() {
+                let step = &a[j] + &b[j] * &dz;
+                steps.extend_from_slice(&step.as_slice()[..grid.states]);
+            }
+            dnodes.push(steps);
         }
         // JΔ = r̃ − r + J̃Δz.
-        let change = &condensed.r - &shot.r + &condensed.jacobian * &dz;
-        let slope = 2.0 * shot.r.dot(&change);
-        let defects = shot.defects.lp_norm(1);
+        let r: Vec<f64> = shots.iter().flat_map(|s| s.r.iter().copied()).collect();
+        let r = DVector::from_vec(r);
+        let change = &condensed.r - &r + &condensed.jacobian * &dz;
+        let slope = 2.0 * r.dot(&change);
+        let defects = defects_l1(shots);
         if defects > 0.0 {
             let required = (slope + change.norm_squared()) / (0.5 * defects);
             self.penalty = self.penalty.max(1.1 * required);
         }
-        let shot = self.shot.as_ref().expect("a sweep at the iterate");
+        let shots = self.shots.as_ref().expect("a sweep at the iterate");
         let direction = Direction {
-            merit: self.merit(shot),
+            merit: self.merit(shots),
             slope: slope - self.penalty * defects,
             dz: solution.x,
             dnodes,
@@ -300,16 +354,20 @@ impl<S: System> Step<S> for Shooting {
         }
         let accepted = line_search(problem, &direction, |alpha, full| {
             let z = trial_z(alpha, full);
-            let nodes: Vec<f64> =
-                self.nodes.iter().zip(&direction.dnodes).map(|(s, d)| s + alpha * d).collect();
+            let nodes: Vec<Vec<f64>> = self
+                .nodes
+                .iter()
+                .zip(&direction.dnodes)
+                .map(|(s, d)| s.iter().zip(d).map(|(s, d)| s + alpha * d).collect())
+                .collect();
             // The full step is evaluated with sensitivities: accepted, it is the next
             // linearization; shorter steps without.
-            let shot = tolerate(self.sweep(ev, (&z, &nodes), full))?;
-            Ok(shot.map(|shot| (self.merit(&shot), (z, nodes, shot))))
+            let shots = tolerate(self.sweep(ev, (&z, &nodes), full))?;
+            Ok(shots.map(|shots| (self.merit(&shots), (z, nodes, shots))))
         })?;
-        let Some((z, nodes, shot)) = accepted else { return Ok(Advance::Stop(Rule::NoDescent)) };
+        let Some((z, nodes, shots)) = accepted else { return Ok(Advance::Stop(Rule::NoDescent)) };
         self.nodes = nodes;
-        self.shot = Some(shot);
+        self.shots = Some(shots);
         Ok(Advance::Moved(self.iterate(ev, z)?))
     }
 }

@@ -1,9 +1,10 @@
 //! Quasilinearization as a [`Step`] of the shared driver: integrate the linear family around
 //! the current trajectory, choose its constants by least squares, move to p + Φc.
 
+use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem, Proposal, Step,
-    drive,
+    Advance, Estimate, Evaluations, Failure, FitError, Iterate, Method, PlannedNoise, Problem,
+    Proposal, Step, drive,
 };
 use sysid_ode::{Counts, System};
 
@@ -19,13 +20,14 @@ pub struct Quasilinearization {
     pub options: QuasilinearizationOptions,
 }
 
-/// A finished run: the estimate and the last trajectory p + Φ c.
+/// A finished run: the estimate and the last trajectories p + Φ c.
 pub struct QuasilinearizationRun {
     /// The estimate.
     pub estimate: Estimate,
-    /// The last trajectory of the iteration (the state at the estimate, as the linear family
-    /// gives it, when the run ended on a stopping rule).
-    pub trajectory: Option<Trajectory>,
+    /// The last trajectory of the iteration in each experiment (the state at the estimate,
+    /// as the linear family gives it, when the run ended on a stopping rule); empty when the
+    /// start failed.
+    pub trajectories: Vec<Trajectory>,
 }
 
 impl Quasilinearization {
@@ -55,27 +57,34 @@ impl Quasilinearization {
     ) -> Result<QuasilinearizationRun, FitError> {
         self.options.validate()?;
         let name = self.method_name();
-        if let Some(u) =
-            problem.unknowns().list().iter().zip(problem.unknowns().wrt()).find_map(|(u, w)| {
-                (u.log && matches!(w, sysid_ode::Wrt::InitialValue(_))).then_some(u)
-            })
-        {
-            return Err(FitError::Unsupported {
-                method: name.into(),
-                what: format!(
-                    "a log scale on the initial value `{}` (the family is linear in it)",
-                    u.name
-                ),
-            });
+        let unsupported = |what: String| FitError::Unsupported { method: name.into(), what };
+        for e in problem.experiments() {
+            for (s, w) in e.slots().iter().enumerate() {
+                let log = e.slot_unknown(s).map(|j| &problem.declared()[j]).filter(|u| u.log);
+                if let (sysid_ode::Wrt::InitialValue(_), Some(u)) = (w, log) {
+                    return Err(unsupported(format!(
+                        "a log scale on the initial value `{}` (the family is linear in it)",
+                        u.name
+                    )));
+                }
+            }
+            if let Some(series) =
+                e.sampled().series.iter().find(|s| matches!(s.noise, PlannedNoise::Function(_)))
+            {
+                return Err(unsupported(format!(
+                    "a σ of `{}` that depends on the model or the unknowns (its least squares has a fixed weight per row)",
+                    series.name(e.system().signature())
+                )));
+            }
         }
         let mut step = Quasi {
             options: &self.options,
-            layout: Layout::new(problem),
-            trajectory: None,
+            layouts: problem.experiments().iter().map(|e| Layout::new(problem, e)).collect(),
+            trajectories: Vec::new(),
             proposed: None,
         };
         let estimate = drive(problem, name, &self.options.driver, &mut step, start)?;
-        Ok(QuasilinearizationRun { estimate, trajectory: step.trajectory })
+        Ok(QuasilinearizationRun { estimate, trajectories: step.trajectories })
     }
 }
 
@@ -89,13 +98,22 @@ impl<S: System> Method<S> for Quasilinearization {
     }
 }
 
-/// The state of the iteration: the trajectory x_k(t) and the family of the last proposal.
+/// The state of the iteration: each experiment's trajectory x_k(t), and the families of the
+/// last proposal.
 struct Quasi<'o> {
     options: &'o QuasilinearizationOptions,
-    layout: Layout,
-    trajectory: Option<Trajectory>,
-    /// The family around x_k, its least-squares constants c and the linear family's ε there.
-    proposed: Option<(Family, Vec<f64>, f64)>,
+    layouts: Vec<Layout>,
+    trajectories: Vec<Trajectory>,
+    proposed: Option<Proposed>,
+}
+
+/// A proposal's families around x_k, with the slots' coordinates c_k and ∂c/∂z there, the
+/// least-squares z and the linear family's ε at it.
+struct Proposed {
+    families: Vec<(Family, Vec<f64>, DMatrix<f64>)>,
+    z: Vec<f64>,
+    zk: Vec<f64>,
+    linear_cost: f64,
 }
 
 /// The nonlinear model's cost at an iterate, the measure every method reports. The method
@@ -110,28 +128,47 @@ fn nonlinear_cost<S: System>(ev: &Evaluations<'_, S>, z: &[f64]) -> Result<f64, 
 }
 
 impl<S: System> Step<S> for Quasi<'_> {
-    /// The first trajectory: the model from the guess, the data, or the caller's.
+    /// The first trajectories: the model from the guess, the data, or the caller's.
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
         let problem = ev.problem();
-        let trajectory = ev.run(&z, || Trajectory::start(problem, &z, &self.options.start))?;
-        self.trajectory = Some(trajectory);
+        self.trajectories.clear();
+        for (e, layout) in problem.experiments().iter().zip(&self.layouts) {
+            let trajectory =
+                ev.run(&z, || Trajectory::start(problem, e, layout, &z, &self.options.start))?;
+            self.trajectories.push(trajectory);
+        }
         let cost = nonlinear_cost(ev, &z)?;
         Ok(Iterate::new(z, cost))
     }
 
-    /// Integrates p and Φ around x_k and chooses c by least squares (QR), projected on the
-    /// bounds.
+    /// Integrates p and Φ of every experiment around x_k and chooses z by least squares (QR),
+    /// projected on the bounds.
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
         let problem = ev.problem();
-        let trajectory = self.trajectory.as_ref().expect("started");
-        let layout = &self.layout;
-        let family = ev.run(&current.z, || {
-            integrate_family(problem, layout, trajectory).map(|f| {
-                let counts = f.counts;
-                (f, counts)
-            })
-        })?;
-        let ls = LeastSquares::new(problem, layout, trajectory, &family);
+        let v = problem.values_at(&current.z);
+        let mut families = Vec::with_capacity(self.layouts.len());
+        let mut parts = Vec::with_capacity(self.layouts.len());
+        for ((e, layout), trajectory) in
+            problem.experiments().iter().zip(&self.layouts).zip(&self.trajectories)
+        {
+            let (y0, known) = e.point(&v);
+            let family = ev.run(&current.z, || {
+                integrate_family(e, problem.integrator(), layout, trajectory, (&y0, &known)).map(
+                    |f| {
+                        let counts = f.counts;
+                        (f, counts)
+                    },
+                )
+            })?;
+            let (c, d) = layout.coordinates(problem, e, &current.z);
+            parts.push((
+                LeastSquares::new(e, layout, trajectory, &family, &known),
+                c.clone(),
+                d.clone(),
+            ));
+            families.push((family, c, d));
+        }
+        let ls = LeastSquares::stacked(&parts, &current.z);
         let gradient_norm = Some(ls.linearization(&current.z, Counts::default()).gradient.norm());
         let (lo, hi): (Vec<f64>, Vec<f64>) =
             problem.unknowns().list().iter().map(|u| u.coordinate_bounds()).unzip();
@@ -142,19 +179,30 @@ impl<S: System> Step<S> for Quasi<'_> {
         // On the bounds exactly where it reaches them (rounding only).
         problem.unknowns().project(&mut z);
         let linear_cost = ls.residual(&z).norm_squared();
-        self.proposed = Some((family, z.clone(), linear_cost));
+        self.proposed =
+            Some(Proposed { families, z: z.clone(), zk: current.z.clone(), linear_cost });
         Ok(Proposal { z, condition: Some(condition), gradient_norm, stop: None })
     }
 
-    /// x_{k+1} = p + Φ c, kept as a dense solution; the nonlinear model's cost at c.
+    /// x_{k+1} = p + Φ c of every experiment, c = c_k + D (z_{k+1} − z_k), kept as dense
+    /// solutions; the nonlinear model's cost at z_{k+1}.
     fn advance(
         &mut self,
         ev: &Evaluations<'_, S>,
         _current: &Iterate,
         _proposal: Proposal,
     ) -> Result<Advance, Failure> {
-        let (family, z, linear_cost) = self.proposed.take().expect("a proposal to take");
-        self.trajectory = Some(next_trajectory(&self.layout, &family, &z));
+        let Proposed { families, z, zk, linear_cost } =
+            self.proposed.take().expect("a proposal to take");
+        let step = DVector::from_column_slice(&z) - DVector::from_column_slice(&zk);
+        self.trajectories = families
+            .iter()
+            .zip(&self.layouts)
+            .map(|((family, c, d), layout)| {
+                let next = DVector::from_column_slice(c) + d * &step;
+                next_trajectory(layout, family, next.as_slice())
+            })
+            .collect();
         let cost = nonlinear_cost(ev, &z)?;
         Ok(Advance::Moved(Iterate::new(z, cost).with(LINEAR_COST, linear_cost)))
     }

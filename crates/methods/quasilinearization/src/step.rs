@@ -18,13 +18,13 @@
 //! dense solution and linearised around next.
 
 use nalgebra::{DMatrix, DVector};
-use sysid_core::{LinearLeastSquares, Linearization, Problem, Singular, minimise_in_box};
+use sysid_core::{LinearLeastSquares, Linearization, Planned, Singular, minimise_in_box};
 use sysid_ode::{
-    Counts, DenseSolution, FactorError, Function, IterationMatrix, JacobianProducts, Observable,
-    OdeError, Rhs, Side, System, integrate,
+    Counts, DenseSolution, FactorError, Function, Integrator, IterationMatrix, JacobianProducts,
+    Observable, OdeError, Rhs, Side, System, integrate,
 };
 
-use crate::trajectory::{Layout, Trajectory};
+use crate::trajectory::{Column, Layout, Trajectory};
 
 /// The linear system for [p; Φ] (state rows; Φ row by row) around x_k.
 struct LinearRhs<'a, S> {
@@ -46,15 +46,17 @@ struct LinearRhs<'a, S> {
 }
 
 /// The directions of the parameters, n_α × (k + 1) row by row: column j < k is the θ row of
-/// Φ (a unit row for each unknown parameter) and column k is p_θ − θ_k = −θ_k, both mapped
-/// by dα/dθ (α itself on a log scale).
-fn parameter_directions(layout: &Layout, np: usize, z: &[f64]) -> Vec<f64> {
+/// Φ (a unit row for each parameter slot) and column k is p_θ − θ_k = −θ_k, both mapped by
+/// dα/dθ (α itself on a log scale).
+fn parameter_directions(layout: &Layout, np: usize, c: &[f64]) -> Vec<f64> {
     let kk = layout.k() + 1;
     let mut vp = vec![0.0; np * kk];
-    for &(j, q, log) in &layout.parameters {
-        let scale = if log { z[j].exp() } else { 1.0 };
-        vp[q * kk + j] = scale;
-        vp[q * kk + layout.k()] = -scale * z[j];
+    for (j, column) in layout.columns.iter().enumerate() {
+        if let Column::Parameter { index: q, log } = *column {
+            let scale = if log { c[j].exp() } else { 1.0 };
+            vp[q * kk + j] = scale;
+            vp[q * kk + layout.k()] = -scale * c[j];
+        }
     }
     vp
 }
@@ -63,8 +65,8 @@ impl<'a, S: System> LinearRhs<'a, S> {
     fn new(sys: &'a S, layout: &Layout, previous: &'a Trajectory, known: &[f64]) -> Self {
         let sig = sys.signature();
         let (n, k) = (layout.n, layout.k());
-        let p = layout.parameters(known, &previous.z);
-        let vp = parameter_directions(layout, p.len(), &previous.z);
+        let p = layout.parameters(known, &previous.c);
+        let vp = parameter_directions(layout, p.len(), &previous.c);
         Self {
             sys,
             previous,
@@ -158,43 +160,43 @@ pub struct Family {
     pub counts: Counts,
 }
 
-/// Integrates the linear system around `previous` from t0 over the problem's span.
+/// Integrates the linear system of experiment `e` around `previous` from t0 over its span;
+/// `y0` and `known` are its initial values and parameters at the current point (the slots'
+/// entries are replaced by the family's columns).
 pub fn integrate_family<S: System>(
-    problem: &Problem<S>,
+    e: &Planned<S>,
+    integrator: &Integrator,
     layout: &Layout,
     previous: &Trajectory,
+    (y0, known): (&[f64], &[f64]),
 ) -> Result<Family, OdeError> {
-    let sys = problem.system();
+    let sys = e.system();
     let (n, k) = (layout.n, layout.k());
-    let (y0, known) = problem.point(&previous.z);
-    let mut rhs = LinearRhs::new(sys, layout, previous, &known);
-    // p(t0): the known initial values (unknown ones 0); Φ(t0): unit columns of the unknowns.
+    let mut rhs = LinearRhs::new(sys, layout, previous, known);
+    // p(t0): the known initial values (slots 0); Φ(t0): unit columns of the initial-value
+    // slots.
     let mut w0 = vec![0.0; n * (1 + k)];
     for (i, v) in y0.iter().enumerate() {
-        if !layout.state_of.contains(&Some(i)) {
+        if !layout.columns.contains(&Column::State(i)) {
             w0[i] = *v;
         }
     }
-    for (j, s) in layout.state_of.iter().enumerate() {
-        if let Some(i) = *s {
+    for (j, column) in layout.columns.iter().enumerate() {
+        if let Column::State(i) = *column {
             w0[n + i * k + j] = 1.0;
         }
     }
-    let t0 = problem.t0();
-    let (t_lo, t_hi) = problem.span();
+    let t0 = e.t0();
+    let (t_lo, t_hi) = e.span();
     let mut dense = DenseSolution::new(w0.len());
     let mut counts = Counts::default();
     for t_end in [t_hi, t_lo] {
         if (t_end - t0).abs() > 0.0 {
-            counts += integrate(
-                problem.integrator(),
-                &mut rhs,
-                (t0, &w0),
-                t_end,
-                sys.discontinuities(),
-                |s| dense.push(s),
-            )?
-            .0;
+            counts +=
+                integrate(integrator, &mut rhs, (t0, &w0), t_end, sys.discontinuities(), |s| {
+                    dense.push(s)
+                })?
+                .0;
         }
     }
     dense.finish();
@@ -210,19 +212,21 @@ pub struct LeastSquares {
 }
 
 impl LeastSquares {
-    /// The rows of the family at the data: r = √w (h(x_k) + ∇h·(p + Φc − x_k) − b), which is
-    /// √w (p_i + Φ_i c − b) for a measured state.
+    /// The rows of experiment `e`'s family at its data: r = √w (T(h_k) + T'(h_k)·∇h·(p + Φc
+    /// − x_k) − T(b)) with h_k the value along x_k, which is √w (p_i + Φ_i c − b) for a
+    /// state measured on its own scale; `known` are its parameters at the current point.
     pub fn new<S: System>(
-        problem: &Problem<S>,
+        e: &Planned<S>,
         layout: &Layout,
         previous: &Trajectory,
         family: &Family,
+        known: &[f64],
     ) -> Self {
-        let sys = problem.system();
+        let sys = e.system();
         let sig = sys.signature();
         let (n, k) = (layout.n, layout.k());
         let kk = k + 1;
-        let sampled = problem.sampled();
+        let sampled = e.sampled();
         let rows: usize = sampled.series.iter().map(|s| s.samples.len()).sum();
         let (mut a, mut b) = (DVector::zeros(rows), DMatrix::zeros(rows, k));
         // p and Φ at every sample time.
@@ -234,11 +238,11 @@ impl LeastSquares {
         }
         // Outputs that are not states are linearised around x_k with dual numbers.
         let n_out = sig.outputs().len();
-        let (_, known) = problem.point(&previous.z);
-        let params = layout.parameters(&known, &previous.z);
-        let vp = parameter_directions(layout, params.len(), &previous.z);
+        let params = layout.parameters(known, &previous.c);
+        let vp = parameter_directions(layout, params.len(), &previous.c);
         let mut products =
             JacobianProducts::new(n, &params, &vp, n_out, if n_out > 0 { kk } else { 0 });
+        let mut g = vec![0.0; k];
         let (mut y, mut vy, mut h, mut dh, mut u) = (
             vec![0.0; n],
             vec![0.0; n * kk],
@@ -254,12 +258,20 @@ impl LeastSquares {
                 let w = &at[sample.index * width..(sample.index + 1) * width];
                 let (p, phi) = w.split_at(n);
                 let sw = sample.sqrt_weight;
-                match series.observable {
+                let transform = series.transform;
+                // The family's value h0 + g·c of the measured quantity, and its value along
+                // x_k where a scale other than its own linearises it.
+                let (h0, along) = match series.observable {
                     Observable::State(i) => {
-                        a[row] = sw * (p[i] - sample.value);
-                        for j in 0..k {
-                            b[(row, j)] = sw * phi[i * k + j];
-                        }
+                        g.copy_from_slice(&phi[i * k..(i + 1) * k]);
+                        let along = match transform {
+                            sysid_core::Transform::Lin => None,
+                            _ => {
+                                previous.eval(t, &mut hint, &mut y);
+                                Some(y[i])
+                            }
+                        };
+                        (p[i], along)
                     }
                     Observable::Output(o) => {
                         previous.eval(t, &mut hint, &mut y);
@@ -269,11 +281,17 @@ impl LeastSquares {
                             vy[i * kk + k] = p[i] - y[i];
                         }
                         products.eval(sys, Function::Outputs, (t, &y, &u), &vy, &mut h, &mut dh);
-                        a[row] = sw * (h[o] + dh[o * kk + k] - sample.value);
-                        for j in 0..k {
-                            b[(row, j)] = sw * dh[o * kk + j];
-                        }
+                        g.copy_from_slice(&dh[o * kk..o * kk + k]);
+                        (h[o] + dh[o * kk + k], Some(h[o]))
                     }
+                };
+                let (value, slope) = match (transform, along) {
+                    (sysid_core::Transform::Lin, _) | (_, None) => (h0, 1.0),
+                    (t, Some(hk)) => (t.apply(hk) + t.derivative(hk) * (h0 - hk), t.derivative(hk)),
+                };
+                a[row] = sw * (value - sample.value);
+                for j in 0..k {
+                    b[(row, j)] = sw * slope * g[j];
                 }
                 row += 1;
             }
@@ -306,18 +324,39 @@ impl LeastSquares {
     /// of the nonlinear problem, whose Jacobian B then is.
     pub fn linearization(&self, c: &[f64], counts: Counts) -> Linearization {
         let r = self.residual(c);
+        let cost = r.norm_squared();
         Linearization {
             z: c.to_vec(),
-            cost: r.norm_squared(),
+            cost,
             gradient: self.b.tr_mul(&r),
             normal: self.b.tr_mul(&self.b),
             residuals: None,
+            norm: cost.sqrt(),
+            experiment_costs: vec![cost],
             counts,
         }
     }
+
+    /// The rows of several experiments in the unknowns' coordinates z: each experiment's
+    /// a + B c with c ≈ c_k + D (z − z_k), stacked.
+    pub fn stacked(parts: &[(LeastSquares, Vec<f64>, DMatrix<f64>)], z: &[f64]) -> Self {
+        let rows: usize = parts.iter().map(|p| p.0.a.len()).sum();
+        let k = z.len();
+        let zk = DVector::from_column_slice(z);
+        let (mut a, mut b) = (DVector::zeros(rows), DMatrix::zeros(rows, k));
+        let mut at = 0;
+        for (ls, c, d) in parts {
+            let m = ls.a.len();
+            let offset = DVector::from_column_slice(c) - d * &zk;
+            a.rows_mut(at, m).copy_from(&(&ls.a + &ls.b * offset));
+            b.rows_mut(at, m).copy_from(&(&ls.b * d));
+            at += m;
+        }
+        Self { a, b }
+    }
 }
 
-/// x_{k+1} = p + Φ c as a dense solution of the states.
+/// x_{k+1} = p + Φ c as a dense solution of one experiment's states.
 pub fn next_trajectory(layout: &Layout, family: &Family, c: &[f64]) -> Trajectory {
     let (n, k) = (layout.n, layout.k());
     let states = family.dense.map(n, |w, y| {

@@ -1,87 +1,141 @@
-//! The augmented state and the iterate x_k(t).
+//! The augmented state and the iterate x_k(t), one per experiment.
 //!
 //! Parameters are constant states (Bellman, Kagiwada & Kalaba; Goodman's eq. 4): the
-//! augmented state is x = [y; θ], with θ the coordinates of the unknown parameters (ln α on a
-//! log scale) and θ' = 0. Known parameters stay constants of the model.
+//! augmented state of an experiment is x = [y; θ], with θ the coordinates of its parameters
+//! that depend on the unknowns (ln α for a parameter that is a log-scale unknown itself) and
+//! θ' = 0. The constants c of the linear family are the experiment's *slots*: those
+//! parameters' coordinates and the initial values that depend on the unknowns. Each slot is
+//! an affine function of the unknowns' coordinates z around the current z (exactly, for a slot
+//! that is one unknown itself). Known values stay constants of the model.
 
-use sysid_core::{Data, Problem, Record as Kind, Samples};
+use nalgebra::DMatrix;
+use sysid_core::{Data, Planned, Problem, Record as Kind, Samples};
 use sysid_ode::{Counts, DenseSolution, Interpolation, Ivp, OdeError, Record, Signal, System, Wrt};
 
 use crate::options::{Start, StateFunction};
 
-/// Where each unknown sits in the augmented state.
+/// What a column of the family (a slot) is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Column {
+    /// The initial value of state i.
+    State(usize),
+    /// Parameter q, in coordinates θ = ln α when `log`.
+    Parameter {
+        /// The parameter.
+        index: usize,
+        /// Whether θ = ln α.
+        log: bool,
+    },
+}
+
+/// Where each slot of an experiment sits in its augmented state.
 #[derive(Clone, Debug)]
 pub struct Layout {
     /// Number of states n.
     pub n: usize,
-    /// Per unknown: `Some(i)` for the initial value of state i, `None` for a parameter.
-    pub state_of: Vec<Option<usize>>,
-    /// Per unknown parameter, in order: (its unknown index, its parameter index, log scale).
-    pub parameters: Vec<(usize, usize, bool)>,
+    /// The slots, in the experiment's order.
+    pub columns: Vec<Column>,
 }
 
 impl Layout {
-    /// The layout of a problem's unknowns.
-    pub fn new<S: System>(problem: &Problem<S>) -> Self {
-        let n = problem.system().signature().n_states();
-        let mut state_of = Vec::new();
-        let mut parameters = Vec::new();
-        for (j, (u, w)) in
-            problem.unknowns().list().iter().zip(problem.unknowns().wrt()).enumerate()
-        {
-            match *w {
-                Wrt::InitialValue(i) => state_of.push(Some(i)),
-                Wrt::Parameter(q) => {
-                    state_of.push(None);
-                    parameters.push((j, q, u.log));
-                }
-            }
-        }
-        Self { n, state_of, parameters }
+    /// The layout of experiment `e` of `problem`.
+    pub fn new<S: System>(problem: &Problem<S>, e: &Planned<S>) -> Self {
+        let n = e.system().signature().n_states();
+        let columns = e
+            .slots()
+            .iter()
+            .enumerate()
+            .map(|(s, w)| match *w {
+                Wrt::InitialValue(i) => Column::State(i),
+                Wrt::Parameter(index) => Column::Parameter {
+                    index,
+                    log: e.slot_unknown(s).is_some_and(|j| problem.declared()[j].log),
+                },
+            })
+            .collect();
+        Self { n, columns }
     }
 
-    /// Number of unknowns k.
+    /// Number of slots k.
     pub fn k(&self) -> usize {
-        self.state_of.len()
+        self.columns.len()
     }
 
-    /// The full parameter vector at the coordinates θ carried by z (the unknowns'
-    /// coordinates), with the known values from `known`.
-    pub fn parameters(&self, known: &[f64], z: &[f64]) -> Vec<f64> {
+    /// The full parameter vector at the slot coordinates `c`, the others from `known`.
+    pub fn parameters(&self, known: &[f64], c: &[f64]) -> Vec<f64> {
         let mut p = known.to_vec();
-        for &(j, q, log) in &self.parameters {
-            p[q] = if log { z[j].exp() } else { z[j] };
+        for (column, &cj) in self.columns.iter().zip(c) {
+            if let Column::Parameter { index, log } = *column {
+                p[index] = if log { cj.exp() } else { cj };
+            }
         }
         p
     }
+
+    /// The slot coordinates at z and their Jacobian ∂c/∂z (slots × k): for a slot that is
+    /// one unknown itself, c = z_j exactly; otherwise the slot's value, linearised.
+    pub fn coordinates<S: System>(
+        &self,
+        problem: &Problem<S>,
+        e: &Planned<S>,
+        z: &[f64],
+    ) -> (Vec<f64>, DMatrix<f64>) {
+        let v = problem.values_at(z);
+        let free = problem.free_index();
+        let (y0, p) = e.point(&v);
+        let chain: Vec<f64> =
+            problem.unknowns().list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect();
+        let jacobian = e.slot_jacobian(&v, &free);
+        let mut d = DMatrix::zeros(self.k(), z.len());
+        let mut c = Vec::with_capacity(self.k());
+        for (s, column) in self.columns.iter().enumerate() {
+            let plain = e.slot_unknown(s).and_then(|j| free[j]);
+            match (plain, *column) {
+                (Some(f), _) => {
+                    c.push(z[f]);
+                    d[(s, f)] = 1.0;
+                }
+                (None, Column::State(i)) => c.push(y0[i]),
+                (None, Column::Parameter { index, .. }) => c.push(p[index]),
+            }
+            if plain.is_none() {
+                for &(f, x) in &jacobian[s] {
+                    d[(s, f)] += x * chain[f];
+                }
+            }
+        }
+        (c, d)
+    }
 }
 
-/// The iterate x_k(t): the states as a function of time, and the constant coordinates of the
-/// unknown parameters.
+/// The iterate x_k(t) of one experiment: the states as a function of time, and the constant
+/// coordinates of its slots.
 pub struct Trajectory {
     states: DenseSolution,
     /// Measured states that follow their data (a data-based start).
     follow: Vec<(usize, Record)>,
     /// A caller's trajectory (replaces `states`).
     custom: Option<StateFunction>,
-    /// The unknowns' coordinates this iterate carries (parameters: θ; initial values: c).
-    pub z: Vec<f64>,
+    /// The slots' coordinates this iterate carries.
+    pub c: Vec<f64>,
 }
 
 impl Trajectory {
     /// x_{k+1} = p + Φ c, stored as a dense solution (not a re-integration).
-    pub fn linear(states: DenseSolution, z: Vec<f64>) -> Self {
-        Self { states, follow: Vec::new(), custom: None, z }
+    pub fn linear(states: DenseSolution, c: Vec<f64>) -> Self {
+        Self { states, follow: Vec::new(), custom: None, c }
     }
 
-    /// The first trajectory from the start z0, and the work of integrating it.
+    /// The first trajectory of experiment `e` from the start z, and the work of integrating
+    /// it.
     pub fn start<S: System>(
         problem: &Problem<S>,
+        e: &Planned<S>,
+        layout: &Layout,
         z0: &[f64],
         start: &Start,
     ) -> Result<(Self, Counts), OdeError> {
-        let sys = problem.system();
-        let (y0, p) = problem.point(z0);
+        let (y0, p) = e.point(&problem.values_at(z0));
         let custom = match start {
             Start::Trajectory(f) => Some(f.clone()),
             _ => None,
@@ -89,14 +143,15 @@ impl Trajectory {
         let (states, counts) = if custom.is_some() {
             (DenseSolution::new(y0.len()), Counts::default())
         } else {
-            let ivp = Ivp::new(sys, problem.t0(), &y0, &p);
-            ivp.dense(problem.integrator(), &[], problem.span())?
+            let ivp = Ivp::new(e.system(), e.t0(), &y0, &p);
+            ivp.dense(problem.integrator(), &[], e.span())?
         };
         let follow = match start {
-            Start::Data => data_interpolants(problem),
+            Start::Data => data_interpolants(e),
             _ => Vec::new(),
         };
-        Ok((Self { states, follow, custom, z: z0.to_vec() }, counts))
+        let (c, _) = layout.coordinates(problem, e, z0);
+        Ok((Self { states, follow, custom, c }, counts))
     }
 
     /// y(t), starting the search at step `hint`.
@@ -114,12 +169,13 @@ impl Trajectory {
     }
 }
 
-/// The data of every measured state as a function of time.
-fn data_interpolants<S: System>(problem: &Problem<S>) -> Vec<(usize, Record)> {
-    let sig = problem.system().signature();
-    let Data { record, series } = problem.data();
+/// The data of every state an experiment measures directly, as a function of time.
+fn data_interpolants<S: System>(e: &Planned<S>) -> Vec<(usize, Record)> {
+    let sig = e.system().signature();
+    let Data { record, series } = e.data();
     series
         .iter()
+        .filter(|s| s.transform == sysid_core::Transform::Lin)
         .filter_map(|s| {
             let i = sig.state(&s.name)?;
             let r = match (&s.samples, record) {

@@ -92,7 +92,7 @@ fn van_der_pol_same_minimum_as_goodman() {
         .unwrap();
     let mut y = [0.0; 2];
     let mut hint = 0;
-    let trajectory = run.trajectory.expect("the run's last trajectory");
+    let trajectory = run.trajectories.into_iter().next().expect("the run's last trajectory");
     for (m, &t) in times.iter().enumerate() {
         trajectory.eval(t, &mut hint, &mut y);
         for (yi, fi) in y.iter().zip(fresh.state(m)) {

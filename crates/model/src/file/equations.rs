@@ -1,9 +1,11 @@
 //! The expressions of a model file: `[equations]`, one per state, and `[outputs]`.
 
-use toml::de::DeTable;
+use sysid_core::Transform;
+use toml::de::{DeTable, DeValue};
 
 use super::names::{Names, Scope};
 use super::reader::Reader;
+use super::{NoiseSpec, OutputSpec};
 use crate::error::ModelError;
 use crate::expr::Program;
 
@@ -42,20 +44,120 @@ pub(super) fn read_equations(
         .collect()
 }
 
-/// Compiles the `[outputs]` expressions, in the order they are written.
+/// Compiles the `[outputs]`, in the order they are written: a string (the expression), or a
+/// table `{ value, sigma, transform, distribution }`.
 pub(super) fn read_outputs(
     r: &Reader<'_>,
     names: &Names<'_, '_>,
     scope: &Scope,
-) -> Result<Vec<(String, Program)>, ModelError> {
+) -> Result<Vec<OutputSpec>, ModelError> {
     names
         .outputs
         .iter()
         .map(|(key, value)| {
             let name = key.get_ref().to_string();
+            let at = key.span().start;
             let what = format!("output {name}");
-            let program = r.expression(value, &what, &|n| scope.resolve(n), &scope.listed)?;
-            Ok((name, program))
+            let DeValue::Table(t) = value.get_ref() else {
+                let value = r.expression(value, &what, &|n| scope.resolve(n), &scope.listed)?;
+                let (noise, transform) = (NoiseSpec::Weights, Transform::Lin);
+                return Ok(OutputSpec { name, value, noise, transform, at });
+            };
+            let expression = t.get("value").ok_or_else(|| {
+                r.err(value.span().start, format!("[outputs] {name}: a table needs `value`, the output's expression"))
+            })?;
+            let program = r.expression(expression, &what, &|n| scope.resolve(n), &scope.listed)?;
+            let mut output =
+                OutputSpec { name: name.clone(), value: program, noise: NoiseSpec::Weights, transform: Transform::Lin, at };
+            for (k, v) in t.iter() {
+                match k.get_ref().as_ref() {
+                    "value" => {}
+                    "sigma" => output.noise = read_sigma(r, &name, v, scope)?,
+                    "transform" => {
+                        output.transform = match r.string(v, &format!("[outputs] {name}.transform"))? {
+                            "lin" => Transform::Lin,
+                            "log" => Transform::Log,
+                            "log10" => Transform::Log10,
+                            other => {
+                                return Err(r.err(
+                                    v.span().start,
+                                    format!("[outputs] {name}.transform must be \"lin\", \"log\" or \"log10\", got \"{other}\""),
+                                ));
+                            }
+                        }
+                    }
+                    "distribution" => match r.string(v, &format!("[outputs] {name}.distribution"))? {
+                        "normal" => {}
+                        "laplace" => {
+                            return Err(r.err(
+                                v.span().start,
+                                format!("[outputs] {name}.distribution: \"laplace\" noise is not supported yet (the likelihood is normal)"),
+                            ));
+                        }
+                        other => {
+                            return Err(r.err(
+                                v.span().start,
+                                format!("[outputs] {name}.distribution must be \"normal\", got \"{other}\""),
+                            ));
+                        }
+                    },
+                    other => {
+                        return Err(r.err(
+                            k.span().start,
+                            format!("[outputs] {name}: unknown key `{other}` (keys: value, sigma, transform, distribution)"),
+                        ));
+                    }
+                }
+            }
+            Ok(output)
         })
         .collect()
+}
+
+/// Reads an output's `sigma`: a positive number, an expression, or `{ column = "NAME" }`.
+fn read_sigma(
+    r: &Reader<'_>,
+    output: &str,
+    v: &toml::Spanned<DeValue<'_>>,
+    scope: &Scope,
+) -> Result<NoiseSpec, ModelError> {
+    let what = format!("[outputs] {output}.sigma");
+    match v.get_ref() {
+        DeValue::String(_) => {
+            let resolve = |n: &str| scope.resolve_sigma(n, output);
+            let e = r.expression_with_names(v, &what, &resolve, &scope.sigma_names(output))?;
+            if e.program.is_constant() {
+                let sigma = e.program.eval::<f64>(0.0, &[], &[], &[]);
+                if !(sigma > 0.0 && sigma.is_finite()) {
+                    return Err(
+                        r.err(v.span().start, format!("{what} must be positive, got {sigma}"))
+                    );
+                }
+                return Ok(NoiseSpec::Number(sigma));
+            }
+            Ok(NoiseSpec::Expression(e))
+        }
+        DeValue::Table(t) => {
+            let column = t.get("column").ok_or_else(|| {
+                r.err(
+                    v.span().start,
+                    format!("{what}: a table takes `column = \"NAME\"`, the data column of σ"),
+                )
+            })?;
+            if let Some((k, _)) = t.iter().find(|(k, _)| k.get_ref() != "column") {
+                return Err(r.err(
+                    k.span().start,
+                    format!("{what}: unknown key `{}` (keys: column)", k.get_ref()),
+                ));
+            }
+            Ok(NoiseSpec::Column(r.string(column, &format!("{what}.column"))?.to_string()))
+        }
+        _ => {
+            let sigma = r.number(v, &what)?;
+            if sigma <= 0.0 {
+                return Err(r.err(v.span().start, format!("{what} must be positive, got {sigma}")));
+            }
+            Ok(NoiseSpec::Number(sigma))
+        }
+    }
 }

@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use sysid_core::Unknown;
+use sysid_core::{Transform, Unknown};
 use sysid_ode::{Integrator, Interpolation};
 use toml::de::DeTable;
 
@@ -12,6 +12,7 @@ use crate::expr::Program;
 
 mod data;
 mod equations;
+mod experiments;
 mod integrator;
 mod names;
 mod reader;
@@ -19,10 +20,82 @@ mod values;
 
 use data::read_data;
 use equations::{read_equations, read_outputs};
+use experiments::read_experiments;
 use integrator::read_integrator;
 use names::{Names, Scope};
 use reader::Reader;
-use values::{Values, read_values};
+use values::{Values, read_unknowns, read_values};
+
+/// An expression of a model file that is not an equation (a setting, an initial value, a
+/// σ), with the names it uses.
+#[derive(Clone, Debug)]
+pub struct Expression {
+    /// As written.
+    pub text: String,
+    /// Compiled (see [`ModelFile`] for the slots each kind of expression uses).
+    pub program: Program,
+    /// The names it uses.
+    pub uses: Vec<String>,
+    /// Byte offset of the string in the model file.
+    pub at: usize,
+    /// The name, when the expression is nothing but one name.
+    pub bare: Option<String>,
+}
+
+/// How a measured quantity's noise is given.
+#[derive(Clone, Debug)]
+pub enum NoiseSpec {
+    /// No `sigma`: `[data.weights]` (default 1) as relative weights.
+    Weights,
+    /// A known σ.
+    Number(f64),
+    /// σ per sample, from a column of the data file.
+    Column(String),
+    /// σ as an expression of t, the states, the parameters, the unknowns and the output's
+    /// own value (the output's name).
+    Expression(Expression),
+}
+
+/// A measured output: its expression and its noise model.
+#[derive(Clone, Debug)]
+pub struct OutputSpec {
+    /// Its name.
+    pub name: String,
+    /// h(t, y, α, u).
+    pub value: Program,
+    /// Its noise.
+    pub noise: NoiseSpec,
+    /// The scale its residuals are formed on.
+    pub transform: Transform,
+    /// Byte offset of its key.
+    pub at: usize,
+}
+
+/// A value an experiment sets a parameter to.
+#[derive(Clone, Debug)]
+pub enum SetValue {
+    /// A number.
+    Number(f64),
+    /// An expression of the unknowns and the parameters given outside the experiments.
+    Expression(Expression),
+}
+
+/// One `[[experiments]]` entry.
+#[derive(Clone, Debug)]
+pub struct ExperimentSpec {
+    /// Its name, unique.
+    pub name: String,
+    /// Its data file, relative to the model file.
+    pub file: PathBuf,
+    /// Time of its initial values (default 0).
+    pub t0: f64,
+    /// Byte offset of its `t0`, if given.
+    pub t0_at: Option<usize>,
+    /// The parameters it sets: name, value, byte offset of the key.
+    pub set: Vec<(String, SetValue, usize)>,
+    /// Byte offset of its `name`.
+    pub at: usize,
+}
 
 /// How the data are taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -65,14 +138,22 @@ pub struct ModelFile {
     pub input_mode: Interpolation,
     /// One right-hand side per state, in state order.
     pub equations: Vec<Program>,
-    /// Measured outputs: names and expressions.
-    pub outputs: Vec<(String, Program)>,
+    /// Measured outputs: expressions and noise models.
+    pub outputs: Vec<OutputSpec>,
     /// Known initial values and parameters.
     pub known: Vec<(String, f64)>,
+    /// Initial values given as expressions of the parameters and unknowns (`A = "dose"`),
+    /// compiled with parameter slots for the parameters followed by the extras.
+    pub initial: Vec<(String, Expression)>,
     /// Unknowns with guesses, bounds and scales.
     pub unknowns: Vec<Unknown>,
+    /// The unknowns that are neither states nor parameters (used by a σ or a setting), in
+    /// the order of `[unknowns]`.
+    pub extras: Vec<String>,
     /// The `[data]` table.
     pub data: DataSpec,
+    /// The `[[experiments]]`, when there are (then there is no `[data]`).
+    pub experiments: Vec<ExperimentSpec>,
     /// The integrator (`[integrator]`, default DOPRI5 with rtol 1e-8, atol 1e-10).
     pub integrator: Integrator,
     /// Byte offset of the `states` key, to locate model-wide errors.
@@ -90,6 +171,7 @@ const TOP_LEVEL: &[&str] = &[
     "unknowns",
     "outputs",
     "data",
+    "experiments",
     "integrator",
 ];
 
@@ -115,11 +197,38 @@ impl ModelFile {
         let doc = doc.get_ref();
         check_top_level_keys(&r, doc)?;
         let names = Names::read(&r, doc)?;
-        let scope = Scope::new(&names);
+        let mut scope = Scope::new(&names);
         let equations = read_equations(&r, doc, &names, &scope)?;
+        let read = read_unknowns(&r, doc, &scope)?;
+        let unknowns = read.list;
+        scope.unknowns_at = read.keys;
+        let extras: Vec<String> = read.extras.iter().map(|e| e.0.clone()).collect();
+        scope.extras = extras.clone();
+        scope.extras_at = read.extras;
         let outputs = read_outputs(&r, &names, &scope)?;
-        let Values { known, unknowns } = read_values(&r, doc, &names, &scope)?;
+        let experiments = read_experiments(&r, doc.get("experiments"), path, &scope)?;
+        let Values { known, initial } =
+            read_values(&r, doc, &names, &scope, &unknowns, (&outputs, &experiments))?;
         let data = read_data(&r, doc.get("data"), path)?;
+        if let (Some(value), false) = (doc.get("data"), experiments.is_empty()) {
+            return Err(r.err(
+                value.span().start,
+                "[data] and [[experiments]] together: with experiments, each experiment names its own data file",
+            ));
+        }
+        for o in &outputs {
+            if !matches!(o.noise, NoiseSpec::Weights)
+                && let Some((_, _, at)) = data.weights.iter().find(|w| w.0 == o.name)
+            {
+                return Err(r.err(
+                    *at,
+                    format!(
+                        "[data.weights] {}: the output has a `sigma`; give its noise one way",
+                        o.name
+                    ),
+                ));
+            }
+        }
         let integrator = read_integrator(&r, doc.get("integrator"))?;
         Ok(Self {
             path: path.to_path_buf(),
@@ -131,8 +240,11 @@ impl ModelFile {
             equations,
             outputs,
             known,
+            initial,
             unknowns,
+            extras,
             data,
+            experiments,
             integrator,
             states_at: names.states_at,
         })

@@ -143,7 +143,9 @@ fn read_input_mode(r: &Reader<'_>, m: &Spanned<DeValue<'_>>) -> Result<Interpola
     }
 }
 
-/// The names an expression may use: states, parameters, inputs and `t`.
+/// The names an expression may use: states, parameters, inputs and `t` in the model's
+/// equations and outputs; the parameters and the extra unknowns in a setting; and in a σ
+/// also t, the states and the output's own value.
 pub(super) struct Scope {
     /// State names, in state order.
     pub(super) states: Vec<String>,
@@ -151,6 +153,12 @@ pub(super) struct Scope {
     pub(super) parameters: Vec<String>,
     /// Input names.
     pub(super) inputs: Vec<String>,
+    /// Unknowns that are neither states nor parameters.
+    pub(super) extras: Vec<String>,
+    /// The same, with the byte offsets of their keys.
+    pub(super) extras_at: Vec<(String, usize)>,
+    /// Every unknown's key and its byte offset.
+    pub(super) unknowns_at: Vec<(String, usize)>,
     /// Every name, listed for an error about an unknown one.
     pub(super) listed: String,
 }
@@ -170,7 +178,56 @@ impl Scope {
             .chain(["t"])
             .collect::<Vec<_>>()
             .join(", ");
-        Self { states, parameters, inputs, listed }
+        Self {
+            states,
+            parameters,
+            inputs,
+            extras: Vec::new(),
+            extras_at: Vec::new(),
+            unknowns_at: Vec::new(),
+            listed,
+        }
+    }
+
+    /// The slot of a parameter or an extra unknown in a setting's parameter vector (the
+    /// parameters, then the extras).
+    pub(super) fn resolve_setting(&self, name: &str) -> Option<Slot> {
+        let np = self.parameters.len();
+        self.parameters
+            .iter()
+            .position(|s| s == name)
+            .or_else(|| self.extras.iter().position(|s| s == name).map(|x| np + x))
+            .map(Slot::Parameter)
+    }
+
+    /// The names a setting may use, listed.
+    pub(super) fn setting_names(&self) -> String {
+        self.parameters.iter().chain(&self.extras).cloned().collect::<Vec<_>>().join(", ")
+    }
+
+    /// The slot of a name in the σ of `output`: t, a state, a parameter or extra (as in a
+    /// setting), or the output's own value (the parameter after the extras).
+    pub(super) fn resolve_sigma(&self, name: &str, output: &str) -> Option<Slot> {
+        if name == output {
+            return Some(Slot::Parameter(self.parameters.len() + self.extras.len()));
+        }
+        if name == "t" {
+            return Some(Slot::Time);
+        }
+        self.states
+            .iter()
+            .position(|s| s == name)
+            .map(Slot::State)
+            .or_else(|| self.resolve_setting(name))
+    }
+
+    /// The names the σ of `output` may use, listed.
+    pub(super) fn sigma_names(&self, output: &str) -> String {
+        let mut names: Vec<String> = self.states.clone();
+        names.extend(self.parameters.iter().chain(&self.extras).cloned());
+        names.push(output.to_string());
+        names.push("t".into());
+        names.join(", ")
     }
 
     /// The slot a name refers to, if any.

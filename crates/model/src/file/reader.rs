@@ -6,6 +6,7 @@ use std::path::Path;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
+use super::Expression;
 use crate::error::{ModelError, char_offset};
 use crate::expr::{self, Program, Slot};
 
@@ -126,6 +127,25 @@ impl<'a> Reader<'a> {
             return Err(self.err(at, format!("`{name}` is reserved (the time or a function)")));
         }
         Ok(())
+    }
+
+    /// Compiles an expression string with the names it uses, locating its errors in the
+    /// file.
+    pub(super) fn expression_with_names(
+        &self,
+        value: &Spanned<DeValue<'_>>,
+        what: &str,
+        resolve: &dyn Fn(&str) -> Option<Slot>,
+        names: &str,
+    ) -> Result<Expression, ModelError> {
+        let program = self.expression(value, what, resolve, names)?;
+        let text = self.string(value, what)?.to_string();
+        let parsed = expr::parse(&text).expect("compiled above");
+        let bare = match &parsed {
+            expr::Expr::Name(name, _) => Some(name.clone()),
+            _ => None,
+        };
+        Ok(Expression { uses: parsed.names(), text, program, at: value.span().start, bare })
     }
 
     /// Compiles an expression string, locating its errors in the file.

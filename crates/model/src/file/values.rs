@@ -1,5 +1,5 @@
-//! What is known and what is unknown: `[initial]`, `[known]` and `[unknowns]`, which
-//! together give every state and parameter exactly once.
+//! What is known and what is unknown: `[unknowns]`, `[initial]` and `[known]`, which together
+//! (with what every experiment sets) give every state and parameter exactly once.
 
 use sysid_core::Unknown;
 use toml::Spanned;
@@ -7,30 +7,37 @@ use toml::de::{DeTable, DeValue};
 
 use super::names::{Names, Scope};
 use super::reader::Reader;
+use super::{ExperimentSpec, Expression, NoiseSpec, OutputSpec, SetValue};
 use crate::error::ModelError;
 
-/// What a model file gives as known and as unknown.
+/// What a model file gives as known: numbers, and initial values as expressions.
 pub(super) struct Values {
     /// Known initial values and parameters, `[initial]` first.
     pub(super) known: Vec<(String, f64)>,
-    /// Unknowns with guesses and bounds, in file order.
-    pub(super) unknowns: Vec<Unknown>,
+    /// Initial values given as expressions.
+    pub(super) initial: Vec<(String, Expression)>,
 }
 
-/// Reads `[initial]`, `[known]` and `[unknowns]`, in that order whatever their order in the
-/// file; checks each state and parameter is given once, and then that none is missing.
+/// Reads `[initial]` and `[known]` given the unknowns; checks each state and parameter is
+/// given once, and then that none is missing (a parameter that every experiment sets needs
+/// nothing more).
 pub(super) fn read_values(
     r: &Reader<'_>,
     doc: &DeTable<'_>,
     names: &Names<'_, '_>,
     scope: &Scope,
+    unknowns: &[Unknown],
+    (outputs, experiments): (&[OutputSpec], &[ExperimentSpec]),
 ) -> Result<Values, ModelError> {
     let mut given = Given::default();
-    let mut known = read_known(r, doc, ("initial", "state"), &scope.states, &mut given)?;
-    known.extend(read_known(r, doc, ("known", "parameter"), &scope.parameters, &mut given)?);
-    let unknowns = read_unknowns(r, doc, scope, &mut given)?;
-    given.check_complete(r, names)?;
-    Ok(Values { known, unknowns })
+    let Values { mut known, initial } = read_initial(r, doc, scope, &mut given)?;
+    known.extend(read_known(r, doc, scope, &mut given)?);
+    for (u, (_, at)) in unknowns.iter().zip(&scope.unknowns_at) {
+        given.mark(r, &u.name, "unknowns", *at)?;
+    }
+    check_unknowns_used(r, scope, (outputs, &initial, experiments))?;
+    given.check_complete(r, names, experiments)?;
+    Ok(Values { known, initial })
 }
 
 /// The section that gives each name so far.
@@ -55,17 +62,42 @@ impl Given {
         Ok(())
     }
 
-    /// Checks every state, then every parameter, is given, locating a missing one where it
-    /// is declared.
-    fn check_complete(&self, r: &Reader<'_>, names: &Names<'_, '_>) -> Result<(), ModelError> {
-        for (kind, section, list) in
-            [("state", "[initial]", &names.states), ("parameter", "[known]", &names.parameters)]
-        {
-            for (name, at) in list {
-                if !self.0.iter().any(|(n, _)| n == name) {
+    /// Checks every state, then every parameter, is given (a parameter also by being set in
+    /// every experiment), locating a missing one where it is declared.
+    fn check_complete(
+        &self,
+        r: &Reader<'_>,
+        names: &Names<'_, '_>,
+        experiments: &[ExperimentSpec],
+    ) -> Result<(), ModelError> {
+        for (name, at) in &names.states {
+            if !self.0.iter().any(|(n, _)| n == name) {
+                return Err(r.err(
+                    *at,
+                    format!("state `{name}` is neither in [initial] nor in [unknowns]"),
+                ));
+            }
+        }
+        for (name, at) in &names.parameters {
+            if self.0.iter().any(|(n, _)| n == name) {
+                continue;
+            }
+            let sets = |e: &ExperimentSpec| e.set.iter().any(|(p, _, _)| p == name);
+            match experiments.iter().find(|e| !sets(e)) {
+                None if !experiments.is_empty() => {}
+                None => {
                     return Err(r.err(
                         *at,
-                        format!("{kind} `{name}` is neither in {section} nor in [unknowns]"),
+                        format!("parameter `{name}` is neither in [known] nor in [unknowns]"),
+                    ));
+                }
+                Some(e) => {
+                    return Err(r.err(
+                        e.at,
+                        format!(
+                            "experiment `{}` does not set parameter `{name}`, which is neither in [known] nor in [unknowns]",
+                            e.name
+                        ),
                     ));
                 }
             }
@@ -74,60 +106,143 @@ impl Given {
     }
 }
 
-/// Reads `[initial]` or `[known]` (the `section`, giving values of a `kind` of name): a
-/// finite number for each name it lists, each one of `names`.
-fn read_known(
-    r: &Reader<'_>,
-    doc: &DeTable<'_>,
-    (section, kind): (&'static str, &str),
-    names: &[String],
-    given: &mut Given,
-) -> Result<Vec<(String, f64)>, ModelError> {
-    let Some(value) = doc.get(section) else {
-        return Ok(Vec::new());
-    };
-    let mut known = Vec::new();
-    for (key, value) in r.table(value, &format!("[{section}]"))?.iter() {
-        let name = key.get_ref();
-        if !names.iter().any(|n| n == name) {
-            return Err(r.err(
-                key.span().start,
-                format!("[{section}]: `{name}` is not a {kind} (names: {})", names.join(", ")),
-            ));
-        }
-        given.mark(r, name, section, key.span().start)?;
-        known.push((name.to_string(), r.number(value, &format!("[{section}] {name}"))?));
-    }
-    Ok(known)
-}
-
-/// Reads `[unknowns]`: for each state or parameter it lists, a guess and optional bounds.
-fn read_unknowns(
+/// Reads `[initial]`: for each state it lists, a finite number or an expression of the
+/// parameters and unknowns.
+fn read_initial(
     r: &Reader<'_>,
     doc: &DeTable<'_>,
     scope: &Scope,
     given: &mut Given,
-) -> Result<Vec<Unknown>, ModelError> {
-    let Some(value) = doc.get("unknowns") else {
+) -> Result<Values, ModelError> {
+    let Some(value) = doc.get("initial") else {
+        return Ok(Values { known: Vec::new(), initial: Vec::new() });
+    };
+    let (mut known, mut expressions) = (Vec::new(), Vec::new());
+    for (key, value) in r.table(value, "[initial]")?.iter() {
+        let name = key.get_ref();
+        if !scope.states.iter().any(|n| n == name) {
+            return Err(r.err(
+                key.span().start,
+                format!("[initial]: `{name}` is not a state (names: {})", scope.states.join(", ")),
+            ));
+        }
+        given.mark(r, name, "initial", key.span().start)?;
+        let what = format!("[initial] {name}");
+        match value.get_ref() {
+            DeValue::String(_) => {
+                let resolve = |n: &str| scope.resolve_setting(n);
+                let e = r.expression_with_names(value, &what, &resolve, &scope.setting_names())?;
+                expressions.push((name.to_string(), e));
+            }
+            _ => known.push((name.to_string(), r.number(value, &what)?)),
+        }
+    }
+    Ok(Values { known, initial: expressions })
+}
+
+/// Reads `[known]`: a finite number for each parameter it lists.
+fn read_known(
+    r: &Reader<'_>,
+    doc: &DeTable<'_>,
+    scope: &Scope,
+    given: &mut Given,
+) -> Result<Vec<(String, f64)>, ModelError> {
+    let Some(value) = doc.get("known") else {
         return Ok(Vec::new());
     };
-    let mut unknowns = Vec::new();
-    for (key, value) in r.table(value, "[unknowns]")?.iter() {
+    let mut known = Vec::new();
+    for (key, value) in r.table(value, "[known]")?.iter() {
         let name = key.get_ref();
-        let candidates = [scope.states.as_slice(), &scope.parameters].concat();
-        if !candidates.iter().any(|n| n == name) {
+        if !scope.parameters.iter().any(|n| n == name) {
             return Err(r.err(
                 key.span().start,
                 format!(
-                    "[unknowns]: `{name}` is not a state or parameter (names: {})",
-                    candidates.join(", ")
+                    "[known]: `{name}` is not a parameter (names: {})",
+                    scope.parameters.join(", ")
                 ),
             ));
         }
-        given.mark(r, name, "unknowns", key.span().start)?;
-        unknowns.push(read_unknown(r, name, value)?);
+        given.mark(r, name, "known", key.span().start)?;
+        known.push((name.to_string(), r.number(value, &format!("[known] {name}"))?));
     }
-    Ok(unknowns)
+    Ok(known)
+}
+
+/// What `[unknowns]` gives.
+pub(super) struct Unknowns {
+    /// The unknowns, in the file's order.
+    pub(super) list: Vec<Unknown>,
+    /// The names of their own (neither states nor parameters), with their keys' offsets.
+    pub(super) extras: Vec<(String, usize)>,
+    /// Every unknown's name and its key's offset.
+    pub(super) keys: Vec<(String, usize)>,
+}
+
+/// Reads `[unknowns]`: for each name it lists (a state, a parameter, or a name of its own
+/// that a σ or a setting uses), a guess and optional bounds; returns them, the names of
+/// their own, and every key's byte offset.
+pub(super) fn read_unknowns(
+    r: &Reader<'_>,
+    doc: &DeTable<'_>,
+    scope: &Scope,
+) -> Result<Unknowns, ModelError> {
+    let Some(value) = doc.get("unknowns") else {
+        return Ok(Unknowns { list: Vec::new(), extras: Vec::new(), keys: Vec::new() });
+    };
+    let mut at = Vec::new();
+    let mut unknowns = Vec::new();
+    let mut extras = Vec::new();
+    for (key, value) in r.table(value, "[unknowns]")?.iter() {
+        let name = key.get_ref();
+        let model = scope.states.iter().chain(&scope.parameters).any(|n| n == name);
+        if !model {
+            r.identifier(name, key.span().start)?;
+            if scope.inputs.iter().any(|n| n == name) {
+                return Err(r.err(key.span().start, format!("[unknowns]: `{name}` is an input")));
+            }
+            extras.push((name.to_string(), key.span().start));
+        }
+        if unknowns.iter().any(|u: &Unknown| u.name == *name) {
+            return Err(r.err(key.span().start, format!("[unknowns]: `{name}` is listed twice")));
+        }
+        unknowns.push(read_unknown(r, name, value)?);
+        at.push((name.to_string(), key.span().start));
+    }
+    Ok(Unknowns { list: unknowns, extras, keys: at })
+}
+
+/// Refuses an unknown that nothing uses: a name of its own that no `sigma`, `set` or
+/// `[initial]` expression mentions.
+fn check_unknowns_used(
+    r: &Reader<'_>,
+    scope: &Scope,
+    (outputs, initial, experiments): (&[OutputSpec], &[(String, Expression)], &[ExperimentSpec]),
+) -> Result<(), ModelError> {
+    let mut used: Vec<&str> = Vec::new();
+    for o in outputs {
+        if let NoiseSpec::Expression(e) = &o.noise {
+            used.extend(e.uses.iter().map(String::as_str));
+        }
+    }
+    for (_, e) in initial {
+        used.extend(e.uses.iter().map(String::as_str));
+    }
+    for x in experiments {
+        for (_, v, _) in &x.set {
+            if let SetValue::Expression(e) = v {
+                used.extend(e.uses.iter().map(String::as_str));
+            }
+        }
+    }
+    for (name, at) in &scope.extras_at {
+        if !used.contains(&name.as_str()) {
+            return Err(r.err(
+                *at,
+                format!("[unknowns]: `{name}` is used nowhere: it is no state or parameter, and no sigma, set or [initial] expression names it"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Reads one unknown: a number, its guess, or a table `{ guess, min, max, log }`.

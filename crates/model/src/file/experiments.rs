@@ -1,0 +1,108 @@
+//! `[[experiments]]`: the conditions a model is fitted under, each with its own data file,
+//! t0 and parameter settings.
+
+use std::path::Path;
+
+use toml::Spanned;
+use toml::de::DeValue;
+
+use super::names::Scope;
+use super::reader::Reader;
+use super::{ExperimentSpec, SetValue};
+use crate::error::ModelError;
+
+/// Reads `[[experiments]]` (optional): an array of tables `{ name, file, t0, set }`.
+pub(super) fn read_experiments(
+    r: &Reader<'_>,
+    value: Option<&Spanned<DeValue<'_>>>,
+    path: &Path,
+    scope: &Scope,
+) -> Result<Vec<ExperimentSpec>, ModelError> {
+    let Some(value) = value else {
+        return Ok(Vec::new());
+    };
+    let DeValue::Array(items) = value.get_ref() else {
+        return Err(r.err(
+            value.span().start,
+            "`experiments` must be an array of tables: write each as [[experiments]]",
+        ));
+    };
+    let mut out: Vec<ExperimentSpec> = Vec::with_capacity(items.len());
+    for item in items {
+        let table = r.table(item, "each [[experiments]]")?;
+        let name_value = table.get("name").ok_or_else(|| {
+            r.err(item.span().start, "[[experiments]]: an experiment needs `name`")
+        })?;
+        let name = r.string(name_value, "[[experiments]] name")?.to_string();
+        let at = name_value.span().start;
+        if name.is_empty() || !name.chars().all(|c| c.is_alphanumeric() || c == '_' || c == '-') {
+            return Err(
+                r.err(at, format!("[[experiments]] name `{name}`: use letters, digits, _ and -"))
+            );
+        }
+        if out.iter().any(|e| e.name == name) {
+            return Err(r.err(at, format!("[[experiments]]: two experiments are called `{name}`")));
+        }
+        let what = |key: &str| format!("experiment `{name}`: {key}");
+        let file = table.get("file").ok_or_else(|| {
+            r.err(item.span().start, what("`file` is missing: name its data file"))
+        })?;
+        let base = path.parent().unwrap_or(Path::new(""));
+        let file_path = base.join(r.string(file, &what("file"))?);
+        let mut spec = ExperimentSpec {
+            name: name.clone(),
+            file: file_path,
+            t0: 0.0,
+            t0_at: None,
+            set: Vec::new(),
+            at,
+        };
+        for (key, v) in table.iter() {
+            match key.get_ref().as_ref() {
+                "name" | "file" => {}
+                "t0" => {
+                    spec.t0 = r.number(v, &what("t0"))?;
+                    spec.t0_at = Some(v.span().start);
+                }
+                "set" => {
+                    for (p, x) in r.table(v, &what("set"))?.iter() {
+                        let parameter = p.get_ref().to_string();
+                        if !scope.parameters.contains(&parameter) {
+                            return Err(r.err(
+                                p.span().start,
+                                format!(
+                                    "experiment `{name}`: set `{parameter}`: not a parameter (parameters: {})",
+                                    scope.parameters.join(", ")
+                                ),
+                            ));
+                        }
+                        let key_what = what(&format!("set {parameter}"));
+                        let value = match x.get_ref() {
+                            DeValue::String(_) => {
+                                let resolve = |n: &str| scope.resolve_setting(n);
+                                SetValue::Expression(r.expression_with_names(
+                                    x,
+                                    &key_what,
+                                    &resolve,
+                                    &scope.setting_names(),
+                                )?)
+                            }
+                            _ => SetValue::Number(r.number(x, &key_what)?),
+                        };
+                        spec.set.push((parameter, value, p.span().start));
+                    }
+                }
+                other => {
+                    return Err(r.err(
+                        key.span().start,
+                        format!(
+                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set)"
+                        ),
+                    ));
+                }
+            }
+        }
+        out.push(spec);
+    }
+    Ok(out)
+}
