@@ -127,13 +127,18 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
         }
         (None, Some(path)) => {
             let model = Model::load(path)?;
-            let data = match &args.source.data {
-                Some(data) => data.clone(),
-                None => model.data_path()?.to_path_buf(),
-            };
             let mut settings = method_settings(args);
             settings.insert("model".into(), sha256(path)?);
-            settings.insert("data".into(), sha256(&data)?);
+            if model.file.experiments.is_empty() {
+                let data = match &args.source.data {
+                    Some(data) => data.clone(),
+                    None => model.data_path()?.to_path_buf(),
+                };
+                settings.insert("data".into(), sha256(&data)?);
+            }
+            for e in &model.file.experiments {
+                settings.insert(format!("data of {}", e.name), sha256(&e.file)?);
+            }
             let problem = prepare(
                 model.problem(args.source.data.as_deref())?,
                 &args.integrator,

@@ -229,25 +229,25 @@ impl<S: System> Problem<S> {
         let k = self.unknowns.len();
         let all = self.evaluate_rows(z, &self.integrator, true)?;
         let rows: usize = all.iter().map(|e| e.r.len()).sum();
-        let mut r = DVector::zeros(rows);
-        let mut jac = DMatrix::zeros(rows, k);
-        let mut normal = DMatrix::zeros(k, k);
+        let (mut r, mut jacobian) = (Vec::with_capacity(rows), Vec::with_capacity(rows * k));
         let mut counts = Counts::default();
         let (mut data_cost, mut noise_rows) = (0.0, 0);
-        let mut at = 0;
         for e in &all {
-            for (i, &ri) in e.r.iter().enumerate() {
-                r[at + i] = ri;
-                for j in 0..k {
-                    jac[(at + i, j)] = e.jacobian[i * k + j];
-                }
-            }
-            normal += e.normal_equations(k).1;
-            at += e.r.len();
+            r.extend_from_slice(&e.r);
+            jacobian.extend_from_slice(&e.jacobian);
             counts += e.counts;
             data_cost += e.data_cost;
             noise_rows += e.noise_rows;
         }
+        let r = DVector::from_vec(r);
+        let jac = DMatrix::from_row_slice(rows, k, &jacobian);
+        // JᵀJ, unless rows whose σ is a function of the unknowns call for the Fisher
+        // information instead.
+        let plain = all.iter().all(|e| e.fisher.is_empty() && e.in_normal.iter().all(|x| *x));
+        let normal = match plain {
+            true => jac.tr_mul(&jac),
+            false => all.iter().map(|e| e.normal_equations(k).1).sum(),
+        };
         let experiment_costs = all.iter().map(|e| e.r.iter().map(|x| x * x).sum()).collect();
         Ok(Linearization {
             z: z.to_vec(),
@@ -633,6 +633,12 @@ impl Rows {
     }
 }
 
+/// An experiment's integration: the states, with their sensitivities when asked for.
+enum Solved {
+    States(sysid_ode::Trajectory),
+    Sensitivities(sysid_ode::SensitivityTrajectory),
+}
+
 /// The rows of one experiment at a point: a row per sample (data rows, series after series)
 /// and then a noise row per function-σ sample; with their Jacobian in the free unknowns'
 /// coordinates when asked for.
@@ -645,16 +651,14 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
     let slots: &[sysid_ode::Wrt] = if at.jacobian { &e.slots } else { &[] };
     let ns = slots.len();
     // The states and (when asked) their sensitivities to the slots at every sample time.
-    let (states, sens, counts) = if at.jacobian {
-        let sol = ivp.solve_sensitivities(at.integrator, slots, times)?;
-        let states: Vec<f64> = (0..times.len()).flat_map(|m| sol.state(m).to_vec()).collect();
-        let sens: Vec<f64> =
-            (0..times.len()).flat_map(|m| sol.sensitivity_slice(m).to_vec()).collect();
-        (states, sens, sol.counts())
+    let solved = if at.jacobian {
+        Solved::Sensitivities(ivp.solve_sensitivities(at.integrator, slots, times)?)
     } else {
-        let sol = ivp.solve(at.integrator, times)?;
-        let states: Vec<f64> = (0..times.len()).flat_map(|m| sol.state(m).to_vec()).collect();
-        (states, Vec::new(), sol.counts())
+        Solved::States(ivp.solve(at.integrator, times)?)
+    };
+    let counts = match &solved {
+        Solved::Sensitivities(sol) => sol.counts(),
+        Solved::States(sol) => sol.counts(),
     };
     // ∂slot/∂z; the identity (slot j is free unknown j) leaves the gradients as they are.
     let dz = at.jacobian.then(|| slot_matrix(e, at.v, at.free_index, at.chain, k));
@@ -681,10 +685,10 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
     for s in &sampled.series {
         for sample in &s.samples {
             let m = sample.index;
-            let (y, sm) = (
-                &states[m * n..(m + 1) * n],
-                if at.jacobian { &sens[m * n * ns..(m + 1) * n * ns] } else { &[][..] },
-            );
+            let (y, sm) = match &solved {
+                Solved::Sensitivities(sol) => (sol.state(m), sol.sensitivity_slice(m)),
+                Solved::States(sol) => (sol.state(m), &[][..]),
+            };
             let h = og.eval(times[m], y, sm, s.observable, &mut grad_slots);
             // ∂h/∂z.
             if let Some(d) = &dz {
