@@ -35,6 +35,16 @@ fn estimates(e: &sysid::core::Estimate) -> Vec<(String, f64)> {
         .collect()
 }
 
+/// The problem of a model file written to a scratch directory (with its data files already
+/// there), and its start in coordinates.
+fn written(dir: &Path, model: &str) -> (Problem<ModelSystem>, Vec<f64>) {
+    let path = dir.join("model.toml");
+    std::fs::write(&path, model).unwrap();
+    let problem = Model::load(&path).unwrap().problem(None).unwrap();
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    (problem, z)
+}
+
 /// Every method reaches scipy's maximum-likelihood estimate of the two-dose problem: the
 /// likelihood to 1e-6 relative, each estimate to 1e-4 relative (the issue's tolerances; the
 /// reference itself is good to 1e-12).
@@ -189,10 +199,7 @@ file = "high.csv"
 rtol = 1e-12
 atol = 1e-14
 "#;
-    let path = dir.join("model.toml");
-    std::fs::write(&path, model).unwrap();
-    let problem = Model::load(&path).unwrap().problem(None).unwrap();
-    let z = problem.unknowns().coordinates(&problem.guesses());
+    let (problem, z) = written(&dir, model);
     let lin = problem.linearize(&z).unwrap();
     for j in 0..z.len() {
         let h = 1e-6 * z[j].abs().max(1e-3);
@@ -279,10 +286,7 @@ set = { k1 = "2 * kb" }
 rtol = 1e-12
 atol = 1e-14
 "#;
-    let path = dir.join("model.toml");
-    std::fs::write(&path, model).unwrap();
-    let problem = Model::load(&path).unwrap().problem(None).unwrap();
-    let z = problem.unknowns().coordinates(&problem.guesses());
+    let (problem, z) = written(&dir, model);
     let lin = problem.linearize(&z).unwrap();
     let cost = |z: &[f64]| problem.linearize(z).unwrap().cost;
     for j in 0..z.len() {

@@ -421,66 +421,49 @@ impl<S: System> Problem<S> {
     /// sample in the order of the residual rows (without the noise rows), from a plain
     /// integration 10 times tighter than the fits use: what noise-free data at z would be.
     pub fn predictions(&self, z: &[f64]) -> Result<Vec<f64>, OdeError> {
-        let v = self.values_at(z);
-        let mut h = Vec::new();
-        for e in &self.experiments {
-            let (y0, p) = e.point(&v);
-            let sampled = e.sampled();
-            let sol = Ivp::new(e.system(), e.t0, &y0, &p)
-                .solve(&self.cost_integrator(), &sampled.times)?;
-            let mut og = ObservableGradient::new(e.system(), &p, &[]);
-            for s in &sampled.series {
-                for sample in &s.samples {
-                    let m = sample.index;
-                    h.push(og.eval(sampled.times[m], sol.state(m), &[], s.observable, &mut []));
-                }
-            }
-        }
-        if let Some(i) = h.iter().position(|v| !v.is_finite()) {
-            return Err(OdeError::NonFinite { t: self.span().0, what: format!("prediction {i}") });
-        }
-        Ok(h)
+        self.model_values(z).map(|(h, _)| h)
     }
 
     /// The noise's σ of every sample at z, in the order of [`predictions`](Self::predictions):
     /// 1/√w for relative weights, the known σ, the noise scale times its factor, or the noise
     /// function evaluated at the model's states and value there.
     pub fn sigmas(&self, z: &[f64]) -> Result<Vec<f64>, OdeError> {
+        self.model_values(z).map(|(_, sigma)| sigma)
+    }
+
+    /// [`predictions`](Self::predictions) and [`sigmas`](Self::sigmas) from one integration.
+    fn model_values(&self, z: &[f64]) -> Result<(Vec<f64>, Vec<f64>), OdeError> {
         let v = self.values_at(z);
-        let mut out = Vec::new();
+        let (mut h, mut sigma) = (Vec::new(), Vec::new());
         for e in &self.experiments {
             let (y0, p) = e.point(&v);
             let sampled = e.sampled();
-            let functions =
-                sampled.series.iter().any(|s| matches!(s.noise, PlannedNoise::Function(_)));
-            let sol = match functions {
-                true => Some(
-                    Ivp::new(e.system(), e.t0, &y0, &p)
-                        .solve(&self.cost_integrator(), &sampled.times)?,
-                ),
-                false => None,
-            };
+            let sol = Ivp::new(e.system(), e.t0, &y0, &p)
+                .solve(&self.cost_integrator(), &sampled.times)?;
             let mut og = ObservableGradient::new(e.system(), &p, &[]);
             let (n, np) = (y0.len(), p.len());
             for s in &sampled.series {
                 for sample in &s.samples {
-                    let sigma = match (&s.noise, &sol) {
-                        (PlannedNoise::Function(f), Some(sol)) => {
-                            let (t, y) = (sampled.times[sample.index], sol.state(sample.index));
-                            let h = og.eval(t, y, &[], s.observable, &mut []);
+                    let (t, y) = (sampled.times[sample.index], sol.state(sample.index));
+                    let value = og.eval(t, y, &[], s.observable, &mut []);
+                    h.push(value);
+                    sigma.push(match &s.noise {
+                        PlannedNoise::Function(f) => {
                             let (mut dy, mut dp, mut dv) =
                                 (vec![0.0; n], vec![0.0; np], vec![0.0; v.len()]);
                             let mut g =
                                 NoiseGradient { y: &mut dy, h: 0.0, p: &mut dp, v: &mut dv };
-                            f.eval(NoiseArgs { t, y, h, p: &p, v: &v }, &mut g)
+                            f.eval(NoiseArgs { t, y, h: value, p: &p, v: &v }, &mut g)
                         }
                         _ => 1.0 / sample.sqrt_weight,
-                    };
-                    out.push(sigma);
+                    });
                 }
             }
         }
-        Ok(out)
+        if let Some(i) = h.iter().position(|v| !v.is_finite()) {
+            return Err(OdeError::NonFinite { t: self.span().0, what: format!("prediction {i}") });
+        }
+        Ok((h, sigma))
     }
 
     /// Every measured quantity of the first experiment at `values` of the unknowns, at

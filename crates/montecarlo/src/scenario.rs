@@ -157,6 +157,19 @@ impl<S: System + Clone> Scenario<S> {
     /// sample after sample, experiment after experiment), on each series' scale: a log-scale
     /// measurement is the model's value times a log-normal factor.
     pub fn noisy_data(&self, noise: f64, rng: &mut impl Rng) -> Vec<Data> {
+        self.data_from(|clean, sigma, transform| {
+            let shift = noise * sigma * rng.sample::<f64, _>(StandardNormal);
+            match transform {
+                Transform::Lin => clean + shift,
+                Transform::Log => clean * shift.exp(),
+                Transform::Log10 => clean * 10f64.powf(shift),
+            }
+        })
+    }
+
+    /// Every experiment's data, each sample's value `value(clean, σ, scale)`, sample after
+    /// sample in the template's order.
+    fn data_from(&self, mut value: impl FnMut(f64, f64, Transform) -> f64) -> Vec<Data> {
         let mut at = 0;
         self.base
             .experiments()
@@ -167,13 +180,7 @@ impl<S: System + Clone> Scenario<S> {
                     let transform = series.transform;
                     if let Samples::Points { values, .. } = &mut series.samples {
                         for v in values.iter_mut() {
-                            let e: f64 = rng.sample(StandardNormal);
-                            let shift = noise * self.sigma[at] * e;
-                            *v = match transform {
-                                Transform::Lin => self.clean[at] + shift,
-                                Transform::Log => self.clean[at] * shift.exp(),
-                                Transform::Log10 => self.clean[at] * 10f64.powf(shift),
-                            };
+                            *v = value(self.clean[at], self.sigma[at], transform);
                             at += 1;
                         }
                     }
@@ -232,22 +239,7 @@ impl<S: System + Clone> Scenario<S> {
 
     /// Every experiment's data without noise.
     pub fn clean_data(&self) -> Vec<Data> {
-        let mut at = 0;
-        self.base
-            .experiments()
-            .iter()
-            .map(|e| {
-                let mut data = e.data().clone();
-                for series in &mut data.series {
-                    if let Samples::Points { values, .. } = &mut series.samples {
-                        let n = values.len();
-                        values.copy_from_slice(&self.clean[at..at + n]);
-                        at += n;
-                    }
-                }
-                data
-            })
-            .collect()
+        self.data_from(|clean, _, _| clean)
     }
 }
 
