@@ -43,9 +43,10 @@ proptest! {
             .unwrap();
         for method in methods() {
             let e = method.fit(&problem).unwrap();
-            // The certificate may integrate twice more (the last and the best iterate).
+            // The certificate may integrate three times more (the last and the best iterate,
+            // and the best once more at finer tolerances to measure its integration error).
             prop_assert!(
-                e.counts.integrations <= BUDGET + 2,
+                e.counts.integrations <= BUDGET + 3,
                 "{}: {} integrations ({})", method.name(), e.counts.integrations, e.termination
             );
             let text = serde_json::to_string(&e.record("tracking")).unwrap();

@@ -9,5 +9,6 @@ mod budget;
 mod certificate;
 mod docs;
 mod experiments;
+mod hard;
 mod model_twins;
 mod paper_goodman_1966;

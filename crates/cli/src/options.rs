@@ -273,9 +273,11 @@ impl IntegratorArgs {
     /// model file's settings is checked once applied).
     fn validate(&self) -> anyhow::Result<()> {
         if let Some(rtol) = self.rtol
-            && !(rtol > 0.0 && rtol.is_finite())
+            && !(rtol > 0.0 && rtol < 1.0)
         {
-            anyhow::bail!("--rtol must be positive, got {rtol}");
+            anyhow::bail!(
+                "--rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got {rtol}"
+            );
         }
         if let Some(atol) = self.atol
             && !(atol >= 0.0 && atol.is_finite())

@@ -94,6 +94,15 @@ fn bad_input_exits_2_with_one_line() {
         (&["fit"][..], "--system"),
         (&["frobnicate"][..], "unrecognized subcommand"),
         (&["fit", "--system", "falling-body", "--rtol", "-1"][..], "rtol must be positive"),
+        // An rtol of 2 made the derived gtol 200: any point "converged".
+        (
+            &["fit", "--system", "falling-body", "--rtol", "2"][..],
+            "rtol must be positive and below 1",
+        ),
+        (
+            &["fit", "--system", "falling-body", "--rtol", "1"][..],
+            "rtol must be positive and below 1",
+        ),
     ] {
         let out = sysid(args);
         let stderr = text(&out.stderr);

@@ -7,7 +7,7 @@ use std::time::Instant;
 use nalgebra::DMatrix;
 use sysid_ode::System;
 
-use crate::certificate::{Certificate, certify};
+use crate::certificate::{Certificate, certify, optimality};
 use crate::confidence::interval;
 use crate::estimate::{Estimate, ExperimentFit, Iteration, ScaleEstimate};
 use crate::evaluate::Linearization;
@@ -32,8 +32,7 @@ pub(crate) fn is_better(a: &Iterate, b: Option<&Iterate>) -> bool {
 type Judged = (Option<Linearization>, Certificate);
 
 /// What the assembly of the estimate needs.
-pub(crate) struct Record<'a, S> {
-    pub(crate) problem: &'a Problem<S>,
+pub(crate) struct Record<'a> {
     pub(crate) method: &'a str,
     pub(crate) options: &'a DriverOptions,
     /// The certificate's tolerance.
@@ -41,9 +40,9 @@ pub(crate) struct Record<'a, S> {
     pub(crate) started: Instant,
 }
 
-impl<S: System> Record<'_, S> {
+impl Record<'_> {
     /// The estimate of a run whose start could not be evaluated: the start, no history.
-    pub(crate) fn start_failed(
+    pub(crate) fn start_failed<S: System>(
         &self,
         ev: &Evaluations<'_, S>,
         z: Vec<f64>,
@@ -63,7 +62,7 @@ impl<S: System> Record<'_, S> {
     /// of updates; its certificate if the loop judged it) and `best` the best earlier one. A
     /// rule that the certificate confirms returns the iterate it stopped at; anything else
     /// returns the best iterate.
-    pub(crate) fn finish(
+    pub(crate) fn finish<S: System>(
         &self,
         ev: &Evaluations<'_, S>,
         (iterations, current, verdict): (usize, Iterate, Option<Judged>),
@@ -119,9 +118,11 @@ impl<S: System> Record<'_, S> {
 
     /// The model's linearization at `point` and the certificate there: the method's own
     /// linearization when it made one, else one more integration (outside the budget: the
-    /// verdict needs it).
-    pub(crate) fn judge(&self, ev: &Evaluations<'_, S>, point: &Iterate) -> Judged {
-        let problem = self.problem;
+    /// verdict needs it); and the measure's integration error, from one more integration at
+    /// a tenth of the tolerances (not measured where that integration fails, or for a fixed
+    /// step).
+    pub(crate) fn judge<S: System>(&self, ev: &Evaluations<'_, S>, point: &Iterate) -> Judged {
+        let problem = ev.problem();
         let lin = match &point.linearization {
             Some(lin) => Some(lin.clone()),
             None => match problem.linearize(&point.z) {
@@ -133,14 +134,26 @@ impl<S: System> Record<'_, S> {
             },
         };
         let certificate = match &lin {
-            Some(lin) => certify(problem, lin, self.gtol, self.options.max_condition),
+            Some(lin) => {
+                let mut certificate = certify(problem, lin, self.gtol, self.options.max_condition);
+                if !certificate.exact_fit
+                    && certificate.optimality.is_finite()
+                    && let Some(finer) = ev.finer()
+                    && let Ok(fine) = finer.linearize(&point.z)
+                {
+                    ev.add(fine.counts);
+                    let value = optimality(&finer, &fine, self.gtol).value;
+                    certificate.error = (certificate.optimality - value).abs();
+                }
+                certificate
+            }
             None => Certificate::failed(point.z.len(), self.gtol),
         };
         (lin, certificate)
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn estimate(
+    fn estimate<S: System>(
         &self,
         ev: &Evaluations<'_, S>,
         point: Iterate,
@@ -150,7 +163,7 @@ impl<S: System> Record<'_, S> {
         (best_iteration, iterations): (usize, usize),
         history: Vec<Iteration>,
     ) -> Estimate {
-        let problem = self.problem;
+        let problem = ev.problem();
         let unknowns = problem.unknowns();
         let values = unknowns.values(&point.z);
         // Unknowns held on a bound are not estimated there: no standard error, no interval,

@@ -14,9 +14,22 @@
 //! change of ‖r‖ (to first order) that moving z_i onto that bound could make: 0 for an
 //! unknown held on its bound by a gradient that pushes outwards, so such an unknown counts
 //! as not free (scipy's `active_mask`, Ceres' projected gradient); away from bounds it is
-//! large and the cosine decides. The optimality is max_i m_i; the point is certified when
-//! it is at most `gtol`, or when the model passes through the data: ‖r‖ ≤ 1e-10 ‖W^½ b‖, a
-//! cost within 1e-20 ‖W^½ b‖² of the least possible cost 0. Non-finite r, g or A never pass.
+//! large and the cosine decides. The optimality is max_i m_i.
+//!
+//! An unknown the model does not respond to at the point is *flat*: moving its coordinate by
+//! its own scale (an e-fold on a log scale, its magnitude on a linear one) would change ‖r‖
+//! by at most gtol relative, √a_i s_i ≤ gtol ‖r‖. The first-order test says nothing about a
+//! flat unknown (a plateau is as stationary as a minimum), so it does not count in the
+//! optimality, is never "held on a bound", and a point where every unknown is flat is not
+//! certified: a run that collapses into a region where the model no longer depends on the
+//! unknowns (rates underflowing to 0, every rate at a bound of a saturated model) has found
+//! a plateau, not a minimum.
+//!
+//! The measure is computed from an integration, and carries its error: the driver measures
+//! it again at a tenth of the integrator's tolerance and reports the difference as
+//! `error`. The point is certified when optimality + error ≤ gtol and some unknown is not
+//! flat, or when the model passes through the data: ‖r‖ ≤ 1e-10 ‖W^½ b‖, a cost within
+//! 1e-20 ‖W^½ b‖² of the least possible cost 0. Non-finite r, g or A never pass.
 
 use serde::Serialize;
 use sysid_ode::System;
@@ -57,12 +70,17 @@ pub struct NullSpace {
 pub struct Certificate {
     /// max_i m_i (module docs); 0 for an exact fit, ∞ when r, g or A is not finite.
     pub optimality: f64,
+    /// The integration error of `optimality`, measured by integrating again at a tenth of
+    /// the tolerance (0 where not measured: an exact fit, a point that failed).
+    pub error: f64,
     /// The tolerance it was held to.
     pub gtol: f64,
     /// The model passes through the data (ε = 0 to rounding).
     pub exact_fit: bool,
     /// Per unknown: the bound it is held on, if any.
     pub active: Vec<Option<Bound>>,
+    /// Per unknown: whether the model does not respond to it at the point (module docs).
+    pub flat: Vec<bool>,
     /// The direction the data cannot identify, when the normal matrix is singular there.
     pub null_space: Option<NullSpace>,
 }
@@ -70,41 +88,51 @@ pub struct Certificate {
 impl Certificate {
     /// Whether the point is certified: the first-order test holds (or ε = 0 to rounding).
     pub fn holds(&self) -> bool {
-        self.exact_fit || self.optimality <= self.gtol
+        self.exact_fit || (self.optimality + self.error <= self.gtol && !self.plateau())
+    }
+
+    /// Whether every unknown is flat: the point is a plateau of the cost, which the
+    /// first-order test cannot tell from a minimum.
+    pub fn plateau(&self) -> bool {
+        !self.flat.is_empty() && self.flat.iter().all(|f| *f)
     }
 
     /// The certificate of a point that could not be evaluated.
     pub fn failed(k: usize, gtol: f64) -> Self {
         Self {
             optimality: f64::INFINITY,
+            error: 0.0,
             gtol,
             exact_fit: false,
             active: vec![None; k],
+            flat: vec![false; k],
             null_space: None,
         }
     }
 }
 
 /// The first-order optimality measure at `lin` (coordinates `lin.z`) with the bounds of
-/// `problem`'s unknowns, and the bound each unknown is held on.
-pub fn optimality<S: System>(
-    problem: &Problem<S>,
-    lin: &Linearization,
-    gtol: f64,
-) -> (f64, Vec<Option<Bound>>) {
+/// `problem`'s unknowns, the bound each unknown is held on, and which are flat.
+pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f64) -> Measure {
     let k = lin.gradient.len();
     let norm_r = lin.norm;
     let finite = lin.cost.is_finite()
         && lin.gradient.iter().all(|v| v.is_finite())
         && lin.normal.iter().all(|v| v.is_finite());
+    let mut measure = Measure { value: 0.0, active: vec![None; k], flat: vec![false; k] };
     if !finite {
-        return (f64::INFINITY, vec![None; k]);
+        measure.value = f64::INFINITY;
+        return measure;
     }
-    let mut worst = 0.0f64;
-    let mut active = vec![None; k];
     for (i, u) in problem.unknowns().list().iter().enumerate() {
         let (g, a) = (lin.gradient[i], lin.normal[(i, i)]);
-        if g == 0.0 || a == 0.0 {
+        // (A NaN response counts as flat.)
+        let responds = a.sqrt() * u.coordinate_scale(lin.z[i]) > gtol * norm_r;
+        if !responds {
+            measure.flat[i] = true;
+            continue;
+        }
+        if g == 0.0 {
             continue;
         }
         let cosine = g.abs() / (a.sqrt() * norm_r);
@@ -114,12 +142,23 @@ pub fn optimality<S: System>(
             if g > 0.0 { (lin.z[i] - lo, Bound::Lower) } else { (hi - lin.z[i], Bound::Upper) };
         let to_bound = a.sqrt() * distance.max(0.0) / norm_r;
         if to_bound < cosine && to_bound <= gtol {
-            active[i] = Some(bound);
+            measure.active[i] = Some(bound);
         }
         let m = cosine.min(to_bound);
-        worst = if m.is_nan() { f64::INFINITY } else { worst.max(m) };
+        measure.value = if m.is_nan() { f64::INFINITY } else { measure.value.max(m) };
     }
-    (worst, active)
+    measure
+}
+
+/// The first-order optimality measure at a point ([`optimality`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Measure {
+    /// max_i m_i over the unknowns that are not flat.
+    pub value: f64,
+    /// Per unknown: the bound it is held on.
+    pub active: Vec<Option<Bound>>,
+    /// Per unknown: flat (module docs).
+    pub flat: Vec<bool>,
 }
 
 /// The certificate at `lin` (the model's linearization at the returned point): optimality,
@@ -131,7 +170,7 @@ pub fn certify<S: System>(
     gtol: f64,
     max_condition: f64,
 ) -> Certificate {
-    let (measure, active) = optimality(problem, lin, gtol);
+    let Measure { value, active, flat } = optimality(problem, lin, gtol);
     let exact_fit = lin.cost.is_finite() && lin.norm <= EXACT_FIT * problem.data_norm();
     let null_space = if lin.normal.iter().all(|v| v.is_finite()) {
         NormalFactor::new(&lin.normal, max_condition).err().map(|s| {
@@ -151,10 +190,12 @@ pub fn certify<S: System>(
         None
     };
     Certificate {
-        optimality: if exact_fit { 0.0 } else { measure },
+        optimality: if exact_fit { 0.0 } else { value },
+        error: 0.0,
         gtol,
         exact_fit,
         active,
+        flat,
         null_space,
     }
 }

@@ -100,9 +100,9 @@ fn drive_once<S: System>(
     options.validate()?;
     let started = Instant::now();
     let z0 = start_coordinates(problem, start)?;
-    let ev = Evaluations::new(problem, options.integration_budget(problem.unknowns().len()));
+    let mut ev = Evaluations::new(problem, options.integration_budget(problem.unknowns().len()));
     let gtol = options.gtol_for(problem.integrator().rtol);
-    let record = Record { problem, method, options, gtol, started };
+    let record = Record { method, options, gtol, started };
     let mut current = match step.start(&ev, z0.clone()) {
         Ok(start) => start,
         Err(failure) => return Ok(record.start_failed(&ev, z0, failure)),
@@ -114,8 +114,24 @@ fn drive_once<S: System>(
     // Steps taken past a stopping rule that fired where the certificate fails, and the
     // certificate of the iterate the last rule stopped at.
     let (mut extra, mut verdict) = (0, None);
-    let ending = loop {
-        let measure = current.linearization.as_ref().map(|l| optimality(problem, l, gtol).0);
+    let mut precision = Precision::default();
+    let ending = 'run: loop {
+        let mut measure =
+            current.linearization.as_ref().map(|l| optimality(ev.problem(), l, gtol).value);
+        // Closing in and no longer gaining: is the measure accurate enough to be tested?
+        if let Some(m) = measure
+            && precision.due(m, gtol, ev.problem().integrator().rtol)
+            && let Some(finer) = precision.check(&ev, &current.z, m, gtol)
+        {
+            ev.refine(finer);
+            current = match step.restart(&ev, &current) {
+                Ok(again) => again,
+                Err(failure) => break Ending::Failed { iteration, failure },
+            };
+            measure =
+                current.linearization.as_ref().map(|l| optimality(ev.problem(), l, gtol).value);
+        }
+        precision.previous = measure;
         history.push(Iteration {
             iteration,
             cost: current.cost,
@@ -126,43 +142,59 @@ fn drive_once<S: System>(
             values: problem.unknowns().values(&current.z),
             diagnostics: current.diagnostics.clone(),
         });
-        if let Some(rule) = pending.take() {
-            let judged = record.judge(&ev, &current);
-            if judged.1.holds() || extra >= EXTRA_STEPS {
-                verdict = Some(judged);
-                break Ending::Rule(rule);
-            }
-            extra += 1;
-        }
         if current.cost == 0.0 {
             break Ending::Rule(Rule::ExactFit);
         }
-        if measure.is_some_and(|m| m <= options.gradient_tolerance.min(gtol)) {
-            break Ending::Rule(Rule::Gradient);
-        }
-        let proposal = match step.propose(&ev, &current) {
-            Ok(p) => p,
-            Err(failure) => break Ending::Failed { iteration, failure },
-        };
-        if let Some(row) = history.last_mut() {
-            row.condition = proposal.condition;
-            if let Some(g) = proposal.gradient_norm {
-                row.gradient_norm = g;
+        let gradient = measure.is_some_and(|m| m <= options.gradient_tolerance.min(gtol));
+        let mut fired = pending.take().or(gradient.then_some(Rule::Gradient));
+        let mut proposal = None;
+        if fired.is_none() {
+            let p = match step.propose(&ev, &current) {
+                Ok(p) => p,
+                Err(failure) => break Ending::Failed { iteration, failure },
+            };
+            if let Some(row) = history.last_mut() {
+                row.condition = p.condition;
+                if let Some(g) = p.gradient_norm {
+                    row.gradient_norm = g;
+                }
             }
+            let small =
+                distance(&p.z, &current.z) <= step_tolerance * (norm(&current.z) + step_tolerance);
+            fired = p.stop.or(small.then_some(Rule::Step));
+            proposal = Some(p);
         }
-        let small = distance(&proposal.z, &current.z)
-            <= step_tolerance * (norm(&current.z) + step_tolerance);
-        if let Some(rule) = proposal.stop.or(small.then_some(Rule::Step)) {
+        if let Some(rule) = fired {
+            // A stopping rule: the certificate judges the point. Where it fails because the
+            // integration is not accurate enough to tell, the run goes on at a finer one.
             let judged = record.judge(&ev, &current);
             if judged.1.holds() || extra >= EXTRA_STEPS {
                 verdict = Some(judged);
                 break Ending::Rule(rule);
+            }
+            if judged.1.error > ACCURATE * gtol
+                && let Some(finer) = ev.finer()
+            {
+                ev.refine(finer);
+                current = match step.restart(&ev, &current) {
+                    Ok(again) => again,
+                    Err(failure) => break Ending::Failed { iteration, failure },
+                };
+                history.pop();
+                continue 'run;
             }
             extra += 1;
         }
         if iteration >= options.max_iterations {
             break Ending::MaxIterations;
         }
+        let proposal = match proposal {
+            Some(p) => p,
+            None => match step.propose(&ev, &current) {
+                Ok(p) => p,
+                Err(failure) => break Ending::Failed { iteration, failure },
+            },
+        };
         let next = match step.advance(&ev, &current, proposal) {
             Ok(Advance::Moved(next)) => next,
             Ok(Advance::MovedThenStop(next, rule)) => {
@@ -180,6 +212,63 @@ fn drive_once<S: System>(
         iteration += 1;
     };
     Ok(record.finish(&ev, (iteration, current, verdict), best, ending, history))
+}
+
+/// The measure's integration error counts as well below gtol under this share of it.
+const ACCURATE: f64 = 0.1;
+
+/// The measure counts as closing in below this multiple of gtol.
+const CLOSING: f64 = 100.0;
+
+/// The driver's watch on the accuracy of the optimality measure during a run: once the
+/// measure is within [`CLOSING`]·gtol and no longer falls tenfold per iteration (a fit
+/// converging quadratically never pauses there), it is measured again at a tenth of the
+/// tolerances; when the two differ by more than [`ACCURATE`]·gtol, the run goes on at the
+/// finer tolerances (from the same point), and is watched again there.
+#[derive(Default)]
+struct Precision {
+    /// The measure at the previous iterate.
+    previous: Option<f64>,
+    /// The rtol whose accuracy was found sufficient.
+    accurate_at: Option<f64>,
+}
+
+impl Precision {
+    fn due(&self, m: f64, gtol: f64, rtol: f64) -> bool {
+        m <= CLOSING * gtol
+            && self.previous.is_none_or(|p| m > 0.1 * p)
+            && self.accurate_at != Some(rtol)
+    }
+
+    /// Measures the error at z; returns the finer problem when it should be used.
+    fn check<S: System>(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        z: &[f64],
+        m: f64,
+        gtol: f64,
+    ) -> Option<Problem<S>> {
+        let rtol = ev.problem().integrator().rtol;
+        if ev.counts().integrations >= ev.budget() {
+            return None;
+        }
+        let Some(finer) = ev.finer() else {
+            self.accurate_at = Some(rtol);
+            return None;
+        };
+        let Ok(fine) = finer.linearize(z) else {
+            self.accurate_at = Some(rtol);
+            return None;
+        };
+        ev.add(fine.counts);
+        let error = (m - optimality(&finer, &fine, gtol).value).abs();
+        if error > ACCURATE * gtol {
+            Some(finer)
+        } else {
+            self.accurate_at = Some(rtol);
+            None
+        }
+    }
 }
 
 /// How many more steps a method may take after its stopping rule fired at a point that fails

@@ -238,7 +238,7 @@ impl Serialize for Iteration {
 impl Serialize for FitRecord<'_> {
     fn serialize<Z: Serializer>(&self, s: Z) -> Result<Z::Ok, Z::Error> {
         let e = self.estimate;
-        let mut st = s.serialize_struct("Fit", 26)?;
+        let mut st = s.serialize_struct("Fit", 27)?;
         st.serialize_field("system", self.system)?;
         st.serialize_field("method", &e.method)?;
         st.serialize_field("converged", &e.converged())?;
@@ -259,6 +259,7 @@ impl Serialize for FitRecord<'_> {
         st.serialize_field("termination", &e.termination.to_string())?;
         st.serialize_field("termination_code", &e.termination.code())?;
         st.serialize_field("optimality", &Num(e.certificate.optimality))?;
+        st.serialize_field("optimality_error", &Num(e.certificate.error))?;
         st.serialize_field("gtol", &e.certificate.gtol)?;
         st.serialize_field("exact_fit", &e.certificate.exact_fit)?;
         let active = e.active_bounds();
@@ -317,10 +318,18 @@ impl Estimate {
             "yes (the model passes through the data: ε = 0 to rounding)".into()
         } else if !c.optimality.is_finite() {
             "no (the reported point could not be evaluated)".into()
+        } else if c.plateau() {
+            "no (a plateau: the model responds to no unknown there)".into()
         } else if c.holds() {
-            format!("yes (first-order optimality {:.2e} ≤ gtol {:.0e})", c.optimality, c.gtol)
+            format!(
+                "yes (first-order optimality {:.2e} ± {:.0e} ≤ gtol {:.0e})",
+                c.optimality, c.error, c.gtol
+            )
         } else {
-            format!("no (first-order optimality {:.2e} > gtol {:.0e})", c.optimality, c.gtol)
+            format!(
+                "no (first-order optimality {:.2e} ± {:.0e} > gtol {:.0e})",
+                c.optimality, c.error, c.gtol
+            )
         }
     }
 

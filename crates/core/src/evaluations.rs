@@ -2,6 +2,10 @@
 //! enforces the hard budget of integrations (inside line searches and step halvings too, so
 //! no fit runs without an end), and turns what cannot be used (an integration failure, a
 //! cost or gradient that overflows) into a [`Failure`] that names the point.
+//!
+//! The driver may refine the integration during a run ([`refine`](Evaluations::refine)):
+//! from then on every evaluation integrates at a tenth of the tolerances, so that the
+//! certificate is measured more accurately than it is tested.
 
 use std::cell::Cell;
 
@@ -15,20 +19,45 @@ use crate::termination::Failure;
 /// Counted, budgeted access to a problem's evaluations. One per fit; not shared between
 /// threads.
 pub struct Evaluations<'p, S> {
-    problem: &'p Problem<S>,
+    base: &'p Problem<S>,
+    /// The problem at refined integrator tolerances, once the driver refined them.
+    refined: Option<Problem<S>>,
     budget: u64,
     counts: Cell<Counts>,
 }
 
+/// The tightest relative tolerance [`Evaluations::finer`] refines to.
+pub const FINEST_RTOL: f64 = 1e-12;
+
 impl<'p, S: System> Evaluations<'p, S> {
     /// Evaluations of `problem` with a budget of `budget` integrations.
     pub fn new(problem: &'p Problem<S>, budget: u64) -> Self {
-        Self { problem, budget, counts: Cell::new(Counts::default()) }
+        Self { base: problem, refined: None, budget, counts: Cell::new(Counts::default()) }
     }
 
-    /// The problem.
-    pub fn problem(&self) -> &'p Problem<S> {
-        self.problem
+    /// The problem, at the integrator tolerances of the run so far.
+    pub fn problem(&self) -> &Problem<S> {
+        self.refined.as_ref().unwrap_or(self.base)
+    }
+
+    /// The problem integrated at a tenth of the current rtol and atol, or `None` where that
+    /// cannot be more accurate: a fixed step (whose discrete cost is smooth in z, so its
+    /// sensitivities are exact for it), or rtol already at [`FINEST_RTOL`].
+    pub fn finer(&self) -> Option<Problem<S>> {
+        let problem = self.problem();
+        let integrator = problem.integrator();
+        if integrator.fixed_step.is_some() || integrator.rtol * 0.1 < FINEST_RTOL * 0.99 {
+            return None;
+        }
+        let mut finer = *integrator;
+        finer.rtol *= 0.1;
+        finer.atol *= 0.1;
+        problem.clone().with_integrator(finer).ok()
+    }
+
+    /// Evaluates from now on with `problem` (one of [`finer`](Self::finer)'s).
+    pub fn refine(&mut self, problem: Problem<S>) {
+        self.refined = Some(problem);
     }
 
     /// The work so far.
@@ -74,7 +103,7 @@ impl<'p, S: System> Evaluations<'p, S> {
 
     /// ε, U and A at z ([`Problem::linearize`]), all finite.
     pub fn linearize(&self, z: &[f64]) -> Result<Linearization, Failure> {
-        let lin = self.run(z, || self.problem.linearize(z).map(with_counts))?;
+        let lin = self.run(z, || self.problem().linearize(z).map(with_counts))?;
         self.check(z, &lin)?;
         Ok(lin)
     }
@@ -82,14 +111,14 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// The weighted residuals and their Jacobian at z
     /// ([`Problem::residuals_and_jacobian`]), with ε, U and A, all finite.
     pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, Failure> {
-        let lin = self.run(z, || self.problem.residuals_and_jacobian(z).map(with_counts))?;
+        let lin = self.run(z, || self.problem().residuals_and_jacobian(z).map(with_counts))?;
         self.check(z, &lin)?;
         Ok(lin)
     }
 
     /// The weighted residuals at z ([`Problem::residuals`]), with a finite sum of squares.
     pub fn residuals(&self, z: &[f64]) -> Result<DVector<f64>, Failure> {
-        let r = self.run(z, || self.problem.residuals(z))?;
+        let r = self.run(z, || self.problem().residuals(z))?;
         if !r.norm_squared().is_finite() {
             return Err(self.overflow(z, "the cost ε", Some(&r)));
         }
@@ -98,7 +127,7 @@ impl<'p, S: System> Evaluations<'p, S> {
 
     /// ε at z by the accurate plain integration ([`Problem::cost`]), finite.
     pub fn cost(&self, z: &[f64]) -> Result<f64, Failure> {
-        let cost = self.run(z, || self.problem.cost(z))?;
+        let cost = self.run(z, || self.problem().cost(z))?;
         if !cost.is_finite() {
             return Err(self.overflow(z, "the cost ε", None));
         }
@@ -106,7 +135,7 @@ impl<'p, S: System> Evaluations<'p, S> {
     }
 
     fn values(&self, z: &[f64]) -> Vec<f64> {
-        self.problem.unknowns().values(z)
+        self.problem().unknowns().values(z)
     }
 
     fn check(&self, z: &[f64], lin: &Linearization) -> Result<(), Failure> {
@@ -131,7 +160,7 @@ impl<'p, S: System> Evaluations<'p, S> {
                 let row = r.iamax();
                 format!(
                     "{what} (the weighted residual of {} is {:e}; its square overflows)",
-                    self.problem.describe_row(row),
+                    self.problem().describe_row(row),
                     r[row]
                 )
             }

@@ -45,21 +45,21 @@ mod termination;
 mod unknowns;
 
 pub use bounded::{BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box};
-pub use certificate::{Bound, Certificate, EXACT_FIT, NullSpace, certify, optimality};
+pub use certificate::{Bound, Certificate, EXACT_FIT, Measure, NullSpace, certify, optimality};
 pub use confidence::{Z95, band_half_width, interval, t95};
 pub use data::{Data, Record, Samples, Series};
 pub use driver::drive;
 pub use error::{FitError, ProblemError};
 pub use estimate::{Estimate, ExperimentFit, FitRecord, Iteration, ScaleEstimate};
 pub use evaluate::{Linearization, Observed, WeightedResiduals};
-pub use evaluations::Evaluations;
+pub use evaluations::{Evaluations, FINEST_RTOL};
 pub use experiment::{Experiment, Planned, Setting, SettingFunction, SlotJacobian};
 pub use linalg::{NormalFactor, Singular, as_faer};
 pub use method::{Method, start_coordinates};
 pub use noise::{
     LN_2PI, NOISE_ROW_SHIFT, Noise, NoiseArgs, NoiseFunction, NoiseGradient, Transform,
 };
-pub use options::{DEFAULT_GTOL, DriverOptions, OptionsError};
+pub use options::{DEFAULT_GTOL, DriverOptions, MAX_DERIVED_GTOL, OptionsError};
 pub use plan::{PlannedNoise, PlannedSeries, RESIDUAL_PANELS, Sample, Sampled};
 pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL, SINGLE_EXPERIMENT};
 pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};

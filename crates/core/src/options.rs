@@ -67,7 +67,8 @@ impl OptionsError {
 }
 
 /// The certificate's default tolerance on the first-order optimality measure, at the
-/// default integrator tolerance (rtol 1e-8); looser integrations get 100·rtol. The
+/// default integrator tolerance (rtol 1e-8); looser integrations get 100·rtol, up to
+/// [`MAX_DERIVED_GTOL`]. The
 /// integration error alone moves the measure at the true minima of the catalogue to at most
 /// 8.8e-8 at rtol 1e-8 (about 9·rtol), so 1e-6 leaves a factor 11: tighter, it would certify
 /// the integrator's error rather than the model's minimum. A point that passes is within about
@@ -75,9 +76,14 @@ impl OptionsError {
 /// certificate) has the measurements.
 pub const DEFAULT_GTOL: f64 = 1e-6;
 
+/// The largest tolerance the certificate derives from a loose integrator: a cosine of 1e-3
+/// between the residual and a sensitivity is as loose as "stationary" can sensibly mean
+/// (100·rtol would pass anything at rtol ≥ 0.01).
+pub const MAX_DERIVED_GTOL: f64 = 1e-3;
+
 /// Options of the iteration driver, the same for every method (a method's options embed
 /// them). Defaults: 50 iterations, step tolerance 1e-10, gradient tolerance 1e-10, gtol
-/// max([`DEFAULT_GTOL`], 100·rtol), singular above condition 1e12, integration budget
+/// 100·rtol within [[`DEFAULT_GTOL`], [`MAX_DERIVED_GTOL`]], singular above condition 1e12, integration budget
 /// 10·(k + 1)·(max_iterations + 1) for k unknowns.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -92,8 +98,8 @@ pub struct DriverOptions {
     pub gradient_tolerance: f64,
     /// The certificate: the returned point counts as converged when its first-order
     /// optimality measure is at most this (or the model passes through the data). `None`:
-    /// max([`DEFAULT_GTOL`], 100·rtol) for the problem's integrator, whose error moves the
-    /// measure by about 10·rtol.
+    /// 100·rtol within [[`DEFAULT_GTOL`], [`MAX_DERIVED_GTOL`]] for the problem's
+    /// integrator, whose error moves the measure by about 10·rtol.
     pub gtol: Option<f64>,
     /// A normal matrix counts as singular when the condition number of its Jacobi-scaled
     /// form exceeds this.
@@ -140,11 +146,14 @@ impl DriverOptions {
 
     /// The certificate's tolerance for an integrator of relative tolerance `rtol`.
     pub fn gtol_for(&self, rtol: f64) -> f64 {
-        self.gtol.unwrap_or((100.0 * rtol).max(DEFAULT_GTOL))
+        self.gtol.unwrap_or((100.0 * rtol).clamp(DEFAULT_GTOL, MAX_DERIVED_GTOL))
     }
 
-    /// The integration budget for k unknowns.
+    /// The integration budget for k unknowns (saturating: a huge iteration count gives a
+    /// huge budget, never a wrapped one).
     pub fn integration_budget(&self, k: usize) -> u64 {
-        self.max_integrations.unwrap_or(10 * (k as u64 + 1) * (self.max_iterations as u64 + 1))
+        self.max_integrations.unwrap_or_else(|| {
+            (10 * (k as u64 + 1)).saturating_mul((self.max_iterations as u64).saturating_add(1))
+        })
     }
 }

@@ -154,16 +154,23 @@ impl<S: System> Problem<S> {
     /// ‖W^½ b‖: the weighted data's norm (the record's for continuous data, by the
     /// quadrature of its residual form), the scale an exact fit is measured against.
     pub fn data_norm(&self) -> f64 {
-        self.experiments
+        let entries: Vec<f64> = self
+            .experiments
             .iter()
             .flat_map(|e| &e.sampled().series)
             .flat_map(|s| s.samples.iter().map(move |m| (s, m)))
             .map(|(s, m)| match s.noise {
-                PlannedNoise::Function(_) => m.value.powi(2),
-                _ => (m.sqrt_weight * m.value).powi(2),
+                PlannedNoise::Function(_) => m.value,
+                _ => m.sqrt_weight * m.value,
             })
-            .sum::<f64>()
-            .sqrt()
+            .collect();
+        // Scaled by the largest entry, so that weights near the largest float do not
+        // overflow the sum of squares (and pass any fit as exact).
+        let top = entries.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if top == 0.0 || !top.is_finite() {
+            return top;
+        }
+        top * entries.iter().map(|v| (v / top).powi(2)).sum::<f64>().sqrt()
     }
 
     /// Row `row` of the residual vector in words: "`B` at t = 3 (sample 14 of `B`)", with

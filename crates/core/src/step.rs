@@ -115,6 +115,13 @@ pub trait Step<S: System> {
     /// cannot be used.
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure>;
 
+    /// Evaluates `current` again after the driver refined the integration
+    /// ([`Evaluations::refine`]), keeping what the method has learnt (a trust region's
+    /// radius); by default, a fresh [`start`](Self::start) there.
+    fn restart(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Iterate, Failure> {
+        self.start(ev, current.z.clone())
+    }
+
     /// Proposes the next point from `current`.
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure>;
 

@@ -59,6 +59,14 @@ impl Unknown {
     pub fn scale(&self, z: f64) -> f64 {
         if self.log { z.exp() } else { 1.0 }
     }
+    /// The scale of the coordinate at z, by which the certificate tells a flat unknown
+    /// (docs of [`certificate`](crate::certificate)): 1 on a log scale (an e-fold of the
+    /// value); on a linear scale the larger of |z|, |guess| and 1 (a generous scale, so that
+    /// a linear unknown of small magnitude is not called flat).
+    pub fn coordinate_scale(&self, z: f64) -> f64 {
+        if self.log { 1.0 } else { z.abs().max(self.guess.abs()).max(1.0) }
+    }
+
     /// The bounds in coordinates.
     pub fn coordinate_bounds(&self) -> (f64, f64) {
         let lo = self.min.map_or(f64::NEG_INFINITY, |v| if self.log { v.ln() } else { v });

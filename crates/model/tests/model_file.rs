@@ -649,7 +649,7 @@ fn integrator() {
         ),
         (
             format!("{OK}[integrator]\nrtol = -1\n"),
-            "models/m.toml:11:1: [integrator]: rtol must be positive, got -1",
+            "models/m.toml:11:1: [integrator]: rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got -1",
         ),
         (
             format!("{OK}[integrator]\natol = -1\n"),
@@ -687,7 +687,7 @@ fn integrator() {
             format!(
                 "{HEAD}integrator = {{ rtol = -1 }}\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n[unknowns]\nk = 0.5\n"
             ),
-            "models/m.toml:3:14: [integrator]: rtol must be positive, got -1",
+            "models/m.toml:3:14: [integrator]: rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got -1",
         ),
         (
             format!("{OK}[integrator]\nrtol = -1\n[data]\nt0 = \"a\"\n"),

@@ -106,8 +106,11 @@ impl Integrator {
 
     /// Checks the settings; returns a description of the first problem found.
     pub fn validate(&self) -> Result<(), String> {
-        if !(self.rtol > 0.0 && self.rtol.is_finite()) {
-            return Err(format!("rtol must be positive, got {}", self.rtol));
+        if !(self.rtol > 0.0 && self.rtol < 1.0) {
+            return Err(format!(
+                "rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got {}",
+                self.rtol
+            ));
         }
         if !(self.atol >= 0.0 && self.atol.is_finite()) {
             return Err(format!("atol must be non-negative, got {}", self.atol));

@@ -343,9 +343,12 @@ fn check_monotone_active_sets<S: System>(problem: &Problem<S>, name: &str) {
         }
         let last = &sets[sets.len().saturating_sub(3)..];
         assert!(last.windows(2).all(|w| w[0] == w[1]), "{name}: the active set moves at the end");
-        // One integration per iteration, and one for the start: bounds cost nothing extra.
+        // One integration per iteration, one for the start, and at most two at finer
+        // tolerances (the driver's watch on the measure's accuracy as the fit closes in, and
+        // the certificate's integration error): bounds cost nothing extra.
         if !halving {
-            assert_eq!(e.counts.integrations as usize, e.iterations + 1, "{name}");
+            let n = e.counts.integrations as usize;
+            assert!((e.iterations + 2..=e.iterations + 3).contains(&n), "{name}: {n}");
         } else {
             let costs: Vec<f64> = e.history.iter().map(|h| h.cost).collect();
             assert!(costs.windows(2).all(|c| c[1] < c[0]), "{name}: costs {costs:?}");
