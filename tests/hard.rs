@@ -149,7 +149,7 @@ fn a_plateau_of_the_cost_is_not_certified() {
     let problem = kinetics(&dir, |t| t, &data);
     for (name, method) in Registry::standard().build_all(&Settings::default()) {
         let e = method.fit(&problem).unwrap();
-        let plateau = e.values.iter().any(|v| *v == 0.0);
+        let plateau = e.values.contains(&0.0);
         assert!(!(plateau && e.converged()), "{name}: converged at {:?}", e.values);
         assert!(!(e.converged() && e.certificate.plateau()), "{name}");
     }
