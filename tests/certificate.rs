@@ -15,7 +15,7 @@ use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use sysid::core::{Problem, Termination};
+use sysid::core::{Problem, Termination, exact_fit_tolerance};
 use sysid::montecarlo::perturb;
 use sysid::ode::{Integrator, System};
 use sysid::registry::{Boxed, Registry, Settings};
@@ -30,7 +30,7 @@ fn methods<S: System>() -> Vec<Boxed<S>> {
 /// The cost an independent search may find below a certified point: 1e-6 relative, or the
 /// exact-fit floor for a zero-residual problem.
 fn allowance<S: System>(problem: &Problem<S>, cost: f64) -> f64 {
-    1e-6 * cost + 1e-20 * problem.data_norm().powi(2)
+    1e-6 * cost + (exact_fit_tolerance(problem) * problem.data_norm()).powi(2)
 }
 
 /// The same problem integrated 1000 times tighter (rtol not below 1e-12).

@@ -192,3 +192,34 @@ fn a_huge_iteration_count_does_not_wrap_the_budget() {
     let options = DriverOptions { max_iterations: 50, ..DriverOptions::default() };
     assert_eq!(options.integration_budget(3), 10 * 4 * 51);
 }
+
+/// Noise-free data (the model's own trajectory at k1 = 0.8, k2 = 0.3, integrated at the
+/// fit's rtol) are fitted exactly to the integration's accuracy: every method says converged
+/// with `exact_fit` (they stalled at ε = 1e-15 before, the first-order test measuring the
+/// integration's error), and the estimates are the rates the data came from, to 1e-6.
+#[test]
+fn noise_free_data_are_an_exact_fit() {
+    let dir = scratch("exact");
+    let model = Model::load(&root().join("examples/kinetics/model.toml")).unwrap();
+    let times: Vec<f64> = (0..=20).map(|i| 0.5 * i as f64).collect();
+    let set = [("k1".to_string(), 0.8), ("k2".to_string(), 0.3)];
+    let csv = model.simulate(&set, None, &times, None).unwrap();
+    // Keep t and B.
+    let data: String = csv
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            format!("{},{}\n", f[0], f[2])
+        })
+        .collect();
+    assert!(data.starts_with("t,B\n"), "{data}");
+    let problem = kinetics(&dir, |t| t, &data);
+    for (name, method) in Registry::standard().build_all(&Settings::default()) {
+        let e = method.fit(&problem).unwrap();
+        assert!(e.converged() && e.certificate.exact_fit, "{name}: {}", e.termination);
+        for (got, want) in e.values.iter().zip([0.8, 0.3]) {
+            assert!((got - want).abs() <= 1e-6 * want, "{name}: {got} vs {want}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -234,7 +234,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         };
         let (a, b) =
             axes.split_once(',').ok_or_else(|| anyhow!("--basin takes two unknowns, U1,U2"))?;
-        let bar = progress_bar((args.grid * args.grid) as u64, "starts");
+        let bar = progress_bar((args.grid as u64).saturating_mul(args.grid as u64), "starts");
         let map = basin(&study, (index(a)?, index(b)?), args.grid, &|done, _| {
             bar.set_position(done as u64)
         })?;

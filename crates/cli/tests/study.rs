@@ -147,6 +147,11 @@ fn shards_merge_into_the_unsharded_study() {
     let err = text(&mixed.stderr);
     assert!(err.contains("integrator.max_steps 100000 vs 700"), "{err}");
     assert!(!Path::new(&scratch.path("never")).exists(), "a refused merge writes nothing");
+    // Nor do they make a complete study for --check (it said `complete`).
+    let check = sysid(&["merge", "--check", &one, &steps]);
+    assert_eq!(check.status.code(), Some(2), "{}", text(&check.stdout));
+    let err = text(&check.stderr);
+    assert!(err.contains("hold different studies: integrator.max_steps"), "{err}");
 }
 
 #[test]
@@ -266,12 +271,16 @@ fn resume_completes_a_cut_study() {
     std::fs::write(Path::new(&cut).join("trials.jsonl"), kept).unwrap();
     std::fs::remove_file(Path::new(&cut).join("summary.json")).unwrap();
     std::fs::remove_file(Path::new(&cut).join("summary.md")).unwrap();
+    // The temporary file of a write the kill cut short: the next run there removes it.
+    let partial = Path::new(&cut).join(".summary.json.4242.partial");
+    std::fs::write(&partial, "{\"half").unwrap();
     let without = study(&cut, &[]);
     assert_eq!(without.status.code(), Some(2), "a study directory needs --resume");
     assert!(text(&without.stderr).contains("--resume"), "{}", text(&without.stderr));
     let resumed = study(&cut, &["--resume"]);
     assert_eq!(resumed.status.code(), Some(0), "{}", text(&resumed.stderr));
     assert_eq!(untimed_trials(&cut), untimed_trials(&whole));
+    assert!(!partial.exists(), "a killed run's temporary file stays behind");
 }
 
 #[test]
@@ -324,6 +333,40 @@ fn bad_study_input_exits_2_with_one_line() {
             "`k` is not an unknown",
         ),
         (vec!["study", "--system", "van-der-pol", "--basin", "mu", "--out", &out], "two unknowns"),
+        // Sizes are checked before anything is allocated (these aborted, or ran out of
+        // memory).
+        (
+            vec![
+                "study",
+                "--system",
+                "van-der-pol",
+                "--basin",
+                "mu,x",
+                "--grid",
+                "4294967297",
+                "--out",
+                &out,
+            ],
+            "--grid must be from 2 to 1000 points per axis",
+        ),
+        (
+            vec![
+                "study",
+                "--system",
+                "van-der-pol",
+                "--basin",
+                "mu,x",
+                "--grid",
+                "20000",
+                "--out",
+                &out,
+            ],
+            "--grid must be from 2 to 1000 points per axis",
+        ),
+        (
+            vec!["study", "--system", "van-der-pol", "--trials", "1000000000", "--out", &out],
+            "--trials 1000000000 is above the limit of 1000000",
+        ),
         (vec!["merge", "--out", &out, &out], "never"),
     ] {
         let run = sysid(&args);

@@ -28,8 +28,11 @@
 //! The measure is computed from an integration, and carries its error: the driver measures
 //! it again at a tenth of the integrator's tolerance and reports the difference as
 //! `error`. The point is certified when optimality + error ≤ gtol and some unknown is not
-//! flat, or when the model passes through the data: ‖r‖ ≤ 1e-10 ‖W^½ b‖, a cost within
-//! 1e-20 ‖W^½ b‖² of the least possible cost 0. Non-finite r, g or A never pass.
+//! flat, or when the model passes through the data to the integration's accuracy:
+//! ‖r‖ ≤ τ ‖W^½ b‖ with τ = max(1e-10, 10·rtol) (1e-10 for a fixed step), a cost within
+//! τ² ‖W^½ b‖² of the least possible cost 0 ([`exact_fit_tolerance`]). Noise-free data are
+//! fitted only as exactly as the model is integrated: below that the first-order test
+//! measures the integration's error, not the fit. Non-finite r, g or A never pass.
 
 use serde::Serialize;
 use sysid_ode::System;
@@ -40,6 +43,16 @@ use crate::problem::Problem;
 
 /// ‖W^½ r‖ / ‖W^½ b‖ at or below which the model passes through the data (ε = 0 to rounding).
 pub const EXACT_FIT: f64 = 1e-10;
+
+/// τ: ‖W^½ r‖ / ‖W^½ b‖ at or below which the model passes through the data as exactly as
+/// `problem` integrates it: [`EXACT_FIT`], or 10·rtol for an adaptive integration.
+pub fn exact_fit_tolerance<S: System>(problem: &Problem<S>) -> f64 {
+    let integrator = problem.integrator();
+    match integrator.fixed_step {
+        Some(_) => EXACT_FIT,
+        None => EXACT_FIT.max(10.0 * integrator.rtol),
+    }
+}
 
 /// The bound an unknown is held on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -171,7 +184,8 @@ pub fn certify<S: System>(
     max_condition: f64,
 ) -> Certificate {
     let Measure { value, active, flat } = optimality(problem, lin, gtol);
-    let exact_fit = lin.cost.is_finite() && lin.norm <= EXACT_FIT * problem.data_norm();
+    let exact_fit =
+        lin.cost.is_finite() && lin.norm <= exact_fit_tolerance(problem) * problem.data_norm();
     let null_space = if lin.normal.iter().all(|v| v.is_finite()) {
         NormalFactor::new(&lin.normal, max_condition).err().map(|s| {
             let names = problem.names();

@@ -45,7 +45,9 @@ mod termination;
 mod unknowns;
 
 pub use bounded::{BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box};
-pub use certificate::{Bound, Certificate, EXACT_FIT, Measure, NullSpace, certify, optimality};
+pub use certificate::{
+    Bound, Certificate, EXACT_FIT, Measure, NullSpace, certify, exact_fit_tolerance, optimality,
+};
 pub use confidence::{Z95, band_half_width, interval, t95};
 pub use data::{Data, Record, Samples, Series};
 pub use driver::drive;

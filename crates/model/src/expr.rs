@@ -167,6 +167,14 @@ fn lex(text: &str) -> Result<Vec<(Token, usize)>, ExprError> {
                 position: start,
                 message: format!("`{literal}` is not a number"),
             })?;
+            if !value.is_finite() {
+                return Err(ExprError {
+                    position: start,
+                    message: format!(
+                        "`{literal}` is beyond the largest floating-point number (about 1.8e308)"
+                    ),
+                });
+            }
             out.push((Token::Num(value), start));
             continue;
         }
@@ -246,7 +254,7 @@ impl Parser {
             self.at += 1;
             let (right, d) = self.term()?;
             depth = self.nest(depth.max(d), position)?;
-            left = Expr::Bin(op, Box::new(left), Box::new(right));
+            left = checked(Expr::Bin(op, Box::new(left), Box::new(right)), position)?;
         }
         Ok((left, depth))
     }
@@ -259,7 +267,7 @@ impl Parser {
             self.at += 1;
             let (right, d) = self.unary()?;
             depth = self.nest(depth.max(d), position)?;
-            left = Expr::Bin(op, Box::new(left), Box::new(right));
+            left = checked(Expr::Bin(op, Box::new(left), Box::new(right)), position)?;
         }
         Ok((left, depth))
     }
@@ -297,7 +305,10 @@ impl Parser {
             // Right-associative, and the exponent may carry its own sign: 2^-x.
             let (exponent, d) = self.unary()?;
             let depth = self.nest(depth.max(d), position)?;
-            return Ok((Expr::Bin(Op::Pow, Box::new(base), Box::new(exponent)), depth));
+            return Ok((
+                checked(Expr::Bin(Op::Pow, Box::new(base), Box::new(exponent)), position)?,
+                depth,
+            ));
         }
         Ok((base, depth))
     }
@@ -354,7 +365,8 @@ impl Parser {
         if args.len() != func.arity() {
             return Err(wrong_arity(&name, func, args.len(), position));
         }
-        Ok((Expr::Call(func, args, position), self.nest(depth, position)?))
+        let depth = self.nest(depth, position)?;
+        Ok((checked(Expr::Call(func, args, position), position)?, depth))
     }
 
     /// "expected `what`, found …" at the current token.
@@ -383,6 +395,52 @@ fn unknown_function(name: &str, position: usize) -> ExprError {
 #[inline(never)]
 fn wrong_arity(name: &str, func: Func, got: usize, position: usize) -> ExprError {
     ExprError { position, message: format!("{name} takes {} argument(s), got {got}", func.arity()) }
+}
+
+/// `e` (an operation or call at `position`), unless it divides by a constant zero or its
+/// operands are constants whose result is not a finite number (`sqrt(-1)`, `log(0)`,
+/// `1e200 * 1e200`): such an equation can never be integrated, and the reader names it where
+/// it is written rather than the integrator at t0.
+fn checked(e: Expr, position: usize) -> Result<Expr, ExprError> {
+    if let Expr::Bin(Op::Div, _, divisor) = &e
+        && constant(divisor) == Some(0.0)
+    {
+        return Err(not_finite(format!("division by a constant zero: `{e}`"), position));
+    }
+    match constant(&e) {
+        Some(v) if !v.is_finite() => {
+            Err(not_finite(format!("`{e}` is not a finite number (it is {v})"), position))
+        }
+        _ => Ok(e),
+    }
+}
+
+/// The value of an expression without names, in f64.
+fn constant(e: &Expr) -> Option<f64> {
+    Some(match e {
+        Expr::Num(v) => *v,
+        Expr::Name(..) => return None,
+        Expr::Neg(a) => -constant(a)?,
+        Expr::Bin(op, a, b) => {
+            let (a, b) = (constant(a)?, constant(b)?);
+            match op {
+                Op::Add => a + b,
+                Op::Sub => a - b,
+                Op::Mul => a * b,
+                Op::Div => a / b,
+                Op::Pow => a.powf(b),
+            }
+        }
+        Expr::Call(Func::Min, args, _) => constant(&args[0])?.min(constant(&args[1])?),
+        Expr::Call(Func::Max, args, _) => constant(&args[0])?.max(constant(&args[1])?),
+        Expr::Call(f, args, _) => eval_func(*f, constant(&args[0])?),
+    })
+}
+
+#[cold]
+#[inline(never)]
+fn not_finite(message: String, position: usize) -> ExprError {
+    ExprError { position, message }
 }
 
 /// The error of an expression that nests deeper than [`MAX_DEPTH`], at `position`.

@@ -257,6 +257,24 @@ fn equations() {
             format!("{HEAD}[equations]\nx = \"x # 2\"\ny = \"x\"\n"),
             "models/m.toml:4:8: equation of x: unexpected character `#`",
         ),
+        // Constant errors are named where they are written, not found by the integrator
+        // as a state that "became non-finite at t = 0".
+        (
+            format!("{HEAD}[equations]\nx = \"-k * x / 0\"\ny = \"x\"\n"),
+            "models/m.toml:4:13: equation of x: division by a constant zero: `(((-k) * x) / 0.0)`",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"-k * x + sqrt(-1)\"\ny = \"x\"\n"),
+            "models/m.toml:4:15: equation of x: `sqrt((-1.0))` is not a finite number (it is NaN)",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"-k * x * 1e309\"\ny = \"x\"\n"),
+            "models/m.toml:4:15: equation of x: `1e309` is beyond the largest floating-point number (about 1.8e308)",
+        ),
+        (
+            format!("{HEAD}[equations]\nx = \"x + 1e200 * 1e200\"\ny = \"x\"\n"),
+            "models/m.toml:4:16: equation of x: `(1e200 * 1e200)` is not a finite number (it is inf)",
+        ),
         (
             format!("{HEAD}[equations]\nx = \"-k * x\"\n"),
             "models/m.toml:1:16: state `y` has no equation in [equations]",

@@ -46,6 +46,9 @@ pub struct BasinMap {
     pub success_rate: f64,
 }
 
+/// The most points per axis of a basin map.
+pub const MAX_GRID: usize = 1000;
+
 /// The grid of `grid` × `grid` starts for the unknowns `axes` (indices), spread as the
 /// study's ρ spreads starts: truth·(1 + ρu), u from −1 to 1 in equal steps.
 pub fn basin<S: System + Clone + Send + Sync>(
@@ -61,8 +64,10 @@ pub fn basin<S: System + Clone + Send + Sync>(
     if axes.0 >= k || axes.1 >= k || axes.0 == axes.1 {
         return Err(StudyError::Setup("a basin needs two different unknowns".into()));
     }
-    if grid < 2 {
-        return Err(StudyError::Setup(format!("--grid must be at least 2, got {grid}")));
+    if !(2..=MAX_GRID).contains(&grid) {
+        return Err(StudyError::Setup(format!(
+            "--grid must be from 2 to {MAX_GRID} points per axis (a million starts), got {grid}"
+        )));
     }
     let spec = study.spec();
     let truth = scenario.truth();

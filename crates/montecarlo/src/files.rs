@@ -367,6 +367,22 @@ pub fn missing_shards(mut given: impl Iterator<Item = Option<Shard>>) -> Vec<usi
 /// with its trials done, a line per shard of the study that was not given, and a last line
 /// `complete` or `incomplete: 3,7` (shard indices); with whether the study is complete.
 pub fn check(dirs: &[PathBuf]) -> Result<(String, bool), StudyError> {
+    // Shards of different studies never make one complete study, whatever their counts.
+    let headers =
+        dirs.iter().map(|d| read_header(&d.join(STUDY_FILE))).collect::<Result<Vec<_>, _>>()?;
+    if let (Some(first), Some(dir)) = (headers.first(), dirs.first()) {
+        let whole = Header { shard: None, ..first.clone() };
+        for (other, header) in dirs.iter().zip(&headers) {
+            if (Header { shard: None, ..header.clone() }) != whole {
+                return Err(StudyError::Mismatch(format!(
+                    "{} and {} hold different studies: {}",
+                    dir.display(),
+                    other.display(),
+                    difference(first, header)
+                )));
+            }
+        }
+    }
     let shards = progress(dirs)?;
     let mut text = String::new();
     let mut incomplete = BTreeSet::new();
@@ -473,7 +489,20 @@ impl DirLock {
             format!("{}\t{now}\t{}\t{}\n", std::process::id(), host.trim(), command.join(" "));
         file.set_len(0).map_err(StudyError::io(&path))?;
         file.write_all(line.as_bytes()).map_err(StudyError::io(&path))?;
+        remove_stale_partials(dir);
         Ok(Self { file, path })
+    }
+}
+
+/// Removes the temporary files of [`write_atomically`] that a killed run left in `dir`: only
+/// the holder of the directory's lock writes there, so while we hold it none is in use.
+fn remove_stale_partials(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if name.starts_with('.') && name.ends_with(".partial") && is_owned(&name) {
+            let _ = std::fs::remove_file(entry.path());
+        }
     }
 }
 

@@ -57,6 +57,10 @@ pub struct StudySpec {
     pub settings: BTreeMap<String, String>,
 }
 
+/// The most trials one study runs (their records are held for the summary: some 10 GB of
+/// memory at the limit with every method).
+pub const MAX_TRIALS: usize = 1_000_000;
+
 impl StudySpec {
     /// Checks the numbers.
     pub fn validate(&self) -> Result<(), StudyError> {
@@ -65,6 +69,13 @@ impl StudySpec {
         }
         if self.trials == 0 {
             return Err(StudyError::Setup("--trials must be at least 1".into()));
+        }
+        if self.trials > MAX_TRIALS {
+            return Err(StudyError::Setup(format!(
+                "--trials {} is above the limit of {MAX_TRIALS} per study (each trial's \
+                 records are kept for the summary): run several studies with other --seed",
+                self.trials
+            )));
         }
         if !(self.noise > 0.0 && self.noise.is_finite()) {
             return Err(StudyError::Setup(format!(
