@@ -163,7 +163,12 @@ proptest! {
         x in 0.2..2.0f64, y in -1.5..1.5f64, k in 0.3..1.7f64, t in 0.0..2.0f64,
     ) {
         let text = e.to_string();
-        let program = Program::compile(&parse(&text).unwrap(), &resolve).unwrap();
+        // A constant that is not a finite number (log(0), x / 0) is refused by the reader.
+        let parsed = parse(&text);
+        prop_assume!(!parsed.as_ref().is_err_and(|err| {
+            err.message.contains("is not a finite number") || err.message.contains("a constant zero")
+        }));
+        let program = Program::compile(&parsed.unwrap(), &resolve).unwrap();
         let linearized = Linearized::new(std::slice::from_ref(&program), (2, 1, 0));
         let interpreted = linearized.interpreted();
         let (mut a, mut b) = (linearized.workspace(), interpreted.workspace());

@@ -9,10 +9,16 @@
 //! scale, ρu for a guess of 0, then moved onto a one-sided bound it falls outside of. The
 //! problem's own guess is the first start, so that N starts never do worse than one.
 //!
-//! The fits run on rayon. The best fit is the converged one with the least cost (the least
-//! cost of all when none converged). A start reached the best minimum when its fit converged
-//! to a cost within [`SAME_MINIMUM_RTOL`] of the best; the distinct minima are the converged
-//! fits grouped by cost the same way, least cost first.
+//! The fits run on rayon. A drawn start whose fit cannot even begin (the model cannot be
+//! integrated there, or its cost overflows) is redrawn, uniformly over the same ranges, up
+//! to [`MAX_REDRAWS`] times; the redraws are counted (`redrawn`). The best fit is the
+//! converged one with the least cost, unless a fit that did not converge ended lower (by
+//! more than [`SAME_MINIMUM_RTOL`]): a certified point is then not reported as the best when
+//! a lower one was found (a corner of the box where every bound is active is a certified
+//! point of the bounded problem, and often a poor one), and the lowest is reported, not
+//! converged. With none converged, the least cost of all. A start reached the best minimum
+//! when its fit converged to a cost within [`SAME_MINIMUM_RTOL`] of the best; the distinct
+//! minima are the converged fits grouped by cost the same way, least cost first.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -20,11 +26,14 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 use sysid_core::format::significant;
-use sysid_core::{Estimate, FitError, Method, Problem, Unknown};
+use sysid_core::{Estimate, FitError, Method, Problem, Termination, Unknown};
 use sysid_ode::System;
 
 /// Two converged costs within this relative distance are one minimum.
 pub const SAME_MINIMUM_RTOL: f64 = 1e-6;
+
+/// The most times one drawn start is redrawn when its fit cannot begin there.
+pub const MAX_REDRAWS: usize = 10;
 
 /// How many starts, drawn how.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -67,6 +76,9 @@ pub struct Starts {
     pub converged: usize,
     /// Starts whose fit converged to the best minimum.
     pub reached_best: usize,
+    /// Drawn starts replaced because the fit could not begin there (each at most
+    /// [`MAX_REDRAWS`] times).
+    pub redrawn: usize,
     /// The distinct minima the converged fits reached, least cost first.
     pub minima: Vec<Minimum>,
     /// Wall-clock time of all the fits, in milliseconds.
@@ -98,7 +110,11 @@ impl std::fmt::Display for Starts {
                 n => format!("{n} distinct minima"),
             },
             if minima.is_empty() { "none".to_string() } else { minima.join(", ") }
-        )
+        )?;
+        if self.redrawn > 0 {
+            write!(f, "; {} redrawn where the fit could not begin", plural(self.redrawn, "start"))?;
+        }
+        Ok(())
     }
 }
 
@@ -167,9 +183,36 @@ where
 {
     let started = std::time::Instant::now();
     let starts = starts(problem, options);
-    let fits: Vec<Estimate> =
-        starts.par_iter().map(|start| method.fit_from(problem, start)).collect::<Result<_, _>>()?;
+    let runs: Vec<(Estimate, usize)> = starts
+        .par_iter()
+        .enumerate()
+        .map(|(j, start)| {
+            let mut fit = method.fit_from(problem, start)?;
+            let mut redrawn = 0;
+            // The guess (start 0) is the user's: it is kept whatever happens there.
+            if j > 0 {
+                let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+                rng.set_stream(j as u64);
+                while redrawn < MAX_REDRAWS
+                    && matches!(fit.termination, Termination::StartFailed(_))
+                {
+                    let again: Vec<f64> = problem
+                        .unknowns()
+                        .list()
+                        .iter()
+                        .map(|u| draw(u, rng.random::<f64>(), options.spread))
+                        .collect();
+                    fit = method.fit_from(problem, &again)?;
+                    redrawn += 1;
+                }
+            }
+            Ok((fit, redrawn))
+        })
+        .collect::<Result<_, FitError>>()?;
+    let redrawn = runs.iter().map(|r| r.1).sum();
+    let fits: Vec<Estimate> = runs.into_iter().map(|r| r.0).collect();
     let mut summary = summarise(&fits, options);
+    summary.redrawn = redrawn;
     summary.elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
     let best = fits.into_iter().nth(summary.best_start).expect("the best start's fit");
     Ok(Multistart { best, starts: summary })
@@ -191,7 +234,13 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
             .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
             .map(|(i, _)| i)
     };
-    let best_start = least(true).or_else(|| least(false)).unwrap_or(0);
+    let lower =
+        |a: usize, b: usize| fits[a].cost < fits[b].cost - SAME_MINIMUM_RTOL * fits[b].cost.abs();
+    let best_start = match (least(true), least(false)) {
+        (Some(c), Some(any)) if lower(any, c) => any,
+        (Some(c), _) => c,
+        (None, any) => any.unwrap_or(0),
+    };
     let mut order: Vec<usize> = (0..fits.len()).filter(|&i| fits[i].converged()).collect();
     order.sort_by(|&a, &b| fits[a].cost.total_cmp(&fits[b].cost).then(a.cmp(&b)));
     // A fit joins a minimum when it matches that minimum's least-cost fit (the first in cost
@@ -225,6 +274,7 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
         best_start,
         converged: fits.iter().filter(|f| f.converged()).count(),
         reached_best,
+        redrawn: 0,
         minima,
         elapsed_ms: 0.0,
     }
