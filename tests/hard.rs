@@ -152,6 +152,14 @@ fn a_plateau_of_the_cost_is_not_certified() {
         let plateau = e.values.contains(&0.0);
         assert!(!(plateau && e.converged()), "{name}: converged at {:?}", e.values);
         assert!(!(e.converged() && e.certificate.plateau()), "{name}");
+        // A run that stalled there says what the point is.
+        if e.certificate.plateau() && e.termination.code().starts_with("stalled") {
+            assert!(
+                e.termination.to_string().contains("on a plateau"),
+                "{name}: {}",
+                e.termination
+            );
+        }
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

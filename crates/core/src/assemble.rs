@@ -93,6 +93,7 @@ impl Record<'_> {
                 rule,
                 iteration: iterations,
                 optimality: stalled.as_ref().map_or(f64::INFINITY, |s| s.1),
+                plateau: stalled.as_ref().is_some_and(|s| s.3.plateau()),
             },
             Ending::MaxIterations => Termination::MaxIterations,
             Ending::Failed { failure: Failure::Budget { integrations }, .. } => {
@@ -265,7 +266,8 @@ pub(crate) fn with_scales<S: System>(
         && e.certificate.holds()
         && let Termination::Converged(rule) = e.termination
     {
-        e.termination = Termination::Stalled { rule, iteration: iterations, optimality };
+        e.termination =
+            Termination::Stalled { rule, iteration: iterations, optimality, plateau: false };
     }
     e.certificate.optimality = optimality;
     let converged = e.certificate.holds();

@@ -153,6 +153,8 @@ pub enum Termination {
         iteration: usize,
         /// The certificate's measure there.
         optimality: f64,
+        /// Whether the point is a plateau: the model responds to no unknown there.
+        plateau: bool,
     },
     /// The iteration budget ran out.
     MaxIterations,
@@ -202,7 +204,11 @@ impl fmt::Display for Termination {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Termination::Converged(rule) => write!(f, "converged: {rule}"),
-            Termination::Stalled { rule, iteration, optimality } => write!(
+            Termination::Stalled { rule, iteration, plateau: true, .. } => write!(
+                f,
+                "stalled at iteration {iteration}: {rule}, on a plateau: the model responds to no unknown there, so no test can tell it from a minimum"
+            ),
+            Termination::Stalled { rule, iteration, optimality, .. } => write!(
                 f,
                 "stalled at iteration {iteration}: {rule}, but the point is not a minimum (first-order optimality {optimality:.2e})"
             ),
