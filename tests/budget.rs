@@ -43,10 +43,12 @@ proptest! {
             .unwrap();
         for method in methods() {
             let e = method.fit(&problem).unwrap();
-            // The certificate may integrate three times more (the last and the best iterate,
-            // and the best once more at finer tolerances to measure its integration error).
+            // Past the budget: the last difference-quotient Jacobian of `-fd` (k + 1 = 3
+            // integrations, admitted while one was left: up to 2 over), and the certificate's
+            // own integrations (the reported point's linearization where the method made none,
+            // and one at finer tolerances for the measure's integration error).
             prop_assert!(
-                e.counts.integrations <= BUDGET + 3,
+                e.counts.integrations <= BUDGET + 4,
                 "{}: {} integrations ({})", method.name(), e.counts.integrations, e.termination
             );
             let text = serde_json::to_string(&e.record("tracking")).unwrap();
