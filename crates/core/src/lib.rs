@@ -42,6 +42,7 @@ mod problem;
 mod step;
 mod table;
 mod termination;
+mod trust;
 mod unknowns;
 
 pub use bounded::{BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box};
@@ -67,4 +68,5 @@ pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL, SINGLE_EXPERIMENT};
 pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};
 pub use table::{Compared, Expected, compact, compact_header, comparison};
 pub use termination::{Failure, Rule, Termination};
+pub use trust::{Curve, CurveStep, actual_decrease};
 pub use unknowns::{Unknown, Unknowns};

@@ -3,8 +3,8 @@
 
 use nalgebra::DVector;
 use sysid_core::{
-    Advance, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem, Proposal, Rule,
-    Step, drive,
+    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem,
+    Proposal, Rule, Step, actual_decrease, drive,
 };
 use sysid_ode::System;
 
@@ -33,7 +33,8 @@ impl<S: System> Method<S> for Goodman {
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         self.options.validate()?;
         let name = <Self as Method<S>>::name(self);
-        let mut step = Newton { options: &self.options, delta: DVector::zeros(0) };
+        let mut step =
+            Newton { options: &self.options, delta: DVector::zeros(0), curve: Curve::default() };
         drive(problem, name, &self.options.driver, &mut step, start)
     }
 }
@@ -43,6 +44,9 @@ struct Newton<'o> {
     options: &'o GoodmanOptions,
     /// The Newton step of the last proposal (inside the bounds).
     delta: DVector<f64>,
+    /// The Levenberg curve along which step halving shortens a step (its scaling kept
+    /// from iterate to iterate).
+    curve: Curve,
 }
 
 impl<S: System> Step<S> for Newton<'_> {
@@ -71,10 +75,14 @@ impl<S: System> Step<S> for Newton<'_> {
         Ok(Proposal { z, condition: Some(step.condition), gradient_norm: None, stop })
     }
 
-    /// c ← c* + δc, then integrate again from the new initial vector. With step halving, δc
-    /// is halved while the cost does not fall (beyond ε's accuracy, near the minimum) or the
-    /// integration fails, at most `max_halvings` times; the box is convex, so every
-    /// shortened step stays inside it.
+    /// c ← c* + δc, then integrate again from the new initial vector. With step halving, a
+    /// step that does not lower the cost (or whose integration fails) is halved, at most
+    /// `max_halvings` times: its scaled length ‖Dδ‖ is halved along the Levenberg curve
+    /// ([`Curve`]), the step the quadratic model prefers at that length, which shortens a
+    /// direction where the Newton step overshoots before the others (halving along the line
+    /// shortens all alike, and crawls on a sloppy problem). Below ε's accuracy the decrease
+    /// is measured from the gradients at both ends ([`actual_decrease`]). Every step stays in
+    /// the box.
     fn advance(
         &mut self,
         ev: &Evaluations<'_, S>,
@@ -91,34 +99,38 @@ impl<S: System> Step<S> for Newton<'_> {
         let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
         let negligible = step_tolerance * (z_norm + step_tolerance);
         let resolution = problem.integrator().rtol * lin.cost;
-        // The decrease of ε the quadratic model predicts for a move to `trial`.
-        let predicted = |trial: &[f64]| {
-            let d = DVector::from_iterator(trial.len(), trial.iter().zip(z).map(|(a, b)| a - b));
-            -(2.0 * lin.gradient.dot(&d) + d.dot(&(&lin.normal * &d)))
+        self.curve.rescale(lin);
+        self.curve.lambda = 0.0;
+        let predicted =
+            -(2.0 * lin.gradient.dot(&self.delta) + self.delta.dot(&(&lin.normal * &self.delta)));
+        let mut step = CurveStep {
+            scaled_norm: self.curve.scaled_norm(self.delta.as_slice()),
+            delta: self.delta.clone(),
+            predicted,
+            lambda: 0.0,
+            condition: f64::NAN,
         };
-        let mut scale = 1.0;
-        for _ in 0..=self.options.max_halvings {
-            if scale < 1.0 && scale * self.delta.norm() <= negligible {
+        let mut trial = proposal.z;
+        for halving in 0..=self.options.max_halvings {
+            if halving > 0 && step.delta.norm() <= negligible {
                 // Shrunk below the step tolerance without reducing the cost.
                 return Ok(Advance::Stop(Rule::Step));
             }
-            let trial = problem.unknowns().moved(z, self.delta.as_slice(), scale);
             match ev.linearize(&trial) {
-                // A step is taken on an actual decrease of the cost; or, where the model
-                // itself expects a change below ε's accuracy (about rtol relative: the
-                // minimum's noise floor), on a change within that accuracy, so that the
-                // iteration can refine the point rather than halve to nothing.
-                Ok(l)
-                    if l.cost < lin.cost
-                        || (l.cost <= lin.cost + resolution && predicted(&trial) <= resolution) =>
-                {
+                Ok(l) if actual_decrease(lin, &l, step.predicted, resolution) > 0.0 => {
                     return Ok(Advance::Moved(Iterate::linearized(l)));
                 }
                 Ok(_) => {}
                 Err(budget @ Failure::Budget { .. }) => return Err(budget),
                 Err(_) => {}
             }
-            scale *= 0.5;
+            let radius = 0.5 * step.scaled_norm;
+            step = match self.curve.within(problem, lin, radius, self.options.driver.max_condition)
+            {
+                Ok(shorter) => shorter,
+                Err(_) => return Ok(Advance::Stop(Rule::NoDescent)),
+            };
+            trial = problem.unknowns().moved(z, step.delta.as_slice(), 1.0);
         }
         Ok(Advance::Stop(Rule::NoDescent))
     }

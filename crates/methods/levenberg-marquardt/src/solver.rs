@@ -23,10 +23,9 @@
 //! floor let the iteration cycle between two points on Boehm's problem, forever 3e-6 from
 //! certified.)
 
-use nalgebra::DVector;
 use sysid_core::{
-    Advance, Estimate, Evaluations, Failure, FitError, Iterate, Linearization, Method, Problem,
-    Proposal, Quadratic, Rule, Singular, Step, drive, minimise_in_box,
+    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Linearization,
+    Method, Problem, Proposal, Rule, Step, actual_decrease, drive,
 };
 use sysid_ode::System;
 
@@ -55,144 +54,31 @@ impl<S: System> Method<S> for LevenbergMarquardt {
         self.options.validate()?;
         let mut step = TrustRegion {
             options: &self.options,
-            scale: Vec::new(),
+            curve: Curve::default(),
             radius: 0.0,
-            lambda: 0.0,
             proposed: None,
         };
         drive(problem, "levenberg-marquardt", &self.options.driver, &mut step, start)
     }
 }
 
-/// The state of the iteration: the scaling D, the radius Δ, the last λ, and the step of the
-/// last proposal (which the advance evaluates first).
+/// The state of the iteration: the curve (its scaling D and last λ), the radius Δ, and the
+/// step of the last proposal (which the advance evaluates first).
 struct TrustRegion<'o> {
     options: &'o LevenbergMarquardtOptions,
-    scale: Vec<f64>,
+    curve: Curve,
     radius: f64,
-    lambda: f64,
-    proposed: Option<Trial>,
-}
-
-/// A trial step with what the decision needs.
-struct Trial {
-    delta: DVector<f64>,
-    /// ‖Dδ‖.
-    scaled_norm: f64,
-    /// ε − m₀(δ) = −(2Uᵀδ + δᵀAδ).
-    predicted: f64,
-    lambda: f64,
-    condition: f64,
+    proposed: Option<CurveStep>,
 }
 
 impl TrustRegion<'_> {
-    /// d_i ← max(d_i, √A_ii); a zero column keeps scale 1.
-    fn rescale(&mut self, lin: &Linearization) {
-        let k = lin.gradient.len();
-        self.scale.resize(k, 0.0);
-        for (i, d) in self.scale.iter_mut().enumerate() {
-            let largest = d.max(lin.normal[(i, i)].max(0.0).sqrt());
-            *d = if largest == 0.0 { 1.0 } else { largest };
-        }
-    }
-
-    /// The minimiser of m_λ in the box, with ‖Dδ‖ and the predicted decrease.
-    fn solve(
-        &self,
-        lin: &Linearization,
-        (lo, hi): (&[f64], &[f64]),
-        lambda: f64,
-    ) -> Result<Trial, Singular> {
-        let k = lin.gradient.len();
-        let mut h = lin.normal.clone();
-        for i in 0..k {
-            h[(i, i)] += lambda * self.scale[i] * self.scale[i];
-        }
-        let model = Quadratic { h: &h, c: &lin.gradient };
-        let max_condition = self.options.driver.max_condition;
-        let solution = minimise_in_box(&model, (lo, hi), &vec![0.0; k], max_condition)?;
-        let delta = DVector::from_vec(solution.x);
-        let scaled_norm = delta.iter().zip(&self.scale).map(|(d, s)| (d * s).powi(2)).sum::<f64>();
-        let predicted = -(2.0 * lin.gradient.dot(&delta) + delta.dot(&(&lin.normal * &delta)));
-        Ok(Trial {
-            delta,
-            scaled_norm: scaled_norm.sqrt(),
-            predicted,
-            lambda,
-            condition: solution.condition,
-        })
-    }
-
     /// The trial step for the current radius from the iterate `lin`.
     fn step<S: System>(
         &mut self,
         problem: &Problem<S>,
         lin: &Linearization,
-    ) -> Result<Trial, Failure> {
-        let (lo, hi) = problem.unknowns().step_box(&lin.z);
-        let bounds = (lo.as_slice(), hi.as_slice());
-        let radius = self.radius;
-        let gauss_newton = self.solve(lin, bounds, 0.0);
-        if let Ok(trial) = &gauss_newton
-            && trial.scaled_norm <= 1.1 * radius
-        {
-            self.lambda = 0.0;
-            return gauss_newton.map_err(|s| Failure::singular(&s, &problem.names()));
-        }
-        // ‖D⁻¹U‖/Δ: the λ at which the steepest-descent limit of δ(λ) has length Δ.
-        let scaled_gradient =
-            lin.gradient.iter().zip(&self.scale).map(|(g, d)| (g / d).powi(2)).sum::<f64>();
-        let mut lambda =
-            if self.lambda > 0.0 { self.lambda } else { scaled_gradient.sqrt() / radius };
-        if !(lambda > 0.0 && lambda.is_finite()) {
-            lambda = 1e-3;
-        }
-        let (mut low, mut high) = (0.0_f64, f64::INFINITY);
-        let (mut inside, mut damped): (Option<Trial>, Option<Trial>) = (None, None);
-        let mut singular = gauss_newton.err();
-        for _ in 0..60 {
-            match self.solve(lin, bounds, lambda) {
-                Ok(trial) if (trial.scaled_norm - radius).abs() <= 0.1 * radius => {
-                    self.lambda = lambda;
-                    return Ok(trial);
-                }
-                Ok(trial) if trial.scaled_norm > radius => {
-                    low = lambda;
-                    damped = Some(trial);
-                }
-                Ok(trial) => {
-                    high = lambda;
-                    inside = Some(trial);
-                }
-                Err(s) => {
-                    low = lambda;
-                    singular = Some(s);
-                }
-            }
-            lambda = match (low > 0.0, high.is_finite()) {
-                (_, false) => lambda * 10.0,
-                (false, true) => high / 10.0,
-                (true, true) => (low * high).sqrt(),
-            };
-        }
-        // Not within 10 % of the radius after 60 tries: the step with the least λ inside the
-        // region, else the most damped one (the advance judges it like any other); when no
-        // λ gave a step, the singular system.
-        match (inside.or(damped), singular) {
-            (Some(trial), _) => {
-                self.lambda = trial.lambda;
-                Ok(trial)
-            }
-            (None, singular) => {
-                let k = lin.gradient.len();
-                let s = singular.unwrap_or_else(|| Singular {
-                    unknowns: (0..k).collect(),
-                    condition: f64::INFINITY,
-                    direction: vec![1.0; k],
-                });
-                Err(Failure::singular(&s, &problem.names()))
-            }
-        }
+    ) -> Result<CurveStep, Failure> {
+        self.curve.within(problem, lin, self.radius, self.options.driver.max_condition)
     }
 }
 
@@ -200,8 +86,8 @@ impl<S: System> Step<S> for TrustRegion<'_> {
     /// Linearizes at the start; D from its A, Δ = factor·‖D z₀‖ (factor when that is 0).
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
         let lin = ev.linearize(&z)?;
-        self.rescale(&lin);
-        let scaled = z.iter().zip(&self.scale).map(|(z, d)| (z * d).powi(2)).sum::<f64>().sqrt();
+        self.curve.rescale(&lin);
+        let scaled = self.curve.scaled_norm(&z);
         let factor = self.options.factor;
         self.radius = if scaled > 0.0 { factor * scaled } else { factor };
         Ok(Iterate::linearized(lin))
@@ -214,7 +100,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
 
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
         let lin = current.linearization.as_ref().expect("the iterates are linearized");
-        self.rescale(lin);
+        self.curve.rescale(lin);
         let trial = self.step(ev.problem(), lin)?;
         let z = ev.problem().unknowns().moved(&current.z, trial.delta.as_slice(), 1.0);
         let condition = Some(trial.condition);
@@ -247,14 +133,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 Err(_) => None,
             };
             let decrease = match &evaluated {
-                // Below ε's accuracy the difference of two integrated costs is noise; the
-                // gradients, from the sensitivities, are still accurate, and the trapezoidal
-                // rule along the step is exact for a quadratic:
-                // ε(z) − ε(z⁺) = −½(∇ε(z) + ∇ε(z⁺))ᵀ(z⁺ − z), with ∇ε = 2U.
-                Some(l) if trial.predicted <= resolution => -(0..l.z.len())
-                    .map(|i| (lin.gradient[i] + l.gradient[i]) * (l.z[i] - lin.z[i]))
-                    .sum::<f64>(),
-                Some(l) => lin.cost - l.cost,
+                Some(l) => actual_decrease(lin, l, trial.predicted, resolution),
                 None => f64::NEG_INFINITY,
             };
             let rho =

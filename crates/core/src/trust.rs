@@ -1,0 +1,180 @@
+//! The Levenberg curve: the steps of bounded length that the Gauss–Newton model prefers, shared
+//! by Levenberg–Marquardt's trust region and by Goodman's step halving.
+//!
+//! At an iterate with ε, U and A, the step δ(λ) minimises
+//!
+//!   m_λ(δ) = ε + 2Uᵀδ + δᵀAδ + λ‖Dδ‖²   over the box lo − z ≤ δ ≤ hi − z,
+//!
+//! with D = diag(d), d_i the largest √A_ii seen so far (Moré's scaling: the curve does not
+//! depend on the units of the unknowns). λ = 0 is the Gauss–Newton step; as λ grows, ‖Dδ(λ)‖
+//! falls and δ turns towards steepest descent. [`Curve::within`] finds the λ whose step has a
+//! given scaled length Δ (within Moré's 10 %), by bisection in log λ from the last λ.
+//!
+//! Shortening a step along the curve rather than along its line is what makes it work in a
+//! sloppy direction: where the Gauss–Newton model overshoots 70 times along one direction (as
+//! at Boehm's optimum), halving the line shortens every direction alike and the others crawl,
+//! while the curve damps the overshooting direction first.
+
+use nalgebra::DVector;
+use sysid_ode::System;
+
+use crate::bounded::{Quadratic, minimise_in_box};
+use crate::evaluate::Linearization;
+use crate::linalg::Singular;
+use crate::problem::Problem;
+use crate::termination::Failure;
+
+/// A step on the curve, with what a decision on it needs.
+#[derive(Clone, Debug)]
+pub struct CurveStep {
+    /// δ, in coordinates.
+    pub delta: DVector<f64>,
+    /// ‖Dδ‖.
+    pub scaled_norm: f64,
+    /// The decrease the Gauss–Newton model predicts, ε − m₀(δ) = −(2Uᵀδ + δᵀAδ).
+    pub predicted: f64,
+    /// Its λ (0 for the Gauss–Newton step).
+    pub lambda: f64,
+    /// The condition number of the system solved.
+    pub condition: f64,
+}
+
+/// The curve's scaling and its last λ, kept from iterate to iterate.
+#[derive(Clone, Debug, Default)]
+pub struct Curve {
+    /// d_i.
+    pub scale: Vec<f64>,
+    /// The λ of the last step found with λ > 0 (a start for the next search).
+    pub lambda: f64,
+}
+
+impl Curve {
+    /// d_i ← max(d_i, √A_ii); a zero column keeps scale 1.
+    pub fn rescale(&mut self, lin: &Linearization) {
+        let k = lin.gradient.len();
+        self.scale.resize(k, 0.0);
+        for (i, d) in self.scale.iter_mut().enumerate() {
+            let largest = d.max(lin.normal[(i, i)].max(0.0).sqrt());
+            *d = if largest == 0.0 { 1.0 } else { largest };
+        }
+    }
+
+    /// ‖Dv‖.
+    pub fn scaled_norm(&self, v: &[f64]) -> f64 {
+        v.iter().zip(&self.scale).map(|(v, d)| (v * d).powi(2)).sum::<f64>().sqrt()
+    }
+
+    /// δ(λ) in the box, with ‖Dδ‖ and the predicted decrease.
+    pub fn solve(
+        &self,
+        lin: &Linearization,
+        (lo, hi): (&[f64], &[f64]),
+        lambda: f64,
+        max_condition: f64,
+    ) -> Result<CurveStep, Singular> {
+        let k = lin.gradient.len();
+        let mut h = lin.normal.clone();
+        for i in 0..k {
+            h[(i, i)] += lambda * self.scale[i] * self.scale[i];
+        }
+        let model = Quadratic { h: &h, c: &lin.gradient };
+        let solution = minimise_in_box(&model, (lo, hi), &vec![0.0; k], max_condition)?;
+        let delta = DVector::from_vec(solution.x);
+        let scaled_norm = self.scaled_norm(delta.as_slice());
+        let predicted = -(2.0 * lin.gradient.dot(&delta) + delta.dot(&(&lin.normal * &delta)));
+        Ok(CurveStep { delta, scaled_norm, predicted, lambda, condition: solution.condition })
+    }
+
+    /// The step of scaled length about `radius` from the iterate `lin`: the Gauss–Newton step
+    /// when it is that short (within 10 %), else δ(λ) with ‖Dδ(λ)‖ within 10 % of `radius`
+    /// (after 60 tries, the least-λ step inside, else the most damped one). `singular` only
+    /// when no λ gives a step.
+    pub fn within<S: System>(
+        &mut self,
+        problem: &Problem<S>,
+        lin: &Linearization,
+        radius: f64,
+        max_condition: f64,
+    ) -> Result<CurveStep, Failure> {
+        let (lo, hi) = problem.unknowns().step_box(&lin.z);
+        let bounds = (lo.as_slice(), hi.as_slice());
+        let gauss_newton = self.solve(lin, bounds, 0.0, max_condition);
+        if let Ok(step) = &gauss_newton
+            && step.scaled_norm <= 1.1 * radius
+        {
+            self.lambda = 0.0;
+            return Ok(gauss_newton.expect("checked"));
+        }
+        // ‖D⁻¹U‖/Δ: the λ at which the steepest-descent limit of δ(λ) has length Δ.
+        let scaled_gradient =
+            lin.gradient.iter().zip(&self.scale).map(|(g, d)| (g / d).powi(2)).sum::<f64>();
+        let mut lambda =
+            if self.lambda > 0.0 { self.lambda } else { scaled_gradient.sqrt() / radius };
+        if !(lambda > 0.0 && lambda.is_finite()) {
+            lambda = 1e-3;
+        }
+        let (mut low, mut high) = (0.0_f64, f64::INFINITY);
+        let (mut inside, mut damped): (Option<CurveStep>, Option<CurveStep>) = (None, None);
+        let mut singular = gauss_newton.err();
+        for _ in 0..60 {
+            match self.solve(lin, bounds, lambda, max_condition) {
+                Ok(step) if (step.scaled_norm - radius).abs() <= 0.1 * radius => {
+                    self.lambda = lambda;
+                    return Ok(step);
+                }
+                Ok(step) if step.scaled_norm > radius => {
+                    low = lambda;
+                    damped = Some(step);
+                }
+                Ok(step) => {
+                    high = lambda;
+                    inside = Some(step);
+                }
+                Err(s) => {
+                    low = lambda;
+                    singular = Some(s);
+                }
+            }
+            lambda = match (low > 0.0, high.is_finite()) {
+                (_, false) => lambda * 10.0,
+                (false, true) => high / 10.0,
+                (true, true) => (low * high).sqrt(),
+            };
+        }
+        match (inside.or(damped), singular) {
+            (Some(step), _) => {
+                self.lambda = step.lambda;
+                Ok(step)
+            }
+            (None, singular) => {
+                let k = lin.gradient.len();
+                let s = singular.unwrap_or_else(|| Singular {
+                    unknowns: (0..k).collect(),
+                    condition: f64::INFINITY,
+                    direction: vec![1.0; k],
+                });
+                Err(Failure::singular(&s, &problem.names()))
+            }
+        }
+    }
+}
+
+/// The actual decrease ε(z) − ε(z⁺) of a step from `from` to `to` (both linearized) whose
+/// predicted decrease is `predicted`. Below ε's accuracy (`resolution`, about rtol·ε) the
+/// difference of two integrated costs is noise, while the gradients from the sensitivities
+/// are still accurate: there the trapezoidal rule along the step, exact for a quadratic,
+/// −½(∇ε(z) + ∇ε(z⁺))ᵀ(z⁺ − z) with ∇ε = 2U, measures it.
+pub fn actual_decrease(
+    from: &Linearization,
+    to: &Linearization,
+    predicted: f64,
+    resolution: f64,
+) -> f64 {
+    if predicted <= resolution {
+        -(0..to.z.len())
+            .map(|i| (from.gradient[i] + to.gradient[i]) * (to.z[i] - from.z[i]))
+            .sum::<f64>()
+    } else {
+        from.cost - to.cost
+    }
+}
