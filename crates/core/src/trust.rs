@@ -20,9 +20,11 @@ use sysid_ode::System;
 
 use crate::bounded::{Quadratic, minimise_in_box};
 use crate::evaluate::Linearization;
+use crate::evaluations::Evaluations;
 use crate::linalg::Singular;
 use crate::problem::Problem;
-use crate::termination::Failure;
+use crate::step::{Advance, Iterate};
+use crate::termination::{Failure, Rule};
 
 /// A step on the curve, with what a decision on it needs.
 #[derive(Clone, Debug)]
@@ -176,5 +178,64 @@ pub fn actual_decrease(
             .sum::<f64>()
     } else {
         from.cost - to.cost
+    }
+}
+
+/// Takes the step `first` from the iterate `lin` (to `z_first`) if it lowers the cost
+/// ([`actual_decrease`]), else halves its scaled length along the curve until one does: at
+/// most `max_halvings` times, and not below the resolvable step (then [`Rule::Step`]). A
+/// trial point where the model cannot be integrated counts as a step too long.
+#[allow(clippy::too_many_arguments)]
+pub fn halve_along_curve<S: System>(
+    ev: &Evaluations<'_, S>,
+    lin: &Linearization,
+    curve: &mut Curve,
+    (mut step, mut trial): (CurveStep, Vec<f64>),
+    max_halvings: usize,
+    step_tolerance: f64,
+    max_condition: f64,
+) -> Result<Advance, Failure> {
+    let problem = ev.problem();
+    let z = &lin.z;
+    let step_tolerance = problem.resolvable_step(step_tolerance);
+    let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let negligible = step_tolerance * (z_norm + step_tolerance);
+    let resolution = problem.integrator().rtol * lin.cost;
+    for halving in 0..=max_halvings {
+        if halving > 0 && step.delta.norm() <= negligible {
+            // Shrunk below the step tolerance without reducing the cost.
+            return Ok(Advance::Stop(Rule::Step));
+        }
+        match ev.linearize(&trial) {
+            Ok(l) if actual_decrease(lin, &l, step.predicted, resolution) > 0.0 => {
+                return Ok(Advance::Moved(Iterate::linearized(l)));
+            }
+            Ok(_) => {}
+            Err(budget @ Failure::Budget { .. }) => return Err(budget),
+            Err(_) => {}
+        }
+        step = match curve.within(problem, lin, 0.5 * step.scaled_norm, max_condition) {
+            Ok(shorter) => shorter,
+            Err(_) => return Ok(Advance::Stop(Rule::NoDescent)),
+        };
+        trial = problem.unknowns().moved(z, step.delta.as_slice(), 1.0);
+    }
+    Ok(Advance::Stop(Rule::NoDescent))
+}
+
+impl Curve {
+    /// The step `delta` (from the iterate `lin`) as a point of the curve: its scaled length
+    /// and predicted decrease, after rescaling D with `lin`'s A.
+    pub fn first(&mut self, lin: &Linearization, delta: DVector<f64>) -> CurveStep {
+        self.rescale(lin);
+        self.lambda = 0.0;
+        let predicted = -(2.0 * lin.gradient.dot(&delta) + delta.dot(&(&lin.normal * &delta)));
+        CurveStep {
+            scaled_norm: self.scaled_norm(delta.as_slice()),
+            delta,
+            predicted,
+            lambda: 0.0,
+            condition: f64::NAN,
+        }
     }
 }

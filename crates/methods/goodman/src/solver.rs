@@ -3,8 +3,8 @@
 
 use nalgebra::DVector;
 use sysid_core::{
-    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem,
-    Proposal, Rule, Step, actual_decrease, drive,
+    Advance, Curve, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem, Proposal,
+    Rule, Step, drive, halve_along_curve,
 };
 use sysid_ode::System;
 
@@ -92,46 +92,17 @@ impl<S: System> Step<S> for Newton<'_> {
         if !self.options.step_halving {
             return ev.linearize(&proposal.z).map(|l| Advance::Moved(Iterate::linearized(l)));
         }
-        let problem = ev.problem();
         let lin = current.linearization.as_ref().expect("Goodman's iterates are linearized");
-        let z = &current.z;
-        let step_tolerance = problem.resolvable_step(self.options.driver.step_tolerance);
-        let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let negligible = step_tolerance * (z_norm + step_tolerance);
-        let resolution = problem.integrator().rtol * lin.cost;
-        self.curve.rescale(lin);
-        self.curve.lambda = 0.0;
-        let predicted =
-            -(2.0 * lin.gradient.dot(&self.delta) + self.delta.dot(&(&lin.normal * &self.delta)));
-        let mut step = CurveStep {
-            scaled_norm: self.curve.scaled_norm(self.delta.as_slice()),
-            delta: self.delta.clone(),
-            predicted,
-            lambda: 0.0,
-            condition: f64::NAN,
-        };
-        let mut trial = proposal.z;
-        for halving in 0..=self.options.max_halvings {
-            if halving > 0 && step.delta.norm() <= negligible {
-                // Shrunk below the step tolerance without reducing the cost.
-                return Ok(Advance::Stop(Rule::Step));
-            }
-            match ev.linearize(&trial) {
-                Ok(l) if actual_decrease(lin, &l, step.predicted, resolution) > 0.0 => {
-                    return Ok(Advance::Moved(Iterate::linearized(l)));
-                }
-                Ok(_) => {}
-                Err(budget @ Failure::Budget { .. }) => return Err(budget),
-                Err(_) => {}
-            }
-            let radius = 0.5 * step.scaled_norm;
-            step = match self.curve.within(problem, lin, radius, self.options.driver.max_condition)
-            {
-                Ok(shorter) => shorter,
-                Err(_) => return Ok(Advance::Stop(Rule::NoDescent)),
-            };
-            trial = problem.unknowns().moved(z, step.delta.as_slice(), 1.0);
-        }
-        Ok(Advance::Stop(Rule::NoDescent))
+        let first = self.curve.first(lin, self.delta.clone());
+        let driver = &self.options.driver;
+        halve_along_curve(
+            ev,
+            lin,
+            &mut self.curve,
+            (first, proposal.z),
+            self.options.max_halvings,
+            driver.step_tolerance,
+            driver.max_condition,
+        )
     }
 }

@@ -43,8 +43,9 @@
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, BoxSolution, Estimate, Evaluations, Failure, FitError, Iterate, LinearLeastSquares,
-    Method, PlannedNoise, Problem, Proposal, Rule, Step, drive, minimise_in_box,
+    Advance, BoxSolution, Curve, Estimate, Evaluations, Failure, FitError, Iterate,
+    LinearLeastSquares, Method, PlannedNoise, Problem, Proposal, Rule, Step, drive,
+    halve_along_curve, minimise_in_box,
 };
 use sysid_ode::System;
 
@@ -97,6 +98,8 @@ impl<S: System> Method<S> for MultipleShooting {
             penalty: 0.0,
             proposed: None,
             merged: false,
+            curve: Curve::default(),
+            step_tolerance: self.options.driver.step_tolerance,
         };
         drive(problem, "multiple-shooting", &self.options.driver, &mut step, start)
     }
@@ -119,6 +122,10 @@ struct Shooting {
     proposed: Option<Direction>,
     /// The nodes have merged into the trajectory: the iteration goes on as single shooting.
     merged: bool,
+    /// The Levenberg curve a merged iteration shortens its steps along.
+    curve: Curve,
+    /// The driver's step tolerance (the least step a merged iteration shortens to).
+    step_tolerance: f64,
 }
 
 /// A step of the variables with what the line search needs.
@@ -331,6 +338,27 @@ impl<S: System> Step<S> for Shooting {
                 problem.unknowns().moved(&current.z, &direction.dz, alpha)
             }
         };
+        if self.merged
+            && let Some(lin) = current.linearization.as_ref()
+        {
+            // Single shooting's Gauss–Newton step, shortened along the Levenberg curve where
+            // it does not lower the cost (as goodman-halving: a line search crawls where the
+            // step overshoots in a sloppy direction).
+            let first = self.curve.first(lin, DVector::from_vec(direction.dz));
+            let advance = halve_along_curve(
+                ev,
+                lin,
+                &mut self.curve,
+                (first, proposal.z),
+                MAX_BACKTRACKS,
+                self.step_tolerance,
+                self.max_condition,
+            )?;
+            return Ok(match advance {
+                Advance::Moved(next) => Advance::Moved(next.with(DEFECT, 0.0)),
+                other => other,
+            });
+        }
         if self.merged {
             // Single shooting: the full step with sensitivities (accepted, it is the next
             // linearization), shorter ones without.
