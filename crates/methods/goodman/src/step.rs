@@ -16,9 +16,43 @@
 //! on its bound when the model's multiplier (U* + Aδ)_i pushes it outwards, and released only
 //! when it points inwards: the active set is that of the model's minimiser, not the sign of
 //! U* at the iterate, so a bound is not entered and left on alternate iterations.
+//!
+//! Where A is too ill-conditioned to solve (a direction the data hardly see, as two rates
+//! whose product alone matters), the step is regularised at the solver's limit rather than
+//! refused: the iteration goes on in the directions the data determine, and the certificate
+//! at the returned point still names the combination the data cannot identify.
 
 use nalgebra::DVector;
 use sysid_core::{Bound, Linearization, Quadratic, Singular, minimise_in_box};
+
+/// μ of the regularised step as a multiple of k / max_condition: the Jacobi-scaled matrix
+/// plus μI then has a condition of at most (k + μ)/μ ≈ max_condition / 100.
+const REGULARISATION: f64 = 100.0;
+
+/// The step of a normal matrix too ill-conditioned to solve: (A + μ diag(A)) δc = −U* with
+/// μ = 100 k / max_condition (Marquardt's regularisation at the solver's limit; an unknown
+/// with a zero column is damped by the largest diagonal, so its correction is 0). The
+/// directions the data determine keep their Newton correction; those they do not see get
+/// almost none, as a truncated SVD would give. `None` when that too cannot be solved.
+fn regularised(
+    lin: &Linearization,
+    (lo, hi): (&[f64], &[f64]),
+    max_condition: f64,
+) -> Option<sysid_core::BoxSolution> {
+    let k = lin.gradient.len();
+    let largest = (0..k).map(|i| lin.normal[(i, i)]).fold(0.0, f64::max);
+    if !(largest > 0.0 && largest.is_finite()) {
+        return None;
+    }
+    let mu = REGULARISATION * k as f64 / max_condition;
+    let mut h = lin.normal.clone();
+    for i in 0..k {
+        let d = lin.normal[(i, i)];
+        h[(i, i)] += mu * if d > 0.0 { d } else { largest };
+    }
+    let model = Quadratic { h: &h, c: &lin.gradient };
+    minimise_in_box(&model, (lo, hi), &vec![0.0; k], max_condition).ok()
+}
 
 /// The Newton correction δc of one iteration.
 #[derive(Clone, Debug, PartialEq)]
@@ -41,7 +75,10 @@ pub fn newton_step(
 ) -> Result<NewtonStep, Singular> {
     let k = lin.gradient.len();
     let model = Quadratic { h: &lin.normal, c: &lin.gradient };
-    let solution = minimise_in_box(&model, (lo, hi), &vec![0.0; k], max_condition)?;
+    let solution = match minimise_in_box(&model, (lo, hi), &vec![0.0; k], max_condition) {
+        Ok(solution) => solution,
+        Err(singular) => regularised(lin, (lo, hi), max_condition).ok_or(singular)?,
+    };
     Ok(NewtonStep {
         delta: DVector::from_vec(solution.x),
         condition: solution.condition,

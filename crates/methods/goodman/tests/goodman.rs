@@ -87,8 +87,11 @@ impl System for TwoRates {
     }
 }
 
+/// A direction the data do not see is not a stop: the singular Newton system is
+/// regularised at the solver's limit, the iteration goes on in the directions the data
+/// determine, and the certificate at the returned point names the combination they cannot.
 #[test]
-fn singular_normal_matrix_names_the_unknowns() {
+fn a_singular_normal_matrix_is_regularised_and_named() {
     let sys = TwoRates(Signature::new(&["x"], &["a", "b", "c"]));
     let times = [0.5, 1.0, 2.0, 3.0];
     let data = exact_data(&sys, 0.0, &[1.0], &[0.3, 0.4, 0.0], &times, &[0]);
@@ -102,30 +105,20 @@ fn singular_normal_matrix_names_the_unknowns() {
         .build()
         .unwrap();
     let estimate = Goodman::default().fit(&problem).unwrap();
-    match &estimate.termination {
-        Termination::Failed {
-            iteration: 0,
-            failure: Failure::Singular { unknowns, condition },
-        } => {
-            assert_eq!(unknowns, &["a", "b"]);
-            assert!(*condition > 1e12);
-        }
-        other => panic!("unexpected {other}"),
-    }
-    assert!(
-        estimate.termination.to_string().contains("involving a, b"),
-        "{}",
-        estimate.termination
-    );
-    assert!(estimate.values.iter().all(|v| v.is_finite()));
-    assert!(!estimate.converged(), "a + b = 0.4 against 0.7 in the data: not a minimum");
-    // The start is kept and the certificate names the direction the data cannot see: δa = −δb.
-    let space = estimate.certificate.null_space.as_ref().expect("singular at the start");
+    assert!(estimate.converged(), "{}", estimate.termination);
+    // The data came from a + b = 0.7: the valley of minima, reached exactly; the steps moved
+    // a and b alike (the regularised step has no component along δa = −δb beyond what the
+    // rounding of a matrix of condition ∞ leaves: 7e-8 here).
+    let (a, b) = (estimate.values[0], estimate.values[1]);
+    assert!((a + b - 0.7).abs() < 1e-8, "a + b = {}", a + b);
+    assert!((a - b).abs() < 1e-6, "a − b = {}", a - b);
+    let space = estimate.certificate.null_space.as_ref().expect("singular at the minimum");
     assert_eq!(space.unknowns, ["a", "b"]);
     assert!((space.direction[0] + space.direction[1]).abs() < 1e-8, "{:?}", space.direction);
-    let combination = space.combination();
-    assert_eq!(combination, "a − b");
+    assert_eq!(space.combination(), "a − b");
+    assert!(estimate.std_errors.is_none(), "no standard errors along a valley");
 
+    // An unknown the model does not use keeps its value; the other is fitted.
     let problem = Problem::builder(sys)
         .known("x", 1.0)
         .known("a", 0.3)
@@ -135,11 +128,11 @@ fn singular_normal_matrix_names_the_unknowns() {
         .build()
         .unwrap();
     let estimate = Goodman::default().fit(&problem).unwrap();
-    assert!(
-        matches!(&estimate.termination, Termination::Failed { failure: Failure::Singular { unknowns, .. }, .. } if unknowns == &["c"]),
-        "{}",
-        estimate.termination
-    );
+    assert!(estimate.converged(), "{}", estimate.termination);
+    assert!((estimate.values[0] - 0.4).abs() < 1e-8, "{:?}", estimate.values);
+    assert_eq!(estimate.values[1].to_bits(), 1f64.to_bits(), "c keeps its value exactly");
+    let space = estimate.certificate.null_space.as_ref().expect("c is not seen");
+    assert_eq!(space.unknowns, ["c"]);
 }
 
 /// x' = p x²: x = 1/(1 − p t) blows up at t = 1/p.
