@@ -283,3 +283,69 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
 fn named(fit: &Estimate) -> serde_json::Map<String, serde_json::Value> {
     fit.names.iter().cloned().zip(fit.values.iter().map(|&v| serde_json::json!(v))).collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use sysid_core::{Certificate, Rule};
+
+    use super::*;
+
+    /// A fit ending at `cost`, certified or not.
+    fn fit(cost: f64, converged: bool) -> Estimate {
+        Estimate {
+            method: "m".into(),
+            names: vec!["a".into()],
+            values: vec![cost],
+            std_errors: None,
+            intervals: None,
+            covariance: None,
+            cost,
+            dof: None,
+            iterations: 1,
+            best_iteration: 1,
+            termination: if converged {
+                Termination::Converged(Rule::Step)
+            } else {
+                Termination::MaxIterations
+            },
+            certificate: Certificate {
+                optimality: if converged { 0.0 } else { 0.5 },
+                error: 0.0,
+                gtol: 1e-6,
+                exact_fit: false,
+                active: vec![None],
+                flat: vec![false],
+                null_space: None,
+            },
+            history: Vec::new(),
+            elapsed: Duration::ZERO,
+            counts: Default::default(),
+            nll: None,
+            experiments: Vec::new(),
+            scales: Vec::new(),
+            noise_model: false,
+        }
+    }
+
+    fn best(fits: &[Estimate]) -> usize {
+        summarise(fits, &MultistartOptions::default()).best_start
+    }
+
+    #[test]
+    fn a_certified_point_is_not_the_best_when_a_lower_one_was_found() {
+        // A certified corner at 7846 and a fit that ran out of iterations at 48: the lower.
+        assert_eq!(best(&[fit(7846.0, true), fit(48.0, false), fit(7846.0, true)]), 1);
+        // Lower only by noise (within 1e-6 relative): the certified one.
+        assert_eq!(best(&[fit(48.0 * (1.0 + 1e-7), false), fit(48.0, true)]), 1);
+        assert_eq!(best(&[fit(48.0 * (1.0 - 1e-7), false), fit(48.0, true)]), 1);
+        // The least certified cost otherwise; the least of all when none is certified.
+        assert_eq!(best(&[fit(50.0, true), fit(60.0, false), fit(48.0, true)]), 2);
+        assert_eq!(best(&[fit(50.0, false), fit(f64::NAN, false), fit(49.0, false)]), 2);
+        // The minima are the certified fits only, and `reached_best` is 0 when the best is
+        // not certified.
+        let s = summarise(&[fit(7846.0, true), fit(48.0, false)], &MultistartOptions::default());
+        assert_eq!((s.minima.len(), s.reached_best, s.converged), (1, 0, 1));
+    }
+}
