@@ -3,50 +3,10 @@
 
 use crate::common;
 
-use common::{expressions, resolve};
+use common::{expressions, reference, resolve};
 use num_dual::Dual64;
 use proptest::prelude::*;
-use sysid_model::expr::{Expr, Func, Op, Program, parse};
-
-/// The reference: a direct walk of the tree in f64.
-fn reference(e: &Expr, x: f64, y: f64, k: f64, t: f64) -> f64 {
-    let r = |e: &Expr| reference(e, x, y, k, t);
-    match e {
-        Expr::Num(v) => *v,
-        Expr::Name(n, _) => match n.as_str() {
-            "x" => x,
-            "y" => y,
-            "k" => k,
-            _ => t,
-        },
-        Expr::Neg(a) => -r(a),
-        Expr::Bin(op, a, b) => {
-            let (a, b) = (r(a), r(b));
-            match op {
-                Op::Add => a + b,
-                Op::Sub => a - b,
-                Op::Mul => a * b,
-                Op::Div => a / b,
-                Op::Pow => a.powf(b),
-            }
-        }
-        Expr::Call(f, args, _) => {
-            let a = r(&args[0]);
-            match f {
-                Func::Exp => a.exp(),
-                Func::Log => a.ln(),
-                Func::Sqrt => a.sqrt(),
-                Func::Sin => a.sin(),
-                Func::Cos => a.cos(),
-                Func::Tan => a.tan(),
-                Func::Tanh => a.tanh(),
-                Func::Abs => a.abs(),
-                Func::Min => a.min(r(&args[1])),
-                Func::Max => a.max(r(&args[1])),
-            }
-        }
-    }
-}
+use sysid_model::expr::{Expr, Program, parse};
 
 /// Whether every subexpression of `e` is moderate (finite, below 1e3 in size) at the point.
 /// Where one is infinite (x/0, then tanh of it) the value may be finite but the derivative is

@@ -6,12 +6,12 @@ use std::path::Path;
 
 use crate::common;
 
-use common::{expressions, resolve};
+use common::{expressions, reference, resolve};
 use num_dual::{Dual64, HyperDual64};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use sysid_model::expr::{Program, parse};
+use sysid_model::expr::{Expr, Op, Program, parse};
 use sysid_model::symbolic::Linearized;
 use sysid_model::{Model, ModelSystem};
 use sysid_ode::{Function, Inputs, JacobianProducts, SparseJacobian, System};
@@ -149,6 +149,21 @@ fn example_models_and_catalogue_twins() {
     }
 }
 
+/// Whether some x^y in `e` has a negative base and an exponent that is not a number.
+fn negative_base_to_a_variable_power(e: &Expr, x: f64, y: f64, k: f64, t: f64) -> bool {
+    let sub = |e: &Expr| negative_base_to_a_variable_power(e, x, y, k, t);
+    match e {
+        Expr::Num(_) | Expr::Name(..) => false,
+        Expr::Neg(a) => sub(a),
+        Expr::Bin(op, a, b) => {
+            (*op == Op::Pow && !matches!(**b, Expr::Num(_)) && reference(a, x, y, k, t) < 0.0)
+                || sub(a)
+                || sub(b)
+        }
+        Expr::Call(_, args, _) => args.iter().any(sub),
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(512))]
 
@@ -168,6 +183,10 @@ proptest! {
         prop_assume!(!parsed.as_ref().is_err_and(|err| {
             err.message.contains("is not a finite number") || err.message.contains("a constant zero")
         }));
+        // A negative base to a power that depends on the point: powf gives a value where
+        // the exponent happens to be an integer (min(0, y) = 0), the dual numbers'
+        // exp(b ln a) NaN. Both paths agree on where x^y is defined, not on such points.
+        prop_assume!(!negative_base_to_a_variable_power(&e, x, y, k, t));
         let program = Program::compile(&parsed.unwrap(), &resolve).unwrap();
         let linearized = Linearized::new(std::slice::from_ref(&program), (2, 1, 0));
         let interpreted = linearized.interpreted();
@@ -189,8 +208,10 @@ proptest! {
             let dual = program.eval::<Dual64>(t, &[seed(0, x), seed(1, y)], &[seed(2, k)], &[]);
             prop_assume!(dual.re.abs() < 1e6 && dual.eps.abs() < 1e6 && symbolic.abs() < 1e6);
             prop_assert!((value - dual.re).abs() <= 1e-12 * dual.re.abs().max(1.0), "{text}: {value} vs {}", dual.re);
+            // 1e-11: chained powers, (k³)⁻² evaluated as k⁻⁶ by one path and step by step
+            // by the other, differ by up to 1.6e-12 relative in the derivative.
             prop_assert!(
-                (symbolic - dual.eps).abs() <= 1e-12 * dual.eps.abs().max(1.0),
+                (symbolic - dual.eps).abs() <= 1e-11 * dual.eps.abs().max(1.0),
                 "{text}: ∂/∂{} {symbolic} vs {}", ["x", "y", "k"][column], dual.eps
             );
         }
