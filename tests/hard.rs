@@ -237,3 +237,40 @@ fn noise_free_data_are_an_exact_fit() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A corner of the box (k1 ≤ 0.4 and k2 ≥ 1.5 against data from k1 ≈ 0.8, k2 ≈ 0.3): every
+/// unknown is held on its bound, the point is a certified stationary point of the bounded
+/// problem, and the fit says it is a corner (JSON `corner`), so that no one takes it for the
+/// minimum sought.
+#[test]
+fn a_corner_of_the_box_is_reported_as_one() {
+    let dir = scratch("corner");
+    let problem = kinetics(
+        &dir,
+        |t| {
+            t.replace(
+                "k1 = { guess = 1.0, log = true }",
+                "k1 = { guess = 0.3, log = true, max = 0.4 }",
+            )
+            .replace(
+                "k2 = { guess = 0.5, log = true }",
+                "k2 = { guess = 2.0, log = true, min = 1.5 }",
+            )
+        },
+        &kinetics_data(),
+    );
+    for (name, method) in Registry::standard().build_all(&Settings::default()) {
+        let e = method.fit(&problem).unwrap();
+        assert!(e.converged(), "{name}: {}", e.termination);
+        assert!(e.certificate.corner(), "{name}: {:?}", e.active_bounds());
+        assert!(e.verdict().contains("at a corner of the box"), "{name}: {}", e.verdict());
+        let json = serde_json::to_value(e.record("kinetics")).unwrap();
+        assert_eq!(json["corner"], true, "{name}");
+    }
+    // An interior minimum is not a corner.
+    let interior = kinetics(&dir, |t| t, &kinetics_data());
+    let lm = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
+    let e = lm.fit(&interior).unwrap();
+    assert!(e.converged() && !e.certificate.corner());
+    std::fs::remove_dir_all(&dir).unwrap();
+}

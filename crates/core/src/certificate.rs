@@ -110,6 +110,12 @@ impl Certificate {
         !self.flat.is_empty() && self.flat.iter().all(|f| *f)
     }
 
+    /// Whether every unknown is held on a bound: a corner of the box, a stationary point of
+    /// the bounded problem that is seldom the minimum sought (multistart reports it as such).
+    pub fn corner(&self) -> bool {
+        !self.active.is_empty() && self.active.iter().all(Option::is_some)
+    }
+
     /// The certificate of a point that could not be evaluated.
     pub fn failed(k: usize, gtol: f64) -> Self {
         Self {

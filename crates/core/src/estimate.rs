@@ -238,7 +238,7 @@ impl Serialize for Iteration {
 impl Serialize for FitRecord<'_> {
     fn serialize<Z: Serializer>(&self, s: Z) -> Result<Z::Ok, Z::Error> {
         let e = self.estimate;
-        let mut st = s.serialize_struct("Fit", 27)?;
+        let mut st = s.serialize_struct("Fit", 28)?;
         st.serialize_field("system", self.system)?;
         st.serialize_field("method", &e.method)?;
         st.serialize_field("converged", &e.converged())?;
@@ -262,6 +262,7 @@ impl Serialize for FitRecord<'_> {
         st.serialize_field("optimality_error", &Num(e.certificate.error))?;
         st.serialize_field("gtol", &e.certificate.gtol)?;
         st.serialize_field("exact_fit", &e.certificate.exact_fit)?;
+        st.serialize_field("corner", &e.certificate.corner())?;
         let active = e.active_bounds();
         let (names, bounds): (Vec<String>, Vec<Bound>) =
             active.iter().map(|(n, b)| (n.to_string(), *b)).unzip();
@@ -320,6 +321,11 @@ impl Estimate {
             "no (the reported point could not be evaluated)".into()
         } else if c.plateau() {
             "no (a plateau: the model responds to no unknown there)".into()
+        } else if c.holds() && c.corner() {
+            format!(
+                "yes (first-order optimality {:.2e} ± {:.0e} ≤ gtol {:.0e}), at a corner of the box: every unknown on a bound",
+                c.optimality, c.error, c.gtol
+            )
         } else if c.holds() {
             format!(
                 "yes (first-order optimality {:.2e} ± {:.0e} ≤ gtol {:.0e})",
