@@ -8,7 +8,9 @@ mod fit;
 mod options;
 mod output;
 mod predict;
+
 mod problem;
+mod profile;
 mod report;
 mod simulate;
 mod study;
@@ -46,6 +48,10 @@ enum Command {
     /// Cramér–Rao bound, iterations and time (trials.jsonl, summary.json, summary.md in
     /// --out). With --basin, a map of convergence over a grid of starts instead.
     Study(study::StudyArgs),
+    /// Fit, then trace the profile likelihood of every unknown (each fixed along a path,
+    /// the others re-optimised by the method): 95 % intervals and an identifiability
+    /// verdict per unknown.
+    Profile(profile::ProfileArgs),
     /// Merge the shard directories of one study (`study --shard i/n`) into one, identical
     /// to an unsharded run.
     Merge(study::MergeArgs),
@@ -88,6 +94,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => simulate::run(&args),
         Command::Predict(args) => predict::run(&args),
         Command::Study(args) => study::run(&args),
+        Command::Profile(args) => profile::run(&args),
         Command::Merge(args) => study::merge(&args),
         Command::Report(args) => report::run(&args),
         Command::Systems => {

@@ -617,3 +617,41 @@ fn multiple_shooting_reaches_lotka_volterras_minimum_and_shows_its_defects() {
     let json: serde_json::Value = serde_json::from_slice(&goodman.stdout).unwrap();
     assert!(json["history"][0].get("defect").is_none());
 }
+
+/// `sysid profile` as a user runs it: the falling body's profiles are parabolas (a model
+/// linear in its unknowns), so each interval is θ̂ ± √(3.84·(A⁻¹)_ii); the JSON keys of
+/// docs/json.md; bad input exits 2 with one line.
+#[test]
+fn profile_prints_intervals_and_verdicts() {
+    let out = sysid(&["profile", "--system", "falling-body", "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["from_certified_optimum"], true);
+    assert_eq!(json["better_optimum_found"].as_array().map(Vec::len), Some(0));
+    let g = &json["profiles"]["g"];
+    assert_eq!(g["label"], "identifiable");
+    // Goodman's falling body: g = 32.5, and (A⁻¹)_gg = 1 exactly from the paper's A
+    // (eq. 28: cofactor 20 over determinant 20).
+    let (lo, hi) = (g["interval"][0].as_f64().unwrap(), g["interval"][1].as_f64().unwrap());
+    let half = 3.841_458_820_694_124_f64.sqrt();
+    assert!(
+        (lo - (32.5 - half)).abs() < 1e-6 * half && (hi - (32.5 + half)).abs() < 1e-6 * half,
+        "{lo} {hi}"
+    );
+    for (args, needle) in [
+        (
+            &["profile", "--system", "falling-body", "--only", "q"][..],
+            "--only: `q` is not an unknown (unknowns: y, v, g)",
+        ),
+        (
+            &["profile", "--system", "falling-body", "--max-points", "0"][..],
+            "--max-points must be at least 1",
+        ),
+    ] {
+        let out = sysid(args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+        assert!(stderr.contains(needle), "{stderr}");
+    }
+}

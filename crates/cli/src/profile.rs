@@ -1,0 +1,178 @@
+//! `sysid profile`.
+
+use anyhow::bail;
+use clap::Args;
+use sysid_core::{Estimate, Problem};
+use sysid_ode::System;
+use sysid_profile::{Label, Outcome as Traced, Point, Profile, ProfileOptions, profile};
+
+use crate::Outcome;
+use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
+use crate::output::emit;
+use crate::problem::{Context, WithProblem, fit_from_starts, method, prepare, with_problem};
+
+/// How many times a profile that finds a better optimum fits again from there.
+const MAX_RESTARTS: usize = 5;
+
+/// Arguments of `sysid profile`.
+#[derive(Args, Debug)]
+pub struct ProfileArgs {
+    #[command(flatten)]
+    source: SourceArgs,
+    #[command(flatten)]
+    method: MethodArg,
+    /// Profile only these unknowns (comma-separated names; default: every unknown).
+    #[arg(long, value_name = "A,B")]
+    only: Option<String>,
+    /// Most points per side of a profile.
+    #[arg(long, default_value_t = 60, value_name = "N")]
+    max_points: usize,
+    /// Output format: a readable table, or JSON (docs/json.md, `sysid profile`).
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    format: Format,
+    #[command(flatten)]
+    options: MethodArgs,
+    #[command(flatten)]
+    starts: StartsArgs,
+    #[command(flatten)]
+    integrator: IntegratorArgs,
+}
+
+/// Runs `sysid profile`.
+pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
+    args.options.validate()?;
+    args.starts.options()?;
+    sysid_registry::parse_list(&args.method.method)?;
+    if args.max_points == 0 {
+        bail!("--max-points must be at least 1");
+    }
+    with_problem(&args.source, ProfileProblem { args })
+}
+
+struct ProfileProblem<'a> {
+    args: &'a ProfileArgs,
+}
+
+impl WithProblem for ProfileProblem<'_> {
+    type Output = Outcome;
+
+    fn run<S: System + Clone + Send + Sync + 'static>(
+        self,
+        problem: Problem<S>,
+        context: Context,
+    ) -> anyhow::Result<Outcome> {
+        let args = self.args;
+        let problem = prepare(problem, &args.integrator, &args.options)?;
+        let names = problem.names();
+        let only = match &args.only {
+            None => Vec::new(),
+            Some(list) => list
+                .split(',')
+                .map(|n| {
+                    let n = n.trim();
+                    names.iter().position(|x| x == n).ok_or_else(|| {
+                        anyhow::anyhow!(
+                            "--only: `{n}` is not an unknown (unknowns: {})",
+                            names.join(", ")
+                        )
+                    })
+                })
+                .collect::<anyhow::Result<Vec<usize>>>()?,
+        };
+        let settings = args.options.settings();
+        let (mut optimum, _) =
+            fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
+        let certified = optimum.converged();
+        let m = method::<S>(&args.method.method, &settings)?;
+        let options = ProfileOptions { max_steps: args.max_points, ..ProfileOptions::default() };
+        let mut better = Vec::new();
+        let profiles = loop {
+            match profile(&*m, &problem, &optimum, &only, &options)? {
+                Traced::Profiles(p) => break p,
+                Traced::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
+                    eprintln!(
+                        "better optimum found along a profile (NLL {} against {}): fitting again from there",
+                        point.nll,
+                        optimum.nll.unwrap_or(optimum.cost / 2.0)
+                    );
+                    optimum = m.fit_from(&problem, &point.estimates)?;
+                    better.push(point);
+                }
+                Traced::BetterOptimum(_) => {
+                    bail!(
+                        "the profiles found a better optimum {MAX_RESTARTS} times over: the fits along them do not reach the minimum"
+                    )
+                }
+            }
+        };
+        match args.format {
+            Format::Json => {
+                let json = serde_json::json!({
+                    "optimum": optimum.record(&context.name),
+                    "from_certified_optimum": certified && better.is_empty(),
+                    "better_optimum_found": better,
+                    "threshold": options.threshold,
+                    "profiles": profiles
+                        .iter()
+                        .map(|p| (p.name.clone(), record(p)))
+                        .collect::<serde_json::Map<_, _>>(),
+                });
+                emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?
+            }
+            Format::Table => emit(&table(&context, &optimum, certified, &better, &profiles))?,
+        }
+        Ok(Outcome::Success)
+    }
+}
+
+/// A profile's JSON object.
+fn record(p: &Profile) -> serde_json::Value {
+    serde_json::json!({ "interval": p.interval, "label": p.label, "points": p.points })
+}
+
+/// The readable report: the optimum's NLL, then a line per unknown.
+fn table(
+    context: &Context,
+    optimum: &Estimate,
+    certified: bool,
+    better: &[Point],
+    profiles: &[Profile],
+) -> String {
+    let mut text = format!(
+        "{}: profile likelihoods ({}), NLL at the optimum {}\n",
+        context.name,
+        optimum.method,
+        optimum.nll.unwrap_or(optimum.cost / 2.0)
+    );
+    if !certified {
+        text += "  warning: the fit did not certify its optimum; the profiles start from its best point\n";
+    }
+    if !better.is_empty() {
+        text += &format!(
+            "  warning: the profiles found a better optimum {} time(s) and started again from it\n",
+            better.len()
+        );
+    }
+    text += &format!(
+        "\n  {:<22} {:>14} {:>14} {:>14}  {}\n",
+        "unknown", "estimate", "95 % low", "95 % high", "verdict"
+    );
+    let bound = |v: Option<f64>| v.map_or("open".to_string(), |v| format!("{v:.6e}"));
+    for p in profiles {
+        let i = optimum.names.iter().position(|n| n == &p.name).unwrap_or(0);
+        let label = match p.label {
+            Label::Identifiable => "identifiable",
+            Label::PracticallyNonIdentifiable => "practically non-identifiable",
+            Label::StructurallyNonIdentifiable => "structurally non-identifiable",
+        };
+        text += &format!(
+            "  {:<22} {:>14.6e} {:>14} {:>14}  {label} ({} points)\n",
+            p.name,
+            optimum.values[i],
+            bound(p.interval[0]),
+            bound(p.interval[1]),
+            p.points.len()
+        );
+    }
+    text
+}

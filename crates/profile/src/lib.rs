@@ -1,0 +1,319 @@
+//! Profile likelihoods (Raue et al., Bioinformatics 25, 2009): for each unknown θ_i,
+//! PL(θ_i) = min over the other unknowns of the negative log-likelihood, traced from the
+//! optimum in both directions, each point re-optimised by the chosen method and warm-started
+//! from its neighbour; unknowns in parallel (rayon).
+//!
+//! **Steps** are taken in the unknown's coordinate (ln θ on a log scale) and adapt to the
+//! profile: each aims at a rise of the NLL of a tenth of the threshold ([`ProfileOptions`]),
+//! a step that rises by more than twice that is retried at half the length, and no step is
+//! longer than [`MAX_STEP`] times the coordinate's scale. A side ends past the threshold, at
+//! the unknown's bound, or after `max_steps` points.
+//!
+//! **The crossing** of the threshold is then located between the last point below and the
+//! first above by regula falsi with bisection as a safeguard (Illinois), until the bracket is
+//! within `locate` of the distance from the optimum (1e-6 by default): never linear
+//! interpolation between far points.
+//!
+//! **A point below the optimum** (by more than 1e-6 relative) means the fit was not at the
+//! optimum: the profile stops and reports it ([`Outcome::BetterOptimum`]), for the caller
+//! to fit again from there.
+//!
+//! **Verdicts**: `identifiable` when both sides cross; `structurally_non_identifiable` when
+//! the profile rises by less than 1e-3 of the threshold over the whole range walked;
+//! `practically_non_identifiable` otherwise (a side reaches a bound or the step budget
+//! without crossing).
+//!
+//! The NLL is the fit's `nll` (the likelihood of its noise model; for data with known
+//! weights, ε/2 plus a constant, so that ΔNLL = Δε/2).
+
+use rayon::prelude::*;
+use serde::Serialize;
+use sysid_core::{Estimate, FitError, Method, Problem, ProblemError};
+use sysid_ode::System;
+
+/// Why profiling could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum ProfileError {
+    /// A fit along the profile could not run.
+    #[error(transparent)]
+    Fit(#[from] FitError),
+    /// An unknown could not be held at a value (the problem says why).
+    #[error(transparent)]
+    Problem(#[from] ProblemError),
+}
+
+/// χ²₁(0.95)/2: the pointwise 95 % threshold of ΔNLL.
+pub const POINTWISE_95: f64 = 3.841_458_820_694_124 / 2.0;
+
+/// The longest step, in units of the coordinate's scale (1 for ln θ: a factor e).
+pub const MAX_STEP: f64 = 1.0;
+
+/// How a profile is traced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProfileOptions {
+    /// ΔNLL at which a side ends (default [`POINTWISE_95`]).
+    pub threshold: f64,
+    /// Most points per side (default 60).
+    pub max_steps: usize,
+    /// The crossing is located to this fraction of its distance from the optimum (1e-6).
+    pub locate: f64,
+}
+
+impl Default for ProfileOptions {
+    fn default() -> Self {
+        Self { threshold: POINTWISE_95, max_steps: 60, locate: 1e-6 }
+    }
+}
+
+/// One point of a profile.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Point {
+    /// θ_i.
+    pub value: f64,
+    /// The NLL minimised over the others.
+    pub nll: f64,
+    /// Whether that fit converged (its certificate).
+    pub converged: bool,
+    /// Every unknown's value there, θ_i included, in the problem's order.
+    pub estimates: Vec<f64>,
+}
+
+/// The identifiability verdict of one unknown.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Label {
+    /// Both sides cross the threshold.
+    Identifiable,
+    /// A side reaches a bound or the step budget without crossing.
+    PracticallyNonIdentifiable,
+    /// The profile is flat: it rises by less than 1e-3 of the threshold over the range
+    /// walked.
+    StructurallyNonIdentifiable,
+}
+
+/// The profile of one unknown.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Profile {
+    /// The unknown.
+    pub name: String,
+    /// Where the profile crosses the threshold, below and above the optimum (None: no
+    /// crossing on that side).
+    pub interval: [Option<f64>; 2],
+    /// The verdict.
+    pub label: Label,
+    /// The points, by value, the optimum included.
+    pub points: Vec<Point>,
+}
+
+/// What profiling found.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outcome {
+    /// The profile of each unknown asked for.
+    Profiles(Vec<Profile>),
+    /// A point with a lower NLL than the optimum's: the fit was not at the optimum.
+    BetterOptimum(Point),
+}
+
+/// Why a side ended.
+enum End {
+    Crossed(f64),
+    Open,
+    Better(Point),
+}
+
+/// The NLL of a fit: its likelihood, or ε/2 where it has none.
+fn nll(e: &Estimate) -> f64 {
+    e.nll.unwrap_or(e.cost / 2.0)
+}
+
+/// Profiles the unknowns `only` (indices; every unknown when empty) of `problem` around
+/// `optimum` (a fit of it), re-optimising with `method`.
+pub fn profile<S, M>(
+    method: &M,
+    problem: &Problem<S>,
+    optimum: &Estimate,
+    only: &[usize],
+    options: &ProfileOptions,
+) -> Result<Outcome, ProfileError>
+where
+    S: System + Sync,
+    M: Method<S> + Sync + ?Sized,
+{
+    let k = problem.unknowns().len();
+    let which: Vec<usize> = if only.is_empty() { (0..k).collect() } else { only.to_vec() };
+    let results: Vec<Result<Result<Profile, Point>, ProfileError>> = which
+        .par_iter()
+        .map(|&i| Tracer { method, problem, optimum, i, options }.profile())
+        .collect();
+    let mut profiles = Vec::with_capacity(results.len());
+    for result in results {
+        match result? {
+            Ok(p) => profiles.push(p),
+            Err(better) => return Ok(Outcome::BetterOptimum(better)),
+        }
+    }
+    Ok(Outcome::Profiles(profiles))
+}
+
+/// The tracing of one unknown's profile.
+struct Tracer<'a, S, M: ?Sized> {
+    method: &'a M,
+    problem: &'a Problem<S>,
+    optimum: &'a Estimate,
+    i: usize,
+    options: &'a ProfileOptions,
+}
+
+impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
+    fn profile(&self) -> Result<Result<Profile, Point>, ProfileError> {
+        let base = nll(self.optimum);
+        let at = Point {
+            value: self.optimum.values[self.i],
+            nll: base,
+            converged: self.optimum.converged(),
+            estimates: self.optimum.values.clone(),
+        };
+        let mut points = vec![at.clone()];
+        let mut interval = [None, None];
+        let mut open = false;
+        for (side, direction) in [-1.0, 1.0].into_iter().enumerate() {
+            let (walked, end) = self.side(&at, direction)?;
+            points.extend(walked);
+            match end {
+                End::Crossed(value) => interval[side] = Some(value),
+                End::Open => open = true,
+                End::Better(point) => return Ok(Err(point)),
+            }
+        }
+        points.sort_by(|a, b| a.value.total_cmp(&b.value));
+        let rise = points.iter().map(|p| p.nll - base).fold(0.0, f64::max);
+        let label = if rise < 1e-3 * self.options.threshold {
+            Label::StructurallyNonIdentifiable
+        } else if open {
+            Label::PracticallyNonIdentifiable
+        } else {
+            Label::Identifiable
+        };
+        let name = self.problem.names()[self.i].clone();
+        Ok(Ok(Profile { name, interval, label, points }))
+    }
+
+    /// The fit with θ_i held at the coordinate `z`, from the point `from`.
+    fn fit_at(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {
+        let unknown = &self.problem.unknowns().list()[self.i];
+        let value = unknown.value(z);
+        let name = unknown.name.clone();
+        let fixed = self.problem.clone().with_fixed(&[(name, value)])?;
+        let start: Vec<f64> = from
+            .estimates
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| *j != self.i)
+            .map(|(_, v)| *v)
+            .collect();
+        let e = self.method.fit_from(&fixed, &start)?;
+        let mut estimates = e.values.clone();
+        estimates.insert(self.i, value);
+        Ok(Point { value, nll: nll(&e), converged: e.converged(), estimates })
+    }
+
+    /// Walks one side from the optimum `at` (direction ±1 in the coordinate).
+    fn side(&self, at: &Point, direction: f64) -> Result<(Vec<Point>, End), ProfileError> {
+        let unknown = &self.problem.unknowns().list()[self.i];
+        let (lo, hi) = unknown.coordinate_bounds();
+        let z0 = self.problem.unknowns().coordinates(&at.estimates)[self.i];
+        let scale = unknown.coordinate_scale(z0);
+        let threshold = self.options.threshold;
+        let target = 0.1 * threshold;
+        let better = |p: &Point| p.nll < at.nll - 1e-6 * at.nll.abs().max(1.0);
+        let mut points: Vec<Point> = Vec::new();
+        let (mut z, mut previous) = (z0, at.clone());
+        let mut h = 0.01 * scale;
+        for _ in 0..self.options.max_steps {
+            let limit = if direction > 0.0 { hi } else { lo };
+            let mut next_z = z + direction * h;
+            let at_bound = if direction > 0.0 { next_z >= limit } else { next_z <= limit };
+            if at_bound {
+                next_z = limit;
+            }
+            let point = self.fit_at(next_z, &previous)?;
+            if better(&point) {
+                return Ok((points, End::Better(point)));
+            }
+            let rise = point.nll - previous.nll;
+            if rise > 2.0 * target && h > 1e-12 * scale && !at_bound {
+                h *= 0.5;
+                continue;
+            }
+            if point.nll - at.nll > threshold {
+                let crossing = self.locate((z, &previous), (next_z, &point), z0)?;
+                points.push(point);
+                return Ok(match crossing {
+                    Ok((value, located)) => {
+                        points.extend(located);
+                        (points, End::Crossed(value))
+                    }
+                    Err(better) => (points, End::Better(better)),
+                });
+            }
+            points.push(point.clone());
+            if at_bound {
+                return Ok((points, End::Open));
+            }
+            let grow = if rise > 0.0 { (target / rise).sqrt().clamp(0.5, 2.0) } else { 2.0 };
+            h = (h * grow).min(MAX_STEP * scale);
+            (z, previous) = (next_z, point);
+        }
+        Ok((points, End::Open))
+    }
+
+    /// The value where the profile crosses the threshold between `a` (below) and `b`
+    /// (above), with the points evaluated on the way; or a point below the optimum.
+    #[allow(clippy::type_complexity)]
+    fn locate(
+        &self,
+        (mut za, a): (f64, &Point),
+        (mut zb, b): (f64, &Point),
+        z0: f64,
+    ) -> Result<Result<(f64, Vec<Point>), Point>, ProfileError> {
+        let level = nll(self.optimum) + self.options.threshold;
+        let (mut fa, mut fb) = (a.nll - level, b.nll - level);
+        let (mut from, mut side) = (a.clone(), 0i8);
+        let mut located = Vec::new();
+        let unknown = &self.problem.unknowns().list()[self.i];
+        for _ in 0..100 {
+            if (zb - za).abs() <= self.options.locate * (0.5 * (za + zb) - z0).abs() {
+                break;
+            }
+            // Regula falsi, bisection where it would not shrink the bracket.
+            let mut z = zb - fb * (zb - za) / (fb - fa);
+            if !(z.is_finite() && (z - za) * (z - zb) < 0.0) {
+                z = 0.5 * (za + zb);
+            }
+            let p = self.fit_at(z, &from)?;
+            if p.nll < nll(self.optimum) - 1e-6 * nll(self.optimum).abs().max(1.0) {
+                return Ok(Err(p));
+            }
+            let f = p.nll - level;
+            if f > 0.0 {
+                (zb, fb) = (z, f);
+                // Illinois: halve the value kept twice on the same side.
+                if side == 1 {
+                    fa *= 0.5;
+                }
+                side = 1;
+            } else {
+                (za, fa) = (z, f);
+                if side == -1 {
+                    fb *= 0.5;
+                }
+                side = -1;
+                from = p.clone();
+            }
+            located.push(p);
+        }
+        let z = zb - fb * (zb - za) / (fb - fa);
+        let z = if z.is_finite() && (z - za) * (z - zb) <= 0.0 { z } else { 0.5 * (za + zb) };
+        Ok(Ok((unknown.value(z), located)))
+    }
+}

@@ -1,0 +1,3 @@
+//! Profile likelihoods against closed forms.
+
+mod profiles;

@@ -1,0 +1,107 @@
+//! Profiles against closed forms: on a model linear in its unknowns every profile is the
+//! exact parabola, so each interval is θ̂ ± √(χ²₁(0.95)·(A⁻¹)_ii) with A the Fisher
+//! information (ε = ‖r‖², NLL = ε/2 + const); with y′ = −k1·k2·y only the product is
+//! identifiable, and both profiles are flat.
+
+use sysid_core::{Data, Problem, Unknown};
+use sysid_ode::{Scalar, Signature, System};
+use sysid_profile::{Label, Outcome, ProfileOptions, profile};
+use sysid_registry::{Registry, Settings};
+
+#[test]
+fn a_linear_model_has_the_exact_parabola() {
+    let case = sysid_systems::falling_body::falling_body();
+    let problem = case.problem(1).unwrap();
+    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
+    let optimum = goodman.fit(&problem).unwrap();
+    assert!(optimum.converged());
+    let z = problem.unknowns().coordinates(&optimum.values);
+    let a = problem.linearize(&z).unwrap().normal;
+    let inverse = a.try_inverse().unwrap();
+    let options = ProfileOptions::default();
+    let Outcome::Profiles(profiles) =
+        profile(&*goodman, &problem, &optimum, &[], &options).unwrap()
+    else {
+        panic!("a better optimum than Goodman's one-step fit of a linear model");
+    };
+    assert_eq!(profiles.len(), 3);
+    for (i, p) in profiles.iter().enumerate() {
+        let half = (2.0 * options.threshold * inverse[(i, i)]).sqrt();
+        let theta = optimum.values[i];
+        assert_eq!(p.label, Label::Identifiable, "{}", p.name);
+        let [lo, hi] = p.interval;
+        let (lo, hi) = (lo.unwrap(), hi.unwrap());
+        assert!((lo - (theta - half)).abs() <= 1e-6 * half, "{}: {lo} vs {}", p.name, theta - half);
+        assert!((hi - (theta + half)).abs() <= 1e-6 * half, "{}: {hi} vs {}", p.name, theta + half);
+        // Every point on the parabola: ΔNLL = (θ − θ̂)²/(2 (A⁻¹)_ii).
+        let base = p.points.iter().map(|q| q.nll).fold(f64::INFINITY, f64::min);
+        for q in &p.points {
+            let expected = (q.value - theta).powi(2) / (2.0 * inverse[(i, i)]);
+            assert!((q.nll - base - expected).abs() <= 1e-8 * (1.0 + expected), "{}", p.name);
+        }
+    }
+
+    // Profiles around a point that is not the optimum (the start: no iteration) find a
+    // lower one and say so instead of tracing from there.
+    let settings = Settings {
+        driver: sysid_core::DriverOptions { max_iterations: 0, ..Default::default() },
+        ..Default::default()
+    };
+    let start = Registry::standard().build("goodman", &settings).unwrap().fit(&problem).unwrap();
+    match profile(&*goodman, &problem, &start, &[0], &options).unwrap() {
+        Outcome::BetterOptimum(point) => assert!(point.nll < start.nll.unwrap() - 1e-3),
+        Outcome::Profiles(_) => panic!("traced from a point that is not the optimum"),
+    }
+}
+
+/// y′ = −k1·k2·y.
+#[derive(Clone)]
+struct Product(Signature);
+
+impl System for Product {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = -(p[0] * p[1] * y[0]);
+    }
+}
+
+#[test]
+fn only_a_product_identifiable_is_structurally_non_identifiable() {
+    let sys = Product(Signature::new(&["y"], &["k1", "k2"]));
+    let times: Vec<f64> = (1..=8).map(|i| 0.5 * i as f64).collect();
+    // k1·k2 = 0.5, with a little deterministic scatter so that the minimum is not exact.
+    let values: Vec<f64> = times
+        .iter()
+        .enumerate()
+        .map(|(m, t)| (-0.5 * t).exp() * (1.0 + 0.01 * if m % 2 == 0 { 1.0 } else { -1.0 }))
+        .collect();
+    let problem = Problem::builder(sys)
+        .known("y", 1.0)
+        .unknown_with(Unknown::new("k1", 1.0).log())
+        .unknown_with(Unknown::new("k2", 0.4).log())
+        .data(Data::discrete().series("y", &times, &values))
+        .build()
+        .unwrap();
+    let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
+    let optimum = method.fit(&problem).unwrap();
+    let options = ProfileOptions { max_steps: 20, ..ProfileOptions::default() };
+    let Outcome::Profiles(profiles) = profile(&*method, &problem, &optimum, &[], &options).unwrap()
+    else {
+        panic!("a better optimum");
+    };
+    for p in &profiles {
+        assert_eq!(p.label, Label::StructurallyNonIdentifiable, "{}: {:?}", p.name, p.points);
+        assert_eq!(p.interval, [None, None], "{}", p.name);
+        // Walked far (20 steps each way, up to a factor e per step), never rising.
+        let (first, last) = (p.points[0].value, p.points[p.points.len() - 1].value);
+        assert!(p.points.len() > 20 && last / first > 1e6, "{}: {first} to {last}", p.name);
+        // The other unknown compensates: the product stays at the optimum's.
+        let product = optimum.values[0] * optimum.values[1];
+        for q in &p.points {
+            let along = q.estimates[0] * q.estimates[1];
+            assert!((along - product).abs() <= 1e-6 * product, "{}: {along} vs {product}", p.name);
+        }
+    }
+}
