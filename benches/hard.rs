@@ -2,7 +2,8 @@
 //! STAT5 problem (examples/boehm) with the three noise s.d. fixed at their published values,
 //! from the published optimum moved by ±0.1–0.3 decades per rate (the start of
 //! tests/hard.rs). The issue's target for Levenberg–Marquardt: ≤ 87 ms per fit, a tenth of
-//! AMICI + fides (0.87 s from nominal + 0.1).
+//! AMICI + fides (0.87 s from nominal + 0.1). `hard/boehm-fixed-sigma/profiles`: the six
+//! profile likelihoods from that fit (target ≤ 5 s on two cores).
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -11,6 +12,7 @@ use std::time::Duration;
 use criterion::{Criterion, criterion_group, criterion_main};
 use sysid::core::Problem;
 use sysid::model::{Model, ModelSystem};
+use sysid::profile::{ProfileOptions, profile};
 use sysid::registry::{Registry, Settings};
 
 /// The published noise s.d. of the three observables.
@@ -76,6 +78,12 @@ fn hard(c: &mut Criterion) {
     );
     group.bench_function("boehm-fixed-sigma/levenberg-marquardt", |b| {
         b.iter(|| method.fit(black_box(&problem)).unwrap())
+    });
+    // All six profile likelihoods from that fit, on both cores (issue 31's target: ≤ 5 s).
+    let options = ProfileOptions::default();
+    group.sample_size(10).measurement_time(Duration::from_secs(60));
+    group.bench_function("boehm-fixed-sigma/profiles", |b| {
+        b.iter(|| profile(&*method, black_box(&problem), &e, &[], &options).unwrap())
     });
     group.finish();
 }

@@ -24,6 +24,7 @@ pub use sysid_model as model;
 pub use sysid_montecarlo as montecarlo;
 pub use sysid_multiple_shooting as multiple_shooting;
 pub use sysid_ode as ode;
+pub use sysid_profile as profile;
 pub use sysid_quasilinearization as quasilinearization;
 pub use sysid_registry as registry;
 pub use sysid_systems as systems;

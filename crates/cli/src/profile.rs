@@ -4,7 +4,9 @@ use anyhow::bail;
 use clap::Args;
 use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
-use sysid_profile::{Label, Outcome as Traced, Point, Profile, ProfileOptions, profile};
+use sysid_profile::{
+    Label, Outcome as Traced, Point, Profile, ProfileOptions, profile, threshold_95,
+};
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
@@ -24,6 +26,10 @@ pub struct ProfileArgs {
     /// Profile only these unknowns (comma-separated names; default: every unknown).
     #[arg(long, value_name = "A,B")]
     only: Option<String>,
+    /// Simultaneous 95 % intervals: the threshold χ²ₖ(0.95)/2 for the k free unknowns
+    /// instead of the pointwise χ²₁(0.95)/2 = 1.92.
+    #[arg(long)]
+    simultaneous: bool,
     /// Most points per side of a profile.
     #[arg(long, default_value_t = 60, value_name = "N")]
     max_points: usize,
@@ -84,7 +90,9 @@ impl WithProblem for ProfileProblem<'_> {
             fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
         let certified = optimum.converged();
         let m = method::<S>(&args.method.method, &settings)?;
-        let options = ProfileOptions { max_steps: args.max_points, ..ProfileOptions::default() };
+        let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));
+        let options =
+            ProfileOptions { max_steps: args.max_points, threshold, ..ProfileOptions::default() };
         let mut better = Vec::new();
         let profiles = loop {
             match profile(&*m, &problem, &optimum, &only, &options)? {

@@ -45,6 +45,20 @@ pub enum ProfileError {
 /// χ²₁(0.95)/2: the pointwise 95 % threshold of ΔNLL.
 pub const POINTWISE_95: f64 = 3.841_458_820_694_124 / 2.0;
 
+/// The threshold of ΔNLL for 95 % confidence: pointwise, χ²₁(0.95)/2 ([`POINTWISE_95`]);
+/// simultaneous for `k` unknowns, χ²ₖ(0.95)/2 (the region of all k at once, as
+/// Data2Dynamics' `ple` offers).
+pub fn threshold_95(simultaneous: Option<usize>) -> f64 {
+    use cdflib::ChiSquared;
+    use cdflib::traits::ContinuousCdf;
+    match simultaneous {
+        Some(k) if k > 1 => {
+            ChiSquared::new(k as f64).inverse_cdf(0.95).map_or(POINTWISE_95, |q| 0.5 * q)
+        }
+        _ => POINTWISE_95,
+    }
+}
+
 /// The longest step, in units of the coordinate's scale (1 for ln θ: a factor e).
 pub const MAX_STEP: f64 = 1.0;
 

@@ -5,7 +5,7 @@
 
 use sysid_core::{Data, Problem, Unknown};
 use sysid_ode::{Scalar, Signature, System};
-use sysid_profile::{Label, Outcome, ProfileOptions, profile};
+use sysid_profile::{Label, Outcome, POINTWISE_95, ProfileOptions, profile, threshold_95};
 use sysid_registry::{Registry, Settings};
 
 #[test]
@@ -104,4 +104,13 @@ fn only_a_product_identifiable_is_structurally_non_identifiable() {
             assert!((along - product).abs() <= 1e-6 * product, "{}: {along} vs {product}", p.name);
         }
     }
+}
+
+#[test]
+fn thresholds_are_half_the_chi_square_quantiles() {
+    // χ²₁(0.95) = 1.959963984540054², χ²₃(0.95) = 7.814727903251178 (tables).
+    assert!((POINTWISE_95 - 1.959_963_984_540_054_f64.powi(2) / 2.0).abs() < 1e-14);
+    assert_eq!(threshold_95(None), POINTWISE_95);
+    assert_eq!(threshold_95(Some(1)), POINTWISE_95);
+    assert!((threshold_95(Some(3)) - 7.814_727_903_251_178 / 2.0).abs() < 1e-12);
 }
