@@ -274,3 +274,50 @@ fn a_corner_of_the_box_is_reported_as_one() {
     assert!(e.converged() && !e.certificate.corner());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Boehm's profiles with σ fixed (issue 31): k_exp_hetero is practically non-identifiable
+/// (open at its lower bound), Epo_degradation_BaF3 and k_phos identifiable, and their
+/// intervals agree between two inner optimisers that share nothing but the model and its
+/// integration (Levenberg–Marquardt's trust region, Goodman's Newton step halved along the
+/// curve) to 1e-2 relative: the profile does not depend on how each point is re-optimised.
+#[test]
+fn boehm_profiles_agree_between_inner_optimisers() {
+    use sysid::profile::{Label, Outcome, ProfileOptions, profile};
+    let dir = scratch("profiles");
+    let problem = boehm_fixed_sigma(&dir, [0.2, -0.15, 0.25, -0.1, -0.3, 0.12]);
+    let names = problem.names();
+    let only: Vec<usize> = ["Epo_degradation_BaF3", "k_exp_hetero", "k_phos"]
+        .iter()
+        .map(|n| names.iter().position(|x| x == n).unwrap())
+        .collect();
+    let mut intervals = Vec::new();
+    for name in ["levenberg-marquardt", "goodman-halving"] {
+        let method = Registry::standard().build(name, &Settings::default()).unwrap();
+        let optimum = method.fit(&problem).unwrap();
+        assert!(optimum.converged(), "{name}");
+        let options = ProfileOptions::default();
+        let Outcome::Profiles(profiles) =
+            profile(&*method, &problem, &optimum, &only, &options).unwrap()
+        else {
+            panic!("{name}: a better optimum than the certified one");
+        };
+        let labels: Vec<Label> = profiles.iter().map(|p| p.label).collect();
+        assert_eq!(
+            labels,
+            [Label::Identifiable, Label::PracticallyNonIdentifiable, Label::Identifiable],
+            "{name}"
+        );
+        assert!(profiles[1].interval[0].is_none() && profiles[1].interval[1].is_some());
+        intervals.push(profiles.iter().map(|p| p.interval).collect::<Vec<_>>());
+    }
+    for (a, b) in intervals[0].iter().zip(&intervals[1]) {
+        for (x, y) in a.iter().zip(b) {
+            match (x, y) {
+                (Some(x), Some(y)) => assert!((x - y).abs() <= 1e-2 * x.abs(), "{x} vs {y}"),
+                (None, None) => {}
+                _ => panic!("one side open for one optimiser only: {a:?} vs {b:?}"),
+            }
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
