@@ -33,6 +33,10 @@ pub struct ProfileArgs {
     /// Most points per side of a profile.
     #[arg(long, default_value_t = 60, value_name = "N")]
     max_points: usize,
+    /// Also draw the profiles: FILE.png and FILE.svg (FILE without extension), one column
+    /// per unknown, ΔNLL with the threshold and the interval above, the others' paths below.
+    #[arg(long, value_name = "FILE")]
+    figure: Option<std::path::PathBuf>,
     /// Output format: a readable table, or JSON (docs/json.md, `sysid profile`).
     #[arg(long, value_enum, default_value_t = Format::Table)]
     format: Format,
@@ -113,6 +117,13 @@ impl WithProblem for ProfileProblem<'_> {
                 }
             }
         };
+        if let Some(stem) = &args.figure {
+            let [png, svg] = sysid_report::save(
+                &figure(&context, &problem, &optimum, &options, &profiles),
+                stem,
+            )?;
+            eprintln!("wrote {} and {}", png.display(), svg.display());
+        }
         match args.format {
             Format::Json => {
                 let json = serde_json::json!({
@@ -130,6 +141,58 @@ impl WithProblem for ProfileProblem<'_> {
             Format::Table => emit(&table(&context, &optimum, certified, &better, &profiles))?,
         }
         Ok(Outcome::Success)
+    }
+}
+
+/// The figure of the profiles.
+fn figure<S: System>(
+    context: &Context,
+    problem: &Problem<S>,
+    optimum: &Estimate,
+    options: &ProfileOptions,
+    profiles: &[Profile],
+) -> sysid_report::Profiles {
+    let names = problem.names();
+    let base = optimum.nll.unwrap_or(optimum.cost / 2.0);
+    let panels = profiles
+        .iter()
+        .map(|p| {
+            let i = names.iter().position(|n| n == &p.name).unwrap_or(0);
+            let points = p
+                .points
+                .iter()
+                .map(|q| {
+                    let others = (0..names.len())
+                        .filter(|&j| j != i)
+                        .map(|j| q.estimates[j] / optimum.values[j])
+                        .collect();
+                    (q.value, q.nll - base, others)
+                })
+                .collect();
+            sysid_report::ProfilePanel {
+                name: p.name.clone(),
+                log: problem.unknowns().list()[i].log,
+                optimum: optimum.values[i],
+                interval: p.interval,
+                label: verdict(p.label).to_string(),
+                points,
+            }
+        })
+        .collect();
+    sysid_report::Profiles {
+        title: format!("{}: profile likelihoods", context.name),
+        threshold: options.threshold,
+        names: names.to_vec(),
+        panels,
+    }
+}
+
+/// The verdict in words.
+fn verdict(label: Label) -> &'static str {
+    match label {
+        Label::Identifiable => "identifiable",
+        Label::PracticallyNonIdentifiable => "practically non-identifiable",
+        Label::StructurallyNonIdentifiable => "structurally non-identifiable",
     }
 }
 
@@ -168,11 +231,7 @@ fn table(
     let bound = |v: Option<f64>| v.map_or("open".to_string(), |v| format!("{v:.6e}"));
     for p in profiles {
         let i = optimum.names.iter().position(|n| n == &p.name).unwrap_or(0);
-        let label = match p.label {
-            Label::Identifiable => "identifiable",
-            Label::PracticallyNonIdentifiable => "practically non-identifiable",
-            Label::StructurallyNonIdentifiable => "structurally non-identifiable",
-        };
+        let label = verdict(p.label);
         text += &format!(
             "  {:<22} {:>14.6e} {:>14} {:>14}  {label} ({} points)\n",
             p.name,

@@ -34,6 +34,7 @@ mod markdown;
 mod minima;
 mod options;
 mod prediction;
+mod profiles;
 mod run;
 
 pub use accuracy::{Accuracy, Spread};
@@ -45,4 +46,5 @@ pub use look::{Look, look};
 pub use minima::{MethodMinima, Minima};
 pub use options::{Observer, Quiet, ReportOptions};
 pub use prediction::{Prediction, PredictionPanel};
+pub use profiles::{ProfilePanel, Profiles};
 pub use run::write_report;

@@ -1,0 +1,187 @@
+//! Profile likelihoods: one column per unknown. Above, ΔNLL along the profile with the
+//! threshold (dashed) and the interval's ends (vertical lines); below, how the other unknowns
+//! compensate: each one's value relative to the optimum's along the path. The unknown's axis
+//! is logarithmic where it is estimated on a log scale.
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::chart::{DrawResult, FONT, Figure, padded};
+use crate::look::look;
+
+/// The profile of one unknown, as drawn.
+#[derive(Clone, Debug)]
+pub struct ProfilePanel {
+    /// The unknown.
+    pub name: String,
+    /// Estimated on a log scale (the axis is logarithmic).
+    pub log: bool,
+    /// Its value at the optimum.
+    pub optimum: f64,
+    /// The interval's ends (None: open).
+    pub interval: [Option<f64>; 2],
+    /// The verdict, in words.
+    pub label: String,
+    /// (value, ΔNLL, the others' values relative to the optimum's), by value.
+    pub points: Vec<(f64, f64, Vec<f64>)>,
+}
+
+/// The profiles figure of one problem.
+#[derive(Clone, Debug)]
+pub struct Profiles {
+    /// The title.
+    pub title: String,
+    /// The threshold of ΔNLL.
+    pub threshold: f64,
+    /// The names of every unknown (the others' paths are labelled by them).
+    pub names: Vec<String>,
+    /// One panel per profiled unknown.
+    pub panels: Vec<ProfilePanel>,
+}
+
+impl Figure for Profiles {
+    fn size(&self) -> (u32, u32) {
+        (340 * self.panels.len().max(1) as u32, 640)
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<DB>
+    where
+        DB::ErrorType: 'static,
+    {
+        let root = root.titled(&self.title, (FONT, 20))?;
+        let columns = root.split_evenly((2, self.panels.len().max(1)));
+        let n = self.panels.len();
+        for (j, panel) in self.panels.iter().enumerate() {
+            let (top, bottom) = (&columns[j], &columns[n + j]);
+            let xs = || panel.points.iter().map(|p| p.0);
+            let (x0, x1) =
+                xs().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+            let y1 = panel.points.iter().map(|p| p.1).fold(self.threshold, f64::max);
+            let caption = format!("{}: {}", panel.name, panel.label);
+            if panel.log && x0 > 0.0 {
+                let (lo, hi) = (x0 / 1.2, x1 * 1.2);
+                let mut chart = ChartBuilder::on(top)
+                    .caption(caption, (FONT, 13))
+                    .margin(8)
+                    .x_label_area_size(28)
+                    .y_label_area_size(44)
+                    .build_cartesian_2d((lo..hi).log_scale(), -0.05 * y1..1.05 * y1)?;
+                chart.configure_mesh().y_desc("ΔNLL").label_style((FONT, 11)).draw()?;
+                draw_profile(&mut chart, panel, self.threshold, (lo, hi), y1)?;
+                let mut others = ChartBuilder::on(bottom)
+                    .margin(8)
+                    .x_label_area_size(28)
+                    .y_label_area_size(44)
+                    .build_cartesian_2d((lo..hi).log_scale(), others_range(panel).log_scale())?;
+                others
+                    .configure_mesh()
+                    .x_desc(panel.name.as_str())
+                    .y_desc("others / optimum")
+                    .label_style((FONT, 11))
+                    .draw()?;
+                draw_others(&mut others, panel, &self.names)?;
+            } else {
+                let (lo, hi) = padded(x0, x1, 0.05);
+                let mut chart = ChartBuilder::on(top)
+                    .caption(caption, (FONT, 13))
+                    .margin(8)
+                    .x_label_area_size(28)
+                    .y_label_area_size(44)
+                    .build_cartesian_2d(lo..hi, -0.05 * y1..1.05 * y1)?;
+                chart.configure_mesh().y_desc("ΔNLL").label_style((FONT, 11)).draw()?;
+                draw_profile(&mut chart, panel, self.threshold, (lo, hi), y1)?;
+                let mut others = ChartBuilder::on(bottom)
+                    .margin(8)
+                    .x_label_area_size(28)
+                    .y_label_area_size(44)
+                    .build_cartesian_2d(lo..hi, others_range(panel).log_scale())?;
+                others
+                    .configure_mesh()
+                    .x_desc(panel.name.as_str())
+                    .y_desc("others / optimum")
+                    .label_style((FONT, 11))
+                    .draw()?;
+                draw_others(&mut others, panel, &self.names)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The range of the others' relative values (a log axis around 1).
+fn others_range(panel: &ProfilePanel) -> std::ops::Range<f64> {
+    let values = panel.points.iter().flat_map(|p| p.2.iter().copied()).filter(|v| *v > 0.0);
+    let (lo, hi) = values.fold((1.0f64, 1.0f64), |(a, b), v| (a.min(v), b.max(v)));
+    lo / 1.5..hi * 1.5
+}
+
+fn draw_profile<DB, X>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<X, plotters::coord::types::RangedCoordf64>>,
+    panel: &ProfilePanel,
+    threshold: f64,
+    (lo, hi): (f64, f64),
+    top: f64,
+) -> DrawResult<DB>
+where
+    DB: DrawingBackend,
+    DB::ErrorType: 'static,
+    X: Ranged<ValueType = f64>,
+{
+    let line = panel.points.iter().map(|p| (p.0, p.1));
+    chart.draw_series(LineSeries::new(line, BLACK.stroke_width(2)))?;
+    chart.draw_series(panel.points.iter().map(|p| Circle::new((p.0, p.1), 2, BLACK.filled())))?;
+    let steps = 24;
+    let dashes = (0..steps).filter(|k| k % 2 == 0).map(|k| {
+        let at = |k: usize| lo * (hi / lo).powf(k as f64 / steps as f64);
+        let (a, b) = if lo > 0.0 {
+            (at(k), at(k + 1))
+        } else {
+            let w = (hi - lo) / steps as f64;
+            (lo + k as f64 * w, lo + (k + 1) as f64 * w)
+        };
+        PathElement::new(vec![(a, threshold), (b, threshold)], RGBColor(213, 94, 0).stroke_width(1))
+    });
+    chart.draw_series(dashes)?;
+    for end in panel.interval.iter().flatten() {
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(*end, 0.0), (*end, top)],
+            RGBColor(0, 114, 178).stroke_width(1),
+        )))?;
+    }
+    chart.draw_series(std::iter::once(Circle::new((panel.optimum, 0.0), 4, RED.filled())))?;
+    Ok(())
+}
+
+fn draw_others<'a, DB, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    panel: &ProfilePanel,
+    names: &[String],
+) -> DrawResult<DB>
+where
+    DB: DrawingBackend + 'a,
+    DB::ErrorType: 'static,
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    let others: Vec<&String> = names.iter().filter(|n| **n != panel.name).collect();
+    for (k, name) in others.iter().enumerate() {
+        let color = look(k + 1).color;
+        let path = panel.points.iter().filter_map(|p| {
+            let v = *p.2.get(k)?;
+            (v > 0.0).then_some((p.0, v))
+        });
+        chart
+            .draw_series(LineSeries::new(path, color.stroke_width(2)))?
+            .label(name.as_str())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 14, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .label_font((FONT, 10))
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
