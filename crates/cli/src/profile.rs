@@ -80,6 +80,9 @@ impl WithProblem for ProfileProblem<'_> {
                 .split(',')
                 .map(|n| {
                     let n = n.trim();
+                    if n.is_empty() {
+                        bail!("--only: an empty name in `{list}` (two commas, or one at an end)");
+                    }
                     names.iter().position(|x| x == n).ok_or_else(|| {
                         anyhow::anyhow!(
                             "--only: `{n}` is not an unknown (unknowns: {})",
@@ -89,6 +92,9 @@ impl WithProblem for ProfileProblem<'_> {
                 })
                 .collect::<anyhow::Result<Vec<usize>>>()?,
         };
+        if let Some(twice) = only.iter().enumerate().find(|(k, i)| only[..*k].contains(i)) {
+            bail!("--only: `{}` is named twice", names[*twice.1]);
+        }
         let settings = args.options.settings();
         let (mut optimum, _) =
             fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;

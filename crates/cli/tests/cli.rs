@@ -647,6 +647,28 @@ fn profile_prints_intervals_and_verdicts() {
             &["profile", "--system", "falling-body", "--max-points", "0"][..],
             "--max-points must be at least 1",
         ),
+        (
+            &["profile", "--system", "falling-body", "--only", "g,g"][..],
+            "--only: `g` is named twice",
+        ),
+        (
+            &["profile", "--system", "falling-body", "--only", "g,"][..],
+            "--only: an empty name in `g,`",
+        ),
+        (
+            &[
+                "profile",
+                "--system",
+                "falling-body",
+                "--fix",
+                "y=0",
+                "--fix",
+                "v=0",
+                "--fix",
+                "g=32",
+            ][..],
+            "no unknowns",
+        ),
     ] {
         let out = sysid(args);
         let stderr = text(&out.stderr);
