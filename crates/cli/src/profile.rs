@@ -4,9 +4,7 @@ use anyhow::bail;
 use clap::Args;
 use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
-use sysid_profile::{
-    Label, Outcome as Traced, Point, Profile, ProfileOptions, profile, threshold_95,
-};
+use sysid_profile::{Outcome as Traced, Point, Profile, ProfileOptions, profile, threshold_95};
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
@@ -124,10 +122,15 @@ impl WithProblem for ProfileProblem<'_> {
             }
         };
         if let Some(stem) = &args.figure {
-            let [png, svg] = sysid_report::save(
-                &figure(&context, &problem, &optimum, &options, &profiles),
-                stem,
-            )?;
+            let title = format!("{}: profile likelihoods", context.name);
+            let figure = sysid_report::Profiles::new(
+                title,
+                &problem,
+                &optimum,
+                options.threshold,
+                &profiles,
+            );
+            let [png, svg] = sysid_report::save(&figure, stem)?;
             eprintln!("wrote {} and {}", png.display(), svg.display());
         }
         match args.format {
@@ -147,58 +150,6 @@ impl WithProblem for ProfileProblem<'_> {
             Format::Table => emit(&table(&context, &optimum, certified, &better, &profiles))?,
         }
         Ok(Outcome::Success)
-    }
-}
-
-/// The figure of the profiles.
-fn figure<S: System>(
-    context: &Context,
-    problem: &Problem<S>,
-    optimum: &Estimate,
-    options: &ProfileOptions,
-    profiles: &[Profile],
-) -> sysid_report::Profiles {
-    let names = problem.names();
-    let base = optimum.nll.unwrap_or(optimum.cost / 2.0);
-    let panels = profiles
-        .iter()
-        .map(|p| {
-            let i = names.iter().position(|n| n == &p.name).unwrap_or(0);
-            let points = p
-                .points
-                .iter()
-                .map(|q| {
-                    let others = (0..names.len())
-                        .filter(|&j| j != i)
-                        .map(|j| q.estimates[j] / optimum.values[j])
-                        .collect();
-                    (q.value, q.nll - base, others)
-                })
-                .collect();
-            sysid_report::ProfilePanel {
-                name: p.name.clone(),
-                log: problem.unknowns().list()[i].log,
-                optimum: optimum.values[i],
-                interval: p.interval,
-                label: verdict(p.label).to_string(),
-                points,
-            }
-        })
-        .collect();
-    sysid_report::Profiles {
-        title: format!("{}: profile likelihoods", context.name),
-        threshold: options.threshold,
-        names: names.to_vec(),
-        panels,
-    }
-}
-
-/// The verdict in words.
-fn verdict(label: Label) -> &'static str {
-    match label {
-        Label::Identifiable => "identifiable",
-        Label::PracticallyNonIdentifiable => "practically non-identifiable",
-        Label::StructurallyNonIdentifiable => "structurally non-identifiable",
     }
 }
 
@@ -237,7 +188,7 @@ fn table(
     let bound = |v: Option<f64>| v.map_or("open".to_string(), |v| format!("{v:.6e}"));
     for p in profiles {
         let i = optimum.names.iter().position(|n| n == &p.name).unwrap_or(0);
-        let label = verdict(p.label);
+        let label = p.label.words();
         text += &format!(
             "  {:<22} {:>14.6e} {:>14} {:>14}  {label} ({} points)\n",
             p.name,

@@ -105,6 +105,17 @@ pub enum Label {
     StructurallyNonIdentifiable,
 }
 
+impl Label {
+    /// The verdict in words: "practically non-identifiable".
+    pub fn words(self) -> &'static str {
+        match self {
+            Label::Identifiable => "identifiable",
+            Label::PracticallyNonIdentifiable => "practically non-identifiable",
+            Label::StructurallyNonIdentifiable => "structurally non-identifiable",
+        }
+    }
+}
+
 /// The profile of one unknown.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Profile {

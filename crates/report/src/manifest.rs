@@ -16,13 +16,14 @@ const MANIFEST: &str = ".sysid-report";
 
 /// The files a report may write for one system, relative to the report's directory.
 fn system_files(system: &str) -> Vec<String> {
-    let figures = ["convergence", "minima", "prediction", "accuracy", "cost", "basin"];
+    let figures = ["convergence", "minima", "prediction", "profiles", "accuracy", "cost", "basin"];
     let mut paths: Vec<String> = figures
         .iter()
         .flat_map(|f| ["png", "svg"].map(|ext| format!("{system}/{f}.{ext}")))
         .collect();
     paths.extend(["convergence", "prediction", "data"].map(|f| format!("{system}/{f}.csv")));
     paths.push(format!("{system}/multistart.json"));
+    paths.push(format!("{system}/profiles.json"));
     for sub in ["study", "basin"] {
         paths.extend(files::OWNED.iter().map(|f| format!("{system}/{sub}/{f}")));
     }

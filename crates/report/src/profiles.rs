@@ -6,6 +6,10 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use sysid_core::{Estimate, Problem};
+use sysid_ode::System;
+use sysid_profile::Profile;
+
 use crate::chart::{DrawResult, FONT, Figure, padded};
 use crate::look::look;
 
@@ -37,6 +41,47 @@ pub struct Profiles {
     pub names: Vec<String>,
     /// One panel per profiled unknown.
     pub panels: Vec<ProfilePanel>,
+}
+
+impl Profiles {
+    /// The figure of `profiles`, traced around `optimum` (a fit of `problem`) up to
+    /// `threshold`.
+    pub fn new<S: System>(
+        title: String,
+        problem: &Problem<S>,
+        optimum: &Estimate,
+        threshold: f64,
+        profiles: &[Profile],
+    ) -> Self {
+        let names = problem.names();
+        let base = optimum.nll.unwrap_or(optimum.cost / 2.0);
+        let panels = profiles
+            .iter()
+            .map(|p| {
+                let i = names.iter().position(|n| n == &p.name).unwrap_or(0);
+                let points = p
+                    .points
+                    .iter()
+                    .map(|q| {
+                        let others = (0..names.len())
+                            .filter(|&j| j != i)
+                            .map(|j| q.estimates[j] / optimum.values[j])
+                            .collect();
+                        (q.value, q.nll - base, others)
+                    })
+                    .collect();
+                ProfilePanel {
+                    name: p.name.clone(),
+                    log: problem.unknowns().list()[i].log,
+                    optimum: optimum.values[i],
+                    interval: p.interval,
+                    label: p.label.words().to_string(),
+                    points,
+                }
+            })
+            .collect();
+        Self { title, threshold, names: names.to_vec(), panels }
+    }
 }
 
 impl Figure for Profiles {
