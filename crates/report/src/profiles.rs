@@ -10,7 +10,7 @@ use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
 use sysid_profile::Profile;
 
-use crate::chart::{DrawResult, FONT, Figure, padded};
+use crate::chart::{DrawResult, FONT, Figure, padded, tick};
 use crate::look::look;
 
 /// The profile of one unknown, as drawn.
@@ -111,7 +111,13 @@ impl Figure for Profiles {
                     .x_label_area_size(28)
                     .y_label_area_size(44)
                     .build_cartesian_2d((lo..hi).log_scale(), -0.05 * y1..1.05 * y1)?;
-                chart.configure_mesh().y_desc("ΔNLL").label_style((FONT, 11)).draw()?;
+                chart
+                    .configure_mesh()
+                    .y_desc("ΔNLL")
+                    .x_label_formatter(&|v| tick(*v))
+                    .y_label_formatter(&|v| tick(*v))
+                    .label_style((FONT, 11))
+                    .draw()?;
                 draw_profile(&mut chart, panel, self.threshold, (lo, hi), y1)?;
                 let mut others = ChartBuilder::on(bottom)
                     .margin(8)
@@ -122,6 +128,8 @@ impl Figure for Profiles {
                     .configure_mesh()
                     .x_desc(panel.name.as_str())
                     .y_desc("others / optimum")
+                    .x_label_formatter(&|v| tick(*v))
+                    .y_label_formatter(&|v| tick(*v))
                     .label_style((FONT, 11))
                     .draw()?;
                 draw_others(&mut others, panel, &self.names)?;
@@ -133,7 +141,13 @@ impl Figure for Profiles {
                     .x_label_area_size(28)
                     .y_label_area_size(44)
                     .build_cartesian_2d(lo..hi, -0.05 * y1..1.05 * y1)?;
-                chart.configure_mesh().y_desc("ΔNLL").label_style((FONT, 11)).draw()?;
+                chart
+                    .configure_mesh()
+                    .y_desc("ΔNLL")
+                    .x_label_formatter(&|v| tick(*v))
+                    .y_label_formatter(&|v| tick(*v))
+                    .label_style((FONT, 11))
+                    .draw()?;
                 draw_profile(&mut chart, panel, self.threshold, (lo, hi), y1)?;
                 let mut others = ChartBuilder::on(bottom)
                     .margin(8)
@@ -144,6 +158,8 @@ impl Figure for Profiles {
                     .configure_mesh()
                     .x_desc(panel.name.as_str())
                     .y_desc("others / optimum")
+                    .x_label_formatter(&|v| tick(*v))
+                    .y_label_formatter(&|v| tick(*v))
                     .label_style((FONT, 11))
                     .draw()?;
                 draw_others(&mut others, panel, &self.names)?;
