@@ -4,7 +4,9 @@ use anyhow::bail;
 use clap::Args;
 use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
-use sysid_profile::{Outcome as Traced, Point, Profile, ProfileOptions, profile, threshold_95};
+use sysid_profile::{
+    Outcome as Traced, Point, Profile, ProfileOptions, nll, profile, threshold_95,
+};
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
@@ -109,7 +111,7 @@ impl WithProblem for ProfileProblem<'_> {
                     eprintln!(
                         "better optimum found along a profile (NLL {} against {}): fitting again from there",
                         point.nll,
-                        optimum.nll.unwrap_or(optimum.cost / 2.0)
+                        nll(&optimum)
                     );
                     optimum = m.fit_from(&problem, &point.estimates)?;
                     better.push(point);
@@ -142,7 +144,7 @@ impl WithProblem for ProfileProblem<'_> {
                     "threshold": options.threshold,
                     "profiles": profiles
                         .iter()
-                        .map(|p| (p.name.clone(), record(p)))
+                        .map(|p| (p.name.clone(), serde_json::json!(p.record())))
                         .collect::<serde_json::Map<_, _>>(),
                 });
                 emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?
@@ -151,11 +153,6 @@ impl WithProblem for ProfileProblem<'_> {
         }
         Ok(Outcome::Success)
     }
-}
-
-/// A profile's JSON object.
-fn record(p: &Profile) -> serde_json::Value {
-    serde_json::json!({ "interval": p.interval, "label": p.label, "points": p.points })
 }
 
 /// The readable report: the optimum's NLL, then a line per unknown.
@@ -170,7 +167,7 @@ fn table(
         "{}: profile likelihoods ({}), NLL at the optimum {}\n",
         context.name,
         optimum.method,
-        optimum.nll.unwrap_or(optimum.cost / 2.0)
+        nll(optimum)
     );
     if !certified {
         text += "  warning: the fit did not certify its optimum; the profiles start from its best point\n";

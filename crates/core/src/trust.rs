@@ -61,6 +61,21 @@ impl Curve {
         }
     }
 
+    /// The step `delta` (from the iterate `lin`) as a point of the curve: its scaled length
+    /// and predicted decrease, after rescaling D with `lin`'s A.
+    pub fn first(&mut self, lin: &Linearization, delta: DVector<f64>) -> CurveStep {
+        self.rescale(lin);
+        self.lambda = 0.0;
+        let predicted = -(2.0 * lin.gradient.dot(&delta) + delta.dot(&(&lin.normal * &delta)));
+        CurveStep {
+            scaled_norm: self.scaled_norm(delta.as_slice()),
+            delta,
+            predicted,
+            lambda: 0.0,
+            condition: f64::NAN,
+        }
+    }
+
     /// ‖Dv‖.
     pub fn scaled_norm(&self, v: &[f64]) -> f64 {
         v.iter().zip(&self.scale).map(|(v, d)| (v * d).powi(2)).sum::<f64>().sqrt()
@@ -100,13 +115,14 @@ impl Curve {
     ) -> Result<CurveStep, Failure> {
         let (lo, hi) = problem.unknowns().step_box(&lin.z);
         let bounds = (lo.as_slice(), hi.as_slice());
-        let gauss_newton = self.solve(lin, bounds, 0.0, max_condition);
-        if let Ok(step) = &gauss_newton
-            && step.scaled_norm <= 1.1 * radius
-        {
-            self.lambda = 0.0;
-            return Ok(gauss_newton.expect("checked"));
-        }
+        let mut singular = match self.solve(lin, bounds, 0.0, max_condition) {
+            Ok(step) if step.scaled_norm <= 1.1 * radius => {
+                self.lambda = 0.0;
+                return Ok(step);
+            }
+            Ok(_) => None,
+            Err(s) => Some(s),
+        };
         // ‖D⁻¹U‖/Δ: the λ at which the steepest-descent limit of δ(λ) has length Δ.
         let scaled_gradient =
             lin.gradient.iter().zip(&self.scale).map(|(g, d)| (g / d).powi(2)).sum::<f64>();
@@ -117,7 +133,6 @@ impl Curve {
         }
         let (mut low, mut high) = (0.0_f64, f64::INFINITY);
         let (mut inside, mut damped): (Option<CurveStep>, Option<CurveStep>) = (None, None);
-        let mut singular = gauss_newton.err();
         for _ in 0..60 {
             match self.solve(lin, bounds, lambda, max_condition) {
                 Ok(step) if (step.scaled_norm - radius).abs() <= 0.1 * radius => {
@@ -221,21 +236,4 @@ pub fn halve_along_curve<S: System>(
         trial = problem.unknowns().moved(z, step.delta.as_slice(), 1.0);
     }
     Ok(Advance::Stop(Rule::NoDescent))
-}
-
-impl Curve {
-    /// The step `delta` (from the iterate `lin`) as a point of the curve: its scaled length
-    /// and predicted decrease, after rescaling D with `lin`'s A.
-    pub fn first(&mut self, lin: &Linearization, delta: DVector<f64>) -> CurveStep {
-        self.rescale(lin);
-        self.lambda = 0.0;
-        let predicted = -(2.0 * lin.gradient.dot(&delta) + delta.dot(&(&lin.normal * &delta)));
-        CurveStep {
-            scaled_norm: self.scaled_norm(delta.as_slice()),
-            delta,
-            predicted,
-            lambda: 0.0,
-            condition: f64::NAN,
-        }
-    }
 }

@@ -130,6 +130,22 @@ pub struct Profile {
     pub points: Vec<Point>,
 }
 
+impl Profile {
+    /// The profile as the JSON of `sysid profile` has it under its name: `interval`,
+    /// `label`, `points`.
+    pub fn record(&self) -> Record<'_> {
+        Record { interval: self.interval, label: self.label, points: &self.points }
+    }
+}
+
+/// A profile without its name ([`Profile::record`]).
+#[derive(Serialize)]
+pub struct Record<'a> {
+    interval: [Option<f64>; 2],
+    label: Label,
+    points: &'a [Point],
+}
+
 /// What profiling found.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Outcome {
@@ -147,7 +163,7 @@ enum End {
 }
 
 /// The NLL of a fit: its likelihood, or ε/2 where it has none.
-fn nll(e: &Estimate) -> f64 {
+pub fn nll(e: &Estimate) -> f64 {
     e.nll.unwrap_or(e.cost / 2.0)
 }
 
@@ -223,6 +239,12 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         Ok(Ok(Profile { name, interval, label, points }))
     }
 
+    /// Whether `p` lies below the optimum by more than 1e-6 relative: the fit was not at it.
+    fn below_optimum(&self, p: &Point) -> bool {
+        let base = nll(self.optimum);
+        p.nll < base - 1e-6 * base.abs().max(1.0)
+    }
+
     /// The fit with θ_i held at the coordinate `z`, from the point `from`.
     fn fit_at(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {
         let unknown = &self.problem.unknowns().list()[self.i];
@@ -250,7 +272,6 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         let scale = unknown.coordinate_scale(z0);
         let threshold = self.options.threshold;
         let target = 0.1 * threshold;
-        let better = |p: &Point| p.nll < at.nll - 1e-6 * at.nll.abs().max(1.0);
         let mut points: Vec<Point> = Vec::new();
         let (mut z, mut previous) = (z0, at.clone());
         let mut h = 0.01 * scale;
@@ -262,7 +283,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
                 next_z = limit;
             }
             let point = self.fit_at(next_z, &previous)?;
-            if better(&point) {
+            if self.below_optimum(&point) {
                 return Ok((points, End::Better(point)));
             }
             let rise = point.nll - previous.nll;
@@ -316,7 +337,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
                 z = 0.5 * (za + zb);
             }
             let p = self.fit_at(z, &from)?;
-            if p.nll < nll(self.optimum) - 1e-6 * nll(self.optimum).abs().max(1.0) {
+            if self.below_optimum(&p) {
                 return Ok(Err(p));
             }
             let f = p.nll - level;

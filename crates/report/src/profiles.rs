@@ -4,6 +4,7 @@
 //! is logarithmic where it is estimated on a log scale.
 
 use plotters::coord::Shift;
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 
 use sysid_core::{Estimate, Problem};
@@ -54,7 +55,7 @@ impl Profiles {
         profiles: &[Profile],
     ) -> Self {
         let names = problem.names();
-        let base = optimum.nll.unwrap_or(optimum.cost / 2.0);
+        let base = sysid_profile::nll(optimum);
         let panels = profiles
             .iter()
             .map(|p| {
@@ -105,67 +106,61 @@ impl Figure for Profiles {
             let caption = format!("{}: {}", panel.name, panel.label);
             if panel.log && x0 > 0.0 {
                 let (lo, hi) = (x0 / 1.2, x1 * 1.2);
-                let mut chart = ChartBuilder::on(top)
-                    .caption(caption, (FONT, 13))
-                    .margin(8)
-                    .x_label_area_size(28)
-                    .y_label_area_size(44)
-                    .build_cartesian_2d((lo..hi).log_scale(), -0.05 * y1..1.05 * y1)?;
-                chart
-                    .configure_mesh()
-                    .y_desc("ΔNLL")
-                    .x_label_formatter(&|v| tick(*v))
-                    .y_label_formatter(&|v| tick(*v))
-                    .label_style((FONT, 11))
-                    .draw()?;
-                draw_profile(&mut chart, panel, self.threshold, (lo, hi), y1)?;
-                let mut others = ChartBuilder::on(bottom)
-                    .margin(8)
-                    .x_label_area_size(28)
-                    .y_label_area_size(44)
-                    .build_cartesian_2d((lo..hi).log_scale(), others_range(panel).log_scale())?;
-                others
-                    .configure_mesh()
-                    .x_desc(panel.name.as_str())
-                    .y_desc("others / optimum")
-                    .x_label_formatter(&|v| tick(*v))
-                    .y_label_formatter(&|v| tick(*v))
-                    .label_style((FONT, 11))
-                    .draw()?;
-                draw_others(&mut others, panel, &self.names)?;
+                self.column((top, bottom), panel, caption, ((lo..hi).log_scale(), lo, hi), y1)?;
             } else {
                 let (lo, hi) = padded(x0, x1, 0.05);
-                let mut chart = ChartBuilder::on(top)
-                    .caption(caption, (FONT, 13))
-                    .margin(8)
-                    .x_label_area_size(28)
-                    .y_label_area_size(44)
-                    .build_cartesian_2d(lo..hi, -0.05 * y1..1.05 * y1)?;
-                chart
-                    .configure_mesh()
-                    .y_desc("ΔNLL")
-                    .x_label_formatter(&|v| tick(*v))
-                    .y_label_formatter(&|v| tick(*v))
-                    .label_style((FONT, 11))
-                    .draw()?;
-                draw_profile(&mut chart, panel, self.threshold, (lo, hi), y1)?;
-                let mut others = ChartBuilder::on(bottom)
-                    .margin(8)
-                    .x_label_area_size(28)
-                    .y_label_area_size(44)
-                    .build_cartesian_2d(lo..hi, others_range(panel).log_scale())?;
-                others
-                    .configure_mesh()
-                    .x_desc(panel.name.as_str())
-                    .y_desc("others / optimum")
-                    .x_label_formatter(&|v| tick(*v))
-                    .y_label_formatter(&|v| tick(*v))
-                    .label_style((FONT, 11))
-                    .draw()?;
-                draw_others(&mut others, panel, &self.names)?;
+                self.column((top, bottom), panel, caption, (lo..hi, lo, hi), y1)?;
             }
         }
         Ok(())
+    }
+}
+
+impl Profiles {
+    /// One unknown's column: the profile on `top`, the others' paths on `bottom`, both over
+    /// the axis `x` (from `lo` to `hi`, linear or logarithmic), ΔNLL up to `y1`.
+    fn column<DB, X>(
+        &self,
+        (top, bottom): (&DrawingArea<DB, Shift>, &DrawingArea<DB, Shift>),
+        panel: &ProfilePanel,
+        caption: String,
+        (x, lo, hi): (X, f64, f64),
+        y1: f64,
+    ) -> DrawResult<DB>
+    where
+        DB: DrawingBackend,
+        DB::ErrorType: 'static,
+        X: AsRangedCoord<Value = f64> + Clone,
+        X::CoordDescType: ValueFormatter<f64>,
+    {
+        let mut chart = ChartBuilder::on(top)
+            .caption(caption, (FONT, 13))
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(44)
+            .build_cartesian_2d(x.clone(), -0.05 * y1..1.05 * y1)?;
+        chart
+            .configure_mesh()
+            .y_desc("ΔNLL")
+            .x_label_formatter(&|v| tick(*v))
+            .y_label_formatter(&|v| tick(*v))
+            .label_style((FONT, 11))
+            .draw()?;
+        draw_profile(&mut chart, panel, self.threshold, (lo, hi), y1)?;
+        let mut others = ChartBuilder::on(bottom)
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(44)
+            .build_cartesian_2d(x, others_range(panel).log_scale())?;
+        others
+            .configure_mesh()
+            .x_desc(panel.name.as_str())
+            .y_desc("others / optimum")
+            .x_label_formatter(&|v| tick(*v))
+            .y_label_formatter(&|v| tick(*v))
+            .label_style((FONT, 11))
+            .draw()?;
+        draw_others(&mut others, panel, &self.names)
     }
 }
 

@@ -240,15 +240,8 @@ impl SystemReport<'_> {
                 return Ok(());
             }
         };
-        let json: serde_json::Map<String, serde_json::Value> = profiles
-            .iter()
-            .map(|p| {
-                let record = serde_json::json!({
-                    "interval": p.interval, "label": p.label, "points": p.points,
-                });
-                (p.name.clone(), record)
-            })
-            .collect();
+        let json: serde_json::Map<String, serde_json::Value> =
+            profiles.iter().map(|p| (p.name.clone(), serde_json::json!(p.record()))).collect();
         write(&dir.join("profiles.json"), &serde_json::to_string_pretty(&json)?)?;
         let title = format!("{system}: profile likelihoods");
         let figure = Profiles::new(title, problem, optimum, options.threshold, &profiles);

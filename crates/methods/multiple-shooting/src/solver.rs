@@ -37,14 +37,15 @@
 //!
 //! The nodes then merge into the trajectory (s_j = y(τ_j) of z, d = 0): with no defects the
 //! condensed step is single shooting's Gauss–Newton step, so the iteration takes it from that
-//! linearization, with the same bounded subproblem and line search (μ no longer matters),
-//! instead of sweeping the intervals again. This needs residual rows, so a continuous record
-//! stays with the nodes to the end.
+//! linearization, with the same bounded subproblem, instead of sweeping the intervals again;
+//! a step that does not lower ε is shortened along the Levenberg curve
+//! ([`halve_along_curve`], as goodman-halving), not by the line search (μ no longer matters).
+//! This needs residual rows, so a continuous record stays with the nodes to the end.
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
     Advance, BoxSolution, Curve, Estimate, Evaluations, Failure, FitError, Iterate,
-    LinearLeastSquares, Method, PlannedNoise, Problem, Proposal, Rule, Step, drive,
+    LinearLeastSquares, Linearization, Method, PlannedNoise, Problem, Proposal, Rule, Step, drive,
     halve_along_curve, minimise_in_box,
 };
 use sysid_ode::System;
@@ -119,13 +120,21 @@ struct Shooting {
     nodes: Vec<Vec<f64>>,
     shots: Option<Vec<Shot>>,
     penalty: f64,
-    proposed: Option<Direction>,
+    proposed: Option<Proposed>,
     /// The nodes have merged into the trajectory: the iteration goes on as single shooting.
     merged: bool,
     /// The Levenberg curve a merged iteration shortens its steps along.
     curve: Curve,
     /// The driver's step tolerance (the least step a merged iteration shortens to).
     step_tolerance: f64,
+}
+
+/// The step of the last proposal, which the advance takes.
+enum Proposed {
+    /// With the nodes: along the direction, by the line search on the merit function.
+    Nodes(Direction),
+    /// Merged: single shooting's Gauss–Newton step δz from the iterate's linearization.
+    Merged(Vec<f64>, Box<Linearization>),
 }
 
 /// A step of the variables with what the line search needs.
@@ -330,7 +339,28 @@ impl<S: System> Step<S> for Shooting {
         proposal: Proposal,
     ) -> Result<Advance, Failure> {
         let problem = ev.problem();
-        let direction = self.proposed.take().expect("a proposal to follow");
+        let direction = match self.proposed.take().expect("a proposal to follow") {
+            Proposed::Nodes(direction) => direction,
+            Proposed::Merged(dz, lin) => {
+                // Single shooting's Gauss–Newton step, shortened along the Levenberg curve
+                // where it does not lower the cost (as goodman-halving: a line search crawls
+                // where the step overshoots in a sloppy direction).
+                let first = self.curve.first(&lin, DVector::from_vec(dz));
+                let advance = halve_along_curve(
+                    ev,
+                    &lin,
+                    &mut self.curve,
+                    (first, proposal.z),
+                    MAX_BACKTRACKS,
+                    self.step_tolerance,
+                    self.max_condition,
+                )?;
+                return Ok(match advance {
+                    Advance::Moved(next) => Advance::Moved(next.with(DEFECT, 0.0)),
+                    other => other,
+                });
+            }
+        };
         let trial_z = |alpha: f64, full: bool| {
             if full {
                 proposal.z.clone()
@@ -338,48 +368,6 @@ impl<S: System> Step<S> for Shooting {
                 problem.unknowns().moved(&current.z, &direction.dz, alpha)
             }
         };
-        if self.merged
-            && let Some(lin) = current.linearization.as_ref()
-        {
-            // Single shooting's Gauss–Newton step, shortened along the Levenberg curve where
-            // it does not lower the cost (as goodman-halving: a line search crawls where the
-            // step overshoots in a sloppy direction).
-            let first = self.curve.first(lin, DVector::from_vec(direction.dz));
-            let advance = halve_along_curve(
-                ev,
-                lin,
-                &mut self.curve,
-                (first, proposal.z),
-                MAX_BACKTRACKS,
-                self.step_tolerance,
-                self.max_condition,
-            )?;
-            return Ok(match advance {
-                Advance::Moved(next) => Advance::Moved(next.with(DEFECT, 0.0)),
-                other => other,
-            });
-        }
-        if self.merged {
-            // Single shooting: the full step with sensitivities (accepted, it is the next
-            // linearization), shorter ones without.
-            let accepted = line_search(problem, &direction, |alpha, full| {
-                let z = trial_z(alpha, full);
-                let evaluated = if full {
-                    ev.linearize(&z).map(|l| (l.cost, Some(l)))
-                } else {
-                    ev.residuals(&z).map(|r| (r.norm_squared(), None))
-                };
-                Ok(tolerate(evaluated)?.map(|(cost, lin)| (cost, (z, cost, lin))))
-            })?;
-            let Some((z, cost, lin)) = accepted else { return Ok(Advance::Stop(Rule::NoDescent)) };
-            return Ok(Advance::Moved(
-                match lin {
-                    Some(lin) => Iterate::linearized(lin),
-                    None => Iterate::new(z, cost),
-                }
-                .with(DEFECT, 0.0),
-            ));
-        }
         let accepted = line_search(problem, &direction, |alpha, full| {
             let z = trial_z(alpha, full);
             let nodes: Vec<Vec<f64>> = self
@@ -414,10 +402,10 @@ impl Shooting {
             None => ev.linearize(&current.z)?,
         };
         let w = lin.residuals.as_ref().expect("merged only with residual rows");
-        let (solution, dz) = self.bounded_step(problem, &current.z, &w.jacobian, &w.r)?;
-        let slope = 2.0 * w.r.dot(&(&w.jacobian * &dz));
-        let direction = Direction { merit: lin.cost, slope, dz: solution.x, dnodes: Vec::new() };
-        Ok(self.proposal(problem, current, direction, solution.condition))
+        let (solution, _) = self.bounded_step(problem, &current.z, &w.jacobian, &w.r)?;
+        let z = problem.unknowns().moved(&current.z, &solution.x, 1.0);
+        self.proposed = Some(Proposed::Merged(solution.x, Box::new(lin)));
+        Ok(Proposal { z, condition: Some(solution.condition), gradient_norm: None, stop: None })
     }
 
     /// The minimiser of ‖r + JΔz‖² over the box the bounds leave around z.
@@ -446,7 +434,7 @@ impl Shooting {
         condition: f64,
     ) -> Proposal {
         let next = problem.unknowns().moved(&current.z, &direction.dz, 1.0);
-        self.proposed = Some(direction);
+        self.proposed = Some(Proposed::Nodes(direction));
         Proposal { z: next, condition: Some(condition), gradient_norm: None, stop: None }
     }
 }
