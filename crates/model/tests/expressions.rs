@@ -59,7 +59,9 @@ proptest! {
         // num-dual's tanh overflows to NaN beyond |x| ≈ 355 (it forms e^{2x}); the f64 path
         // gives ±1 there. The dual numbers are the reference only where they are finite.
         prop_assume!(dual.re.is_finite());
-        prop_assert!((dual.re - value).abs() <= 1e-13 * value.abs().max(1.0));
+        // 1e-11, as in symbolic.rs: nested tangents (cos(tan(tan t)) near a pole of the
+        // outer tan) amplify the two paths' rounding past 1e-13.
+        prop_assert!((dual.re - value).abs() <= 1e-11 * value.abs().max(1.0));
         let f = |x: f64| program.eval::<f64>(t, &[x, y], &[k], &[]);
         let central = |h: f64| (f(x + h) - f(x - h)) / (2.0 * h);
         let (coarse, fine) = (central(1e-4), central(5e-5));
