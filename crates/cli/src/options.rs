@@ -25,8 +25,12 @@ pub struct SourceArgs {
     #[arg(long, value_name = "NAME", conflicts_with = "model")]
     pub system: Option<String>,
     /// A model file (TOML; its keys in docs/model-files.md).
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "petab")]
     pub model: Option<PathBuf>,
+    /// A PEtab problem (its YAML file; docs/petab.md), imported as a model file with several
+    /// experiments: the start is the parameter table's nominal values.
+    #[arg(long, value_name = "YAML", conflicts_with_all = ["system", "data"])]
+    pub petab: Option<PathBuf>,
     // A catalogue system has data of its own: --data with --system is an error, not ignored.
     // `requires = "model"` alone does not refuse it: clap drops a requirement that conflicts
     // with an argument given (--model conflicts with --system).
@@ -37,6 +41,26 @@ pub struct SourceArgs {
     /// study's trials (trial i draws from the random stream i of this seed).
     #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub seed: u64,
+}
+
+impl SourceArgs {
+    /// The model file or PEtab problem given, if any.
+    pub fn file(&self) -> Option<&std::path::Path> {
+        self.model.as_deref().or(self.petab.as_deref())
+    }
+
+    /// Reads `path`: a model file, or the PEtab problem imported as one.
+    pub fn load(&self, path: &std::path::Path) -> anyhow::Result<sysid_model::Model> {
+        match self.petab {
+            Some(_) => Ok(sysid_petab::import(path)?.model),
+            None => Ok(sysid_model::Model::load(path)?),
+        }
+    }
+
+    /// What kind of problem `file` is, in a report's words.
+    pub fn kind(&self) -> &'static str {
+        if self.petab.is_some() { "PEtab problem" } else { "model file" }
+    }
 }
 
 /// The help of `--method`: every method of the registry, one line each.

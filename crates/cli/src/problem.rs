@@ -4,7 +4,6 @@
 
 use anyhow::Context as _;
 use sysid_core::{Estimate, Expected, Failure, FitRecord, Method, Problem, Termination};
-use sysid_model::Model;
 use sysid_montecarlo::MultistartOptions;
 use sysid_montecarlo::multistart::Starts;
 use sysid_ode::System;
@@ -59,7 +58,7 @@ pub fn no_source() -> anyhow::Error {
     anyhow::anyhow!(
         "no problem given: name a catalogue system with --system NAME (`sysid systems` lists \
          them; e.g. --system falling-body) or a model file with --model FILE (e.g. --model \
-         examples/kinetics/model.toml)"
+         examples/kinetics/model.toml) or a PEtab problem with --petab FILE.yaml"
     )
 }
 
@@ -72,14 +71,14 @@ pub fn visit_system<V: Visit>(name: &str, visit: V) -> anyhow::Result<V::Output>
 
 /// Builds the problem of `source` and hands it to `with`.
 pub fn with_problem<W: WithProblem>(source: &SourceArgs, with: W) -> anyhow::Result<W::Output> {
-    match (&source.system, &source.model) {
+    match (&source.system, source.file()) {
         (Some(name), _) => visit_system(name, Catalogue { seed: source.seed, with })?,
         (None, Some(path)) => {
-            let model = Model::load(path)?;
+            let model = source.load(path)?;
             let problem = model.problem(source.data.as_deref())?;
             let context = Context {
                 name: path.display().to_string(),
-                summary: "model file".into(),
+                summary: source.kind().into(),
                 ..Context::default()
             };
             with.run(problem, context)

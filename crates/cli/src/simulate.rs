@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail};
 use clap::Args;
 use sysid_core::{Data, Record};
-use sysid_model::Model;
 use sysid_ode::System;
 use sysid_systems::{Case, Visit};
 
@@ -42,7 +41,7 @@ pub struct SimulateArgs {
 
 /// Runs `sysid simulate`.
 pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
-    let text = match (&args.source.system, &args.source.model) {
+    let text = match (&args.source.system, args.source.file()) {
         (Some(name), _) => {
             if !(args.step > 0.0 && args.step.is_finite()) {
                 bail!("--step must be positive, got {}", args.step);
@@ -74,7 +73,7 @@ fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
         }
         set.push((name.trim().to_string(), value));
     }
-    let model = Model::load(path)?;
+    let model = args.source.load(path)?;
     Ok(model.simulate(&set, args.source.data.as_deref(), &times, args.experiment.as_deref())?)
 }
 

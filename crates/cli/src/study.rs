@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
-use sysid_model::Model;
 use sysid_montecarlo::files::{self, RunOptions, Shard};
 use sysid_montecarlo::{Scenario, Study, StudySpec, basin};
 use sysid_ode::System;
@@ -120,15 +119,26 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     if args.basin.is_some() && (args.shard.is_some() || args.resume) {
         bail!("a basin map runs in one go: --shard and --resume are for trials");
     }
-    match (&args.source.system, &args.source.model) {
+    match (&args.source.system, args.source.file()) {
         (Some(name), _) => {
             let settings = method_settings(args);
             visit_system(name, FromCase { args, methods, settings })?
         }
         (None, Some(path)) => {
-            let model = Model::load(path)?;
+            let model = args.source.load(path)?;
             let mut settings = method_settings(args);
-            settings.insert("model".into(), sha256(path)?);
+            // A PEtab problem's SBML and tables are in the model it was imported as and the
+            // data tables it holds in memory.
+            let held = |e: &sysid_model::ExperimentSpec| {
+                model.file.tables.iter().find(|t| t.0 == e.file).map(|t| format!("{:?}", t.1))
+            };
+            settings.insert(
+                "model".into(),
+                match args.source.petab {
+                    Some(_) => sha256_of(model.file.text.as_bytes()),
+                    None => sha256(path)?,
+                },
+            );
             if model.file.experiments.is_empty() {
                 let data = match &args.source.data {
                     Some(data) => data.clone(),
@@ -137,7 +147,11 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
                 settings.insert("data".into(), sha256(&data)?);
             }
             for e in &model.file.experiments {
-                settings.insert(format!("data of {}", e.name), sha256(&e.file)?);
+                let digest = match held(e) {
+                    Some(table) => sha256_of(table.as_bytes()),
+                    None => sha256(&e.file)?,
+                };
+                settings.insert(format!("data of {}", e.name), digest);
             }
             let problem = prepare(
                 model.problem(args.source.data.as_deref())?,
@@ -181,10 +195,14 @@ fn method_settings(args: &StudyArgs) -> BTreeMap<String, String> {
 
 /// "sha256:…" of a file's contents.
 fn sha256(path: &Path) -> anyhow::Result<String> {
-    use sha2::{Digest, Sha256};
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let digest = Sha256::digest(&bytes);
-    Ok(format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>()))
+    Ok(sha256_of(&bytes))
+}
+
+fn sha256_of(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    let digest = Sha256::digest(bytes);
+    format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>())
 }
 
 impl Visit for FromCase<'_> {

@@ -3,4 +3,5 @@
 
 mod cli;
 mod model_files;
+mod petab;
 mod study;

@@ -190,12 +190,17 @@ fn resolve<S: System>(system: &S, data: &Data, s: &Series) -> Result<Observable,
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
             return Err(invalid(format!("value at t = {} is {}", times[i], values[i])));
         }
-        if let Some(i) = times.windows(2).position(|w| w[1] <= w[0]) {
-            return Err(invalid(format!(
-                "times must increase: {} follows {}",
-                times[i + 1],
-                times[i]
-            )));
+        // Discrete samples may repeat a time (replicates); a record's points may not.
+        let back = |w: &[f64]| match data.record {
+            Kind::Discrete => w[1] < w[0],
+            _ => w[1] <= w[0],
+        };
+        if let Some(i) = times.windows(2).position(back) {
+            let what = match data.record {
+                Kind::Discrete => "times must not decrease",
+                _ => "times must increase",
+            };
+            return Err(invalid(format!("{what}: {} follows {}", times[i + 1], times[i])));
         }
     }
     if let Some(weights) = &s.sample_weights {

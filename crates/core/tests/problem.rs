@@ -87,8 +87,13 @@ fn data_errors() {
         e(Data::discrete().series("z", &[0.0], &[1.0])).to_string(),
         "measured series `z` is not a state or output of the system (observable: y, v)"
     );
+    // Discrete samples may repeat a time (replicates), not go back; a record's may not.
     assert_eq!(
-        e(Data::discrete().series("y", &[0.0, 1.0, 1.0, 2.0], &[0.0; 4])).to_string(),
+        e(Data::discrete().series("y", &[0.0, 2.0, 1.0], &[0.0; 3])).to_string(),
+        "measured series `y`: times must not decrease: 1 follows 2"
+    );
+    assert_eq!(
+        e(Data::continuous(0.0, 2.0).series("y", &[0.0, 1.0, 1.0, 2.0], &[0.0; 4])).to_string(),
         "measured series `y`: times must increase: 1 follows 1"
     );
     assert_eq!(

@@ -86,10 +86,19 @@ pub fn read_from(
     start: Start<'_>,
 ) -> Result<ModelData, ModelError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| ModelError::file(&file, e.to_string()))?;
-    let text = without_bom(&text);
-    check_time_column(text, &file)?;
-    let table = Table::parse(text, &file).map_err(table_error)?;
+    let held = model.tables.iter().find(|(p, _)| p == path).map(|(_, t)| t.clone());
+    let (text, table) = match held {
+        Some(table) => (String::new(), table),
+        None => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| ModelError::file(&file, e.to_string()))?;
+            let text = without_bom(&text).to_string();
+            check_time_column(&text, &file)?;
+            let table = Table::parse(&text, &file).map_err(table_error)?;
+            (text, table)
+        }
+    };
+    let text = text.as_str();
     check_columns(model, &table, &file)?;
     check_weights(model, &table, &file)?;
     let signals = input_signals(model, &table, &file)?;

@@ -87,6 +87,26 @@ pub enum Func {
     Min,
     /// max(a, b)
     Max,
+    /// if(c, a, b): a where c ≠ 0, else b (also where c is NaN).
+    If,
+    /// lt(a, b): 1 if a < b, else 0.
+    Lt,
+    /// le(a, b): 1 if a ≤ b, else 0.
+    Le,
+    /// gt(a, b): 1 if a > b, else 0.
+    Gt,
+    /// ge(a, b): 1 if a ≥ b, else 0.
+    Ge,
+    /// eq(a, b): 1 if a = b, else 0.
+    Eq,
+    /// ne(a, b): 1 if a ≠ b, else 0.
+    Ne,
+    /// and(a, b): 1 if both are nonzero, else 0.
+    And,
+    /// or(a, b): 1 if either is nonzero, else 0.
+    Or,
+    /// not(a): 1 if a = 0, else 0.
+    Not,
 }
 
 impl Func {
@@ -102,11 +122,49 @@ impl Func {
             "abs" => Func::Abs,
             "min" => Func::Min,
             "max" => Func::Max,
+            "if" => Func::If,
+            "lt" => Func::Lt,
+            "le" => Func::Le,
+            "gt" => Func::Gt,
+            "ge" => Func::Ge,
+            "eq" => Func::Eq,
+            "ne" => Func::Ne,
+            "and" => Func::And,
+            "or" => Func::Or,
+            "not" => Func::Not,
             _ => return None,
         })
     }
     fn arity(self) -> usize {
-        if matches!(self, Func::Min | Func::Max) { 2 } else { 1 }
+        match self {
+            Func::If => 3,
+            Func::Min
+            | Func::Max
+            | Func::Lt
+            | Func::Le
+            | Func::Gt
+            | Func::Ge
+            | Func::Eq
+            | Func::Ne
+            | Func::And
+            | Func::Or => 2,
+            _ => 1,
+        }
+    }
+
+    /// Whether it is a function of one argument compiled to a [`Node::Func`].
+    fn is_unary(self) -> bool {
+        matches!(
+            self,
+            Func::Exp
+                | Func::Log
+                | Func::Sqrt
+                | Func::Sin
+                | Func::Cos
+                | Func::Tan
+                | Func::Tanh
+                | Func::Abs
+        )
     }
 }
 
@@ -386,7 +444,7 @@ fn unknown_function(name: &str, position: usize) -> ExprError {
     ExprError {
         position,
         message: format!(
-            "unknown function `{name}` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max)"
+            "unknown function `{name}` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max, if, lt, le, gt, ge, eq, ne, and, or, not)"
         ),
     }
 }
@@ -433,7 +491,11 @@ fn constant(e: &Expr) -> Option<f64> {
         }
         Expr::Call(Func::Min, args, _) => constant(&args[0])?.min(constant(&args[1])?),
         Expr::Call(Func::Max, args, _) => constant(&args[0])?.max(constant(&args[1])?),
-        Expr::Call(f, args, _) => eval_func(*f, constant(&args[0])?),
+        Expr::Call(f, args, _) if f.is_unary() => eval_func(*f, constant(&args[0])?),
+        Expr::Call(f, args, _) => {
+            let values: Vec<f64> = args.iter().map(constant).collect::<Option<_>>()?;
+            switch(*f, &values)
+        }
     })
 }
 
@@ -544,6 +606,33 @@ pub(crate) enum Node {
     Func(Func, Operand),
     Min(Operand, Operand),
     Max(Operand, Operand),
+    /// c if a < b, else d: the comparisons, logic and `if`.
+    Less(Operand, Operand, Operand, Operand),
+}
+
+/// The value of a comparison, logical function or `if` at numbers.
+#[expect(clippy::float_cmp, reason = "eq and ne are exact, as SBML's are")]
+fn switch(f: Func, v: &[f64]) -> f64 {
+    let truth = |b: bool| if b { 1.0 } else { 0.0 };
+    match f {
+        Func::If => {
+            if 0.0 < v[0].abs() {
+                v[1]
+            } else {
+                v[2]
+            }
+        }
+        Func::Lt => truth(v[0] < v[1]),
+        Func::Le => truth(v[0] <= v[1]),
+        Func::Gt => truth(v[0] > v[1]),
+        Func::Ge => truth(v[0] >= v[1]),
+        Func::Eq => truth(v[0] == v[1]),
+        Func::Ne => truth(v[0] != v[1]),
+        Func::And => truth(0.0 < v[0].abs() && 0.0 < v[1].abs()),
+        Func::Or => truth(0.0 < v[0].abs() || 0.0 < v[1].abs()),
+        Func::Not => truth(v[0] == 0.0),
+        _ => unreachable!("not a switch"),
+    }
 }
 
 /// A compiled expression.
@@ -643,11 +732,76 @@ impl Program {
                     _ => self.node(Node::Max(a, b)),
                 }
             }
-            _ => match a {
+            f if f.is_unary() => match a {
                 Const(x) => Const(eval_func(f, x)),
                 a => self.node(Node::Func(f, a)),
             },
+            f => {
+                let mut operands = vec![a];
+                for arg in &args[1..] {
+                    operands.push(self.add(arg, resolve)?);
+                }
+                self.switch(f, &operands)
+            }
         })
+    }
+
+    /// c if a < b, else d; folded when a and b are constant.
+    fn less(&mut self, a: Operand, b: Operand, c: Operand, d: Operand) -> Operand {
+        match (a, b) {
+            (Operand::Const(x), Operand::Const(y)) => {
+                if x < y {
+                    c
+                } else {
+                    d
+                }
+            }
+            _ if c == d => c,
+            _ => self.node(Node::Less(a, b, c, d)),
+        }
+    }
+
+    /// A comparison, logical function or `if` as [`Node::Less`] nodes: each is a choice
+    /// between its values by one comparison, so its derivative is the chosen value's.
+    fn switch(&mut self, f: Func, v: &[Operand]) -> Operand {
+        use Operand::Const;
+        let (zero, one) = (Const(0.0), Const(1.0));
+        // 1 where x ≠ 0 (|x| > 0), else c.
+        let nonzero = |p: &mut Self, x: Operand, yes: Operand, no: Operand| {
+            let magnitude = match x {
+                Const(c) => Const(c.abs()),
+                x => p.node(Node::Func(Func::Abs, x)),
+            };
+            p.less(zero, magnitude, yes, no)
+        };
+        match f {
+            Func::If => nonzero(self, v[0], v[1], v[2]),
+            Func::Lt => self.less(v[0], v[1], one, zero),
+            Func::Gt => self.less(v[1], v[0], one, zero),
+            Func::Le => self.less(v[1], v[0], zero, one),
+            Func::Ge => self.less(v[0], v[1], zero, one),
+            Func::Eq => {
+                let at_most = self.less(v[1], v[0], zero, one);
+                self.less(v[0], v[1], zero, at_most)
+            }
+            Func::Ne => {
+                let above = self.less(v[1], v[0], one, zero);
+                self.less(v[0], v[1], one, above)
+            }
+            Func::Not => {
+                let at_most = self.less(zero, v[0], zero, one);
+                self.less(v[0], zero, zero, at_most)
+            }
+            Func::And => {
+                let second = nonzero(self, v[1], one, zero);
+                nonzero(self, v[0], second, zero)
+            }
+            Func::Or => {
+                let second = nonzero(self, v[1], one, zero);
+                nonzero(self, v[0], one, second)
+            }
+            _ => unreachable!("not a switch"),
+        }
     }
 
     /// Evaluates at (t, y, α, u) for any scalar.
@@ -746,7 +900,7 @@ fn compute<T: Scalar>(node: Node, get: impl Fn(Operand) -> T) -> T {
                 Func::Tan => x.tan(),
                 Func::Tanh => x.tanh(),
                 Func::Abs => x.abs(),
-                Func::Min | Func::Max => unreachable!("compiled to Min and Max nodes"),
+                _ => unreachable!("compiled to nodes of their own"),
             }
         }
         Node::Min(a, b) => {
@@ -756,6 +910,13 @@ fn compute<T: Scalar>(node: Node, get: impl Fn(Operand) -> T) -> T {
         Node::Max(a, b) => {
             let (x, y) = (get(a), get(b));
             if y.re() > x.re() { y } else { x }
+        }
+        Node::Less(a, b, c, d) => {
+            if get(a).re() < get(b).re() {
+                get(c)
+            } else {
+                get(d)
+            }
         }
     }
 }
@@ -770,7 +931,7 @@ pub(crate) fn eval_func(f: Func, x: f64) -> f64 {
         Func::Tan => x.tan(),
         Func::Tanh => x.tanh(),
         Func::Abs => x.abs(),
-        Func::Min | Func::Max => unreachable!("two-argument functions are folded on their own"),
+        _ => unreachable!("functions of several arguments are folded on their own"),
     }
 }
 

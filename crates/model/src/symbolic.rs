@@ -310,6 +310,10 @@ impl Graph {
                     let (a, b) = (get(a), get(b));
                     self.max(a, b)
                 }
+                Node::Less(a, b, c, d) => {
+                    let (a, b, c, d) = (get(a), get(b), get(c), get(d));
+                    self.less(a, b, c, d)
+                }
             };
             ids.push(id);
         }
@@ -458,7 +462,7 @@ impl Graph {
                 let sign = self.signum(a);
                 self.mul(sign, da)
             }
-            Func::Min | Func::Max => unreachable!("min and max are terms of their own"),
+            _ => unreachable!("functions of several arguments are terms of their own"),
         }
     }
 }
@@ -528,7 +532,7 @@ fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (T
                     Func::Tan => Instr::Tan(a),
                     Func::Tanh => Instr::Tanh(a),
                     Func::Abs => Instr::Abs(a),
-                    Func::Min | Func::Max => unreachable!("min and max are terms of their own"),
+                    _ => unreachable!("functions of several arguments are terms of their own"),
                 }
             }
             Term::Signum(a) => Instr::Signum(r(a)),

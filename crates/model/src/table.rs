@@ -154,6 +154,47 @@ impl Table {
         Ok(Self { source: source.to_string(), headers, time, lines, columns })
     }
 
+    /// A table built in memory (an imported problem's measurements): `rows` of a time and
+    /// one cell per column after it, sorted here by time (stably). Unlike a CSV file, a time
+    /// may repeat: replicates at one time are rows of their own. `source` names the table in
+    /// errors; its rows have no file lines.
+    pub fn from_rows(
+        source: &str,
+        headers: Vec<String>,
+        mut rows: Vec<(f64, Vec<Option<f64>>)>,
+    ) -> Result<Self, TableError> {
+        let err = |message: String| TableError {
+            source: source.to_string(),
+            line: None,
+            position: None,
+            column: None,
+            message,
+        };
+        if rows.is_empty() {
+            return Err(err("no data rows".into()));
+        }
+        if let Some((t, _)) = rows.iter().find(|(t, cells)| {
+            !t.is_finite()
+                || cells.len() + 1 != headers.len()
+                || cells.iter().flatten().any(|v| !v.is_finite())
+        }) {
+            return Err(err(format!(
+                "a row at time {t} is not finite or has the wrong number of cells"
+            )));
+        }
+        rows.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut columns = vec![Vec::with_capacity(rows.len()); headers.len() - 1];
+        let mut time = Vec::with_capacity(rows.len());
+        for (t, cells) in rows {
+            time.push(t);
+            for (c, v) in cells.into_iter().enumerate() {
+                columns[c].push(v);
+            }
+        }
+        let lines = vec![0; time.len()];
+        Ok(Self { source: source.to_string(), headers, time, lines, columns })
+    }
+
     /// The file line of data row `row` (0-based, in time order).
     pub fn line(&self, row: usize) -> Option<u64> {
         self.lines.get(row).copied().filter(|&l| l > 0)

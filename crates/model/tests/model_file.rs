@@ -247,7 +247,7 @@ fn equations() {
         ),
         (
             format!("{HEAD}[equations]\nx = \"foo(x)\"\ny = \"x\"\n"),
-            "models/m.toml:4:6: equation of x: unknown function `foo` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max)",
+            "models/m.toml:4:6: equation of x: unknown function `foo` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max, if, lt, le, gt, ge, eq, ne, and, or, not)",
         ),
         (
             format!("{HEAD}[equations]\nx = \"min(x)\"\ny = \"x\"\n"),

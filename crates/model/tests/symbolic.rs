@@ -224,3 +224,50 @@ proptest! {
         }
     }
 }
+
+/// The comparisons, the logic and `if` (what an imported SBML piecewise becomes): their
+/// values at and around the switch, and their derivatives, the chosen branch's, against
+/// dual numbers on both sides of it.
+#[test]
+fn comparisons_logic_and_if() {
+    let value = |text: &str, t: f64, x: f64| {
+        let program = Program::compile(&parse(text).expect("parses"), &resolve).expect("compiles");
+        program.eval(t, &[x, 0.0], &[0.0], &[])
+    };
+    for (text, expected) in [
+        ("lt(t, 2)", [1.0_f64, 0.0, 0.0]),
+        ("le(t, 2)", [1.0, 1.0, 0.0]),
+        ("gt(t, 2)", [0.0, 0.0, 1.0]),
+        ("ge(t, 2)", [0.0, 1.0, 1.0]),
+        ("eq(t, 2)", [0.0, 1.0, 0.0]),
+        ("ne(t, 2)", [1.0, 0.0, 1.0]),
+        ("not(eq(t, 2))", [1.0, 0.0, 1.0]),
+        ("and(ge(t, 2), le(t, 2))", [0.0, 1.0, 0.0]),
+        ("or(lt(t, 2), gt(t, 2))", [1.0, 0.0, 1.0]),
+        ("if(le(t, 2), 3 * t, -1)", [3.0, 6.0, -1.0]),
+    ] {
+        for (t, want) in [1.0_f64, 2.0, 3.0].into_iter().zip(expected) {
+            assert_eq!(value(text, t, 0.0).to_bits(), want.to_bits(), "{text} at t = {t}");
+        }
+    }
+    // A NaN condition takes the else branch, as a false one does.
+    assert_eq!(value("if(x, 1, 2)", 0.0, f64::NAN).to_bits(), 2.0_f64.to_bits());
+    let text = r#"
+states = ["x", "y"]
+parameters = ["k", "c"]
+[equations]
+x = "if(and(le(t, c), gt(x, 0.5)), -k * x^2, k * y) + if(or(lt(y, 0.3), not(eq(k, 1))), sin(y), 0)"
+y = "if(ge(x * y, c), x - y, exp(-k * y))"
+[initial]
+x = 1.0
+y = 0.5
+[known]
+c = 1.0
+[unknowns]
+k = 0.7
+[data]
+file = "unused.csv"
+"#;
+    let file = sysid_model::ModelFile::parse(text, Path::new("switch.toml")).expect("reads");
+    agree(&Model { file }, 400, 7);
+}

@@ -158,6 +158,9 @@ pub struct ModelFile {
     pub integrator: Integrator,
     /// Byte offset of the `states` key, to locate model-wide errors.
     pub states_at: usize,
+    /// Data tables held in memory, by the data-file path they stand for: an imported
+    /// problem's measurements (a PEtab measurement table), read instead of that file.
+    pub tables: Vec<(PathBuf, crate::table::Table)>,
 }
 
 /// The top-level keys: the sections of a model file.
@@ -247,6 +250,7 @@ impl ModelFile {
             experiments,
             integrator,
             states_at: names.states_at,
+            tables: Vec::new(),
         })
     }
 }

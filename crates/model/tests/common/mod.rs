@@ -92,6 +92,29 @@ pub fn reference(e: &Expr, x: f64, y: f64, k: f64, t: f64) -> f64 {
                 Func::Abs => a.abs(),
                 Func::Min => a.min(r(&args[1])),
                 Func::Max => a.max(r(&args[1])),
+                Func::If => {
+                    if a != 0.0 && !a.is_nan() {
+                        r(&args[1])
+                    } else {
+                        r(&args[2])
+                    }
+                }
+                f => {
+                    let b = args.get(1).map_or(0.0, r);
+                    let truth = match f {
+                        Func::Lt => a < b,
+                        Func::Le => a <= b,
+                        Func::Gt => a > b,
+                        Func::Ge => a >= b,
+                        Func::Eq => a.partial_cmp(&b) == Some(std::cmp::Ordering::Equal),
+                        Func::Ne => a.partial_cmp(&b) != Some(std::cmp::Ordering::Equal),
+                        Func::And => a != 0.0 && b != 0.0 && !a.is_nan() && !b.is_nan(),
+                        Func::Or => (a != 0.0 && !a.is_nan()) || (b != 0.0 && !b.is_nan()),
+                        Func::Not => a == 0.0,
+                        _ => unreachable!("every function is listed"),
+                    };
+                    f64::from(u8::from(truth))
+                }
             }
         }
     }

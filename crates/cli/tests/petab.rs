@@ -1,0 +1,49 @@
+//! PEtab problems from the command line: `--petab` on the commands that read a problem,
+//! the NLL at nominal in the JSON, refusals with exit 2 and one line.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn sysid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sysid")).args(args).output().expect("the binary runs")
+}
+
+fn problem(name: &str) -> String {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
+    root.join(name).join(format!("{name}.yaml")).display().to_string()
+}
+
+/// `fit --max-iterations 0` evaluates at the nominal parameters: Boehm's NLL is AMICI's
+/// reference to 1e-3 (AMICI's own check; 8.4e-7 here).
+#[test]
+fn fit_at_nominal_prints_the_nll() {
+    let boehm = problem("Boehm_JProteomeRes2014");
+    let out = sysid(&["fit", "--petab", &boehm, "--max-iterations", "0", "--format", "json"]);
+    let json: serde_json::Value =
+        serde_json::from_slice(&out.stdout).expect("JSON on standard output");
+    let nll = json["nll"].as_f64().expect("an nll");
+    assert!((nll - 138.22199693517703).abs() <= 1e-3, "{nll}");
+    assert_eq!(json["iterations"].as_u64(), Some(0));
+}
+
+/// A feature that is not supported, a missing file, and --petab with --model or --data:
+/// exit 2, one line naming it.
+#[test]
+fn refusals_exit_2_with_one_line() {
+    let weber = problem("Weber_BMC2015");
+    let boehm = problem("Boehm_JProteomeRes2014");
+    for (args, expected) in [
+        (vec!["fit", "--petab", weber.as_str()], "preequilibration"),
+        (vec!["simulate", "--petab", weber.as_str(), "--times", "0:1:1"], "preequilibration"),
+        (vec!["fit", "--petab", "no/such.yaml"], "no/such.yaml: cannot be read"),
+        (vec!["fit", "--petab", boehm.as_str(), "--model", "m.toml"], "cannot be used with"),
+        (vec!["fit", "--petab", boehm.as_str(), "--data", "d.csv"], "cannot be used with"),
+    ] {
+        let out = sysid(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+        assert!(out.stdout.is_empty());
+    }
+}

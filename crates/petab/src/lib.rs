@@ -1,0 +1,1052 @@
+//! # sysid-petab: PEtab problems as sysid model files
+//!
+//! A PEtab problem (PEtab-dev/PEtab, format v1) is an SBML model and four TSV tables
+//! (conditions, measurements, observables, parameters) tied together by a YAML file. This
+//! crate reads them and writes the same problem as a multi-experiment model file
+//! ([`sysid_model::ModelFile`]), so that every method, study and report works on it without
+//! knowing where it came from:
+//!
+//! * the SBML species, compartments, parameters, reactions and rules become states,
+//!   parameters and equations ([`sbml`]: the subset it reads, and what it refuses by name);
+//! * each simulation condition becomes an experiment that sets the condition table's
+//!   parameters; its measurements are a data table held in memory (times may repeat);
+//! * each observable, with the observable and noise parameters of a measurement row put in
+//!   place of its `observableParameter{n}_{id}` / `noiseParameter{n}_{id}`, becomes an
+//!   output with its σ and its transformation (one output per distinct replacement);
+//! * the parameter table's estimated parameters become the unknowns, with their bounds, on a
+//!   log scale where `parameterScale` is `log` or `log10` (the optimum does not depend on
+//!   the base), starting from `nominalValue`; the others are known.
+//!
+//! Preequilibration, steady-state measurements (time `inf`), events and laplace noise are
+//! refused naming the feature. Every error names the file, the line and the column.
+#![warn(missing_docs)]
+
+pub mod math;
+pub mod sbml;
+pub mod tsv;
+
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::Deserialize;
+use sysid_model::table::Table;
+use sysid_model::{Model, ModelError, ModelFile};
+
+use math::{Math, parse_formula};
+use sbml::{Initial, Sbml};
+use tsv::{Cell, Tsv};
+
+/// A PEtab problem, imported.
+#[derive(Clone, Debug)]
+pub struct Imported {
+    /// The problem as a model file, its measurements held in memory.
+    pub model: Model,
+    /// The model file's text (what `sysid` would read as `--model`, but for the data).
+    pub text: String,
+    /// Priors of the parameter table (`objectivePriorType`), not part of the model file.
+    pub priors: Vec<Prior>,
+}
+
+/// A prior on an estimated parameter.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Prior {
+    /// The parameter.
+    pub parameter: String,
+    /// `objectivePriorType`, e.g. `parameterScaleNormal`.
+    pub kind: String,
+    /// `objectivePriorParameters`.
+    pub parameters: Vec<f64>,
+}
+
+#[derive(Deserialize)]
+struct ProblemFile {
+    format_version: serde_saphyr_value::Version,
+    parameter_file: String,
+    problems: Vec<SubProblem>,
+}
+
+#[derive(Deserialize)]
+struct SubProblem {
+    sbml_files: Vec<String>,
+    condition_files: Vec<String>,
+    measurement_files: Vec<String>,
+    observable_files: Vec<String>,
+}
+
+mod serde_saphyr_value {
+    use serde::Deserialize;
+
+    /// `format_version`: a number or a string.
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    pub enum Version {
+        Number(f64),
+        Text(String),
+    }
+
+    impl Version {
+        pub fn is_one(&self) -> bool {
+            match self {
+                Version::Number(v) => (*v - 1.0).abs() < 1e-12,
+                Version::Text(s) => s.trim() == "1" || s.trim().starts_with("1."),
+            }
+        }
+    }
+}
+
+/// Words the model file's expression language keeps for itself: an SBML or PEtab id that is
+/// one of them gets a trailing `_`.
+const RESERVED: &[&str] = &[
+    "t", "exp", "log", "sqrt", "sin", "cos", "tan", "tanh", "abs", "min", "max", "if", "lt", "le",
+    "gt", "ge", "eq", "ne", "and", "or", "not",
+];
+
+/// Imports the PEtab problem of the YAML file `yaml`.
+pub fn import(yaml: &Path) -> Result<Imported, ModelError> {
+    let name = yaml.display().to_string();
+    let text = std::fs::read_to_string(yaml)
+        .map_err(|e| ModelError::file(&name, format!("cannot be read: {e}")))?;
+    let problem: ProblemFile = serde_saphyr::from_str(&text).map_err(|e| {
+        ModelError::file(&name, format!("not a PEtab problem file: {}", first_line(&e.to_string())))
+    })?;
+    if !problem.format_version.is_one() {
+        return Err(ModelError::file(&name, "only PEtab format version 1 is supported"));
+    }
+    let [sub] = problem.problems.as_slice() else {
+        return Err(ModelError::file(&name, "`problems` must list exactly one problem"));
+    };
+    let base = yaml.parent().unwrap_or(Path::new(""));
+    let [sbml_file] = sub.sbml_files.as_slice() else {
+        return Err(ModelError::file(&name, "`sbml_files` must name exactly one SBML file"));
+    };
+    let sbml_path = base.join(sbml_file);
+    let sbml_text = std::fs::read_to_string(&sbml_path).map_err(|e| {
+        ModelError::file(&sbml_path.display().to_string(), format!("cannot be read: {e}"))
+    })?;
+    let sbml = Sbml::parse(&sbml_text, &sbml_path.display().to_string())?;
+    let read_all = |files: &[String], what: &str| -> Result<Vec<Tsv>, ModelError> {
+        if files.is_empty() {
+            return Err(ModelError::file(&name, format!("no {what} file")));
+        }
+        files.iter().map(|f| Tsv::read(&base.join(f))).collect()
+    };
+    let tables = Tables {
+        parameters: Tsv::read(&base.join(&problem.parameter_file))?,
+        conditions: read_all(&sub.condition_files, "condition")?,
+        measurements: read_all(&sub.measurement_files, "measurement")?,
+        observables: read_all(&sub.observable_files, "observable")?,
+    };
+    Builder::new(&sbml, &tables, yaml)?.build()
+}
+
+fn first_line(s: &str) -> &str {
+    s.lines().next().unwrap_or(s)
+}
+
+struct Tables {
+    parameters: Tsv,
+    conditions: Vec<Tsv>,
+    measurements: Vec<Tsv>,
+    observables: Vec<Tsv>,
+}
+
+/// A row of the parameter table.
+#[derive(Clone, Debug)]
+struct Parameter {
+    nominal: f64,
+    estimate: bool,
+    lower: f64,
+    upper: f64,
+    log: bool,
+}
+
+/// An observable of the observable table.
+struct Observable {
+    formula: Math,
+    noise: Math,
+    transform: &'static str,
+}
+
+/// An output of the model file: one observable with one set of replacements.
+struct Output {
+    observable: String,
+    value: String,
+    sigma: Sigma,
+    transform: &'static str,
+}
+
+#[derive(Clone, PartialEq)]
+enum Sigma {
+    Number(f64),
+    /// An expression in which [`OWN`] stands for the output's own name.
+    Expression(String),
+}
+
+/// A measurement: its time, its output's index and its value.
+type Sample = (f64, usize, f64);
+
+/// Stands for the output's own value in a σ expression until the output is named.
+const OWN: &str = "\u{1}own\u{1}";
+
+struct Builder<'a> {
+    sbml: &'a Sbml,
+    tables: &'a Tables,
+    yaml: &'a Path,
+    /// The model file's name of each SBML and PEtab id.
+    names: HashMap<String, String>,
+    /// Assignment rules and the initial assignments of parameters, resolved.
+    rules: HashMap<String, Math>,
+    parameters: BTreeMap<String, (Parameter, usize)>,
+    observables: HashMap<String, Observable>,
+}
+
+impl<'a> Builder<'a> {
+    fn new(sbml: &'a Sbml, tables: &'a Tables, yaml: &'a Path) -> Result<Self, ModelError> {
+        let mut b = Self {
+            sbml,
+            tables,
+            yaml,
+            names: HashMap::new(),
+            rules: HashMap::new(),
+            parameters: BTreeMap::new(),
+            observables: HashMap::new(),
+        };
+        b.read_parameters()?;
+        b.read_observables()?;
+        b.name_ids();
+        b.resolve_rules()?;
+        Ok(b)
+    }
+
+    fn read_parameters(&mut self) -> Result<(), ModelError> {
+        let t = &self.tables.parameters;
+        let id = t.required("parameterId")?;
+        let scale = t.column("parameterScale");
+        let (lower, upper) = (t.column("lowerBound"), t.column("upperBound"));
+        let nominal = t.required("nominalValue")?;
+        let estimate = t.required("estimate")?;
+        for row in 0..t.rows.len() {
+            let pid = t.cell(row, id);
+            if pid.text.is_empty() {
+                return Err(pid.err("a parameter needs an id"));
+            }
+            let e = t.cell(row, estimate);
+            let estimated = match e.text {
+                "1" => true,
+                "0" => false,
+                other => return Err(e.err(format!("`{other}`: estimate is 0 or 1"))),
+            };
+            let log = match scale.map(|c| t.cell(row, c)) {
+                None => false,
+                Some(c) => match c.text {
+                    "" | "lin" => false,
+                    "log" | "log10" => true,
+                    other => {
+                        return Err(c.err(format!("`{other}`: the scale is lin, log or log10")));
+                    }
+                },
+            };
+            let bound = |column: Option<usize>, default: f64| -> Result<f64, ModelError> {
+                match column.map(|c| t.cell(row, c)) {
+                    Some(c) if !c.is_blank() => c.number(),
+                    _ => Ok(default),
+                }
+            };
+            let p = Parameter {
+                nominal: t.cell(row, nominal).number()?,
+                estimate: estimated,
+                lower: bound(lower, f64::NEG_INFINITY)?,
+                upper: bound(upper, f64::INFINITY)?,
+                log,
+            };
+            if estimated {
+                let c = t.cell(row, nominal);
+                if !p.nominal.is_finite() || p.nominal < p.lower || p.nominal > p.upper {
+                    return Err(c.err(format!(
+                        "nominal value {} of `{}` is not within its bounds [{}, {}]",
+                        p.nominal, pid.text, p.lower, p.upper
+                    )));
+                }
+                if log && !(p.lower > 0.0 || p.lower == f64::NEG_INFINITY && p.nominal > 0.0) {
+                    return Err(c.err(format!(
+                        "`{}` is estimated on a log scale, so its bounds and nominal value must be positive",
+                        pid.text
+                    )));
+                }
+            }
+            if self.parameters.insert(pid.text.to_string(), (p, row)).is_some() {
+                return Err(pid.err(format!("parameter `{}` is listed twice", pid.text)));
+            }
+        }
+        Ok(())
+    }
+
+    fn read_observables(&mut self) -> Result<(), ModelError> {
+        for t in &self.tables.observables {
+            let id = t.required("observableId")?;
+            let formula = t.required("observableFormula")?;
+            let noise = t.required("noiseFormula")?;
+            for row in 0..t.rows.len() {
+                let oid = t.cell(row, id);
+                let parse = |c: Cell<'_>| {
+                    parse_formula(c.text).map_err(|e| {
+                        let mut err = c.err(format!("`{}`: {}", c.text, e.message));
+                        err.column = err.column.map(|col| col + e.position);
+                        err
+                    })
+                };
+                let transform = match t.cell_named(row, "observableTransformation") {
+                    None => "lin",
+                    Some(c) => match c.text {
+                        "" | "lin" => "lin",
+                        "log" => "log",
+                        "log10" => "log10",
+                        other => {
+                            return Err(c.err(format!(
+                                "`{other}`: the transformation is lin, log or log10"
+                            )));
+                        }
+                    },
+                };
+                if let Some(c) = t.cell_named(row, "noiseDistribution") {
+                    match c.text {
+                        "" | "normal" => {}
+                        "laplace" => {
+                            return Err(c.err("laplace noise is not supported (only normal)"));
+                        }
+                        other => {
+                            return Err(
+                                c.err(format!("`{other}`: the noise distribution is normal"))
+                            );
+                        }
+                    }
+                }
+                let observable = Observable {
+                    formula: parse(t.cell(row, formula))?,
+                    noise: parse(t.cell(row, noise))?,
+                    transform,
+                };
+                if self.observables.insert(oid.text.to_string(), observable).is_some() {
+                    return Err(oid.err(format!("observable `{}` is defined twice", oid.text)));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Gives every SBML and PEtab id its model-file name: itself, or with trailing `_`s
+    /// when it is a reserved word.
+    fn name_ids(&mut self) {
+        let s = self.sbml;
+        let ids = s
+            .species
+            .iter()
+            .map(|x| x.id.clone())
+            .chain(s.compartments.iter().map(|c| c.0.clone()))
+            .chain(s.parameters.iter().map(|p| p.0.clone()))
+            .chain(self.parameters.keys().cloned())
+            .chain(self.observables.keys().cloned());
+        let mut taken: Vec<String> = Vec::new();
+        for id in ids {
+            if self.names.contains_key(&id) {
+                continue;
+            }
+            let mut name = id.clone();
+            while RESERVED.contains(&name.as_str()) || taken.contains(&name) {
+                name.push('_');
+            }
+            taken.push(name.clone());
+            self.names.insert(id, name);
+        }
+    }
+
+    fn name(&self, id: &str) -> String {
+        self.names.get(id).cloned().unwrap_or_else(|| id.to_string())
+    }
+
+    fn sbml_file(&self) -> String {
+        let dir = self.yaml.parent().unwrap_or(Path::new(""));
+        dir.join("model").display().to_string()
+    }
+
+    /// Assignment rules, and initial assignments of parameters and compartments (which the
+    /// parameter table does not set), substituted into each other.
+    fn resolve_rules(&mut self) -> Result<(), ModelError> {
+        let s = self.sbml;
+        let species = |n: &str| s.species.iter().any(|x| x.id == n);
+        let mut raw: HashMap<String, Math> = HashMap::new();
+        for (v, m) in &s.initial_assignments {
+            if !species(v)
+                && !self.parameters.contains_key(v)
+                && !s.rate_rules.iter().any(|r| &r.0 == v)
+            {
+                raw.insert(v.clone(), m.clone());
+            }
+        }
+        for (v, m) in &s.assignment_rules {
+            raw.insert(v.clone(), m.clone());
+        }
+        let mut resolved: HashMap<String, Math> = HashMap::new();
+        for key in raw.keys() {
+            let m = resolve(key, &raw, &mut resolved, &mut Vec::new()).map_err(|cycle| {
+                ModelError::file(
+                    &self.sbml_file(),
+                    format!(
+                        "assignment rules refer to each other in a cycle: {}",
+                        cycle.join(" → ")
+                    ),
+                )
+            })?;
+            resolved.insert(key.clone(), m);
+        }
+        self.rules = resolved;
+        Ok(())
+    }
+
+    /// An expression with the rules substituted.
+    fn ruled(&self, m: &Math) -> Math {
+        m.substitute(&|n| self.rules.get(n).cloned())
+    }
+
+    fn build(self) -> Result<Imported, ModelError> {
+        let s = self.sbml;
+        let rate_ruled = |n: &str| s.rate_rules.iter().find(|r| r.0 == n).map(|r| &r.1);
+        let compartment = |id: &str| s.compartments.iter().find(|c| c.0 == id);
+        // States: the species no assignment rule gives, and parameters with rate rules.
+        let species: Vec<&sbml::Species> =
+            s.species.iter().filter(|x| !self.rules.contains_key(&x.id)).collect();
+        let mut states: Vec<String> = species.iter().map(|x| x.id.clone()).collect();
+        states.extend(
+            s.parameters.iter().filter(|p| rate_ruled(&p.0).is_some()).map(|p| p.0.clone()),
+        );
+        for (v, _) in &s.rate_rules {
+            if !states.contains(v) {
+                return Err(ModelError::file(
+                    &self.sbml_file(),
+                    format!("a rate rule for `{v}`, which is no species or parameter"),
+                ));
+            }
+        }
+        // Equations.
+        let mut equations: Vec<(String, Math)> = Vec::new();
+        for x in &species {
+            let eq = if let Some(r) = rate_ruled(&x.id) {
+                self.ruled(r)
+            } else if x.fixed {
+                Math::Num(0.0)
+            } else {
+                let mut terms = Vec::new();
+                for r in &s.reactions {
+                    let net: f64 =
+                        r.products.iter().filter(|p| p.0 == x.id).map(|p| p.1).sum::<f64>()
+                            - r.reactants.iter().filter(|p| p.0 == x.id).map(|p| p.1).sum::<f64>();
+                    if net != 0.0 {
+                        let rate = self.ruled(&r.rate);
+                        terms.push(match net {
+                            1.0 => rate,
+                            -1.0 => Math::Neg(Box::new(rate)),
+                            _ => Math::Mul(vec![Math::Num(net), rate]),
+                        });
+                    }
+                }
+                let sum = match terms.len() {
+                    0 => Math::Num(0.0),
+                    1 => terms.remove(0),
+                    _ => Math::Add(terms),
+                };
+                match (x.amount, sum) {
+                    (_, Math::Num(0.0)) => Math::Num(0.0),
+                    (true, sum) => sum,
+                    (false, sum) => {
+                        Math::Div(Box::new(sum), Box::new(Math::Name(x.compartment.clone())))
+                    }
+                }
+            };
+            equations.push((x.id.clone(), eq));
+        }
+        for p in s.parameters.iter().filter(|p| rate_ruled(&p.0).is_some()) {
+            equations.push((p.0.clone(), self.ruled(rate_ruled(&p.0).expect("filtered"))));
+        }
+        // Initial values.
+        let species_initial = |x: &sbml::Species| -> Result<Math, ModelError> {
+            if let Some((_, m)) = s.initial_assignments.iter().find(|a| a.0 == x.id) {
+                return Ok(self.ruled(m));
+            }
+            let size = || Math::Name(x.compartment.clone());
+            match (x.initial, x.amount) {
+                (Some(Initial::Concentration(c)), false) | (Some(Initial::Amount(c)), true) => {
+                    Ok(Math::Num(c))
+                }
+                (Some(Initial::Concentration(c)), true) => {
+                    Ok(Math::Mul(vec![Math::Num(c), size()]))
+                }
+                (Some(Initial::Amount(a)), false) => {
+                    Ok(Math::Div(Box::new(Math::Num(a)), Box::new(size())))
+                }
+                (None, _) => Err(ModelError::file(
+                    &self.sbml_file(),
+                    format!("species `{}` has no initial value", x.id),
+                )),
+            }
+        };
+        let mut initial: Vec<(String, Math)> = Vec::new();
+        for x in &species {
+            initial.push((x.id.clone(), species_initial(x)?));
+        }
+        for p in s.parameters.iter().filter(|p| rate_ruled(&p.0).is_some()) {
+            let m = s
+                .initial_assignments
+                .iter()
+                .find(|a| a.0 == p.0)
+                .map_or(Math::Num(p.1), |a| self.ruled(&a.1));
+            initial.push((p.0.clone(), m));
+        }
+        // An initial value may use another species' initial value.
+        let initial_of: HashMap<String, Math> = initial.iter().cloned().collect();
+        let initial: Vec<(String, Math)> =
+            initial.iter().map(|(x, m)| (x.clone(), substitute_deep(m, &initial_of, 8))).collect();
+
+        // Model parameters: the SBML's parameters and compartments that are no rule or state,
+        // and the PEtab parameters an output uses.
+        let mut model_parameters: Vec<String> = s
+            .parameters
+            .iter()
+            .map(|p| p.0.clone())
+            .chain(s.compartments.iter().map(|c| c.0.clone()))
+            .filter(|p| !self.rules.contains_key(p) && !states.contains(p))
+            .collect();
+        let sbml_id = |id: &str| {
+            s.parameters.iter().any(|p| p.0 == id)
+                || compartment(id).is_some()
+                || s.species.iter().any(|x| x.id == id)
+        };
+
+        // Outputs and the experiments' data, from the measurement table.
+        let mut outputs: Vec<Output> = Vec::new();
+        let mut experiments: Vec<(String, Vec<Sample>)> = Vec::new();
+        for t in &self.tables.measurements {
+            let c_obs = t.required("observableId")?;
+            let c_cond = t.required("simulationConditionId")?;
+            let c_value = t.required("measurement")?;
+            let c_time = t.required("time")?;
+            for row in 0..t.rows.len() {
+                if let Some(c) = t.cell_named(row, "preequilibrationConditionId")
+                    && !c.is_blank()
+                {
+                    return Err(c.err(format!(
+                        "preequilibration (condition `{}`) is not supported",
+                        c.text
+                    )));
+                }
+                let oc = t.cell(row, c_obs);
+                let observable = self.observables.get(oc.text).ok_or_else(|| {
+                    oc.err(format!("`{}` is not in the observable table", oc.text))
+                })?;
+                let cc = t.cell(row, c_cond);
+                if !self.tables.conditions.iter().any(|ct| condition_row(ct, cc.text).is_some()) {
+                    return Err(
+                        cc.err(format!("condition `{}` is not in the condition table", cc.text))
+                    );
+                }
+                let time_cell = t.cell(row, c_time);
+                let time = time_cell.number()?;
+                if time.is_infinite() {
+                    return Err(
+                        time_cell.err("steady-state measurements (time inf) are not supported")
+                    );
+                }
+                if time < 0.0 {
+                    return Err(
+                        time_cell.err(format!("time {time} is before the experiment starts at 0"))
+                    );
+                }
+                let value_cell = t.cell(row, c_value);
+                let value = value_cell.number()?;
+                if !value.is_finite() {
+                    return Err(value_cell.err("the measurement is not finite"));
+                }
+                let replace =
+                    |formula: &Math, kind: &str, column: &str| -> Result<Math, ModelError> {
+                        let given = t.cell_named(row, column);
+                        let list: Vec<&str> = match given {
+                            Some(c) if !c.is_blank() => c.text.split(';').map(str::trim).collect(),
+                            _ => Vec::new(),
+                        };
+                        let prefix = format!("{kind}Parameter");
+                        let suffix = format!("_{}", oc.text);
+                        let mut missing = None;
+                        let m = formula.substitute(&|n| {
+                            let k: usize =
+                                n.strip_prefix(&prefix)?.strip_suffix(&suffix)?.parse().ok()?;
+                            list.get(k.checked_sub(1)?).map(|v| match tsv::parse_number(v) {
+                                Some(x) => Math::Num(x),
+                                None => Math::Name((*v).to_string()),
+                            })
+                        });
+                        for n in m.names() {
+                            if n.starts_with(&prefix) && n.ends_with(&suffix) {
+                                missing = Some(n);
+                            }
+                        }
+                        if let Some(n) = missing {
+                            let at = given.unwrap_or(oc);
+                            return Err(at.err(format!(
+                                "`{n}` of observable `{}` is not given a value in `{column}`",
+                                oc.text
+                            )));
+                        }
+                        Ok(m)
+                    };
+                let formula = replace(&observable.formula, "observable", "observableParameters")?;
+                let noise = replace(&observable.noise, "noise", "noiseParameters")?;
+                let value_math = self.resolve_names(&self.ruled(&formula), oc, &states, None)?;
+                let noise_math =
+                    self.resolve_names(&self.ruled(&noise), oc, &states, Some(oc.text))?;
+                let value_text = value_math.render(&|n| self.name(n));
+                let sigma = match noise_math.number() {
+                    Some(v) if v > 0.0 && v.is_finite() => Sigma::Number(v),
+                    Some(v) => {
+                        let c = t.cell_named(row, "noiseParameters").unwrap_or(oc);
+                        return Err(
+                            c.err(format!("σ of `{}` is {v}: it must be positive", oc.text))
+                        );
+                    }
+                    None => Sigma::Expression(noise_math.render(&|n| {
+                        if n == OWN { OWN.to_string() } else { self.name(n) }
+                    })),
+                };
+                let index = match outputs.iter().position(|o| {
+                    o.observable == oc.text && o.value == value_text && o.sigma == sigma
+                }) {
+                    Some(i) => i,
+                    None => {
+                        outputs.push(Output {
+                            observable: oc.text.to_string(),
+                            value: value_text,
+                            sigma,
+                            transform: observable.transform,
+                        });
+                        outputs.len() - 1
+                    }
+                };
+                if observable.transform != "lin" && value <= 0.0 {
+                    return Err(value_cell.err(format!(
+                        "{value} is not positive, and `{}` is measured on the {} scale",
+                        oc.text, observable.transform
+                    )));
+                }
+                match experiments.iter_mut().find(|e| e.0 == cc.text) {
+                    Some(e) => e.1.push((time, index, value)),
+                    None => experiments.push((cc.text.to_string(), vec![(time, index, value)])),
+                }
+            }
+        }
+        if experiments.is_empty() {
+            return Err(ModelError::file(&self.tables.measurements[0].file, "no measurements"));
+        }
+
+        // Output names: the observable's, numbered when it has several outputs.
+        let mut output_names: Vec<String> = Vec::new();
+        for o in &outputs {
+            let count = outputs.iter().filter(|p| p.observable == o.observable).count();
+            let base = self.name(&o.observable);
+            let mut name = if count == 1 {
+                base.clone()
+            } else {
+                let k = output_names.iter().filter(|n| n.starts_with(&format!("{base}__"))).count();
+                format!("{base}__{}", k + 1)
+            };
+            while output_names.contains(&name)
+                || states.iter().any(|s| self.name(s) == name)
+                || model_parameters.iter().any(|p| self.name(p) == name)
+            {
+                name.push('_');
+            }
+            output_names.push(name);
+        }
+
+        // PEtab parameters that are no SBML id: an estimated one an output uses (or nothing
+        // uses) is a model parameter, one only σ and settings use is an unknown of its own;
+        // a known one is its nominal value.
+        let used_in_outputs: Vec<String> =
+            outputs.iter().flat_map(|o| names_in(&o.value)).collect();
+        let used_elsewhere: Vec<String> = outputs
+            .iter()
+            .filter_map(|o| match &o.sigma {
+                Sigma::Expression(e) => Some(names_in(e)),
+                Sigma::Number(_) => None,
+            })
+            .flatten()
+            .chain(self.condition_values())
+            .chain(initial.iter().flat_map(|(_, m)| m.names()).map(|n| self.name(&n)))
+            .chain(equations.iter().flat_map(|(_, m)| m.names()).map(|n| self.name(&n)))
+            .collect();
+        let mut extras: Vec<String> = Vec::new();
+        for (id, (p, _)) in &self.parameters {
+            if sbml_id(id) || !p.estimate {
+                continue;
+            }
+            let n = self.name(id);
+            if used_in_outputs.contains(&n) || !used_elsewhere.contains(&n) {
+                model_parameters.push(id.clone());
+            } else {
+                extras.push(id.clone());
+            }
+        }
+
+        // The model file.
+        let mut text = String::new();
+        let quote = |names: &[String]| {
+            names.iter().map(|n| format!("\"{}\"", self.name(n))).collect::<Vec<_>>().join(", ")
+        };
+        let _ = writeln!(
+            text,
+            "# Imported from the PEtab problem {} by sysid-petab.\n",
+            self.yaml.display()
+        );
+        let _ = writeln!(text, "states = [{}]", quote(&states));
+        let _ = writeln!(text, "parameters = [{}]\n", quote(&model_parameters));
+        let _ = writeln!(text, "[equations]");
+        for (x, m) in &equations {
+            let _ = writeln!(text, "{} = \"{}\"", self.name(x), self.render(m));
+        }
+        let _ = writeln!(text, "\n[initial]");
+        for (x, m) in &initial {
+            match m.number() {
+                Some(v) => {
+                    let _ = writeln!(text, "{} = {}", self.name(x), toml_number(v));
+                }
+                None => {
+                    let _ = writeln!(text, "{} = \"{}\"", self.name(x), self.render(m));
+                }
+            }
+        }
+        let _ = writeln!(text, "\n[known]");
+        let mut unknowns = String::new();
+        for p in &model_parameters {
+            match self.parameters.get(p) {
+                Some((q, _)) if q.estimate => {
+                    let _ = writeln!(unknowns, "{} = {}", self.name(p), unknown_entry(q));
+                }
+                Some((q, _)) => {
+                    let _ = writeln!(text, "{} = {}", self.name(p), toml_number(q.nominal));
+                }
+                None => {
+                    let value = s
+                        .parameters
+                        .iter()
+                        .find(|x| &x.0 == p)
+                        .map(|x| x.1)
+                        .or_else(|| compartment(p).map(|c| c.1))
+                        .unwrap_or(f64::NAN);
+                    if !value.is_finite() {
+                        return Err(ModelError::file(
+                            &self.sbml_file(),
+                            format!(
+                                "parameter `{p}` has no value, and the parameter table does not give one"
+                            ),
+                        ));
+                    }
+                    let _ = writeln!(text, "{} = {}", self.name(p), toml_number(value));
+                }
+            }
+        }
+        for x in &extras {
+            let (q, _) = &self.parameters[x];
+            let _ = writeln!(unknowns, "{} = {}", self.name(x), unknown_entry(q));
+        }
+        let _ = writeln!(text, "\n[outputs]");
+        for (o, name) in outputs.iter().zip(&output_names) {
+            let sigma = match &o.sigma {
+                Sigma::Number(v) => toml_number(*v),
+                Sigma::Expression(e) => format!("\"{}\"", e.replace(OWN, name)),
+            };
+            let _ = writeln!(
+                text,
+                "{name} = {{ value = \"{}\", sigma = {sigma}, transform = \"{}\" }}",
+                o.value, o.transform
+            );
+        }
+        let _ = writeln!(text, "\n[unknowns]\n{unknowns}");
+        let measurement_file = Path::new(&self.tables.measurements[0].file)
+            .file_name()
+            .map_or("measurements".into(), |f| f.to_string_lossy().to_string());
+        for (condition, _) in &experiments {
+            let _ = writeln!(text, "[[experiments]]");
+            let _ = writeln!(text, "name = \"{condition}\"");
+            let _ = writeln!(text, "file = \"{measurement_file}#{condition}\"");
+            let set = self.condition_settings(condition, &model_parameters, &states)?;
+            if !set.is_empty() {
+                let _ = writeln!(text, "set = {{ {} }}", set.join(", "));
+            }
+            let _ = writeln!(text);
+        }
+        let _ = writeln!(
+            text,
+            "[integrator]\nmethod = \"rodas4\"\nrtol = 1e-8\natol = 1e-12\nmax_steps = 200000"
+        );
+
+        let mut file = ModelFile::parse(&text, self.yaml).map_err(|e| ModelError {
+            message: format!("the model file made of this PEtab problem is refused: {} (at line {} of the text `sysid import` prints)", e.message, e.line.unwrap_or(0)),
+            line: None,
+            column: None,
+            ..e
+        })?;
+        for (spec, (condition, rows)) in file.experiments.clone().iter().zip(&experiments) {
+            let mut headers = vec!["t".to_string()];
+            let mut columns: Vec<usize> = rows.iter().map(|r| r.1).collect();
+            columns.sort_unstable();
+            columns.dedup();
+            headers.extend(columns.iter().map(|&c| output_names[c].clone()));
+            let table_rows = rows
+                .iter()
+                .map(|&(time, output, value)| {
+                    let mut cells = vec![None; columns.len()];
+                    cells[columns.iter().position(|&c| c == output).expect("listed")] = Some(value);
+                    (time, cells)
+                })
+                .collect();
+            let source = spec.file.display().to_string();
+            let table = Table::from_rows(&source, headers, table_rows).map_err(|e| {
+                ModelError::file(&source, format!("condition `{condition}`: {}", e.message))
+            })?;
+            file.tables.push((spec.file.clone(), table));
+        }
+        let priors = self.priors()?;
+        Ok(Imported { model: Model { file }, text, priors })
+    }
+
+    fn render(&self, m: &Math) -> String {
+        m.render(&|n| self.name(n))
+    }
+
+    /// Checks every name of an observable's expression is something the model has, after
+    /// putting the nominal value in place of a PEtab parameter that is not estimated.
+    fn resolve_names(
+        &self,
+        m: &Math,
+        at: Cell<'_>,
+        states: &[String],
+        own: Option<&str>,
+    ) -> Result<Math, ModelError> {
+        let s = self.sbml;
+        let m = m.substitute(&|n| {
+            if own == Some(n) {
+                return Some(Math::Name(OWN.to_string()));
+            }
+            match self.parameters.get(n) {
+                Some((p, _))
+                    if !p.estimate
+                        && !s.parameters.iter().any(|x| x.0 == n)
+                        && !s.compartments.iter().any(|c| c.0 == n) =>
+                {
+                    Some(Math::Num(p.nominal))
+                }
+                _ => None,
+            }
+        });
+        for n in m.names() {
+            let known = n == OWN
+                || states.contains(&n)
+                || self.parameters.contains_key(&n)
+                || s.parameters.iter().any(|p| p.0 == n)
+                || s.compartments.iter().any(|c| c.0 == n);
+            if !known {
+                return Err(at.err(format!(
+                    "observable `{}` uses `{n}`, which is no species, parameter or compartment of the model and not in the parameter table",
+                    at.text
+                )));
+            }
+        }
+        Ok(m)
+    }
+
+    /// Names the condition tables use as values.
+    fn condition_values(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        for t in &self.tables.conditions {
+            for row in 0..t.rows.len() {
+                for c in 2..t.headers().len() {
+                    let cell = t.cell(row, c);
+                    if !cell.is_blank() && tsv::parse_number(cell.text).is_none() {
+                        out.push(self.name(cell.text));
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The `set` entries of a condition.
+    fn condition_settings(
+        &self,
+        condition: &str,
+        model_parameters: &[String],
+        states: &[String],
+    ) -> Result<Vec<String>, ModelError> {
+        let mut out = Vec::new();
+        for t in &self.tables.conditions {
+            let Some(row) = condition_row(t, condition) else { continue };
+            for (c, target) in t.headers().iter().enumerate() {
+                if target == "conditionId" || target == "conditionName" {
+                    continue;
+                }
+                let cell = t.cell(row, c);
+                if cell.is_blank() {
+                    continue;
+                }
+                if states.contains(target) || self.sbml.species.iter().any(|x| &x.id == target) {
+                    return Err(cell.err(format!(
+                        "a condition setting the initial value of species `{target}` is not supported"
+                    )));
+                }
+                if !model_parameters.contains(target) {
+                    return Err(cell.err(format!(
+                        "`{target}` is no parameter or compartment of the model that a condition can set"
+                    )));
+                }
+                if self.parameters.get(target).is_some_and(|p| p.0.estimate) {
+                    return Err(cell.err(format!(
+                        "`{target}` is estimated (parameter table) and set by a condition"
+                    )));
+                }
+                let value = match tsv::parse_number(cell.text) {
+                    Some(v) if v.is_finite() => toml_number(v),
+                    Some(v) => return Err(cell.err(format!("{v} is not a finite number"))),
+                    None => match self.parameters.get(cell.text) {
+                        Some((p, _)) if !p.estimate => toml_number(p.nominal),
+                        Some(_) => format!("\"{}\"", self.name(cell.text)),
+                        None if self.sbml.parameters.iter().any(|p| p.0 == cell.text) => {
+                            format!("\"{}\"", self.name(cell.text))
+                        }
+                        None => {
+                            return Err(cell.err(format!(
+                                "`{}` is not a number, nor a parameter of the model or the parameter table",
+                                cell.text
+                            )));
+                        }
+                    },
+                };
+                out.push(format!("{} = {value}", self.name(target)));
+            }
+        }
+        Ok(out)
+    }
+
+    fn priors(&self) -> Result<Vec<Prior>, ModelError> {
+        let t = &self.tables.parameters;
+        let (Some(kind), parameters) =
+            (t.column("objectivePriorType"), t.column("objectivePriorParameters"))
+        else {
+            return Ok(Vec::new());
+        };
+        let mut out = Vec::new();
+        for (id, (p, row)) in &self.parameters {
+            let k = t.cell(*row, kind);
+            if k.is_blank() || !p.estimate {
+                continue;
+            }
+            let values = match parameters.map(|c| t.cell(*row, c)) {
+                Some(c) if !c.is_blank() => c
+                    .text
+                    .split(';')
+                    .map(|v| {
+                        tsv::parse_number(v).ok_or_else(|| c.err(format!("`{v}` is not a number")))
+                    })
+                    .collect::<Result<Vec<f64>, _>>()?,
+                _ => Vec::new(),
+            };
+            out.push(Prior { parameter: id.clone(), kind: k.text.to_string(), parameters: values });
+        }
+        Ok(out)
+    }
+}
+
+/// The row of `condition` in a condition table.
+fn condition_row(t: &Tsv, condition: &str) -> Option<usize> {
+    let c = t.column("conditionId")?;
+    (0..t.rows.len()).find(|&r| t.cell(r, c).text == condition)
+}
+
+/// The names of a rendered expression.
+fn names_in(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut current = String::new();
+    let mut after_digit = false;
+    for ch in text.chars().chain(std::iter::once(' ')) {
+        if ch.is_alphanumeric() || ch == '_' {
+            if current.is_empty() && (ch.is_ascii_digit() || after_digit) {
+                after_digit = true;
+                continue;
+            }
+            current.push(ch);
+        } else {
+            after_digit = false;
+            if !current.is_empty() {
+                out.push(std::mem::take(&mut current));
+            }
+        }
+    }
+    out
+}
+
+fn resolve(
+    key: &str,
+    raw: &HashMap<String, Math>,
+    done: &mut HashMap<String, Math>,
+    stack: &mut Vec<String>,
+) -> Result<Math, Vec<String>> {
+    if let Some(m) = done.get(key) {
+        return Ok(m.clone());
+    }
+    if stack.iter().any(|s| s == key) {
+        let mut cycle = stack.clone();
+        cycle.push(key.to_string());
+        return Err(cycle);
+    }
+    stack.push(key.to_string());
+    let m = &raw[key];
+    let mut replacements: HashMap<String, Math> = HashMap::new();
+    for n in m.names() {
+        if raw.contains_key(&n) {
+            let r = resolve(&n, raw, done, stack)?;
+            replacements.insert(n, r);
+        }
+    }
+    stack.pop();
+    let out = m.substitute(&|n| replacements.get(n).cloned());
+    done.insert(key.to_string(), out.clone());
+    Ok(out)
+}
+
+/// Substitutes `with` into `m` until no name of it is left, at most `depth` times.
+fn substitute_deep(m: &Math, with: &HashMap<String, Math>, depth: usize) -> Math {
+    let mut out = m.clone();
+    for _ in 0..depth {
+        if !out.names().iter().any(|n| with.contains_key(n)) {
+            break;
+        }
+        out = out.substitute(&|n| with.get(n).cloned());
+    }
+    out
+}
+
+fn toml_number(v: f64) -> String {
+    format!("{v:e}")
+}
+
+fn unknown_entry(p: &Parameter) -> String {
+    let mut s = format!("{{ guess = {}", toml_number(p.nominal));
+    if p.lower.is_finite() {
+        let _ = write!(s, ", min = {}", toml_number(p.lower));
+    }
+    if p.upper.is_finite() {
+        let _ = write!(s, ", max = {}", toml_number(p.upper));
+    }
+    if p.log {
+        s.push_str(", log = true");
+    }
+    s.push_str(" }");
+    s
+}

@@ -1,0 +1,528 @@
+//! The SBML subset the benchmark problems use, read with roxmltree: compartments, species,
+//! parameters, reactions with kinetic laws and local parameters, rate and assignment rules,
+//! initial assignments and function definitions, their MathML as [`Math`]. Anything else
+//! that changes the dynamics (events, algebraic rules, delays, fast reactions, rules on
+//! compartments) is refused naming the construct and the element's id.
+
+use std::collections::HashMap;
+
+use roxmltree::{Document, Node};
+use sysid_model::ModelError;
+
+use crate::math::{Math, Rel};
+
+/// A species.
+#[derive(Clone, Debug)]
+pub struct Species {
+    /// Its id.
+    pub id: String,
+    /// Its compartment's id.
+    pub compartment: String,
+    /// `initialConcentration` or `initialAmount`, as given.
+    pub initial: Option<Initial>,
+    /// `hasOnlySubstanceUnits`: its symbol is an amount, not a concentration.
+    pub amount: bool,
+    /// `boundaryCondition` or `constant`: reactions do not change it.
+    pub fixed: bool,
+}
+
+/// A species' initial quantity as the SBML gives it.
+#[derive(Clone, Copy, Debug)]
+pub enum Initial {
+    /// `initialConcentration`.
+    Concentration(f64),
+    /// `initialAmount`.
+    Amount(f64),
+}
+
+/// A reaction: stoichiometries and its rate (an amount per time), local parameters
+/// substituted.
+#[derive(Clone, Debug)]
+pub struct Reaction {
+    /// Its id.
+    pub id: String,
+    /// (species, stoichiometry) consumed.
+    pub reactants: Vec<(String, f64)>,
+    /// (species, stoichiometry) produced.
+    pub products: Vec<(String, f64)>,
+    /// The kinetic law.
+    pub rate: Math,
+}
+
+/// An SBML model, read.
+#[derive(Clone, Debug, Default)]
+pub struct Sbml {
+    /// (id, size) of each compartment (size 1 when not given).
+    pub compartments: Vec<(String, f64)>,
+    /// The species.
+    pub species: Vec<Species>,
+    /// (id, value) of each global parameter (NaN when not given).
+    pub parameters: Vec<(String, f64)>,
+    /// Initial assignments: (symbol, expression).
+    pub initial_assignments: Vec<(String, Math)>,
+    /// Assignment rules: (variable, expression), substituted wherever the variable is used.
+    pub assignment_rules: Vec<(String, Math)>,
+    /// Rate rules: (variable, its time derivative).
+    pub rate_rules: Vec<(String, Math)>,
+    /// The reactions.
+    pub reactions: Vec<Reaction>,
+}
+
+struct Reader<'a> {
+    doc: &'a Document<'a>,
+    file: &'a str,
+    functions: HashMap<String, (Vec<String>, Math)>,
+}
+
+impl Reader<'_> {
+    fn err(&self, node: Node<'_, '_>, message: impl Into<String>) -> ModelError {
+        let pos = self.doc.text_pos_at(node.range().start);
+        ModelError {
+            file: self.file.to_string(),
+            line: Some(pos.row as usize),
+            column: Some(pos.col as usize),
+            message: message.into(),
+        }
+    }
+
+    fn number(&self, node: Node<'_, '_>, attribute: &str) -> Result<Option<f64>, ModelError> {
+        match node.attribute(attribute) {
+            None => Ok(None),
+            Some(s) => s.trim().parse::<f64>().map(Some).map_err(|_| {
+                self.err(node, format!("`{attribute}` of `{}`: `{s}` is not a number", id(node)))
+            }),
+        }
+    }
+
+    fn flag(node: Node<'_, '_>, attribute: &str) -> bool {
+        node.attribute(attribute).is_some_and(|v| v.trim() == "true" || v.trim() == "1")
+    }
+
+    /// The expression of a `<math>` element.
+    fn math_of(&self, parent: Node<'_, '_>) -> Result<Math, ModelError> {
+        let math = child(parent, "math")
+            .ok_or_else(|| self.err(parent, format!("`{}` has no <math>", id(parent))))?;
+        let body = elements(math).next().ok_or_else(|| self.err(math, "an empty <math>"))?;
+        self.math(body)
+    }
+
+    fn math(&self, node: Node<'_, '_>) -> Result<Math, ModelError> {
+        let text = || node.text().unwrap_or_default().trim().to_string();
+        Ok(match node.tag_name().name() {
+            "ci" => Math::Name(text()),
+            "cn" => self.cn(node)?,
+            "csymbol" => {
+                let url = node.attribute("definitionURL").unwrap_or_default();
+                if url.ends_with("/time") {
+                    Math::Time
+                } else if url.ends_with("/avogadro") {
+                    Math::Num(6.022_140_76e23)
+                } else {
+                    let what = url.rsplit('/').next().unwrap_or(url);
+                    return Err(self.err(node, format!("`{what}` (csymbol) is not supported")));
+                }
+            }
+            "true" => Math::Num(1.0),
+            "false" => Math::Num(0.0),
+            "pi" => Math::Num(std::f64::consts::PI),
+            "exponentiale" => Math::Num(std::f64::consts::E),
+            "semantics" => {
+                let first =
+                    elements(node).next().ok_or_else(|| self.err(node, "empty <semantics>"))?;
+                self.math(first)?
+            }
+            "piecewise" => {
+                let mut pieces = Vec::new();
+                let mut otherwise = None;
+                for part in elements(node) {
+                    let args: Vec<Node<'_, '_>> = elements(part).collect();
+                    match (part.tag_name().name(), args.as_slice()) {
+                        ("piece", [value, condition]) => {
+                            pieces.push((self.math(*value)?, self.math(*condition)?));
+                        }
+                        ("otherwise", [value]) => otherwise = Some(Box::new(self.math(*value)?)),
+                        (other, _) => {
+                            return Err(
+                                self.err(part, format!("a malformed <{other}> in <piecewise>"))
+                            );
+                        }
+                    }
+                }
+                Math::Piecewise(pieces, otherwise)
+            }
+            "apply" => self.apply(node)?,
+            other => return Err(self.err(node, format!("MathML <{other}> is not supported"))),
+        })
+    }
+
+    fn cn(&self, node: Node<'_, '_>) -> Result<Math, ModelError> {
+        let parts: Vec<String> = node
+            .children()
+            .filter(|n| n.is_text())
+            .map(|n| n.text().unwrap_or_default().trim().to_string())
+            .filter(|s| !s.is_empty())
+            .collect();
+        let parse = |s: &str| {
+            s.parse::<f64>().map_err(|_| self.err(node, format!("<cn> `{s}` is not a number")))
+        };
+        let kind = node.attribute("type").unwrap_or("real");
+        Ok(Math::Num(match (kind, parts.as_slice()) {
+            ("e-notation", [mantissa, exponent]) => parse(&format!("{mantissa}e{exponent}"))?,
+            ("rational", [n, d]) => parse(n)? / parse(d)?,
+            ("real" | "integer" | "double", [one]) => parse(one)?,
+            _ => return Err(self.err(node, format!("a <cn> of type `{kind}` that cannot be read"))),
+        }))
+    }
+
+    fn apply(&self, node: Node<'_, '_>) -> Result<Math, ModelError> {
+        let mut children = elements(node);
+        let op = children.next().ok_or_else(|| self.err(node, "an empty <apply>"))?;
+        let rest: Vec<Node<'_, '_>> = children.collect();
+        // Qualifiers (<degree>, <logbase>) apart from the arguments.
+        let qualifier = |name: &str| -> Result<Option<Math>, ModelError> {
+            match rest.iter().find(|n| n.tag_name().name() == name) {
+                None => Ok(None),
+                Some(q) => {
+                    let inner =
+                        elements(*q).next().ok_or_else(|| self.err(*q, "empty qualifier"))?;
+                    Ok(Some(self.math(inner)?))
+                }
+            }
+        };
+        let args: Vec<Math> = rest
+            .iter()
+            .filter(|n| !matches!(n.tag_name().name(), "degree" | "logbase"))
+            .map(|n| self.math(*n))
+            .collect::<Result<_, _>>()?;
+        let name = op.tag_name().name();
+        let count = args.len();
+        let arity = |n: usize| -> Result<(), ModelError> {
+            match count == n {
+                true => Ok(()),
+                false => Err(self.err(op, format!("<{name}> with {count} arguments (needs {n})"))),
+            }
+        };
+        let mut args = args;
+        let one = |args: &mut Vec<Math>| Box::new(args.remove(0));
+        Ok(match name {
+            "plus" => match args.len() {
+                0 => Math::Num(0.0),
+                1 => args.remove(0),
+                _ => Math::Add(args),
+            },
+            "times" => match args.len() {
+                0 => Math::Num(1.0),
+                1 => args.remove(0),
+                _ => Math::Mul(args),
+            },
+            "minus" => match args.len() {
+                1 => Math::Neg(one(&mut args)),
+                _ => {
+                    arity(2)?;
+                    let a = one(&mut args);
+                    Math::Sub(a, one(&mut args))
+                }
+            },
+            "divide" => {
+                arity(2)?;
+                let a = one(&mut args);
+                Math::Div(a, one(&mut args))
+            }
+            "power" => {
+                arity(2)?;
+                let a = one(&mut args);
+                Math::Pow(a, one(&mut args))
+            }
+            "root" => {
+                arity(1)?;
+                match qualifier("degree")? {
+                    None => Math::Call("sqrt", args),
+                    Some(n) => Math::Pow(
+                        one(&mut args),
+                        Box::new(Math::Div(Box::new(Math::Num(1.0)), Box::new(n))),
+                    ),
+                }
+            }
+            "exp" | "abs" | "sin" | "cos" | "tan" | "tanh" => {
+                arity(1)?;
+                let f = crate::math::UNARY.iter().find(|f| **f == name).expect("listed");
+                Math::Call(f, args)
+            }
+            "ln" => {
+                arity(1)?;
+                Math::Call("log", args)
+            }
+            "log" => {
+                arity(1)?;
+                let base = qualifier("logbase")?.unwrap_or(Math::Num(10.0));
+                Math::Div(
+                    Box::new(Math::Call("log", args)),
+                    Box::new(Math::Call("log", vec![base])),
+                )
+            }
+            "min" | "max" if args.len() >= 2 => {
+                let f = if name == "min" { "min" } else { "max" };
+                let mut it = args.into_iter();
+                let first = it.next().expect("two");
+                it.fold(first, |a, b| Math::Call(f, vec![a, b]))
+            }
+            "eq" | "neq" | "lt" | "leq" | "gt" | "geq" => {
+                arity(2)?;
+                let rel = match name {
+                    "eq" => Rel::Eq,
+                    "neq" => Rel::Ne,
+                    "lt" => Rel::Lt,
+                    "leq" => Rel::Le,
+                    "gt" => Rel::Gt,
+                    _ => Rel::Ge,
+                };
+                let a = one(&mut args);
+                Math::Compare(rel, a, one(&mut args))
+            }
+            "and" => Math::And(args),
+            "or" => Math::Or(args),
+            "not" => {
+                arity(1)?;
+                Math::Not(one(&mut args))
+            }
+            "ci" => {
+                let f = op.text().unwrap_or_default().trim();
+                let (parameters, body) = self.functions.get(f).ok_or_else(|| {
+                    self.err(op, format!("a call of `{f}`, which is no function definition"))
+                })?;
+                if parameters.len() != args.len() {
+                    return Err(self.err(
+                        op,
+                        format!("`{f}` takes {} arguments, given {}", parameters.len(), args.len()),
+                    ));
+                }
+                body.substitute(&|n| {
+                    parameters.iter().position(|p| p == n).map(|i| args[i].clone())
+                })
+            }
+            "csymbol" => {
+                let url = op.attribute("definitionURL").unwrap_or_default();
+                let what = url.rsplit('/').next().unwrap_or(url);
+                return Err(self.err(op, format!("`{what}` (csymbol) is not supported")));
+            }
+            other => return Err(self.err(op, format!("MathML <{other}> is not supported"))),
+        })
+    }
+}
+
+fn elements<'a, 'b>(node: Node<'a, 'b>) -> impl Iterator<Item = Node<'a, 'b>> {
+    node.children().filter(Node::is_element)
+}
+
+fn child<'a, 'b>(node: Node<'a, 'b>, name: &str) -> Option<Node<'a, 'b>> {
+    elements(node).find(|n| n.tag_name().name() == name)
+}
+
+fn list<'a, 'b>(node: Node<'a, 'b>, name: &str) -> impl Iterator<Item = Node<'a, 'b>> {
+    child(node, name).into_iter().flat_map(elements)
+}
+
+fn id<'a>(node: Node<'a, '_>) -> &'a str {
+    node.attribute("id")
+        .or_else(|| node.attribute("variable"))
+        .or_else(|| node.attribute("symbol"))
+        .unwrap_or("?")
+}
+
+impl Sbml {
+    /// Reads SBML text; `file` names it in errors.
+    pub fn parse(text: &str, file: &str) -> Result<Self, ModelError> {
+        let options = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
+        let doc = Document::parse_with_options(text, options).map_err(|e| {
+            let pos = e.pos();
+            ModelError {
+                file: file.to_string(),
+                line: Some(pos.row as usize),
+                column: Some(pos.col as usize),
+                message: format!("not valid XML: {e}"),
+            }
+        })?;
+        let mut r = Reader { doc: &doc, file, functions: HashMap::new() };
+        let root = doc.root_element();
+        let model =
+            child(root, "model").ok_or_else(|| r.err(root, "no <model> in the SBML file"))?;
+        if model.attribute("conversionFactor").is_some() {
+            return Err(r.err(model, "conversion factors are not supported"));
+        }
+        let mut out = Sbml::default();
+        for f in list(model, "listOfFunctionDefinitions") {
+            let math = child(f, "math")
+                .ok_or_else(|| r.err(f, format!("function `{}` has no <math>", id(f))))?;
+            let lambda = child(math, "lambda")
+                .ok_or_else(|| r.err(math, format!("function `{}` is not a <lambda>", id(f))))?;
+            let mut parameters = Vec::new();
+            let mut body = None;
+            for part in elements(lambda) {
+                match part.tag_name().name() {
+                    "bvar" => {
+                        let ci =
+                            child(part, "ci").ok_or_else(|| r.err(part, "<bvar> without <ci>"))?;
+                        parameters.push(ci.text().unwrap_or_default().trim().to_string());
+                    }
+                    _ => body = Some(r.math(part)?),
+                }
+            }
+            let body =
+                body.ok_or_else(|| r.err(lambda, format!("function `{}` has no body", id(f))))?;
+            r.functions.insert(id(f).to_string(), (parameters, body));
+        }
+        for c in list(model, "listOfCompartments") {
+            let size = r.number(c, "size")?.or(r.number(c, "volume")?).unwrap_or(1.0);
+            out.compartments.push((id(c).to_string(), size));
+        }
+        for s in list(model, "listOfSpecies") {
+            if s.attribute("conversionFactor").is_some() {
+                return Err(
+                    r.err(s, format!("species `{}`: conversion factors are not supported", id(s)))
+                );
+            }
+            let initial =
+                match (r.number(s, "initialConcentration")?, r.number(s, "initialAmount")?) {
+                    (Some(c), _) => Some(Initial::Concentration(c)),
+                    (None, Some(a)) => Some(Initial::Amount(a)),
+                    (None, None) => None,
+                };
+            out.species.push(Species {
+                id: id(s).to_string(),
+                compartment: s.attribute("compartment").unwrap_or_default().to_string(),
+                initial,
+                amount: Reader::flag(s, "hasOnlySubstanceUnits"),
+                fixed: Reader::flag(s, "boundaryCondition") || Reader::flag(s, "constant"),
+            });
+        }
+        for p in list(model, "listOfParameters") {
+            out.parameters.push((id(p).to_string(), r.number(p, "value")?.unwrap_or(f64::NAN)));
+        }
+        for a in list(model, "listOfInitialAssignments") {
+            out.initial_assignments.push((id(a).to_string(), r.math_of(a)?));
+        }
+        let compartment = |name: &str| out.compartments.iter().any(|c| c.0 == name);
+        for rule in list(model, "listOfRules") {
+            let variable = id(rule).to_string();
+            let kind = rule.tag_name().name();
+            if kind == "algebraicRule" {
+                return Err(r.err(rule, "algebraic rules are not supported"));
+            }
+            if compartment(&variable) {
+                return Err(r.err(
+                    rule,
+                    format!("rules on compartments are not supported (compartment `{variable}`)"),
+                ));
+            }
+            let math = r.math_of(rule)?;
+            match kind {
+                "assignmentRule" => out.assignment_rules.push((variable, math)),
+                "rateRule" => out.rate_rules.push((variable, math)),
+                other => return Err(r.err(rule, format!("<{other}> is not supported"))),
+            }
+        }
+        if let Some(event) = list(model, "listOfEvents").next() {
+            return Err(r.err(event, format!("events are not supported (event `{}`)", id(event))));
+        }
+        if let Some(c) = list(model, "listOfConstraints").next() {
+            return Err(r.err(c, "constraints are not supported"));
+        }
+        for reaction in list(model, "listOfReactions") {
+            let rid = id(reaction).to_string();
+            if Reader::flag(reaction, "fast") {
+                return Err(r.err(
+                    reaction,
+                    format!("fast reactions are not supported (reaction `{rid}`)"),
+                ));
+            }
+            let references = |name: &str| -> Result<Vec<(String, f64)>, ModelError> {
+                list(reaction, name)
+                    .map(|s| {
+                        if child(s, "stoichiometryMath").is_some() {
+                            return Err(r.err(
+                                s,
+                                format!("reaction `{rid}`: stoichiometryMath is not supported"),
+                            ));
+                        }
+                        let species = s.attribute("species").unwrap_or_default().to_string();
+                        Ok((species, r.number(s, "stoichiometry")?.unwrap_or(1.0)))
+                    })
+                    .collect()
+            };
+            let reactants = references("listOfReactants")?;
+            let products = references("listOfProducts")?;
+            let law = child(reaction, "kineticLaw")
+                .ok_or_else(|| r.err(reaction, format!("reaction `{rid}` has no kinetic law")))?;
+            let mut local = Vec::new();
+            for list_name in ["listOfLocalParameters", "listOfParameters"] {
+                for p in list(law, list_name) {
+                    let value = r.number(p, "value")?.ok_or_else(|| {
+                        r.err(
+                            p,
+                            format!("local parameter `{}` of reaction `{rid}` has no value", id(p)),
+                        )
+                    })?;
+                    local.push((id(p).to_string(), value));
+                }
+            }
+            let rate = r.math_of(law)?;
+            let rate =
+                rate.substitute(&|n| local.iter().find(|l| l.0 == n).map(|l| Math::Num(l.1)));
+            out.reactions.push(Reaction { id: rid, reactants, products, rate });
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MODEL: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<sbml xmlns="http://www.sbml.org/sbml/level3/version1/core" level="3" version="1">
+  <model id="m">
+    <listOfFunctionDefinitions>
+      <functionDefinition id="mm">
+        <math xmlns="http://www.w3.org/1998/Math/MathML">
+          <lambda><bvar><ci>v</ci></bvar><bvar><ci>s</ci></bvar>
+            <apply><divide/><apply><times/><ci>v</ci><ci>s</ci></apply>
+              <apply><plus/><cn>1</cn><ci>s</ci></apply></apply>
+          </lambda>
+        </math>
+      </functionDefinition>
+    </listOfFunctionDefinitions>
+    <listOfCompartments><compartment id="c" size="2"/></listOfCompartments>
+    <listOfSpecies><species id="A" compartment="c" initialConcentration="1.5"/></listOfSpecies>
+    <listOfReactions>
+      <reaction id="r">
+        <listOfReactants><speciesReference species="A" stoichiometry="1"/></listOfReactants>
+        <kineticLaw>
+          <math xmlns="http://www.w3.org/1998/Math/MathML">
+            <apply><ci>mm</ci><ci>k</ci><cn type="e-notation"> 2 <sep/> -3 </cn></apply>
+          </math>
+          <listOfLocalParameters><localParameter id="k" value="4"/></listOfLocalParameters>
+        </kineticLaw>
+      </reaction>
+    </listOfReactions>
+  </model>
+</sbml>"#;
+
+    #[test]
+    fn function_definitions_are_inlined_and_local_parameters_substituted() {
+        let m = Sbml::parse(MODEL, "m.xml").expect("reads");
+        let rate = m.reactions[0].rate.render(&|n| n.to_string());
+        assert_eq!(rate, "4e0 * 2e-3 / (1e0 + 2e-3)");
+        assert_eq!(m.compartments, vec![("c".to_string(), 2.0)]);
+    }
+
+    #[test]
+    fn events_are_refused_by_name_with_their_line() {
+        let text = MODEL.replace(
+            "</listOfReactions>",
+            "</listOfReactions><listOfEvents><event id=\"pulse\"/></listOfEvents>",
+        );
+        let e = Sbml::parse(&text, "m.xml").unwrap_err();
+        assert!(e.message.contains("events are not supported (event `pulse`)"), "{e}");
+        assert!(e.line.is_some());
+    }
+}

@@ -1,0 +1,174 @@
+//! PEtab problems of Benchmark-Models-PEtab (tests/data/petab, BSD-3) imported and
+//! evaluated: the negative log-likelihood at the nominal parameters against AMICI's stored
+//! reference (to 1e-3, AMICI's own check) or the collection's simulated data; the features
+//! refused by name; bad input located by file, line and column.
+
+use std::path::{Path, PathBuf};
+
+use sysid_model::ModelError;
+use sysid_petab::import;
+
+fn data() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab")
+}
+
+fn yaml(problem: &str) -> PathBuf {
+    data().join(problem).join(format!("{problem}.yaml"))
+}
+
+/// The NLL (likelihood only, priors apart) at the parameter table's nominal values.
+fn nll_at_nominal(problem: &str) -> f64 {
+    let imported = import(&yaml(problem)).unwrap_or_else(|e| panic!("{problem}: {e}"));
+    let problem = imported.model.problem(None).unwrap_or_else(|e| panic!("{problem}: {e}"));
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let lin = problem.linearize(&z).expect("integrates at nominal");
+    problem.nll(&lin).expect("a likelihood")
+}
+
+/// AMICI's stored NLL at nominal (tests/benchmark_models/benchmark_models.yaml of
+/// AMICI-dev/AMICI, as llh = −NLL), checked as AMICI checks itself: to 1e-3 absolute.
+#[test]
+fn nll_at_nominal_matches_amicis_reference() {
+    let references = [
+        ("Boehm_JProteomeRes2014", 138.22199693517703),
+        ("Fujita_SciSignal2010", -53.08377736998929),
+        ("Bachmann_MSB2011", -418.40573341425295),
+        ("Elowitz_Nature2000", -63.20279991419332),
+        ("Fiedler_BMCSystBiol2016", -58.58390161681),
+        ("Bruno_JExpBot2016", -46.688176988431806),
+        ("Sneyd_PNAS2002", -319.79177818768756),
+        ("Borghans_BiophysChem1997", -83.3237191357272),
+    ];
+    for (problem, reference) in references {
+        let nll = nll_at_nominal(problem);
+        assert!((nll - reference).abs() <= 1e-3, "{problem}: NLL {nll} vs AMICI's {reference}");
+    }
+}
+
+/// Crauste: sysid's NLL agrees to 1e-7 with the one the collection's own simulated
+/// observables give (simulatedData_*.tsv: the model at nominal, as published beside the
+/// problem), and with itself at rtol 1e-12; AMICI's stored reference, 190.96521897, is
+/// 1.24e-3 above both, outside AMICI's 1e-3, so it is not the test's reference here.
+#[test]
+fn crauste_matches_the_collections_simulated_data() {
+    let dir = data().join("Crauste_CellSystems2017");
+    let table = |name: &str| {
+        let text = std::fs::read_to_string(dir.join(name)).expect("a table");
+        let mut lines = text.lines();
+        let header: Vec<String> =
+            lines.next().expect("a header").split('\t').map(String::from).collect();
+        let rows: Vec<Vec<String>> =
+            lines.map(|l| l.split('\t').map(String::from).collect()).collect();
+        (header, rows)
+    };
+    let column = |h: &[String], name: &str| h.iter().position(|c| c == name).expect("a column");
+    let (ph, parameters) = table("parameters_Crauste_CellSystems2017.tsv");
+    let (mh, measured) = table("measurementData_Crauste_CellSystems2017.tsv");
+    let (sh, simulated) = table("simulatedData_Crauste_CellSystems2017.tsv");
+    let nominal = |id: &str| -> f64 {
+        match parameters.iter().find(|r| r[column(&ph, "parameterId")] == id) {
+            Some(r) => r[column(&ph, "nominalValue")].parse().expect("a number"),
+            None => id.parse().expect("a number"),
+        }
+    };
+    let mut reference = 0.0;
+    for (m, s) in measured.iter().zip(&simulated) {
+        let sigma = nominal(&m[column(&mh, "noiseParameters")]);
+        let b: f64 = m[column(&mh, "measurement")].parse().expect("a number");
+        let y: f64 = s[column(&sh, "simulation")].parse().expect("a number");
+        reference += 0.5 * (2.0 * std::f64::consts::PI * sigma * sigma).ln()
+            + 0.5 * ((b - y) / sigma).powi(2);
+    }
+    let nll = nll_at_nominal("Crauste_CellSystems2017");
+    assert!((nll - reference).abs() <= 1e-7, "NLL {nll} vs the simulated data's {reference}");
+    assert!((nll - 190.96521897435176).abs() > 1e-3);
+}
+
+fn refusal(problem: &str) -> ModelError {
+    import(&yaml(problem)).map(|_| ()).expect_err("refused")
+}
+
+/// Preequilibration (Weber, Zheng) and events (Smith) are refused by name, where they are
+/// written.
+#[test]
+fn unsupported_features_are_refused_by_name() {
+    for problem in ["Weber_BMC2015", "Zheng_PNAS2012"] {
+        let e = refusal(problem);
+        assert!(
+            e.message.contains("preequilibration") && e.message.contains("not supported"),
+            "{e}"
+        );
+        assert!(e.file.ends_with(".tsv") && e.line == Some(2), "{e}");
+    }
+    let e = refusal("Smith_BMCSystBiol2013");
+    assert!(e.message.contains("events are not supported (event `"), "{e}");
+    assert!(e.file.ends_with(".xml") && e.line.is_some(), "{e}");
+}
+
+/// A copy of Boehm's problem in a directory of its own, with `edit` applied to one file.
+fn edited(test: &str, file: &str, edit: impl Fn(String) -> String) -> PathBuf {
+    let problem = "Boehm_JProteomeRes2014";
+    let dir = std::env::temp_dir().join(format!("sysid-petab-{test}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a directory");
+    for entry in std::fs::read_dir(data().join(problem)).expect("the problem") {
+        let path = entry.expect("an entry").path();
+        let name = path.file_name().expect("a name").to_string_lossy().to_string();
+        let text = std::fs::read_to_string(&path).expect("a file");
+        let text = if name.starts_with(file) { edit(text) } else { text };
+        std::fs::write(dir.join(&name), text).expect("written");
+    }
+    dir.join(format!("{problem}.yaml"))
+}
+
+fn error_of(path: &Path) -> String {
+    import(path).map(|_| ()).expect_err("refused").to_string()
+}
+
+/// Bad input: each error names the file, the line and the column (the cell), and what is
+/// wrong, with the offending name.
+#[test]
+fn bad_input_is_located() {
+    let e = error_of(&data().join("missing/none.yaml"));
+    assert!(e.contains("none.yaml: cannot be read"), "{e}");
+
+    let path =
+        edited("observable", "measurementData", |t| t.replacen("pSTAT5A_rel\t", "pSTAT5X\t", 1));
+    let e = error_of(&path);
+    assert!(e.contains("measurementData_Boehm_JProteomeRes2014.tsv:2:1: column `observableId`: `pSTAT5X` is not in the observable table"), "{e}");
+
+    let path = edited("formula", "observables", |t| t.replacen("(100 * pApB", "(100 * * pApB", 1));
+    let e = error_of(&path);
+    assert!(
+        e.contains("observables_Boehm_JProteomeRes2014.tsv:2:")
+            && e.contains("column `observableFormula`"),
+        "{e}"
+    );
+
+    let path = edited("condition", "measurementData", |t| t.replacen("model1_data1", "model9", 1));
+    let e = error_of(&path);
+    assert!(
+        e.contains(".tsv:2:") && e.contains("condition `model9` is not in the condition table"),
+        "{e}"
+    );
+
+    let path = edited("number", "measurementData", |t| {
+        let mut lines: Vec<String> = t.lines().map(String::from).collect();
+        let mut cells: Vec<String> = lines[1].split('\t').map(String::from).collect();
+        cells[3] = "n/a".into();
+        lines[1] = cells.join("\t");
+        lines.join("\n")
+    });
+    let e = error_of(&path);
+    assert!(
+        e.contains(".tsv:2:") && e.contains("column `measurement`: `n/a` is not a number"),
+        "{e}"
+    );
+
+    let path = edited("parameter", "observables", |t| t.replacen("specC17 - 1", "specC99 - 1", 1));
+    let e = error_of(&path);
+    assert!(e.contains("uses `specC99`, which is no species, parameter or compartment"), "{e}");
+
+    let path = edited("sbml", "model_", |t| t.replacen("<listOfReactions>", "<listOfReactions", 1));
+    let e = error_of(&path);
+    assert!(e.contains("model_Boehm_JProteomeRes2014.xml:") && e.contains("not valid XML"), "{e}");
+}
