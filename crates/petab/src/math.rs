@@ -371,7 +371,13 @@ impl Parser {
     fn error(&self, message: &str) -> FormulaError {
         let what = match self.peek() {
             None => "the end".to_string(),
-            Some((t, _)) => format!("{t:?}"),
+            Some((Token::Num(v), _)) => format!("`{v}`"),
+            Some((Token::Name(n), _)) => format!("`{n}`"),
+            Some((Token::Op(c), _)) => format!("`{c}`"),
+            Some((Token::Pow, _)) => "`^`".into(),
+            Some((Token::Open, _)) => "`(`".into(),
+            Some((Token::Close, _)) => "`)`".into(),
+            Some((Token::Comma, _)) => "`,`".into(),
         };
         FormulaError { position: self.here(), message: format!("{message}, found {what}") }
     }
@@ -564,6 +570,7 @@ mod tests {
     fn formula_errors_say_where() {
         let e = parse_formula("a + * b").unwrap_err();
         assert_eq!(e.position, 4);
+        assert_eq!(e.message, "expected a number, a name or `(`, found `*`");
         let e = parse_formula("foo(a)").unwrap_err();
         assert!(e.message.contains("unknown function `foo`"), "{}", e.message);
         assert_eq!(parse_formula("a $ b").unwrap_err().position, 2);
