@@ -30,11 +30,14 @@ fn fit_at_nominal_prints_the_nll() {
 /// exit 2, one line naming it.
 #[test]
 fn refusals_exit_2_with_one_line() {
-    let weber = problem("Weber_BMC2015");
+    let smith = problem("Smith_BMCSystBiol2013");
     let boehm = problem("Boehm_JProteomeRes2014");
     for (args, expected) in [
-        (vec!["fit", "--petab", weber.as_str()], "preequilibration"),
-        (vec!["simulate", "--petab", weber.as_str(), "--times", "0:1:1"], "preequilibration"),
+        (vec!["fit", "--petab", smith.as_str()], "events are not supported"),
+        (
+            vec!["simulate", "--petab", smith.as_str(), "--times", "0:1:1"],
+            "events are not supported",
+        ),
         (vec!["fit", "--petab", "no/such.yaml"], "no/such.yaml: cannot be read"),
         (vec!["fit", "--petab", boehm.as_str(), "--model", "m.toml"], "cannot be used with"),
         (vec!["fit", "--petab", boehm.as_str(), "--data", "d.csv"], "cannot be used with"),

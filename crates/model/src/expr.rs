@@ -610,6 +610,46 @@ pub(crate) enum Node {
     Less(Operand, Operand, Operand, Operand),
 }
 
+/// Where an expression switches in time (see [`Program::time_switches`]): at
+/// offset + s·p_k.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Switch {
+    pub(crate) offset: f64,
+    /// (k, s), if a parameter moves it.
+    pub(crate) parameter: Option<(usize, f64)>,
+}
+
+impl Switch {
+    /// The time at the parameters `p`.
+    pub(crate) fn at(&self, p: &[f64]) -> f64 {
+        self.offset + self.parameter.map_or(0.0, |(k, s)| s * p[k])
+    }
+}
+
+/// a·t + c + s·p_k.
+#[derive(Clone, Copy, Debug)]
+struct Affine {
+    t: f64,
+    c: f64,
+    p: Option<(usize, f64)>,
+}
+
+impl Affine {
+    fn times(self, x: f64) -> Self {
+        Self { t: self.t * x, c: self.c * x, p: self.p.map(|(k, s)| (k, s * x)) }
+    }
+
+    /// The sum, if it has at most one parameter.
+    fn plus(self, o: Self) -> Option<Self> {
+        let p = match (self.p, o.p) {
+            (None, p) | (p, None) => p,
+            (Some((k, s)), Some((l, r))) if k == l => Some((k, s + r)),
+            _ => return None,
+        };
+        Some(Self { t: self.t + o.t, c: self.c + o.c, p })
+    }
+}
+
 /// The value of a comparison, logical function or `if` at numbers.
 #[expect(clippy::float_cmp, reason = "eq and ne are exact, as SBML's are")]
 fn switch(f: Func, v: &[f64]) -> f64 {
@@ -820,6 +860,44 @@ impl Program {
             slots.push(value);
         }
         operand(self.root, &slots, t, y, p, u)
+    }
+
+    /// Where the expression switches in time: every comparison of an affine function of
+    /// `t`, a number and at most one parameter with zero (`le(t, t_end)`, `lt(t - t_on, 0)`,
+    /// an `if` on them).
+    pub(crate) fn time_switches(&self) -> Vec<Switch> {
+        let mut out = Vec::new();
+        for node in &self.nodes {
+            if let Node::Less(a, b, _, _) = *node
+                && let (Some(a), Some(b)) = (self.affine(a), self.affine(b))
+                && let Some(d) = a.plus(b.times(-1.0))
+                && d.t != 0.0
+            {
+                // d.t·t + d.c + s·p = 0.
+                out.push(Switch { offset: -d.c / d.t, parameter: d.p.map(|(k, s)| (k, -s / d.t)) });
+            }
+        }
+        out
+    }
+
+    /// The operand as a·t + c + s·p_k, if it is one.
+    fn affine(&self, o: Operand) -> Option<Affine> {
+        let constant = |c: f64| Affine { t: 0.0, c, p: None };
+        match o {
+            Operand::Const(c) => Some(constant(c)),
+            Operand::Var(Slot::Time) => Some(Affine { t: 1.0, c: 0.0, p: None }),
+            Operand::Var(Slot::Parameter(k)) => Some(Affine { t: 0.0, c: 0.0, p: Some((k, 1.0)) }),
+            Operand::Var(_) => None,
+            Operand::Node(i) => match self.nodes[i as usize] {
+                Node::Add(a, b) => self.affine(a)?.plus(self.affine(b)?),
+                Node::Sub(a, b) => self.affine(a)?.plus(self.affine(b)?.times(-1.0)),
+                Node::AddC(a, c) => self.affine(a)?.plus(constant(c)),
+                Node::SubC(c, a) => constant(c).plus(self.affine(a)?.times(-1.0)),
+                Node::Neg(a) => Some(self.affine(a)?.times(-1.0)),
+                Node::MulC(a, c) => Some(self.affine(a)?.times(c)),
+                _ => None,
+            },
+        }
     }
 
     /// The operations, children first.

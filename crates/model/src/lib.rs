@@ -46,6 +46,7 @@ pub mod file;
 mod jit;
 mod problem;
 pub mod simulate;
+mod steady;
 pub mod symbolic;
 mod system;
 pub mod table;

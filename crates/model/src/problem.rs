@@ -17,6 +17,7 @@ use crate::data::{self, Start};
 use crate::error::ModelError;
 use crate::expr::Program;
 use crate::file::{Expression, NoiseSpec, SetValue};
+use crate::steady::SteadyState;
 use crate::{Model, ModelSystem};
 
 /// Where a parameter's value comes from in one experiment.
@@ -196,6 +197,7 @@ struct Plan<'a> {
     file: &'a Path,
     start: Start<'a>,
     set: Vec<(String, &'a SetValue)>,
+    preequilibrate: Option<Vec<(String, &'a SetValue)>>,
 }
 
 impl Model {
@@ -209,7 +211,13 @@ impl Model {
                 None => self.data_path()?,
             };
             let start = Start { t0: f.data.t0, at: f.data.t0_at, table: "[data]" };
-            vec![Plan { name: sysid_core::SINGLE_EXPERIMENT.into(), file, start, set: Vec::new() }]
+            vec![Plan {
+                name: sysid_core::SINGLE_EXPERIMENT.into(),
+                file,
+                start,
+                set: Vec::new(),
+                preequilibrate: None,
+            }]
         } else {
             if data.is_some() {
                 return Err(self.located(
@@ -223,6 +231,10 @@ impl Model {
                     file: &e.file,
                     start: Start { t0: e.t0, at: e.t0_at, table: "[[experiments]]" },
                     set: e.set.iter().map(|(p, v, _)| (p.clone(), v)).collect(),
+                    preequilibrate: e
+                        .preequilibrate
+                        .as_ref()
+                        .map(|list| list.iter().map(|(p, v, _)| (p.clone(), v)).collect()),
                 })
                 .collect()
         };
@@ -249,73 +261,22 @@ impl Model {
         for plan in &plans {
             let read = data::read_from(f, plan.file, plan.start)
                 .map_err(|e| self.in_experiment(&plan.name, e))?;
-            // The parameters as this experiment gives them.
-            let mut effective = base.clone();
-            let mut set_uses = Vec::new();
-            for (name, value) in &plan.set {
-                let q = f.parameters.iter().position(|p| p == name).expect("checked when read");
-                effective[q] = match value {
-                    SetValue::Number(x) => Source::Known(*x),
-                    SetValue::Expression(e) => match e.bare.as_deref().and_then(index) {
-                        Some(j) => Source::Unknown(j),
-                        None => {
-                            self.check_base(e, &base, &plan.name)?;
-                            let probe = Context {
-                                base: base.clone(),
-                                effective: Vec::new(),
-                                extras: extras.clone(),
-                            };
-                            let names = Names {
-                                parameters: &f.parameters,
-                                extras: &f.extras,
-                                set_uses: Vec::new(),
-                            };
-                            set_uses.push((q, probe.uses_of(&e.uses, &names, false)));
-                            Source::Expression(e.program.clone())
-                        }
-                    },
-                };
+            let set: Vec<(String, &SetValue)> = plan.set.clone();
+            let (parameters, mut initial) = self.settings(&set, &base, &extras, &plan.name)?;
+            if let Some(pre) = &plan.preequilibrate {
+                let (pre_parameters, pre_initial) =
+                    self.settings(pre, &base, &extras, &plan.name)?;
+                let steady = Arc::new(SteadyState::new(
+                    system.clone(),
+                    f.integrator,
+                    (pre_parameters, pre_initial),
+                    declared,
+                    &plan.name,
+                ));
+                initial = (0..f.states.len())
+                    .map(|i| Setting::Function(Arc::new(steady.component(i, &f.states[i]))))
+                    .collect();
             }
-            let context =
-                Arc::new(Context { base: base.clone(), effective, extras: extras.clone() });
-            let names = Names { parameters: &f.parameters, extras: &f.extras, set_uses };
-            let setting = |e: &Expression, effective: bool| -> Setting {
-                Setting::Function(Arc::new(ExpressionSetting {
-                    program: e.program.clone(),
-                    context: context.clone(),
-                    effective,
-                    uses: context.uses_of(&e.uses, &names, effective),
-                    text: e.text.clone(),
-                }))
-            };
-            let parameters: Vec<Setting> = f
-                .parameters
-                .iter()
-                .enumerate()
-                .map(|(q, name)| match &context.effective[q] {
-                    Source::Known(x) => Setting::Value(*x),
-                    Source::Unknown(j) => Setting::Unknown(declared[*j].name.clone()),
-                    Source::Expression(_) => {
-                        let (_, value) = plan.set.iter().find(|(p, _)| p == name).expect("set");
-                        let SetValue::Expression(e) = value else { unreachable!("an expression") };
-                        setting(e, false)
-                    }
-                    Source::Unset => Setting::Value(f64::NAN),
-                })
-                .collect();
-            let initial: Vec<Setting> = f
-                .states
-                .iter()
-                .map(|name| {
-                    if let Some((_, v)) = f.known.iter().find(|k| &k.0 == name) {
-                        Setting::Value(*v)
-                    } else if let Some((_, e)) = f.initial.iter().find(|k| &k.0 == name) {
-                        setting(e, true)
-                    } else {
-                        Setting::Unknown(name.clone())
-                    }
-                })
-                .collect();
             let mut data = read.data;
             for &(series, output) in &read.modelled {
                 let NoiseSpec::Expression(e) = &f.outputs[output].noise else { continue };
@@ -348,6 +309,87 @@ impl Model {
         let problem = builder.build().map_err(|e| self.problem_error(e, &plans))?;
         self.check_sigma_at_start(&problem)?;
         Ok(problem)
+    }
+
+    /// The parameters and the initial values of an experiment under the settings `set` (its
+    /// own, or its preequilibration's) applied to the parameters outside the experiments,
+    /// `base`.
+    fn settings(
+        &self,
+        set: &[(String, &SetValue)],
+        base: &[Source],
+        extras: &[usize],
+        experiment: &str,
+    ) -> Result<(Vec<Setting>, Vec<Setting>), ModelError> {
+        let f = &self.file;
+        let declared = &f.unknowns;
+        let index = |name: &str| declared.iter().position(|u| u.name == name);
+        let mut effective = base.to_vec();
+        let mut set_uses = Vec::new();
+        for (name, value) in set {
+            let q = f.parameters.iter().position(|p| p == name).expect("checked when read");
+            effective[q] = match value {
+                SetValue::Number(x) => Source::Known(*x),
+                SetValue::Expression(e) => match e.bare.as_deref().and_then(index) {
+                    Some(j) => Source::Unknown(j),
+                    None => {
+                        self.check_base(e, base, experiment)?;
+                        let probe = Context {
+                            base: base.to_vec(),
+                            effective: Vec::new(),
+                            extras: extras.to_vec(),
+                        };
+                        let names = Names {
+                            parameters: &f.parameters,
+                            extras: &f.extras,
+                            set_uses: Vec::new(),
+                        };
+                        set_uses.push((q, probe.uses_of(&e.uses, &names, false)));
+                        Source::Expression(e.program.clone())
+                    }
+                },
+            };
+        }
+        let context = Arc::new(Context { base: base.to_vec(), effective, extras: extras.to_vec() });
+        let names = Names { parameters: &f.parameters, extras: &f.extras, set_uses };
+        let setting = |e: &Expression, effective: bool| -> Setting {
+            Setting::Function(Arc::new(ExpressionSetting {
+                program: e.program.clone(),
+                context: context.clone(),
+                effective,
+                uses: context.uses_of(&e.uses, &names, effective),
+                text: e.text.clone(),
+            }))
+        };
+        let parameters: Vec<Setting> = f
+            .parameters
+            .iter()
+            .enumerate()
+            .map(|(q, name)| match &context.effective[q] {
+                Source::Known(x) => Setting::Value(*x),
+                Source::Unknown(j) => Setting::Unknown(declared[*j].name.clone()),
+                Source::Expression(_) => {
+                    let (_, value) = set.iter().find(|(p, _)| p == name).expect("set");
+                    let SetValue::Expression(e) = value else { unreachable!("an expression") };
+                    setting(e, false)
+                }
+                Source::Unset => Setting::Value(f64::NAN),
+            })
+            .collect();
+        let initial: Vec<Setting> = f
+            .states
+            .iter()
+            .map(|name| {
+                if let Some((_, v)) = f.known.iter().find(|k| &k.0 == name) {
+                    Setting::Value(*v)
+                } else if let Some((_, e)) = f.initial.iter().find(|k| &k.0 == name) {
+                    setting(e, true)
+                } else {
+                    Setting::Unknown(name.clone())
+                }
+            })
+            .collect();
+        Ok((parameters, initial))
     }
 
     /// The extras whose only use is to be the whole σ of outputs: noise scales, set in closed

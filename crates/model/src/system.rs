@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use sysid_ode::{Function, Inputs, Scalar, Side, Signature, SparseJacobian, System};
 
-use crate::expr::Program;
+use crate::expr::{Program, Switch};
 use crate::symbolic::Linearized;
 
 /// A model read from a file: compiled right-hand sides and outputs, their symbolic
@@ -18,6 +18,8 @@ pub struct ModelSystem {
     /// by dual numbers.
     symbolic: Option<Arc<(Linearized, Linearized)>>,
     inputs: Inputs,
+    /// Where the right-hand side switches in time.
+    switches: Arc<Vec<Switch>>,
 }
 
 impl ModelSystem {
@@ -32,7 +34,14 @@ impl ModelSystem {
         let dims = (signature.n_states(), signature.n_parameters(), signature.n_inputs());
         let symbolic =
             (Linearized::with_curvature(&equations, dims), Linearized::new(&outputs, dims));
+        let mut switches: Vec<Switch> = Vec::new();
+        for s in equations.iter().flat_map(Program::time_switches) {
+            if !switches.contains(&s) {
+                switches.push(s);
+            }
+        }
         Self {
+            switches: Arc::new(switches),
             signature,
             equations: Arc::new(equations),
             outputs: Arc::new(outputs),
@@ -77,6 +86,9 @@ impl System for ModelSystem {
     }
     fn discontinuities(&self) -> &[f64] {
         self.inputs.jumps()
+    }
+    fn switches(&self, p: &[f64]) -> Vec<f64> {
+        self.switches.iter().map(|s| s.at(p)).collect()
     }
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
         let symbolic = self.symbolic.as_deref()?;

@@ -156,3 +156,115 @@ fn a_valid_file_is_the_problem_it_describes() {
     assert_eq!(starts, [1.0, 5.0]);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `preequilibrate`: the experiment starts from the steady state reached under other
+/// settings. x' = a − b·x settles at a/b (a = 1 before, 4 in the experiment); A ⇌ B keeps
+/// A + B, so its steady state k₂/(k₁ + k₂)·A₀ depends on the unknown initial value A₀ (a
+/// singular Jacobian: the implicit-function formula would lose it). The cost and its
+/// gradient against the closed form x(t) = 4/b − 3/b·e^{−bt}, A(t) = k₂A₀/(k₁ + k₂), the
+/// gradient by central differences of the closed form.
+#[test]
+fn preequilibration_starts_from_the_steady_state() {
+    let model = "states = [\"x\", \"A\", \"B\"]
+parameters = [\"a\", \"b\", \"k1\", \"k2\"]
+[equations]
+x = \"a - b * x\"
+A = \"-k1 * A + k2 * B\"
+B = \"k1 * A - k2 * B\"
+[initial]
+x = 0.0
+B = 0.0
+[known]
+a = 1.0
+k2 = 0.5
+[unknowns]
+b = 2.0
+k1 = 1.5
+A = 3.0
+[[experiments]]
+name = \"after\"
+file = \"low.csv\"
+set = { a = 4.0 }
+preequilibrate = { a = 1.0 }
+[integrator]
+method = \"rodas4\"
+rtol = 1e-10
+atol = 1e-12
+";
+    let data = "t,x,A\n0.5,1.2,0.8\n1,1.6,0.7\n2,1.9,0.75\n";
+    let dir = scratch("preequilibrate", data, data);
+    let path = dir.join("m.toml");
+    std::fs::write(&path, model).unwrap();
+    let problem = Model::load(&path).unwrap().problem(None).unwrap();
+    let cost = |b: f64, k1: f64, a0: f64| {
+        let k2 = 0.5;
+        let mut eps = 0.0;
+        for (t, x, a) in [(0.5, 1.2, 0.8), (1.0, 1.6, 0.7), (2.0, 1.9, 0.75)] {
+            let xm = 4.0 / b - 3.0 / b * (-b * t).exp();
+            let am = k2 * a0 / (k1 + k2);
+            eps += (x - xm) * (x - xm) + (a - am) * (a - am);
+        }
+        eps
+    };
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let lin = problem.linearize(&z).unwrap();
+    let (b, k1, a0) = (2.0, 1.5, 3.0);
+    assert!((lin.cost - cost(b, k1, a0)).abs() <= 1e-8, "{} vs {}", lin.cost, cost(b, k1, a0));
+    let h = 1e-6;
+    let fd = [
+        (cost(b + h, k1, a0) - cost(b - h, k1, a0)) / (2.0 * h),
+        (cost(b, k1 + h, a0) - cost(b, k1 - h, a0)) / (2.0 * h),
+        (cost(b, k1, a0 + h) - cost(b, k1, a0 - h)) / (2.0 * h),
+    ];
+    for (j, d) in fd.iter().enumerate() {
+        // U is half the gradient of ε.
+        assert!(
+            (lin.gradient[j] - 0.5 * d).abs() <= 1e-7 * d.abs().max(1.0),
+            "{j}: {} vs {}",
+            lin.gradient[j],
+            0.5 * d
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A switch in time in the equations, at a parameter: the integrators stop on it, each side
+/// taking its own branch, so x' = if(lt(t, c), 1, 0) integrates to exactly c (DOPRI5 and
+/// Rodas4; without the stop the step at the switch straddles it).
+#[test]
+fn integrators_stop_at_a_switch_in_time() {
+    use sysid_ode::{Integrator, Ivp, Scheme};
+    let model = "states = [\"x\"]
+parameters = [\"c\"]
+[equations]
+x = \"if(lt(t - c, 0), 1, 0) + 0 * x\"
+[initial]
+x = 0.0
+[unknowns]
+c = 1.37
+[data]
+file = \"unused.csv\"
+";
+    let file = ModelFile::parse(model, Path::new("switch.toml")).unwrap();
+    let system = Model { file }.system(Default::default());
+    for scheme in [Scheme::Dopri5, Scheme::Rodas4] {
+        let integrator = Integrator { scheme, ..Integrator::default() };
+        let x = Ivp::new(&system, 0.0, &[0.0], &[1.37]).solve(&integrator, &[3.0]).unwrap();
+        assert!((x.state(0)[0] - 1.37).abs() <= 1e-13, "{scheme:?}: {}", x.state(0)[0]);
+    }
+}
+
+/// `preequilibrate` names parameters, as `set` does, and needs a model without inputs.
+#[test]
+fn preequilibrate_is_checked_like_set() {
+    let with = |extra: &str| format!("{TWO}preequilibrate = {{ {extra} }}\n");
+    refused(
+        &with("zz = 1.0"),
+        "m.toml:24:20: experiment `high`: preequilibrate `zz`: not a parameter (parameters: k, dose, scale)",
+    );
+    let inputs = TWO.replace("parameters = [", "inputs = [\"u\"]\nparameters = [");
+    refused(
+        &format!("{inputs}preequilibrate = {{ dose = 1.0 }}\n"),
+        "m.toml:25:18: experiment `high`: preequilibrate: a model with inputs has no steady state to run to",
+    );
+}

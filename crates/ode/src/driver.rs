@@ -47,8 +47,8 @@ pub(crate) fn integrate_selected<R: Rhs>(
     if t_end - t0 == 0.0 {
         return Ok((run.ev.counts, x0.to_vec()));
     }
-    for seg_end in segment_ends(t0, t_end, stops) {
-        run.segment(seg_end)?;
+    for (i, seg_end) in segment_ends(t0, t_end, stops).into_iter().enumerate() {
+        run.segment(seg_end, i > 0)?;
     }
     Ok((run.ev.counts, run.work.x))
 }
@@ -195,7 +195,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         work.x.copy_from_slice(x0);
         let counts = Counts { integrations: 1, ..Counts::default() };
         Self {
-            ev: Evaluator { rhs, cfg: *cfg, counts, seg: (t0, t_end) },
+            ev: Evaluator { rhs, cfg: *cfg, counts, seg: (t0, t_end), stops: (false, false) },
             work,
             stepper: Active::first(cfg.scheme),
             t: t0,
@@ -212,8 +212,9 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
     }
 
     /// Integrates from t to `seg_end`, inside which the right-hand side is smooth.
-    fn segment(&mut self, seg_end: f64) -> Result<(), OdeError> {
+    fn segment(&mut self, seg_end: f64, after_stop: bool) -> Result<(), OdeError> {
         self.ev.seg = (self.t, seg_end);
+        self.ev.stops = (after_stop, seg_end.to_bits() != self.t_end.to_bits());
         // A fresh first stage: there is none yet at t0, and at a discontinuity the last step's
         // f(t, x) is the limit from the other side.
         self.ev.f(self.t, &self.work.x, &mut self.work.k[0]);
@@ -373,7 +374,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         }
         let t = self.t;
         let auto = self.ev.cfg.scheme == Scheme::Auto;
-        if auto && self.ev.rhs.factor(t, self.ev.side(t), &self.work.x, 1.0).is_ok() {
+        if auto && self.ev.rhs.factor(self.ev.at(t), self.ev.side(t), &self.work.x, 1.0).is_ok() {
             self.stepper = Active::Rodas4;
             self.ev.counts.jacobians += 1;
         } else {

@@ -323,7 +323,7 @@ impl<'a, S: System> Ivp<'a, S> {
         let mut rhs = ModelRhs::new(self.system, self.p);
         let mut values = vec![0.0; times.len() * n];
         let counts =
-            sample(integrator, &mut rhs, self.t0, self.y0, times, self.stops(), &mut values)?;
+            sample(integrator, &mut rhs, self.t0, self.y0, times, &self.stops(), &mut values)?;
         Ok(Trajectory { times: times.to_vec(), n, values, counts })
     }
 
@@ -340,7 +340,7 @@ impl<'a, S: System> Ivp<'a, S> {
         let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
         let x0 = rhs.initial_state(self.y0);
         let mut data = vec![0.0; times.len() * x0.len()];
-        let counts = sample(integrator, &mut rhs, self.t0, &x0, times, self.stops(), &mut data)?;
+        let counts = sample(integrator, &mut rhs, self.t0, &x0, times, &self.stops(), &mut data)?;
         Ok(SensitivityTrajectory { times: times.to_vec(), n, k: wrt.len(), data, counts })
     }
 
@@ -361,10 +361,12 @@ impl<'a, S: System> Ivp<'a, S> {
         let stops = self.stops();
         let mut counts = Counts::default();
         if t_hi > self.t0 {
-            counts += integrate(integrator, &mut rhs, (self.t0, &x0), t_hi, stops, &mut on_step)?.0;
+            counts +=
+                integrate(integrator, &mut rhs, (self.t0, &x0), t_hi, &stops, &mut on_step)?.0;
         }
         if t_lo < self.t0 {
-            counts += integrate(integrator, &mut rhs, (self.t0, &x0), t_lo, stops, &mut on_step)?.0;
+            counts +=
+                integrate(integrator, &mut rhs, (self.t0, &x0), t_lo, &stops, &mut on_step)?.0;
         }
         Ok(counts)
     }
@@ -383,8 +385,16 @@ impl<'a, S: System> Ivp<'a, S> {
         Ok((solution, counts))
     }
 
-    fn stops(&self) -> &'a [f64] {
-        self.system.discontinuities()
+    /// The discontinuities and the switches at this problem's parameters, ascending.
+    fn stops(&self) -> Vec<f64> {
+        let mut stops = self.system.discontinuities().to_vec();
+        let switches = self.system.switches(self.p);
+        if !switches.is_empty() {
+            stops.extend(switches.into_iter().filter(|t| t.is_finite()));
+            stops.sort_by(f64::total_cmp);
+            stops.dedup();
+        }
+        stops
     }
 }
 

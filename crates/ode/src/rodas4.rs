@@ -94,7 +94,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         let n = w.x.len();
         let side = ev.side(t);
         ev.counts.jacobians += 1;
-        ev.rhs.factor(t, side, &w.x, 1.0 / (GAMMA * h))?;
+        ev.rhs.factor(ev.at(t), side, &w.x, 1.0 / (GAMMA * h))?;
         // f(t, x), and ∂f/∂t by a difference quotient inside the step.
         ev.f(t, &w.x, &mut w.f0);
         let delta = (1e-7 * t.abs().max(1.0)).min(0.5 * h.abs()) * h.signum();

@@ -203,6 +203,14 @@ pub trait System: Send + Sync {
         &[]
     }
 
+    /// Times where the right-hand side switches at the parameters `p` (a model file's
+    /// `if(le(t, t_end), …)`): the integrators stop there too, as at
+    /// [`discontinuities`](Self::discontinuities). Default: none.
+    fn switches(&self, p: &[f64]) -> Vec<f64> {
+        let _ = p;
+        Vec::new()
+    }
+
     /// The right-hand side (or the outputs) with the nonzero entries of its Jacobian, for
     /// systems that can evaluate them directly (default: none, dual numbers are used).
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
@@ -266,6 +274,9 @@ impl<S: System> System for &S {
     }
     fn discontinuities(&self) -> &[f64] {
         (**self).discontinuities()
+    }
+    fn switches(&self, p: &[f64]) -> Vec<f64> {
+        (**self).switches(p)
     }
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
         (**self).sparse_jacobian(function)

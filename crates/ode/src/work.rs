@@ -49,6 +49,9 @@ pub(crate) struct Evaluator<'r, R: Rhs> {
     pub(crate) counts: Counts,
     /// Start and end of the current segment, in the direction of integration.
     pub(crate) seg: (f64, f64),
+    /// Whether the segment's start and end are stops inside the integration (a
+    /// discontinuity or a switch), rather than its first or last time.
+    pub(crate) stops: (bool, bool),
 }
 
 impl<R: Rhs> Evaluator<'_, R> {
@@ -56,7 +59,23 @@ impl<R: Rhs> Evaluator<'_, R> {
     pub(crate) fn f(&mut self, t: f64, x: &[f64], dx: &mut [f64]) {
         self.counts.rhs_evaluations += 1;
         let side = self.side(t);
-        self.rhs.eval(t, side, x, dx);
+        self.rhs.eval(self.at(t), side, x, dx);
+    }
+
+    /// The time a stage at t is evaluated at: t, or one unit in the last place inside the
+    /// segment where t is a stop. A switch in time written in the equations
+    /// (`if(lt(t, 24), …)`) then takes its value from inside the segment, as an input
+    /// signal does by its [`Side`]; the step lands on the stop exactly.
+    #[inline]
+    pub(crate) fn at(&self, t: f64) -> f64 {
+        let inward = |t: f64, towards: f64| if towards > t { t.next_up() } else { t.next_down() };
+        if self.stops.1 && t.to_bits() == self.seg.1.to_bits() {
+            inward(t, self.seg.0)
+        } else if self.stops.0 && t.to_bits() == self.seg.0.to_bits() {
+            inward(t, self.seg.1)
+        } else {
+            t
+        }
     }
 
     #[inline]

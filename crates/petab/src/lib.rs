@@ -17,8 +17,11 @@
 //!   log scale where `parameterScale` is `log` or `log10` (the optimum does not depend on
 //!   the base), starting from `nominalValue`; the others are known.
 //!
-//! Preequilibration, steady-state measurements (time `inf`), events and laplace noise are
-//! refused naming the feature. Every error names the file, the line and the column.
+//! * a preequilibration condition becomes the experiment's `preequilibrate`: it starts from
+//!   the steady state under that condition.
+//!
+//! Steady-state measurements (time `inf`), events and laplace noise are refused naming the
+//! feature. Every error names the file, the line and the column.
 #![warn(missing_docs)]
 
 pub mod math;
@@ -185,6 +188,9 @@ enum Sigma {
 
 /// A measurement: its time, its output's index and its value.
 type Sample = (f64, usize, f64);
+
+/// An experiment: its preequilibration condition, if any, and its simulation condition.
+type Key = (Option<String>, String);
 
 /// Stands for the output's own value in a σ expression until the output is named.
 const OWN: &str = "\u{1}own\u{1}";
@@ -524,21 +530,30 @@ impl<'a> Builder<'a> {
 
         // Outputs and the experiments' data, from the measurement table.
         let mut outputs: Vec<Output> = Vec::new();
-        let mut experiments: Vec<(String, Vec<Sample>)> = Vec::new();
+        let mut experiments: Vec<(Key, Vec<Sample>)> = Vec::new();
         for t in &self.tables.measurements {
             let c_obs = t.required("observableId")?;
             let c_cond = t.required("simulationConditionId")?;
             let c_value = t.required("measurement")?;
             let c_time = t.required("time")?;
             for row in 0..t.rows.len() {
-                if let Some(c) = t.cell_named(row, "preequilibrationConditionId")
-                    && !c.is_blank()
-                {
-                    return Err(c.err(format!(
-                        "preequilibration (condition `{}`) is not supported",
-                        c.text
-                    )));
-                }
+                let pre = match t.cell_named(row, "preequilibrationConditionId") {
+                    Some(c) if !c.is_blank() => {
+                        if !self
+                            .tables
+                            .conditions
+                            .iter()
+                            .any(|ct| condition_row(ct, c.text).is_some())
+                        {
+                            return Err(c.err(format!(
+                                "condition `{}` is not in the condition table",
+                                c.text
+                            )));
+                        }
+                        Some(c.text.to_string())
+                    }
+                    _ => None,
+                };
                 let oc = t.cell(row, c_obs);
                 let observable = self.observables.get(oc.text).ok_or_else(|| {
                     oc.err(format!("`{}` is not in the observable table", oc.text))
@@ -636,9 +651,10 @@ impl<'a> Builder<'a> {
                         oc.text, observable.transform
                     )));
                 }
-                match experiments.iter_mut().find(|e| e.0 == cc.text) {
+                let key = (pre, cc.text.to_string());
+                match experiments.iter_mut().find(|e| e.0 == key) {
                     Some(e) => e.1.push((time, index, value)),
-                    None => experiments.push((cc.text.to_string(), vec![(time, index, value)])),
+                    None => experiments.push((key, vec![(time, index, value)])),
                 }
             }
         }
@@ -772,13 +788,28 @@ impl<'a> Builder<'a> {
         let measurement_file = Path::new(&self.tables.measurements[0].file)
             .file_name()
             .map_or("measurements".into(), |f| f.to_string_lossy().to_string());
-        for (condition, _) in &experiments {
+        // An experiment is named after its simulation condition, and after its
+        // preequilibration too where one condition follows several.
+        let names: Vec<String> = experiments
+            .iter()
+            .map(|((pre, sim), _)| {
+                match (pre, experiments.iter().filter(|e| &e.0.1 == sim).count()) {
+                    (Some(pre), 2..) => format!("{sim}-after-{pre}"),
+                    _ => sim.clone(),
+                }
+            })
+            .collect();
+        for (((pre, sim), _), name) in experiments.iter().zip(&names) {
             let _ = writeln!(text, "[[experiments]]");
-            let _ = writeln!(text, "name = \"{condition}\"");
-            let _ = writeln!(text, "file = \"{measurement_file}#{condition}\"");
-            let set = self.condition_settings(condition, &model_parameters, &states)?;
+            let _ = writeln!(text, "name = \"{name}\"");
+            let _ = writeln!(text, "file = \"{measurement_file}#{name}\"");
+            let set = self.condition_settings(sim, &model_parameters, &states)?;
             if !set.is_empty() {
                 let _ = writeln!(text, "set = {{ {} }}", set.join(", "));
+            }
+            if let Some(pre) = pre {
+                let set = self.condition_settings(pre, &model_parameters, &states)?;
+                let _ = writeln!(text, "preequilibrate = {{ {} }}", set.join(", "));
             }
             let _ = writeln!(text);
         }
@@ -793,7 +824,7 @@ impl<'a> Builder<'a> {
             column: None,
             ..e
         })?;
-        for (spec, (condition, rows)) in file.experiments.clone().iter().zip(&experiments) {
+        for (spec, ((_, condition), rows)) in file.experiments.clone().iter().zip(&experiments) {
             let mut headers = vec!["t".to_string()];
             let mut columns: Vec<usize> = rows.iter().map(|r| r.1).collect();
             columns.sort_unstable();

@@ -11,7 +11,8 @@ use super::reader::Reader;
 use super::{ExperimentSpec, SetValue};
 use crate::error::ModelError;
 
-/// Reads `[[experiments]]` (optional): an array of tables `{ name, file, t0, set }`.
+/// Reads `[[experiments]]` (optional): an array of tables `{ name, file, t0, set,
+/// preequilibrate }`.
 pub(super) fn read_experiments(
     r: &Reader<'_>,
     value: Option<&Spanned<DeValue<'_>>>,
@@ -55,6 +56,7 @@ pub(super) fn read_experiments(
             t0: 0.0,
             t0_at: None,
             set: Vec::new(),
+            preequilibrate: None,
             at,
         };
         for (key, v) in table.iter() {
@@ -64,19 +66,28 @@ pub(super) fn read_experiments(
                     spec.t0 = r.number(v, &what("t0"))?;
                     spec.t0_at = Some(v.span().start);
                 }
-                "set" => {
-                    for (p, x) in r.table(v, &what("set"))?.iter() {
+                key @ ("set" | "preequilibrate") => {
+                    if key == "preequilibrate" && !scope.inputs.is_empty() {
+                        return Err(r.err(
+                            v.span().start,
+                            what(
+                                "preequilibrate: a model with inputs has no steady state to run to",
+                            ),
+                        ));
+                    }
+                    let mut list = Vec::new();
+                    for (p, x) in r.table(v, &what(key))?.iter() {
                         let parameter = p.get_ref().to_string();
                         if !scope.parameters.contains(&parameter) {
                             return Err(r.err(
                                 p.span().start,
                                 format!(
-                                    "experiment `{name}`: set `{parameter}`: not a parameter (parameters: {})",
+                                    "experiment `{name}`: {key} `{parameter}`: not a parameter (parameters: {})",
                                     scope.parameters.join(", ")
                                 ),
                             ));
                         }
-                        let key_what = what(&format!("set {parameter}"));
+                        let key_what = what(&format!("{key} {parameter}"));
                         let value = match x.get_ref() {
                             DeValue::String(_) => {
                                 let resolve = |n: &str| scope.resolve_setting(n);
@@ -89,14 +100,18 @@ pub(super) fn read_experiments(
                             }
                             _ => SetValue::Number(r.number(x, &key_what)?),
                         };
-                        spec.set.push((parameter, value, p.span().start));
+                        list.push((parameter, value, p.span().start));
+                    }
+                    match key {
+                        "set" => spec.set = list,
+                        _ => spec.preequilibrate = Some(list),
                     }
                 }
                 other => {
                     return Err(r.err(
                         key.span().start,
                         format!(
-                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set)"
+                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set, preequilibrate)"
                         ),
                     ));
                 }

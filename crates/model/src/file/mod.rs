@@ -93,6 +93,9 @@ pub struct ExperimentSpec {
     pub t0_at: Option<usize>,
     /// The parameters it sets: name, value, byte offset of the key.
     pub set: Vec<(String, SetValue, usize)>,
+    /// `preequilibrate`: before t0 the system runs to a steady state with the parameters
+    /// outside the experiments and these settings, and starts the experiment from it.
+    pub preequilibrate: Option<Vec<(String, SetValue, usize)>>,
     /// Byte offset of its `name`.
     pub at: usize,
 }

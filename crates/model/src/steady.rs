@@ -1,0 +1,218 @@
+//! Preequilibration: an experiment that starts from the steady state its system reaches
+//! under other settings (`preequilibrate` in `[[experiments]]`; PEtab's
+//! `preequilibrationConditionId`).
+//!
+//! The steady state is found by integrating from the initial values under the
+//! preequilibration's parameters to t = 1, 10, 100, … until every |dyᵢ/dt| ≤ atol + rtol·|yᵢ|
+//! (the integrator's tolerances), at most to t = 1e12. Its derivatives with respect to the
+//! unknowns are the forward sensitivities at that time, chained with the derivatives of the
+//! preequilibration's parameters and initial values: a conserved quantity (a singular
+//! Jacobian) keeps its dependence on the initial values, which the implicit-function
+//! formula −J⁻¹ ∂f/∂α would lose.
+
+use std::sync::{Arc, Mutex};
+
+use sysid_core::{Setting, SettingFunction, Unknown};
+use sysid_ode::{Integrator, Ivp, System, Wrt};
+
+use crate::ModelSystem;
+
+/// The last time a steady state is looked for.
+const LAST: f64 = 1e12;
+
+/// The steady state of one experiment's preequilibration, shared by its states' settings
+/// and computed once per point of the unknowns.
+pub(crate) struct SteadyState {
+    system: ModelSystem,
+    integrator: Integrator,
+    parameters: Vec<Setting>,
+    initial: Vec<Setting>,
+    /// The declared unknowns' names.
+    names: Vec<String>,
+    uses: Vec<usize>,
+    experiment: String,
+    /// The last point and its steady state (None: not found there).
+    cache: Mutex<Option<(Vec<f64>, Option<Solved>)>>,
+}
+
+/// A steady state and its derivatives ∂y/∂v (n × n_v, row by row).
+#[derive(Clone)]
+struct Solved {
+    y: Vec<f64>,
+    dy: Vec<f64>,
+}
+
+impl SteadyState {
+    /// The steady state of `system` under `settings` (parameters, initial values) before
+    /// `experiment`.
+    pub(crate) fn new(
+        system: ModelSystem,
+        integrator: Integrator,
+        settings: (Vec<Setting>, Vec<Setting>),
+        declared: &[Unknown],
+        experiment: &str,
+    ) -> Self {
+        let names: Vec<String> = declared.iter().map(|u| u.name.clone()).collect();
+        let mut uses = Vec::new();
+        for s in settings.0.iter().chain(&settings.1) {
+            let list = match s {
+                Setting::Value(_) => Vec::new(),
+                Setting::Unknown(name) => {
+                    names.iter().position(|n| n == name).into_iter().collect()
+                }
+                Setting::Function(f) => f.uses().to_vec(),
+            };
+            for j in list {
+                if !uses.contains(&j) {
+                    uses.push(j);
+                }
+            }
+        }
+        uses.sort_unstable();
+        Self {
+            system,
+            integrator,
+            parameters: settings.0,
+            initial: settings.1,
+            names,
+            uses,
+            experiment: experiment.to_string(),
+            cache: Mutex::new(None),
+        }
+    }
+
+    /// The setting of state `i`'s initial value.
+    pub(crate) fn component(self: &Arc<Self>, i: usize, state: &str) -> Component {
+        Component {
+            steady: self.clone(),
+            state: i,
+            text: format!(
+                "the steady state of `{state}` before experiment `{}` (preequilibration)",
+                self.experiment
+            ),
+        }
+    }
+
+    fn solved(&self, v: &[f64]) -> Option<Solved> {
+        let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((at, solved)) = cache.as_ref()
+            && at.iter().zip(v).all(|(a, b)| a.to_bits() == b.to_bits())
+        {
+            return solved.clone();
+        }
+        let solved = self.solve(v);
+        *cache = Some((v.to_vec(), solved.clone()));
+        solved
+    }
+
+    /// A setting's value at `v`, its gradient into `g`.
+    fn setting(&self, s: &Setting, v: &[f64], g: &mut [f64]) -> f64 {
+        match s {
+            Setting::Value(x) => *x,
+            Setting::Unknown(name) => match self.names.iter().position(|n| n == name) {
+                Some(j) => {
+                    g[j] = 1.0;
+                    v[j]
+                }
+                None => f64::NAN,
+            },
+            Setting::Function(f) => f.eval(v, g),
+        }
+    }
+
+    fn solve(&self, v: &[f64]) -> Option<Solved> {
+        let nv = v.len();
+        let (np, n) = (self.parameters.len(), self.initial.len());
+        let mut dp = vec![0.0; np * nv];
+        let p: Vec<f64> = (0..np)
+            .map(|q| self.setting(&self.parameters[q], v, &mut dp[q * nv..(q + 1) * nv]))
+            .collect();
+        let mut dy0 = vec![0.0; n * nv];
+        let y0: Vec<f64> = (0..n)
+            .map(|i| self.setting(&self.initial[i], v, &mut dy0[i * nv..(i + 1) * nv]))
+            .collect();
+        if !p.iter().chain(&y0).all(|x| x.is_finite()) {
+            return None;
+        }
+        let sys = &self.system;
+        let (rtol, atol) = (self.integrator.rtol, self.integrator.atol);
+        let steady = |t: f64, y: &[f64]| {
+            let mut f = vec![0.0; n];
+            sys.rhs::<f64>(t, y, &p, &[], &mut f);
+            f.iter().zip(y).all(|(fi, yi)| fi.abs() <= atol + rtol * yi.abs())
+        };
+        // The time the state settles by.
+        let (mut t, mut y) = (0.0, y0.clone());
+        while !steady(t, &y) {
+            let next = if t == 0.0 { 1.0 } else { 10.0 * t };
+            if next > LAST {
+                return None;
+            }
+            let trajectory = Ivp::new(sys, t, &y, &p).solve(&self.integrator, &[next]).ok()?;
+            y = trajectory.state(0).to_vec();
+            t = next;
+        }
+        // The sensitivities to that time, for the columns the unknowns move.
+        let moved = |rows: &[f64], k: usize| rows[k * nv..(k + 1) * nv].iter().any(|d| *d != 0.0);
+        let mut wrt = Vec::new();
+        let mut chain: Vec<&[f64]> = Vec::new();
+        for q in (0..np).filter(|&q| moved(&dp, q)) {
+            wrt.push(Wrt::Parameter(q));
+            chain.push(&dp[q * nv..(q + 1) * nv]);
+        }
+        for i in (0..n).filter(|&i| moved(&dy0, i)) {
+            wrt.push(Wrt::InitialValue(i));
+            chain.push(&dy0[i * nv..(i + 1) * nv]);
+        }
+        let mut dy = vec![0.0; n * nv];
+        if wrt.is_empty() || t == 0.0 {
+            if t == 0.0 {
+                dy.copy_from_slice(&dy0);
+            }
+            return Some(Solved { y, dy });
+        }
+        let trajectory =
+            Ivp::new(sys, 0.0, &y0, &p).solve_sensitivities(&self.integrator, &wrt, &[t]).ok()?;
+        let s = trajectory.sensitivity(0);
+        for i in 0..n {
+            for (c, row) in chain.iter().enumerate() {
+                let sic = s[(i, c)];
+                if sic != 0.0 {
+                    for j in 0..nv {
+                        dy[i * nv + j] += sic * row[j];
+                    }
+                }
+            }
+        }
+        let y = trajectory.state(0).to_vec();
+        y.iter().chain(&dy).all(|x| x.is_finite()).then_some(Solved { y, dy })
+    }
+}
+
+/// One state's initial value: its component of the steady state.
+pub(crate) struct Component {
+    steady: Arc<SteadyState>,
+    state: usize,
+    text: String,
+}
+
+impl SettingFunction for Component {
+    fn eval(&self, v: &[f64], gradient: &mut [f64]) -> f64 {
+        let nv = v.len();
+        match self.steady.solved(v) {
+            Some(s) => {
+                for &j in &self.steady.uses {
+                    gradient[j] = s.dy[self.state * nv + j];
+                }
+                s.y[self.state]
+            }
+            None => f64::NAN,
+        }
+    }
+    fn uses(&self) -> &[usize] {
+        &self.steady.uses
+    }
+    fn describe(&self) -> String {
+        self.text.clone()
+    }
+}
