@@ -310,3 +310,61 @@ atol = 1e-14
     assert!((lin.cost - direct).abs() <= 1e-8 * direct, "{} against {direct}", lin.cost);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A normal prior is a residual row of its own: y' = 0 with y(0) unknown, data 1, 2, 3 and
+/// the prior N(5, 1) give the closed-form maximum a posteriori y₀ = (1 + 2 + 3 + 5)/4 =
+/// 2.75 for every method that supports priors; `nll` stays the likelihood of the data and
+/// `prior` is ½(y₀ − 5)² + ln √(2π) apart. On a log10 scale the prior's row moves with
+/// log10 y₀. Multiple shooting and quasilinearization refuse priors by name.
+#[test]
+fn a_prior_is_a_row_of_its_own() {
+    let dir = std::env::temp_dir().join(format!("sysid-prior-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("data.csv"), "t,y\n1,1\n2,2\n3,3\n").unwrap();
+    let model = |prior: &str| {
+        let text = format!(
+            "states = [\"y\"]\n[equations]\ny = \"0\"\n[outputs]\nym = {{ value = \"y\", sigma = 1.0 }}\n\
+             [unknowns]\ny = {{ guess = 1.0, min = 0.01, {prior} }}\n[data]\nfile = \"data.csv\"\n"
+        )
+        .replace("t,y", "t,ym");
+        std::fs::write(dir.join("m.toml"), text).unwrap();
+        std::fs::write(dir.join("data.csv"), "t,ym\n1,1\n2,2\n3,3\n").unwrap();
+        Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap()
+    };
+    let problem = model("prior = { mean = 5.0, sd = 1.0 }");
+    let half_ln_2pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
+    for m in
+        ["goodman", "goodman-halving", "gauss-newton", "gauss-newton-ls", "levenberg-marquardt"]
+    {
+        let e = Registry::standard().build(m, &Settings::default()).unwrap().fit(&problem).unwrap();
+        assert!(e.converged(), "{m}: {}", e.termination);
+        assert!((e.values[0] - 2.75).abs() <= 1e-8, "{m}: {}", e.values[0]);
+        let data: f64 =
+            [1.0, 2.0, 3.0].iter().map(|b: &f64| 0.5 * (b - 2.75).powi(2) + half_ln_2pi).sum();
+        assert!((e.nll.unwrap() - data).abs() <= 1e-8, "{m}: nll {:?} vs {data}", e.nll);
+        let prior = 0.5 * (2.75_f64 - 5.0).powi(2) + half_ln_2pi;
+        assert!((e.prior.unwrap() - prior).abs() <= 1e-8, "{m}: prior {:?} vs {prior}", e.prior);
+    }
+    for m in ["multiple-shooting", "quasilinearization"] {
+        let e = Registry::standard().build(m, &Settings::default()).unwrap().fit(&problem);
+        let message = e.map(|_| ()).unwrap_err().to_string();
+        assert!(message.contains("does not support priors"), "{m}: {message}");
+    }
+    // log10: minimise Σ(b − y)² + ((log10 y − log10 5)/0.1)²: its stationary point, by the
+    // first-order condition Σ(y − b) + (log10 y − log10 5)/(0.01 y ln 10) = 0 (bisection).
+    let problem = model("prior = { mean = 0.69897000433601886, sd = 0.1, on = \"log10\" }");
+    let g =
+        |y: f64| 3.0 * y - 6.0 + (y.log10() - 5f64.log10()) / (0.01 * y * std::f64::consts::LN_10);
+    let (mut lo, mut hi) = (2.0, 5.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if g(mid) > 0.0 { hi = mid } else { lo = mid }
+    }
+    let e = Registry::standard()
+        .build("levenberg-marquardt", &Settings::default())
+        .unwrap()
+        .fit(&problem)
+        .unwrap();
+    assert!(e.converged() && (e.values[0] - lo).abs() <= 1e-8, "{} vs {lo}", e.values[0]);
+    let _ = std::fs::remove_dir_all(&dir);
+}

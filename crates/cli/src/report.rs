@@ -45,6 +45,11 @@ pub struct ReportArgs {
     /// replaced, and nothing else in OUT is touched.
     #[arg(long)]
     force: bool,
+    /// A directory of PEtab problems, a folder each, for the report's PEtab section (the NLL
+    /// at nominal against `references.tsv` there, and fits from nominal); skipped when the
+    /// directory does not exist.
+    #[arg(long, default_value = "tests/data/petab", value_name = "DIR")]
+    petab: PathBuf,
 }
 
 /// The help of `--methods`: the registry's report methods.
@@ -81,6 +86,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
         starts: args.starts,
         seed: args.seed,
         force: args.force,
+        petab: args.petab.is_dir().then(|| args.petab.clone()),
     };
     write_report(&options, &Bars::default())?;
     Ok(Outcome::Success)

@@ -209,6 +209,7 @@ impl Record<'_> {
             elapsed: self.started.elapsed(),
             counts: ev.counts(),
             nll: lin.and_then(|l| problem.nll(l)),
+            prior: lin.and_then(|l| problem.prior_nll(l)),
             experiments: problem
                 .experiments()
                 .iter()

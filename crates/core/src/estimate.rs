@@ -86,6 +86,9 @@ pub struct Estimate {
     /// continuous record). With relative weights w (no noise model) σ = 1/√w: ε/2 +
     /// Σ ½ ln(2π/w).
     pub nll: Option<f64>,
+    /// The negative log-prior at the estimate, apart from [`nll`](Self::nll) (None without
+    /// priors): what a fit with priors minimises is nll + prior.
+    pub prior: Option<f64>,
     /// Each experiment's name, measured values and negative log-likelihood.
     pub experiments: Vec<ExperimentFit>,
     /// The noise scales set in closed form (σ = s·f), estimated with the rest.
@@ -293,6 +296,9 @@ impl Serialize for FitRecord<'_> {
         }
         st.serialize_field("counts", &e.counts)?;
         st.serialize_field("nll", &e.nll.map(Num))?;
+        if let Some(prior) = e.prior {
+            st.serialize_field("prior", &Num(prior))?;
+        }
         let experiments: Vec<serde_json::Value> = e
             .experiments
             .iter()

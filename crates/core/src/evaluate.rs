@@ -219,10 +219,60 @@ impl<S: System> Problem<S> {
         let k = self.unknowns.len();
         let (v, free_index, chain) = (self.values_at(z), self.free_index(), self.chain(z));
         let at = At { v: &v, free_index: &free_index, chain: &chain, integrator, jacobian };
-        match self.experiments.len() {
-            1 => Ok(vec![experiment_rows(&self.experiments[0], &at, k)?]),
-            _ => self.experiments.par_iter().map(|e| experiment_rows(e, &at, k)).collect(),
+        let mut rows = match self.experiments.len() {
+            1 => vec![experiment_rows(&self.experiments[0], &at, k)?],
+            _ => self
+                .experiments
+                .par_iter()
+                .map(|e| experiment_rows(e, &at, k))
+                .collect::<Result<Vec<_>, _>>()?,
+        };
+        rows.extend(self.prior_rows(&at, k));
+        Ok(rows)
+    }
+
+    /// The priors' rows (T(θ) − mean)/sd at the point `at`, after the experiments' rows;
+    /// none without priors.
+    fn prior_rows(&self, at: &At<'_>, k: usize) -> Option<Rows> {
+        let mut r = Vec::new();
+        let mut jacobian = Vec::new();
+        for (j, u) in self.declared.iter().enumerate() {
+            let Some(prior) = &u.prior else { continue };
+            let (residual, slope) = prior.residual(at.v[j]);
+            r.push(residual);
+            if at.jacobian {
+                let mut row = vec![0.0; k];
+                if let Some(f) = at.free_index[j] {
+                    row[f] = slope * at.chain[f];
+                }
+                jacobian.extend(row);
+            }
         }
+        (!r.is_empty()).then(|| Rows {
+            data_cost: r.iter().map(|x| x * x).sum(),
+            in_normal: vec![true; r.len()],
+            r,
+            jacobian,
+            fisher: Vec::new(),
+            noise_rows: 0,
+            counts: Counts::default(),
+        })
+    }
+
+    /// The number of unknowns with a prior (each a residual row after the experiments').
+    pub fn n_priors(&self) -> usize {
+        self.declared.iter().filter(|u| u.prior.is_some()).count()
+    }
+
+    /// The negative log-prior at a linearization's point, ½ Σ r² + Σ ln(sd·√(2π)) over the
+    /// priors; None without priors. [`nll`](Self::nll) is the likelihood alone.
+    pub fn prior_nll(&self, lin: &Linearization) -> Option<f64> {
+        if self.n_priors() == 0 || lin.experiment_costs.len() <= self.experiments.len() {
+            return None;
+        }
+        let offsets: f64 =
+            self.declared.iter().filter_map(|u| u.prior.as_ref()).map(|p| p.offset()).sum();
+        lin.experiment_costs.last().map(|c| 0.5 * c + offsets)
     }
 
     fn linearize_sampled(&self, z: &[f64]) -> Result<Linearization, OdeError> {
@@ -315,9 +365,9 @@ impl<S: System> Problem<S> {
         Ok((cost, counts))
     }
 
-    /// Number of rows of [`residuals`](Self::residuals).
+    /// Number of rows of [`residuals`](Self::residuals): the experiments' and the priors'.
     pub fn n_residuals(&self) -> usize {
-        self.experiments.iter().map(|e| e.n_rows()).sum()
+        self.experiments.iter().map(|e| e.n_rows()).sum::<usize>() + self.n_priors()
     }
 
     /// The negative log-likelihood at a linearization's point: ½ ε plus every experiment's

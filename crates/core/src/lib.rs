@@ -69,4 +69,4 @@ pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};
 pub use table::{Compared, Expected, compact, compact_header, comparison};
 pub use termination::{Failure, Rule, Termination};
 pub use trust::{Curve, CurveStep, actual_decrease, halve_along_curve};
-pub use unknowns::{Unknown, Unknowns};
+pub use unknowns::{Prior, Unknown, Unknowns};

@@ -21,7 +21,8 @@ use std::sync::Arc;
 pub const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
 /// The scale residuals are formed on.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Transform {
     /// The values themselves.
     #[default]

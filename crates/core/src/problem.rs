@@ -472,6 +472,21 @@ impl<S: System> ProblemBuilder<S> {
         }
         let experiments = resolve_experiments(&declared, experiments)?;
         let (free, scales) = roles(&declared, &experiments)?;
+        for &j in &scales {
+            if declared[j].prior.is_some() {
+                return Err(ProblemError::InvalidUnknown {
+                    name: declared[j].name.clone(),
+                    message:
+                        "a prior on a noise scale, which is set in closed form, is not supported"
+                            .into(),
+                });
+            }
+        }
+        if declared.iter().any(|u| u.prior.is_some())
+            && experiments.iter().any(|e| e.data.record != crate::Record::Discrete)
+        {
+            return Err(ProblemError::Experiments("priors need discrete data".into()));
+        }
         let held = declared.iter().map(|u| u.guess).collect();
         let problem = Problem {
             unknowns: Unknowns::new(Vec::new()),

@@ -27,12 +27,40 @@ pub struct Unknown {
     pub max: Option<f64>,
     /// Estimate ln(value) instead of the value.
     pub log: bool,
+    /// A normal prior, added to the objective (none: the likelihood alone).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<Prior>,
+}
+
+/// A normal prior on an unknown θ: the objective gains ½((T(θ) − mean)/sd)², T the identity,
+/// ln or log10 (`on`), as a residual row of its own; the negative log-prior
+/// ½((T(θ) − mean)/sd)² + ln(sd·√(2π)) is reported apart from the likelihood.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Prior {
+    /// Its mean, on the scale `on`.
+    pub mean: f64,
+    /// Its standard deviation, on the scale `on`.
+    pub sd: f64,
+    /// The scale it is normal on.
+    pub on: crate::Transform,
+}
+
+impl Prior {
+    /// The residual (T(θ) − mean)/sd and its derivative with respect to θ.
+    pub fn residual(&self, value: f64) -> (f64, f64) {
+        ((self.on.apply(value) - self.mean) / self.sd, self.on.derivative(value) / self.sd)
+    }
+
+    /// ln(sd·√(2π)): the negative log-prior less ½ r².
+    pub fn offset(&self) -> f64 {
+        self.sd.ln() + 0.5 * crate::noise::LN_2PI
+    }
 }
 
 impl Unknown {
     /// An unbounded unknown on a linear scale.
     pub fn new(name: impl Into<String>, guess: f64) -> Self {
-        Self { name: name.into(), guess, min: None, max: None, log: false }
+        Self { name: name.into(), guess, min: None, max: None, log: false, prior: None }
     }
     /// With a lower bound.
     pub fn min(self, min: f64) -> Self {
@@ -45,6 +73,10 @@ impl Unknown {
     /// On a logarithmic scale.
     pub fn log(self) -> Self {
         Self { log: true, ..self }
+    }
+    /// With a normal prior.
+    pub fn prior(self, prior: Prior) -> Self {
+        Self { prior: Some(prior), ..self }
     }
 
     /// The coordinate z of a value.
@@ -97,6 +129,20 @@ impl Unknown {
                 && m <= 0.0
             {
                 return Err(format!("a log-scale unknown needs a positive min, got {m}"));
+            }
+        }
+        if let Some(p) = &self.prior {
+            if !(p.mean.is_finite() && p.sd > 0.0 && p.sd.is_finite()) {
+                return Err(format!(
+                    "a prior needs a finite mean and a positive sd, got mean {} and sd {}",
+                    p.mean, p.sd
+                ));
+            }
+            if p.on != crate::Transform::Lin && !self.log && !self.min.is_some_and(|m| m > 0.0) {
+                return Err(format!(
+                    "a prior on the {} scale needs a positive unknown: a log scale or a positive min",
+                    p.on.name()
+                ));
             }
         }
         let (lo, hi) = (self.min.unwrap_or(f64::NEG_INFINITY), self.max.unwrap_or(f64::INFINITY));

@@ -323,6 +323,7 @@ mod tests {
             elapsed: Duration::ZERO,
             counts: Default::default(),
             nll: None,
+            prior: None,
             experiments: Vec::new(),
             scales: Vec::new(),
             noise_model: false,

@@ -47,19 +47,6 @@ pub struct Imported {
     pub model: Model,
     /// The model file's text (what `sysid` would read as `--model`, but for the data).
     pub text: String,
-    /// Priors of the parameter table (`objectivePriorType`), not part of the model file.
-    pub priors: Vec<Prior>,
-}
-
-/// A prior on an estimated parameter.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Prior {
-    /// The parameter.
-    pub parameter: String,
-    /// `objectivePriorType`, e.g. `parameterScaleNormal`.
-    pub kind: String,
-    /// `objectivePriorParameters`.
-    pub parameters: Vec<f64>,
 }
 
 #[derive(Deserialize)]
@@ -162,6 +149,8 @@ struct Parameter {
     lower: f64,
     upper: f64,
     log: bool,
+    /// A normal prior: mean, sd, and the scale it is normal on.
+    prior: Option<(f64, f64, &'static str)>,
 }
 
 /// An observable of the observable table.
@@ -243,16 +232,18 @@ impl<'a> Builder<'a> {
                 "0" => false,
                 other => return Err(e.err(format!("`{other}`: estimate is 0 or 1"))),
             };
-            let log = match scale.map(|c| t.cell(row, c)) {
-                None => false,
+            let scale_name = match scale.map(|c| t.cell(row, c)) {
+                None => "lin",
                 Some(c) => match c.text {
-                    "" | "lin" => false,
-                    "log" | "log10" => true,
+                    "" | "lin" => "lin",
+                    "log" => "log",
+                    "log10" => "log10",
                     other => {
                         return Err(c.err(format!("`{other}`: the scale is lin, log or log10")));
                     }
                 },
             };
+            let log = scale_name != "lin";
             let bound = |column: Option<usize>, default: f64| -> Result<f64, ModelError> {
                 match column.map(|c| t.cell(row, c)) {
                     Some(c) if !c.is_blank() => c.number(),
@@ -265,6 +256,7 @@ impl<'a> Builder<'a> {
                 lower: bound(lower, f64::NEG_INFINITY)?,
                 upper: bound(upper, f64::INFINITY)?,
                 log,
+                prior: if estimated { prior(t, row, scale_name)? } else { None },
             };
             if estimated {
                 let c = t.cell(row, nominal);
@@ -844,8 +836,7 @@ impl<'a> Builder<'a> {
             })?;
             file.tables.push((spec.file.clone(), table));
         }
-        let priors = self.priors()?;
-        Ok(Imported { model: Model { file }, text, priors })
+        Ok(Imported { model: Model { file }, text })
     }
 
     fn render(&self, m: &Math) -> String {
@@ -964,34 +955,6 @@ impl<'a> Builder<'a> {
         }
         Ok(out)
     }
-
-    fn priors(&self) -> Result<Vec<Prior>, ModelError> {
-        let t = &self.tables.parameters;
-        let (Some(kind), parameters) =
-            (t.column("objectivePriorType"), t.column("objectivePriorParameters"))
-        else {
-            return Ok(Vec::new());
-        };
-        let mut out = Vec::new();
-        for (id, (p, row)) in &self.parameters {
-            let k = t.cell(*row, kind);
-            if k.is_blank() || !p.estimate {
-                continue;
-            }
-            let values = match parameters.map(|c| t.cell(*row, c)) {
-                Some(c) if !c.is_blank() => c
-                    .text
-                    .split(';')
-                    .map(|v| {
-                        tsv::parse_number(v).ok_or_else(|| c.err(format!("`{v}` is not a number")))
-                    })
-                    .collect::<Result<Vec<f64>, _>>()?,
-                _ => Vec::new(),
-            };
-            out.push(Prior { parameter: id.clone(), kind: k.text.to_string(), parameters: values });
-        }
-        Ok(out)
-    }
 }
 
 /// The row of `condition` in a condition table.
@@ -1067,6 +1030,42 @@ fn toml_number(v: f64) -> String {
     format!("{v:e}")
 }
 
+/// The objective prior of row `row` of the parameter table: a normal one on the value
+/// (`normal`) or on the parameter's scale (`parameterScaleNormal`); a uniform one adds a
+/// constant within the bounds and leaves the objective's minimum where it is, so it is not
+/// added; any other is refused by name.
+fn prior(
+    t: &Tsv,
+    row: usize,
+    scale: &'static str,
+) -> Result<Option<(f64, f64, &'static str)>, ModelError> {
+    let Some(kind) = t.cell_named(row, "objectivePriorType").filter(|c| !c.is_blank()) else {
+        return Ok(None);
+    };
+    let on = match kind.text {
+        "normal" => "lin",
+        "parameterScaleNormal" => scale,
+        "uniform" | "parameterScaleUniform" => return Ok(None),
+        other => {
+            return Err(kind.err(format!(
+                "a prior of type `{other}` is not supported (normal, parameterScaleNormal, uniform, parameterScaleUniform)"
+            )));
+        }
+    };
+    let Some(cell) = t.cell_named(row, "objectivePriorParameters").filter(|c| !c.is_blank()) else {
+        return Err(kind.err("the prior needs `objectivePriorParameters`: mean;sd"));
+    };
+    let values: Vec<f64> = cell
+        .text
+        .split(';')
+        .map(|v| tsv::parse_number(v).ok_or_else(|| cell.err(format!("`{v}` is not a number"))))
+        .collect::<Result<_, _>>()?;
+    match values[..] {
+        [mean, sd] if mean.is_finite() && sd > 0.0 && sd.is_finite() => Ok(Some((mean, sd, on))),
+        _ => Err(cell.err(format!("`{}`: a normal prior is mean;sd with sd > 0", cell.text))),
+    }
+}
+
 fn unknown_entry(p: &Parameter) -> String {
     let mut s = format!("{{ guess = {}", toml_number(p.nominal));
     if p.lower.is_finite() {
@@ -1077,6 +1076,14 @@ fn unknown_entry(p: &Parameter) -> String {
     }
     if p.log {
         s.push_str(", log = true");
+    }
+    if let Some((mean, sd, on)) = p.prior {
+        let _ = write!(
+            s,
+            ", prior = {{ mean = {}, sd = {}, on = \"{on}\" }}",
+            toml_number(mean),
+            toml_number(sd)
+        );
     }
     s.push_str(" }");
     s

@@ -166,3 +166,38 @@ fn bad_input_is_located() {
     let e = error_of(&path);
     assert!(e.contains("model_Boehm_JProteomeRes2014.xml:") && e.contains("not valid XML"), "{e}");
 }
+
+/// Bachmann's one prior (parameterScaleNormal on log10 init_EpoRJAK2) is a row of the
+/// objective, reported apart: the likelihood is AMICI's reference without it, and the
+/// negative log-prior at nominal is ½((log10 θ − μ)/σ)² + ln(σ√(2π)) from the table's
+/// numbers. A prior type that is not supported is refused at its cell.
+#[test]
+fn a_prior_is_reported_apart_from_the_likelihood() {
+    let imported = import(&yaml("Bachmann_MSB2011")).expect("imports");
+    let problem = imported.model.problem(None).expect("a problem");
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let lin = problem.linearize(&z).expect("integrates");
+    let (theta, mean, sd) = (3.97622379188569_f64, 0.599470870492697, 0.193459292722329);
+    let expected = 0.5 * ((theta.log10() - mean) / sd).powi(2)
+        + (sd * (2.0 * std::f64::consts::PI).sqrt()).ln();
+    let prior = problem.prior_nll(&lin).expect("a prior");
+    assert!((prior - expected).abs() <= 1e-12, "{prior} vs {expected}");
+    assert!((problem.nll(&lin).expect("a likelihood") + 418.40573341425295).abs() <= 1e-3);
+
+    let dir = std::env::temp_dir().join(format!("sysid-petab-laplace-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a directory");
+    for entry in std::fs::read_dir(data().join("Bachmann_MSB2011")).expect("the problem") {
+        let path = entry.expect("an entry").path();
+        let text = std::fs::read_to_string(&path).expect("a file");
+        let text = text.replace("parameterScaleNormal", "laplace");
+        std::fs::write(dir.join(path.file_name().expect("a name")), text).expect("written");
+    }
+    let e = error_of(&dir.join("Bachmann_MSB2011.yaml"));
+    assert!(
+        e.contains("parameters_Bachmann_MSB2011.tsv:")
+            && e.contains(
+                "column `objectivePriorType`: a prior of type `laplace` is not supported"
+            ),
+        "{e}"
+    );
+}

@@ -33,6 +33,7 @@ mod manifest;
 mod markdown;
 mod minima;
 mod options;
+mod petab;
 mod prediction;
 mod profiles;
 mod run;

@@ -43,7 +43,12 @@ pub(crate) struct Manifest {
 impl Manifest {
     /// Checks that the report replaces only files a report wrote (or `force`), and removes
     /// those of the systems it is about to write, stale figures included.
-    pub(crate) fn prepare(out: &Path, systems: &[String], force: bool) -> anyhow::Result<Self> {
+    pub(crate) fn prepare(
+        out: &Path,
+        systems: &[String],
+        petab: bool,
+        force: bool,
+    ) -> anyhow::Result<Self> {
         let path = out.join(MANIFEST);
         let earlier: std::collections::BTreeSet<String> = match std::fs::read_to_string(&path) {
             Ok(text) => text.lines().map(str::to_string).collect(),
@@ -52,6 +57,9 @@ impl Manifest {
         };
         let mut planned = vec![README.to_string()];
         planned.extend(systems.iter().flat_map(|s| system_files(s)));
+        if petab {
+            planned.push("petab/petab.json".into());
+        }
         let foreign: Vec<&String> =
             planned.iter().filter(|f| out.join(f).exists() && !earlier.contains(*f)).collect();
         if !foreign.is_empty() && !force {

@@ -28,6 +28,9 @@ pub struct ReportOptions {
     pub seed: u64,
     /// Replace files at the report's paths that no report wrote (refused otherwise).
     pub force: bool,
+    /// A directory of PEtab problems (a folder each) for the report's PEtab section; none:
+    /// no section.
+    pub petab: Option<PathBuf>,
 }
 
 impl Default for ReportOptions {
@@ -43,6 +46,7 @@ impl Default for ReportOptions {
             starts: 20,
             seed: 1,
             force: false,
+            petab: None,
         }
     }
 }

@@ -49,7 +49,7 @@ pub fn write_report(args: &ReportOptions, observer: &dyn Observer) -> anyhow::Re
         }
     }
     let methods = &args.methods;
-    let manifest = Manifest::prepare(&args.out, &systems, args.force)?;
+    let manifest = Manifest::prepare(&args.out, &systems, args.petab.is_some(), args.force)?;
     let written = write_sections(args, &systems, methods, observer);
     manifest.close()?;
     let path = written?;
@@ -73,7 +73,16 @@ fn write_sections(
         observer.note(&format!("{name}: done in {:.1} s", t.elapsed().as_secs_f64()));
         sections.push(section);
     }
-    let readme = markdown(args, methods, &sections, started.elapsed().as_secs_f64());
+    let petab = match &args.petab {
+        Some(dir) => {
+            let t = Instant::now();
+            let md = crate::petab::section(dir, &args.out, observer)?;
+            observer.note(&format!("PEtab problems: done in {:.1} s", t.elapsed().as_secs_f64()));
+            md
+        }
+        None => String::new(),
+    };
+    let readme = markdown(args, methods, &sections, started.elapsed().as_secs_f64()) + &petab;
     let path = args.out.join(README);
     write(&path, &readme)?;
     Ok(path)

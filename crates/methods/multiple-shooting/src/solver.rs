@@ -75,6 +75,12 @@ impl<S: System> Method<S> for MultipleShooting {
 
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         self.options.validate()?;
+        if problem.n_priors() > 0 {
+            return Err(FitError::Unsupported {
+                method: "multiple-shooting".into(),
+                what: "priors (its condensed least squares has no rows for them)".into(),
+            });
+        }
         for e in problem.experiments() {
             if let Some(series) =
                 e.sampled().series.iter().find(|s| matches!(s.noise, PlannedNoise::Function(_)))

@@ -58,6 +58,11 @@ impl Quasilinearization {
         self.options.validate()?;
         let name = self.method_name();
         let unsupported = |what: String| FitError::Unsupported { method: name.into(), what };
+        if problem.n_priors() > 0 {
+            return Err(unsupported(
+                "priors (its linear two-point problems have no rows for them)".into(),
+            ));
+        }
         for e in problem.experiments() {
             for (s, w) in e.slots().iter().enumerate() {
                 let log = e.slot_unknown(s).map(|j| &problem.declared()[j]).filter(|u| u.log);

@@ -1,7 +1,7 @@
 //! What is known and what is unknown: `[unknowns]`, `[initial]` and `[known]`, which together
 //! (with what every experiment sets) give every state and parameter exactly once.
 
-use sysid_core::Unknown;
+use sysid_core::{Prior, Transform, Unknown};
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
@@ -272,15 +272,64 @@ fn read_unknown(
                     ));
                 }
             },
+            "prior" => u.prior = Some(read_prior(r, name, v)?),
             other => {
                 return Err(r.err(
                     k.span().start,
                     format!(
-                        "[unknowns] {name}: unknown key `{other}` (keys: guess, min, max, log)"
+                        "[unknowns] {name}: unknown key `{other}` (keys: guess, min, max, log, prior)"
                     ),
                 ));
             }
         }
     }
     Ok(u)
+}
+
+/// Reads `prior = { mean, sd, on }`: a normal prior on the value (`on = "lin"`, the default),
+/// its natural logarithm (`"log"`) or its log10 (`"log10"`).
+fn read_prior(
+    r: &Reader<'_>,
+    name: &str,
+    value: &Spanned<DeValue<'_>>,
+) -> Result<Prior, ModelError> {
+    let what = format!("[unknowns] {name}.prior");
+    let t = r.table(value, &what)?;
+    let number = |key: &str| -> Result<f64, ModelError> {
+        let v = t
+            .get(key)
+            .ok_or_else(|| r.err(value.span().start, format!("{what}: a prior needs `{key}`")))?;
+        r.number(v, &format!("{what}.{key}"))
+    };
+    let (mean, sd) = (number("mean")?, number("sd")?);
+    if sd <= 0.0 || sd.is_nan() {
+        let at = t.get("sd").map_or(value.span().start, |v| v.span().start);
+        return Err(r.err(at, format!("{what}.sd must be positive, got {sd}")));
+    }
+    let mut on = Transform::Lin;
+    for (k, v) in t.iter() {
+        match k.get_ref().as_ref() {
+            "mean" | "sd" => {}
+            "on" => {
+                on = match r.string(v, &format!("{what}.on"))? {
+                    "lin" => Transform::Lin,
+                    "log" => Transform::Log,
+                    "log10" => Transform::Log10,
+                    other => {
+                        return Err(r.err(
+                            v.span().start,
+                            format!("{what}.on: `{other}` (scales: lin, log, log10)"),
+                        ));
+                    }
+                };
+            }
+            other => {
+                return Err(r.err(
+                    k.span().start,
+                    format!("{what}: unknown key `{other}` (keys: mean, sd, on)"),
+                ));
+            }
+        }
+    }
+    Ok(Prior { mean, sd, on })
 }
