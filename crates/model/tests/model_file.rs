@@ -487,7 +487,7 @@ fn unknowns() {
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, scale = 1 }}\n"),
-            "models/m.toml:10:18: [unknowns] k: unknown key `scale` (keys: guess, min, max, log)",
+            "models/m.toml:10:18: [unknowns] k: unknown key `scale` (keys: guess, min, max, log, prior)",
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ scale = 1, guess = \"a\" }}\n"),

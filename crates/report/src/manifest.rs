@@ -46,7 +46,7 @@ impl Manifest {
     pub(crate) fn prepare(
         out: &Path,
         systems: &[String],
-        petab: bool,
+        petab: &[String],
         force: bool,
     ) -> anyhow::Result<Self> {
         let path = out.join(MANIFEST);
@@ -57,8 +57,13 @@ impl Manifest {
         };
         let mut planned = vec![README.to_string()];
         planned.extend(systems.iter().flat_map(|s| system_files(s)));
-        if petab {
+        if !petab.is_empty() {
             planned.push("petab/petab.json".into());
+        }
+        for problem in petab {
+            for f in ["profiles.json", "profiles.png", "profiles.svg"] {
+                planned.push(format!("petab/{problem}/{f}"));
+            }
         }
         let foreign: Vec<&String> =
             planned.iter().filter(|f| out.join(f).exists() && !earlier.contains(*f)).collect();

@@ -37,6 +37,8 @@ struct Row {
 }
 
 struct Numbers {
+    /// The caption of its profiles figure, where they were traced.
+    profiles: Option<String>,
     states: usize,
     unknowns: usize,
     experiments: usize,
@@ -61,8 +63,28 @@ fn references(dir: &Path) -> Vec<(String, f64)> {
         .collect()
 }
 
-/// Imports, evaluates and fits one problem.
-fn numbers(yaml: &Path, observer: &dyn Observer) -> Result<Numbers, String> {
+/// The most free unknowns a problem's profiles are traced for (each profile point is a fit
+/// of the others; beyond this the section would take hours).
+const PROFILED_UNKNOWNS: usize = 15;
+
+/// The problems of a directory of PEtab problems: its folders, sorted.
+pub(crate) fn problems(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok())
+                .filter(|e| e.path().is_dir())
+                .map(|e| e.file_name().to_string_lossy().to_string())
+                .collect()
+        })
+        .unwrap_or_default();
+    names.sort();
+    names
+}
+
+/// Imports, evaluates and fits one problem; traces its profiles (into `out`) where the
+/// Levenberg–Marquardt fit certifies and it has at most [`PROFILED_UNKNOWNS`] free unknowns.
+fn numbers(yaml: &Path, out: &Path, observer: &dyn Observer) -> Result<Numbers, String> {
     let started = Instant::now();
     let imported = sysid_petab::import(yaml).map_err(|e| e.to_string())?;
     let problem = imported.model.problem(None).map_err(|e| e.to_string())?;
@@ -71,6 +93,7 @@ fn numbers(yaml: &Path, observer: &dyn Observer) -> Result<Numbers, String> {
     let lin = problem.linearize(&z).map_err(|e| e.to_string())?;
     let nominal = problem.nll(&lin).ok_or("no likelihood")?;
     let mut fits = Vec::new();
+    let mut profiles = None;
     for m in methods() {
         let method =
             Registry::standard().build(m, &Settings::default()).map_err(|e| e.to_string())?;
@@ -86,8 +109,24 @@ fn numbers(yaml: &Path, observer: &dyn Observer) -> Result<Numbers, String> {
             termination: fit.termination.to_string(),
         });
         observer.note(&format!("{}: {m} in {seconds:.1} s", yaml.display()));
+        if m == "levenberg-marquardt"
+            && fit.converged()
+            && problem.names().len() <= PROFILED_UNKNOWNS
+        {
+            let t = Instant::now();
+            std::fs::create_dir_all(out).map_err(|e| e.to_string())?;
+            let name = yaml.file_stem().map_or(String::new(), |s| s.to_string_lossy().to_string());
+            profiles = crate::run::write_profiles(&name, &problem, &fit, out, m)
+                .map_err(|e| format!("profiles: {e}"))?;
+            observer.note(&format!(
+                "{}: profiles in {:.1} s",
+                yaml.display(),
+                t.elapsed().as_secs_f64()
+            ));
+        }
     }
     Ok(Numbers {
+        profiles,
         states: problem.experiments()[0].system().signature().n_states(),
         unknowns: problem.names().len(),
         experiments: problem.experiments().len(),
@@ -101,16 +140,10 @@ fn numbers(yaml: &Path, observer: &dyn Observer) -> Result<Numbers, String> {
 /// written to `out/petab/petab.json`; the section's Markdown.
 pub(crate) fn section(dir: &Path, out: &Path, observer: &dyn Observer) -> anyhow::Result<String> {
     let references = references(dir);
-    let mut names: Vec<String> = std::fs::read_dir(dir)?
-        .filter_map(|e| e.ok())
-        .filter(|e| e.path().is_dir())
-        .map(|e| e.file_name().to_string_lossy().to_string())
-        .collect();
-    names.sort();
     let mut rows = Vec::new();
-    for name in names {
+    for name in problems(dir) {
         let yaml = dir.join(&name).join(format!("{name}.yaml"));
-        let outcome = numbers(&yaml, observer);
+        let outcome = numbers(&yaml, &out.join("petab").join(&name), observer);
         let reference = references.iter().find(|r| r.0 == name).map(|r| r.1);
         rows.push(Row { problem: name, reference, outcome });
     }
@@ -206,9 +239,24 @@ fn markdown(dir: &Path, rows: &[Row]) -> String {
             }
         }
     }
+    md.push('\n');
+    for r in rows {
+        if let Ok(Numbers { profiles: Some(caption), .. }) = &r.outcome {
+            let _ = writeln!(
+                md,
+                "### {0}: profile likelihoods\n\n![{0} profiles](petab/{0}/profiles.png)\n\n{caption}\n",
+                r.problem
+            );
+        }
+    }
     let _ = writeln!(
         md,
-        "\nCrauste: the stored reference is 1.24e-3 above sysid's value, which agrees to 1e-8 \
+        "Profiles are traced where the {lm} fit certifies and the problem has at most \
+         {PROFILED_UNKNOWNS} free unknowns.\n"
+    );
+    let _ = writeln!(
+        md,
+        "Crauste: the stored reference is 1.24e-3 above sysid's value, which agrees to 1e-8 \
          with the NLL of the collection's own simulated observables at nominal \
          (docs/petab.md). A fit that is not certified keeps its best point: its NLL is never \
          above the NLL at nominal.\n"

@@ -49,7 +49,8 @@ pub fn write_report(args: &ReportOptions, observer: &dyn Observer) -> anyhow::Re
         }
     }
     let methods = &args.methods;
-    let manifest = Manifest::prepare(&args.out, &systems, args.petab.is_some(), args.force)?;
+    let petab = args.petab.as_deref().map(crate::petab::problems).unwrap_or_default();
+    let manifest = Manifest::prepare(&args.out, &systems, &petab, args.force)?;
     let written = write_sections(args, &systems, methods, observer);
     manifest.close()?;
     let path = written?;
@@ -236,36 +237,9 @@ impl SystemReport<'_> {
         figures: &mut Vec<(String, String)>,
     ) -> anyhow::Result<()> {
         let reference = Role::Reference.method();
-        let options = ProfileOptions::default();
-        let profiles = match profile(&*method::<S>(reference)?, problem, optimum, &[], &options)? {
-            Traced::Profiles(p) => p,
-            Traced::BetterOptimum(point) => {
-                write(
-                    &dir.join("profiles.json"),
-                    &serde_json::to_string_pretty(&serde_json::json!({
-                        "better_optimum_found": point,
-                    }))?,
-                )?;
-                return Ok(());
-            }
-        };
-        let json: serde_json::Map<String, serde_json::Value> =
-            profiles.iter().map(|p| (p.name.clone(), serde_json::json!(p.record()))).collect();
-        write(&dir.join("profiles.json"), &serde_json::to_string_pretty(&json)?)?;
-        let title = format!("{system}: profile likelihoods");
-        let figure = Profiles::new(title, problem, optimum, options.threshold, &profiles);
-        save(&figure, &dir.join("profiles"))?;
-        let verdicts: Vec<String> =
-            profiles.iter().map(|p| format!("{} {}", p.name, p.label.words())).collect();
-        figures.push((
-            "profiles".into(),
-            format!(
-                "Profile likelihoods around the fit ({reference} re-optimising the others): \
-                 ΔNLL with the pointwise 95 % threshold 1.92 (dashed) and the interval's ends, \
-                 and below how the other unknowns compensate. {}.",
-                verdicts.join(", ")
-            ),
-        ));
+        if let Some(caption) = write_profiles(system, problem, optimum, dir, reference)? {
+            figures.push(("profiles".into(), caption));
+        }
         Ok(())
     }
 
@@ -578,4 +552,43 @@ fn draw_basin<S: System + Clone + Send + Sync>(
         axes: map.axes.clone(),
         rates: map.maps.iter().map(|m| (m.method.clone(), m.success_rate)).collect(),
     })
+}
+
+/// The profile likelihoods of every unknown around `optimum`, each point re-optimised by
+/// `method` (`dir/profiles.json`, drawn as `dir/profiles.png|svg`); the figure's caption, or
+/// None when a profile found a lower point than the fit (then said in `profiles.json`).
+pub(crate) fn write_profiles<S: System + Sync>(
+    name: &str,
+    problem: &Problem<S>,
+    optimum: &Estimate,
+    dir: &Path,
+    method_name: &str,
+) -> anyhow::Result<Option<String>> {
+    let options = ProfileOptions::default();
+    let profiles = match profile(&*method::<S>(method_name)?, problem, optimum, &[], &options)? {
+        Traced::Profiles(p) => p,
+        Traced::BetterOptimum(point) => {
+            write(
+                &dir.join("profiles.json"),
+                &serde_json::to_string_pretty(&serde_json::json!({
+                    "better_optimum_found": point,
+                }))?,
+            )?;
+            return Ok(None);
+        }
+    };
+    let json: serde_json::Map<String, serde_json::Value> =
+        profiles.iter().map(|p| (p.name.clone(), serde_json::json!(p.record()))).collect();
+    write(&dir.join("profiles.json"), &serde_json::to_string_pretty(&json)?)?;
+    let title = format!("{name}: profile likelihoods");
+    let figure = Profiles::new(title, problem, optimum, options.threshold, &profiles);
+    save(&figure, &dir.join("profiles"))?;
+    let verdicts: Vec<String> =
+        profiles.iter().map(|p| format!("{} {}", p.name, p.label.words())).collect();
+    Ok(Some(format!(
+        "Profile likelihoods around the fit ({method_name} re-optimising the others): \
+         ΔNLL with the pointwise 95 % threshold 1.92 (dashed) and the interval's ends, \
+         and below how the other unknowns compensate. {}.",
+        verdicts.join(", ")
+    )))
 }
