@@ -482,18 +482,31 @@ impl Model {
             }
             let (y0, p) = e.point(&v);
             let sampled = e.sampled();
-            let Ok(sol) =
-                Ivp::new(e.system(), e.t0(), &y0, &p).solve(problem.integrator(), &sampled.times)
-            else {
-                continue;
+            // The trajectory, unless every σ here is a function of t, the parameters and the
+            // unknowns alone (a PEtab noise formula of noise parameters): then σ needs no
+            // integration.
+            let model_free = functions.iter().all(|(s, _)| self.sigma_is_model_free(s.observable));
+            let sol = match model_free {
+                true => None,
+                false => match Ivp::new(e.system(), e.t0(), &y0, &p)
+                    .solve(problem.integrator(), &sampled.times)
+                {
+                    Ok(sol) => Some(sol),
+                    Err(_) => continue,
+                },
             };
             let mut og = ObservableGradient::new(e.system(), &p, &[]);
             let (n, np) = (y0.len(), p.len());
             for (series, noise) in functions {
                 for sample in &series.samples {
                     let t = sampled.times[sample.index];
-                    let y = sol.state(sample.index);
-                    let h = og.eval(t, y, &[], series.observable, &mut []);
+                    let (y, h) = match &sol {
+                        Some(sol) => {
+                            let y = sol.state(sample.index);
+                            (y, og.eval(t, y, &[], series.observable, &mut []))
+                        }
+                        None => (y0.as_slice(), f64::NAN),
+                    };
                     let (mut dy, mut dp, mut dv) =
                         (vec![0.0; n], vec![0.0; np], vec![0.0; v.len()]);
                     let mut g = NoiseGradient { y: &mut dy, h: 0.0, p: &mut dp, v: &mut dv };
@@ -520,6 +533,19 @@ impl Model {
             }
         }
         Ok(())
+    }
+
+    /// Whether the σ of an observable uses neither the states nor the output's own value.
+    fn sigma_is_model_free(&self, observable: Observable) -> bool {
+        let f = &self.file;
+        let Observable::Output(o) = observable else { return false };
+        let output = &f.outputs[o];
+        match &output.noise {
+            NoiseSpec::Expression(e) => {
+                !e.uses.iter().any(|n| n == &output.name || f.states.contains(n))
+            }
+            _ => false,
+        }
     }
 
     fn in_experiment(&self, name: &str, e: ModelError) -> ModelError {

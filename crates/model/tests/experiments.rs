@@ -268,3 +268,27 @@ fn preequilibrate_is_checked_like_set() {
         "m.toml:25:18: experiment `high`: preequilibrate: a model with inputs has no steady state to run to",
     );
 }
+
+/// A σ that is not positive at the start is refused, naming the output, the experiment and
+/// the time: with a σ of the model's values (found along the trajectory) and with a σ of the
+/// unknowns alone (evaluated without integrating).
+#[test]
+fn a_sigma_that_is_not_positive_at_the_start_is_refused() {
+    let dir = scratch("sigma", LOW, HIGH);
+    for (sigma, what) in [("s * (Bm - 10)", "Bm"), ("s * c", "Bm")] {
+        let mut model = TWO.replace("sigma = \"s\"", &format!("sigma = \"{sigma}\""));
+        if sigma.contains('c') {
+            model = model.replace(
+                "s = { guess = 0.1, log = true }",
+                "s = { guess = 0.1, log = true }\nc = -2.0",
+            );
+        }
+        let message = problem_error(&dir, &model);
+        assert!(
+            message.contains(&format!("the σ of `{what}`, {sigma}, is "))
+                && message.contains("in experiment `low` at the start: σ must be positive"),
+            "{message}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
