@@ -20,8 +20,10 @@
 //! * a preequilibration condition becomes the experiment's `preequilibrate`: it starts from
 //!   the steady state under that condition.
 //!
-//! Steady-state measurements (time `inf`), events and laplace noise are refused naming the
-//! feature. Every error names the file, the line and the column.
+//! * measurements at time `inf` (steady state) become an experiment that preequilibrates
+//!   under its own condition and is measured at t = 0.
+//!
+//! Events and laplace noise are refused naming the feature. Every error names the file, the line and the column.
 #![warn(missing_docs)]
 
 pub mod math;
@@ -127,7 +129,7 @@ pub fn import(yaml: &Path) -> Result<Imported, ModelError> {
         measurements: read_all(&sub.measurement_files, "measurement")?,
         observables: read_all(&sub.observable_files, "observable")?,
     };
-    Builder::new(&sbml, &tables, yaml)?.build()
+    Builder::new((&sbml, sbml_path.display().to_string()), &tables, yaml)?.build()
 }
 
 fn first_line(s: &str) -> &str {
@@ -161,6 +163,7 @@ struct Observable {
 }
 
 /// An output of the model file: one observable with one set of replacements.
+#[derive(PartialEq)]
 struct Output {
     observable: String,
     value: String,
@@ -181,11 +184,26 @@ type Sample = (f64, usize, f64);
 /// An experiment: its preequilibration condition, if any, and its simulation condition.
 type Key = (Option<String>, String);
 
+/// The states of the model file, with their equations and initial values.
+struct Dynamics {
+    states: Vec<String>,
+    equations: Vec<(String, Math)>,
+    initial: Vec<(String, Math)>,
+}
+
+/// What the measurement tables give: the outputs, and each experiment's measurements.
+struct Measured {
+    outputs: Vec<Output>,
+    experiments: Vec<(Key, Vec<Sample>)>,
+}
+
 /// Stands for the output's own value in a σ expression until the output is named.
 const OWN: &str = "\u{1}own\u{1}";
 
 struct Builder<'a> {
     sbml: &'a Sbml,
+    /// The SBML file, as errors name it.
+    sbml_file: String,
     tables: &'a Tables,
     yaml: &'a Path,
     /// The model file's name of each SBML and PEtab id.
@@ -197,9 +215,14 @@ struct Builder<'a> {
 }
 
 impl<'a> Builder<'a> {
-    fn new(sbml: &'a Sbml, tables: &'a Tables, yaml: &'a Path) -> Result<Self, ModelError> {
+    fn new(
+        (sbml, sbml_file): (&'a Sbml, String),
+        tables: &'a Tables,
+        yaml: &'a Path,
+    ) -> Result<Self, ModelError> {
         let mut b = Self {
             sbml,
+            sbml_file,
             tables,
             yaml,
             names: HashMap::new(),
@@ -363,11 +386,6 @@ impl<'a> Builder<'a> {
         self.names.get(id).cloned().unwrap_or_else(|| id.to_string())
     }
 
-    fn sbml_file(&self) -> String {
-        let dir = self.yaml.parent().unwrap_or(Path::new(""));
-        dir.join("model").display().to_string()
-    }
-
     /// Assignment rules, and initial assignments of parameters and compartments (which the
     /// parameter table does not set), substituted into each other.
     fn resolve_rules(&mut self) -> Result<(), ModelError> {
@@ -389,7 +407,7 @@ impl<'a> Builder<'a> {
         for key in raw.keys() {
             let m = resolve(key, &raw, &mut resolved, &mut Vec::new()).map_err(|cycle| {
                 ModelError::file(
-                    &self.sbml_file(),
+                    &self.sbml_file,
                     format!(
                         "assignment rules refer to each other in a cycle: {}",
                         cycle.join(" → ")
@@ -408,91 +426,58 @@ impl<'a> Builder<'a> {
     }
 
     fn build(self) -> Result<Imported, ModelError> {
+        let dynamics = self.dynamics()?;
+        let measured = self.measured(&dynamics.states)?;
+        let (parameters, extras) = self.split_parameters(&dynamics, &measured);
+        let outputs = self.output_names(&measured.outputs, &dynamics.states, &parameters);
+        let experiments = experiment_names(&measured.experiments);
+        let text =
+            self.model_text(&dynamics, &measured, (&parameters, &extras), &outputs, &experiments)?;
+        let mut file = ModelFile::parse(&text, self.yaml).map_err(|e| ModelError {
+            message: format!(
+                "the model file made of this PEtab problem is refused, which is a bug of the importer: {} (line {} of the text it made)",
+                e.message,
+                e.line.unwrap_or(0)
+            ),
+            line: None,
+            column: None,
+            ..e
+        })?;
+        for (spec, (_, rows)) in file.experiments.clone().iter().zip(&measured.experiments) {
+            file.tables.push((spec.file.clone(), data_table(spec, rows, &outputs)?));
+        }
+        Ok(Imported { model: Model { file }, text })
+    }
+
+    /// The states (the species no assignment rule gives, and the parameters with rate
+    /// rules), their equations and their initial values.
+    fn dynamics(&self) -> Result<Dynamics, ModelError> {
         let s = self.sbml;
         let rate_ruled = |n: &str| s.rate_rules.iter().find(|r| r.0 == n).map(|r| &r.1);
-        let compartment = |id: &str| s.compartments.iter().find(|c| c.0 == id);
-        // States: the species no assignment rule gives, and parameters with rate rules.
         let species: Vec<&sbml::Species> =
             s.species.iter().filter(|x| !self.rules.contains_key(&x.id)).collect();
+        let ruled_parameters: Vec<&(String, f64)> =
+            s.parameters.iter().filter(|p| rate_ruled(&p.0).is_some()).collect();
         let mut states: Vec<String> = species.iter().map(|x| x.id.clone()).collect();
-        states.extend(
-            s.parameters.iter().filter(|p| rate_ruled(&p.0).is_some()).map(|p| p.0.clone()),
-        );
-        for (v, _) in &s.rate_rules {
-            if !states.contains(v) {
-                return Err(ModelError::file(
-                    &self.sbml_file(),
-                    format!("a rate rule for `{v}`, which is no species or parameter"),
-                ));
-            }
+        states.extend(ruled_parameters.iter().map(|p| p.0.clone()));
+        if let Some((v, _)) = s.rate_rules.iter().find(|(v, _)| !states.contains(v)) {
+            return Err(ModelError::file(
+                &self.sbml_file,
+                format!("a rate rule for `{v}`, which is no species or parameter"),
+            ));
         }
-        // Equations.
         let mut equations: Vec<(String, Math)> = Vec::new();
-        for x in &species {
-            let eq = if let Some(r) = rate_ruled(&x.id) {
-                self.ruled(r)
-            } else if x.fixed {
-                Math::Num(0.0)
-            } else {
-                let mut terms = Vec::new();
-                for r in &s.reactions {
-                    let net: f64 =
-                        r.products.iter().filter(|p| p.0 == x.id).map(|p| p.1).sum::<f64>()
-                            - r.reactants.iter().filter(|p| p.0 == x.id).map(|p| p.1).sum::<f64>();
-                    if net != 0.0 {
-                        let rate = self.ruled(&r.rate);
-                        terms.push(match net {
-                            1.0 => rate,
-                            -1.0 => Math::Neg(Box::new(rate)),
-                            _ => Math::Mul(vec![Math::Num(net), rate]),
-                        });
-                    }
-                }
-                let sum = match terms.len() {
-                    0 => Math::Num(0.0),
-                    1 => terms.remove(0),
-                    _ => Math::Add(terms),
-                };
-                match (x.amount, sum) {
-                    (_, Math::Num(0.0)) => Math::Num(0.0),
-                    (true, sum) => sum,
-                    (false, sum) => {
-                        Math::Div(Box::new(sum), Box::new(Math::Name(x.compartment.clone())))
-                    }
-                }
-            };
-            equations.push((x.id.clone(), eq));
-        }
-        for p in s.parameters.iter().filter(|p| rate_ruled(&p.0).is_some()) {
-            equations.push((p.0.clone(), self.ruled(rate_ruled(&p.0).expect("filtered"))));
-        }
-        // Initial values.
-        let species_initial = |x: &sbml::Species| -> Result<Math, ModelError> {
-            if let Some((_, m)) = s.initial_assignments.iter().find(|a| a.0 == x.id) {
-                return Ok(self.ruled(m));
-            }
-            let size = || Math::Name(x.compartment.clone());
-            match (x.initial, x.amount) {
-                (Some(Initial::Concentration(c)), false) | (Some(Initial::Amount(c)), true) => {
-                    Ok(Math::Num(c))
-                }
-                (Some(Initial::Concentration(c)), true) => {
-                    Ok(Math::Mul(vec![Math::Num(c), size()]))
-                }
-                (Some(Initial::Amount(a)), false) => {
-                    Ok(Math::Div(Box::new(Math::Num(a)), Box::new(size())))
-                }
-                (None, _) => Err(ModelError::file(
-                    &self.sbml_file(),
-                    format!("species `{}` has no initial value", x.id),
-                )),
-            }
-        };
         let mut initial: Vec<(String, Math)> = Vec::new();
         for x in &species {
-            initial.push((x.id.clone(), species_initial(x)?));
+            let equation = match rate_ruled(&x.id) {
+                Some(r) => self.ruled(r),
+                None => self.reaction_equation(x),
+            };
+            equations.push((x.id.clone(), equation));
+            initial.push((x.id.clone(), self.species_initial(x)?));
         }
-        for p in s.parameters.iter().filter(|p| rate_ruled(&p.0).is_some()) {
+        for p in ruled_parameters {
+            equations.push((p.0.clone(), self.ruled(rate_ruled(&p.0).expect("filtered"))));
             let m = s
                 .initial_assignments
                 .iter()
@@ -502,184 +487,189 @@ impl<'a> Builder<'a> {
         }
         // An initial value may use another species' initial value.
         let initial_of: HashMap<String, Math> = initial.iter().cloned().collect();
-        let initial: Vec<(String, Math)> =
+        let initial =
             initial.iter().map(|(x, m)| (x.clone(), substitute_deep(m, &initial_of, 8))).collect();
+        Ok(Dynamics { states, equations, initial })
+    }
 
-        // Model parameters: the SBML's parameters and compartments that are no rule or state,
-        // and the PEtab parameters an output uses.
-        let mut model_parameters: Vec<String> = s
+    /// dx/dt of a species from the reactions: Σ stoichiometry · rate, divided by its
+    /// compartment's size where the species is a concentration; 0 for a boundary or
+    /// constant species.
+    fn reaction_equation(&self, x: &sbml::Species) -> Math {
+        if x.fixed {
+            return Math::Num(0.0);
+        }
+        let mut terms = Vec::new();
+        for r in &self.sbml.reactions {
+            let count = |list: &[(String, f64)]| -> f64 {
+                list.iter().filter(|p| p.0 == x.id).map(|p| p.1).sum()
+            };
+            let net = count(&r.products) - count(&r.reactants);
+            if net != 0.0 {
+                let rate = self.ruled(&r.rate);
+                terms.push(match net {
+                    1.0 => rate,
+                    -1.0 => Math::Neg(Box::new(rate)),
+                    _ => Math::Mul(vec![Math::Num(net), rate]),
+                });
+            }
+        }
+        let sum = match terms.len() {
+            0 => return Math::Num(0.0),
+            1 => terms.remove(0),
+            _ => Math::Add(terms),
+        };
+        match x.amount {
+            true => sum,
+            false => Math::Div(Box::new(sum), Box::new(Math::Name(x.compartment.clone()))),
+        }
+    }
+
+    /// A species' initial value in its own units: its initial assignment, or its initial
+    /// concentration or amount converted by the compartment's size.
+    fn species_initial(&self, x: &sbml::Species) -> Result<Math, ModelError> {
+        if let Some((_, m)) = self.sbml.initial_assignments.iter().find(|a| a.0 == x.id) {
+            return Ok(self.ruled(m));
+        }
+        let size = || Box::new(Math::Name(x.compartment.clone()));
+        match (x.initial, x.amount) {
+            (Some(Initial::Concentration(c)), false) | (Some(Initial::Amount(c)), true) => {
+                Ok(Math::Num(c))
+            }
+            (Some(Initial::Concentration(c)), true) => Ok(Math::Mul(vec![Math::Num(c), *size()])),
+            (Some(Initial::Amount(a)), false) => Ok(Math::Div(Box::new(Math::Num(a)), size())),
+            (None, _) => Err(ModelError::file(
+                &self.sbml_file,
+                format!("species `{}` has no initial value", x.id),
+            )),
+        }
+    }
+
+    /// The outputs and the experiments' measurements, from the measurement table.
+    fn measured(&self, states: &[String]) -> Result<Measured, ModelError> {
+        let mut measured = Measured { outputs: Vec::new(), experiments: Vec::new() };
+        for t in &self.tables.measurements {
+            for row in 0..t.rows.len() {
+                self.measurement(t, row, states, &mut measured)?;
+            }
+        }
+        if measured.experiments.is_empty() {
+            return Err(ModelError::file(&self.tables.measurements[0].file, "no measurements"));
+        }
+        Ok(measured)
+    }
+
+    /// Reads row `row` of a measurement table into `measured`: its experiment (conditions),
+    /// its output (the observable with this row's parameters) and its time and value.
+    fn measurement(
+        &self,
+        t: &Tsv,
+        row: usize,
+        states: &[String],
+        measured: &mut Measured,
+    ) -> Result<(), ModelError> {
+        let known_condition = |c: Cell<'_>| -> Result<String, ModelError> {
+            match self.tables.conditions.iter().any(|ct| condition_row(ct, c.text).is_some()) {
+                true => Ok(c.text.to_string()),
+                false => {
+                    Err(c.err(format!("condition `{}` is not in the condition table", c.text)))
+                }
+            }
+        };
+        let pre = match t.cell_named(row, "preequilibrationConditionId") {
+            Some(c) if !c.is_blank() => Some(known_condition(c)?),
+            _ => None,
+        };
+        let oc = t.cell(row, t.required("observableId")?);
+        let observable = self
+            .observables
+            .get(oc.text)
+            .ok_or_else(|| oc.err(format!("`{}` is not in the observable table", oc.text)))?;
+        let simulation = known_condition(t.cell(row, t.required("simulationConditionId")?))?;
+        let time_cell = t.cell(row, t.required("time")?);
+        let mut time = time_cell.number()?;
+        let mut pre = pre;
+        if time == f64::INFINITY {
+            // At steady state: an experiment of its own that preequilibrates under its own
+            // condition and is measured at once.
+            if let Some(p) = &pre {
+                return Err(time_cell.err(format!(
+                    "a steady-state measurement (time inf) after the preequilibration `{p}` is not supported"
+                )));
+            }
+            pre = Some(simulation.clone());
+            time = 0.0;
+        }
+        if time < 0.0 {
+            return Err(time_cell.err(format!("time {time} is before the experiment starts at 0")));
+        }
+        let value_cell = t.cell(row, t.required("measurement")?);
+        let value = value_cell.number()?;
+        if !value.is_finite() {
+            return Err(value_cell.err("the measurement is not finite"));
+        }
+        if observable.transform != "lin" && value <= 0.0 {
+            return Err(value_cell.err(format!(
+                "{value} is not positive, and `{}` is measured on the {} scale",
+                oc.text, observable.transform
+            )));
+        }
+        let formula = placeholders(t, row, oc, &observable.formula, "observable")?;
+        let noise = placeholders(t, row, oc, &observable.noise, "noise")?;
+        let value_math = self.resolve_names(&self.ruled(&formula), oc, states, None)?;
+        let noise_math = self.resolve_names(&self.ruled(&noise), oc, states, Some(oc.text))?;
+        let output = Output {
+            observable: oc.text.to_string(),
+            value: value_math.render(&|n| self.name(n)),
+            sigma: match noise_math.number() {
+                Some(v) if v > 0.0 && v.is_finite() => Sigma::Number(v),
+                Some(v) => {
+                    let c = t.cell_named(row, "noiseParameters").unwrap_or(oc);
+                    return Err(c.err(format!("σ of `{}` is {v}: it must be positive", oc.text)));
+                }
+                None => Sigma::Expression(noise_math.render(&|n| {
+                    if n == OWN { OWN.to_string() } else { self.name(n) }
+                })),
+            },
+            transform: observable.transform,
+        };
+        let outputs = &mut measured.outputs;
+        let index = match outputs.iter().position(|o| o == &output) {
+            Some(i) => i,
+            None => {
+                outputs.push(output);
+                outputs.len() - 1
+            }
+        };
+        let key = (pre, simulation);
+        match measured.experiments.iter_mut().find(|e| e.0 == key) {
+            Some(e) => e.1.push((time, index, value)),
+            None => measured.experiments.push((key, vec![(time, index, value)])),
+        }
+        Ok(())
+    }
+
+    /// The model's parameters (the SBML's parameters and compartments that are no rule or
+    /// state, and the estimated PEtab parameters an output uses or nothing uses) and the
+    /// unknowns of their own (estimated PEtab parameters only σ and settings use). A PEtab
+    /// parameter that is not estimated is its nominal value wherever it appears.
+    fn split_parameters(&self, d: &Dynamics, m: &Measured) -> (Vec<String>, Vec<String>) {
+        let s = self.sbml;
+        let mut parameters: Vec<String> = s
             .parameters
             .iter()
             .map(|p| p.0.clone())
             .chain(s.compartments.iter().map(|c| c.0.clone()))
-            .filter(|p| !self.rules.contains_key(p) && !states.contains(p))
+            .filter(|p| !self.rules.contains_key(p) && !d.states.contains(p))
             .collect();
         let sbml_id = |id: &str| {
             s.parameters.iter().any(|p| p.0 == id)
-                || compartment(id).is_some()
+                || s.compartments.iter().any(|c| c.0 == id)
                 || s.species.iter().any(|x| x.id == id)
         };
-
-        // Outputs and the experiments' data, from the measurement table.
-        let mut outputs: Vec<Output> = Vec::new();
-        let mut experiments: Vec<(Key, Vec<Sample>)> = Vec::new();
-        for t in &self.tables.measurements {
-            let c_obs = t.required("observableId")?;
-            let c_cond = t.required("simulationConditionId")?;
-            let c_value = t.required("measurement")?;
-            let c_time = t.required("time")?;
-            for row in 0..t.rows.len() {
-                let pre = match t.cell_named(row, "preequilibrationConditionId") {
-                    Some(c) if !c.is_blank() => {
-                        if !self
-                            .tables
-                            .conditions
-                            .iter()
-                            .any(|ct| condition_row(ct, c.text).is_some())
-                        {
-                            return Err(c.err(format!(
-                                "condition `{}` is not in the condition table",
-                                c.text
-                            )));
-                        }
-                        Some(c.text.to_string())
-                    }
-                    _ => None,
-                };
-                let oc = t.cell(row, c_obs);
-                let observable = self.observables.get(oc.text).ok_or_else(|| {
-                    oc.err(format!("`{}` is not in the observable table", oc.text))
-                })?;
-                let cc = t.cell(row, c_cond);
-                if !self.tables.conditions.iter().any(|ct| condition_row(ct, cc.text).is_some()) {
-                    return Err(
-                        cc.err(format!("condition `{}` is not in the condition table", cc.text))
-                    );
-                }
-                let time_cell = t.cell(row, c_time);
-                let time = time_cell.number()?;
-                if time.is_infinite() {
-                    return Err(
-                        time_cell.err("steady-state measurements (time inf) are not supported")
-                    );
-                }
-                if time < 0.0 {
-                    return Err(
-                        time_cell.err(format!("time {time} is before the experiment starts at 0"))
-                    );
-                }
-                let value_cell = t.cell(row, c_value);
-                let value = value_cell.number()?;
-                if !value.is_finite() {
-                    return Err(value_cell.err("the measurement is not finite"));
-                }
-                let replace =
-                    |formula: &Math, kind: &str, column: &str| -> Result<Math, ModelError> {
-                        let given = t.cell_named(row, column);
-                        let list: Vec<&str> = match given {
-                            Some(c) if !c.is_blank() => c.text.split(';').map(str::trim).collect(),
-                            _ => Vec::new(),
-                        };
-                        let prefix = format!("{kind}Parameter");
-                        let suffix = format!("_{}", oc.text);
-                        let mut missing = None;
-                        let m = formula.substitute(&|n| {
-                            let k: usize =
-                                n.strip_prefix(&prefix)?.strip_suffix(&suffix)?.parse().ok()?;
-                            list.get(k.checked_sub(1)?).map(|v| match tsv::parse_number(v) {
-                                Some(x) => Math::Num(x),
-                                None => Math::Name((*v).to_string()),
-                            })
-                        });
-                        for n in m.names() {
-                            if n.starts_with(&prefix) && n.ends_with(&suffix) {
-                                missing = Some(n);
-                            }
-                        }
-                        if let Some(n) = missing {
-                            let at = given.unwrap_or(oc);
-                            return Err(at.err(format!(
-                                "`{n}` of observable `{}` is not given a value in `{column}`",
-                                oc.text
-                            )));
-                        }
-                        Ok(m)
-                    };
-                let formula = replace(&observable.formula, "observable", "observableParameters")?;
-                let noise = replace(&observable.noise, "noise", "noiseParameters")?;
-                let value_math = self.resolve_names(&self.ruled(&formula), oc, &states, None)?;
-                let noise_math =
-                    self.resolve_names(&self.ruled(&noise), oc, &states, Some(oc.text))?;
-                let value_text = value_math.render(&|n| self.name(n));
-                let sigma = match noise_math.number() {
-                    Some(v) if v > 0.0 && v.is_finite() => Sigma::Number(v),
-                    Some(v) => {
-                        let c = t.cell_named(row, "noiseParameters").unwrap_or(oc);
-                        return Err(
-                            c.err(format!("σ of `{}` is {v}: it must be positive", oc.text))
-                        );
-                    }
-                    None => Sigma::Expression(noise_math.render(&|n| {
-                        if n == OWN { OWN.to_string() } else { self.name(n) }
-                    })),
-                };
-                let index = match outputs.iter().position(|o| {
-                    o.observable == oc.text && o.value == value_text && o.sigma == sigma
-                }) {
-                    Some(i) => i,
-                    None => {
-                        outputs.push(Output {
-                            observable: oc.text.to_string(),
-                            value: value_text,
-                            sigma,
-                            transform: observable.transform,
-                        });
-                        outputs.len() - 1
-                    }
-                };
-                if observable.transform != "lin" && value <= 0.0 {
-                    return Err(value_cell.err(format!(
-                        "{value} is not positive, and `{}` is measured on the {} scale",
-                        oc.text, observable.transform
-                    )));
-                }
-                let key = (pre, cc.text.to_string());
-                match experiments.iter_mut().find(|e| e.0 == key) {
-                    Some(e) => e.1.push((time, index, value)),
-                    None => experiments.push((key, vec![(time, index, value)])),
-                }
-            }
-        }
-        if experiments.is_empty() {
-            return Err(ModelError::file(&self.tables.measurements[0].file, "no measurements"));
-        }
-
-        // Output names: the observable's, numbered when it has several outputs.
-        let mut output_names: Vec<String> = Vec::new();
-        for o in &outputs {
-            let count = outputs.iter().filter(|p| p.observable == o.observable).count();
-            let base = self.name(&o.observable);
-            let mut name = if count == 1 {
-                base.clone()
-            } else {
-                let k = output_names.iter().filter(|n| n.starts_with(&format!("{base}__"))).count();
-                format!("{base}__{}", k + 1)
-            };
-            while output_names.contains(&name)
-                || states.iter().any(|s| self.name(s) == name)
-                || model_parameters.iter().any(|p| self.name(p) == name)
-            {
-                name.push('_');
-            }
-            output_names.push(name);
-        }
-
-        // PEtab parameters that are no SBML id: an estimated one an output uses (or nothing
-        // uses) is a model parameter, one only σ and settings use is an unknown of its own;
-        // a known one is its nominal value.
-        let used_in_outputs: Vec<String> =
-            outputs.iter().flat_map(|o| names_in(&o.value)).collect();
-        let used_elsewhere: Vec<String> = outputs
+        let in_outputs: Vec<String> = m.outputs.iter().flat_map(|o| names_in(&o.value)).collect();
+        let elsewhere: Vec<String> = m
+            .outputs
             .iter()
             .filter_map(|o| match &o.sigma {
                 Sigma::Expression(e) => Some(names_in(e)),
@@ -687,23 +677,85 @@ impl<'a> Builder<'a> {
             })
             .flatten()
             .chain(self.condition_values())
-            .chain(initial.iter().flat_map(|(_, m)| m.names()).map(|n| self.name(&n)))
-            .chain(equations.iter().flat_map(|(_, m)| m.names()).map(|n| self.name(&n)))
+            .chain(d.initial.iter().flat_map(|(_, m)| m.names()).map(|n| self.name(&n)))
+            .chain(d.equations.iter().flat_map(|(_, m)| m.names()).map(|n| self.name(&n)))
             .collect();
-        let mut extras: Vec<String> = Vec::new();
+        let mut extras = Vec::new();
         for (id, (p, _)) in &self.parameters {
             if sbml_id(id) || !p.estimate {
                 continue;
             }
             let n = self.name(id);
-            if used_in_outputs.contains(&n) || !used_elsewhere.contains(&n) {
-                model_parameters.push(id.clone());
+            if in_outputs.contains(&n) || !elsewhere.contains(&n) {
+                parameters.push(id.clone());
             } else {
                 extras.push(id.clone());
             }
         }
+        (parameters, extras)
+    }
 
-        // The model file.
+    /// Each output's name: its observable's, numbered (`__1`, `__2`, …) where the
+    /// observable has several outputs, and kept apart from every other name.
+    fn output_names(
+        &self,
+        outputs: &[Output],
+        states: &[String],
+        parameters: &[String],
+    ) -> Vec<String> {
+        let mut names: Vec<String> = Vec::new();
+        for o in outputs {
+            let count = outputs.iter().filter(|p| p.observable == o.observable).count();
+            let base = self.name(&o.observable);
+            let mut name = match count {
+                1 => base.clone(),
+                _ => {
+                    let k = names.iter().filter(|n| n.starts_with(&format!("{base}__"))).count();
+                    format!("{base}__{}", k + 1)
+                }
+            };
+            while names.contains(&name)
+                || states.iter().chain(parameters).any(|s| self.name(s) == name)
+            {
+                name.push('_');
+            }
+            names.push(name);
+        }
+        names
+    }
+
+    /// The known value of a model parameter that the parameter table does not estimate:
+    /// its nominal value there, else its SBML value or size.
+    fn known_value(&self, p: &str) -> Result<f64, ModelError> {
+        let s = self.sbml;
+        let value = match self.parameters.get(p) {
+            Some((q, _)) => q.nominal,
+            None => s
+                .parameters
+                .iter()
+                .find(|x| x.0 == p)
+                .map(|x| x.1)
+                .or_else(|| s.compartments.iter().find(|c| c.0 == p).map(|c| c.1))
+                .unwrap_or(f64::NAN),
+        };
+        match value.is_finite() {
+            true => Ok(value),
+            false => Err(ModelError::file(
+                &self.sbml_file,
+                format!("parameter `{p}` has no value, and the parameter table does not give one"),
+            )),
+        }
+    }
+
+    /// The model file's text.
+    fn model_text(
+        &self,
+        d: &Dynamics,
+        m: &Measured,
+        (parameters, extras): (&[String], &[String]),
+        output_names: &[String],
+        experiment_names: &[String],
+    ) -> Result<String, ModelError> {
         let mut text = String::new();
         let quote = |names: &[String]| {
             names.iter().map(|n| format!("\"{}\"", self.name(n))).collect::<Vec<_>>().join(", ")
@@ -713,59 +765,36 @@ impl<'a> Builder<'a> {
             "# Imported from the PEtab problem {} by sysid-petab.\n",
             self.yaml.display()
         );
-        let _ = writeln!(text, "states = [{}]", quote(&states));
-        let _ = writeln!(text, "parameters = [{}]\n", quote(&model_parameters));
+        let _ = writeln!(text, "states = [{}]", quote(&d.states));
+        let _ = writeln!(text, "parameters = [{}]\n", quote(parameters));
         let _ = writeln!(text, "[equations]");
-        for (x, m) in &equations {
-            let _ = writeln!(text, "{} = \"{}\"", self.name(x), self.render(m));
+        for (x, e) in &d.equations {
+            let _ = writeln!(text, "{} = \"{}\"", self.name(x), self.render(e));
         }
         let _ = writeln!(text, "\n[initial]");
-        for (x, m) in &initial {
-            match m.number() {
-                Some(v) => {
-                    let _ = writeln!(text, "{} = {}", self.name(x), toml_number(v));
-                }
-                None => {
-                    let _ = writeln!(text, "{} = \"{}\"", self.name(x), self.render(m));
-                }
-            }
+        for (x, e) in &d.initial {
+            let value = e.number().map_or_else(|| format!("\"{}\"", self.render(e)), toml_number);
+            let _ = writeln!(text, "{} = {value}", self.name(x));
         }
         let _ = writeln!(text, "\n[known]");
         let mut unknowns = String::new();
-        for p in &model_parameters {
+        for p in parameters {
             match self.parameters.get(p) {
                 Some((q, _)) if q.estimate => {
                     let _ = writeln!(unknowns, "{} = {}", self.name(p), unknown_entry(q));
                 }
-                Some((q, _)) => {
-                    let _ = writeln!(text, "{} = {}", self.name(p), toml_number(q.nominal));
-                }
-                None => {
-                    let value = s
-                        .parameters
-                        .iter()
-                        .find(|x| &x.0 == p)
-                        .map(|x| x.1)
-                        .or_else(|| compartment(p).map(|c| c.1))
-                        .unwrap_or(f64::NAN);
-                    if !value.is_finite() {
-                        return Err(ModelError::file(
-                            &self.sbml_file(),
-                            format!(
-                                "parameter `{p}` has no value, and the parameter table does not give one"
-                            ),
-                        ));
-                    }
-                    let _ = writeln!(text, "{} = {}", self.name(p), toml_number(value));
+                _ => {
+                    let _ =
+                        writeln!(text, "{} = {}", self.name(p), toml_number(self.known_value(p)?));
                 }
             }
         }
-        for x in &extras {
+        for x in extras {
             let (q, _) = &self.parameters[x];
             let _ = writeln!(unknowns, "{} = {}", self.name(x), unknown_entry(q));
         }
         let _ = writeln!(text, "\n[outputs]");
-        for (o, name) in outputs.iter().zip(&output_names) {
+        for (o, name) in m.outputs.iter().zip(output_names) {
             let sigma = match &o.sigma {
                 Sigma::Number(v) => toml_number(*v),
                 Sigma::Expression(e) => format!("\"{}\"", e.replace(OWN, name)),
@@ -780,27 +809,16 @@ impl<'a> Builder<'a> {
         let measurement_file = Path::new(&self.tables.measurements[0].file)
             .file_name()
             .map_or("measurements".into(), |f| f.to_string_lossy().to_string());
-        // An experiment is named after its simulation condition, and after its
-        // preequilibration too where one condition follows several.
-        let names: Vec<String> = experiments
-            .iter()
-            .map(|((pre, sim), _)| {
-                match (pre, experiments.iter().filter(|e| &e.0.1 == sim).count()) {
-                    (Some(pre), 2..) => format!("{sim}-after-{pre}"),
-                    _ => sim.clone(),
-                }
-            })
-            .collect();
-        for (((pre, sim), _), name) in experiments.iter().zip(&names) {
+        for (((pre, sim), _), name) in m.experiments.iter().zip(experiment_names) {
             let _ = writeln!(text, "[[experiments]]");
             let _ = writeln!(text, "name = \"{name}\"");
             let _ = writeln!(text, "file = \"{measurement_file}#{name}\"");
-            let set = self.condition_settings(sim, &model_parameters, &states)?;
+            let set = self.condition_settings(sim, parameters, &d.states)?;
             if !set.is_empty() {
                 let _ = writeln!(text, "set = {{ {} }}", set.join(", "));
             }
             if let Some(pre) = pre {
-                let set = self.condition_settings(pre, &model_parameters, &states)?;
+                let set = self.condition_settings(pre, parameters, &d.states)?;
                 let _ = writeln!(text, "preequilibrate = {{ {} }}", set.join(", "));
             }
             let _ = writeln!(text);
@@ -809,34 +827,7 @@ impl<'a> Builder<'a> {
             text,
             "[integrator]\nmethod = \"rodas4\"\nrtol = 1e-8\natol = 1e-12\nmax_steps = 200000"
         );
-
-        let mut file = ModelFile::parse(&text, self.yaml).map_err(|e| ModelError {
-            message: format!("the model file made of this PEtab problem is refused: {} (at line {} of the text `sysid import` prints)", e.message, e.line.unwrap_or(0)),
-            line: None,
-            column: None,
-            ..e
-        })?;
-        for (spec, ((_, condition), rows)) in file.experiments.clone().iter().zip(&experiments) {
-            let mut headers = vec!["t".to_string()];
-            let mut columns: Vec<usize> = rows.iter().map(|r| r.1).collect();
-            columns.sort_unstable();
-            columns.dedup();
-            headers.extend(columns.iter().map(|&c| output_names[c].clone()));
-            let table_rows = rows
-                .iter()
-                .map(|&(time, output, value)| {
-                    let mut cells = vec![None; columns.len()];
-                    cells[columns.iter().position(|&c| c == output).expect("listed")] = Some(value);
-                    (time, cells)
-                })
-                .collect();
-            let source = spec.file.display().to_string();
-            let table = Table::from_rows(&source, headers, table_rows).map_err(|e| {
-                ModelError::file(&source, format!("condition `{condition}`: {}", e.message))
-            })?;
-            file.tables.push((spec.file.clone(), table));
-        }
-        Ok(Imported { model: Model { file }, text })
+        Ok(text)
     }
 
     fn render(&self, m: &Math) -> String {
@@ -955,6 +946,80 @@ impl<'a> Builder<'a> {
         }
         Ok(out)
     }
+}
+
+/// `formula` with row `row`'s observable or noise parameters (`kind`) in place of
+/// `{kind}Parameter{n}_{observableId}`: numbers or parameter ids, `;`-separated in the row's
+/// `{kind}Parameters` cell. One left without a value is an error at that cell.
+fn placeholders(
+    t: &Tsv,
+    row: usize,
+    observable: Cell<'_>,
+    formula: &Math,
+    kind: &str,
+) -> Result<Math, ModelError> {
+    let column = format!("{kind}Parameters");
+    let given = t.cell_named(row, &column);
+    let list: Vec<&str> = match given {
+        Some(c) if !c.is_blank() => c.text.split(';').map(str::trim).collect(),
+        _ => Vec::new(),
+    };
+    let prefix = format!("{kind}Parameter");
+    let suffix = format!("_{}", observable.text);
+    let m = formula.substitute(&|n| {
+        let k: usize = n.strip_prefix(&prefix)?.strip_suffix(&suffix)?.parse().ok()?;
+        list.get(k.checked_sub(1)?).map(|v| match tsv::parse_number(v) {
+            Some(x) => Math::Num(x),
+            None => Math::Name((*v).to_string()),
+        })
+    });
+    match m.names().into_iter().find(|n| n.starts_with(&prefix) && n.ends_with(&suffix)) {
+        None => Ok(m),
+        Some(n) => Err(given.unwrap_or(observable).err(format!(
+            "`{n}` of observable `{}` is not given a value in `{column}`",
+            observable.text
+        ))),
+    }
+}
+
+/// Each experiment's name: its simulation condition's, and its preequilibration's too
+/// where one simulation condition follows several (`SIM-after-PRE`, `SIM-steady` for the
+/// steady-state measurements of SIM).
+fn experiment_names(experiments: &[(Key, Vec<Sample>)]) -> Vec<String> {
+    experiments
+        .iter()
+        .map(|((pre, sim), _)| match (pre, experiments.iter().filter(|e| &e.0.1 == sim).count()) {
+            (Some(pre), 2..) if pre == sim => format!("{sim}-steady"),
+            (Some(pre), 2..) => format!("{sim}-after-{pre}"),
+            _ => sim.clone(),
+        })
+        .collect()
+}
+
+/// An experiment's measurements as the data table its model-file experiment reads: the time
+/// and a column per output it measures, a row per measurement (replicates repeat a time).
+fn data_table(
+    spec: &sysid_model::ExperimentSpec,
+    rows: &[Sample],
+    output_names: &[String],
+) -> Result<Table, ModelError> {
+    let mut columns: Vec<usize> = rows.iter().map(|r| r.1).collect();
+    columns.sort_unstable();
+    columns.dedup();
+    let mut headers = vec!["t".to_string()];
+    headers.extend(columns.iter().map(|&c| output_names[c].clone()));
+    let table_rows = rows
+        .iter()
+        .map(|&(time, output, value)| {
+            let mut cells = vec![None; columns.len()];
+            cells[columns.iter().position(|&c| c == output).expect("listed")] = Some(value);
+            (time, cells)
+        })
+        .collect();
+    let source = spec.file.display().to_string();
+    Table::from_rows(&source, headers, table_rows).map_err(|e| {
+        ModelError::file(&source, format!("experiment `{}`: {}", spec.name, e.message))
+    })
 }
 
 /// The row of `condition` in a condition table.

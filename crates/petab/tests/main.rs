@@ -201,3 +201,43 @@ fn a_prior_is_reported_apart_from_the_likelihood() {
         "{e}"
     );
 }
+
+/// A measurement at time `inf` is the steady state: Boehm with its last measurement moved
+/// to `inf` (its Epo input decays, so the system settles) gives the NLL of the same
+/// measurement at t = 1e8, when the state has long settled, to 1e-6; the steady one is an
+/// experiment of its own. After a preequilibration it is refused at its cell.
+#[test]
+fn a_measurement_at_time_inf_is_the_steady_state() {
+    let at = |time: &str, tag: &str| {
+        let path = edited(tag, "measurementData", |t| {
+            let mut lines: Vec<String> = t.lines().map(String::from).collect();
+            let last = lines.len() - 1;
+            let mut cells: Vec<String> = lines[last].split('\t').map(String::from).collect();
+            cells[4] = time.into();
+            lines[last] = cells.join("\t");
+            lines.join("\n")
+        });
+        let imported = import(&path).unwrap_or_else(|e| panic!("{e}"));
+        let problem = imported.model.problem(None).expect("a problem");
+        let z = problem.unknowns().coordinates(&problem.guesses());
+        let nll = problem.nll(&problem.linearize(&z).expect("integrates")).expect("an nll");
+        let names: Vec<String> =
+            problem.experiments().iter().map(|e| e.name().to_string()).collect();
+        (nll, names)
+    };
+    let (steady, names) = at("inf", "inf");
+    assert_eq!(names, ["model1_data1", "model1_data1-steady"]);
+    let (late, _) = at("1e8", "late");
+    assert!((steady - late).abs() <= 1e-6, "{steady} vs {late}");
+
+    let path = edited("inf-pre", "measurementData", |t| {
+        let mut lines: Vec<String> = t.lines().map(String::from).collect();
+        let mut cells: Vec<String> = lines[1].split('\t').map(String::from).collect();
+        cells[1] = "model1_data1".into();
+        cells[4] = "inf".into();
+        lines[1] = cells.join("\t");
+        lines.join("\n")
+    });
+    let e = error_of(&path);
+    assert!(e.contains("column `time`: a steady-state measurement (time inf) after the preequilibration `model1_data1` is not supported"), "{e}");
+}
