@@ -59,7 +59,9 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
             .iter()
             .map(|n| SourceArgs { system: Some(n.to_string()), ..args.source.clone() })
             .collect(),
-        (false, SourceArgs { system: None, model: None, .. }) => return Err(no_source()),
+        (false, SourceArgs { system: None, model: None, petab: None, .. }) => {
+            return Err(no_source());
+        }
         (false, source) => vec![source.clone()],
     };
     let mut json = Vec::new();

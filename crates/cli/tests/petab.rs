@@ -50,3 +50,30 @@ fn refusals_exit_2_with_one_line() {
         assert!(out.stdout.is_empty());
     }
 }
+
+/// Every command that reads a problem reads a PEtab problem: `compare` runs every method on
+/// Boehm's (each certifies, fails or refuses by name, and the ones that certify agree on the
+/// NLL to 1e-6), `predict` writes the fitted trajectory.
+#[test]
+fn compare_and_predict_read_a_petab_problem() {
+    let boehm = problem("Boehm_JProteomeRes2014");
+    let out = sysid(&["compare", "--petab", &boehm, "--format", "json"]);
+    assert!(out.status.code().is_some_and(|c| c <= 1), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let records = json.as_array().expect("an array");
+    assert_eq!(records.len(), 9, "{json}");
+    let certified: Vec<f64> = records
+        .iter()
+        .filter(|r| r["converged"].as_bool() == Some(true))
+        .filter_map(|r| r["nll"].as_f64())
+        .collect();
+    assert!(!certified.is_empty(), "{json}");
+    for nll in &certified {
+        assert!((nll - certified[0]).abs() <= 1e-6, "{certified:?}");
+    }
+    let out =
+        sysid(&["predict", "--petab", &boehm, "--method", "levenberg-marquardt", "--until", "300"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.lines().next().is_some_and(|h| h.contains("STAT5A")), "{text}");
+}
