@@ -85,9 +85,13 @@ impl Profiles {
     }
 }
 
+/// The most unknowns a profiles figure puts side by side.
+const PER_ROW: usize = 6;
+
 impl Figure for Profiles {
     fn size(&self) -> (u32, u32) {
-        (340 * self.panels.len().max(1) as u32, 640)
+        let (columns, bands) = self.grid();
+        (340 * columns as u32, 640 * bands as u32)
     }
 
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> DrawResult<DB>
@@ -95,10 +99,12 @@ impl Figure for Profiles {
         DB::ErrorType: 'static,
     {
         let root = root.titled(&self.title, (FONT, 20))?;
-        let columns = root.split_evenly((2, self.panels.len().max(1)));
-        let n = self.panels.len();
+        let (columns, bands) = self.grid();
+        let areas = root.split_evenly((2 * bands, columns));
         for (j, panel) in self.panels.iter().enumerate() {
-            let (top, bottom) = (&columns[j], &columns[n + j]);
+            let (band, column) = (j / columns, j % columns);
+            let top = &areas[2 * band * columns + column];
+            let bottom = &areas[(2 * band + 1) * columns + column];
             let xs = || panel.points.iter().map(|p| p.0);
             let (x0, x1) =
                 xs().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
@@ -117,6 +123,13 @@ impl Figure for Profiles {
 }
 
 impl Profiles {
+    /// Panels per row, and rows: at most [`PER_ROW`] unknowns side by side, the rest in
+    /// further rows (a catalogue system of 23 unknowns is four rows, not one strip).
+    fn grid(&self) -> (usize, usize) {
+        let n = self.panels.len().max(1);
+        (n.min(PER_ROW), n.div_ceil(PER_ROW))
+    }
+
     /// One unknown's column: the profile on `top`, the others' paths on `bottom`, both over
     /// the axis `x` (from `lo` to `hi`, linear or logarithmic), ΔNLL up to `y1`.
     fn column<DB, X>(
