@@ -255,17 +255,7 @@ impl<'a> Builder<'a> {
                 "0" => false,
                 other => return Err(e.err(format!("`{other}`: estimate is 0 or 1"))),
             };
-            let scale_name = match scale.map(|c| t.cell(row, c)) {
-                None => "lin",
-                Some(c) => match c.text {
-                    "" | "lin" => "lin",
-                    "log" => "log",
-                    "log10" => "log10",
-                    other => {
-                        return Err(c.err(format!("`{other}`: the scale is lin, log or log10")));
-                    }
-                },
-            };
+            let scale_name = scale_of(scale.map(|c| t.cell(row, c)), "scale")?;
             let log = scale_name != "lin";
             let bound = |column: Option<usize>, default: f64| -> Result<f64, ModelError> {
                 match column.map(|c| t.cell(row, c)) {
@@ -317,19 +307,8 @@ impl<'a> Builder<'a> {
                         err
                     })
                 };
-                let transform = match t.cell_named(row, "observableTransformation") {
-                    None => "lin",
-                    Some(c) => match c.text {
-                        "" | "lin" => "lin",
-                        "log" => "log",
-                        "log10" => "log10",
-                        other => {
-                            return Err(c.err(format!(
-                                "`{other}`: the transformation is lin, log or log10"
-                            )));
-                        }
-                    },
-                };
+                let transform =
+                    scale_of(t.cell_named(row, "observableTransformation"), "transformation")?;
                 if let Some(c) = t.cell_named(row, "noiseDistribution") {
                     match c.text {
                         "" | "normal" => {}
@@ -1020,6 +999,17 @@ fn data_table(
     Table::from_rows(&source, headers, table_rows).map_err(|e| {
         ModelError::file(&source, format!("experiment `{}`: {}", spec.name, e.message))
     })
+}
+
+/// A scale cell (`parameterScale`, `observableTransformation`): `lin` (also empty or
+/// absent), `log` or `log10`; anything else is an error naming the cell and `what` it is.
+fn scale_of(cell: Option<Cell<'_>>, what: &str) -> Result<&'static str, ModelError> {
+    match cell.map(|c| (c, c.text)) {
+        None | Some((_, "" | "lin")) => Ok("lin"),
+        Some((_, "log")) => Ok("log"),
+        Some((_, "log10")) => Ok("log10"),
+        Some((c, other)) => Err(c.err(format!("`{other}`: the {what} is lin, log or log10"))),
+    }
 }
 
 /// The row of `condition` in a condition table.

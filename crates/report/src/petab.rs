@@ -116,7 +116,7 @@ fn numbers(yaml: &Path, out: &Path, observer: &dyn Observer) -> Result<Numbers, 
             let t = Instant::now();
             std::fs::create_dir_all(out).map_err(|e| e.to_string())?;
             let name = yaml.file_stem().map_or(String::new(), |s| s.to_string_lossy().to_string());
-            profiles = crate::run::write_profiles(&name, &problem, &fit, out, m)
+            profiles = crate::profiles::write_profiles(&name, &problem, &fit, out, m)
                 .map_err(|e| format!("profiles: {e}"))?;
             observer.note(&format!(
                 "{}: profiles in {:.1} s",

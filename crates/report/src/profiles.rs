@@ -7,12 +7,16 @@ use plotters::coord::Shift;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 
+use std::path::Path;
 use sysid_core::{Estimate, Problem};
 use sysid_ode::System;
-use sysid_profile::Profile;
 
-use crate::chart::{DrawResult, FONT, Figure, padded, tick};
+use sysid_profile::{Outcome as Traced, Profile, ProfileOptions, profile};
+use sysid_registry::{Registry, Settings};
+
+use crate::chart::{DrawResult, FONT, Figure, padded, save, tick};
 use crate::look::look;
+use crate::manifest::write;
 
 /// The profile of one unknown, as drawn.
 #[derive(Clone, Debug)]
@@ -253,4 +257,45 @@ where
         .border_style(BLACK)
         .draw()?;
     Ok(())
+}
+
+/// The profile likelihoods of every unknown around `optimum`, each point re-optimised by
+/// `method` (`dir/profiles.json`, drawn as `dir/profiles.png|svg`); the figure's caption, or
+/// None when a profile found a lower point than the fit (then said in `profiles.json`).
+pub(crate) fn write_profiles<S: System + Sync>(
+    name: &str,
+    problem: &Problem<S>,
+    optimum: &Estimate,
+    dir: &Path,
+    method_name: &str,
+) -> anyhow::Result<Option<String>> {
+    let options = ProfileOptions::default();
+    let method: sysid_registry::Boxed<S> =
+        Registry::standard().build(method_name, &Settings::default())?;
+    let profiles = match profile(&*method, problem, optimum, &[], &options)? {
+        Traced::Profiles(p) => p,
+        Traced::BetterOptimum(point) => {
+            write(
+                &dir.join("profiles.json"),
+                &serde_json::to_string_pretty(&serde_json::json!({
+                    "better_optimum_found": point,
+                }))?,
+            )?;
+            return Ok(None);
+        }
+    };
+    let json: serde_json::Map<String, serde_json::Value> =
+        profiles.iter().map(|p| (p.name.clone(), serde_json::json!(p.record()))).collect();
+    write(&dir.join("profiles.json"), &serde_json::to_string_pretty(&json)?)?;
+    let title = format!("{name}: profile likelihoods");
+    let figure = Profiles::new(title, problem, optimum, options.threshold, &profiles);
+    save(&figure, &dir.join("profiles"))?;
+    let verdicts: Vec<String> =
+        profiles.iter().map(|p| format!("{} {}", p.name, p.label.words())).collect();
+    Ok(Some(format!(
+        "Profile likelihoods around the fit ({method_name} re-optimising the others): \
+         ΔNLL with the pointwise 95 % threshold 1.92 (dashed) and the interval's ends, \
+         and below how the other unknowns compensate. {}.",
+        verdicts.join(", ")
+    )))
 }

@@ -14,7 +14,6 @@ use sysid_montecarlo::{
     MultistartOptions, Scenario, Study, StudySpec, Summary, TrialRecord, basin,
 };
 use sysid_ode::System;
-use sysid_profile::{Outcome as Traced, ProfileOptions, profile};
 use sysid_registry::{Boxed, Registry, Role, Settings};
 use sysid_systems::{Case, Visit};
 
@@ -28,7 +27,7 @@ use crate::markdown::{BasinNumbers, Section, markdown};
 use crate::minima::{MethodMinima, Minima};
 use crate::options::{Observer, ReportOptions};
 use crate::prediction::{Prediction, PredictionPanel};
-use crate::profiles::Profiles;
+use crate::profiles::write_profiles;
 
 /// The registry's method `name`, with the default settings.
 fn method<S: System>(name: &str) -> anyhow::Result<Boxed<S>> {
@@ -552,43 +551,4 @@ fn draw_basin<S: System + Clone + Send + Sync>(
         axes: map.axes.clone(),
         rates: map.maps.iter().map(|m| (m.method.clone(), m.success_rate)).collect(),
     })
-}
-
-/// The profile likelihoods of every unknown around `optimum`, each point re-optimised by
-/// `method` (`dir/profiles.json`, drawn as `dir/profiles.png|svg`); the figure's caption, or
-/// None when a profile found a lower point than the fit (then said in `profiles.json`).
-pub(crate) fn write_profiles<S: System + Sync>(
-    name: &str,
-    problem: &Problem<S>,
-    optimum: &Estimate,
-    dir: &Path,
-    method_name: &str,
-) -> anyhow::Result<Option<String>> {
-    let options = ProfileOptions::default();
-    let profiles = match profile(&*method::<S>(method_name)?, problem, optimum, &[], &options)? {
-        Traced::Profiles(p) => p,
-        Traced::BetterOptimum(point) => {
-            write(
-                &dir.join("profiles.json"),
-                &serde_json::to_string_pretty(&serde_json::json!({
-                    "better_optimum_found": point,
-                }))?,
-            )?;
-            return Ok(None);
-        }
-    };
-    let json: serde_json::Map<String, serde_json::Value> =
-        profiles.iter().map(|p| (p.name.clone(), serde_json::json!(p.record()))).collect();
-    write(&dir.join("profiles.json"), &serde_json::to_string_pretty(&json)?)?;
-    let title = format!("{name}: profile likelihoods");
-    let figure = Profiles::new(title, problem, optimum, options.threshold, &profiles);
-    save(&figure, &dir.join("profiles"))?;
-    let verdicts: Vec<String> =
-        profiles.iter().map(|p| format!("{} {}", p.name, p.label.words())).collect();
-    Ok(Some(format!(
-        "Profile likelihoods around the fit ({method_name} re-optimising the others): \
-         ΔNLL with the pointwise 95 % threshold 1.92 (dashed) and the interval's ends, \
-         and below how the other unknowns compensate. {}.",
-        verdicts.join(", ")
-    )))
 }
