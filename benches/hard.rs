@@ -2,7 +2,8 @@
 //! STAT5 problem (examples/boehm) with the three noise s.d. fixed at their published values,
 //! from the published optimum moved by ±0.1–0.3 decades per rate (the start of
 //! tests/hard.rs). The issue's target for Levenberg–Marquardt: ≤ 87 ms per fit, a tenth of
-//! AMICI + fides (0.87 s from nominal + 0.1). `hard/boehm-fixed-sigma/profiles`: the six
+//! AMICI + fides (0.87 s from nominal + 0.1); `hybrid-newton` beside it.
+//! `hard/boehm-fixed-sigma/profiles`: the six
 //! profile likelihoods from that fit (target ≤ 5 s on two cores).
 
 use std::hint::black_box;
@@ -68,17 +69,24 @@ fn hard(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(5))
         .sample_size(20);
     let problem = problem();
+    // Levenberg–Marquardt, and the Fletcher–Xu hybrid that adds the differenced Hessian
+    // once ε falls slowly.
+    for name in ["hybrid-newton", "levenberg-marquardt"] {
+        let method = Registry::standard().build(name, &Settings::default()).unwrap();
+        let e = method.fit(&problem).unwrap();
+        eprintln!(
+            "hard/boehm-fixed-sigma/{name}: {} iterations, {} integrations, converged {}, χ² {}",
+            e.iterations,
+            e.counts.integrations,
+            e.converged(),
+            e.cost
+        );
+        group.bench_function(format!("boehm-fixed-sigma/{name}"), |b| {
+            b.iter(|| method.fit(black_box(&problem)).unwrap())
+        });
+    }
     let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
     let e = method.fit(&problem).unwrap();
-    eprintln!(
-        "hard/boehm-fixed-sigma/levenberg-marquardt: {} iterations, converged {}, χ² {}",
-        e.iterations,
-        e.converged(),
-        e.cost
-    );
-    group.bench_function("boehm-fixed-sigma/levenberg-marquardt", |b| {
-        b.iter(|| method.fit(black_box(&problem)).unwrap())
-    });
     // All six profile likelihoods from that fit, on both cores (issue 31's target: ≤ 5 s).
     let options = ProfileOptions::default();
     group.sample_size(10).measurement_time(Duration::from_secs(60));

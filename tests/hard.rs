@@ -49,6 +49,12 @@ const BOEHM_SIGMA: [(&str, f64); 3] = [
 /// examples/boehm with σ fixed and the six rates' guesses moved by `shift` decades each
 /// (reflected into the bounds).
 fn boehm_fixed_sigma(dir: &Path, shift: [f64; 6]) -> Problem<ModelSystem> {
+    boehm_fixed_sigma_from(dir, |i, decades| decades + shift[i])
+}
+
+/// examples/boehm with σ fixed and rate i's guess at 10^`guess(i, log10 of its published
+/// value)` (reflected into the bounds).
+fn boehm_fixed_sigma_from(dir: &Path, guess: impl Fn(usize, f64) -> f64) -> Problem<ModelSystem> {
     std::fs::copy(root().join("examples/boehm/data.csv"), dir.join("data.csv")).unwrap();
     let mut text = std::fs::read_to_string(root().join("examples/boehm/model.toml")).unwrap();
     for (name, sigma) in BOEHM_SIGMA {
@@ -61,7 +67,7 @@ fn boehm_fixed_sigma(dir: &Path, shift: [f64; 6]) -> Problem<ModelSystem> {
         .map(|line| {
             let Some(rest) = line.split_once(" = { guess = ") else { return line.to_string() };
             let (value, tail) = rest.1.split_once(',').unwrap();
-            let mut decades = value.parse::<f64>().unwrap().log10() + shift[rate];
+            let mut decades = guess(rate, value.parse::<f64>().unwrap().log10());
             rate += 1;
             if decades < -5.0 {
                 decades = -10.0 - decades;
@@ -90,6 +96,8 @@ fn boehm_fixed_sigma_certifies_its_bounded_optimum() {
         ("levenberg-marquardt", [-0.25, 0.3, -0.12, 0.2, 0.15, -0.28]),
         ("goodman-halving", [0.2, -0.15, 0.25, -0.1, -0.3, 0.12]),
         ("multiple-shooting", [-0.25, 0.3, -0.12, 0.2, 0.15, -0.28]),
+        ("hybrid-newton", [0.2, -0.15, 0.25, -0.1, -0.3, 0.12]),
+        ("hybrid-newton", [-0.25, 0.3, -0.12, 0.2, 0.15, -0.28]),
     ] {
         let method = Registry::standard().build(name, &Settings::default()).unwrap();
         let problem = boehm_fixed_sigma(&dir, shift);
@@ -107,6 +115,25 @@ fn boehm_fixed_sigma_certifies_its_bounded_optimum() {
         let c = &e.certificate;
         assert!(c.error > 0.0 && c.error <= 0.1 * c.gtol, "error {} (gtol {})", c.error, c.gtol);
     }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// From the generic guess (every rate 0.1), 20 starts of the Fletcher–Xu hybrid (the guess
+/// and a Latin hypercube over the box, log-uniform over its ten decades) reach the bounded
+/// optimum from at least 4 (AMICI + fides: 2 of 20 on the PEtab problem); the best reported
+/// is that optimum, certified. Levenberg–Marquardt reaches it from 1–2 of 20 (seeds 1–10):
+/// the starts that close in on it crawl, the Gauss–Newton model misjudging the large
+/// residuals' curvature, and stop at the iteration limit.
+#[test]
+fn boehm_from_a_generic_guess_multistart_finds_the_optimum() {
+    let dir = scratch("generic");
+    let problem = boehm_fixed_sigma_from(&dir, |_, _| -1.0);
+    let method = Registry::standard().build("hybrid-newton", &Settings::default()).unwrap();
+    let options = sysid::montecarlo::MultistartOptions { starts: 20, ..Default::default() };
+    let run = sysid::montecarlo::multistart(method.as_ref(), &problem, &options).unwrap();
+    assert!(run.best.converged(), "{}", run.best.verdict());
+    assert!((run.best.cost - BOEHM_CHI2).abs() <= 1e-9 * BOEHM_CHI2, "χ² {}", run.best.cost);
+    assert!(run.starts.reached_best >= 4, "{}", run.starts);
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -63,7 +63,7 @@ fn every_method_fits_the_twins_as_the_dual_path_does() {
             tight += usize::from(estimates == RTOL);
         }
     }
-    // 5 twins × 9 methods: 45 fits; all but the ten of quasilinearization and two that
+    // 5 twins × 10 methods: 50 fits; all but the ten of quasilinearization and two that
     // stop without converging (LV's goodman and gauss-newton, at their first step) are
     // held to 1e-12.
     assert!(tight >= 33, "{tight} fits held to 1e-12");

@@ -316,6 +316,7 @@ fn compare_lists_every_method_as_json() {
             "gauss-newton-ls",
             "gauss-newton-fd",
             "levenberg-marquardt",
+            "hybrid-newton",
             "multiple-shooting",
             "quasilinearization",
             "quasilinearization-data"

@@ -15,7 +15,8 @@
 //! at Boehm's optimum), halving the line shortens every direction alike and the others crawl,
 //! while the curve damps the overshooting direction first.
 
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
 use sysid_ode::System;
 
 use crate::bounded::{Quadratic, minimise_in_box};
@@ -25,6 +26,56 @@ use crate::linalg::Singular;
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate};
 use crate::termination::{Failure, Rule};
+
+/// The curvature of the model a step minimises: m_λ's A.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Hessian {
+    /// A = JᵀWJ, the Gauss–Newton matrix every method shares: exact where the residuals
+    /// vanish, and it leaves out Σ rᵢ∇²rᵢ, which large residuals make matter.
+    #[default]
+    GaussNewton,
+    /// Fletcher and Xu's hybrid (IMA J. Numer. Anal. 7, 1987, 371–389): JᵀWJ while ε falls
+    /// fast, else A = ∂U/∂z, half the full Hessian of ε, from forward differences of U (the
+    /// sensitivities' gradient; k more linearizations per iterate, [`differenced_hessian`]).
+    Hybrid,
+}
+
+/// Half the Hessian of ε at the iterate `lin`, ∂U/∂z, by forward differences of U, made
+/// symmetric: column j from a linearization at z + h_j e_j, h_j = √rtol·max(1, |z_j|) (the
+/// gradient is accurate to about rtol, so the difference to about √rtol relative), taken
+/// backwards where the box leaves no room forwards. `None` when a difference point cannot
+/// be integrated (the caller keeps JᵀWJ for that iterate); a spent budget is an error.
+pub fn differenced_hessian<S: System>(
+    ev: &Evaluations<'_, S>,
+    lin: &Linearization,
+) -> Result<Option<DMatrix<f64>>, Failure> {
+    let problem = ev.problem();
+    let k = lin.gradient.len();
+    let (lo, hi) = problem.unknowns().step_box(&lin.z);
+    let relative = problem.integrator().rtol.sqrt();
+    let mut h = DMatrix::zeros(k, k);
+    for j in 0..k {
+        let size = relative * lin.z[j].abs().max(1.0);
+        let step = if hi[j] >= size {
+            size
+        } else if -lo[j] >= size {
+            -size
+        } else {
+            // A box narrower than the difference: the Gauss–Newton column.
+            h.set_column(j, &lin.normal.column(j));
+            continue;
+        };
+        let mut z = lin.z.clone();
+        z[j] += step;
+        match ev.linearize(&z) {
+            Ok(other) => h.set_column(j, &((&other.gradient - &lin.gradient) / step)),
+            Err(budget @ Failure::Budget { .. }) => return Err(budget),
+            Err(_) => return Ok(None),
+        }
+    }
+    Ok(Some((&h + h.transpose()) * 0.5))
+}
 
 /// A step on the curve, with what a decision on it needs.
 #[derive(Clone, Debug)]

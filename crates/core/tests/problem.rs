@@ -267,3 +267,52 @@ fn observed_values_and_bands_of_a_linear_model() {
     let plain = problem.observed(&values, None, &times).unwrap();
     assert!(plain[0].half_width.is_none());
 }
+
+/// Half the Hessian of ε by differences of the sensitivities' gradient, against its closed
+/// form on the falling body with g on a log scale, θ = ln g: y = y0 + v (t − t0) + e^θ (t − t0)²/2
+/// is linear in y0 and v but not in θ, so ½∇²ε = JᵀJ + Σ (y_i − b_i) ∂²y_i/∂θ² e_θ e_θᵀ with
+/// ∂²y/∂θ² = g (t − t0)²/2, and the rest of the matrix is JᵀJ. The residuals are large
+/// here (ε ≈ 1.6e4), so the added term is most of the (θ, θ) entry.
+#[test]
+fn the_differenced_hessian_is_the_full_hessian() {
+    use sysid_core::{Evaluations, differenced_hessian};
+    let problem = Problem::builder(fall())
+        .t0(1.0)
+        .unknown("y", 0.5)
+        .unknown("v", 2.0)
+        .unknown_with(Unknown::new("g", 30.0).log())
+        .data(table())
+        .build()
+        .unwrap();
+    let z = problem.unknowns().coordinates(&[0.5, 2.0, 30.0]);
+    let ev = Evaluations::new(&problem, 100);
+    let lin = ev.linearize(&z).unwrap();
+    let h = differenced_hessian(&ev, &lin).unwrap().unwrap();
+    // With s = (t − t0)²/2 and g = 30: the residual term Σ (y − b) g s, and the θ-derivative
+    // of the (θ, θ) entry, 3 Σ (g s)² + Σ (y − b) g s.
+    let (t, b) = ([0.0f64, 1.0, 2.0, 3.0], [0.0, 15.0, 65.0, 145.0]);
+    let terms = t.iter().zip(b).map(|(t, b)| {
+        let gs = 30.0 * (t - 1.0).powi(2) / 2.0;
+        (0.5 + 2.0 * (t - 1.0) + gs - b, gs)
+    });
+    let second: f64 = terms.clone().map(|(r, gs)| r * gs).sum();
+    let third: f64 = terms.map(|(r, gs)| 3.0 * gs * gs + r * gs).sum();
+    assert!(second.abs() > lin.normal[(2, 2)], "the residual term dominates");
+    // The forward difference in θ (h = √rtol·ln 30) is off by its first-order term, h/2
+    // times the θ-derivative of the entry: `third` for (θ, θ), and the entry itself for
+    // (y0, θ) and (v, θ) (each linear in g), halved there by the symmetrisation since the
+    // other column, in y0 or v where U is linear, is exact. The falling body integrates
+    // exactly, so what remains is O(h²).
+    let h_theta = problem.integrator().rtol.sqrt() * 30f64.ln();
+    for i in 0..3 {
+        for j in 0..3 {
+            let exact = lin.normal[(i, j)];
+            let expected = match (i, j) {
+                (2, 2) => exact + second + h_theta / 2.0 * third,
+                (2, _) | (_, 2) => exact * (1.0 + h_theta / 4.0),
+                _ => exact,
+            };
+            assert_close(h[(i, j)], expected, 1e-6);
+        }
+    }
+}

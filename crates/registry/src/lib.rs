@@ -88,7 +88,7 @@ impl Entry {
 }
 
 /// Every method sysid offers, in the order tables list them.
-pub static ENTRIES: [Entry; 9] = [
+pub static ENTRIES: [Entry; 10] = [
     Entry {
         name: "goodman",
         description: "Goodman 1966: Newton iteration on the initial values, full steps",
@@ -132,6 +132,15 @@ pub static ENTRIES: [Entry; 9] = [
         build: |s| {
             let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
             Built::LevenbergMarquardt(LevenbergMarquardt::new(options))
+        },
+    },
+    Entry {
+        name: "hybrid-newton",
+        description: "Fletcher–Xu 1987: Levenberg–Marquardt's trust region, on the full Hessian of ε (differenced sensitivity gradient) once ε falls slowly",
+        roles: &[],
+        build: |s| {
+            let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
+            Built::LevenbergMarquardt(LevenbergMarquardt::hybrid(options))
         },
     },
     Entry {

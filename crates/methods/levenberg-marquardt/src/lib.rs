@@ -6,6 +6,12 @@
 //! Gauss–Newton model plus λ‖Dδ‖² over the box the bounds leave (the active-set method of
 //! [`sysid_core::minimise_in_box`]), so no step is clipped after the fact.
 //!
+//! The same trust region runs Fletcher and Xu's hybrid ([`LevenbergMarquardt::hybrid`],
+//! `hybrid-newton`; IMA J. Numer. Anal. 7, 1987): Gauss–Newton's model while ε falls by at
+//! least [`FAST_FALL`] of itself per step, the full Hessian of ε by differences of the
+//! sensitivities' gradient once it falls more slowly, where large residuals make the
+//! Gauss–Newton model misjudge the curvature.
+//!
 //! Why written here rather than taken from a crate: the step needs the shared driver's
 //! Jacobian from forward sensitivities, its integration budget and its certificate, and a box
 //! inside the subproblem; the MINPACK ports on crates.io (levenberg-marquardt 0.14) have no
@@ -23,4 +29,4 @@ mod options;
 mod solver;
 
 pub use options::LevenbergMarquardtOptions;
-pub use solver::LevenbergMarquardt;
+pub use solver::{FAST_FALL, LevenbergMarquardt};

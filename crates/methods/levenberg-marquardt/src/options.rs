@@ -1,7 +1,7 @@
 //! Options of Levenberg–Marquardt.
 
 use serde::{Deserialize, Serialize};
-use sysid_core::{DriverOptions, OptionsError};
+use sysid_core::{DriverOptions, Hessian, OptionsError};
 
 /// Options with MINPACK's defaults.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -14,11 +14,20 @@ pub struct LevenbergMarquardtOptions {
     /// Most trial steps rejected in a row before the iteration stops with no descent
     /// (default 30; each halves the radius at least).
     pub max_rejections: usize,
+    /// The curvature of the step's model: JᵀWJ (Levenberg–Marquardt proper, the default), or
+    /// Fletcher and Xu's switch between it and the full Hessian of ε (`hybrid-newton`).
+    #[serde(default)]
+    pub hessian: Hessian,
 }
 
 impl Default for LevenbergMarquardtOptions {
     fn default() -> Self {
-        Self { driver: DriverOptions::default(), factor: 100.0, max_rejections: 30 }
+        Self {
+            driver: DriverOptions::default(),
+            factor: 100.0,
+            max_rejections: 30,
+            hessian: Hessian::GaussNewton,
+        }
     }
 }
 

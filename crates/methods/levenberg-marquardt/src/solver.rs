@@ -24,12 +24,19 @@
 //! certified.)
 
 use sysid_core::{
-    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Linearization,
-    Method, Problem, Proposal, Rule, Step, actual_decrease, drive,
+    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Hessian, Iterate,
+    Linearization, Method, Problem, Proposal, Rule, Step, actual_decrease, differenced_hessian,
+    drive,
 };
 use sysid_ode::System;
 
 use crate::options::LevenbergMarquardtOptions;
+
+/// Fletcher and Xu's switch: a step that lowered ε by at least this fraction of itself
+/// keeps the hybrid on Gauss–Newton's model (their ε = 0.2). Below it the residuals are
+/// not falling towards zero, Σ rᵢ∇²rᵢ matters, and the full Hessian pays for its k
+/// linearizations.
+pub const FAST_FALL: f64 = 0.2;
 
 /// Levenberg–Marquardt with its options.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -43,11 +50,20 @@ impl LevenbergMarquardt {
     pub fn new(options: LevenbergMarquardtOptions) -> Self {
         Self { options }
     }
+
+    /// Fletcher and Xu's hybrid in the same trust region: Gauss–Newton while ε falls fast,
+    /// Newton on the full Hessian of ε (by differences) once it slows.
+    pub fn hybrid(options: LevenbergMarquardtOptions) -> Self {
+        Self { options: LevenbergMarquardtOptions { hessian: Hessian::Hybrid, ..options } }
+    }
 }
 
 impl<S: System> Method<S> for LevenbergMarquardt {
     fn name(&self) -> &str {
-        "levenberg-marquardt"
+        match self.options.hessian {
+            Hessian::GaussNewton => "levenberg-marquardt",
+            Hessian::Hybrid => "hybrid-newton",
+        }
     }
 
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
@@ -57,28 +73,58 @@ impl<S: System> Method<S> for LevenbergMarquardt {
             curve: Curve::default(),
             radius: 0.0,
             proposed: None,
+            newton: None,
+            fall: None,
         };
-        drive(problem, "levenberg-marquardt", &self.options.driver, &mut step, start)
+        let name = Method::<S>::name(self);
+        drive(problem, name, &self.options.driver, &mut step, start)
     }
 }
 
-/// The state of the iteration: the curve (its scaling D and last λ), the radius Δ, and the
-/// step of the last proposal (which the advance evaluates first).
+/// The state of the iteration: the curve (its scaling D and last λ), the radius Δ, the
+/// step of the last proposal (which the advance evaluates first), and, for the hybrid, the
+/// relative fall of ε at the last step and the iterate with A replaced by the differenced
+/// Hessian.
 struct TrustRegion<'o> {
     options: &'o LevenbergMarquardtOptions,
     curve: Curve,
     radius: f64,
     proposed: Option<CurveStep>,
+    newton: Option<Linearization>,
+    fall: Option<f64>,
 }
 
 impl TrustRegion<'_> {
-    /// The trial step for the current radius from the iterate `lin`.
+    /// The trial step for the current radius from the iterate `lin`: on Newton's model when
+    /// there is one at this iterate, else on Gauss–Newton's.
     fn step<S: System>(
         &mut self,
         problem: &Problem<S>,
         lin: &Linearization,
     ) -> Result<CurveStep, Failure> {
-        self.curve.within(problem, lin, self.radius, self.options.driver.max_condition)
+        let model = self.newton.as_ref().filter(|n| n.z == lin.z).unwrap_or(lin);
+        self.curve.within(problem, model, self.radius, self.options.driver.max_condition)
+    }
+
+    /// The hybrid's model at the iterate `lin`: Gauss–Newton's after a step that lowered ε
+    /// by at least [`FAST_FALL`] of itself (and at the start), else Newton's, A ← ∂U/∂z
+    /// (differenced once per iterate). The scaling D stays JᵀWJ's, so the trust region
+    /// measures steps as Levenberg–Marquardt's does; where the Hessian is indefinite, the
+    /// curve's λ grows until A + λD² is positive definite.
+    fn model<S: System>(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        lin: &Linearization,
+    ) -> Result<(), Failure> {
+        // An exact fit's 0/0 counts as fast.
+        let fast = self.fall.is_none_or(|f| f >= FAST_FALL || f.is_nan());
+        if self.options.hessian == Hessian::GaussNewton || fast {
+            self.newton = None;
+        } else if !self.newton.as_ref().is_some_and(|n| n.z == lin.z) {
+            self.newton =
+                differenced_hessian(ev, lin)?.map(|normal| Linearization { normal, ..lin.clone() });
+        }
+        Ok(())
     }
 }
 
@@ -93,14 +139,17 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         Ok(Iterate::linearized(lin))
     }
 
-    /// The same point at the refined integration; the radius and the scaling stay.
+    /// The same point at the refined integration; the radius and the scaling stay, Newton's
+    /// model is differenced again.
     fn restart(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Iterate, Failure> {
+        self.newton = None;
         ev.linearize(&current.z).map(Iterate::linearized)
     }
 
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
         let lin = current.linearization.as_ref().expect("the iterates are linearized");
         self.curve.rescale(lin);
+        self.model(ev, lin)?;
         let trial = self.step(ev.problem(), lin)?;
         let z = ev.problem().unknowns().moved(&current.z, trial.delta.as_slice(), 1.0);
         let condition = Some(trial.condition);
@@ -144,6 +193,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 self.radius = 2.0 * trial.scaled_norm;
             }
             if let Some(l) = evaluated.filter(|_| rho >= 1e-4) {
+                self.fall = Some((lin.cost - l.cost) / lin.cost);
                 return Ok(Advance::Moved(Iterate::linearized(l)));
             }
             if trial.delta.norm() <= negligible || !(self.radius > 0.0 && self.radius.is_finite()) {

@@ -1,5 +1,6 @@
-//! Levenberg–Marquardt against an independent reference: Goodman's method with step halving
-//! on the same data from the same start, on every catalogue system, and the paper's example.
+//! Levenberg–Marquardt and the Fletcher–Xu hybrid against an independent reference: Goodman's
+//! method with step halving on the same data from the same start, on every catalogue system,
+//! and the paper's example.
 //! (Its certificate on bounds, outliers, tiny rates and blow-ups is checked with every other
 //! method's in the workspace's tests/certificate.rs.)
 
@@ -13,35 +14,40 @@ use sysid_systems::{Case, Visit};
 struct BothMethods;
 
 impl Visit for BothMethods {
-    type Output = (f64, f64, bool);
+    type Output = (f64, f64, f64, bool);
     fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
         let problem = case.problem(1).unwrap();
         let lm = LevenbergMarquardt::default().fit(&problem).unwrap();
         assert!(lm.converged(), "{}: {}", case.name, lm.termination);
+        let hybrid = LevenbergMarquardt::hybrid(Default::default()).fit(&problem).unwrap();
+        assert!(hybrid.converged(), "{}: {}", case.name, hybrid.termination);
+        assert_eq!(hybrid.method, "hybrid-newton");
         let reference =
             Goodman::new(GoodmanOptions::default().with_step_halving(true)).fit(&problem).unwrap();
         assert!(reference.converged(), "{}: {}", case.name, reference.termination);
-        (lm.cost, reference.cost, lm.active_bounds().is_empty())
+        (lm.cost, hybrid.cost, reference.cost, lm.active_bounds().is_empty())
     }
 }
 
 #[test]
 fn every_catalogue_minimum_is_goodmans() {
     for name in sysid_systems::NAMES {
-        let (lm, goodman, _) = sysid_systems::visit(name, BothMethods).unwrap();
-        // Both stop where the certificate holds (optimality ≤ 1e-6): the costs of one minimum
+        let (lm, hybrid, goodman, _) = sysid_systems::visit(name, BothMethods).unwrap();
+        // All stop where the certificate holds (optimality ≤ 1e-6): the costs of one minimum
         // then agree to far below 1e-8 (van-der-pol-three-point's ε ≈ 1e-25 is an exact fit).
-        if goodman > 1e-20 {
-            assert_close(lm, goodman, 1e-8);
-        } else {
-            assert!(lm <= 1e-20, "{name}: ε = {lm:e} at an exact fit");
+        for cost in [lm, hybrid] {
+            if goodman > 1e-20 {
+                assert_close(cost, goodman, 1e-8);
+            } else {
+                assert!(cost <= 1e-20, "{name}: ε = {cost:e} at an exact fit");
+            }
         }
     }
 }
 
 #[test]
 fn the_compartment_chain_holds_its_rate_on_the_bound() {
-    let (_, _, free) = sysid_systems::visit("compartment-chain", BothMethods).unwrap();
+    let (_, _, _, free) = sysid_systems::visit("compartment-chain", BothMethods).unwrap();
     assert!(!free, "d1's lower bound is active at the minimum");
 }
 
