@@ -130,7 +130,12 @@ impl TrustRegion<'_> {
 
 impl<S: System> Step<S> for TrustRegion<'_> {
     /// Linearizes at the start; D from its A, Δ = factor·‖D z₀‖ (factor when that is 0).
+    ///
+    /// A start begins the hybrid afresh: each round of the noise scales' closed form starts
+    /// the step again at the point the last round ended, with new weights, where a Newton
+    /// model kept from that round would be the old problem's.
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
+        (self.newton, self.fall) = (None, None);
         let lin = ev.linearize(&z)?;
         self.curve.rescale(&lin);
         let scaled = self.curve.scaled_norm(&z);
