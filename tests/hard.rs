@@ -121,7 +121,7 @@ fn boehm_fixed_sigma_certifies_its_bounded_optimum() {
 /// From the generic guess (every rate 0.1), 20 starts of the Fletcher–Xu hybrid (the guess
 /// and a Latin hypercube over the box, log-uniform over its ten decades) reach the bounded
 /// optimum from at least 4 (AMICI + fides: 2 of 20 on the PEtab problem); the best reported
-/// is that optimum, certified. Levenberg–Marquardt reaches it from 1–2 of 20 (seeds 1–10):
+/// is that optimum, certified. Levenberg–Marquardt reaches it from 0–2 of 20 (seeds 1–10):
 /// the starts that close in on it crawl, the Gauss–Newton model misjudging the large
 /// residuals' curvature, and stop at the iteration limit.
 #[test]

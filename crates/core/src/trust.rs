@@ -230,7 +230,8 @@ impl Curve {
 /// The actual decrease ε(z) − ε(z⁺) of a step from `from` to `to` (both linearized) whose
 /// predicted decrease is `predicted`. Below ε's accuracy (`resolution`, about rtol·ε) the
 /// difference of two integrated costs is noise, while the gradients from the sensitivities
-/// are still accurate: there the trapezoidal rule along the step, exact for a quadratic,
+/// are still accurate: where both the predicted decrease and the difference are that small,
+/// the trapezoidal rule along the step, exact for a quadratic,
 /// −½(∇ε(z) + ∇ε(z⁺))ᵀ(z⁺ − z) with ∇ε = 2U, measures it.
 pub fn actual_decrease(
     from: &Linearization,
@@ -238,14 +239,21 @@ pub fn actual_decrease(
     predicted: f64,
     resolution: f64,
 ) -> f64 {
-    if predicted <= resolution {
+    let difference = from.cost - to.cost;
+    if predicted <= resolution && difference.abs() <= NOISE_FLOOR * resolution {
         -(0..to.z.len())
             .map(|i| (from.gradient[i] + to.gradient[i]) * (to.z[i] - from.z[i]))
             .sum::<f64>()
     } else {
-        from.cost - to.cost
+        difference
     }
 }
+
+/// Where the costs at the two ends differ by more than this many times ε's accuracy, the
+/// difference is the decrease, whatever the model predicted: the trapezoidal rule is exact
+/// only for a quadratic, and a model that predicts a tiny decrease where the cost changes by
+/// thousands (the first step off a plateau) is not one.
+const NOISE_FLOOR: f64 = 10.0;
 
 /// Takes the step `first` from the iterate `lin` (to `z_first`) if it lowers the cost
 /// ([`actual_decrease`]), else halves its scaled length along the curve until one does: at
@@ -287,4 +295,36 @@ pub fn halve_along_curve<S: System>(
         trial = problem.unknowns().moved(z, step.delta.as_slice(), 1.0);
     }
     Ok(Advance::Stop(Rule::NoDescent))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(z: f64, cost: f64, gradient: f64) -> Linearization {
+        Linearization {
+            z: vec![z],
+            cost,
+            gradient: DVector::from_element(1, gradient),
+            normal: DMatrix::from_element(1, 1, 1.0),
+            residuals: None,
+            norm: cost.sqrt(),
+            experiment_costs: vec![cost],
+            counts: Default::default(),
+        }
+    }
+
+    #[test]
+    fn the_decrease_is_the_gradients_only_within_the_noise() {
+        // Within the noise (resolution 1e-4): the trapezoidal rule, −(U(0) + U(δ))·δ, exact
+        // for a quadratic, here ε = 1e4 + (z − 1)² moved by δ = 1e-6.
+        let (from, to) =
+            (at(0.0, 1e4 + 1.0, -1.0), at(1e-6, 1e4 + (1.0 - 1e-6f64).powi(2), -(1.0 - 1e-6)));
+        let exact = 1.0 - (1.0 - 1e-6f64).powi(2);
+        assert!((actual_decrease(&from, &to, 2e-6, 1e-4) - exact).abs() < 1e-15);
+        // The first step off a plateau: the model predicts 3e-5, the cost falls by 5634
+        // (the trial point's gradient points back, so the trapezoid would say it rose).
+        let (from, to) = (at(0.0, 7846.0, 1e-5), at(40.0, 2212.0, 30.0));
+        assert!((actual_decrease(&from, &to, 3e-5, 7.8e-5) - 5634.0).abs() < 1e-12);
+    }
 }
