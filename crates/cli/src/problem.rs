@@ -168,6 +168,16 @@ pub fn with_starts(record: FitRecord<'_>, starts: Option<&Starts>) -> serde_json
 /// Why the start cannot be used, if it cannot.
 fn unusable_start(e: &Estimate) -> Option<String> {
     match &e.termination {
+        // Multiple shooting starts each interval from a node of its own (the data where a
+        // state is measured), not from the guess alone: say so, since the guess may well
+        // integrate (the other methods' start).
+        Termination::StartFailed(Failure::Integration { error, .. })
+            if e.method == "multiple-shooting" =>
+        {
+            Some(format!(
+                "the model cannot be integrated from multiple shooting's starting nodes (each interval starts from the data where a state is measured, else from the guess's trajectory): {error}; the single-shooting methods start from the guess alone"
+            ))
+        }
         Termination::StartFailed(Failure::Integration { error, .. }) => {
             Some(format!("the model cannot be integrated from the starting guess: {error}"))
         }

@@ -396,6 +396,27 @@ fn a_model_that_blows_up() {
     );
 }
 
+/// x′ = k x² from x(0) = 0.1 blows up at t = 20 for the guess k = 0.5, after the data end;
+/// from the datum x(5) = 2, multiple shooting's node for its second interval, it blows up at
+/// t = 6. Multiple shooting says where it started, not "from the starting guess", which
+/// integrates.
+#[test]
+fn multiple_shooting_names_its_own_start() {
+    let model = DECAY.replace("-k * x", "k * x^2").replace("x = 2.0", "x = 0.1");
+    let data: String = std::iter::once("t,x".to_string())
+        .chain((0..=15).map(|t| format!("{t},{}", if t < 5 { 0.1 } else { 2.0 })))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let case = Case::new("ms-start", &model, &data);
+    let out = sysid(&["fit", "--model", &case.model(), "--method", "multiple-shooting"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("from multiple shooting's starting nodes"), "{stderr}");
+    assert!(stderr.contains("the solution blows up"), "{stderr}");
+    let out = sysid(&["fit", "--model", &case.model(), "--method", "goodman-halving"]);
+    assert!(!text(&out.stderr).contains("cannot be integrated from"), "{}", text(&out.stderr));
+}
+
 #[test]
 fn failures_leave_no_partial_output_file() {
     let case = Case::new("partial", DECAY, "t,x\n0,2\n1,abc\n");
