@@ -11,14 +11,17 @@
 //!
 //! The fits run on rayon. A drawn start whose fit cannot even begin (the model cannot be
 //! integrated there, or its cost overflows) is redrawn, uniformly over the same ranges, up
-//! to [`MAX_REDRAWS`] times; the redraws are counted (`redrawn`). The best fit is the
-//! converged one with the least cost, unless a fit that did not converge ended lower (by
-//! more than [`SAME_MINIMUM_RTOL`]): a certified point is then not reported as the best when
-//! a lower one was found (a corner of the box where every bound is active is a certified
-//! point of the bounded problem, and often a poor one), and the lowest is reported, not
-//! converged. With none converged, the least cost of all. A start reached the best minimum
-//! when its fit converged to a cost within [`SAME_MINIMUM_RTOL`] of the best; the distinct
-//! minima are the converged fits grouped by cost the same way, least cost first.
+//! to [`MAX_REDRAWS`] times; the redraws are counted (`redrawn`). Fits are ranked by what
+//! they minimise: the negative log-likelihood where there is one (with noise scales
+//! estimated, ε ends every fit at about the number of data and ranks nothing), else ε. The
+//! best fit is the converged one with the least objective, unless a fit that did not
+//! converge ended lower (by more than [`SAME_MINIMUM_RTOL`] of ε): a certified point is
+//! then not reported as the best when a lower one was found (a corner of the box where every
+//! bound is active is a certified point of the bounded problem, and often a poor one), and
+//! the lowest is reported, not converged. With none converged, the least objective of all. A
+//! start reached the best minimum when its fit converged to an objective within
+//! [`SAME_MINIMUM_RTOL`] of ε of the best; the distinct minima are the converged fits
+//! grouped the same way, least first.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -79,7 +82,7 @@ pub struct Starts {
     /// Drawn starts replaced because the fit could not begin there (each at most
     /// [`MAX_REDRAWS`] times).
     pub redrawn: usize,
-    /// The distinct minima the converged fits reached, least cost first.
+    /// The distinct minima the converged fits reached, least objective first.
     pub minima: Vec<Minimum>,
     /// Wall-clock time of all the fits, in milliseconds.
     pub elapsed_ms: f64,
@@ -87,13 +90,17 @@ pub struct Starts {
 
 impl std::fmt::Display for Starts {
     /// "20 starts in 31.2 ms (…): 18 converged, 12 reached the best (start 0); 2 distinct
-    /// minima: ε = … (12 starts), ε = … (6 starts)".
+    /// minima: ε = …, nll … (12 starts), ε = …, nll … (6 starts)".
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let plural = |n: usize, what: &str| format!("{n} {what}{}", if n == 1 { "" } else { "s" });
         let minima: Vec<String> = self
             .minima
             .iter()
-            .map(|m| format!("ε = {} ({})", significant(m.cost, 10), plural(m.count, "start")))
+            .map(|m| {
+                let nll =
+                    m.nll.map(|v| format!(", nll {}", significant(v, 10))).unwrap_or_default();
+                format!("ε = {}{nll} ({})", significant(m.cost, 10), plural(m.count, "start"))
+            })
             .collect();
         write!(
             f,
@@ -121,8 +128,11 @@ impl std::fmt::Display for Starts {
 /// One minimum the starts reached.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Minimum {
-    /// The least cost among the fits that reached it.
+    /// ε of the fit with the least objective among those that reached it.
     pub cost: f64,
+    /// Its negative log-likelihood, the objective the minima are ranked by (null for a
+    /// continuous record, ranked by ε).
+    pub nll: Option<f64>,
     /// How many starts reached it.
     pub count: usize,
     /// The first start (in order) that reached it.
@@ -218,11 +228,25 @@ where
     Ok(Multistart { best, starts: summary })
 }
 
-/// Whether two converged fits are at one minimum: costs within [`SAME_MINIMUM_RTOL`], or
+/// What the fits minimise, in units of ε/2: the negative log-likelihood where the fit has
+/// one (it differs from ε/2 by a constant when σ is known, and is the objective when noise
+/// scales are estimated, where ε at every round's end is about the number of data), else
+/// ε/2.
+fn objective(f: &Estimate) -> f64 {
+    f.nll.unwrap_or(f.cost / 2.0)
+}
+
+/// [`SAME_MINIMUM_RTOL`] of ε, in the objective's units: ½·rtol·ε (for known σ exactly the
+/// relative rule on ε).
+fn resolution(a: &Estimate, b: &Estimate) -> f64 {
+    0.5 * SAME_MINIMUM_RTOL * a.cost.abs().max(b.cost.abs())
+}
+
+/// Whether two converged fits are at one minimum: objectives within [`resolution`], or
 /// both exact fits (ε = 0 to rounding, where the relative difference of the costs is noise).
 fn same_minimum(a: &Estimate, b: &Estimate) -> bool {
     (a.certificate.exact_fit && b.certificate.exact_fit)
-        || (a.cost - b.cost).abs() <= SAME_MINIMUM_RTOL * a.cost.abs().max(b.cost.abs())
+        || (objective(a) - objective(b)).abs() <= resolution(a, b)
 }
 
 fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
@@ -230,19 +254,20 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
         fits.iter()
             .enumerate()
             .filter(|(_, f)| !converged || f.converged())
-            .filter(|(_, f)| !f.cost.is_nan())
-            .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
+            .filter(|(_, f)| !objective(f).is_nan())
+            .min_by(|a, b| objective(a.1).total_cmp(&objective(b.1)))
             .map(|(i, _)| i)
     };
-    let lower =
-        |a: usize, b: usize| fits[a].cost < fits[b].cost - SAME_MINIMUM_RTOL * fits[b].cost.abs();
+    let lower = |a: usize, b: usize| {
+        objective(&fits[a]) < objective(&fits[b]) - resolution(&fits[b], &fits[b])
+    };
     let best_start = match (least(true), least(false)) {
         (Some(c), Some(any)) if lower(any, c) => any,
         (Some(c), _) => c,
         (None, any) => any.unwrap_or(0),
     };
     let mut order: Vec<usize> = (0..fits.len()).filter(|&i| fits[i].converged()).collect();
-    order.sort_by(|&a, &b| fits[a].cost.total_cmp(&fits[b].cost).then(a.cmp(&b)));
+    order.sort_by(|&a, &b| objective(&fits[a]).total_cmp(&objective(&fits[b])).then(a.cmp(&b)));
     // A fit joins a minimum when it matches that minimum's least-cost fit (the first in cost
     // order); the minimum's start and estimates are those of the earliest start that reached it.
     let mut minima: Vec<(usize, Minimum)> = Vec::new();
@@ -256,8 +281,10 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
                     m.estimates = named(fit);
                 }
             }
-            _ => minima
-                .push((i, Minimum { cost: fit.cost, count: 1, start: i, estimates: named(fit) })),
+            _ => minima.push((
+                i,
+                Minimum { cost: fit.cost, nll: fit.nll, count: 1, start: i, estimates: named(fit) },
+            )),
         }
     }
     let minima = minima.into_iter().map(|(_, m)| m).collect();
@@ -328,6 +355,30 @@ mod tests {
             scales: Vec::new(),
             noise_model: false,
         }
+    }
+
+    /// A fit of a problem with estimated noise scales: ε about the number of data, ranked by
+    /// its negative log-likelihood.
+    fn fit_nll(cost: f64, nll: f64, converged: bool) -> Estimate {
+        Estimate { nll: Some(nll), ..fit(cost, converged) }
+    }
+
+    #[test]
+    fn fits_with_estimated_noise_are_ranked_by_their_likelihood() {
+        // Boehm's problem with σ estimated from 20 starts: every certified fit ends at ε ≈ 48
+        // (σ in closed form), at NLL 138.22 or 150.0; an unconverged one ends at ε = 47.9 but
+        // NLL 147.87, worse. Ranked by ε, it was reported as the best, and the two minima
+        // were one.
+        let fits =
+            [fit_nll(47.9, 147.87, false), fit_nll(48.0, 138.22, true), fit_nll(48.0, 150.0, true)];
+        let s = summarise(&fits, &MultistartOptions::default());
+        assert_eq!((s.best_start, s.reached_best, s.minima.len()), (1, 1, 2));
+        assert_eq!(s.minima[0].nll, Some(138.22));
+        // Lower only by noise (within ½·1e-6·ε of the objective): still the certified one.
+        let fits = [fit_nll(48.0, 138.22 - 1e-5, false), fit_nll(48.0, 138.22, true)];
+        assert_eq!(best(&fits), 1);
+        let fits = [fit_nll(48.0, 138.22 - 1e-4, false), fit_nll(48.0, 138.22, true)];
+        assert_eq!(best(&fits), 0);
     }
 
     fn best(fits: &[Estimate]) -> usize {
