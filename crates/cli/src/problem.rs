@@ -116,8 +116,9 @@ pub fn fit<S: System>(
     name: &str,
     settings: &Settings,
 ) -> anyhow::Result<Estimate> {
-    let estimate = method::<S>(name, settings)?.fit(problem)?;
-    if let Some(message) = unusable_start(&estimate) {
+    let m = method::<S>(name, settings)?;
+    let estimate = m.fit(problem)?;
+    if let Some(message) = unusable_start(&estimate, m.start_point()) {
         anyhow::bail!(message);
     }
     Ok(estimate)
@@ -150,7 +151,7 @@ where
     M: Method<S> + Sync + ?Sized,
 {
     let run = sysid_montecarlo::multistart(m, problem, options)?;
-    if let Some(message) = unusable_start(&run.best) {
+    if let Some(message) = unusable_start(&run.best, m.start_point()) {
         anyhow::bail!("every start fails; the best: {message}");
     }
     Ok((run.best, run.starts))
@@ -165,21 +166,12 @@ pub fn with_starts(record: FitRecord<'_>, starts: Option<&Starts>) -> serde_json
     value
 }
 
-/// Why the start cannot be used, if it cannot.
-fn unusable_start(e: &Estimate) -> Option<String> {
+/// Why the start cannot be used, if it cannot; `start_point` is what the method integrates
+/// from there ([`Method::start_point`]).
+fn unusable_start(e: &Estimate, start_point: &str) -> Option<String> {
     match &e.termination {
-        // Multiple shooting starts each interval from a node of its own (the data where a
-        // state is measured), not from the guess alone: say so, since the guess may well
-        // integrate (the other methods' start).
-        Termination::StartFailed(Failure::Integration { error, .. })
-            if e.method == "multiple-shooting" =>
-        {
-            Some(format!(
-                "the model cannot be integrated from multiple shooting's starting nodes (each interval starts from the data where a state is measured, else from the guess's trajectory): {error}; the single-shooting methods start from the guess alone"
-            ))
-        }
         Termination::StartFailed(Failure::Integration { error, .. }) => {
-            Some(format!("the model cannot be integrated from the starting guess: {error}"))
+            Some(format!("the model cannot be integrated from {start_point}: {error}"))
         }
         Termination::StartFailed(failure) => {
             Some(format!("the starting guess cannot be used: {failure}"))

@@ -68,7 +68,5 @@ pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL, SINGLE_EXPERIMENT};
 pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};
 pub use table::{Compared, Expected, compact, compact_header, comparison};
 pub use termination::{Failure, Rule, Termination};
-pub use trust::{
-    Curve, CurveStep, Hessian, actual_decrease, differenced_hessian, halve_along_curve,
-};
+pub use trust::{Curve, CurveStep, actual_decrease, differenced_hessian, halve_along_curve};
 pub use unknowns::{Prior, Unknown, Unknowns};

@@ -19,6 +19,12 @@ pub trait Method<S: System> {
     /// The method's name as the command line spells it.
     fn name(&self) -> &str;
 
+    /// What a fit integrates from at its start, as a message names it when the model cannot
+    /// be integrated there: the starting guess, for the methods that shoot from it.
+    fn start_point(&self) -> &str {
+        "the starting guess"
+    }
+
     /// Fits from `start` (values of the unknowns, in the problem's order).
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError>;
 

@@ -16,7 +16,6 @@
 //! while the curve damps the overshooting direction first.
 
 use nalgebra::{DMatrix, DVector};
-use serde::{Deserialize, Serialize};
 use sysid_ode::System;
 
 use crate::bounded::{Quadratic, minimise_in_box};
@@ -26,20 +25,6 @@ use crate::linalg::Singular;
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate};
 use crate::termination::{Failure, Rule};
-
-/// The curvature of the model a step minimises: m_λ's A.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Hessian {
-    /// A = JᵀWJ, the Gauss–Newton matrix every method shares: exact where the residuals
-    /// vanish, and it leaves out Σ rᵢ∇²rᵢ, which large residuals make matter.
-    #[default]
-    GaussNewton,
-    /// Fletcher and Xu's hybrid (IMA J. Numer. Anal. 7, 1987, 371–389): JᵀWJ while ε falls
-    /// fast, else A = ∂U/∂z, half the full Hessian of ε, from forward differences of U (the
-    /// sensitivities' gradient; k more linearizations per iterate, [`differenced_hessian`]).
-    Hybrid,
-}
 
 /// Half the Hessian of ε at the iterate `lin`, ∂U/∂z, by forward differences of U, made
 /// symmetric: column j from a linearization at z + h_j e_j, h_j = √rtol·max(1, |z_j|) (the

@@ -259,7 +259,7 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
             .map(|(i, _)| i)
     };
     let lower = |a: usize, b: usize| {
-        objective(&fits[a]) < objective(&fits[b]) - resolution(&fits[b], &fits[b])
+        objective(&fits[a]) < objective(&fits[b]) - resolution(&fits[a], &fits[b])
     };
     let best_start = match (least(true), least(false)) {
         (Some(c), Some(any)) if lower(any, c) => any,

@@ -214,6 +214,9 @@ impl<S: System> Method<S> for Built {
     fn name(&self) -> &str {
         with_method!(self, m => Method::<S>::name(m))
     }
+    fn start_point(&self) -> &str {
+        with_method!(self, m => Method::<S>::start_point(m))
+    }
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         with_method!(self, m => m.fit_from(problem, start))
     }

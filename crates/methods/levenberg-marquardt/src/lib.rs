@@ -28,5 +28,5 @@
 mod options;
 mod solver;
 
-pub use options::LevenbergMarquardtOptions;
+pub use options::{Hessian, LevenbergMarquardtOptions};
 pub use solver::{FAST_FALL, LevenbergMarquardt};

@@ -1,7 +1,21 @@
 //! Options of Levenberg–Marquardt.
 
 use serde::{Deserialize, Serialize};
-use sysid_core::{DriverOptions, Hessian, OptionsError};
+use sysid_core::{DriverOptions, OptionsError};
+
+/// The curvature of the model a step minimises: m_λ's A.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Hessian {
+    /// A = JᵀWJ, the Gauss–Newton matrix every method shares: exact where the residuals
+    /// vanish, and it leaves out Σ rᵢ∇²rᵢ, which large residuals make matter.
+    #[default]
+    GaussNewton,
+    /// Fletcher and Xu's hybrid (IMA J. Numer. Anal. 7, 1987, 371–389): JᵀWJ while ε falls
+    /// fast, else A = ∂U/∂z, half the full Hessian of ε, from forward differences of U (the
+    /// sensitivities' gradient; k more linearizations per iterate, [`sysid_core::differenced_hessian`]).
+    Hybrid,
+}
 
 /// Options with MINPACK's defaults.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -24,13 +24,12 @@
 //! certified.)
 
 use sysid_core::{
-    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Hessian, Iterate,
-    Linearization, Method, Problem, Proposal, Rule, Step, actual_decrease, differenced_hessian,
-    drive,
+    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Linearization,
+    Method, Problem, Proposal, Rule, Step, actual_decrease, differenced_hessian, drive,
 };
 use sysid_ode::System;
 
-use crate::options::LevenbergMarquardtOptions;
+use crate::options::{Hessian, LevenbergMarquardtOptions};
 
 /// Fletcher and Xu's switch: a step that lowered ε by at least this fraction of itself
 /// keeps the hybrid on Gauss–Newton's model (their ε = 0.2). Below it the residuals are

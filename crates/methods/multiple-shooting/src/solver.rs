@@ -73,6 +73,12 @@ impl<S: System> Method<S> for MultipleShooting {
         "multiple-shooting"
     }
 
+    /// Each interval starts from a node of its own, so a start can fail where the guess
+    /// integrates.
+    fn start_point(&self) -> &str {
+        "multiple shooting's starting nodes (each interval starts from the data where a state is measured, else from the guess's trajectory; the single-shooting methods start from the guess alone)"
+    }
+
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         self.options.validate()?;
         if problem.n_priors() > 0 {
