@@ -241,9 +241,11 @@ pub fn actual_decrease(
 const NOISE_FLOOR: f64 = 10.0;
 
 /// Takes the step `first` from the iterate `lin` (to `z_first`) if it lowers the cost
-/// ([`actual_decrease`]), else halves its scaled length along the curve until one does: at
-/// most `max_halvings` times, and not below the resolvable step (then [`Rule::Step`]). A
-/// trial point where the model cannot be integrated counts as a step too long.
+/// ([`actual_decrease`]) by at least `sufficient` times the decrease the model predicts (0:
+/// any decrease, Goodman's rule), else halves its scaled length along the curve until one
+/// does: at most `max_halvings` times, and not below the resolvable step (then
+/// [`Rule::Step`]). A trial point where the model cannot be integrated counts as a step too
+/// long.
 #[allow(clippy::too_many_arguments)]
 pub fn halve_along_curve<S: System>(
     ev: &Evaluations<'_, S>,
@@ -251,6 +253,7 @@ pub fn halve_along_curve<S: System>(
     curve: &mut Curve,
     (mut step, mut trial): (CurveStep, Vec<f64>),
     max_halvings: usize,
+    sufficient: f64,
     step_tolerance: f64,
     max_condition: f64,
 ) -> Result<Advance, Failure> {
@@ -266,7 +269,12 @@ pub fn halve_along_curve<S: System>(
             return Ok(Advance::Stop(Rule::Step));
         }
         match ev.linearize(&trial) {
-            Ok(l) if actual_decrease(lin, &l, step.predicted, resolution) > 0.0 => {
+            Ok(l)
+                if {
+                    let actual = actual_decrease(lin, &l, step.predicted, resolution);
+                    actual > 0.0 && actual >= sufficient * step.predicted
+                } =>
+            {
                 return Ok(Advance::Moved(Iterate::linearized(l)));
             }
             Ok(_) => {}

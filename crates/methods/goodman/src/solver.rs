@@ -101,6 +101,7 @@ impl<S: System> Step<S> for Newton<'_> {
             &mut self.curve,
             (first, proposal.z),
             self.options.max_halvings,
+            0.0,
             driver.step_tolerance,
             driver.max_condition,
         )

@@ -364,6 +364,7 @@ impl<S: System> Step<S> for Shooting {
                     &mut self.curve,
                     (first, proposal.z),
                     MAX_BACKTRACKS,
+                    0.0,
                     self.step_tolerance,
                     self.max_condition,
                 )?;

@@ -12,6 +12,13 @@
 //! the next trajectory: it never re-integrates the nonlinear model to move on. Convergence is
 //! quadratic near the solution, where x_k solves the nonlinear model.
 //!
+//! **The safeguard.** The full step is taken where the nonlinear model's ε falls by more than
+//! its accuracy, or, within that accuracy, where the step is at most half the last
+//! (Deuflhard's contraction test), or where ε at x_k is unknown. Otherwise, and where the least
+//! squares is singular, the family is taken around the model's own trajectory (where it is the
+//! Gauss–Newton model) and its step is halved along the Levenberg curve until ε falls by a
+//! quarter of the predicted decrease; `singular` only when no step is found.
+//!
 //! **What it offers over Goodman's method.** The first trajectory is free: from the model
 //! integrated at the guess ([`Start::Guess`]), from the data for measured states
 //! ([`Start::Data`]), or any trajectory the caller has ([`Start::Trajectory`]). Since the

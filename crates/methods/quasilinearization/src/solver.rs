@@ -3,8 +3,8 @@
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, Estimate, Evaluations, Failure, FitError, Iterate, Method, PlannedNoise, Problem,
-    Proposal, Step, drive,
+    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Linearization,
+    Method, PlannedNoise, Problem, Proposal, Rule, Step, drive, halve_along_curve,
 };
 use sysid_ode::{Counts, System};
 
@@ -87,6 +87,8 @@ impl Quasilinearization {
             layouts: problem.experiments().iter().map(|e| Layout::new(problem, e)).collect(),
             trajectories: Vec::new(),
             proposed: None,
+            curve: Curve::default(),
+            last_step: None,
         };
         let estimate = drive(problem, name, &self.options.driver, &mut step, start)?;
         Ok(QuasilinearizationRun { estimate, trajectories: step.trajectories })
@@ -103,23 +105,38 @@ impl<S: System> Method<S> for Quasilinearization {
     }
 }
 
-/// The state of the iteration: each experiment's trajectory x_k(t), and the families of the
-/// last proposal.
+/// The state of the iteration: each experiment's trajectory x_k(t), the last proposal, and
+/// the Levenberg curve of the safeguard (its scaling kept from iterate to iterate).
 struct Quasi<'o> {
     options: &'o QuasilinearizationOptions,
     layouts: Vec<Layout>,
     trajectories: Vec<Trajectory>,
     proposed: Option<Proposed>,
+    curve: Curve,
+    /// The length of the last step taken (‖z_{k+1} − z_k‖).
+    last_step: Option<f64>,
 }
 
-/// A proposal's families around x_k, with the slots' coordinates c_k and ∂c/∂z there, the
-/// least-squares z and the linear family's ε at it.
-struct Proposed {
-    families: Vec<(Family, Vec<f64>, DMatrix<f64>)>,
-    z: Vec<f64>,
-    zk: Vec<f64>,
-    linear_cost: f64,
+/// What the last proposal was.
+enum Proposed {
+    /// Quasilinearization's own step: the families around x_k, with the slots' coordinates
+    /// c_k and ∂c/∂z there, the least-squares z and the linear family's ε at it.
+    Family { families: Vec<(Family, Vec<f64>, DMatrix<f64>)>, z: Vec<f64>, linear_cost: f64 },
+    /// The safeguard's first step along the Levenberg curve of the model's linearization at
+    /// z_k, where the linear family gave no step (its least squares singular, or its
+    /// integration failed).
+    Safeguard { lin: Box<Linearization>, first: CurveStep },
 }
+
+/// How many times the safeguard halves a step along the Levenberg curve before it stops
+/// with no descent (as goodman-halving's default).
+const MAX_HALVINGS: usize = 30;
+
+/// The share of the predicted decrease a safeguard step must achieve (the trust-region
+/// methods' ρ ≥ 1/4, Moré 1978): a step that lowers ε only by overshooting the valley's floor
+/// to the other side (as the first decreasing halving of a Gauss–Newton step does where the
+/// residuals' curvature dominates a sloppy direction) is halved again.
+const SUFFICIENT: f64 = 0.25;
 
 /// The nonlinear model's cost at an iterate, the measure every method reports. The method
 /// does not need it to move on (its iterates need not be solutions of the model), so a point
@@ -137,6 +154,7 @@ impl<S: System> Step<S> for Quasi<'_> {
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
         let problem = ev.problem();
         self.trajectories.clear();
+        self.last_step = None;
         for (e, layout) in problem.experiments().iter().zip(&self.layouts) {
             let trajectory =
                 ev.run(&z, || Trajectory::start(problem, e, layout, &z, &self.options.start))?;
@@ -147,8 +165,146 @@ impl<S: System> Step<S> for Quasi<'_> {
     }
 
     /// Integrates p and Φ of every experiment around x_k and chooses z by least squares (QR),
-    /// projected on the bounds.
+    /// projected on the bounds. Where that gives no step (a singular least-squares problem,
+    /// a linear system that cannot be integrated) and the model can be integrated at z_k, the
+    /// safeguard's step instead ([`Quasi::safeguard`]): `singular` only when no step can be
+    /// found.
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
+        match self.family_step(ev, current) {
+            Err(failure)
+                if current.cost.is_finite() && !matches!(failure, Failure::Budget { .. }) =>
+            {
+                let lin = ev.linearize(&current.z)?;
+                self.curve.rescale(&lin);
+                // No step to size from: MINPACK's first radius, ‖D z‖ (1 where it is 0).
+                let radius =
+                    Some(self.curve.scaled_norm(&current.z)).filter(|r| *r > 0.0).unwrap_or(1.0);
+                let first = self
+                    .curve
+                    .within(ev.problem(), &lin, radius, self.options.driver.max_condition)
+                    .map_err(|_| failure)?;
+                let z = ev.problem().unknowns().moved(&current.z, first.delta.as_slice(), 1.0);
+                let condition = Some(first.condition);
+                self.proposed = Some(Proposed::Safeguard { lin: Box::new(lin), first });
+                Ok(Proposal { z, condition, gradient_norm: None, stop: None })
+            }
+            other => other,
+        }
+    }
+
+    /// Takes quasilinearization's step where it lowers the model's ε (or where ε at x_k is
+    /// unknown: the model cannot be integrated there), else the safeguard's.
+    fn advance(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        current: &Iterate,
+        _proposal: Proposal,
+    ) -> Result<Advance, Failure> {
+        match self.proposed.take().expect("a proposal to take") {
+            Proposed::Family { families, z, linear_cost } => {
+                let cost = nonlinear_cost(ev, &z)?;
+                let length = distance(&z, &current.z);
+                if current.cost.is_finite() && !self.descends(ev, current.cost, cost, length) {
+                    let lin = ev.linearize(&current.z)?;
+                    let delta: Vec<f64> = z.iter().zip(&current.z).map(|(a, b)| a - b).collect();
+                    self.curve.rescale(&lin);
+                    let radius = 0.5 * self.curve.scaled_norm(&delta);
+                    let max_condition = self.options.driver.max_condition;
+                    return match self.curve.within(ev.problem(), &lin, radius, max_condition) {
+                        Ok(first) => self.safeguard(ev, &lin, first),
+                        Err(_) => Ok(Advance::Stop(Rule::NoDescent)),
+                    };
+                }
+                let step = DVector::from_column_slice(&z) - DVector::from_column_slice(&current.z);
+                self.trajectories = families
+                    .iter()
+                    .zip(&self.layouts)
+                    .map(|((family, c, d), layout)| {
+                        let next = DVector::from_column_slice(c) + d * &step;
+                        next_trajectory(layout, family, next.as_slice())
+                    })
+                    .collect();
+                self.last_step = Some(length);
+                Ok(Advance::Moved(Iterate::new(z, cost).with(LINEAR_COST, linear_cost)))
+            }
+            Proposed::Safeguard { lin, first } => self.safeguard(ev, &lin, first),
+        }
+    }
+}
+
+impl Quasi<'_> {
+    /// Whether quasilinearization's step of `length` from ε = `from` to ε = `to` is taken: where
+    /// ε falls by more than its accuracy (rtol relative); within that accuracy ε cannot judge
+    /// the step, and the iteration's contraction does (Deuflhard's monotonicity test for
+    /// Newton's method): the step is at most half the last one, as in a converging
+    /// quasilinearization, whose steps shrink quadratically. (Otherwise a long step along a
+    /// sloppy direction, where ε's rounding happens to be lower, is taken and undone by the
+    /// safeguard, over and over.)
+    fn descends<S: System>(
+        &self,
+        ev: &Evaluations<'_, S>,
+        from: f64,
+        to: f64,
+        length: f64,
+    ) -> bool {
+        let resolution = ev.problem().integrator().rtol * from;
+        to < from - resolution
+            || (to <= from + resolution && self.last_step.is_some_and(|l| length <= 0.5 * l))
+    }
+
+    /// The safeguard: from z_k, where the model's own trajectory is the linear family's x_k
+    /// and quasilinearization's least squares is the Gauss–Newton model, the step `first`
+    /// along the Levenberg curve of that model, halved along it until ε falls (as
+    /// goodman-halving); the next trajectory is the model's at the point reached.
+    fn safeguard<S: System>(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        lin: &Linearization,
+        first: CurveStep,
+    ) -> Result<Advance, Failure> {
+        let problem = ev.problem();
+        let trial = problem.unknowns().moved(&lin.z, first.delta.as_slice(), 1.0);
+        let driver = &self.options.driver;
+        let advance = halve_along_curve(
+            ev,
+            lin,
+            &mut self.curve,
+            (first, trial),
+            MAX_HALVINGS,
+            SUFFICIENT,
+            driver.step_tolerance,
+            driver.max_condition,
+        )?;
+        if let Advance::Moved(next) = &advance {
+            self.last_step = Some(distance(&next.z, &lin.z));
+            self.trajectories = self.model_trajectories(ev, &next.z)?;
+        }
+        Ok(advance)
+    }
+
+    /// The model's trajectory of every experiment at z.
+    fn model_trajectories<S: System>(
+        &self,
+        ev: &Evaluations<'_, S>,
+        z: &[f64],
+    ) -> Result<Vec<Trajectory>, Failure> {
+        let problem = ev.problem();
+        problem
+            .experiments()
+            .iter()
+            .zip(&self.layouts)
+            .map(|(e, layout)| {
+                ev.run(z, || Trajectory::start(problem, e, layout, z, &Start::Guess))
+            })
+            .collect()
+    }
+
+    /// Quasilinearization's own step: the families around x_k and their least squares.
+    fn family_step<S: System>(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        current: &Iterate,
+    ) -> Result<Proposal, Failure> {
         let problem = ev.problem();
         let v = problem.values_at(&current.z);
         let mut families = Vec::with_capacity(self.layouts.len());
@@ -184,31 +340,12 @@ impl<S: System> Step<S> for Quasi<'_> {
         // On the bounds exactly where it reaches them (rounding only).
         problem.unknowns().project(&mut z);
         let linear_cost = ls.residual(&z).norm_squared();
-        self.proposed =
-            Some(Proposed { families, z: z.clone(), zk: current.z.clone(), linear_cost });
+        self.proposed = Some(Proposed::Family { families, z: z.clone(), linear_cost });
         Ok(Proposal { z, condition: Some(condition), gradient_norm, stop: None })
     }
+}
 
-    /// x_{k+1} = p + Φ c of every experiment, c = c_k + D (z_{k+1} − z_k), kept as dense
-    /// solutions; the nonlinear model's cost at z_{k+1}.
-    fn advance(
-        &mut self,
-        ev: &Evaluations<'_, S>,
-        _current: &Iterate,
-        _proposal: Proposal,
-    ) -> Result<Advance, Failure> {
-        let Proposed { families, z, zk, linear_cost } =
-            self.proposed.take().expect("a proposal to take");
-        let step = DVector::from_column_slice(&z) - DVector::from_column_slice(&zk);
-        self.trajectories = families
-            .iter()
-            .zip(&self.layouts)
-            .map(|((family, c, d), layout)| {
-                let next = DVector::from_column_slice(c) + d * &step;
-                next_trajectory(layout, family, next.as_slice())
-            })
-            .collect();
-        let cost = nonlinear_cost(ev, &z)?;
-        Ok(Advance::Moved(Iterate::new(z, cost).with(LINEAR_COST, linear_cost)))
-    }
+/// ‖a − b‖.
+fn distance(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f64>().sqrt()
 }
