@@ -371,3 +371,64 @@ fn boehm_profiles_agree_between_inner_optimisers() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Boehm's six 95 % profile intervals with σ fixed (issue 31) against an independent
+/// computation: at each finite end (Levenberg–Marquardt's profiles), the rate is held 1 % of
+/// the half-width (in ln θ) inside and outside the end, and the other rates re-optimised from
+/// the optimum by quasilinearization, which shares nothing with the profile's stepping, its
+/// crossing search or Levenberg–Marquardt but the model. ΔNLL lies below the threshold inside
+/// and above it outside: every end is right to 1e-2 of its half-width, and the crossing
+/// interpolated between the two lies within 2e-3 of it (measured: 5e-5 to 7e-4). The two rates
+/// on their bounds are open on that side, and only there.
+#[test]
+fn boehm_profile_ends_hold_under_an_independent_reoptimisation() {
+    use sysid::profile::{Outcome, POINTWISE_95, ProfileOptions, profile};
+    let dir = scratch("profile-ends");
+    let problem = boehm_fixed_sigma(&dir, [0.0; 6]);
+    let registry = Registry::standard();
+    let lm = registry.build("levenberg-marquardt", &Settings::default()).unwrap();
+    let optimum = lm.fit(&problem).unwrap();
+    assert!(optimum.converged(), "{}", optimum.termination);
+    let all: Vec<usize> = (0..problem.names().len()).collect();
+    let Outcome::Profiles(profiles) =
+        profile(&*lm, &problem, &optimum, &all, &ProfileOptions::default()).unwrap()
+    else {
+        panic!("a better optimum than the certified one");
+    };
+    let open: Vec<(String, usize)> = profiles
+        .iter()
+        .flat_map(|p| (0..2).filter(|s| p.interval[*s].is_none()).map(|s| (p.name.clone(), s)))
+        .collect();
+    assert_eq!(open, [("k_exp_hetero".to_string(), 0), ("k_imp_homo".to_string(), 1)]);
+    let ql = registry.build("quasilinearization", &Settings::default()).unwrap();
+    let base = optimum.nll.unwrap();
+    for (i, p) in profiles.iter().enumerate() {
+        let centre = optimum.values[i].ln();
+        for end in p.interval.iter().flatten() {
+            let mut rises = Vec::new();
+            for (share, inside) in [(0.99, true), (1.01, false)] {
+                let value = (centre + share * (end.ln() - centre)).exp();
+                let held = problem.clone().with_fixed(&[(p.name.clone(), value)]).unwrap();
+                let start: Vec<f64> = (0..optimum.values.len())
+                    .filter(|j| *j != i)
+                    .map(|j| optimum.values[j])
+                    .collect();
+                let e = ql.fit_from(&held, &start).unwrap();
+                assert!(e.converged(), "{} = {value}: {}", p.name, e.termination);
+                let rise = e.nll.unwrap() - base;
+                assert_eq!(
+                    rise < POINTWISE_95,
+                    inside,
+                    "{} = {value} ({share} of the way to the end {end}): ΔNLL {rise}",
+                    p.name
+                );
+                rises.push(rise);
+            }
+            // The crossing between the two, by linear interpolation over 2 % of the
+            // half-width: the profile's end to 2e-3 of it.
+            let share = 0.99 + 0.02 * (POINTWISE_95 - rises[0]) / (rises[1] - rises[0]);
+            assert!((share - 1.0).abs() <= 2e-3, "{} end {end}: the crossing at {share}", p.name);
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -626,6 +626,28 @@ fn multiple_shooting_reaches_lotka_volterras_minimum_and_shows_its_defects() {
 /// linear in its unknowns), so each interval is θ̂ ± √(3.84·(A⁻¹)_ii); the JSON keys of
 /// docs/json.md; bad input exits 2 with one line.
 #[test]
+fn profiles_from_an_uncertified_fit_say_so() {
+    // A gtol below what rounding lets the measure reach: the fit stops at Goodman's minimum
+    // without certifying it. The profiles start from its best point, the JSON says
+    // `from_certified_optimum: false`, and the table warns; the intervals are still the
+    // exact parabola's, g = 32.5 ± √3.84 (the certificate judges, it does not move the point).
+    let args = ["profile", "--system", "falling-body", "--only", "g", "--gtol", "1e-16"];
+    let out = sysid(&[&args[..], &["--format", "json"]].concat());
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["from_certified_optimum"], false, "{json}");
+    let g = &json["profiles"]["g"]["interval"];
+    let half = 3.841_458_820_694_124_f64.sqrt();
+    assert!((g[0].as_f64().unwrap() - (32.5 - half)).abs() < 1e-6 * half, "{g}");
+    let table = text(&sysid(&args).stdout);
+    assert!(
+        table.contains(
+            "warning: the fit did not certify its optimum; the profiles start from its best point"
+        ),
+        "{table}"
+    );
+}
+
+#[test]
 fn profile_prints_intervals_and_verdicts() {
     let out = sysid(&["profile", "--system", "falling-body", "--format", "json"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
