@@ -2,7 +2,8 @@
 //! STAT5 problem (examples/boehm) with the three noise s.d. fixed at their published values,
 //! from the published optimum moved by ±0.1–0.3 decades per rate (the start of
 //! tests/hard.rs). The issue's target for Levenberg–Marquardt: ≤ 87 ms per fit, a tenth of
-//! AMICI + fides (0.87 s from nominal + 0.1); `hybrid-newton` beside it.
+//! AMICI + fides (0.87 s from nominal + 0.1); `hybrid-newton` and `quasilinearization`
+//! beside it.
 //! `hard/boehm-fixed-sigma/profiles`: the six
 //! profile likelihoods from that fit (target ≤ 5 s on two cores).
 
@@ -69,9 +70,10 @@ fn hard(c: &mut Criterion) {
         .measurement_time(Duration::from_secs(5))
         .sample_size(20);
     let problem = problem();
-    // Levenberg–Marquardt, and the Fletcher–Xu hybrid that adds the differenced Hessian
-    // once ε falls slowly; the last, LM, is kept for the profiles.
-    let fitted = ["hybrid-newton", "levenberg-marquardt"].map(|name| {
+    // Quasilinearization with its safeguard, the Fletcher–Xu hybrid that adds the differenced
+    // Hessian once ε falls slowly, and Levenberg–Marquardt; the last, LM, is kept for the
+    // profiles.
+    let fitted = ["quasilinearization", "hybrid-newton", "levenberg-marquardt"].map(|name| {
         let method = Registry::standard().build(name, &Settings::default()).unwrap();
         let e = method.fit(&problem).unwrap();
         eprintln!(
@@ -86,7 +88,7 @@ fn hard(c: &mut Criterion) {
         });
         (method, e)
     });
-    let [_, (method, e)] = fitted;
+    let [_, _, (method, e)] = fitted;
     // All six profile likelihoods from that fit, on both cores (issue 31's target: ≤ 5 s).
     let options = ProfileOptions::default();
     group.sample_size(10).measurement_time(Duration::from_secs(60));
