@@ -271,3 +271,49 @@ file = "unused.csv"
     let file = sysid_model::ModelFile::parse(text, Path::new("switch.toml")).expect("reads");
     agree(&Model { file }, 400, 7);
 }
+
+/// A parameter that enters only an output has sensitivities S = 0 for all t, which the
+/// integration does not carry: with such a column among those asked for, the others are the
+/// same, bit for bit, as without it (the same augmented system is integrated), and the
+/// column is exactly zero; a parameter in the right-hand side still moves.
+#[test]
+fn a_parameter_outside_the_right_hand_side_is_not_integrated() {
+    use sysid_model::ModelFile;
+    use sysid_ode::{Integrator, Ivp, Wrt};
+    const MODEL: &str = r#"states = ["x", "y"]
+parameters = ["k", "s"]
+[equations]
+x = "-k * x * y"
+y = "k * x * y - y"
+[initial]
+x = 1.0
+y = 0.1
+[outputs]
+scaled = "s * y"
+[unknowns]
+k = 2.0
+s = 3.0
+"#;
+    let file = ModelFile::parse(MODEL, Path::new("sir.toml")).expect("a valid model");
+    let sys = Model { file }.system(Inputs::new(Vec::new()));
+    let ivp = Ivp::new(&sys, 0.0, &[1.0, 0.1], &[2.0, 3.0]);
+    let times = [0.5, 1.0, 4.0];
+    for integrator in [Integrator::dopri5(1e-8, 1e-10), Integrator::rodas4(1e-8, 1e-10)] {
+        let both = [Wrt::Parameter(1), Wrt::InitialValue(0), Wrt::Parameter(0)];
+        let with = ivp.solve_sensitivities(&integrator, &both, &times).unwrap();
+        let without = ivp
+            .solve_sensitivities(&integrator, &[Wrt::InitialValue(0), Wrt::Parameter(0)], &times)
+            .unwrap();
+        assert_eq!(with.counts(), without.counts());
+        for m in 0..times.len() {
+            assert_eq!(with.state(m), without.state(m));
+            let (s, t) = (with.sensitivity(m), without.sensitivity(m));
+            for i in 0..2 {
+                assert_eq!(s[(i, 0)].to_bits(), 0.0f64.to_bits());
+                assert_eq!(s[(i, 1)].to_bits(), t[(i, 0)].to_bits());
+                assert_eq!(s[(i, 2)].to_bits(), t[(i, 1)].to_bits());
+            }
+            assert!(s[(1, 2)].abs() > 1e-3, "∂y/∂k = {}", s[(1, 2)]);
+        }
+    }
+}

@@ -337,11 +337,19 @@ impl<'a, S: System> Ivp<'a, S> {
         self.check()?;
         check_wrt(self.system, wrt)?;
         let n = self.y0.len();
-        let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
+        // Columns of parameters the right-hand side does not depend on are zero for all t
+        // (their initial values are 0): only the others are integrated.
+        let moving = moving_columns(self.system, wrt);
+        let integrated: Vec<Wrt> = moving.iter().map(|&j| wrt[j]).collect();
+        let mut rhs = SensitivityRhs::new(self.system, self.p, &integrated);
         let x0 = rhs.initial_state(self.y0);
         let mut data = vec![0.0; times.len() * x0.len()];
         let counts = sample(integrator, &mut rhs, self.t0, &x0, times, &self.stops(), &mut data)?;
-        Ok(SensitivityTrajectory { times: times.to_vec(), n, k: wrt.len(), data, counts })
+        let k = wrt.len();
+        if moving.len() < k {
+            data = widened(&data, n, &moving, k);
+        }
+        Ok(SensitivityTrajectory { times: times.to_vec(), n, k, data, counts })
     }
 
     /// Integrates the state and the sensitivities `wrt` from t0 to `t_hi` and from t0 back to
@@ -536,4 +544,44 @@ impl<'a, S: System> ObservableGradient<'a, S> {
             }
         }
     }
+}
+
+/// The columns of `wrt` whose sensitivities can be nonzero: initial values, and parameters
+/// the right-hand side depends on (by its sparse Jacobian's pattern; all of them for a
+/// system without one). A parameter that enters only the outputs, a σ or nothing has
+/// S = 0 for all t.
+fn moving_columns<S: System>(system: &S, wrt: &[Wrt]) -> Vec<usize> {
+    let n = system.signature().n_states();
+    let Some(sparse) = system.sparse_jacobian(Function::Rhs) else {
+        return (0..wrt.len()).collect();
+    };
+    let mut enters = vec![false; system.signature().n_parameters()];
+    for &(_, c) in sparse.pattern() {
+        if let Some(q) = (c as usize).checked_sub(n) {
+            enters[q] = true;
+        }
+    }
+    (0..wrt.len())
+        .filter(|&j| match wrt[j] {
+            Wrt::Parameter(q) => enters[q],
+            _ => true,
+        })
+        .collect()
+}
+
+/// Per time, [y; S] with S's columns `moving` of k (row by row), from the integrated
+/// [y; S_moving]: the other columns zero.
+fn widened(data: &[f64], n: usize, moving: &[usize], k: usize) -> Vec<f64> {
+    let (narrow, wide) = (n * (1 + moving.len()), n * (1 + k));
+    let times = data.len() / narrow;
+    let mut out = vec![0.0; times * wide];
+    for (from, to) in data.chunks_exact(narrow).zip(out.chunks_exact_mut(wide)) {
+        to[..n].copy_from_slice(&from[..n]);
+        for i in 0..n {
+            for (c, &j) in moving.iter().enumerate() {
+                to[n + i * k + j] = from[n + i * moving.len() + c];
+            }
+        }
+    }
+    out
 }
