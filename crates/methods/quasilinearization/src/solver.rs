@@ -174,8 +174,7 @@ impl<S: System> Step<S> for Quasi<'_> {
             Err(failure)
                 if current.cost.is_finite() && !matches!(failure, Failure::Budget { .. }) =>
             {
-                let lin = ev.linearize(&current.z)?;
-                self.curve.rescale(&lin);
+                let lin = self.model_at(ev, current)?;
                 // No step to size from: MINPACK's first radius, ‖D z‖ (1 where it is 0).
                 let radius =
                     Some(self.curve.scaled_norm(&current.z)).filter(|r| *r > 0.0).unwrap_or(1.0);
@@ -203,19 +202,17 @@ impl<S: System> Step<S> for Quasi<'_> {
         match self.proposed.take().expect("a proposal to take") {
             Proposed::Family { families, z, linear_cost } => {
                 let cost = nonlinear_cost(ev, &z)?;
-                let length = distance(&z, &current.z);
+                let step = DVector::from_column_slice(&z) - DVector::from_column_slice(&current.z);
+                let length = step.norm();
                 if current.cost.is_finite() && !self.descends(ev, current.cost, cost, length) {
-                    let lin = ev.linearize(&current.z)?;
-                    let delta: Vec<f64> = z.iter().zip(&current.z).map(|(a, b)| a - b).collect();
-                    self.curve.rescale(&lin);
-                    let radius = 0.5 * self.curve.scaled_norm(&delta);
+                    let lin = self.model_at(ev, current)?;
+                    let radius = 0.5 * self.curve.scaled_norm(step.as_slice());
                     let max_condition = self.options.driver.max_condition;
                     return match self.curve.within(ev.problem(), &lin, radius, max_condition) {
                         Ok(first) => self.safeguard(ev, &lin, first),
                         Err(_) => Ok(Advance::Stop(Rule::NoDescent)),
                     };
                 }
-                let step = DVector::from_column_slice(&z) - DVector::from_column_slice(&current.z);
                 self.trajectories = families
                     .iter()
                     .zip(&self.layouts)
@@ -233,6 +230,22 @@ impl<S: System> Step<S> for Quasi<'_> {
 }
 
 impl Quasi<'_> {
+    /// The model's linearization at the iterate, where the safeguard starts: the one the
+    /// safeguard's last step computed there, else integrated; the curve's scaling updated
+    /// with it.
+    fn model_at<S: System>(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        current: &Iterate,
+    ) -> Result<Linearization, Failure> {
+        let lin = match &current.linearization {
+            Some(lin) => lin.clone(),
+            None => ev.linearize(&current.z)?,
+        };
+        self.curve.rescale(&lin);
+        Ok(lin)
+    }
+
     /// Whether quasilinearization's step of `length` from ε = `from` to ε = `to` is taken: where
     /// ε falls by more than its accuracy (rtol relative); within that accuracy ε cannot judge
     /// the step, and the iteration's contraction does (Deuflhard's monotonicity test for
