@@ -6,11 +6,11 @@
 use nalgebra::DMatrix;
 use num_dual::HyperDual64;
 
-use crate::jacobian::JacobianProducts;
+use crate::jacobian::{JacobianProducts, ProductPlan};
 use crate::lu::{FactorError, Lu};
 use crate::sparse::SparseJacobian;
 use crate::system::{Function, System};
-use crate::wrt::Wrt;
+use crate::wrt::{Wrt, parameter_seeds};
 
 /// E = I/(γh) − ∂g/∂y at one point, factorised, for a system at fixed parameters.
 pub struct IterationMatrix {
@@ -134,16 +134,24 @@ pub(crate) struct AugmentedMatrix {
 }
 
 impl AugmentedMatrix {
-    pub(crate) fn new<S: System>(sys: &S, p: &[f64], k: usize) -> Self {
+    /// For `sys` at parameters `p`, with the sensitivity columns `wrt`.
+    pub(crate) fn new<S: System>(sys: &S, p: &[f64], wrt: &[Wrt]) -> Self {
         let sig = sys.signature();
-        let n = sig.n_states();
+        let (n, k) = (sig.n_states(), wrt.len());
         let zero = HyperDual64::from_re(0.0);
+        let curvature = sys.sparse_jacobian(Function::Rhs).and_then(|jacobian| {
+            let second = jacobian.curvature()?;
+            let pattern = jacobian.pattern();
+            let seeds = parameter_seeds(p.len(), wrt);
+            Some(Curvature {
+                work: second.workspace(),
+                along: vec![0.0; pattern.len()],
+                plan: ProductPlan::new(pattern, 0..pattern.len() as u32, (n, n), &seeds, k),
+            })
+        });
         Self {
             matrix: IterationMatrix::new(sys, p, k),
-            curvature: sys
-                .sparse_jacobian(Function::Rhs)
-                .and_then(|j| j.curvature())
-                .map(|c| Curvature { work: c.workspace(), along: vec![0.0; c.values().len()] }),
+            curvature,
             t: 0.0,
             u: vec![0.0; sig.n_inputs()],
             x: vec![0.0; n * (1 + k)],
@@ -186,10 +194,9 @@ impl AugmentedMatrix {
         }
         let (y, s) = self.x.split_at(n);
         if let Some(curvature) = &mut self.curvature
-            && let Some(jacobian) = sys.sparse_jacobian(Function::Rhs)
-            && let Some(second) = jacobian.curvature()
+            && let Some(second) = sys.sparse_jacobian(Function::Rhs).and_then(|j| j.curvature())
         {
-            curvature.couple(jacobian, second, (s, ry), wrt, rs);
+            curvature.couple(second, (s, ry), rs);
             self.matrix.solve_rows(rs, k);
             return;
         }
@@ -215,36 +222,17 @@ struct Curvature {
     work: Vec<f64>,
     /// Per entry e of J: Σ_l ∂J_e/∂y_l k_y,l.
     along: Vec<f64>,
+    /// The products Σ_e along_e v_j,c(e) over J's pattern, for the columns' directions.
+    plan: ProductPlan,
 }
 
 impl Curvature {
     /// rs += (M_j k_y)_j for every column j, with S (row by row) and k_y.
-    fn couple(
-        &mut self,
-        jacobian: &dyn SparseJacobian,
-        second: &dyn SparseJacobian,
-        (s, ky): (&[f64], &[f64]),
-        wrt: &[Wrt],
-        rs: &mut [f64],
-    ) {
+    fn couple(&mut self, second: &dyn SparseJacobian, (s, ky): (&[f64], &[f64]), rs: &mut [f64]) {
         self.along.fill(0.0);
         for (&(e, l), &r) in second.pattern().iter().zip(second.entries()) {
             self.along[e as usize] += self.work[r as usize] * ky[l as usize];
         }
-        let (n, k) = (ky.len(), wrt.len());
-        for (&(i, c), &a) in jacobian.pattern().iter().zip(&self.along) {
-            if a == 0.0 {
-                continue;
-            }
-            let (i, c) = (i as usize, c as usize);
-            let row = &mut rs[i * k..(i + 1) * k];
-            if c < n {
-                for (o, v) in row.iter_mut().zip(&s[c * k..(c + 1) * k]) {
-                    *o += a * v;
-                }
-            } else if let Some(j) = wrt.iter().position(|w| *w == Wrt::Parameter(c - n)) {
-                row[j] += a;
-            }
-        }
+        self.plan.apply::<true>(&self.along, s, rs);
     }
 }

@@ -14,7 +14,7 @@ use crate::options::Integrator;
 use crate::rhs::Rhs;
 use crate::signal::Side;
 use crate::system::{Function, Observable, System};
-use crate::wrt::{Wrt, wrt_name};
+use crate::wrt::{Wrt, parameter_seeds, wrt_name};
 
 /// An initial-value problem: a system, the initial time t0, the state y(t0) and the
 /// parameters. The solution may be asked for at times before and after t0.
@@ -164,18 +164,6 @@ pub struct SensitivityRhs<'a, S> {
     implicit: Option<Box<AugmentedMatrix>>,
 }
 
-/// The n_α × k unit seeds of the parameter columns, row by row.
-fn parameter_seeds(np: usize, wrt: &[Wrt]) -> Vec<f64> {
-    let k = wrt.len();
-    let mut seeds = vec![0.0; np * k];
-    for (j, w) in wrt.iter().enumerate() {
-        if let Wrt::Parameter(q) = *w {
-            seeds[q * k + j] = 1.0;
-        }
-    }
-    seeds
-}
-
 impl<'a, S: System> SensitivityRhs<'a, S> {
     /// The augmented right-hand side of `sys` at parameters `p`, columns `wrt`.
     pub fn new(sys: &'a S, p: &'a [f64], wrt: &'a [Wrt]) -> Self {
@@ -272,8 +260,9 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         x: &[f64],
         inv_gamma_h: f64,
     ) -> Result<(), FactorError> {
-        let (sys, p, k) = (self.sys, self.p, self.wrt.len());
-        let matrix = self.implicit.get_or_insert_with(|| Box::new(AugmentedMatrix::new(sys, p, k)));
+        let (sys, p) = (self.sys, self.p);
+        let matrix =
+            self.implicit.get_or_insert_with(|| Box::new(AugmentedMatrix::new(sys, p, self.wrt)));
         sys.input_values(t, side, &mut self.u);
         matrix.factor(sys, (t, x, &self.u), inv_gamma_h)
     }

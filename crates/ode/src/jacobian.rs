@@ -42,16 +42,131 @@ struct SparseWork {
     work: Vec<f64>,
     /// The registers of the function values.
     values: Vec<u32>,
-    /// Per row of the products: the end of its terms in `states` and in `parameters`.
+    /// The plan for the current parameter directions; `None` until the next evaluation
+    /// after they change.
+    plan: Option<ProductPlan>,
+}
+
+/// The plan of sparse Jacobian–matrix products J_y V_y + J_α V_α with K directions, the
+/// entries of J read from a slice of values by index: the pattern's rows in order, each
+/// with its state entries (index, offset c·K of column c in V_y) and, per parameter entry,
+/// the nonzero components of its direction (index, direction, component).
+///
+/// The sensitivity right-hand side reads J's entries from the registers of its work space;
+/// the implicit solve's coupling reads its per-entry values in pattern order.
+pub(crate) struct ProductPlan {
+    k: usize,
+    /// Per row: the end of its terms in `states` and in `parameters`.
     rows: Vec<(u32, u32)>,
-    /// Per state entry: its register and the offset of its column in the state directions
-    /// (column c: c·K).
     states: Vec<(u32, u32)>,
-    /// Per parameter entry and nonzero direction component: its register, the direction,
-    /// and the component.
     parameters: Vec<(u32, u32, f64)>,
-    /// Whether the plan is for the current parameter directions.
-    planned: bool,
+}
+
+impl ProductPlan {
+    /// The plan for `m` rows of the pattern (row-ordered) whose e-th entry is read at
+    /// index `index[e]`, n states, parameter directions `vp` (n_α × K, row by row).
+    pub(crate) fn new(
+        pattern: &[(u32, u32)],
+        index: impl IntoIterator<Item = u32>,
+        (m, n): (usize, usize),
+        vp: &[f64],
+        k: usize,
+    ) -> Self {
+        let mut plan = Self { k, rows: Vec::new(), states: Vec::new(), parameters: Vec::new() };
+        let mut entries = pattern.iter().zip(index).peekable();
+        for row in 0..m as u32 {
+            while let Some((&(_, column), register)) = entries.next_if(|e| e.0.0 == row) {
+                let column = column as usize;
+                if column < n {
+                    plan.states.push((register, (column * k) as u32));
+                    continue;
+                }
+                let q = column - n;
+                for (j, &v) in vp[q * k..(q + 1) * k].iter().enumerate() {
+                    if v != 0.0 {
+                        plan.parameters.push((register, j as u32, v));
+                    }
+                }
+            }
+            plan.rows.push((plan.states.len() as u32, plan.parameters.len() as u32));
+        }
+        plan
+    }
+
+    /// out = J_y vy + J_α vp (K columns, row by row), J's entries read from `entries`; with
+    /// `ADD`, out += instead.
+    pub(crate) fn apply<const ADD: bool>(&self, entries: &[f64], vy: &[f64], out: &mut [f64]) {
+        match self.k {
+            1 => self.accumulate::<1, ADD>(entries, vy, out),
+            2 => self.accumulate::<2, ADD>(entries, vy, out),
+            3 => self.accumulate::<3, ADD>(entries, vy, out),
+            4 => self.accumulate::<4, ADD>(entries, vy, out),
+            5 => self.accumulate::<5, ADD>(entries, vy, out),
+            6 => self.accumulate::<6, ADD>(entries, vy, out),
+            7 => self.accumulate::<7, ADD>(entries, vy, out),
+            8 => self.accumulate::<8, ADD>(entries, vy, out),
+            k => self.accumulate_any::<ADD>(k, entries, vy, out),
+        }
+    }
+
+    /// The products row by row for K directions known at compile time: each row's K sums
+    /// stay in registers until they are stored.
+    #[inline(always)]
+    fn accumulate<const K: usize, const ADD: bool>(
+        &self,
+        entries: &[f64],
+        vy: &[f64],
+        out: &mut [f64],
+    ) {
+        let (mut s, mut q) = (0, 0);
+        for (row, &(s_end, q_end)) in out.chunks_exact_mut(K).zip(&self.rows) {
+            let mut sums = [0.0; K];
+            if ADD {
+                sums.copy_from_slice(row);
+            }
+            for &(r, column) in &self.states[s..s_end as usize] {
+                let a = entries[r as usize];
+                let column = column as usize;
+                let direction: &[f64; K] = vy[column..column + K].try_into().expect("K values");
+                for j in 0..K {
+                    sums[j] += a * direction[j];
+                }
+            }
+            // The parameters' terms after the store: indexing the sums by a run-time
+            // column would keep them in memory instead of registers.
+            row.copy_from_slice(&sums);
+            for &(r, j, v) in &self.parameters[q..q_end as usize] {
+                row[j as usize] += entries[r as usize] * v;
+            }
+            (s, q) = (s_end as usize, q_end as usize);
+        }
+    }
+
+    /// The products for any number of directions.
+    fn accumulate_any<const ADD: bool>(
+        &self,
+        k: usize,
+        entries: &[f64],
+        vy: &[f64],
+        out: &mut [f64],
+    ) {
+        let (mut s, mut q) = (0, 0);
+        for (row, &(s_end, q_end)) in out.chunks_exact_mut(k).zip(&self.rows) {
+            if !ADD {
+                row.fill(0.0);
+            }
+            for &(r, column) in &self.states[s..s_end as usize] {
+                let (a, column) = (entries[r as usize], column as usize);
+                for (o, v) in row.iter_mut().zip(&vy[column..column + k]) {
+                    *o += a * v;
+                }
+            }
+            for &(r, j, v) in &self.parameters[q..q_end as usize] {
+                row[j as usize] += entries[r as usize] * v;
+            }
+            (s, q) = (s_end as usize, q_end as usize);
+        }
+    }
 }
 
 impl JacobianProducts {
@@ -75,7 +190,7 @@ impl JacobianProducts {
         self.vp.copy_from_slice(vp);
         if let Some(sparse) = &mut self.sparse {
             // Planned again for the new directions on the next evaluation.
-            sparse.planned = false;
+            sparse.plan = None;
         }
         self.duals.set_parameters(p, vp);
     }
@@ -101,10 +216,7 @@ impl JacobianProducts {
                 self.sparse = None;
             }
             let sparse = self.sparse.get_or_insert_with(|| SparseWork::new(jacobian, function));
-            if !sparse.planned {
-                sparse.plan(jacobian, y.len(), vp, k);
-            }
-            sparse.products(jacobian, (t, y, &self.p, u), (vy, k), value, out);
+            sparse.products(jacobian, (t, y, &self.p, u), (vy, vp, k), value, out);
             return;
         }
         self.duals.eval(sys, function, (t, y, &self.p, u), vy, value, out);
@@ -118,35 +230,7 @@ impl SparseWork {
             function,
             work: jacobian.workspace(),
             values: jacobian.values().to_vec(),
-            rows: Vec::new(),
-            states: Vec::new(),
-            parameters: Vec::new(),
-            planned: false,
-        }
-    }
-
-    /// The products' plan for parameter directions `vp` (n_α × K, row by row).
-    fn plan(&mut self, jacobian: &dyn SparseJacobian, n: usize, vp: &[f64], k: usize) {
-        self.planned = true;
-        self.rows.clear();
-        self.states.clear();
-        self.parameters.clear();
-        let mut entries = jacobian.pattern().iter().zip(jacobian.entries()).peekable();
-        for row in 0..self.values.len() as u32 {
-            while let Some((&(_, column), &register)) = entries.next_if(|e| e.0.0 == row) {
-                let column = column as usize;
-                if column < n {
-                    self.states.push((register, (column * k) as u32));
-                    continue;
-                }
-                let q = column - n;
-                for (j, &v) in vp[q * k..(q + 1) * k].iter().enumerate() {
-                    if v != 0.0 {
-                        self.parameters.push((register, j as u32, v));
-                    }
-                }
-            }
-            self.rows.push((self.states.len() as u32, self.parameters.len() as u32));
+            plan: None,
         }
     }
 
@@ -156,70 +240,19 @@ impl SparseWork {
         &mut self,
         jacobian: &dyn SparseJacobian,
         (t, y, p, u): (f64, &[f64], &[f64], &[f64]),
-        (vy, k): (&[f64], usize),
+        (vy, vp, k): (&[f64], &[f64], usize),
         value: &mut [f64],
         out: &mut [f64],
     ) {
+        let plan = self.plan.get_or_insert_with(|| {
+            let (m, n) = (self.values.len(), y.len());
+            ProductPlan::new(jacobian.pattern(), jacobian.entries().iter().copied(), (m, n), vp, k)
+        });
         jacobian.eval(t, y, p, u, &mut self.work);
         for (v, &r) in value.iter_mut().zip(&self.values) {
             *v = self.work[r as usize];
         }
-        match k {
-            1 => self.accumulate::<1>(vy, out),
-            2 => self.accumulate::<2>(vy, out),
-            3 => self.accumulate::<3>(vy, out),
-            4 => self.accumulate::<4>(vy, out),
-            5 => self.accumulate::<5>(vy, out),
-            6 => self.accumulate::<6>(vy, out),
-            7 => self.accumulate::<7>(vy, out),
-            8 => self.accumulate::<8>(vy, out),
-            _ => self.accumulate_any(k, vy, out),
-        }
-    }
-
-    /// The products row by row for K directions known at compile time: each row's K sums
-    /// stay in registers until they are stored.
-    #[inline(always)]
-    fn accumulate<const K: usize>(&self, vy: &[f64], out: &mut [f64]) {
-        let work = &self.work;
-        let (mut s, mut q) = (0, 0);
-        for (row, &(s_end, q_end)) in out.chunks_exact_mut(K).zip(&self.rows) {
-            let mut sums = [0.0; K];
-            for &(r, column) in &self.states[s..s_end as usize] {
-                let a = work[r as usize];
-                let column = column as usize;
-                let direction: &[f64; K] = vy[column..column + K].try_into().expect("K values");
-                for j in 0..K {
-                    sums[j] += a * direction[j];
-                }
-            }
-            // The parameters' terms after the store: indexing the sums by a run-time
-            // column would keep them in memory instead of registers.
-            row.copy_from_slice(&sums);
-            for &(r, j, v) in &self.parameters[q..q_end as usize] {
-                row[j as usize] += work[r as usize] * v;
-            }
-            (s, q) = (s_end as usize, q_end as usize);
-        }
-    }
-
-    /// The products for any number of directions.
-    fn accumulate_any(&self, k: usize, vy: &[f64], out: &mut [f64]) {
-        let work = &self.work;
-        let (mut s, mut q) = (0, 0);
-        for (row, &(s_end, q_end)) in out.chunks_exact_mut(k).zip(&self.rows) {
-            row.fill(0.0);
-            for &(r, column) in &self.states[s..s_end as usize] {
-                let (a, column) = (work[r as usize], column as usize);
-                for (o, v) in row.iter_mut().zip(&vy[column..column + k]) {
-                    *o += a * v;
-                }
-            }
-            for &(r, j, v) in &self.parameters[q..q_end as usize] {
-                row[j as usize] += work[r as usize] * v;
-            }
-            (s, q) = (s_end as usize, q_end as usize);
-        }
+        plan.apply::<false>(&self.work, vy, out);
     }
 }
 

@@ -17,19 +17,22 @@ pub enum FactorError {
 /// An n × n matrix and its LU factors.
 ///
 /// The factorisation is faer's (partial pivoting, in place); the solves are plain forward and
-/// back substitution on a row-major copy of the factors. For the small systems of implicit
-/// steps (n of a few to a few dozen) faer's general solve spends more time in permutation
-/// and copying than in arithmetic; the substitution runs over contiguous rows instead, and
-/// solves an n × k block row by row, the k columns in the inner loop.
+/// back substitution on a copy of the factors. For the small systems of implicit steps (n of
+/// a few to a few dozen) faer's general solve spends more time in permutation and copying
+/// than in arithmetic. The substitution is column-oriented: once x_j is known it is
+/// eliminated from every later (earlier, going back) equation at once, so the chain of
+/// dependent operations is one multiply-add per unknown rather than a dot product per
+/// unknown; an n × k block is solved the same way with its rows as the unknowns, the k
+/// columns in the inner loop.
 pub struct Lu {
     n: usize,
     a: Mat<f64>,
     fwd: Vec<usize>,
     inv: Vec<usize>,
     mem: MemBuffer,
-    /// L (unit diagonal, strictly below) and U (above the diagonal), row by row, with the
-    /// reciprocals of U's diagonal on the diagonal: back substitution multiplies instead of
-    /// dividing, off the critical path of its dependency chain.
+    /// L (unit diagonal, strictly below) and U (above the diagonal), column by column, with
+    /// the reciprocals of U's diagonal on the diagonal: back substitution multiplies instead
+    /// of dividing.
     factors: Vec<f64>,
     /// The permuted right-hand side.
     work: Vec<f64>,
@@ -73,11 +76,9 @@ impl Lu {
         if (0..n).any(|i| !(self.a[(i, i)].abs() > 0.0 && self.a[(i, i)].is_finite())) {
             return Err(FactorError::Singular);
         }
-        for i in 0..n {
-            for j in 0..n {
-                self.factors[i * n + j] = self.a[(i, j)];
-            }
-            self.factors[i * n + i] = 1.0 / self.a[(i, i)];
+        for j in 0..n {
+            self.factors[j * n..(j + 1) * n].copy_from_slice(self.a.col_as_slice(j));
+            self.factors[j * n + j] = 1.0 / self.a[(j, j)];
         }
         Ok(())
     }
@@ -89,14 +90,26 @@ impl Lu {
         for (xi, &from) in x.iter_mut().zip(&self.fwd) {
             *xi = r[from];
         }
-        for i in 1..n {
-            let row = &lu[i * n..i * n + i];
-            x[i] -= row.iter().zip(&x[..i]).map(|(l, y)| l * y).sum::<f64>();
+        // L y = P r, unit diagonal: y_j leaves the equations below it.
+        for j in 0..n {
+            let (done, rest) = x.split_at_mut(j + 1);
+            let yj = done[j];
+            if yj != 0.0 {
+                for (v, l) in rest.iter_mut().zip(&lu[j * n + j + 1..(j + 1) * n]) {
+                    *v -= l * yj;
+                }
+            }
         }
-        for i in (0..n).rev() {
-            let row = &lu[i * n + i + 1..(i + 1) * n];
-            let s: f64 = row.iter().zip(&x[i + 1..]).map(|(u, y)| u * y).sum();
-            x[i] = (x[i] - s) * lu[i * n + i];
+        // U x = y: x_j leaves the equations above it.
+        for j in (0..n).rev() {
+            let (rest, done) = x.split_at_mut(j);
+            let xj = done[0] * lu[j * n + j];
+            done[0] = xj;
+            if xj != 0.0 {
+                for (v, u) in rest.iter_mut().zip(&lu[j * n..j * n + j]) {
+                    *v -= u * xj;
+                }
+            }
         }
         r.copy_from_slice(x);
     }
@@ -111,33 +124,32 @@ impl Lu {
         for (i, &from) in self.fwd.iter().enumerate() {
             x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
         }
-        // L Y = P R, unit diagonal.
-        for i in 1..n {
-            let (done, row) = x.split_at_mut(i * k);
-            let row = &mut row[..k];
-            for (j, &l) in lu[i * n..i * n + i].iter().enumerate() {
+        // L Y = P R, unit diagonal: row j of Y leaves the rows below it.
+        for j in 0..n {
+            let (done, rest) = x.split_at_mut((j + 1) * k);
+            let solved = &done[j * k..];
+            for (row, &l) in rest.chunks_exact_mut(k).zip(&lu[j * n + j + 1..(j + 1) * n]) {
                 if l != 0.0 {
-                    for (v, y) in row.iter_mut().zip(&done[j * k..(j + 1) * k]) {
+                    for (v, y) in row.iter_mut().zip(solved) {
                         *v -= l * y;
                     }
                 }
             }
         }
-        // U X = Y.
-        for i in (0..n).rev() {
-            let (head, rest) = x.split_at_mut((i + 1) * k);
-            let row = &mut head[i * k..];
-            for (j, &u) in lu[i * n + i + 1..(i + 1) * n].iter().enumerate() {
+        // U X = Y: row j of X leaves the rows above it.
+        for j in (0..n).rev() {
+            let (rest, done) = x.split_at_mut(j * k);
+            let solved = &mut done[..k];
+            let inverse_pivot = lu[j * n + j];
+            for v in solved.iter_mut() {
+                *v *= inverse_pivot;
+            }
+            for (row, &u) in rest.chunks_exact_mut(k).zip(&lu[j * n..j * n + j]) {
                 if u != 0.0 {
-                    let solved = &rest[j * k..(j + 1) * k];
-                    for (v, y) in row.iter_mut().zip(solved) {
+                    for (v, y) in row.iter_mut().zip(solved.iter()) {
                         *v -= u * y;
                     }
                 }
-            }
-            let inverse_pivot = lu[i * n + i];
-            for v in row.iter_mut() {
-                *v *= inverse_pivot;
             }
         }
         r.copy_from_slice(x);

@@ -21,3 +21,15 @@ pub fn wrt_name(sig: &Signature, wrt: Wrt) -> String {
         Wrt::Parameter(k) => sig.parameters()[k].clone(),
     }
 }
+
+/// The n_α × k unit seeds of the parameter columns, row by row.
+pub(crate) fn parameter_seeds(np: usize, wrt: &[Wrt]) -> Vec<f64> {
+    let k = wrt.len();
+    let mut seeds = vec![0.0; np * k];
+    for (j, w) in wrt.iter().enumerate() {
+        if let Wrt::Parameter(q) = *w {
+            seeds[q * k + j] = 1.0;
+        }
+    }
+    seeds
+}
