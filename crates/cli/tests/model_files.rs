@@ -534,14 +534,18 @@ fn a_stiff_model_file_fits_with_rodas4_and_explicit_integration_says_why_it_fail
         .concat(),
     );
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
-    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    // Noise-free data from the truth: the fit returns it, to the integration tolerance
-    // (measured: 1e-9 relative).
-    for (name, value) in [("k1", 0.04), ("k2", 3e7), ("k3", 1e4)] {
-        let k = json["estimates"][name].as_f64().unwrap();
-        assert!((k - value).abs() < 1e-7 * value, "{name}: {k} vs {value}");
+    // The model file's Rodas4, and Rodas5P from the command line.
+    for scheme in [&[][..], &["--integrator", "rodas5p"][..]] {
+        let fit = ["fit", "--model", &case.model(), "--format", "json"];
+        let out = sysid(&[&fit[..], scheme].concat());
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        // Noise-free data from the truth: the fit returns it, to the integration tolerance
+        // (measured: 1e-9 relative).
+        for (name, value) in [("k1", 0.04), ("k2", 3e7), ("k3", 1e4)] {
+            let k = json["estimates"][name].as_f64().unwrap();
+            assert!((k - value).abs() < 1e-7 * value, "{scheme:?} {name}: {k} vs {value}");
+        }
     }
     // DOPRI5 with a modest step budget: exit 2, and the message says the model is stiff.
     let out =
@@ -558,7 +562,7 @@ fn integrator_choices_are_checked() {
         "radau",
         &model,
         DECAY_DATA,
-        "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\" or \"auto\", got \"radau\"",
+        "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\" or \"auto\", got \"radau\"",
     );
     let case = Case::new("rk4-step", DECAY, DECAY_DATA);
     let out = sysid(&["fit", "--model", &case.model(), "--integrator", "rk4"]);

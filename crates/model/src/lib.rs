@@ -27,7 +27,7 @@
 //!
 //! Extensions of the contract: `inputs` may be a table `{ names = [...], mode = "step" }` for
 //! piecewise-constant inputs (default linear), `[outputs]` name measured expressions, and
-//! `[integrator]` sets `method` ("dopri5" | "rk4" | "rodas4" for stiff models | "auto"),
+//! `[integrator]` sets `method` ("dopri5" | "rk4" | "rodas4" or "rodas5p" for stiff models | "auto"),
 //! `rtol`, `atol`, `step`, `max_steps`.
 //!
 //! Expressions are compiled once ([`expr::Program`]) and evaluated for any scalar. At load

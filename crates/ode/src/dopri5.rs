@@ -68,7 +68,7 @@ impl<R: Rhs> Stepper<R> for Dopri5 {
         h: f64,
     ) -> Result<f64, FactorError> {
         let n = w.x.len();
-        let [k1, k2, k3, k4, k5, k6, k7] = &mut w.k;
+        let [k1, k2, k3, k4, k5, k6, k7, _] = &mut w.k;
         // Slices of one length: the loops below run without bounds checks.
         let (x, tmp, xn) = (&w.x[..n], &mut w.tmp[..n], &mut w.x_new[..n]);
         for i in 0..n {

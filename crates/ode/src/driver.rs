@@ -12,6 +12,7 @@ use crate::options::{Integrator, Scheme};
 use crate::rhs::Rhs;
 use crate::rk4::Rk4;
 use crate::rodas4::Rodas4;
+use crate::rodas5p::Rodas5p;
 use crate::stepper::Stepper;
 use crate::stiffness::Stiffness;
 use crate::work::{Evaluator, Work};
@@ -102,6 +103,7 @@ enum Active {
     Dopri5,
     Rk4,
     Rodas4,
+    Rodas5p,
 }
 
 impl Active {
@@ -112,6 +114,7 @@ impl Active {
             Scheme::Dopri5 | Scheme::Auto => Self::Dopri5,
             Scheme::Rk4 => Self::Rk4,
             Scheme::Rodas4 => Self::Rodas4,
+            Scheme::Rodas5p => Self::Rodas5p,
         }
     }
 }
@@ -129,6 +132,7 @@ impl<R: Rhs> Stepper<R> for Active {
             Self::Dopri5 => Dopri5.step(ev, w, t, h),
             Self::Rk4 => Rk4.step(ev, w, t, h),
             Self::Rodas4 => Rodas4.step(ev, w, t, h),
+            Self::Rodas5p => Rodas5p.step(ev, w, t, h),
         }
     }
 
@@ -138,6 +142,7 @@ impl<R: Rhs> Stepper<R> for Active {
             Self::Dopri5 => <Dopri5 as Stepper<R>>::dense(&Dopri5, w, t, t_next),
             Self::Rk4 => <Rk4 as Stepper<R>>::dense(&Rk4, w, t, t_next),
             Self::Rodas4 => <Rodas4 as Stepper<R>>::dense(&Rodas4, w, t, t_next),
+            Self::Rodas5p => <Rodas5p as Stepper<R>>::dense(&Rodas5p, w, t, t_next),
         }
     }
 
@@ -146,6 +151,7 @@ impl<R: Rhs> Stepper<R> for Active {
             Self::Dopri5 => <Dopri5 as Stepper<R>>::control(&Dopri5),
             Self::Rk4 => <Rk4 as Stepper<R>>::control(&Rk4),
             Self::Rodas4 => <Rodas4 as Stepper<R>>::control(&Rodas4),
+            Self::Rodas5p => <Rodas5p as Stepper<R>>::control(&Rodas5p),
         }
     }
 
@@ -154,6 +160,7 @@ impl<R: Rhs> Stepper<R> for Active {
             Self::Dopri5 => <Dopri5 as Stepper<R>>::stiffness_estimate(&Dopri5, w, h),
             Self::Rk4 => <Rk4 as Stepper<R>>::stiffness_estimate(&Rk4, w, h),
             Self::Rodas4 => <Rodas4 as Stepper<R>>::stiffness_estimate(&Rodas4, w, h),
+            Self::Rodas5p => <Rodas5p as Stepper<R>>::stiffness_estimate(&Rodas5p, w, h),
         }
     }
 }

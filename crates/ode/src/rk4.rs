@@ -22,7 +22,7 @@ impl<R: Rhs> Stepper<R> for Rk4 {
         h: f64,
     ) -> Result<f64, FactorError> {
         let n = w.x.len();
-        let [k1, k2, k3, k4, _, _, k7] = &mut w.k;
+        let [k1, k2, k3, k4, _, _, k7, _] = &mut w.k;
         let (x, tmp, xn) = (&w.x, &mut w.tmp, &mut w.x_new);
         for i in 0..n {
             tmp[i] = x[i] + 0.5 * h * k1[i];

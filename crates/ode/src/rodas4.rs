@@ -104,7 +104,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         for (ft, f0) in w.ft.iter_mut().zip(&w.f0) {
             *ft = (*ft - f0) / delta;
         }
-        let [k1, k2, k3, k4, k5, k6, _] = &mut w.k;
+        let [k1, k2, k3, k4, k5, k6, _, _] = &mut w.k;
         let (x, y, f0, ft) = (&w.x[..n], &mut w.tmp, &w.f0[..n], &w.ft[..n]);
         // Stage 1.
         for i in 0..n {
@@ -185,83 +185,40 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
 
 #[cfg(test)]
 mod tests {
-    //! The coefficients against the order conditions of Rosenbrock methods (Hairer & Wanner,
-    //! Table IV.7.1). The code uses the transformed coefficients (a, c, d); the conditions
-    //! are stated for the original ones (α, Γ, b), recovered from them first. A mistyped
-    //! digit fails these.
+    //! The coefficients against the order conditions of Rosenbrock methods.
     use super::*;
-    use nalgebra::{Matrix6, Vector6};
+    use crate::rosenbrock_conditions::{Transformed, assert_order_four};
+    use nalgebra::{DMatrix, DVector};
 
-    /// Recovers (α, γ_ij, b) of the untransformed method from the transformed (a, c, m):
-    /// C = diag(1/γ) − Γ⁻¹, A = α Γ⁻¹.
-    fn untransformed() -> (Matrix6<f64>, Matrix6<f64>, Vector6<f64>) {
-        let mut c = Matrix6::zeros();
-        let cs = [
+    #[test]
+    fn coefficients_satisfy_the_order_conditions() {
+        let lower = |rows: [[f64; 5]; 6]| {
+            DMatrix::from_fn(6, 6, |i, j| if j < i { rows[i][j] } else { 0.0 })
+        };
+        let c = lower([
             [0.0; 5],
             [C21, 0.0, 0.0, 0.0, 0.0],
             [C31, C32, 0.0, 0.0, 0.0],
             [C41, C42, C43, 0.0, 0.0],
             [C51, C52, C53, C54, 0.0],
             [C61, C62, C63, C64, C65],
-        ];
-        for i in 0..6 {
-            for j in 0..i {
-                c[(i, j)] = cs[i][j];
-            }
-        }
-        // Γ⁻¹ = diag(1/γ) − C.
-        let gamma_inv = Matrix6::from_diagonal_element(1.0 / GAMMA) - c;
-        let gamma_m = gamma_inv.try_inverse().unwrap();
-        let mut a = Matrix6::zeros();
-        let as_ = [
+        ]);
+        // Stage 6's input is stage 5's plus k₅; x_new is stage 6's plus k₆.
+        let a = lower([
             [0.0; 5],
             [A21, 0.0, 0.0, 0.0, 0.0],
             [A31, A32, 0.0, 0.0, 0.0],
             [A41, A42, A43, 0.0, 0.0],
             [A51, A52, A53, A54, 0.0],
             [A51, A52, A53, A54, 1.0],
-        ];
-        for i in 0..6 {
-            for j in 0..i {
-                a[(i, j)] = as_[i][j];
-            }
-        }
-        let alpha = a * gamma_m;
-        // x_new = x + Σ m_j k_j with m = (a_61, .., a_65, 1): b = mᵀ Γ.
-        let m = Vector6::new(A51, A52, A53, A54, 1.0, 1.0);
-        let b = gamma_m.transpose() * m;
-        (alpha, gamma_m, b)
-    }
-
-    #[test]
-    fn coefficients_satisfy_the_order_conditions() {
-        // Hairer & Wanner, Table IV.7.1, with α and B' = β − γI strictly lower triangular.
-        let (alpha, gamma_m, b) = untransformed();
-        let g = GAMMA;
-        let bl = alpha + gamma_m - Matrix6::from_diagonal_element(g);
-        let one = Vector6::repeat(1.0);
-        let ai = alpha * one;
-        let bi = bl * one;
-        let sq = ai.component_mul(&ai);
-        let checks = [
-            ("b·1", b.sum(), 1.0),
-            ("b·B'1", b.dot(&bi), 0.5 - g),
-            ("b·(α1)²", b.dot(&sq), 1.0 / 3.0),
-            ("b·B'B'1", b.dot(&(bl * bi)), 1.0 / 6.0 - g + g * g),
-            ("b·(α1)³", b.dot(&sq.component_mul(&ai)), 0.25),
-            ("b·(α1)(αB'1)", b.dot(&ai.component_mul(&(alpha * bi))), 1.0 / 8.0 - g / 3.0),
-            ("b·B'(α1)²", b.dot(&(bl * sq)), 1.0 / 12.0 - g / 3.0),
-            ("b·B'B'B'1", b.dot(&(bl * bl * bi)), 1.0 / 24.0 - g / 2.0 + 1.5 * g * g - g * g * g),
-        ];
-        for (name, lhs, rhs) in checks {
-            assert!((lhs - rhs).abs() < 1e-12, "order condition {name}: {lhs} vs {rhs}");
-        }
-        // The nodes c_i are the row sums of α, the d_i those of Γ.
-        for (ci, x) in [0.0, C2, C3, C4, 1.0, 1.0].iter().zip(ai.iter()) {
-            assert!((ci - x).abs() < 1e-12, "c {ci} vs α row sum {x}");
-        }
-        for (di, x) in [D1, D2, D3, D4, 0.0, 0.0].iter().zip((gamma_m * one).iter()) {
-            assert!((di - x).abs() < 1e-12, "d {di} vs Γ row sum {x}");
-        }
+        ]);
+        assert_order_four(&Transformed {
+            gamma: GAMMA,
+            a,
+            c,
+            m: DVector::from_vec(vec![A51, A52, A53, A54, 1.0, 1.0]),
+            nodes: vec![0.0, C2, C3, C4, 1.0, 1.0],
+            d: vec![D1, D2, D3, D4, 0.0, 0.0],
+        });
     }
 }

@@ -9,7 +9,7 @@ use crate::signal::Side;
 
 /// Preallocated stage vectors: nothing is allocated inside the step loop.
 pub(crate) struct Work {
-    pub(crate) k: [Vec<f64>; 7],
+    pub(crate) k: [Vec<f64>; 8],
     pub(crate) tmp: Vec<f64>,
     pub(crate) x: Vec<f64>,
     pub(crate) x_new: Vec<f64>,

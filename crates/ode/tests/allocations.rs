@@ -36,7 +36,12 @@ fn allocations_do_not_grow_with_the_number_of_steps() {
     let sys = VanDerPol::default();
     let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0), Wrt::InitialValue(1)];
     let ivp = Ivp::new(&sys, 0.0, &[2.0, 0.0], &[1.0]);
-    for integrator in [Integrator::dopri5(1e-8, 1e-10), Integrator::rodas4(1e-6, 1e-8)] {
+    let integrators = [
+        Integrator::dopri5(1e-8, 1e-10),
+        Integrator::rodas4(1e-6, 1e-8),
+        Integrator::rodas5p(1e-6, 1e-8),
+    ];
+    for integrator in integrators {
         let run = |t_end: f64| {
             let before = ALLOCATIONS.with(Cell::get);
             let sol = ivp.solve_sensitivities(&integrator, &wrt, &[t_end]).unwrap();

@@ -38,17 +38,18 @@ pub(super) fn read_integrator(
     Ok(integrator)
 }
 
-/// Reads `[integrator] method`: "dopri5", "rk4", "rodas4" or "auto".
+/// Reads `[integrator] method`: "dopri5", "rk4", "rodas4", "rodas5p" or "auto".
 fn read_scheme(r: &Reader<'_>, v: &Spanned<DeValue<'_>>) -> Result<Scheme, ModelError> {
     match r.string(v, "[integrator] method")? {
         "dopri5" => Ok(Scheme::Dopri5),
         "rk4" => Ok(Scheme::Rk4),
         "rodas4" => Ok(Scheme::Rodas4),
+        "rodas5p" => Ok(Scheme::Rodas5p),
         "auto" => Ok(Scheme::Auto),
         other => Err(r.err(
             v.span().start,
             format!(
-                "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\" or \"auto\", got \"{other}\""
+                "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\" or \"auto\", got \"{other}\""
             ),
         )),
     }
