@@ -212,6 +212,19 @@ struct Builder<'a> {
     rules: HashMap<String, Math>,
     parameters: BTreeMap<String, (Parameter, usize)>,
     observables: HashMap<String, Observable>,
+    /// The species a condition table sets the initial value of, each with the two known
+    /// parameters that carry the setting into the model file: a switch (0 by default, 1
+    /// where a condition sets it) and the value it sets.
+    overrides: Vec<Override>,
+}
+
+/// A species whose initial value a condition sets: its initial value in the model file is
+/// `switch · value + (1 − switch) · (the SBML initial value)`, with `switch` and `value`
+/// known parameters (0 by default) that an experiment's `set` or `preequilibrate` gives.
+struct Override {
+    species: String,
+    switch: String,
+    value: String,
 }
 
 impl<'a> Builder<'a> {
@@ -229,10 +242,12 @@ impl<'a> Builder<'a> {
             rules: HashMap::new(),
             parameters: BTreeMap::new(),
             observables: HashMap::new(),
+            overrides: Vec::new(),
         };
         b.read_parameters()?;
         b.read_observables()?;
         b.name_ids();
+        b.name_overrides();
         b.resolve_rules()?;
         Ok(b)
     }
@@ -365,6 +380,34 @@ impl<'a> Builder<'a> {
         self.names.get(id).cloned().unwrap_or_else(|| id.to_string())
     }
 
+    /// The switch and value parameters of every species a condition table has a column
+    /// for, named `<species>_initial_set` and `<species>_initial` (with `_` appended until
+    /// no other name is taken).
+    fn name_overrides(&mut self) {
+        let columns: Vec<String> = self
+            .tables
+            .conditions
+            .iter()
+            .flat_map(|t| t.headers().iter().skip(2).cloned())
+            .filter(|c| self.sbml.species.iter().any(|x| &x.id == c))
+            .collect();
+        for species in columns {
+            if self.overrides.iter().any(|o| o.species == species) {
+                continue;
+            }
+            let mut fresh = |suffix: &str| {
+                let mut name = format!("{}{suffix}", self.name(&species));
+                while self.names.contains_key(&name) || self.names.values().any(|n| n == &name) {
+                    name.push('_');
+                }
+                self.names.insert(name.clone(), name.clone());
+                name
+            };
+            let (switch, value) = (fresh("_initial_set"), fresh("_initial"));
+            self.overrides.push(Override { species, switch, value });
+        }
+    }
+
     /// Assignment rules, and initial assignments of parameters and compartments (which the
     /// parameter table does not set), substituted into each other.
     fn resolve_rules(&mut self) -> Result<(), ModelError> {
@@ -453,7 +496,19 @@ impl<'a> Builder<'a> {
                 None => self.reaction_equation(x),
             };
             equations.push((x.id.clone(), equation));
-            initial.push((x.id.clone(), self.species_initial(x)?));
+            let mut m = self.species_initial(x)?;
+            if let Some(o) = self.overrides.iter().find(|o| o.species == x.id) {
+                // switch · value + (1 − switch) · m
+                let switch = || Math::Name(o.switch.clone());
+                m = Math::Add(vec![
+                    Math::Mul(vec![switch(), Math::Name(o.value.clone())]),
+                    Math::Mul(vec![
+                        Math::Add(vec![Math::Num(1.0), Math::Neg(Box::new(switch()))]),
+                        m,
+                    ]),
+                ]);
+            }
+            initial.push((x.id.clone(), m));
         }
         for p in ruled_parameters {
             equations.push((p.0.clone(), self.ruled(rate_ruled(&p.0).expect("filtered"))));
@@ -640,6 +695,7 @@ impl<'a> Builder<'a> {
             .map(|p| p.0.clone())
             .chain(s.compartments.iter().map(|c| c.0.clone()))
             .filter(|p| !self.rules.contains_key(p) && !d.states.contains(p))
+            .chain(self.overrides.iter().flat_map(|o| [o.switch.clone(), o.value.clone()]))
             .collect();
         let sbml_id = |id: &str| {
             s.parameters.iter().any(|p| p.0 == id)
@@ -706,6 +762,9 @@ impl<'a> Builder<'a> {
     /// The known value of a model parameter that the parameter table does not estimate:
     /// its nominal value there, else its SBML value or size.
     fn known_value(&self, p: &str) -> Result<f64, ModelError> {
+        if self.overrides.iter().any(|o| o.switch == p || o.value == p) {
+            return Ok(0.0);
+        }
         let s = self.sbml;
         let value = match self.parameters.get(p) {
             Some((q, _)) => q.nominal,
@@ -792,12 +851,12 @@ impl<'a> Builder<'a> {
             let _ = writeln!(text, "[[experiments]]");
             let _ = writeln!(text, "name = \"{name}\"");
             let _ = writeln!(text, "file = \"{measurement_file}#{name}\"");
-            let set = self.condition_settings(sim, parameters, &d.states)?;
+            let set = self.condition_settings(sim, parameters, &d.states, pre.as_deref())?;
             if !set.is_empty() {
                 let _ = writeln!(text, "set = {{ {} }}", set.join(", "));
             }
             if let Some(pre) = pre {
-                let set = self.condition_settings(pre, parameters, &d.states)?;
+                let set = self.condition_settings(pre, parameters, &d.states, None)?;
                 let _ = writeln!(text, "preequilibrate = {{ {} }}", set.join(", "));
             }
             let _ = writeln!(text);
@@ -870,12 +929,15 @@ impl<'a> Builder<'a> {
         out
     }
 
-    /// The `set` entries of a condition.
+    /// The `set` entries of a condition: its parameters and compartment sizes, and for each
+    /// species it sets, the species' switch and value (a `NaN` cell keeps the model's
+    /// initial value). `after` is the preequilibration the condition follows, if any.
     fn condition_settings(
         &self,
         condition: &str,
         model_parameters: &[String],
         states: &[String],
+        after: Option<&str>,
     ) -> Result<Vec<String>, ModelError> {
         let mut out = Vec::new();
         for t in &self.tables.conditions {
@@ -888,10 +950,23 @@ impl<'a> Builder<'a> {
                 if cell.is_blank() {
                     continue;
                 }
-                if states.contains(target) || self.sbml.species.iter().any(|x| &x.id == target) {
-                    return Err(cell.err(format!(
-                        "a condition setting the initial value of species `{target}` is not supported"
-                    )));
+                if let Some(o) = self.overrides.iter().find(|o| &o.species == target) {
+                    if tsv::parse_number(cell.text).is_some_and(f64::is_nan) {
+                        continue;
+                    }
+                    if !states.contains(target) {
+                        return Err(cell.err(format!(
+                            "a condition sets the initial value of species `{target}`, which an assignment rule gives"
+                        )));
+                    }
+                    if let Some(pre) = after {
+                        return Err(cell.err(format!(
+                            "condition `{condition}` sets the initial value of species `{target}` after the preequilibration `{pre}`: re-initialising a species after a preequilibration is not supported"
+                        )));
+                    }
+                    out.push(format!("{} = 1", o.switch));
+                    out.push(format!("{} = {}", o.value, self.setting_value(cell)?));
+                    continue;
                 }
                 if !model_parameters.contains(target) {
                     return Err(cell.err(format!(
@@ -903,27 +978,33 @@ impl<'a> Builder<'a> {
                         "`{target}` is estimated (parameter table) and set by a condition"
                     )));
                 }
-                let value = match tsv::parse_number(cell.text) {
-                    Some(v) if v.is_finite() => toml_number(v),
-                    Some(v) => return Err(cell.err(format!("{v} is not a finite number"))),
-                    None => match self.parameters.get(cell.text) {
-                        Some((p, _)) if !p.estimate => toml_number(p.nominal),
-                        Some(_) => format!("\"{}\"", self.name(cell.text)),
-                        None if self.sbml.parameters.iter().any(|p| p.0 == cell.text) => {
-                            format!("\"{}\"", self.name(cell.text))
-                        }
-                        None => {
-                            return Err(cell.err(format!(
-                                "`{}` is not a number, nor a parameter of the model or the parameter table",
-                                cell.text
-                            )));
-                        }
-                    },
-                };
-                out.push(format!("{} = {value}", self.name(target)));
+                out.push(format!("{} = {}", self.name(target), self.setting_value(cell)?));
             }
         }
         Ok(out)
+    }
+
+    /// A condition cell as the value of a `set` entry: a finite number, a parameter the
+    /// parameter table fixes (its nominal value), or the name of an estimated or SBML
+    /// parameter.
+    fn setting_value(&self, cell: Cell<'_>) -> Result<String, ModelError> {
+        Ok(match tsv::parse_number(cell.text) {
+            Some(v) if v.is_finite() => toml_number(v),
+            Some(v) => return Err(cell.err(format!("{v} is not a finite number"))),
+            None => match self.parameters.get(cell.text) {
+                Some((p, _)) if !p.estimate => toml_number(p.nominal),
+                Some(_) => format!("\"{}\"", self.name(cell.text)),
+                None if self.sbml.parameters.iter().any(|p| p.0 == cell.text) => {
+                    format!("\"{}\"", self.name(cell.text))
+                }
+                None => {
+                    return Err(cell.err(format!(
+                        "`{}` is not a number, nor a parameter of the model or the parameter table",
+                        cell.text
+                    )));
+                }
+            },
+        })
     }
 }
 

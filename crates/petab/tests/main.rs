@@ -101,14 +101,25 @@ fn unsupported_features_are_refused_by_name() {
 
 /// A copy of Boehm's problem in a directory of its own, with `edit` applied to one file.
 fn edited(test: &str, file: &str, edit: impl Fn(String) -> String) -> PathBuf {
+    edited_files(test, &[(file, &edit)])
+}
+
+/// A copy of Boehm's problem in a directory of its own, each edit applied to the file whose
+/// name starts with its prefix.
+#[allow(clippy::type_complexity)]
+fn edited_files(test: &str, edits: &[(&str, &dyn Fn(String) -> String)]) -> PathBuf {
     let problem = "Boehm_JProteomeRes2014";
     let dir = std::env::temp_dir().join(format!("sysid-petab-{test}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a directory");
     for entry in std::fs::read_dir(data().join(problem)).expect("the problem") {
         let path = entry.expect("an entry").path();
         let name = path.file_name().expect("a name").to_string_lossy().to_string();
-        let text = std::fs::read_to_string(&path).expect("a file");
-        let text = if name.starts_with(file) { edit(text) } else { text };
+        let mut text = std::fs::read_to_string(&path).expect("a file");
+        for (file, edit) in edits {
+            if name.starts_with(file) {
+                text = edit(text);
+            }
+        }
         std::fs::write(dir.join(&name), text).expect("written");
     }
     dir.join(format!("{problem}.yaml"))
@@ -240,4 +251,88 @@ fn a_measurement_at_time_inf_is_the_steady_state() {
     });
     let e = error_of(&path);
     assert!(e.contains("column `time`: a steady-state measurement (time inf) after the preequilibration `model1_data1` is not supported"), "{e}");
+}
+
+/// The NLL and gradient at the nominal parameters of a problem file.
+fn nll_and_gradient(path: &Path) -> (f64, Vec<f64>) {
+    let imported = import(path).unwrap_or_else(|e| panic!("{e}"));
+    let problem = imported.model.problem(None).expect("a problem");
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let lin = problem.linearize(&z).expect("integrates");
+    (problem.nll(&lin).expect("an nll"), lin.gradient.as_slice().to_vec())
+}
+
+/// Boehm's condition table with a column for species `pApB` (its SBML initial value 0).
+fn setting_pApB(value: &'static str) -> impl Fn(String) -> String {
+    move |t: String| {
+        t.lines()
+            .enumerate()
+            .map(|(i, l)| format!("{l}\t{}", if i == 0 { "pApB" } else { value }))
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+}
+
+/// A condition that sets a species' initial value gives the NLL and gradient of the model
+/// with that initial value written into its SBML (a number as the initial concentration,
+/// an estimated parameter as an initial assignment), to rounding; `NaN` keeps the model's
+/// value; after a preequilibration it is refused at its cell.
+#[test]
+fn a_condition_sets_a_species_initial_value() {
+    let close = |(a, ga): (f64, Vec<f64>), (b, gb): (f64, Vec<f64>)| {
+        assert!((a - b).abs() <= 1e-9 * b.abs(), "NLL {a} vs {b}");
+        for (x, y) in ga.iter().zip(&gb) {
+            assert!((x - y).abs() <= 1e-9 * y.abs().max(1e-3), "gradient {ga:?} vs {gb:?}");
+        }
+    };
+    let by_condition =
+        nll_and_gradient(&edited("species-5", "experimentalCondition", setting_pApB("5")));
+    let in_sbml = nll_and_gradient(&edited("species-5-sbml", "model_", |t| {
+        t.replace(
+            r#"<species id="pApB" name="pApB" compartment="cyt" initialConcentration="0""#,
+            r#"<species id="pApB" name="pApB" compartment="cyt" initialConcentration="5""#,
+        )
+    }));
+    let nominal = nll_and_gradient(&yaml("Boehm_JProteomeRes2014"));
+    assert!((by_condition.0 - nominal.0).abs() > 1.0, "the setting changes the fit");
+    close(by_condition, in_sbml);
+
+    let by_parameter = nll_and_gradient(&edited(
+        "species-k",
+        "experimentalCondition",
+        setting_pApB("Epo_degradation_BaF3"),
+    ));
+    let assigned = nll_and_gradient(&edited("species-k-sbml", "model_", |t| {
+        t.replace(
+            "    </listOfInitialAssignments>",
+            r#"      <initialAssignment symbol="pApB">
+        <math xmlns="http://www.w3.org/1998/Math/MathML">
+          <ci> Epo_degradation_BaF3 </ci>
+        </math>
+      </initialAssignment>
+    </listOfInitialAssignments>"#,
+        )
+    }));
+    close(by_parameter, assigned);
+
+    let kept =
+        nll_and_gradient(&edited("species-nan", "experimentalCondition", setting_pApB("NaN")));
+    close(kept, nominal);
+
+    let after = edited_files(
+        "species-pre",
+        &[
+            ("experimentalCondition", &setting_pApB("5")),
+            ("measurementData", &|t: String| {
+                let mut lines: Vec<String> = t.lines().map(String::from).collect();
+                let mut cells: Vec<String> = lines[1].split('\t').map(String::from).collect();
+                cells[1] = "model1_data1".into();
+                lines[1] = cells.join("\t");
+                lines.join("\n")
+            }),
+        ],
+    );
+    let e = error_of(&after);
+    assert!(e.contains("experimentalCondition_Boehm_JProteomeRes2014.tsv:2:25: column `pApB`:"), "{e}");
+    assert!(e.contains("condition `model1_data1` sets the initial value of species `pApB` after the preequilibration `model1_data1`"), "{e}");
 }
