@@ -152,6 +152,37 @@ const CONTROL: Control = Control { exponent: 0.2, beta: 0.0, max_factor: 6.0 };
 /// The Rodas5P scheme.
 pub(crate) struct Rodas5p;
 
+/// out += Σ_j c_j v_j over the (v_j, c_j) in `terms` (at most [`STAGES`]), in one pass.
+fn accumulate(out: &mut [f64], terms: &[(&[f64], f64)]) {
+    match terms.len() {
+        0 => {}
+        1 => accumulate_fixed::<1>(out, terms),
+        2 => accumulate_fixed::<2>(out, terms),
+        3 => accumulate_fixed::<3>(out, terms),
+        4 => accumulate_fixed::<4>(out, terms),
+        5 => accumulate_fixed::<5>(out, terms),
+        6 => accumulate_fixed::<6>(out, terms),
+        7 => accumulate_fixed::<7>(out, terms),
+        _ => accumulate_fixed::<STAGES>(out, terms),
+    }
+}
+
+/// [`accumulate`] with the number of terms known at compile time: the sum for each element
+/// stays in a register, and the loop vectorises over the elements.
+#[inline(always)]
+fn accumulate_fixed<const T: usize>(out: &mut [f64], terms: &[(&[f64], f64)]) {
+    let n = out.len();
+    let vectors: [&[f64]; T] = std::array::from_fn(|j| &terms[j].0[..n]);
+    let coefficients: [f64; T] = std::array::from_fn(|j| terms[j].1);
+    for (m, o) in out.iter_mut().enumerate() {
+        let mut v = *o;
+        for j in 0..T {
+            v += coefficients[j] * vectors[j][m];
+        }
+        *o = v;
+    }
+}
+
 impl<R: Rhs> Stepper<R> for Rodas5p {
     /// One Rodas5P step from (t, w.x) of size h: the solution in w.x_new, the stage
     /// increments k₁..k₈ in w.k, and the error norm (of k₈).
@@ -176,9 +207,12 @@ impl<R: Rhs> Stepper<R> for Rodas5p {
             *ft = (*ft - f0) / delta;
         }
         let (x, y, ft) = (&w.x[..n], &mut w.tmp[..n], &w.ft[..n]);
+        // Each stage's combinations of earlier increments in one pass over its vectors.
         for i in 0..STAGES {
+            let mut terms: [(&[f64], f64); STAGES] = [(&[], 0.0); STAGES];
             let (done, rest) = w.k.split_at_mut(i);
             let ki = &mut rest[0][..n];
+            let mut count = 0;
             if i == 0 {
                 ki.copy_from_slice(&w.f0[..n]);
             } else {
@@ -186,29 +220,25 @@ impl<R: Rhs> Stepper<R> for Rodas5p {
                 if i <= 5 {
                     y.copy_from_slice(x);
                     for (kj, &a) in done.iter().zip(&A[i - 1][..i]) {
-                        for (v, k) in y.iter_mut().zip(&kj[..n]) {
-                            *v += a * k;
-                        }
+                        terms[count] = (&kj[..n], a);
+                        count += 1;
                     }
+                    accumulate(y, &terms[..count]);
+                    count = 0;
                 } else {
-                    for (v, k) in y.iter_mut().zip(&done[i - 1][..n]) {
-                        *v += k;
-                    }
+                    accumulate(y, &[(&done[i - 1][..n], 1.0)]);
                 }
                 ev.f(t + NODES[i] * h, y, ki);
                 for (kj, &c) in done.iter().zip(&C[i - 1][..i]) {
-                    let c = c / h;
-                    for (v, k) in ki.iter_mut().zip(&kj[..n]) {
-                        *v += c * k;
-                    }
+                    terms[count] = (&kj[..n], c / h);
+                    count += 1;
                 }
             }
             if D[i] != 0.0 {
-                let d = h * D[i];
-                for (v, f) in ki.iter_mut().zip(ft) {
-                    *v += d * f;
-                }
+                terms[count] = (ft, h * D[i]);
+                count += 1;
             }
+            accumulate(ki, &terms[..count]);
             ev.rhs.solve(ki);
         }
         let k8 = &w.k[STAGES - 1][..n];
