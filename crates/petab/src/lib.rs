@@ -863,7 +863,7 @@ impl<'a> Builder<'a> {
         }
         let _ = writeln!(
             text,
-            "[integrator]\nmethod = \"rodas4\"\nrtol = 1e-8\natol = 1e-12\nmax_steps = 200000"
+            "[integrator]\nmethod = \"rodas5p\"\nrtol = 1e-8\natol = 1e-12\nmax_steps = 200000"
         );
         Ok(text)
     }
