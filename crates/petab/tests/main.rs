@@ -263,7 +263,7 @@ fn nll_and_gradient(path: &Path) -> (f64, Vec<f64>) {
 }
 
 /// Boehm's condition table with a column for species `pApB` (its SBML initial value 0).
-fn setting_pApB(value: &'static str) -> impl Fn(String) -> String {
+fn setting_papb(value: &'static str) -> impl Fn(String) -> String {
     move |t: String| {
         t.lines()
             .enumerate()
@@ -286,7 +286,7 @@ fn a_condition_sets_a_species_initial_value() {
         }
     };
     let by_condition =
-        nll_and_gradient(&edited("species-5", "experimentalCondition", setting_pApB("5")));
+        nll_and_gradient(&edited("species-5", "experimentalCondition", setting_papb("5")));
     let in_sbml = nll_and_gradient(&edited("species-5-sbml", "model_", |t| {
         t.replace(
             r#"<species id="pApB" name="pApB" compartment="cyt" initialConcentration="0""#,
@@ -300,7 +300,7 @@ fn a_condition_sets_a_species_initial_value() {
     let by_parameter = nll_and_gradient(&edited(
         "species-k",
         "experimentalCondition",
-        setting_pApB("Epo_degradation_BaF3"),
+        setting_papb("Epo_degradation_BaF3"),
     ));
     let assigned = nll_and_gradient(&edited("species-k-sbml", "model_", |t| {
         t.replace(
@@ -316,13 +316,13 @@ fn a_condition_sets_a_species_initial_value() {
     close(by_parameter, assigned);
 
     let kept =
-        nll_and_gradient(&edited("species-nan", "experimentalCondition", setting_pApB("NaN")));
+        nll_and_gradient(&edited("species-nan", "experimentalCondition", setting_papb("NaN")));
     close(kept, nominal);
 
     let after = edited_files(
         "species-pre",
         &[
-            ("experimentalCondition", &setting_pApB("5")),
+            ("experimentalCondition", &setting_papb("5")),
             ("measurementData", &|t: String| {
                 let mut lines: Vec<String> = t.lines().map(String::from).collect();
                 let mut cells: Vec<String> = lines[1].split('\t').map(String::from).collect();
@@ -333,6 +333,9 @@ fn a_condition_sets_a_species_initial_value() {
         ],
     );
     let e = error_of(&after);
-    assert!(e.contains("experimentalCondition_Boehm_JProteomeRes2014.tsv:2:25: column `pApB`:"), "{e}");
+    assert!(
+        e.contains("experimentalCondition_Boehm_JProteomeRes2014.tsv:2:25: column `pApB`:"),
+        "{e}"
+    );
     assert!(e.contains("condition `model1_data1` sets the initial value of species `pApB` after the preequilibration `model1_data1`"), "{e}");
 }
