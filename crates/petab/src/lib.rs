@@ -195,6 +195,9 @@ struct Dynamics {
 struct Measured {
     outputs: Vec<Output>,
     experiments: Vec<(Key, Vec<Sample>)>,
+    /// Per experiment, the names of the other conditions whose measurements it holds
+    /// because they set the same values ([`Builder::merge_same_simulations`]).
+    merged: Vec<Vec<String>>,
 }
 
 /// Stands for the output's own value in a σ expression until the output is named.
@@ -452,7 +455,8 @@ impl<'a> Builder<'a> {
         let measured = self.measured(&dynamics.states)?;
         let (parameters, extras) = self.split_parameters(&dynamics, &measured);
         let outputs = self.output_names(&measured.outputs, &dynamics.states, &parameters);
-        let experiments = experiment_names(&measured.experiments);
+        let (measured, experiments) =
+            self.merge_same_simulations(measured, &parameters, &dynamics.states)?;
         let text =
             self.model_text(&dynamics, &measured, (&parameters, &extras), &outputs, &experiments)?;
         let mut file = ModelFile::parse(&text, self.yaml).map_err(|e| ModelError {
@@ -581,7 +585,8 @@ impl<'a> Builder<'a> {
 
     /// The outputs and the experiments' measurements, from the measurement table.
     fn measured(&self, states: &[String]) -> Result<Measured, ModelError> {
-        let mut measured = Measured { outputs: Vec::new(), experiments: Vec::new() };
+        let mut measured =
+            Measured { outputs: Vec::new(), experiments: Vec::new(), merged: Vec::new() };
         for t in &self.tables.measurements {
             for row in 0..t.rows.len() {
                 self.measurement(t, row, states, &mut measured)?;
@@ -591,6 +596,48 @@ impl<'a> Builder<'a> {
             return Err(ModelError::file(&self.tables.measurements[0].file, "no measurements"));
         }
         Ok(measured)
+    }
+
+    /// One experiment for the conditions that set the same values after the same
+    /// preequilibration (the same settings, to the text of the model file): they are one
+    /// simulation, integrated once, and their measurements are its data. Bachmann's 36
+    /// conditions are 12 simulations. The experiment keeps the first condition's name;
+    /// the model file lists the others. Returns the experiments with their names.
+    fn merge_same_simulations(
+        &self,
+        measured: Measured,
+        parameters: &[String],
+        states: &[String],
+    ) -> Result<(Measured, Vec<String>), ModelError> {
+        let names = experiment_names(&measured.experiments);
+        type Settings = (Vec<String>, Option<Vec<String>>);
+        let mut groups: Vec<(Settings, Key, Vec<Sample>, String, Vec<String>)> = Vec::new();
+        for ((key, samples), name) in measured.experiments.into_iter().zip(names) {
+            let (pre, sim) = &key;
+            let settings = (
+                self.condition_settings(sim, parameters, states, pre.as_deref())?,
+                match pre {
+                    Some(p) => Some(self.condition_settings(p, parameters, states, None)?),
+                    None => None,
+                },
+            );
+            match groups.iter_mut().find(|g| g.0 == settings) {
+                Some(group) => {
+                    group.2.extend(samples);
+                    group.4.push(name);
+                }
+                None => groups.push((settings, key, samples, name, Vec::new())),
+            }
+        }
+        let mut merged =
+            Measured { outputs: measured.outputs, experiments: Vec::new(), merged: Vec::new() };
+        let mut names = Vec::new();
+        for (_, key, samples, name, others) in groups {
+            merged.experiments.push((key, samples));
+            merged.merged.push(others);
+            names.push(name);
+        }
+        Ok((merged, names))
     }
 
     /// Reads row `row` of a measurement table into `measured`: its experiment (conditions),
@@ -847,8 +894,17 @@ impl<'a> Builder<'a> {
         let measurement_file = Path::new(&self.tables.measurements[0].file)
             .file_name()
             .map_or("measurements".into(), |f| f.to_string_lossy().to_string());
-        for (((pre, sim), _), name) in m.experiments.iter().zip(experiment_names) {
+        for ((((pre, sim), _), name), others) in
+            m.experiments.iter().zip(experiment_names).zip(&m.merged)
+        {
             let _ = writeln!(text, "[[experiments]]");
+            if !others.is_empty() {
+                let _ = writeln!(
+                    text,
+                    "# also the conditions {}: they set the same values",
+                    others.join(", ")
+                );
+            }
             let _ = writeln!(text, "name = \"{name}\"");
             let _ = writeln!(text, "file = \"{measurement_file}#{name}\"");
             let set = self.condition_settings(sim, parameters, &d.states, pre.as_deref())?;

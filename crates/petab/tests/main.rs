@@ -339,3 +339,47 @@ fn a_condition_sets_a_species_initial_value() {
     );
     assert!(e.contains("condition `model1_data1` sets the initial value of species `pApB` after the preequilibration `model1_data1`"), "{e}");
 }
+
+/// Conditions that set the same values are one simulation: Boehm with its condition copied
+/// under another id, and every other measurement moved to the copy, gives one experiment
+/// (the first condition's) and Boehm's NLL and gradient; Bachmann's 36 conditions are 12
+/// experiments.
+#[test]
+fn conditions_that_set_the_same_values_share_one_experiment() {
+    let copied = edited_files(
+        "same-settings",
+        &[
+            ("experimentalCondition", &|t: String| format!("{}\ncopy\tcondition1", t.trim_end())),
+            ("measurementData", &|t: String| {
+                let lines: Vec<String> = t
+                    .lines()
+                    .enumerate()
+                    .map(|(i, l)| match i > 0 && i % 2 == 0 {
+                        true => l.replace("\tmodel1_data1\t", "\tcopy\t"),
+                        false => l.to_string(),
+                    })
+                    .collect();
+                lines.join("\n")
+            }),
+        ],
+    );
+    let imported = import(&copied).unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        imported.text.contains("# also the conditions copy: they set the same values"),
+        "{}",
+        imported.text
+    );
+    let problem = imported.model.problem(None).expect("a problem");
+    let names: Vec<&str> = problem.experiments().iter().map(|e| e.name()).collect();
+    assert_eq!(names, ["model1_data1"]);
+    let (a, ga) = nll_and_gradient(&copied);
+    let (b, gb) = nll_and_gradient(&yaml("Boehm_JProteomeRes2014"));
+    assert!((a - b).abs() <= 1e-12 * b.abs(), "NLL {a} vs {b}");
+    for (x, y) in ga.iter().zip(&gb) {
+        assert!((x - y).abs() <= 1e-12 * y.abs().max(1e-3), "gradient {ga:?} vs {gb:?}");
+    }
+
+    let bachmann = import(&yaml("Bachmann_MSB2011")).expect("imports");
+    let problem = bachmann.model.problem(None).expect("a problem");
+    assert_eq!(problem.experiments().len(), 12);
+}
