@@ -609,9 +609,17 @@ impl<'a> Builder<'a> {
         parameters: &[String],
         states: &[String],
     ) -> Result<(Measured, Vec<String>), ModelError> {
+        /// One simulation: its settings, its first condition's key and name, its
+        /// measurements, and the names of the other conditions merged into it.
+        struct Group {
+            settings: (Vec<String>, Option<Vec<String>>),
+            key: Key,
+            samples: Vec<Sample>,
+            name: String,
+            others: Vec<String>,
+        }
         let names = experiment_names(&measured.experiments);
-        type Settings = (Vec<String>, Option<Vec<String>>);
-        let mut groups: Vec<(Settings, Key, Vec<Sample>, String, Vec<String>)> = Vec::new();
+        let mut groups: Vec<Group> = Vec::new();
         for ((key, samples), name) in measured.experiments.into_iter().zip(names) {
             let (pre, sim) = &key;
             let settings = (
@@ -621,21 +629,21 @@ impl<'a> Builder<'a> {
                     None => None,
                 },
             );
-            match groups.iter_mut().find(|g| g.0 == settings) {
+            match groups.iter_mut().find(|g| g.settings == settings) {
                 Some(group) => {
-                    group.2.extend(samples);
-                    group.4.push(name);
+                    group.samples.extend(samples);
+                    group.others.push(name);
                 }
-                None => groups.push((settings, key, samples, name, Vec::new())),
+                None => groups.push(Group { settings, key, samples, name, others: Vec::new() }),
             }
         }
         let mut merged =
             Measured { outputs: measured.outputs, experiments: Vec::new(), merged: Vec::new() };
         let mut names = Vec::new();
-        for (_, key, samples, name, others) in groups {
-            merged.experiments.push((key, samples));
-            merged.merged.push(others);
-            names.push(name);
+        for g in groups {
+            merged.experiments.push((g.key, g.samples));
+            merged.merged.push(g.others);
+            names.push(g.name);
         }
         Ok((merged, names))
     }
