@@ -616,3 +616,37 @@ fn several_experiments_from_the_command_line() {
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("no such experiment (experiments: low, high)"));
 }
+
+/// A switch time as an unknown: x' = if(le(t, tau), a, −k·x) fitted to noise-free data of
+/// τ = 1.5 from τ = 1.2 returns τ, certified. Without the sensitivity jump at the switch,
+/// ∂r/∂τ would be 0 and τ would never move (or a zero gradient would certify the guess).
+#[test]
+fn a_switch_time_is_estimated() {
+    let model = r#"states = ["x"]
+parameters = ["a", "k", "tau"]
+[equations]
+x = "if(le(t, tau), a, -k * x)"
+[initial]
+x = 0.0
+[known]
+a = 2.0
+k = 0.5
+[unknowns]
+tau = 1.2
+[data]
+file = "data.csv"
+"#;
+    let x = |t: f64| if t <= 1.5 { 2.0 * t } else { 3.0 * (-0.5 * (t - 1.5)).exp() };
+    let mut data = String::from("t,x\n");
+    for i in 1..=8 {
+        let t = 0.5 * f64::from(i) - 0.25;
+        data.push_str(&format!("{t},{}\n", x(t)));
+    }
+    let case = Case::new("switch-time", model, &data);
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let tau = json["estimates"]["tau"].as_f64().unwrap();
+    assert!((tau - 1.5).abs() < 1e-6, "tau = {tau}");
+    assert_eq!(json["converged"], true, "{json}");
+}

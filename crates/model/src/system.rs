@@ -90,6 +90,12 @@ impl System for ModelSystem {
     fn switches(&self, p: &[f64]) -> Vec<f64> {
         self.switches.iter().map(|s| s.at(p)).collect()
     }
+    fn moving_switches(&self, p: &[f64]) -> Vec<(f64, usize, f64)> {
+        self.switches
+            .iter()
+            .filter_map(|s| s.parameter.map(|(q, slope)| (s.at(p), q, slope)))
+            .collect()
+    }
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
         let symbolic = self.symbolic.as_deref()?;
         Some(match function {

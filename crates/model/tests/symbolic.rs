@@ -317,3 +317,61 @@ s = 3.0
         }
     }
 }
+
+/// A switch time that is an unknown: x' = if(le(t, tau), a, −k·x), x(0) = 0, so x = a·t up
+/// to τ and a·τ·e^{−k(t−τ)} after. Past the switch ∂x/∂τ = a(1 + kτ)e^{−k(t−τ)}: the jump
+/// (g₋ − g₊)·∂τ/∂τ = a + k·a·τ at τ, carried on by the variational equation; before it, 0.
+/// Backwards from x(5) = c, before τ x = c·e^{k(5−τ)} − a(τ − t) and
+/// ∂x/∂τ = −a − k·c·e^{k(5−τ)}.
+#[test]
+fn a_switch_time_that_is_an_unknown_has_its_sensitivity() {
+    use sysid_model::ModelFile;
+    use sysid_ode::{Integrator, Ivp, Wrt};
+    const MODEL: &str = r#"states = ["x"]
+parameters = ["a", "k", "tau"]
+[equations]
+x = "if(le(t, tau), a, -k * x)"
+[initial]
+x = 0.0
+[unknowns]
+a = 2.0
+k = 0.5
+tau = 1.5
+"#;
+    let file = ModelFile::parse(MODEL, Path::new("switch.toml")).expect("a valid model");
+    let sys = Model { file }.system(Inputs::new(Vec::new()));
+    let (a, k, tau) = (2.0, 0.5, 1.5);
+    let p = [a, k, tau];
+    let wrt = [Wrt::Parameter(2), Wrt::Parameter(0), Wrt::Parameter(1)];
+    let times = [0.5, 2.0, 4.0];
+    for integrator in [Integrator::dopri5(1e-11, 1e-13), Integrator::rodas5p(1e-11, 1e-13)] {
+        let sol = Ivp::new(&sys, 0.0, &[0.0], &p).solve_sensitivities(&integrator, &wrt, &times);
+        let sol = sol.unwrap();
+        for (m, &t) in times.iter().enumerate() {
+            let decay = (-k * (t - tau)).exp();
+            let (x, dtau, da, dk) = match t < tau {
+                true => (a * t, 0.0, t, 0.0),
+                false => (
+                    a * tau * decay,
+                    a * (1.0 + k * tau) * decay,
+                    tau * decay,
+                    -a * tau * (t - tau) * decay,
+                ),
+            };
+            let s = sol.sensitivity(m);
+            for (got, want) in
+                [(sol.state(m)[0], x), (s[(0, 0)], dtau), (s[(0, 1)], da), (s[(0, 2)], dk)]
+            {
+                assert!((got - want).abs() < 1e-8, "t = {t}: {got} vs {want}");
+            }
+        }
+        // Backwards across the switch from x(5) = c.
+        let c = 0.7;
+        let back = Ivp::new(&sys, 5.0, &[c], &p).solve_sensitivities(&integrator, &wrt, &[0.5]);
+        let back = back.unwrap();
+        let grown = c * (k * (5.0 - tau)).exp();
+        assert!((back.state(0)[0] - (grown - a * (tau - 0.5))).abs() < 1e-8);
+        let dtau = back.sensitivity(0)[(0, 0)];
+        assert!((dtau - (-a - k * grown)).abs() < 1e-8, "{dtau} vs {}", -a - k * grown);
+    }
+}

@@ -48,7 +48,12 @@ pub(crate) fn integrate_selected<R: Rhs>(
     if t_end - t0 == 0.0 {
         return Ok((run.ev.counts, x0.to_vec()));
     }
-    for (i, seg_end) in segment_ends(t0, t_end, stops).into_iter().enumerate() {
+    let ends = segment_ends(t0, t_end, stops);
+    for (i, &seg_end) in ends.iter().enumerate() {
+        if i > 0 {
+            let dir = run.dir;
+            run.ev.rhs.cross(ends[i - 1], &mut run.work.x, dir);
+        }
         run.segment(seg_end, i > 0)?;
     }
     Ok((run.ev.counts, run.work.x))

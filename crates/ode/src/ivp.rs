@@ -162,6 +162,8 @@ pub struct SensitivityRhs<'a, S> {
     jp: DMatrix<f64>,
     /// Allocated on the first implicit step.
     implicit: Option<Box<AugmentedMatrix>>,
+    /// The switches that move with a parameter ([`System::moving_switches`]).
+    moving: Vec<(f64, usize, f64)>,
 }
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
@@ -187,6 +189,7 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
             jy: DMatrix::zeros(jn, jn),
             jp: DMatrix::zeros(jn, jnp),
             implicit: None,
+            moving: sys.moving_switches(p),
         }
     }
 
@@ -272,6 +275,29 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
             matrix.solve(self.sys, self.wrt, r);
         }
     }
+
+    /// At a switch τ(α_q) the column of α_q jumps by (g₋ − g₊)·∂τ/∂α_q, g₋ the right-hand
+    /// side on the side of smaller t (`dir` turns it round going backwards).
+    fn cross(&mut self, t: f64, x: &mut [f64], dir: f64) {
+        if !self.moving.iter().any(|m| m.0.to_bits() == t.to_bits()) {
+            return;
+        }
+        let (n, k) = (self.sys.signature().n_states(), self.wrt.len());
+        let (y, s) = x.split_at_mut(n);
+        let mut sides = [vec![0.0; n], vec![0.0; n]];
+        for (g, (at, side)) in
+            sides.iter_mut().zip([(t.next_down(), Side::Before), (t.next_up(), Side::After)])
+        {
+            self.sys.input_values(at, side, &mut self.u);
+            self.sys.rhs(at, y, self.p, &self.u, g);
+        }
+        for &(_, q, slope) in self.moving.iter().filter(|m| m.0.to_bits() == t.to_bits()) {
+            let Some(j) = self.wrt.iter().position(|w| *w == Wrt::Parameter(q)) else { continue };
+            for i in 0..n {
+                s[i * k + j] += dir * (sides[0][i] - sides[1][i]) * slope;
+            }
+        }
+    }
 }
 
 impl<'a, S: System> Ivp<'a, S> {
@@ -328,7 +354,7 @@ impl<'a, S: System> Ivp<'a, S> {
         let n = self.y0.len();
         // Columns of parameters the right-hand side does not depend on are zero for all t
         // (their initial values are 0): only the others are integrated.
-        let moving = moving_columns(self.system, wrt);
+        let moving = moving_columns(self.system, self.p, wrt);
         let integrated: Vec<Wrt> = moving.iter().map(|&j| wrt[j]).collect();
         let mut rhs = SensitivityRhs::new(self.system, self.p, &integrated);
         let x0 = rhs.initial_state(self.y0);
@@ -535,11 +561,11 @@ impl<'a, S: System> ObservableGradient<'a, S> {
     }
 }
 
-/// The columns of `wrt` whose sensitivities can be nonzero: initial values, and parameters
-/// the right-hand side depends on (by its sparse Jacobian's pattern; all of them for a
-/// system without one). A parameter that enters only the outputs, a σ or nothing has
-/// S = 0 for all t.
-fn moving_columns<S: System>(system: &S, wrt: &[Wrt]) -> Vec<usize> {
+/// The columns of `wrt` whose sensitivities can be nonzero: initial values, parameters the
+/// right-hand side depends on (by its sparse Jacobian's pattern; all of them for a system
+/// without one), and parameters that move a switch (at `p`). A parameter that enters only
+/// the outputs, a σ or nothing has S = 0 for all t.
+fn moving_columns<S: System>(system: &S, p: &[f64], wrt: &[Wrt]) -> Vec<usize> {
     let n = system.signature().n_states();
     let Some(sparse) = system.sparse_jacobian(Function::Rhs) else {
         return (0..wrt.len()).collect();
@@ -549,6 +575,9 @@ fn moving_columns<S: System>(system: &S, wrt: &[Wrt]) -> Vec<usize> {
         if let Some(q) = (c as usize).checked_sub(n) {
             enters[q] = true;
         }
+    }
+    for (_, q, _) in system.moving_switches(p) {
+        enters[q] = true;
     }
     (0..wrt.len())
         .filter(|&j| match wrt[j] {

@@ -37,4 +37,10 @@ pub trait Rhs {
     fn solve(&mut self, r: &mut [f64]) {
         let _ = r;
     }
+    /// Called where the integration crosses a stop t inside it (in direction `dir`, ±1),
+    /// between the segments on either side: the place to apply a jump of x there. Default:
+    /// none (the solution is continuous).
+    fn cross(&mut self, t: f64, x: &mut [f64], dir: f64) {
+        let _ = (t, x, dir);
+    }
 }

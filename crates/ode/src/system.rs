@@ -211,6 +211,15 @@ pub trait System: Send + Sync {
         Vec::new()
     }
 
+    /// The [`switches`](Self::switches) that move with a parameter, at the parameters `p`:
+    /// each one's time τ, the parameter's index q and ∂τ/∂α_q. Where the right-hand side
+    /// switches from g₋ to g₊ at τ(α), the sensitivity with respect to α_q jumps there by
+    /// (g₋ − g₊)·∂τ/∂α_q (the state is continuous, the switch moves). Default: none.
+    fn moving_switches(&self, p: &[f64]) -> Vec<(f64, usize, f64)> {
+        let _ = p;
+        Vec::new()
+    }
+
     /// The right-hand side (or the outputs) with the nonzero entries of its Jacobian, for
     /// systems that can evaluate them directly (default: none, dual numbers are used).
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
@@ -277,6 +286,9 @@ impl<S: System> System for &S {
     }
     fn switches(&self, p: &[f64]) -> Vec<f64> {
         (**self).switches(p)
+    }
+    fn moving_switches(&self, p: &[f64]) -> Vec<(f64, usize, f64)> {
+        (**self).moving_switches(p)
     }
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
         (**self).sparse_jacobian(function)
