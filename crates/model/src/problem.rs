@@ -198,6 +198,7 @@ struct Plan<'a> {
     start: Start<'a>,
     set: Vec<(String, &'a SetValue)>,
     preequilibrate: Option<Vec<(String, &'a SetValue)>>,
+    steady: bool,
 }
 
 impl Model {
@@ -217,6 +218,7 @@ impl Model {
                 start,
                 set: Vec::new(),
                 preequilibrate: None,
+                steady: false,
             }]
         } else {
             if data.is_some() {
@@ -235,6 +237,7 @@ impl Model {
                         .preequilibrate
                         .as_ref()
                         .map(|list| list.iter().map(|(p, v, _)| (p.clone(), v)).collect()),
+                    steady: e.steady,
                 })
                 .collect()
         };
@@ -270,6 +273,19 @@ impl Model {
                     system.clone(),
                     f.integrator,
                     (pre_parameters, pre_initial),
+                    declared,
+                    &plan.name,
+                ));
+                initial = (0..f.states.len())
+                    .map(|i| Setting::Function(Arc::new(steady.component(i, &f.states[i]))))
+                    .collect();
+            }
+            if plan.steady {
+                // From there (or from [initial]) to the steady state under its own settings.
+                let steady = Arc::new(SteadyState::new(
+                    system.clone(),
+                    f.integrator,
+                    (parameters.clone(), initial),
                     declared,
                     &plan.name,
                 ));

@@ -228,6 +228,58 @@ atol = 1e-12
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `steady = true`: the experiment starts from the steady state under its own settings,
+/// after its preequilibration if it has one (PEtab's measurement at time `inf`). x' = p − o·x
+/// − k·x, y' = k·x keeps x + y while p = o = 0: preequilibrated with k = 0, x settles at p/o
+/// = 3 and y stays 0.5, and the experiment's own steady state is y = p/o + 0.5 = 3.5; without
+/// the preequilibration it is y = x₀ + y₀ = 1.5. The cost and its gradient (∂y/∂p = 1/o) in
+/// closed form.
+#[test]
+fn a_steady_experiment_starts_from_its_own_steady_state() {
+    let model = "states = [\"x\", \"y\"]
+parameters = [\"p\", \"o\", \"k\"]
+[equations]
+x = \"p - o * x - k * x\"
+y = \"k * x\"
+[initial]
+x = 1.0
+y = 0.5
+[known]
+o = 1.0
+k = 1.0
+[unknowns]
+p = 3.0
+[[experiments]]
+name = \"after\"
+file = \"low.csv\"
+set = { p = 0.0, o = 0.0 }
+preequilibrate = { k = 0.0 }
+steady = true
+[[experiments]]
+name = \"alone\"
+file = \"high.csv\"
+set = { p = 0.0, o = 0.0 }
+steady = true
+[integrator]
+method = \"rodas5p\"
+rtol = 1e-10
+atol = 1e-12
+";
+    let dir = scratch("steady", "t,y\n0,3.4\n", "t,y\n0,1.45\n");
+    let path = dir.join("m.toml");
+    std::fs::write(&path, model).unwrap();
+    let problem = Model::load(&path).unwrap().problem(None).unwrap();
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let lin = problem.linearize(&z).unwrap();
+    // ε = (3.4 − (p + 0.5))² + (1.45 − 1.5)², U = ½ dε/dp = −(3.4 − 3.5) = 0.1.
+    assert!((lin.cost - 0.0125).abs() <= 1e-9, "{}", lin.cost);
+    assert!((lin.gradient[0] - 0.1).abs() <= 1e-8, "{}", lin.gradient[0]);
+    let steady = |extra: &str| format!("{TWO}steady = {extra}\n");
+    let e = problem_error(&dir, &steady("1"));
+    assert!(e.contains("experiment `high`: steady must be true or false"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A switch in time in the equations, at a parameter: the integrators stop on it, each side
 /// taking its own branch, so x' = if(lt(t, c), 1, 0) integrates to exactly c (DOPRI5 and
 /// Rodas4; without the stop the step at the switch straddles it).

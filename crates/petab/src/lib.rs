@@ -182,7 +182,15 @@ enum Sigma {
 type Sample = (f64, usize, f64);
 
 /// An experiment: its preequilibration condition, if any, and its simulation condition.
-type Key = (Option<String>, String);
+/// What an experiment is made of: its preequilibration condition, its simulation condition,
+/// and whether it then runs to its own steady state (the measurements at time `inf` after a
+/// preequilibration).
+#[derive(Clone, Debug, PartialEq)]
+struct Key {
+    pre: Option<String>,
+    sim: String,
+    steady: bool,
+}
 
 /// The states of the model file, with their equations and initial values.
 struct Dynamics {
@@ -612,7 +620,7 @@ impl<'a> Builder<'a> {
         /// One simulation: its settings, its first condition's key and name, its
         /// measurements, and the names of the other conditions merged into it.
         struct Group {
-            settings: (Vec<String>, Option<Vec<String>>),
+            settings: (Vec<String>, Option<Vec<String>>, bool),
             key: Key,
             samples: Vec<Sample>,
             name: String,
@@ -621,13 +629,14 @@ impl<'a> Builder<'a> {
         let names = experiment_names(&measured.experiments);
         let mut groups: Vec<Group> = Vec::new();
         for ((key, samples), name) in measured.experiments.into_iter().zip(names) {
-            let (pre, sim) = &key;
+            let Key { pre, sim, steady } = &key;
             let settings = (
                 self.condition_settings(sim, parameters, states, pre.as_deref())?,
                 match pre {
                     Some(p) => Some(self.condition_settings(p, parameters, states, None)?),
                     None => None,
                 },
+                *steady,
             );
             match groups.iter_mut().find(|g| g.settings == settings) {
                 Some(group) => {
@@ -677,16 +686,15 @@ impl<'a> Builder<'a> {
         let simulation = known_condition(t.cell(row, t.required("simulationConditionId")?))?;
         let time_cell = t.cell(row, t.required("time")?);
         let mut time = time_cell.number()?;
-        let mut pre = pre;
+        let (mut pre, mut steady) = (pre, false);
         if time == f64::INFINITY {
-            // At steady state: an experiment of its own that preequilibrates under its own
-            // condition and is measured at once.
-            if let Some(p) = &pre {
-                return Err(time_cell.err(format!(
-                    "a steady-state measurement (time inf) after the preequilibration `{p}` is not supported"
-                )));
+            // At steady state: an experiment of its own, measured at once, that starts from
+            // the steady state under its condition: a preequilibration under its own
+            // condition, or after its preequilibration, its own steady state from there.
+            match pre {
+                Some(_) => steady = true,
+                None => pre = Some(simulation.clone()),
             }
-            pre = Some(simulation.clone());
             time = 0.0;
         }
         if time < 0.0 {
@@ -730,7 +738,7 @@ impl<'a> Builder<'a> {
                 outputs.len() - 1
             }
         };
-        let key = (pre, simulation);
+        let key = Key { pre, sim: simulation, steady };
         match measured.experiments.iter_mut().find(|e| e.0 == key) {
             Some(e) => e.1.push((time, index, value)),
             None => measured.experiments.push((key, vec![(time, index, value)])),
@@ -902,7 +910,7 @@ impl<'a> Builder<'a> {
         let measurement_file = Path::new(&self.tables.measurements[0].file)
             .file_name()
             .map_or("measurements".into(), |f| f.to_string_lossy().to_string());
-        for ((((pre, sim), _), name), others) in
+        for (((Key { pre, sim, steady }, _), name), others) in
             m.experiments.iter().zip(experiment_names).zip(&m.merged)
         {
             let _ = writeln!(text, "[[experiments]]");
@@ -922,6 +930,9 @@ impl<'a> Builder<'a> {
             if let Some(pre) = pre {
                 let set = self.condition_settings(pre, parameters, &d.states, None)?;
                 let _ = writeln!(text, "preequilibrate = {{ {} }}", set.join(", "));
+            }
+            if *steady {
+                let _ = writeln!(text, "steady = true");
             }
             let _ = writeln!(text);
         }
@@ -1108,14 +1119,17 @@ fn placeholders(
 
 /// Each experiment's name: its simulation condition's, and its preequilibration's too
 /// where one simulation condition follows several (`SIM-after-PRE`, `SIM-steady` for the
-/// steady-state measurements of SIM).
+/// steady-state measurements of SIM, `SIM-steady-after-PRE` for those after PRE).
 fn experiment_names(experiments: &[(Key, Vec<Sample>)]) -> Vec<String> {
     experiments
         .iter()
-        .map(|((pre, sim), _)| match (pre, experiments.iter().filter(|e| &e.0.1 == sim).count()) {
-            (Some(pre), 2..) if pre == sim => format!("{sim}-steady"),
-            (Some(pre), 2..) => format!("{sim}-after-{pre}"),
-            _ => sim.clone(),
+        .map(|(Key { pre, sim, steady }, _)| {
+            match (pre, *steady, experiments.iter().filter(|e| &e.0.sim == sim).count()) {
+                (Some(pre), true, 2..) => format!("{sim}-steady-after-{pre}"),
+                (Some(pre), false, 2..) if pre == sim => format!("{sim}-steady"),
+                (Some(pre), false, 2..) => format!("{sim}-after-{pre}"),
+                _ => sim.clone(),
+            }
         })
         .collect()
 }

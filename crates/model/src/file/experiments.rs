@@ -57,6 +57,7 @@ pub(super) fn read_experiments(
             t0_at: None,
             set: Vec::new(),
             preequilibrate: None,
+            steady: false,
             at,
         };
         for (key, v) in table.iter() {
@@ -65,6 +66,18 @@ pub(super) fn read_experiments(
                 "t0" => {
                     spec.t0 = r.number(v, &what("t0"))?;
                     spec.t0_at = Some(v.span().start);
+                }
+                "steady" => {
+                    let DeValue::Boolean(steady) = v.get_ref() else {
+                        return Err(r.err(v.span().start, what("steady must be true or false")));
+                    };
+                    if *steady && !scope.inputs.is_empty() {
+                        return Err(r.err(
+                            v.span().start,
+                            what("steady: a model with inputs has no steady state to run to"),
+                        ));
+                    }
+                    spec.steady = *steady;
                 }
                 key @ ("set" | "preequilibrate") => {
                     if key == "preequilibrate" && !scope.inputs.is_empty() {
@@ -111,7 +124,7 @@ pub(super) fn read_experiments(
                     return Err(r.err(
                         key.span().start,
                         format!(
-                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set, preequilibrate)"
+                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set, preequilibrate, steady)"
                         ),
                     ));
                 }

@@ -96,6 +96,9 @@ pub struct ExperimentSpec {
     /// `preequilibrate`: before t0 the system runs to a steady state with the parameters
     /// outside the experiments and these settings, and starts the experiment from it.
     pub preequilibrate: Option<Vec<(String, SetValue, usize)>>,
+    /// `steady = true`: the experiment starts from the steady state it reaches under its own
+    /// settings (after its preequilibration, if any), so its data are that steady state.
+    pub steady: bool,
     /// Byte offset of its `name`.
     pub at: usize,
 }
