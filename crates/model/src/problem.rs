@@ -191,6 +191,9 @@ impl NoiseFunction for ExpressionNoise {
     }
 }
 
+/// A name and the value an experiment gives it (`set`, `preequilibrate`, `initial`).
+type Assignment<'a> = (String, &'a SetValue);
+
 /// An experiment to build: its name, data file, t0 and where t0 is written, and what it sets.
 struct Plan<'a> {
     name: String,
@@ -199,6 +202,7 @@ struct Plan<'a> {
     set: Vec<(String, &'a SetValue)>,
     preequilibrate: Option<Vec<(String, &'a SetValue)>>,
     steady: bool,
+    initial: Vec<(String, &'a SetValue)>,
 }
 
 impl Model {
@@ -219,6 +223,7 @@ impl Model {
                 set: Vec::new(),
                 preequilibrate: None,
                 steady: false,
+                initial: Vec::new(),
             }]
         } else {
             if data.is_some() {
@@ -238,6 +243,7 @@ impl Model {
                         .as_ref()
                         .map(|list| list.iter().map(|(p, v, _)| (p.clone(), v)).collect()),
                     steady: e.steady,
+                    initial: e.initial.iter().map(|(x, v, _)| (x.clone(), v)).collect(),
                 })
                 .collect()
         };
@@ -265,10 +271,12 @@ impl Model {
             let read = data::read_from(f, plan.file, plan.start)
                 .map_err(|e| self.in_experiment(&plan.name, e))?;
             let set: Vec<(String, &SetValue)> = plan.set.clone();
-            let (parameters, mut initial) = self.settings(&set, &base, &extras, &plan.name)?;
+            let (parameters, mut initial) =
+                self.settings((&set, &plan.initial), &base, &extras, &plan.name)?;
+            let own = initial.clone();
             if let Some(pre) = &plan.preequilibrate {
                 let (pre_parameters, pre_initial) =
-                    self.settings(pre, &base, &extras, &plan.name)?;
+                    self.settings((pre, &[]), &base, &extras, &plan.name)?;
                 let steady = Arc::new(SteadyState::new(
                     system.clone(),
                     f.integrator,
@@ -279,6 +287,12 @@ impl Model {
                 initial = (0..f.states.len())
                     .map(|i| Setting::Function(Arc::new(steady.component(i, &f.states[i]))))
                     .collect();
+            }
+            // The experiment's own initial values replace the preequilibration's steady state
+            // (PEtab's re-initialisation after a preequilibration).
+            for (state, _) in &plan.initial {
+                let i = f.states.iter().position(|x| x == state).expect("checked when read");
+                initial[i] = own[i].clone();
             }
             if plan.steady {
                 // From there (or from [initial]) to the steady state under its own settings.
@@ -329,10 +343,11 @@ impl Model {
 
     /// The parameters and the initial values of an experiment under the settings `set` (its
     /// own, or its preequilibration's) applied to the parameters outside the experiments,
-    /// `base`.
+    /// `base`; the states in `starts` (its `initial`) start from those values instead of
+    /// `[initial]`'s, evaluated with its parameters.
     fn settings(
         &self,
-        set: &[(String, &SetValue)],
+        (set, starts): (&[Assignment<'_>], &[Assignment<'_>]),
         base: &[Source],
         extras: &[usize],
         experiment: &str,
@@ -396,7 +411,12 @@ impl Model {
             .states
             .iter()
             .map(|name| {
-                if let Some((_, v)) = f.known.iter().find(|k| &k.0 == name) {
+                if let Some((_, start)) = starts.iter().find(|s| &s.0 == name) {
+                    match start {
+                        SetValue::Number(x) => Setting::Value(*x),
+                        SetValue::Expression(e) => setting(e, true),
+                    }
+                } else if let Some((_, v)) = f.known.iter().find(|k| &k.0 == name) {
                     Setting::Value(*v)
                 } else if let Some((_, e)) = f.initial.iter().find(|k| &k.0 == name) {
                     setting(e, true)
@@ -426,7 +446,7 @@ impl Model {
             other.extend(e.uses.iter().map(String::as_str));
         }
         for x in &f.experiments {
-            for (_, v, _) in &x.set {
+            for (_, v, _) in x.set.iter().chain(&x.initial) {
                 if let SetValue::Expression(e) = v {
                     other.extend(e.uses.iter().map(String::as_str));
                 }

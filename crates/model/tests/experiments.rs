@@ -63,7 +63,7 @@ fn mistakes_in_the_file_are_named_where_they_are() {
             "s = { guess = 0.1, log = true }",
             "s = { guess = 0.1, log = true }\nunused = 1.0",
         ),
-        "m.toml:16:1: [unknowns]: `unused` is used nowhere: it is no state or parameter, and no sigma, set or [initial] expression names it",
+        "m.toml:16:1: [unknowns]: `unused` is used nowhere: it is no state or parameter, and no sigma, set, preequilibrate, initial or [initial] expression names it",
     );
     refused(
         &TWO.replace("sigma = \"s\" }", "sigma = \"s\", distribution = \"laplace\" }"),
@@ -277,6 +277,74 @@ atol = 1e-12
     let steady = |extra: &str| format!("{TWO}steady = {extra}\n");
     let e = problem_error(&dir, &steady("1"));
     assert!(e.contains("experiment `high`: steady must be true or false"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `initial` in an experiment: its own initial values. x' = a − b·x with x(0) = 2 in one
+/// experiment (x = a/b + (2 − a/b)e^{−bt}), and in another, after a preequilibration that
+/// settles x at 1/b with a = 1, x restarts at the unknown `c` (PEtab's re-initialisation):
+/// x = 4/b + (c − 4/b)e^{−bt}. Cost and gradient in closed form, the gradient by central
+/// differences of it.
+#[test]
+fn an_experiment_sets_its_own_initial_values() {
+    let model = "states = [\"x\"]
+parameters = [\"a\", \"b\"]
+[equations]
+x = \"a - b * x\"
+[initial]
+x = 0.0
+[known]
+a = 4.0
+[unknowns]
+b = 2.0
+c = 3.0
+[[experiments]]
+name = \"low\"
+file = \"low.csv\"
+initial = { x = 2.0 }
+[[experiments]]
+name = \"high\"
+file = \"high.csv\"
+preequilibrate = { a = 1.0 }
+initial = { x = \"c\" }
+[integrator]
+method = \"rodas5p\"
+rtol = 1e-11
+atol = 1e-13
+";
+    let low = [(0.5, 1.9), (1.0, 2.05)];
+    let high = [(0.5, 2.4), (2.0, 2.1)];
+    let to_csv = |rows: &[(f64, f64)]| {
+        rows.iter().fold(String::from("t,x\n"), |s, (t, x)| format!("{s}{t},{x}\n"))
+    };
+    let dir = scratch("initial", &to_csv(&low), &to_csv(&high));
+    let path = dir.join("m.toml");
+    std::fs::write(&path, model).unwrap();
+    let problem = Model::load(&path).unwrap().problem(None).unwrap();
+    let cost = |b: f64, c: f64| {
+        let low_x = |t: f64| 4.0 / b + (2.0 - 4.0 / b) * (-b * t).exp();
+        let high_x = |t: f64| 4.0 / b + (c - 4.0 / b) * (-b * t).exp();
+        let low_eps: f64 = low.iter().map(|(t, x)| (x - low_x(*t)).powi(2)).sum();
+        low_eps + high.iter().map(|(t, x)| (x - high_x(*t)).powi(2)).sum::<f64>()
+    };
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let lin = problem.linearize(&z).unwrap();
+    assert!((lin.cost - cost(2.0, 3.0)).abs() <= 1e-9, "{} vs {}", lin.cost, cost(2.0, 3.0));
+    let h = 1e-6;
+    let fd = [
+        (cost(2.0 + h, 3.0) - cost(2.0 - h, 3.0)) / (2.0 * h),
+        (cost(2.0, 3.0 + h) - cost(2.0, 3.0 - h)) / (2.0 * h),
+    ];
+    for (j, d) in fd.iter().enumerate() {
+        assert!(
+            (lin.gradient[j] - 0.5 * d).abs() <= 1e-7,
+            "{j}: {} vs {}",
+            lin.gradient[j],
+            d / 2.0
+        );
+    }
+    let e = problem_error(&dir, &format!("{TWO}initial = {{ zz = 1.0 }}\n"));
+    assert!(e.contains("experiment `high`: initial `zz`: not a state (states: "), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -447,7 +447,7 @@ fn unknowns() {
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nz = 1\n"),
-            "models/m.toml:10:1: [unknowns]: `z` is used nowhere: it is no state or parameter, and no sigma, set or [initial] expression names it",
+            "models/m.toml:10:1: [unknowns]: `z` is used nowhere: it is no state or parameter, and no sigma, set, preequilibrate, initial or [initial] expression names it",
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nx = 1\n"),
@@ -459,7 +459,7 @@ fn unknowns() {
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nk = 1\nk2 = 2\n"),
-            "models/m.toml:11:1: [unknowns]: `k2` is used nowhere: it is no state or parameter, and no sigma, set or [initial] expression names it",
+            "models/m.toml:11:1: [unknowns]: `k2` is used nowhere: it is no state or parameter, and no sigma, set, preequilibrate, initial or [initial] expression names it",
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ min = 0 }}\n"),

@@ -208,6 +208,10 @@ struct Measured {
     merged: Vec<Vec<String>>,
 }
 
+/// A condition's entries of an experiment's `set`, and of its `initial` (the species it
+/// re-initialises after a preequilibration), as model-file text.
+type ConditionSettings = (Vec<String>, Vec<String>);
+
 /// Stands for the output's own value in a σ expression until the output is named.
 const OWN: &str = "\u{1}own\u{1}";
 
@@ -620,7 +624,7 @@ impl<'a> Builder<'a> {
         /// One simulation: its settings, its first condition's key and name, its
         /// measurements, and the names of the other conditions merged into it.
         struct Group {
-            settings: (Vec<String>, Option<Vec<String>>, bool),
+            settings: (ConditionSettings, Option<Vec<String>>, bool),
             key: Key,
             samples: Vec<Sample>,
             name: String,
@@ -633,7 +637,7 @@ impl<'a> Builder<'a> {
             let settings = (
                 self.condition_settings(sim, parameters, states, pre.as_deref())?,
                 match pre {
-                    Some(p) => Some(self.condition_settings(p, parameters, states, None)?),
+                    Some(p) => Some(self.condition_settings(p, parameters, states, None)?.0),
                     None => None,
                 },
                 *steady,
@@ -923,13 +927,17 @@ impl<'a> Builder<'a> {
             }
             let _ = writeln!(text, "name = \"{name}\"");
             let _ = writeln!(text, "file = \"{measurement_file}#{name}\"");
-            let set = self.condition_settings(sim, parameters, &d.states, pre.as_deref())?;
+            let (set, initial) =
+                self.condition_settings(sim, parameters, &d.states, pre.as_deref())?;
             if !set.is_empty() {
                 let _ = writeln!(text, "set = {{ {} }}", set.join(", "));
             }
             if let Some(pre) = pre {
-                let set = self.condition_settings(pre, parameters, &d.states, None)?;
+                let (set, _) = self.condition_settings(pre, parameters, &d.states, None)?;
                 let _ = writeln!(text, "preequilibrate = {{ {} }}", set.join(", "));
+            }
+            if !initial.is_empty() {
+                let _ = writeln!(text, "initial = {{ {} }}", initial.join(", "));
             }
             if *steady {
                 let _ = writeln!(text, "steady = true");
@@ -1006,15 +1014,16 @@ impl<'a> Builder<'a> {
 
     /// The `set` entries of a condition: its parameters and compartment sizes, and for each
     /// species it sets, the species' switch and value (a `NaN` cell keeps the model's
-    /// initial value). `after` is the preequilibration the condition follows, if any.
+    /// initial value). `after` is the preequilibration the condition follows, if any: then
+    /// the species it sets are re-initialised, the second list's `initial` entries.
     fn condition_settings(
         &self,
         condition: &str,
         model_parameters: &[String],
         states: &[String],
         after: Option<&str>,
-    ) -> Result<Vec<String>, ModelError> {
-        let mut out = Vec::new();
+    ) -> Result<ConditionSettings, ModelError> {
+        let (mut out, mut initial) = (Vec::new(), Vec::new());
         for t in &self.tables.conditions {
             let Some(row) = condition_row(t, condition) else { continue };
             for (c, target) in t.headers().iter().enumerate() {
@@ -1034,10 +1043,13 @@ impl<'a> Builder<'a> {
                             "a condition sets the initial value of species `{target}`, which an assignment rule gives"
                         )));
                     }
-                    if let Some(pre) = after {
-                        return Err(cell.err(format!(
-                            "condition `{condition}` sets the initial value of species `{target}` after the preequilibration `{pre}`: re-initialising a species after a preequilibration is not supported"
-                        )));
+                    if after.is_some() {
+                        initial.push(format!(
+                            "{} = {}",
+                            self.name(target),
+                            self.setting_value(cell)?
+                        ));
+                        continue;
                     }
                     out.push(format!("{} = 1", o.switch));
                     out.push(format!("{} = {}", o.value, self.setting_value(cell)?));
@@ -1056,7 +1068,7 @@ impl<'a> Builder<'a> {
                 out.push(format!("{} = {}", self.name(target), self.setting_value(cell)?));
             }
         }
-        Ok(out)
+        Ok((out, initial))
     }
 
     /// A condition cell as the value of a `set` entry: a finite number, a parameter the

@@ -12,7 +12,7 @@ use super::{ExperimentSpec, SetValue};
 use crate::error::ModelError;
 
 /// Reads `[[experiments]]` (optional): an array of tables `{ name, file, t0, set,
-/// preequilibrate }`.
+/// preequilibrate, steady, initial }`.
 pub(super) fn read_experiments(
     r: &Reader<'_>,
     value: Option<&Spanned<DeValue<'_>>>,
@@ -58,6 +58,7 @@ pub(super) fn read_experiments(
             set: Vec::new(),
             preequilibrate: None,
             steady: false,
+            initial: Vec::new(),
             at,
         };
         for (key, v) in table.iter() {
@@ -79,7 +80,7 @@ pub(super) fn read_experiments(
                     }
                     spec.steady = *steady;
                 }
-                key @ ("set" | "preequilibrate") => {
+                key @ ("set" | "preequilibrate" | "initial") => {
                     if key == "preequilibrate" && !scope.inputs.is_empty() {
                         return Err(r.err(
                             v.span().start,
@@ -91,7 +92,16 @@ pub(super) fn read_experiments(
                     let mut list = Vec::new();
                     for (p, x) in r.table(v, &what(key))?.iter() {
                         let parameter = p.get_ref().to_string();
-                        if !scope.parameters.contains(&parameter) {
+                        if key == "initial" && !scope.states.contains(&parameter) {
+                            return Err(r.err(
+                                p.span().start,
+                                format!(
+                                    "experiment `{name}`: initial `{parameter}`: not a state (states: {})",
+                                    scope.states.join(", ")
+                                ),
+                            ));
+                        }
+                        if key != "initial" && !scope.parameters.contains(&parameter) {
                             return Err(r.err(
                                 p.span().start,
                                 format!(
@@ -117,6 +127,7 @@ pub(super) fn read_experiments(
                     }
                     match key {
                         "set" => spec.set = list,
+                        "initial" => spec.initial = list,
                         _ => spec.preequilibrate = Some(list),
                     }
                 }
@@ -124,7 +135,7 @@ pub(super) fn read_experiments(
                     return Err(r.err(
                         key.span().start,
                         format!(
-                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set, preequilibrate, steady)"
+                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set, preequilibrate, steady, initial)"
                         ),
                     ));
                 }

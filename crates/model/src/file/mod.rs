@@ -99,6 +99,10 @@ pub struct ExperimentSpec {
     /// `steady = true`: the experiment starts from the steady state it reaches under its own
     /// settings (after its preequilibration, if any), so its data are that steady state.
     pub steady: bool,
+    /// `initial`: the initial values of some states in this experiment, replacing
+    /// `[initial]` (or, after a preequilibration, the steady state): state, value, byte
+    /// offset of the key.
+    pub initial: Vec<(String, SetValue, usize)>,
     /// Byte offset of its `name`.
     pub at: usize,
 }

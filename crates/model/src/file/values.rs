@@ -211,8 +211,8 @@ pub(super) fn read_unknowns(
     Ok(Unknowns { list: unknowns, extras, keys: at })
 }
 
-/// Refuses an unknown that nothing uses: a name of its own that no `sigma`, `set` or
-/// `[initial]` expression mentions.
+/// Refuses an unknown that nothing uses: a name of its own that no `sigma`, `set`,
+/// `preequilibrate`, `initial` or `[initial]` expression mentions.
 fn check_unknowns_used(
     r: &Reader<'_>,
     scope: &Scope,
@@ -228,7 +228,8 @@ fn check_unknowns_used(
         used.extend(e.uses.iter().map(String::as_str));
     }
     for x in experiments {
-        for (_, v, _) in &x.set {
+        let pre = x.preequilibrate.iter().flatten();
+        for (_, v, _) in x.set.iter().chain(pre).chain(&x.initial) {
             if let SetValue::Expression(e) = v {
                 used.extend(e.uses.iter().map(String::as_str));
             }
@@ -238,7 +239,7 @@ fn check_unknowns_used(
         if !used.contains(&name.as_str()) {
             return Err(r.err(
                 *at,
-                format!("[unknowns]: `{name}` is used nowhere: it is no state or parameter, and no sigma, set or [initial] expression names it"),
+                format!("[unknowns]: `{name}` is used nowhere: it is no state or parameter, and no sigma, set, preequilibrate, initial or [initial] expression names it"),
             ));
         }
     }
