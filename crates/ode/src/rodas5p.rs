@@ -152,6 +152,22 @@ const CONTROL: Control = Control { exponent: 0.2, beta: 0.0, max_factor: 6.0 };
 /// The Rodas5P scheme.
 pub(crate) struct Rodas5p;
 
+/// The input of stage i ≥ 1 into `y`: x + Σ_{j<i} a_ij k_j for stages 2 to 6, in one pass;
+/// for stages 7 and 8, the previous stage's input (in `y`) plus the previous increment.
+fn stage_input(i: usize, x: &[f64], done: &[Vec<f64>], y: &mut [f64]) {
+    let n = y.len();
+    if i <= 5 {
+        y.copy_from_slice(x);
+        let mut terms: [(&[f64], f64); 5] = [(&[], 0.0); 5];
+        for ((term, kj), &a) in terms.iter_mut().zip(done).zip(&A[i - 1][..i]) {
+            *term = (&kj[..n], a);
+        }
+        accumulate(y, &terms[..i]);
+    } else {
+        accumulate(y, &[(&done[i - 1][..n], 1.0)]);
+    }
+}
+
 /// out += Σ_j c_j v_j over the (v_j, c_j) in `terms` (at most [`STAGES`]), in one pass.
 fn accumulate(out: &mut [f64], terms: &[(&[f64], f64)]) {
     match terms.len() {
@@ -207,33 +223,22 @@ impl<R: Rhs> Stepper<R> for Rodas5p {
             *ft = (*ft - f0) / delta;
         }
         let (x, y, ft) = (&w.x[..n], &mut w.tmp[..n], &w.ft[..n]);
-        // Each stage's combinations of earlier increments in one pass over its vectors.
         for i in 0..STAGES {
-            let mut terms: [(&[f64], f64); STAGES] = [(&[], 0.0); STAGES];
             let (done, rest) = w.k.split_at_mut(i);
             let ki = &mut rest[0][..n];
-            let mut count = 0;
             if i == 0 {
                 ki.copy_from_slice(&w.f0[..n]);
             } else {
-                // The stage's input.
-                if i <= 5 {
-                    y.copy_from_slice(x);
-                    for (kj, &a) in done.iter().zip(&A[i - 1][..i]) {
-                        terms[count] = (&kj[..n], a);
-                        count += 1;
-                    }
-                    accumulate(y, &terms[..count]);
-                    count = 0;
-                } else {
-                    accumulate(y, &[(&done[i - 1][..n], 1.0)]);
-                }
+                stage_input(i, x, done, y);
                 ev.f(t + NODES[i] * h, y, ki);
-                for (kj, &c) in done.iter().zip(&C[i - 1][..i]) {
-                    terms[count] = (&kj[..n], c / h);
-                    count += 1;
-                }
             }
+            // k_i += Σ_{j<i} (c_ij / h) k_j + h d_i ∂f/∂t, in one pass.
+            let mut terms: [(&[f64], f64); STAGES] = [(&[], 0.0); STAGES];
+            let c_row: &[f64] = if i == 0 { &[] } else { &C[i - 1][..i] };
+            for ((term, kj), &c) in terms.iter_mut().zip(done.iter()).zip(c_row) {
+                *term = (&kj[..n], c / h);
+            }
+            let mut count = i;
             if D[i] != 0.0 {
                 terms[count] = (ft, h * D[i]);
                 count += 1;
