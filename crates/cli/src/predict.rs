@@ -64,7 +64,7 @@ impl WithProblem for Predict<'_> {
         let problem = prepare(problem, &args.integrator, &args.options)?;
         let experiments: Vec<usize> = match &args.experiment {
             None => (0..problem.experiments().len()).collect(),
-            Some(name) => match problem.experiments().iter().position(|e| e.name() == name) {
+            Some(name) => match problem.experiments().iter().position(|e| e.answers_to(name)) {
                 Some(i) => vec![i],
                 None => {
                     let names: Vec<&str> = problem.experiments().iter().map(|e| e.name()).collect();

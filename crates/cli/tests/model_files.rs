@@ -650,3 +650,47 @@ file = "data.csv"
     assert!((tau - 1.5).abs() < 1e-6, "tau = {tau}");
     assert_eq!(json["converged"], true, "{json}");
 }
+
+/// `also`: an experiment answers to other names too (the PEtab conditions merged into it):
+/// `simulate` and `predict` find it by either; a name taken twice is refused where written.
+#[test]
+fn an_experiment_answers_to_its_other_names() {
+    let model = r#"states = ["x"]
+parameters = ["k"]
+[equations]
+x = "-k * x"
+[initial]
+x = 2.0
+[unknowns]
+k = 0.5
+[[experiments]]
+name = "first"
+file = "data.csv"
+also = ["same-settings", "again"]
+"#;
+    let case = Case::new("also", model, DECAY_DATA);
+    let sim = |name: &str| {
+        let times = ["--times", "0:2:1", "--experiment", name];
+        sysid(&[&["simulate", "--model", &case.model()][..], &times[..]].concat())
+    };
+    let (by_name, by_other) = (sim("first"), sim("again"));
+    assert_eq!(by_other.status.code(), Some(0), "{}", text(&by_other.stderr));
+    assert_eq!(text(&by_name.stdout), text(&by_other.stdout));
+    let out = sysid(&[
+        "predict",
+        "--model",
+        &case.model(),
+        "--until",
+        "5",
+        "--experiment",
+        "same-settings",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(text(&out.stdout).starts_with("t,x,"), "{}", text(&out.stdout));
+    bad(
+        "also-twice",
+        &model.replace(r#"["same-settings", "again"]"#, r#"["first"]"#),
+        DECAY_DATA,
+        "model.toml:12:9: [[experiments]]: two experiments are called `first`",
+    );
+}

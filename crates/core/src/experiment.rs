@@ -56,6 +56,9 @@ impl fmt::Debug for Setting {
 pub struct Experiment<S> {
     /// Its name, unique in the problem.
     pub name: String,
+    /// Other names it answers to, unique in the problem too (the PEtab conditions merged
+    /// into it because they set the same values).
+    pub also: Vec<String>,
     /// The model, driven by this experiment's inputs.
     pub system: S,
     /// Time of the initial values.
@@ -111,6 +114,7 @@ impl Resolved {
 #[derive(Debug)]
 pub struct Planned<S> {
     pub(crate) name: String,
+    pub(crate) also: Vec<String>,
     pub(crate) system: Arc<S>,
     pub(crate) t0: f64,
     pub(crate) initial: Vec<Resolved>,
@@ -125,6 +129,7 @@ impl<S> Clone for Planned<S> {
     fn clone(&self) -> Self {
         Self {
             name: self.name.clone(),
+            also: self.also.clone(),
             system: self.system.clone(),
             t0: self.t0,
             initial: self.initial.clone(),
@@ -143,6 +148,10 @@ impl<S: System> Planned<S> {
     /// Its name.
     pub fn name(&self) -> &str {
         &self.name
+    }
+    /// Whether it is called `name`, by its name or by one of the others it answers to.
+    pub fn answers_to(&self, name: &str) -> bool {
+        self.name == name || self.also.iter().any(|a| a == name)
     }
     /// Its system (with its inputs).
     pub fn system(&self) -> &S {

@@ -552,6 +552,7 @@ fn single<S: System>(
     let parameters = initial.split_off(n);
     Ok(Experiment {
         name: SINGLE_EXPERIMENT.into(),
+        also: Vec::new(),
         system,
         t0,
         initial,
@@ -567,11 +568,15 @@ fn resolve_experiments<S: System>(
 ) -> Result<Vec<Planned<S>>, ProblemError> {
     let mut out: Vec<Planned<S>> = Vec::with_capacity(experiments.len());
     for e in experiments {
-        if out.iter().any(|o| o.name == e.name) {
-            return Err(ProblemError::Experiments(format!(
-                "two experiments are called `{}`",
-                e.name
-            )));
+        let names = std::iter::once(&e.name).chain(&e.also);
+        for (k, name) in names.clone().enumerate() {
+            if out.iter().any(|o| o.answers_to(name))
+                || names.clone().skip(k + 1).any(|n| n == name)
+            {
+                return Err(ProblemError::Experiments(format!(
+                    "two experiments are called `{name}`"
+                )));
+            }
         }
         let fail = |message: String| {
             ProblemError::Experiments(format!("experiment `{}`: {message}", e.name))
@@ -626,6 +631,7 @@ fn resolve_experiments<S: System>(
         let plan = plan(&e.system, &e.data, &find).map_err(|err| in_experiment(&e.name, err))?;
         out.push(Planned {
             name: e.name,
+            also: e.also,
             system: std::sync::Arc::new(e.system),
             t0: e.t0,
             initial,

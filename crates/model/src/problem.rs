@@ -203,6 +203,7 @@ struct Plan<'a> {
     preequilibrate: Option<Vec<(String, &'a SetValue)>>,
     steady: bool,
     initial: Vec<(String, &'a SetValue)>,
+    also: Vec<String>,
 }
 
 impl Model {
@@ -224,6 +225,7 @@ impl Model {
                 preequilibrate: None,
                 steady: false,
                 initial: Vec::new(),
+                also: Vec::new(),
             }]
         } else {
             if data.is_some() {
@@ -244,6 +246,7 @@ impl Model {
                         .map(|list| list.iter().map(|(p, v, _)| (p.clone(), v)).collect()),
                     steady: e.steady,
                     initial: e.initial.iter().map(|(x, v, _)| (x.clone(), v)).collect(),
+                    also: e.also.clone(),
                 })
                 .collect()
         };
@@ -329,6 +332,7 @@ impl Model {
             let t0 = plan.start.t0;
             builder = builder.experiment(Experiment {
                 name: plan.name.clone(),
+                also: plan.also.clone(),
                 system: system.with_inputs(read.inputs),
                 t0,
                 initial,

@@ -58,7 +58,7 @@ impl Model {
                 }
             }
             if let Some(name) = experiment
-                && !problem.experiments().iter().any(|e| e.name() == name)
+                && !problem.experiments().iter().any(|e| e.answers_to(name))
             {
                 let names: Vec<&str> = problem.experiments().iter().map(|e| e.name()).collect();
                 return Err(ModelError::file(
@@ -72,7 +72,7 @@ impl Model {
             problem
                 .experiments()
                 .iter()
-                .filter(|e| experiment.is_none_or(|n| n == e.name()))
+                .filter(|e| experiment.is_none_or(|n| e.answers_to(n)))
                 .map(|e| (e.name().to_string(), e.system().clone(), e.t0(), e.point(&values)))
                 .collect()
         };

@@ -613,8 +613,8 @@ impl<'a> Builder<'a> {
     /// One experiment for the conditions that set the same values after the same
     /// preequilibration (the same settings, to the text of the model file): they are one
     /// simulation, integrated once, and their measurements are its data. Bachmann's 36
-    /// conditions are 12 simulations. The experiment keeps the first condition's name;
-    /// the model file lists the others. Returns the experiments with their names.
+    /// conditions are 12 simulations. The experiment keeps the first condition's name and
+    /// answers to the others' (`also`). Returns the experiments with their names.
     fn merge_same_simulations(
         &self,
         measured: Measured,
@@ -918,14 +918,12 @@ impl<'a> Builder<'a> {
             m.experiments.iter().zip(experiment_names).zip(&m.merged)
         {
             let _ = writeln!(text, "[[experiments]]");
-            if !others.is_empty() {
-                let _ = writeln!(
-                    text,
-                    "# also the conditions {}: they set the same values",
-                    others.join(", ")
-                );
-            }
             let _ = writeln!(text, "name = \"{name}\"");
+            if !others.is_empty() {
+                // The conditions that set the same values: one simulation, their names too.
+                let quoted: Vec<String> = others.iter().map(|o| format!("\"{o}\"")).collect();
+                let _ = writeln!(text, "also = [{}]", quoted.join(", "));
+            }
             let _ = writeln!(text, "file = \"{measurement_file}#{name}\"");
             let (set, initial) =
                 self.condition_settings(sim, parameters, &d.states, pre.as_deref())?;

@@ -384,14 +384,11 @@ fn conditions_that_set_the_same_values_share_one_experiment() {
         ],
     );
     let imported = import(&copied).unwrap_or_else(|e| panic!("{e}"));
-    assert!(
-        imported.text.contains("# also the conditions copy: they set the same values"),
-        "{}",
-        imported.text
-    );
+    assert!(imported.text.contains("also = [\"copy\"]"), "{}", imported.text);
     let problem = imported.model.problem(None).expect("a problem");
     let names: Vec<&str> = problem.experiments().iter().map(|e| e.name()).collect();
     assert_eq!(names, ["model1_data1"]);
+    assert!(problem.experiments()[0].answers_to("copy"));
     let (a, ga) = nll_and_gradient(&copied);
     let (b, gb) = nll_and_gradient(&yaml("Boehm_JProteomeRes2014"));
     assert!((a - b).abs() <= 1e-12 * b.abs(), "NLL {a} vs {b}");

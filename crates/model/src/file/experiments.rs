@@ -12,7 +12,7 @@ use super::{ExperimentSpec, SetValue};
 use crate::error::ModelError;
 
 /// Reads `[[experiments]]` (optional): an array of tables `{ name, file, t0, set,
-/// preequilibrate, steady, initial }`.
+/// preequilibrate, steady, initial, also }`.
 pub(super) fn read_experiments(
     r: &Reader<'_>,
     value: Option<&Spanned<DeValue<'_>>>,
@@ -36,12 +36,15 @@ pub(super) fn read_experiments(
         })?;
         let name = r.string(name_value, "[[experiments]] name")?.to_string();
         let at = name_value.span().start;
-        if name.is_empty() || !name.chars().all(|c| c.is_alphanumeric() || c == '_' || c == '-') {
+        let valid = |name: &str| {
+            !name.is_empty() && name.chars().all(|c| c.is_alphanumeric() || c == '_' || c == '-')
+        };
+        if !valid(&name) {
             return Err(
                 r.err(at, format!("[[experiments]] name `{name}`: use letters, digits, _ and -"))
             );
         }
-        if out.iter().any(|e| e.name == name) {
+        if out.iter().any(|e| e.name == name || e.also.contains(&name)) {
             return Err(r.err(at, format!("[[experiments]]: two experiments are called `{name}`")));
         }
         let what = |key: &str| format!("experiment `{name}`: {key}");
@@ -59,6 +62,7 @@ pub(super) fn read_experiments(
             preequilibrate: None,
             steady: false,
             initial: Vec::new(),
+            also: Vec::new(),
             at,
         };
         for (key, v) in table.iter() {
@@ -67,6 +71,34 @@ pub(super) fn read_experiments(
                 "t0" => {
                     spec.t0 = r.number(v, &what("t0"))?;
                     spec.t0_at = Some(v.span().start);
+                }
+                "also" => {
+                    let DeValue::Array(items) = v.get_ref() else {
+                        return Err(r.err(
+                            v.span().start,
+                            what("also must be a list of names, like [\"a\", \"b\"]"),
+                        ));
+                    };
+                    for item in items {
+                        let alias = r.string(item, &what("each entry of also"))?.to_string();
+                        let at = item.span().start;
+                        if !valid(&alias) {
+                            return Err(r.err(
+                                at,
+                                what(&format!("also `{alias}`: use letters, digits, _ and -")),
+                            ));
+                        }
+                        let taken = alias == name
+                            || spec.also.contains(&alias)
+                            || out.iter().any(|e| e.name == alias || e.also.contains(&alias));
+                        if taken {
+                            return Err(r.err(
+                                at,
+                                format!("[[experiments]]: two experiments are called `{alias}`"),
+                            ));
+                        }
+                        spec.also.push(alias);
+                    }
                 }
                 "steady" => {
                     let DeValue::Boolean(steady) = v.get_ref() else {
@@ -135,7 +167,7 @@ pub(super) fn read_experiments(
                     return Err(r.err(
                         key.span().start,
                         format!(
-                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set, preequilibrate, steady, initial)"
+                            "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set, preequilibrate, steady, initial, also)"
                         ),
                     ));
                 }

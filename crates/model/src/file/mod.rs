@@ -103,6 +103,8 @@ pub struct ExperimentSpec {
     /// `[initial]` (or, after a preequilibration, the steady state): state, value, byte
     /// offset of the key.
     pub initial: Vec<(String, SetValue, usize)>,
+    /// `also`: other names it answers to (`--experiment`), as unique as names.
+    pub also: Vec<String>,
     /// Byte offset of its `name`.
     pub at: usize,
 }
