@@ -199,10 +199,10 @@ struct Plan<'a> {
     name: String,
     file: &'a Path,
     start: Start<'a>,
-    set: Vec<(String, &'a SetValue)>,
-    preequilibrate: Option<Vec<(String, &'a SetValue)>>,
+    set: Vec<Assignment<'a>>,
+    preequilibrate: Option<Vec<Assignment<'a>>>,
     steady: bool,
-    initial: Vec<(String, &'a SetValue)>,
+    initial: Vec<Assignment<'a>>,
     also: Vec<String>,
 }
 
@@ -273,9 +273,8 @@ impl Model {
         for plan in &plans {
             let read = data::read_from(f, plan.file, plan.start)
                 .map_err(|e| self.in_experiment(&plan.name, e))?;
-            let set: Vec<(String, &SetValue)> = plan.set.clone();
             let (parameters, mut initial) =
-                self.settings((&set, &plan.initial), &base, &extras, &plan.name)?;
+                self.settings((&plan.set, &plan.initial), &base, &extras, &plan.name)?;
             let own = initial.clone();
             if let Some(pre) = &plan.preequilibrate {
                 let (pre_parameters, pre_initial) =

@@ -92,18 +92,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         h: f64,
     ) -> Result<f64, FactorError> {
         let n = w.x.len();
-        let side = ev.side(t);
-        ev.counts.jacobians += 1;
-        ev.rhs.factor(ev.at(t), side, &w.x, 1.0 / (GAMMA * h))?;
-        // f(t, x), and ∂f/∂t by a difference quotient inside the step.
-        ev.f(t, &w.x, &mut w.f0);
-        let delta = (1e-7 * t.abs().max(1.0)).min(0.5 * h.abs()) * h.signum();
-        let t_delta = t + delta;
-        let delta = t_delta - t;
-        ev.f(t_delta, &w.x, &mut w.ft);
-        for (ft, f0) in w.ft.iter_mut().zip(&w.f0) {
-            *ft = (*ft - f0) / delta;
-        }
+        ev.rosenbrock_start(w, t, h, GAMMA)?;
         let [k1, k2, k3, k4, k5, k6, _, _] = &mut w.k;
         let (x, y, f0, ft) = (&w.x[..n], &mut w.tmp, &w.f0[..n], &w.ft[..n]);
         // Stage 1.

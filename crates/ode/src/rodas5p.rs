@@ -210,18 +210,7 @@ impl<R: Rhs> Stepper<R> for Rodas5p {
         h: f64,
     ) -> Result<f64, FactorError> {
         let n = w.x.len();
-        let side = ev.side(t);
-        ev.counts.jacobians += 1;
-        ev.rhs.factor(ev.at(t), side, &w.x, 1.0 / (GAMMA * h))?;
-        // f(t, x), and ∂f/∂t by a difference quotient inside the step (as in Rodas4).
-        ev.f(t, &w.x, &mut w.f0);
-        let delta = (1e-7 * t.abs().max(1.0)).min(0.5 * h.abs()) * h.signum();
-        let t_delta = t + delta;
-        let delta = t_delta - t;
-        ev.f(t_delta, &w.x, &mut w.ft);
-        for (ft, f0) in w.ft.iter_mut().zip(&w.f0) {
-            *ft = (*ft - f0) / delta;
-        }
+        ev.rosenbrock_start(w, t, h, GAMMA)?;
         let (x, y, ft) = (&w.x[..n], &mut w.tmp[..n], &w.ft[..n]);
         for i in 0..STAGES {
             let (done, rest) = w.k.split_at_mut(i);

@@ -3,6 +3,7 @@
 
 use crate::counts::Counts;
 use crate::interpolant::Interpolant;
+use crate::lu::FactorError;
 use crate::options::Integrator;
 use crate::rhs::Rhs;
 use crate::signal::Side;
@@ -81,6 +82,30 @@ impl<R: Rhs> Evaluator<'_, R> {
     #[inline]
     pub(crate) fn side(&self, t: f64) -> Side {
         side_in(self.seg.0, self.seg.1, t)
+    }
+
+    /// What every Rosenbrock step from (t, w.x) of size h starts with: E = I/(γh) − ∂f/∂x
+    /// factorised there, f(t, x) in `w.f0`, and ∂f/∂t in `w.ft` by a one-sided difference
+    /// quotient inside the step (exactly 0 for an autonomous system; see [`crate::rodas4`]).
+    pub(crate) fn rosenbrock_start(
+        &mut self,
+        w: &mut Work,
+        t: f64,
+        h: f64,
+        gamma: f64,
+    ) -> Result<(), FactorError> {
+        let side = self.side(t);
+        self.counts.jacobians += 1;
+        self.rhs.factor(self.at(t), side, &w.x, 1.0 / (gamma * h))?;
+        self.f(t, &w.x, &mut w.f0);
+        let delta = (1e-7 * t.abs().max(1.0)).min(0.5 * h.abs()) * h.signum();
+        let t_delta = t + delta;
+        let delta = t_delta - t;
+        self.f(t_delta, &w.x, &mut w.ft);
+        for (ft, f0) in w.ft.iter_mut().zip(&w.f0) {
+            *ft = (*ft - f0) / delta;
+        }
+        Ok(())
     }
 
     /// The error norm sqrt(mean((e_i / (atol + rtol·max(|x_i|, |x̂_i|)))²)).

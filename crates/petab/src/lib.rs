@@ -203,14 +203,23 @@ struct Dynamics {
 struct Measured {
     outputs: Vec<Output>,
     experiments: Vec<(Key, Vec<Sample>)>,
-    /// Per experiment, the names of the other conditions whose measurements it holds
-    /// because they set the same values ([`Builder::merge_same_simulations`]).
-    merged: Vec<Vec<String>>,
+    /// Per experiment, what it sets (filled by [`Builder::merge_same_simulations`]).
+    simulations: Vec<Simulation>,
 }
 
 /// A condition's entries of an experiment's `set`, and of its `initial` (the species it
 /// re-initialises after a preequilibration), as model-file text.
 type ConditionSettings = (Vec<String>, Vec<String>);
+
+/// What an experiment sets, as model-file text: its condition's `set` and `initial`
+/// entries, its preequilibration's, whether it runs to its own steady state, and the other
+/// conditions it answers to (`also`: they set the same values).
+struct Simulation {
+    settings: ConditionSettings,
+    preequilibrate: Option<Vec<String>>,
+    steady: bool,
+    also: Vec<String>,
+}
 
 /// Stands for the output's own value in a σ expression until the output is named.
 const OWN: &str = "\u{1}own\u{1}";
@@ -598,7 +607,7 @@ impl<'a> Builder<'a> {
     /// The outputs and the experiments' measurements, from the measurement table.
     fn measured(&self, states: &[String]) -> Result<Measured, ModelError> {
         let mut measured =
-            Measured { outputs: Vec::new(), experiments: Vec::new(), merged: Vec::new() };
+            Measured { outputs: Vec::new(), experiments: Vec::new(), simulations: Vec::new() };
         for t in &self.tables.measurements {
             for row in 0..t.rows.len() {
                 self.measurement(t, row, states, &mut measured)?;
@@ -614,51 +623,49 @@ impl<'a> Builder<'a> {
     /// preequilibration (the same settings, to the text of the model file): they are one
     /// simulation, integrated once, and their measurements are its data. Bachmann's 36
     /// conditions are 12 simulations. The experiment keeps the first condition's name and
-    /// answers to the others' (`also`). Returns the experiments with their names.
+    /// answers to the others' (`also`). Returns the experiments, each with what it sets
+    /// (the model file's text is written from it), and their names.
     fn merge_same_simulations(
         &self,
         measured: Measured,
         parameters: &[String],
         states: &[String],
     ) -> Result<(Measured, Vec<String>), ModelError> {
-        /// One simulation: its settings, its first condition's key and name, its
-        /// measurements, and the names of the other conditions merged into it.
-        struct Group {
-            settings: (ConditionSettings, Option<Vec<String>>, bool),
-            key: Key,
-            samples: Vec<Sample>,
-            name: String,
-            others: Vec<String>,
-        }
         let names = experiment_names(&measured.experiments);
-        let mut groups: Vec<Group> = Vec::new();
+        let mut merged = Measured {
+            outputs: measured.outputs,
+            experiments: Vec::new(),
+            simulations: Vec::new(),
+        };
+        let mut kept = Vec::new();
         for ((key, samples), name) in measured.experiments.into_iter().zip(names) {
             let Key { pre, sim, steady } = &key;
-            let settings = (
-                self.condition_settings(sim, parameters, states, pre.as_deref())?,
-                match pre {
+            let simulation = Simulation {
+                settings: self.condition_settings(sim, parameters, states, pre.as_deref())?,
+                preequilibrate: match pre {
                     Some(p) => Some(self.condition_settings(p, parameters, states, None)?.0),
                     None => None,
                 },
-                *steady,
-            );
-            match groups.iter_mut().find(|g| g.settings == settings) {
-                Some(group) => {
-                    group.samples.extend(samples);
-                    group.others.push(name);
+                steady: *steady,
+                also: Vec::new(),
+            };
+            let same = |s: &Simulation| {
+                (&s.settings, &s.preequilibrate, s.steady)
+                    == (&simulation.settings, &simulation.preequilibrate, simulation.steady)
+            };
+            match merged.simulations.iter().position(same) {
+                Some(i) => {
+                    merged.experiments[i].1.extend(samples);
+                    merged.simulations[i].also.push(name);
                 }
-                None => groups.push(Group { settings, key, samples, name, others: Vec::new() }),
+                None => {
+                    merged.experiments.push((key, samples));
+                    merged.simulations.push(simulation);
+                    kept.push(name);
+                }
             }
         }
-        let mut merged =
-            Measured { outputs: measured.outputs, experiments: Vec::new(), merged: Vec::new() };
-        let mut names = Vec::new();
-        for g in groups {
-            merged.experiments.push((g.key, g.samples));
-            merged.merged.push(g.others);
-            names.push(g.name);
-        }
-        Ok((merged, names))
+        Ok((merged, kept))
     }
 
     /// Reads row `row` of a measurement table into `measured`: its experiment (conditions),
@@ -914,30 +921,27 @@ impl<'a> Builder<'a> {
         let measurement_file = Path::new(&self.tables.measurements[0].file)
             .file_name()
             .map_or("measurements".into(), |f| f.to_string_lossy().to_string());
-        for (((Key { pre, sim, steady }, _), name), others) in
-            m.experiments.iter().zip(experiment_names).zip(&m.merged)
-        {
+        for (simulation, name) in m.simulations.iter().zip(experiment_names) {
             let _ = writeln!(text, "[[experiments]]");
             let _ = writeln!(text, "name = \"{name}\"");
-            if !others.is_empty() {
+            if !simulation.also.is_empty() {
                 // The conditions that set the same values: one simulation, their names too.
-                let quoted: Vec<String> = others.iter().map(|o| format!("\"{o}\"")).collect();
+                let quoted: Vec<String> =
+                    simulation.also.iter().map(|o| format!("\"{o}\"")).collect();
                 let _ = writeln!(text, "also = [{}]", quoted.join(", "));
             }
             let _ = writeln!(text, "file = \"{measurement_file}#{name}\"");
-            let (set, initial) =
-                self.condition_settings(sim, parameters, &d.states, pre.as_deref())?;
+            let (set, initial) = &simulation.settings;
             if !set.is_empty() {
                 let _ = writeln!(text, "set = {{ {} }}", set.join(", "));
             }
-            if let Some(pre) = pre {
-                let (set, _) = self.condition_settings(pre, parameters, &d.states, None)?;
-                let _ = writeln!(text, "preequilibrate = {{ {} }}", set.join(", "));
+            if let Some(pre) = &simulation.preequilibrate {
+                let _ = writeln!(text, "preequilibrate = {{ {} }}", pre.join(", "));
             }
             if !initial.is_empty() {
                 let _ = writeln!(text, "initial = {{ {} }}", initial.join(", "));
             }
-            if *steady {
+            if simulation.steady {
                 let _ = writeln!(text, "steady = true");
             }
             let _ = writeln!(text);
