@@ -449,7 +449,8 @@ impl Model {
             other.extend(e.uses.iter().map(String::as_str));
         }
         for x in &f.experiments {
-            for (_, v, _) in x.set.iter().chain(&x.initial) {
+            for (_, v, _) in x.set.iter().chain(&x.initial).chain(x.preequilibrate.iter().flatten())
+            {
                 if let SetValue::Expression(e) = v {
                     other.extend(e.uses.iter().map(String::as_str));
                 }

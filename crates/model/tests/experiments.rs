@@ -154,6 +154,22 @@ fn a_valid_file_is_the_problem_it_describes() {
     let v = problem.values_at(&problem.unknowns().coordinates(&problem.guesses()));
     let starts: Vec<f64> = problem.experiments().iter().map(|e| e.point(&v).0[0]).collect();
     assert_eq!(starts, [1.0, 5.0]);
+    // A σ that also enters a setting moves the model, so it is no pure scale: the methods
+    // move it, whichever key the setting is under.
+    for key in ["set", "preequilibrate", "initial"] {
+        let other = match key {
+            "initial" => "initial = { B = \"s\" }",
+            _ => &format!("{key} = {{ dose = \"s\" }}"),
+        };
+        let model = format!(
+            "{TWO}[[experiments]]\nname = \"third\"\nfile = \"low.csv\"\nset = {{ dose = 2.0 }}\n{other}\n"
+        );
+        let model = model.replace("set = { dose = 2.0 }\nset = ", "set = ");
+        std::fs::write(&path, model).unwrap();
+        let problem = Model::load(&path).unwrap().problem(None).unwrap();
+        assert_eq!(problem.names(), ["k", "s"], "{key}");
+        assert!(problem.scales().is_empty(), "{key}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
