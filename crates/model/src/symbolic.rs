@@ -547,6 +547,15 @@ fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (T
     (Tape::new((n, np, nu), constants, code), registers)
 }
 
+/// Whether the functions do not change with t at fixed y, α and u: their derivative with
+/// respect to t simplifies to the constant 0. A switch in time (`if(le(t, 24), a, b)`) is
+/// constant in t between its stops, where the integrators evaluate it.
+pub fn independent_of_time(functions: &[Program]) -> bool {
+    let mut graph = Graph::default();
+    let roots: Vec<Id> = functions.iter().map(|f| graph.program(f)).collect();
+    graph.derivatives(&roots, Slot::Time).into_iter().all(|d| graph.is_zero(d))
+}
+
 /// Functions f(t, y, α, u) (a model's right-hand side or its outputs) with their symbolic
 /// Jacobian [∂f/∂y | ∂f/∂α], evaluated as one [`Tape`]: compiled to machine code with the
 /// `jit` feature (where Cranelift supports the host), else interpreted.
@@ -697,6 +706,22 @@ mod tests {
             _ => None,
         };
         texts.iter().map(|t| Program::compile(&parse(t).unwrap(), &resolve).unwrap()).collect()
+    }
+
+    /// t written in an equation makes it depend on time, unless it cancels or only switches
+    /// it (constant between the stops, where the integrators evaluate it).
+    #[test]
+    fn dependence_on_time() {
+        for (texts, free) in [
+            (&["c * (V - V^3 / 3 + R)", "-(V - a + b * R) / c"][..], true),
+            (&["if(le(t, 24), a, b) * V", "lt(t - c, 0) * R"], true),
+            (&["V + t - t"], true),
+            (&["-a * V", "exp(-b * t) * R"], false),
+            (&["if(le(t, 24), t, b) * V"], false),
+            (&["V^t"], false),
+        ] {
+            assert_eq!(independent_of_time(&compile(texts)), free, "{texts:?}");
+        }
     }
 
     /// FitzHugh–Nagumo's Jacobian has the structure read off its equations, and the program

@@ -20,6 +20,8 @@ pub struct ModelSystem {
     inputs: Inputs,
     /// Where the right-hand side switches in time.
     switches: Arc<Vec<Switch>>,
+    /// Whether the equations do not mention t outside their switches in time.
+    time_free: bool,
 }
 
 impl ModelSystem {
@@ -42,6 +44,7 @@ impl ModelSystem {
         }
         Self {
             switches: Arc::new(switches),
+            time_free: crate::symbolic::independent_of_time(&equations),
             signature,
             equations: Arc::new(equations),
             outputs: Arc::new(outputs),
@@ -86,6 +89,9 @@ impl System for ModelSystem {
     }
     fn discontinuities(&self) -> &[f64] {
         self.inputs.jumps()
+    }
+    fn autonomous(&self) -> bool {
+        self.time_free && self.signature.n_inputs() == 0
     }
     fn switches(&self, p: &[f64]) -> Vec<f64> {
         self.switches.iter().map(|s| s.at(p)).collect()

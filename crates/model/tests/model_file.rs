@@ -817,3 +817,16 @@ fn a_file_with_every_section_reads_every_value() {
     assert_eq!(file.integrator, integrator);
     assert_eq!(file.states_at, at("[\"x\", \"y\"]"));
 }
+
+/// A model whose equations do not mention t and which has no inputs is autonomous, and its
+/// Rosenbrock steps skip ∂f/∂t; t in an equation, or an input, makes it depend on time.
+#[test]
+fn autonomy_of_the_examples() {
+    use sysid_ode::System;
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    for (example, autonomous) in [("kinetics", true), ("boehm", false), ("short-period", false)] {
+        let model = Model::load(&root.join(example).join("model.toml")).unwrap();
+        let problem = model.problem(None).unwrap();
+        assert_eq!(problem.system().autonomous(), autonomous, "{example}");
+    }
+}

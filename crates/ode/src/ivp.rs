@@ -127,6 +127,9 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
     fn describe(&self, i: usize) -> String {
         format!("state {}", self.sys.signature().states()[i])
     }
+    fn autonomous(&self) -> bool {
+        self.sys.autonomous()
+    }
     fn factor(
         &mut self,
         t: f64,
@@ -211,6 +214,11 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
 impl<S: System> Rhs for SensitivityRhs<'_, S> {
     fn dim(&self) -> usize {
         self.sys.signature().n_states() * (1 + self.wrt.len())
+    }
+
+    // The sensitivities' right-hand side J·S + ∂g/∂α is as free of t as g is.
+    fn autonomous(&self) -> bool {
+        self.sys.autonomous()
     }
 
     fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {

@@ -21,6 +21,11 @@ pub trait Rhs {
     fn states(&self) -> usize {
         self.dim()
     }
+    /// Whether f does not depend on t: a Rosenbrock step then takes ∂f/∂t = 0 without
+    /// evaluating f again. Default: false (∂f/∂t is differenced).
+    fn autonomous(&self) -> bool {
+        false
+    }
     /// For implicit (Rosenbrock) steps: evaluates the Jacobian ∂f/∂x at (t, x) exactly and
     /// factorises E = I·`inv_gamma_h` − ∂f/∂x. Default: unsupported (explicit schemes only).
     fn factor(

@@ -198,6 +198,13 @@ pub trait System: Send + Sync {
         let _ = (t, side, u);
     }
 
+    /// Whether g depends on t neither directly nor through inputs (between the
+    /// [`switches`](Self::switches)): a Rosenbrock step then takes ∂g/∂t = 0 instead of
+    /// differencing it. Default: false.
+    fn autonomous(&self) -> bool {
+        false
+    }
+
     /// Times where an input (or the right-hand side) is discontinuous, ascending.
     fn discontinuities(&self) -> &[f64] {
         &[]

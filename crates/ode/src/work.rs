@@ -85,8 +85,9 @@ impl<R: Rhs> Evaluator<'_, R> {
     }
 
     /// What every Rosenbrock step from (t, w.x) of size h starts with: E = I/(γh) − ∂f/∂x
-    /// factorised there, f(t, x) in `w.f0`, and ∂f/∂t in `w.ft` by a one-sided difference
-    /// quotient inside the step (exactly 0 for an autonomous system; see [`crate::rodas4`]).
+    /// factorised there, f(t, x) in `w.f0`, and ∂f/∂t in `w.ft`: 0 for an
+    /// [autonomous](Rhs::autonomous) right-hand side, else a one-sided difference quotient
+    /// inside the step (see [`crate::rodas4`]).
     pub(crate) fn rosenbrock_start(
         &mut self,
         w: &mut Work,
@@ -98,6 +99,10 @@ impl<R: Rhs> Evaluator<'_, R> {
         self.counts.jacobians += 1;
         self.rhs.factor(self.at(t), side, &w.x, 1.0 / (gamma * h))?;
         self.f(t, &w.x, &mut w.f0);
+        if self.rhs.autonomous() {
+            w.ft.fill(0.0);
+            return Ok(());
+        }
         let delta = (1e-7 * t.abs().max(1.0)).min(0.5 * h.abs()) * h.signum();
         let t_delta = t + delta;
         let delta = t_delta - t;

@@ -270,3 +270,46 @@ fn the_automatic_choice_switches_only_on_stiff_problems() {
         }
     }
 }
+
+/// Robertson's kinetics declared [autonomous](sysid_ode::System::autonomous): a Rosenbrock
+/// step takes ∂f/∂t = 0 instead of differencing f in t. The difference of an f that does not
+/// depend on t is exactly 0, so states and sensitivities are the same to the last bit, with
+/// one evaluation of f fewer per step tried.
+#[test]
+fn an_autonomous_system_skips_the_time_derivative() {
+    struct Declared(Robertson);
+    impl sysid_ode::System for Declared {
+        fn signature(&self) -> &sysid_ode::Signature {
+            self.0.signature()
+        }
+        fn rhs<T: sysid_ode::Scalar>(&self, t: f64, y: &[T], p: &[T], u: &[f64], dy: &mut [T]) {
+            self.0.rhs(t, y, p, u, dy);
+        }
+        fn autonomous(&self) -> bool {
+            true
+        }
+    }
+    let times = [1.0, 40.0, 4e5];
+    let wrt = [Wrt::Parameter(0), Wrt::Parameter(1), Wrt::InitialValue(0)];
+    for scheme in ROSENBROCK {
+        let integrator = scheme(1e-8, 1e-14);
+        let plain = Ivp::new(&Robertson::default(), 0.0, &ROBERTSON_Y0, &robertson_rates())
+            .solve_sensitivities(&integrator, &wrt, &times)
+            .unwrap();
+        let declared =
+            Ivp::new(&Declared(Robertson::default()), 0.0, &ROBERTSON_Y0, &robertson_rates())
+                .solve_sensitivities(&integrator, &wrt, &times)
+                .unwrap();
+        for m in 0..times.len() {
+            assert_eq!(plain.state(m), declared.state(m));
+            assert_eq!(plain.sensitivity_slice(m), declared.sensitivity_slice(m));
+        }
+        let (a, b) = (plain.counts(), declared.counts());
+        assert_eq!((a.steps, a.rejected_steps), (b.steps, b.rejected_steps));
+        assert_eq!(
+            a.rhs_evaluations - b.rhs_evaluations,
+            a.steps + a.rejected_steps,
+            "{a:?} {b:?}"
+        );
+    }
+}
