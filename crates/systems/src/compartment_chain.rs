@@ -32,6 +32,9 @@ impl System for Chain {
     fn signature(&self) -> &Signature {
         &self.signature
     }
+    fn autonomous(&self) -> bool {
+        true
+    }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         let n = self.n;
         let (k, d) = p.split_at(n - 1);

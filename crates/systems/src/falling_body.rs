@@ -20,6 +20,9 @@ impl System for FallingBody {
     fn signature(&self) -> &Signature {
         &self.0
     }
+    fn autonomous(&self) -> bool {
+        true
+    }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         dy[0] = y[1];
         dy[1] = p[0];

@@ -19,6 +19,9 @@ impl System for FitzHughNagumo {
     fn signature(&self) -> &Signature {
         &self.0
     }
+    fn autonomous(&self) -> bool {
+        true
+    }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         let (v, r) = (y[0], y[1]);
         let (a, b, c) = (p[0], p[1], p[2]);

@@ -27,6 +27,9 @@ impl System for LotkaVolterra {
     fn signature(&self) -> &Signature {
         &self.0
     }
+    fn autonomous(&self) -> bool {
+        true
+    }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         let (x, z) = (y[0], y[1]);
         let (a, b, g, d) = (p[0], p[1], p[2], p[3]);

@@ -24,6 +24,9 @@ impl System for Robertson {
     fn signature(&self) -> &Signature {
         &self.0
     }
+    fn autonomous(&self) -> bool {
+        true
+    }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         let (k1, k2, k3) = (p[0], p[1], p[2]);
         let slow = k3 * y[1] * y[2];

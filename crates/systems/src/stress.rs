@@ -54,6 +54,9 @@ impl System for Branching {
     fn signature(&self) -> &Signature {
         &self.0
     }
+    fn autonomous(&self) -> bool {
+        true
+    }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         dy[0] = -(p[0] + p[1]) * y[0];
         dy[1] = p[0] * y[0];
@@ -149,6 +152,9 @@ impl System for Consecutive {
     fn signature(&self) -> &Signature {
         &self.0
     }
+    fn autonomous(&self) -> bool {
+        true
+    }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         dy[0] = -p[0] * y[0];
         dy[1] = p[0] * y[0] - p[1] * y[1];
@@ -228,6 +234,9 @@ impl Default for TwoDecays {
 impl System for TwoDecays {
     fn signature(&self) -> &Signature {
         &self.0
+    }
+    fn autonomous(&self) -> bool {
+        true
     }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         dy[0] = -p[0] * y[0];

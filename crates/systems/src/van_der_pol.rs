@@ -19,6 +19,9 @@ impl System for VanDerPol {
     fn signature(&self) -> &Signature {
         &self.0
     }
+    fn autonomous(&self) -> bool {
+        true
+    }
     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
         let (x, v, mu) = (y[0], y[1], p[0]);
         dy[0] = v;
