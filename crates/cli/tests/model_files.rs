@@ -618,8 +618,9 @@ fn several_experiments_from_the_command_line() {
 }
 
 /// A switch time as an unknown: x' = if(le(t, tau), a, −k·x) fitted to noise-free data of
-/// τ = 1.5 from τ = 1.2 returns τ, certified. Without the sensitivity jump at the switch,
-/// ∂r/∂τ would be 0 and τ would never move (or a zero gradient would certify the guess).
+/// τ = 1.5 from τ = 1.2 returns τ, certified, by Goodman's method and by quasilinearization.
+/// Without the sensitivity jump at the switch, ∂r/∂τ would be 0 and τ would never move (or
+/// a zero gradient would certify the guess).
 #[test]
 fn a_switch_time_is_estimated() {
     let model = r#"states = ["x"]
@@ -643,12 +644,21 @@ file = "data.csv"
         data.push_str(&format!("{t},{}\n", x(t)));
     }
     let case = Case::new("switch-time", model, &data);
-    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let tau = json["estimates"]["tau"].as_f64().unwrap();
-    assert!((tau - 1.5).abs() < 1e-6, "tau = {tau}");
-    assert_eq!(json["converged"], true, "{json}");
+    for method in ["goodman", "quasilinearization"] {
+        let out = sysid(&["fit", "--model", &case.model(), "--method", method, "--format", "json"]);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let tau = json["estimates"]["tau"].as_f64().unwrap();
+        assert!((tau - 1.5).abs() < 1e-6, "{method}: tau = {tau}");
+        assert_eq!(json["converged"], true, "{json}");
+        if method == "quasilinearization" {
+            // Its own steps, each from a linear family whose Φ jumps at the switch as the
+            // sensitivity does (without the jump Φ_τ = 0, the least squares is singular and
+            // every step is the safeguard's, which has no linear cost).
+            let history = json["history"].as_array().unwrap();
+            assert!(history[1..].iter().all(|h| h["linear_cost"].is_number()), "{json}");
+        }
+    }
 }
 
 /// `also`: an experiment answers to other names too (the PEtab conditions merged into it):

@@ -418,15 +418,22 @@ impl<'a, S: System> Ivp<'a, S> {
 
     /// The discontinuities and the switches at this problem's parameters, ascending.
     fn stops(&self) -> Vec<f64> {
-        let mut stops = self.system.discontinuities().to_vec();
-        let switches = self.system.switches(self.p);
-        if !switches.is_empty() {
-            stops.extend(switches.into_iter().filter(|t| t.is_finite()));
-            stops.sort_by(f64::total_cmp);
-            stops.dedup();
-        }
-        stops
+        stops(self.system, self.p)
     }
+}
+
+/// Where an integration of `system` at the parameters `p` stops: the inputs'
+/// [discontinuities](System::discontinuities) and the right-hand side's
+/// [switches](System::switches), ascending.
+pub fn stops<S: System>(system: &S, p: &[f64]) -> Vec<f64> {
+    let mut stops = system.discontinuities().to_vec();
+    let switches = system.switches(p);
+    if !switches.is_empty() {
+        stops.extend(switches.into_iter().filter(|t| t.is_finite()));
+        stops.sort_by(f64::total_cmp);
+        stops.dedup();
+    }
+    stops
 }
 
 fn check_wrt<S: System>(sys: &S, wrt: &[Wrt]) -> Result<(), OdeError> {

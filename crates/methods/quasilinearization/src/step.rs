@@ -21,7 +21,7 @@ use nalgebra::{DMatrix, DVector};
 use sysid_core::{LinearLeastSquares, Linearization, Planned, Singular, minimise_in_box};
 use sysid_ode::{
     Counts, DenseSolution, FactorError, Function, Integrator, IterationMatrix, JacobianProducts,
-    Observable, OdeError, Rhs, Side, System, integrate,
+    Observable, OdeError, Rhs, Side, System, integrate, stops,
 };
 
 use crate::trajectory::{Column, Layout, Trajectory};
@@ -43,6 +43,10 @@ struct LinearRhs<'a, S> {
     /// (allocated on the first).
     p: Vec<f64>,
     implicit: Option<Box<IterationMatrix>>,
+    /// The parameters' directions ([`parameter_directions`]) and the switches in time that
+    /// move with a parameter (τ, q, ∂τ/∂α_q) at `p`.
+    vp: Vec<f64>,
+    moving: Vec<(f64, usize, f64)>,
 }
 
 /// The directions of the parameters, n_α × (k + 1) row by row: column j < k is the θ row of
@@ -79,6 +83,8 @@ impl<'a, S: System> LinearRhs<'a, S> {
             vy: vec![0.0; n * (k + 1)],
             g: vec![0.0; n],
             jv: vec![0.0; n * (k + 1)],
+            moving: sys.moving_switches(&p),
+            vp,
             p,
             implicit: None,
         }
@@ -141,6 +147,39 @@ impl<S: System> Rhs for LinearRhs<'_, S> {
         self.n
     }
 
+    /// At a switch τ(α_q), where the model's right-hand side changes from g₋ to g₊ along
+    /// x_k, the linearised jump (g₋ − g₊)·∂τ/∂α_q·(α_q − α_q,k): each column of Φ jumps by
+    /// (g₋ − g₊)·∂τ/∂α_q times its direction in α_q, and p by the same times the direction's
+    /// column p_θ − θ_k (as the sensitivities jump; `dir` turns it round going backwards).
+    fn cross(&mut self, t: f64, w: &mut [f64], dir: f64) {
+        if !self.moving.iter().any(|m| m.0.to_bits() == t.to_bits()) {
+            return;
+        }
+        let (n, k, kk) = (self.n, self.k, self.k + 1);
+        self.previous.eval(t, &mut self.hint, &mut self.y);
+        let mut jump = vec![0.0; n];
+        for (sign, (at, side)) in
+            [(1.0, (t.next_down(), Side::Before)), (-1.0, (t.next_up(), Side::After))]
+        {
+            self.sys.input_values(at, side, &mut self.u);
+            self.sys.rhs(at, &self.y, &self.p, &self.u, &mut self.g);
+            for i in 0..n {
+                jump[i] += sign * self.g[i];
+            }
+        }
+        let (p, phi) = w.split_at_mut(n);
+        for &(_, q, slope) in self.moving.iter().filter(|m| m.0.to_bits() == t.to_bits()) {
+            let direction = &self.vp[q * kk..(q + 1) * kk];
+            for i in 0..n {
+                let d = dir * jump[i] * slope;
+                p[i] += d * direction[k];
+                for j in 0..k {
+                    phi[i * k + j] += d * direction[j];
+                }
+            }
+        }
+    }
+
     fn describe(&self, i: usize) -> String {
         let sig = self.sys.signature();
         if i < self.n {
@@ -188,15 +227,13 @@ pub fn integrate_family<S: System>(
     }
     let t0 = e.t0();
     let (t_lo, t_hi) = e.span();
+    let stops = stops(sys, &rhs.p);
     let mut dense = DenseSolution::new(w0.len());
     let mut counts = Counts::default();
     for t_end in [t_hi, t_lo] {
         if (t_end - t0).abs() > 0.0 {
             counts +=
-                integrate(integrator, &mut rhs, (t0, &w0), t_end, sys.discontinuities(), |s| {
-                    dense.push(s)
-                })?
-                .0;
+                integrate(integrator, &mut rhs, (t0, &w0), t_end, &stops, |s| dense.push(s))?.0;
         }
     }
     dense.finish();
