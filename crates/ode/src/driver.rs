@@ -49,12 +49,17 @@ pub(crate) fn integrate_selected<R: Rhs>(
         return Ok((run.ev.counts, x0.to_vec()));
     }
     let ends = segment_ends(t0, t_end, stops);
+    // t0 and t_end may be stops themselves (a switch at the last measurement): stages there
+    // take the right-hand side from inside, as at the stops between.
+    let at_stop = |t: f64| stops.iter().any(|&s| (s - t).abs() <= resolution(t));
+    let (from_stop, to_stop) = (at_stop(t0), at_stop(t_end));
     for (i, &seg_end) in ends.iter().enumerate() {
         if i > 0 {
             let dir = run.dir;
             run.ev.rhs.cross(ends[i - 1], &mut run.work.x, dir);
         }
-        run.segment(seg_end, i > 0)?;
+        let last = i + 1 == ends.len();
+        run.segment(seg_end, (i > 0 || from_stop, !last || to_stop))?;
     }
     Ok((run.ev.counts, run.work.x))
 }
@@ -83,11 +88,15 @@ fn check_inputs<R: Rhs>(
     Ok(())
 }
 
+/// How close to t a stop is merged with it: no step fits in between.
+fn resolution(t: f64) -> f64 {
+    64.0 * f64::EPSILON * t.abs().max(1.0)
+}
+
 /// Segment ends in the direction of integration, t_end last: the stops strictly between t0
 /// and t_end, except those too close to either to take a step in between (merged with it).
 fn segment_ends(t0: f64, t_end: f64, stops: &[f64]) -> Vec<f64> {
     let dir = (t_end - t0).signum();
-    let resolution = |t: f64| 64.0 * f64::EPSILON * t.abs().max(1.0);
     let mut ends: Vec<f64> = stops
         .iter()
         .copied()
@@ -223,10 +232,11 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         }
     }
 
-    /// Integrates from t to `seg_end`, inside which the right-hand side is smooth.
-    fn segment(&mut self, seg_end: f64, after_stop: bool) -> Result<(), OdeError> {
+    /// Integrates from t to `seg_end`, inside which the right-hand side is smooth; `stops`
+    /// says whether t and `seg_end` are stops (discontinuities or switches).
+    fn segment(&mut self, seg_end: f64, stops: (bool, bool)) -> Result<(), OdeError> {
         self.ev.seg = (self.t, seg_end);
-        self.ev.stops = (after_stop, seg_end.to_bits() != self.t_end.to_bits());
+        self.ev.stops = stops;
         // A fresh first stage: there is none yet at t0, and at a discontinuity the last step's
         // f(t, x) is the limit from the other side.
         self.ev.f(self.t, &self.work.x, &mut self.work.k[0]);

@@ -166,6 +166,43 @@ fn steps_stop_on_input_discontinuities() {
     }
 }
 
+/// x' = 1 before t = 1 and −1000 from it on, a switch written in the right-hand side (as a
+/// model file's `if(lt(t, 1), 1, -1000)`) and declared as a stop.
+struct Switched(Signature);
+impl System for Switched {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, t: f64, _y: &[T], _p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = T::from(if t < 1.0 { 1.0 } else { -1000.0 });
+    }
+    fn switches(&self, _p: &[f64]) -> Vec<f64> {
+        vec![1.0]
+    }
+}
+
+/// An integration that ends (or starts) on a switch takes the right-hand side there from
+/// inside its span, as at a switch between: x(1) = 1 from 0, and x(0) = 0 back from
+/// x(1) = 1, exactly up to rounding. Before, the last stage evaluated the other branch and
+/// the steps shrank to nothing at t = 1.
+#[test]
+fn an_integration_may_end_or_start_on_a_switch() {
+    let sys = Switched(Signature::new(&["x"], &[]));
+    let integrators = [
+        Integrator::dopri5(1e-8, 1e-10),
+        Integrator::rk4(0.3),
+        Integrator::rodas4(1e-8, 1e-10),
+        Integrator::rodas5p(1e-8, 1e-10),
+    ];
+    for integrator in integrators {
+        let forward = Ivp::new(&sys, 0.0, &[0.0], &[]).solve(&integrator, &[0.5, 1.0]).unwrap();
+        assert_close_abs(forward.state(1)[0], 1.0, 1e-13);
+        let back = Ivp::new(&sys, 1.0, &[1.0], &[]).solve(&integrator, &[0.0]).unwrap();
+        assert_close_abs(back.state(0)[0], 0.0, 1e-13);
+        assert!(forward.counts().steps < 20 && back.counts().steps < 20, "{integrator:?}");
+    }
+}
+
 /// y' = y²: y = 1/(1 − t) blows up at t = 1.
 struct BlowUp(Signature);
 impl System for BlowUp {
