@@ -6,7 +6,7 @@ use anyhow::Context as _;
 use sysid_core::{Estimate, Expected, Failure, FitRecord, Method, Problem, Termination};
 use sysid_montecarlo::MultistartOptions;
 use sysid_montecarlo::multistart::Starts;
-use sysid_ode::System;
+use sysid_ode::{OdeError, System};
 use sysid_registry::{Boxed, Registry, Settings};
 use sysid_systems::{Case, Visit};
 
@@ -118,7 +118,7 @@ pub fn fit<S: System>(
 ) -> anyhow::Result<Estimate> {
     let m = method::<S>(name, settings)?;
     let estimate = m.fit(problem)?;
-    if let Some(message) = unusable_start(&estimate, m.start_point()) {
+    if let Some(message) = unusable_start(problem, &estimate, m.start_point()) {
         anyhow::bail!(message);
     }
     Ok(estimate)
@@ -151,7 +151,7 @@ where
     M: Method<S> + Sync + ?Sized,
 {
     let run = sysid_montecarlo::multistart(m, problem, options)?;
-    if let Some(message) = unusable_start(&run.best, m.start_point()) {
+    if let Some(message) = unusable_start(problem, &run.best, m.start_point()) {
         anyhow::bail!("every start fails; the best: {message}");
     }
     Ok((run.best, run.starts))
@@ -168,10 +168,24 @@ pub fn with_starts(record: FitRecord<'_>, starts: Option<&Starts>) -> serde_json
 
 /// Why the start cannot be used, if it cannot; `start_point` is what the method integrates
 /// from there ([`Method::start_point`]).
-fn unusable_start(e: &Estimate, start_point: &str) -> Option<String> {
+fn unusable_start<S: System>(
+    problem: &Problem<S>,
+    e: &Estimate,
+    start_point: &str,
+) -> Option<String> {
     match &e.termination {
-        Termination::StartFailed(Failure::Integration { error, .. }) => {
-            Some(format!("the model cannot be integrated from {start_point}: {error}"))
+        Termination::StartFailed(Failure::Integration { error, at }) => {
+            let mut message = format!("the model cannot be integrated from {start_point}: {error}");
+            // Steps that shrink to nothing with the sensitivities, where the model alone
+            // integrates: say so, and what usually causes it.
+            if matches!(error, OdeError::StepSizeTooSmall { .. })
+                && problem.cost(&problem.unknowns().coordinates(at)).is_ok()
+            {
+                message.push_str(
+                    " (the model alone integrates there, its sensitivities do not: this happens where the right-hand side switches on a state, with min, max, abs or a comparison of states, since the integrators do not locate such switches and the sensitivities change abruptly there)",
+                );
+            }
+            Some(message)
         }
         Termination::StartFailed(failure) => {
             Some(format!("the starting guess cannot be used: {failure}"))

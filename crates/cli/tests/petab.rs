@@ -26,17 +26,21 @@ fn fit_at_nominal_prints_the_nll() {
     assert_eq!(json["iterations"].as_u64(), Some(0));
 }
 
-/// A feature that is not supported, a missing file, and --petab with --model or --data:
-/// exit 2, one line naming it.
+/// A start whose sensitivities cannot be integrated (Smith's switch on a state), a missing
+/// file, and --petab with --model or --data: exit 2, one line naming it. Smith itself, with
+/// its events, simulates: its event-set species is the state `Ins_before_events`.
 #[test]
 fn refusals_exit_2_with_one_line() {
     let smith = problem("Smith_BMCSystBiol2013");
     let boehm = problem("Boehm_JProteomeRes2014");
+    let out = sysid(&["simulate", "--petab", smith.as_str(), "--times", "0:30:10"]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = String::from_utf8_lossy(&out.stdout).to_string();
+    assert!(csv.lines().next().is_some_and(|h| h.contains(",Ins_before_events,")), "{csv}");
     for (args, expected) in [
-        (vec!["fit", "--petab", smith.as_str()], "events are not supported"),
         (
-            vec!["simulate", "--petab", smith.as_str(), "--times", "0:1:1"],
-            "events are not supported",
+            vec!["fit", "--petab", smith.as_str()],
+            "the model alone integrates there, its sensitivities do not",
         ),
         (vec!["fit", "--petab", "no/such.yaml"], "no/such.yaml: cannot be read"),
         (vec!["fit", "--petab", boehm.as_str(), "--model", "m.toml"], "cannot be used with"),

@@ -376,6 +376,21 @@ impl<S: System> Problem<S> {
         self.experiment_nlls(lin).map(|list| list.iter().sum())
     }
 
+    /// The negative log-likelihood at z from a plain integration of the model (no
+    /// sensitivities), as [`nll`](Self::nll) gives it from a linearization: for a point
+    /// where the sensitivities cannot be integrated but the model can.
+    pub fn nll_at(&self, z: &[f64]) -> Result<Option<f64>, OdeError> {
+        let rows = self.evaluate_rows(z, &self.integrator, false)?;
+        Ok(self
+            .experiments
+            .iter()
+            .zip(&rows)
+            .map(|(e, rows)| {
+                e.nll_offset().map(|o| 0.5 * rows.r.iter().map(|x| x * x).sum::<f64>() + o)
+            })
+            .sum())
+    }
+
     /// The negative log-likelihood of each experiment at a linearization's point.
     pub fn experiment_nlls(&self, lin: &Linearization) -> Option<Vec<f64>> {
         self.experiments

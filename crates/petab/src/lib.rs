@@ -38,7 +38,7 @@ use serde::Deserialize;
 use sysid_model::table::Table;
 use sysid_model::{Model, ModelError, ModelFile};
 
-use math::{Math, parse_formula};
+use math::{Math, Rel, parse_formula};
 use sbml::{Initial, Sbml};
 use tsv::{Cell, Tsv};
 
@@ -234,6 +234,9 @@ struct Builder<'a> {
     names: HashMap<String, String>,
     /// Assignment rules and the initial assignments of parameters, resolved.
     rules: HashMap<String, Math>,
+    /// What the events make of the variables they set: a switch in time between the
+    /// variable's own value (before any event) and the events' values.
+    events: HashMap<String, Math>,
     parameters: BTreeMap<String, (Parameter, usize)>,
     observables: HashMap<String, Observable>,
     /// The species a condition table sets the initial value of, each with the two known
@@ -264,6 +267,7 @@ impl<'a> Builder<'a> {
             yaml,
             names: HashMap::new(),
             rules: HashMap::new(),
+            events: HashMap::new(),
             parameters: BTreeMap::new(),
             observables: HashMap::new(),
             overrides: Vec::new(),
@@ -273,6 +277,7 @@ impl<'a> Builder<'a> {
         b.name_ids();
         b.name_overrides();
         b.resolve_rules()?;
+        b.resolve_events()?;
         Ok(b)
     }
 
@@ -375,9 +380,13 @@ impl<'a> Builder<'a> {
     }
 
     /// Gives every SBML and PEtab id its model-file name: itself, or with trailing `_`s
-    /// when it is a reserved word.
+    /// when it is a reserved word. A species that events set is a state holding its value
+    /// before any event (the events' values enter the equations as a switch in time), so
+    /// its name says so: `<id>_before_events`.
     fn name_ids(&mut self) {
         let s = self.sbml;
+        let set_by_events =
+            |id: &str| s.events.iter().any(|e| e.assignments.iter().any(|a| a.0 == id));
         let ids = s
             .species
             .iter()
@@ -392,6 +401,9 @@ impl<'a> Builder<'a> {
                 continue;
             }
             let mut name = id.clone();
+            if s.species.iter().any(|x| x.id == id) && set_by_events(&id) {
+                name.push_str("_before_events");
+            }
             while RESERVED.contains(&name.as_str()) || taken.contains(&name) {
                 name.push('_');
             }
@@ -412,7 +424,7 @@ impl<'a> Builder<'a> {
             .tables
             .conditions
             .iter()
-            .flat_map(|t| t.headers().iter().skip(2).cloned())
+            .flat_map(|t| t.headers().iter().filter(|h| !is_condition_label(h)).cloned())
             .filter(|c| self.sbml.species.iter().any(|x| &x.id == c))
             .collect();
         for species in columns {
@@ -471,6 +483,132 @@ impl<'a> Builder<'a> {
         m.substitute(&|n| self.rules.get(n).cloned())
     }
 
+    /// An expression of the dynamics (an equation, an observable, a σ): the rules
+    /// substituted, and each variable that events set replaced by its switch in time.
+    fn dynamic(&self, m: &Math) -> Math {
+        self.ruled(m).substitute(&|n| self.events.get(n).cloned())
+    }
+
+    /// Events that fire when time reaches a value (`time ≥ τ`, τ a number or an expression
+    /// of parameters) and set variables nothing else changes (a boundary or constant
+    /// species, a parameter without rules) to values of parameters: the integration's
+    /// state never jumps, so each such variable X is written as a switch in time,
+    ///
+    /// X(t) = X + Σᵢ firedᵢ(t)·(vᵢ − X),
+    ///
+    /// firedᵢ(t) being 1 where event i has fired (t ≥ τᵢ, and τᵢ > 0 where its trigger
+    /// counts as true before the start) and no later one setting X has (of two at the same
+    /// time, the later in the file). X itself keeps its value before any event. The
+    /// integrators stop at each τᵢ, where the switch is; a τᵢ that is estimated moves
+    /// the switch with its sensitivity. Anything else is refused, naming the event.
+    fn resolve_events(&mut self) -> Result<(), ModelError> {
+        let s = self.sbml;
+        let species = |n: &str| s.species.iter().find(|x| x.id == n);
+        let mut by_variable: Vec<(String, Vec<Firing>)> = Vec::new();
+        for event in &s.events {
+            let refuse = |message: String| ModelError {
+                file: self.sbml_file.clone(),
+                line: Some(event.at.0),
+                column: Some(event.at.1),
+                message: format!("event `{}`: {message}", event.id),
+            };
+            let fixed = |m: &Math| {
+                let mut time = false;
+                m.visit(&mut |x| time |= matches!(x, Math::Time));
+                !time && m.names().iter().all(|n| species(n).is_none())
+            };
+            let trigger = self.ruled(&event.trigger);
+            let (rel, tau) = match &trigger {
+                Math::Compare(rel @ (Rel::Ge | Rel::Gt), a, b) if **a == Math::Time => {
+                    (*rel, (**b).clone())
+                }
+                Math::Compare(Rel::Le, a, b) if **b == Math::Time => (Rel::Ge, (**a).clone()),
+                Math::Compare(Rel::Lt, a, b) if **b == Math::Time => (Rel::Gt, (**a).clone()),
+                _ => {
+                    return Err(refuse(
+                        "only triggers that fire when time reaches a value (time ≥ τ) are supported"
+                            .into(),
+                    ));
+                }
+            };
+            if !fixed(&tau) {
+                return Err(refuse(
+                    "its trigger time depends on species or time, which is not supported".into(),
+                ));
+            }
+            for (variable, value) in &event.assignments {
+                let why = match species(variable) {
+                    Some(x) if !x.fixed => Some("reactions change"),
+                    None if !s.parameters.iter().any(|p| &p.0 == variable) => {
+                        Some("is no species or parameter")
+                    }
+                    _ if self.rules.contains_key(variable)
+                        || s.rate_rules.iter().any(|r| &r.0 == variable) =>
+                    {
+                        Some("a rule gives")
+                    }
+                    _ => None,
+                };
+                if let Some(why) = why {
+                    return Err(refuse(format!(
+                        "it sets `{variable}`, which {why}: events may only set what nothing else changes (boundary or constant species, parameters without rules), since resetting a state is not supported"
+                    )));
+                }
+                let value = self.ruled(value);
+                let set =
+                    |n: &String| s.events.iter().any(|e| e.assignments.iter().any(|a| &a.0 == n));
+                if !fixed(&value) || value.names().iter().any(set) {
+                    return Err(refuse(format!(
+                        "the value it gives `{variable}` depends on species, time or variables that events set, which is not supported"
+                    )));
+                }
+                let entry = match by_variable.iter().position(|(v, _)| v == variable) {
+                    Some(i) => &mut by_variable[i].1,
+                    None => {
+                        by_variable.push((variable.clone(), Vec::new()));
+                        &mut by_variable.last_mut().expect("pushed").1
+                    }
+                };
+                entry.push(Firing {
+                    rel,
+                    tau: tau.clone(),
+                    value,
+                    initially_true: event.initially_true,
+                });
+            }
+        }
+        for (variable, events) in by_variable {
+            let x = || Math::Name(variable.clone());
+            let compare = |rel: Rel, a: Math, b: Math| Math::Compare(rel, Box::new(a), Box::new(b));
+            // Where event i has fired: t reached τ (after the start, where its trigger counts
+            // as true before it).
+            let reached = |f: &Firing| {
+                let mut factors = vec![compare(f.rel, Math::Time, f.tau.clone())];
+                if f.initially_true {
+                    factors.push(compare(Rel::Gt, f.tau.clone(), Math::Num(0.0)));
+                }
+                factors
+            };
+            let mut terms = vec![x()];
+            for (i, event) in events.iter().enumerate() {
+                let mut factors = reached(event);
+                for (j, later) in events.iter().enumerate().filter(|(j, _)| *j != i) {
+                    // Event j supersedes i where it has fired too, at a later time (or at
+                    // the same time, coming later in the file).
+                    let order = if j > i { Rel::Ge } else { Rel::Gt };
+                    let mut overrides = reached(later);
+                    overrides.push(compare(order, later.tau.clone(), event.tau.clone()));
+                    factors
+                        .push(Math::Sub(Box::new(Math::Num(1.0)), Box::new(Math::Mul(overrides))));
+                }
+                factors.push(Math::Sub(Box::new(event.value.clone()), Box::new(x())));
+                terms.push(Math::Mul(factors));
+            }
+            self.events.insert(variable, Math::Add(terms));
+        }
+        Ok(())
+    }
+
     fn build(self) -> Result<Imported, ModelError> {
         let dynamics = self.dynamics()?;
         let measured = self.measured(&dynamics.states)?;
@@ -517,7 +655,7 @@ impl<'a> Builder<'a> {
         let mut initial: Vec<(String, Math)> = Vec::new();
         for x in &species {
             let equation = match rate_ruled(&x.id) {
-                Some(r) => self.ruled(r),
+                Some(r) => self.dynamic(r),
                 None => self.reaction_equation(x),
             };
             equations.push((x.id.clone(), equation));
@@ -536,7 +674,7 @@ impl<'a> Builder<'a> {
             initial.push((x.id.clone(), m));
         }
         for p in ruled_parameters {
-            equations.push((p.0.clone(), self.ruled(rate_ruled(&p.0).expect("filtered"))));
+            equations.push((p.0.clone(), self.dynamic(rate_ruled(&p.0).expect("filtered"))));
             let m = s
                 .initial_assignments
                 .iter()
@@ -565,7 +703,7 @@ impl<'a> Builder<'a> {
             };
             let net = count(&r.products) - count(&r.reactants);
             if net != 0.0 {
-                let rate = self.ruled(&r.rate);
+                let rate = self.dynamic(&r.rate);
                 terms.push(match net {
                     1.0 => rate,
                     -1.0 => Math::Neg(Box::new(rate)),
@@ -711,6 +849,15 @@ impl<'a> Builder<'a> {
         if time < 0.0 {
             return Err(time_cell.err(format!("time {time} is before the experiment starts at 0")));
         }
+        if pre.is_some()
+            && let Some(event) = self.sbml.events.first()
+        {
+            let c = t.cell_named(row, "preequilibrationConditionId").unwrap_or(time_cell);
+            return Err(c.err(format!(
+                "a preequilibration (or a steady state) in a model with events (event `{}`) is not supported",
+                event.id
+            )));
+        }
         let value_cell = t.cell(row, t.required("measurement")?);
         let value = value_cell.number()?;
         if !value.is_finite() {
@@ -724,8 +871,8 @@ impl<'a> Builder<'a> {
         }
         let formula = placeholders(t, row, oc, &observable.formula, "observable")?;
         let noise = placeholders(t, row, oc, &observable.noise, "noise")?;
-        let value_math = self.resolve_names(&self.ruled(&formula), oc, states, None)?;
-        let noise_math = self.resolve_names(&self.ruled(&noise), oc, states, Some(oc.text))?;
+        let value_math = self.resolve_names(&self.dynamic(&formula), oc, states, None)?;
+        let noise_math = self.resolve_names(&self.dynamic(&noise), oc, states, Some(oc.text))?;
         let output = Output {
             observable: oc.text.to_string(),
             value: value_math.render(&|n| self.name(n)),
@@ -1003,7 +1150,8 @@ impl<'a> Builder<'a> {
         let mut out = Vec::new();
         for t in &self.tables.conditions {
             for row in 0..t.rows.len() {
-                for c in 2..t.headers().len() {
+                for (c, _) in t.headers().iter().enumerate().filter(|(_, h)| !is_condition_label(h))
+                {
                     let cell = t.cell(row, c);
                     if !cell.is_blank() && tsv::parse_number(cell.text).is_none() {
                         out.push(self.name(cell.text));
@@ -1029,7 +1177,7 @@ impl<'a> Builder<'a> {
         for t in &self.tables.conditions {
             let Some(row) = condition_row(t, condition) else { continue };
             for (c, target) in t.headers().iter().enumerate() {
-                if target == "conditionId" || target == "conditionName" {
+                if is_condition_label(target) {
                     continue;
                 }
                 let cell = t.cell(row, c);
@@ -1129,6 +1277,21 @@ fn placeholders(
             observable.text
         ))),
     }
+}
+
+/// One event's setting of a variable: when t reaches τ (`rel` is ≥ or >), the value; whether
+/// its trigger counts as true before the start.
+struct Firing {
+    rel: Rel,
+    tau: Math,
+    value: Math,
+    initially_true: bool,
+}
+
+/// Whether a condition table's column names the condition (`conditionId`, the optional
+/// `conditionName`) rather than setting a parameter or species.
+fn is_condition_label(column: &str) -> bool {
+    column == "conditionId" || column == "conditionName"
 }
 
 /// Each experiment's name: its simulation condition's, and its preequilibration's too

@@ -88,7 +88,7 @@ impl Math {
         out
     }
 
-    fn visit(&self, f: &mut dyn FnMut(&Math)) {
+    pub(crate) fn visit(&self, f: &mut dyn FnMut(&Math)) {
         f(self);
         match self {
             Math::Num(_) | Math::Name(_) | Math::Time => {}

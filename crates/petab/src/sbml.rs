@@ -1,8 +1,9 @@
 //! The SBML subset the benchmark problems use, read with roxmltree: compartments, species,
 //! parameters, reactions with kinetic laws and local parameters, rate and assignment rules,
-//! initial assignments and function definitions, their MathML as [`Math`]. Anything else
-//! that changes the dynamics (events, algebraic rules, delays, fast reactions, rules on
-//! compartments) is refused naming the construct and the element's id.
+//! initial assignments, function definitions and events without delays, their MathML as
+//! [`Math`]. Anything else that changes the dynamics (algebraic rules, delays, fast
+//! reactions, rules on compartments) is refused naming the construct and the element's id;
+//! the importer refuses the events it cannot write as switches in time.
 
 use std::collections::HashMap;
 
@@ -49,6 +50,23 @@ pub struct Reaction {
     pub rate: Math,
 }
 
+/// An event: when its trigger becomes true, each assignment sets its variable.
+#[derive(Clone, Debug)]
+pub struct Event {
+    /// Its id.
+    pub id: String,
+    /// The trigger's condition.
+    pub trigger: Math,
+    /// Whether the trigger counts as true before the start, so that a trigger already true
+    /// at the start does not fire (SBML Level 3's `initialValue`; Level 2's events behave
+    /// as with `true`).
+    pub initially_true: bool,
+    /// (variable, value) of each event assignment.
+    pub assignments: Vec<(String, Math)>,
+    /// Line and column of the `<event>` element, for errors.
+    pub at: (usize, usize),
+}
+
 /// An SBML model, read.
 #[derive(Clone, Debug, Default)]
 pub struct Sbml {
@@ -66,6 +84,8 @@ pub struct Sbml {
     pub rate_rules: Vec<(String, Math)>,
     /// The reactions.
     pub reactions: Vec<Reaction>,
+    /// The events.
+    pub events: Vec<Event>,
 }
 
 struct Reader<'a> {
@@ -421,8 +441,28 @@ impl Sbml {
                 other => return Err(r.err(rule, format!("<{other}> is not supported"))),
             }
         }
-        if let Some(event) = list(model, "listOfEvents").next() {
-            return Err(r.err(event, format!("events are not supported (event `{}`)", id(event))));
+        for event in list(model, "listOfEvents") {
+            let eid = id(event).to_string();
+            if let Some(delay) = child(event, "delay") {
+                return Err(r.err(delay, format!("event `{eid}`: delays are not supported")));
+            }
+            let trigger = child(event, "trigger")
+                .ok_or_else(|| r.err(event, format!("event `{eid}` has no <trigger>")))?;
+            let initially_true = trigger.attribute("initialValue").is_none_or(|v| {
+                let v = v.trim();
+                v == "true" || v == "1"
+            });
+            let assignments = list(event, "listOfEventAssignments")
+                .map(|a| Ok((id(a).to_string(), r.math_of(a)?)))
+                .collect::<Result<Vec<_>, ModelError>>()?;
+            let pos = doc.text_pos_at(event.range().start);
+            out.events.push(Event {
+                id: eid,
+                trigger: r.math_of(trigger)?,
+                initially_true,
+                assignments,
+                at: (pos.row as usize, pos.col as usize),
+            });
         }
         if let Some(c) = list(model, "listOfConstraints").next() {
             return Err(r.err(c, "constraints are not supported"));
@@ -515,14 +555,63 @@ mod tests {
         assert_eq!(m.compartments, vec![("c".to_string(), 2.0)]);
     }
 
+    /// An event is read with its trigger and assignments; one without a trigger, or with a
+    /// delay, is refused naming it, at its line.
     #[test]
-    fn events_are_refused_by_name_with_their_line() {
-        let text = MODEL.replace(
-            "</listOfReactions>",
-            "</listOfReactions><listOfEvents><event id=\"pulse\"/></listOfEvents>",
+    fn events_are_read_and_their_faults_located() {
+        let with = |event: &str| {
+            MODEL.replace(
+                "</listOfReactions>",
+                &format!("</listOfReactions><listOfEvents>{event}</listOfEvents>"),
+            )
+        };
+        let math = |body: &str| {
+            format!("<math xmlns=\"http://www.w3.org/1998/Math/MathML\">{body}</math>")
+        };
+        let assignment = format!(
+            "<listOfEventAssignments><eventAssignment variable=\"A\">{}</eventAssignment></listOfEventAssignments>",
+            math("<cn> 0 </cn>")
         );
-        let e = Sbml::parse(&text, "m.xml").unwrap_err();
-        assert!(e.message.contains("events are not supported (event `pulse`)"), "{e}");
-        assert!(e.line.is_some());
+        let trigger = |attributes: &str| {
+            format!(
+                "<trigger{attributes}>{}</trigger>",
+                math(
+                    "<apply><geq/><csymbol definitionURL=\"http://www.sbml.org/sbml/symbols/time\"> t </csymbol><cn> 2 </cn></apply>"
+                )
+            )
+        };
+        let m = Sbml::parse(
+            &with(&format!("<event id=\"pulse\">{}{assignment}</event>", trigger(""))),
+            "m.xml",
+        )
+        .expect("reads");
+        let e = &m.events[0];
+        assert_eq!((e.id.as_str(), e.initially_true), ("pulse", true));
+        assert_eq!(e.trigger.render(&|n| n.to_string()), "ge(t, 2e0)");
+        assert_eq!(e.assignments[0].0, "A");
+        let m = Sbml::parse(
+            &with(&format!(
+                "<event id=\"pulse\">{}{assignment}</event>",
+                trigger(" initialValue=\"false\"")
+            )),
+            "m.xml",
+        )
+        .expect("reads");
+        assert!(!m.events[0].initially_true);
+        for (event, message) in [
+            ("<event id=\"pulse\"/>".to_string(), "event `pulse` has no <trigger>"),
+            (
+                format!(
+                    "<event id=\"pulse\">{}<delay>{}</delay>{assignment}</event>",
+                    trigger(""),
+                    math("<cn> 1 </cn>")
+                ),
+                "event `pulse`: delays are not supported",
+            ),
+        ] {
+            let e = Sbml::parse(&with(&event), "m.xml").unwrap_err();
+            assert!(e.message.contains(message), "{e}");
+            assert!(e.line.is_some());
+        }
     }
 }

@@ -90,8 +90,13 @@ fn numbers(yaml: &Path, out: &Path, observer: &dyn Observer) -> Result<Numbers, 
     let problem = imported.model.problem(None).map_err(|e| e.to_string())?;
     let import_ms = started.elapsed().as_secs_f64() * 1e3;
     let z = problem.unknowns().coordinates(&problem.guesses());
-    let lin = problem.linearize(&z).map_err(|e| e.to_string())?;
-    let nominal = problem.nll(&lin).ok_or("no likelihood")?;
+    // Where the sensitivities cannot be integrated at nominal (a switch on a state), the
+    // model alone may be: its NLL, and the fits say why they cannot start.
+    let nominal = match problem.linearize(&z) {
+        Ok(lin) => problem.nll(&lin),
+        Err(_) => problem.nll_at(&z).map_err(|e| e.to_string())?,
+    };
+    let nominal = nominal.ok_or("no likelihood")?;
     let mut fits = Vec::new();
     let mut profiles = None;
     for m in methods() {

@@ -163,8 +163,8 @@ impl<S: System> Rhs for LinearRhs<'_, S> {
         {
             self.sys.input_values(at, side, &mut self.u);
             self.sys.rhs(at, &self.y, &self.p, &self.u, &mut self.g);
-            for i in 0..n {
-                jump[i] += sign * self.g[i];
+            for (j, g) in jump.iter_mut().zip(&self.g) {
+                *j += sign * g;
             }
         }
         let (p, phi) = w.split_at_mut(n);
