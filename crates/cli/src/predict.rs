@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use anyhow::bail;
 use clap::Args;
 use sysid_core::Problem;
+use sysid_core::format::shortest;
 use sysid_ode::System;
 
 use crate::Outcome;
@@ -129,9 +130,13 @@ impl WithProblem for Predict<'_> {
                 text += &format!("{t}");
                 for s in &states {
                     let y = s.values[m];
+                    let y_text = shortest(y);
                     match &s.half_width {
-                        Some(w) => text += &format!(",{y},{},{}", y - w[m], y + w[m]),
-                        None => text += &format!(",{y},,"),
+                        Some(w) => {
+                            text +=
+                                &format!(",{y_text},{},{}", shortest(y - w[m]), shortest(y + w[m]));
+                        }
+                        None => text += &format!(",{y_text},,"),
                     }
                 }
                 text += "\n";

@@ -28,7 +28,8 @@ fn fit_at_nominal_prints_the_nll() {
 
 /// A start whose sensitivities cannot be integrated (Smith's switch on a state), a missing
 /// file, and --petab with --model or --data: exit 2, one line naming it. Smith itself, with
-/// its events, simulates: its event-set species is the state `Ins_before_events`.
+/// its events, simulates: its event-set species is the state `Ins_before_events`, and its
+/// CSV keeps every digit in at most 24 characters a value.
 #[test]
 fn refusals_exit_2_with_one_line() {
     let smith = problem("Smith_BMCSystBiol2013");
@@ -37,6 +38,13 @@ fn refusals_exit_2_with_one_line() {
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let csv = String::from_utf8_lossy(&out.stdout).to_string();
     assert!(csv.lines().next().is_some_and(|h| h.contains(",Ins_before_events,")), "{csv}");
+    // Every value reads back, and a tiny one (Ins_InR falls to 1e-196 by t = 30) is written
+    // in exponent form, not as two hundred digits.
+    for line in csv.lines().skip(1) {
+        for cell in line.split(',').skip(1) {
+            assert!(cell.parse::<f64>().is_ok() && cell.len() <= 24, "`{cell}` in {line}");
+        }
+    }
     for (args, expected) in [
         (
             vec!["fit", "--petab", smith.as_str()],

@@ -1,8 +1,10 @@
 //! What `sysid simulate` writes: a model's trajectory at chosen values, and a data set, as
-//! CSV (a header row, time first, every digit kept).
+//! CSV (a header row, time first, every digit kept; exponent form outside [1e-4, 1e9), so
+//! that 1e-60 is not sixty zeros).
 
 use std::path::Path;
 
+use sysid_core::format::shortest;
 use sysid_core::{Data, Record, Samples};
 use sysid_ode::{Inputs, Ivp, Side, System};
 
@@ -110,13 +112,13 @@ impl Model {
                 }
                 text += &format!("{}", decimal(t));
                 for v in sol.state(m) {
-                    text += &format!(",{v}");
+                    text += &format!(",{}", shortest(*v));
                 }
                 if !h.is_empty() {
                     system.input_values(t, Side::After, &mut u);
                     system.outputs(t, sol.state(m), &p, &u, &mut h);
                     for v in &h {
-                        text += &format!(",{v}");
+                        text += &format!(",{}", shortest(*v));
                     }
                 }
                 text += "\n";
@@ -170,7 +172,7 @@ pub fn data_csv(data: &Data, intervals: usize) -> String {
         for (c, (_, points)) in columns.iter().enumerate() {
             out += ",";
             if points.get(cursor[c]).is_some_and(|p| p.0.total_cmp(&t).is_eq()) {
-                out += &format!("{}", points[cursor[c]].1);
+                out += &shortest(points[cursor[c]].1);
                 cursor[c] += 1;
             }
         }
