@@ -385,8 +385,6 @@ impl<'a> Builder<'a> {
     /// its name says so: `<id>_before_events`.
     fn name_ids(&mut self) {
         let s = self.sbml;
-        let set_by_events =
-            |id: &str| s.events.iter().any(|e| e.assignments.iter().any(|a| a.0 == id));
         let ids = s
             .species
             .iter()
@@ -401,7 +399,7 @@ impl<'a> Builder<'a> {
                 continue;
             }
             let mut name = id.clone();
-            if s.species.iter().any(|x| x.id == id) && set_by_events(&id) {
+            if s.species.iter().any(|x| x.id == id) && s.set_by_events(&id) {
                 name.push_str("_before_events");
             }
             while RESERVED.contains(&name.as_str()) || taken.contains(&name) {
@@ -555,9 +553,7 @@ impl<'a> Builder<'a> {
                     )));
                 }
                 let value = self.ruled(value);
-                let set =
-                    |n: &String| s.events.iter().any(|e| e.assignments.iter().any(|a| &a.0 == n));
-                if !fixed(&value) || value.names().iter().any(set) {
+                if !fixed(&value) || value.names().iter().any(|n| s.set_by_events(n)) {
                     return Err(refuse(format!(
                         "the value it gives `{variable}` depends on species, time or variables that events set, which is not supported"
                     )));

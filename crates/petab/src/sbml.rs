@@ -350,6 +350,11 @@ fn id<'a>(node: Node<'a, '_>) -> &'a str {
 }
 
 impl Sbml {
+    /// Whether an event sets `id`.
+    pub fn set_by_events(&self, id: &str) -> bool {
+        self.events.iter().any(|e| e.assignments.iter().any(|a| a.0 == id))
+    }
+
     /// Reads SBML text; `file` names it in errors.
     pub fn parse(text: &str, file: &str) -> Result<Self, ModelError> {
         let options = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
