@@ -177,9 +177,9 @@ fn unusable_start<S: System>(
         Termination::StartFailed(Failure::Integration { error, at }) => {
             let mut message = format!("the model cannot be integrated from {start_point}: {error}");
             // Steps that shrink to nothing with the sensitivities, where the model alone
-            // integrates: say so, and what usually causes it.
+            // integrates at the same tolerances: say so, and what usually causes it.
             if matches!(error, OdeError::StepSizeTooSmall { .. })
-                && problem.cost(&problem.unknowns().coordinates(at)).is_ok()
+                && problem.residuals(&problem.unknowns().coordinates(at)).is_ok()
             {
                 message.push_str(
                     " (the model alone integrates there, its sensitivities do not: this happens where the right-hand side switches on a state, with min, max, abs or a comparison of states, since the integrators do not locate such switches and the sensitivities change abruptly there)",

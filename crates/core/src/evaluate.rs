@@ -381,21 +381,21 @@ impl<S: System> Problem<S> {
     /// where the sensitivities cannot be integrated but the model can.
     pub fn nll_at(&self, z: &[f64]) -> Result<Option<f64>, OdeError> {
         let rows = self.evaluate_rows(z, &self.integrator, false)?;
-        Ok(self
-            .experiments
-            .iter()
-            .zip(&rows)
-            .map(|(e, rows)| {
-                e.nll_offset().map(|o| 0.5 * rows.r.iter().map(|x| x * x).sum::<f64>() + o)
-            })
-            .sum())
+        let costs = rows.iter().map(|rows| rows.r.iter().map(|x| x * x).sum::<f64>());
+        Ok(self.nlls(costs).map(|list| list.iter().sum()))
     }
 
     /// The negative log-likelihood of each experiment at a linearization's point.
     pub fn experiment_nlls(&self, lin: &Linearization) -> Option<Vec<f64>> {
+        self.nlls(lin.experiment_costs.iter().copied())
+    }
+
+    /// Each experiment's NLL from its ε (the experiments' costs in order; what follows them,
+    /// the priors' rows, is left out).
+    fn nlls(&self, costs: impl Iterator<Item = f64>) -> Option<Vec<f64>> {
         self.experiments
             .iter()
-            .zip(&lin.experiment_costs)
+            .zip(costs)
             .map(|(e, c)| e.nll_offset().map(|o| 0.5 * c + o))
             .collect()
     }

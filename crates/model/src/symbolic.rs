@@ -547,15 +547,6 @@ fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (T
     (Tape::new((n, np, nu), constants, code), registers)
 }
 
-/// Whether the functions do not change with t at fixed y, α and u: their derivative with
-/// respect to t simplifies to the constant 0. A switch in time (`if(le(t, 24), a, b)`) is
-/// constant in t between its stops, where the integrators evaluate it.
-pub fn independent_of_time(functions: &[Program]) -> bool {
-    let mut graph = Graph::default();
-    let roots: Vec<Id> = functions.iter().map(|f| graph.program(f)).collect();
-    graph.derivatives(&roots, Slot::Time).into_iter().all(|d| graph.is_zero(d))
-}
-
 /// Functions f(t, y, α, u) (a model's right-hand side or its outputs) with their symbolic
 /// Jacobian [∂f/∂y | ∂f/∂α], evaluated as one [`Tape`]: compiled to machine code with the
 /// `jit` feature (where Cranelift supports the host), else interpreted.
@@ -572,6 +563,8 @@ pub struct Linearized {
     pattern: Vec<(u32, u32)>,
     /// The entries' derivatives with respect to the states, where built.
     curvature: Option<std::sync::Arc<Linearized>>,
+    /// Whether the functions' derivative with respect to t is 0.
+    time_free: bool,
 }
 
 impl Linearized {
@@ -590,6 +583,8 @@ impl Linearized {
         let mut graph = Graph::default();
         let roots: Vec<Id> = functions.iter().map(|f| graph.program(f)).collect();
         let (mut first, entries) = Self::build(&mut graph, &roots, dims, true);
+        first.time_free =
+            graph.derivatives(&roots, Slot::Time).into_iter().all(|d| graph.is_zero(d));
         if curvature {
             let (second, _) = Self::build(&mut graph, &entries, dims, false);
             first.curvature = Some(std::sync::Arc::new(second));
@@ -629,6 +624,7 @@ impl Linearized {
             entries: entries.to_vec(),
             pattern,
             curvature: None,
+            time_free: false,
         };
         (linearized, outputs[roots.len()..].to_vec())
     }
@@ -642,6 +638,14 @@ impl Linearized {
             curvature: self.curvature.as_ref().map(|c| std::sync::Arc::new(c.interpreted())),
             ..self.clone()
         }
+    }
+
+    /// Whether the functions do not change with t at fixed y, α and u: their derivative
+    /// with respect to t simplifies to the constant 0. A switch in time
+    /// (`if(le(t, 24), a, b)`) is constant in t between its stops, where the integrators
+    /// evaluate it.
+    pub fn independent_of_time(&self) -> bool {
+        self.time_free
     }
 
     /// Whether the program runs as machine code.
@@ -720,7 +724,8 @@ mod tests {
             (&["if(le(t, 24), t, b) * V"], false),
             (&["V^t"], false),
         ] {
-            assert_eq!(independent_of_time(&compile(texts)), free, "{texts:?}");
+            let f = Linearized::new(&compile(texts), (2, 3, 0));
+            assert_eq!(f.independent_of_time(), free, "{texts:?}");
         }
     }
 

@@ -36,6 +36,7 @@ impl ModelSystem {
         let dims = (signature.n_states(), signature.n_parameters(), signature.n_inputs());
         let symbolic =
             (Linearized::with_curvature(&equations, dims), Linearized::new(&outputs, dims));
+        let time_free = symbolic.0.independent_of_time();
         let mut switches: Vec<Switch> = Vec::new();
         for s in equations.iter().flat_map(Program::time_switches) {
             if !switches.contains(&s) {
@@ -44,7 +45,7 @@ impl ModelSystem {
         }
         Self {
             switches: Arc::new(switches),
-            time_free: crate::symbolic::independent_of_time(&equations),
+            time_free,
             signature,
             equations: Arc::new(equations),
             outputs: Arc::new(outputs),

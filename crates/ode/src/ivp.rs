@@ -292,17 +292,11 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         }
         let (n, k) = (self.sys.signature().n_states(), self.wrt.len());
         let (y, s) = x.split_at_mut(n);
-        let mut sides = [vec![0.0; n], vec![0.0; n]];
-        for (g, (at, side)) in
-            sides.iter_mut().zip([(t.next_down(), Side::Before), (t.next_up(), Side::After)])
-        {
-            self.sys.input_values(at, side, &mut self.u);
-            self.sys.rhs(at, y, self.p, &self.u, g);
-        }
+        let jump = rhs_jump(self.sys, t, y, self.p, &mut self.u);
         for &(_, q, slope) in self.moving.iter().filter(|m| m.0.to_bits() == t.to_bits()) {
             let Some(j) = self.wrt.iter().position(|w| *w == Wrt::Parameter(q)) else { continue };
             for i in 0..n {
-                s[i * k + j] += dir * (sides[0][i] - sides[1][i]) * slope;
+                s[i * k + j] += dir * jump[i] * slope;
             }
         }
     }
@@ -420,6 +414,24 @@ impl<'a, S: System> Ivp<'a, S> {
     fn stops(&self) -> Vec<f64> {
         stops(self.system, self.p)
     }
+}
+
+/// g₋ − g₊: the right-hand side of `system` at (y, `p`) just before the stop t minus just
+/// after it (the inputs, in `u`, from each side), the jump a switch at t makes. Allocates;
+/// it runs at stops only.
+pub fn rhs_jump<S: System>(system: &S, t: f64, y: &[f64], p: &[f64], u: &mut [f64]) -> Vec<f64> {
+    let n = y.len();
+    let (mut before, mut after) = (vec![0.0; n], vec![0.0; n]);
+    for (g, (at, side)) in
+        [(&mut before, (t.next_down(), Side::Before)), (&mut after, (t.next_up(), Side::After))]
+    {
+        system.input_values(at, side, u);
+        system.rhs(at, y, p, u, g);
+    }
+    for (b, a) in before.iter_mut().zip(&after) {
+        *b -= a;
+    }
+    before
 }
 
 /// Where an integration of `system` at the parameters `p` stops: the inputs'

@@ -100,7 +100,7 @@ pub use implicit::IterationMatrix;
 pub use interpolant::{DenseSolution, Interpolant};
 pub use ivp::{
     Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory,
-    check_times, stops,
+    check_times, rhs_jump, stops,
 };
 pub use jacobian::JacobianProducts;
 pub use lu::{FactorError, Lu};

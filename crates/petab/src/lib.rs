@@ -510,7 +510,8 @@ impl<'a> Builder<'a> {
                 column: Some(event.at.1),
                 message: format!("event `{}`: {message}", event.id),
             };
-            let fixed = |m: &Math| {
+            // Neither time nor species: a number or an expression of parameters.
+            let of_parameters = |m: &Math| {
                 let mut time = false;
                 m.visit(&mut |x| time |= matches!(x, Math::Time));
                 !time && m.names().iter().all(|n| species(n).is_none())
@@ -529,7 +530,7 @@ impl<'a> Builder<'a> {
                     ));
                 }
             };
-            if !fixed(&tau) {
+            if !of_parameters(&tau) {
                 return Err(refuse(
                     "its trigger time depends on species or time, which is not supported".into(),
                 ));
@@ -553,7 +554,7 @@ impl<'a> Builder<'a> {
                     )));
                 }
                 let value = self.ruled(value);
-                if !fixed(&value) || value.names().iter().any(|n| s.set_by_events(n)) {
+                if !of_parameters(&value) || value.names().iter().any(|n| s.set_by_events(n)) {
                     return Err(refuse(format!(
                         "the value it gives `{variable}` depends on species, time or variables that events set, which is not supported"
                     )));

@@ -21,7 +21,7 @@ use nalgebra::{DMatrix, DVector};
 use sysid_core::{LinearLeastSquares, Linearization, Planned, Singular, minimise_in_box};
 use sysid_ode::{
     Counts, DenseSolution, FactorError, Function, Integrator, IterationMatrix, JacobianProducts,
-    Observable, OdeError, Rhs, Side, System, integrate, stops,
+    Observable, OdeError, Rhs, Side, System, integrate, rhs_jump, stops,
 };
 
 use crate::trajectory::{Column, Layout, Trajectory};
@@ -157,16 +157,7 @@ impl<S: System> Rhs for LinearRhs<'_, S> {
         }
         let (n, k, kk) = (self.n, self.k, self.k + 1);
         self.previous.eval(t, &mut self.hint, &mut self.y);
-        let mut jump = vec![0.0; n];
-        for (sign, (at, side)) in
-            [(1.0, (t.next_down(), Side::Before)), (-1.0, (t.next_up(), Side::After))]
-        {
-            self.sys.input_values(at, side, &mut self.u);
-            self.sys.rhs(at, &self.y, &self.p, &self.u, &mut self.g);
-            for (j, g) in jump.iter_mut().zip(&self.g) {
-                *j += sign * g;
-            }
-        }
+        let jump = rhs_jump(self.sys, t, &self.y, &self.p, &mut self.u);
         let (p, phi) = w.split_at_mut(n);
         for &(_, q, slope) in self.moving.iter().filter(|m| m.0.to_bits() == t.to_bits()) {
             let direction = &self.vp[q * kk..(q + 1) * kk];
