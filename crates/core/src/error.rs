@@ -64,6 +64,11 @@ pub enum ProblemError {
     /// There is nothing to identify.
     #[error("no unknowns: name at least one parameter or initial value to identify")]
     NoUnknowns,
+    /// Every unknown is held at a fixed value: nothing is left to identify.
+    #[error(
+        "every unknown is held at a fixed value ({0}): nothing is left to identify; fix fewer of them"
+    )]
+    AllFixed(String),
     /// No data were given.
     #[error("no measurements: give at least one measured series or record")]
     NoData,
@@ -100,7 +105,7 @@ pub enum ProblemError {
     Simulation(String),
     /// The integrator settings are invalid.
     #[error("integrator: {0}")]
-    Integrator(String),
+    Integrator(sysid_ode::InvalidSetting),
     /// The experiments, their settings or the unknowns they use do not fit together.
     #[error("{0}")]
     Experiments(String),

@@ -667,31 +667,31 @@ fn integrator() {
         ),
         (
             format!("{OK}[integrator]\nrtol = -1\n"),
-            "models/m.toml:11:1: [integrator]: rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got -1",
+            "models/m.toml:11:1: [integrator] rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got -1",
         ),
         (
             format!("{OK}[integrator]\natol = -1\n"),
-            "models/m.toml:11:1: [integrator]: atol must be non-negative, got -1",
+            "models/m.toml:11:1: [integrator] atol must be a non-negative number, got -1",
         ),
         (
             format!("{OK}[integrator]\nmethod = \"rk4\"\n"),
-            "models/m.toml:11:1: [integrator]: RK4 needs a fixed step",
+            "models/m.toml:11:1: [integrator] step is needed by RK4, which has no error control",
         ),
         (
             format!("{OK}[integrator]\nmethod = \"auto\"\nstep = 0.1\n"),
-            "models/m.toml:11:1: [integrator]: the automatic choice needs error control, not a fixed step",
+            "models/m.toml:11:1: [integrator] step cannot be used with the automatic choice of scheme, which needs error control",
         ),
         (
             format!("{OK}[integrator]\nstep = 0\n"),
-            "models/m.toml:11:1: [integrator]: the fixed step must be positive, got 0",
+            "models/m.toml:11:1: [integrator] step must be positive, got 0",
         ),
         (
             format!("{OK}[integrator]\nmax_steps = 0\n"),
-            "models/m.toml:11:1: [integrator]: max_steps must be at least 1",
+            "models/m.toml:11:1: [integrator] max_steps must be at least 1",
         ),
         (
             format!("{OK}[integrator]\nmax_steps = -5\n"),
-            "models/m.toml:11:1: [integrator]: max_steps must be at least 1",
+            "models/m.toml:11:1: [integrator] max_steps must be at least 1",
         ),
         (
             format!("{OK}[integrator]\norder = 5\n"),
@@ -705,7 +705,7 @@ fn integrator() {
             format!(
                 "{HEAD}integrator = {{ rtol = -1 }}\n[equations]\nx = \"-k * x\"\ny = \"k * x\"\n[initial]\nx = 1.0\ny = 0.0\n[unknowns]\nk = 0.5\n"
             ),
-            "models/m.toml:3:14: [integrator]: rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got -1",
+            "models/m.toml:3:14: [integrator] rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got -1",
         ),
         (
             format!("{OK}[integrator]\nrtol = -1\n[data]\nt0 = \"a\"\n"),

@@ -42,6 +42,20 @@ impl Control {
     }
 }
 
+/// The scaled error e/sk of one component, sk = atol + rtol·|x|: 0 for a component that is
+/// 0 and has no error (its scale is 0 only under a purely relative tolerance, atol = 0, and
+/// 0/0 would poison the norm), ∞ for an error where there is no scale.
+#[inline]
+pub(crate) fn scaled(e: f64, sk: f64) -> f64 {
+    if sk > 0.0 {
+        e / sk
+    } else if e == 0.0 {
+        0.0
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Hairer's starting step size for a given direction (Solving ODE I, Section II.4), from
 /// (t, w.x) with `w.k[0]` = f(t, x); one evaluation of f, into `w.k[1]`.
 pub(crate) fn initial_step<R: Rhs>(
@@ -53,10 +67,14 @@ pub(crate) fn initial_step<R: Rhs>(
     let n = w.x.len() as f64;
     let (rtol, atol) = (ev.cfg.rtol, ev.cfg.atol);
     let (mut dnf, mut dny) = (0.0, 0.0);
+    // A component without a scale yet (0 under a purely relative tolerance, atol = 0)
+    // says nothing about the first step's size.
     for (x, f) in w.x.iter().zip(&w.k[0]) {
         let sk = atol + rtol * x.abs();
-        dnf += (f / sk) * (f / sk);
-        dny += (x / sk) * (x / sk);
+        if sk > 0.0 {
+            dnf += (f / sk) * (f / sk);
+            dny += (x / sk) * (x / sk);
+        }
     }
     let (dnf, dny) = ((dnf / n).sqrt(), (dny / n).sqrt());
     let mut h = if dnf <= 1e-5 || dny <= 1e-5 { 1e-6 } else { 0.01 * dny / dnf };
@@ -68,7 +86,9 @@ pub(crate) fn initial_step<R: Rhs>(
     let mut der2 = 0.0;
     for i in 0..w.x.len() {
         let sk = atol + rtol * w.x[i].abs();
-        der2 += ((w.k[1][i] - w.k[0][i]) / sk).powi(2);
+        if sk > 0.0 {
+            der2 += ((w.k[1][i] - w.k[0][i]) / sk).powi(2);
+        }
     }
     let der2 = (der2 / n).sqrt() / h;
     let der12 = der2.abs().max(dnf);

@@ -108,8 +108,8 @@ impl<R: Rhs> Stepper<R> for Dopri5 {
         for i in 0..n {
             let e =
                 h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
-            let sk = atol + rtol * x[i].abs().max(xn[i].abs());
-            sum += (e / sk) * (e / sk);
+            let q = crate::control::scaled(e, atol + rtol * x[i].abs().max(xn[i].abs()));
+            sum += q * q;
         }
         Ok((sum / n as f64).sqrt())
     }

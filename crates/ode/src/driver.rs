@@ -76,7 +76,7 @@ fn check_inputs<R: Rhs>(
     if x0.len() != n {
         return Err(OdeError::Dimension { what: "initial state", actual: x0.len(), expected: n });
     }
-    cfg.validate().map_err(OdeError::InvalidSetup)?;
+    cfg.validate().map_err(|e| OdeError::InvalidSetup(e.to_string()))?;
     for (what, v) in [("t0", t0), ("t_end", t_end)] {
         if !v.is_finite() {
             return Err(OdeError::InvalidInput { what: what.into(), value: v });

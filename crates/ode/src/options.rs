@@ -113,34 +113,88 @@ impl Integrator {
         Self { fixed_step: Some(h), ..self }
     }
 
-    /// Checks the settings; returns a description of the first problem found.
-    pub fn validate(&self) -> Result<(), String> {
+    /// Checks the settings; returns the first setting that cannot be used, by name.
+    pub fn validate(&self) -> Result<(), InvalidSetting> {
+        let bad = |name, problem: String| Err(InvalidSetting { name, problem });
         if !(self.rtol > 0.0 && self.rtol < 1.0) {
-            return Err(format!(
-                "rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got {}",
-                self.rtol
-            ));
+            return bad(
+                "rtol",
+                format!(
+                    "must be positive and below 1 (a relative error of 100 % or more controls nothing), got {}",
+                    shortest(self.rtol)
+                ),
+            );
+        }
+        if self.rtol < MIN_RTOL {
+            return bad(
+                "rtol",
+                format!(
+                    "must be at least {MIN_RTOL:e}: below it the rounding of double precision (1.1e-16 per operation, accumulating over the steps) is larger than the error asked for, got {:e}",
+                    self.rtol
+                ),
+            );
         }
         if !(self.atol >= 0.0 && self.atol.is_finite()) {
-            return Err(format!("atol must be non-negative, got {}", self.atol));
+            return bad(
+                "atol",
+                format!("must be a non-negative number, got {}", shortest(self.atol)),
+            );
         }
         if let Some(h) = self.fixed_step
             && !(h > 0.0 && h.is_finite())
         {
-            return Err(format!("the fixed step must be positive, got {h}"));
+            return bad("fixed_step", format!("must be positive, got {}", shortest(h)));
         }
         if self.scheme == Scheme::Auto && self.fixed_step.is_some() {
-            return Err("the automatic choice needs error control, not a fixed step".into());
+            return bad(
+                "fixed_step",
+                "cannot be used with the automatic choice of scheme, which needs error control"
+                    .into(),
+            );
         }
         if self.scheme == Scheme::Rk4 && self.fixed_step.is_none() {
-            return Err("RK4 needs a fixed step".into());
+            return bad("fixed_step", "is needed by RK4, which has no error control".into());
         }
         if self.max_step.is_nan() || self.max_step <= 0.0 {
-            return Err(format!("max_step must be positive, got {}", self.max_step));
+            return bad("max_step", format!("must be positive, got {}", self.max_step));
         }
         if self.max_steps == 0 {
-            return Err("max_steps must be at least 1".into());
+            return bad("max_steps", "must be at least 1".into());
         }
         Ok(())
     }
 }
+
+/// `v` as an error quotes it: exponent form outside [1e-4, 1e9) (`-1e-8`, not
+/// `-0.00000001`).
+fn shortest(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && a.is_finite() && !(1e-4..1e9).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// The smallest relative tolerance an integration accepts (Hairer's DOPRI5 refuses anything
+/// at or below 10 × the unit round-off, 2.2e-16).
+pub const MIN_RTOL: f64 = 1e-14;
+
+/// An integrator setting that cannot be used: its name (the field of [`Integrator`]) as data,
+/// so that a caller can name it as its user spells it (`--rtol`, `[integrator] rtol`), and
+/// what is wrong with it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct InvalidSetting {
+    /// The field: `rtol`, `atol`, `fixed_step`, `max_step` or `max_steps`.
+    pub name: &'static str,
+    /// What is wrong, without the name: "must be positive, got -1".
+    pub problem: String,
+}
+
+impl std::fmt::Display for InvalidSetting {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} {}", self.name, self.problem)
+    }
+}
+
+impl std::error::Error for InvalidSetting {}

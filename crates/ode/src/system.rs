@@ -288,6 +288,9 @@ impl<S: System> System for &S {
     fn input_values(&self, t: f64, side: Side, u: &mut [f64]) {
         (**self).input_values(t, side, u)
     }
+    fn autonomous(&self) -> bool {
+        (**self).autonomous()
+    }
     fn discontinuities(&self) -> &[f64] {
         (**self).discontinuities()
     }

@@ -119,8 +119,8 @@ impl<R: Rhs> Evaluator<'_, R> {
         let n = e.len();
         let mut sum = 0.0;
         for i in 0..n {
-            let sk = atol + rtol * x[i].abs().max(xn[i].abs());
-            sum += (e[i] / sk) * (e[i] / sk);
+            let q = crate::control::scaled(e[i], atol + rtol * x[i].abs().max(xn[i].abs()));
+            sum += q * q;
         }
         (sum / n as f64).sqrt()
     }

@@ -357,3 +357,49 @@ fn dense_solution_on_both_sides_evaluates_and_maps_exactly() {
     }
     assert!(!solution.eval(4.5, &mut out));
 }
+
+/// A → B → C with rates k1, k2, from (1, 0, 0).
+struct Consecutive(Signature);
+
+impl System for Consecutive {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = -p[0] * y[0];
+        dy[1] = p[0] * y[0] - p[1] * y[1];
+        dy[2] = p[1] * y[1];
+    }
+}
+
+/// A purely relative tolerance (atol = 0) integrates states that start at 0 and
+/// sensitivities that stay 0 (∂A/∂k2): a component with no scale and no error counts as
+/// none, where 0/0 used to make the first state non-finite.
+#[test]
+fn a_purely_relative_tolerance_integrates_zero_components() {
+    let sys = Consecutive(Signature::new(&["A", "B", "C"], &["k1", "k2"]));
+    let (k1, k2) = (0.8, 0.3);
+    let times: Vec<f64> = (1..=10).map(f64::from).collect();
+    let wrt = [sysid_ode::Wrt::Parameter(0), sysid_ode::Wrt::Parameter(1)];
+    for integrator in [Integrator::dopri5(1e-10, 0.0), Integrator::rodas5p(1e-10, 0.0)] {
+        let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0, 0.0], &[k1, k2])
+            .solve_sensitivities(&integrator, &wrt, &times)
+            .unwrap_or_else(|e| panic!("{:?}: {e}", integrator.scheme));
+        for (m, &t) in times.iter().enumerate() {
+            let b = k1 / (k2 - k1) * ((-k1 * t).exp() - (-k2 * t).exp());
+            assert_close(sol.state(m)[1], b, 1e-8);
+            assert_eq!(sol.sensitivity(m)[(0, 1)].to_bits(), 0f64.to_bits(), "∂A/∂k2 stays 0");
+        }
+    }
+}
+
+/// An rtol below 1e-14 asks for more than double precision holds: refused, by name.
+#[test]
+fn an_rtol_below_double_precision_is_refused() {
+    let e = Integrator::dopri5(1e-300, 1e-12).validate().unwrap_err();
+    assert_eq!(e.name, "rtol");
+    assert!(e.problem.contains("at least 1e-14"), "{e}");
+    assert!(Integrator::dopri5(1e-14, 1e-16).validate().is_ok());
+    let e = Integrator::dopri5(1e-8, -1.0).validate().unwrap_err();
+    assert_eq!(e.name, "atol");
+}

@@ -34,7 +34,11 @@ pub(super) fn read_integrator(
             }
         }
     }
-    integrator.validate().map_err(|e| r.err(value.span().start, format!("[integrator]: {e}")))?;
+    integrator.validate().map_err(|e| {
+        // The file's key for the setting: `step` is the integrator's fixed step.
+        let key = if e.name == "fixed_step" { "step" } else { e.name };
+        r.err(value.span().start, format!("[integrator] {key} {}", e.problem))
+    })?;
     Ok(integrator)
 }
 
