@@ -24,6 +24,12 @@ pub(crate) enum Ending {
     MaxIterations,
     Failed { iteration: usize, failure: Failure },
 }
+/// The names of the unknowns the certificate finds undetermined.
+pub(crate) fn undetermined_names<S: System>(problem: &Problem<S>, c: &Certificate) -> Vec<String> {
+    let names = problem.names();
+    c.undetermined().into_iter().map(|i| names[i].clone()).collect()
+}
+
 /// Whether `a` has a finite cost below `b`'s (or `b` is missing or has none).
 pub(crate) fn is_better(a: &Iterate, b: Option<&Iterate>) -> bool {
     a.cost.is_finite() && b.is_none_or(|b| b.cost.is_nan() || a.cost < b.cost)
@@ -94,6 +100,10 @@ impl Record<'_> {
                 iteration: iterations,
                 optimality: stalled.as_ref().map_or(f64::INFINITY, |s| s.1),
                 plateau: stalled.as_ref().is_some_and(|s| s.3.plateau()),
+                undetermined: stalled
+                    .as_ref()
+                    .map(|s| undetermined_names(ev.problem(), &s.3))
+                    .unwrap_or_default(),
             },
             Ending::MaxIterations => Termination::MaxIterations,
             Ending::Failed { failure: Failure::Budget { integrations }, .. } => {
@@ -120,8 +130,8 @@ impl Record<'_> {
     /// The model's linearization at `point` and the certificate there: the method's own
     /// linearization when it made one, else one more integration (outside the budget: the
     /// verdict needs it); and the measure's integration error, from one more integration at
-    /// a tenth of the tolerances (not measured where that integration fails, or for a fixed
-    /// step).
+    /// a tenth of the tolerances, or with error control for a fixed step
+    /// ([`Evaluations::reference`]; not measured where that integration fails).
     pub(crate) fn judge<S: System>(&self, ev: &Evaluations<'_, S>, point: &Iterate) -> Judged {
         let problem = ev.problem();
         let lin = match &point.linearization {
@@ -139,7 +149,7 @@ impl Record<'_> {
                 let mut certificate = certify(problem, lin, self.gtol, self.options.max_condition);
                 if !certificate.exact_fit
                     && certificate.optimality.is_finite()
-                    && let Some(finer) = ev.finer()
+                    && let Some(finer) = ev.reference()
                     && let Ok(fine) = finer.linearize(&point.z)
                 {
                     ev.add(fine.counts);
@@ -172,8 +182,9 @@ impl Record<'_> {
         let held: Vec<bool> = certificate.active.iter().map(Option::is_some).collect();
         let free = held.iter().filter(|h| !**h).count();
         // s² A⁻¹ is the estimate's covariance at a minimum only.
-        let covariance =
-            lin.filter(|_| certificate.holds()).and_then(|l| problem.covariance(l, &held));
+        let covariance = lin
+            .filter(|_| certificate.holds())
+            .and_then(|l| problem.covariance(l, &held, self.options.max_condition));
         let std_errors: Option<Vec<f64>> = covariance.as_ref().map(|c| {
             (0..c.nrows()).map(|i| if held[i] { f64::NAN } else { c[(i, i)].sqrt() }).collect()
         });
@@ -235,7 +246,6 @@ pub(crate) fn with_scales<S: System>(
     held: &Problem<S>,
     rounds: Vec<Estimate>,
     moved: f64,
-    gtol: f64,
 ) -> Estimate {
     let (iterations, counts) = rounds.iter().fold((0, sysid_ode::Counts::default()), |acc, e| {
         let mut c = acc.1;
@@ -247,8 +257,13 @@ pub(crate) fn with_scales<S: System>(
     let elapsed = rounds.iter().map(|e| e.elapsed).sum();
     let mut last = None;
     for (r, e) in rounds.into_iter().enumerate() {
-        // A round starts where the last one stopped: that row is there already.
-        history.extend(e.history.iter().skip(usize::from(r > 0)).cloned().map(|mut row| {
+        // A round starts where the last one stopped, at the scales' new values: its first
+        // row replaces the last one's, so that each row is the point as last evaluated (and
+        // the reported point's row is the certificate's).
+        if r > 0 && !e.history.is_empty() {
+            history.pop();
+        }
+        history.extend(e.history.iter().cloned().map(|mut row| {
             row.iteration += offset;
             row
         }));
@@ -261,16 +276,19 @@ pub(crate) fn with_scales<S: System>(
     e.history = history;
     e.counts = counts;
     e.elapsed = elapsed;
-    let optimality = e.certificate.optimality.max(moved);
-    if !e.certificate.exact_fit
-        && optimality > gtol
-        && e.certificate.holds()
+    e.certificate.scales = Some(moved);
+    if !e.certificate.holds()
         && let Termination::Converged(rule) = e.termination
     {
-        e.termination =
-            Termination::Stalled { rule, iteration: iterations, optimality, plateau: false };
+        // The fit of the last round was certified, but the scales would still move.
+        e.termination = Termination::Stalled {
+            rule,
+            iteration: iterations,
+            optimality: e.certificate.optimality.max(moved),
+            plateau: false,
+            undetermined: Vec::new(),
+        };
     }
-    e.certificate.optimality = optimality;
     let converged = e.certificate.holds();
     let counts_per_scale = held.scale_samples();
     e.scales = held
@@ -310,8 +328,14 @@ impl<S: System> Problem<S> {
     /// bound are not estimated there: the covariance is that of the free ones, with
     /// N − k_free, and the held ones' rows and columns are 0. `None` when there are no more
     /// data than free unknowns, for a record given as a function (no count N), or when A_FF
-    /// is singular.
-    pub fn covariance(&self, lin: &Linearization, held: &[bool]) -> Option<DMatrix<f64>> {
+    /// is singular: its Jacobi-scaled condition number above `max_condition` (standard
+    /// errors from a matrix the data cannot invert are numbers without meaning).
+    pub fn covariance(
+        &self,
+        lin: &Linearization,
+        held: &[bool],
+        max_condition: f64,
+    ) -> Option<DMatrix<f64>> {
         let k = self.unknowns.len();
         let free: Vec<usize> = (0..k).filter(|&i| !held.get(i).copied().unwrap_or(false)).collect();
         let n = self.n_observations()?;
@@ -323,8 +347,16 @@ impl<S: System> Problem<S> {
             true => 1.0,
             false => lin.cost / (n - free.len()) as f64,
         };
+        // Weights are relative: s² A⁻¹ does not depend on their overall scale c, and is
+        // formed as (s²/c)(A/c)⁻¹ with c the largest diagonal entry, so that tiny weights
+        // (1e-308) do not overflow A⁻¹ and huge ones do not overflow A.
         let block = lin.normal.select_rows(&free).select_columns(&free);
-        let inverse = NormalFactor::new(&block, f64::INFINITY).ok()?.inverse();
+        let c = block.diagonal().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if !(c > 0.0 && c.is_finite()) {
+            return None;
+        }
+        let inverse = NormalFactor::new(&(block / c), max_condition).ok()?.inverse();
+        let s2 = s2 / c;
         let scale: Vec<f64> =
             self.unknowns.list().iter().zip(&lin.z).map(|(u, &z)| u.scale(z)).collect();
         let mut cov = DMatrix::zeros(k, k);

@@ -20,19 +20,25 @@
 //! its own scale (an e-fold on a log scale, its magnitude on a linear one) would change ‖r‖
 //! by at most gtol relative, √a_i s_i ≤ gtol ‖r‖. The first-order test says nothing about a
 //! flat unknown (a plateau is as stationary as a minimum), so it does not count in the
-//! optimality, is never "held on a bound", and a point where every unknown is flat is not
-//! certified: a run that collapses into a region where the model no longer depends on the
-//! unknowns (rates underflowing to 0, every rate at a bound of a saturated model) has found
-//! a plateau, not a minimum.
+//! optimality. A flat unknown that rests exactly on one of its bounds is held there (the
+//! bounded problem's minimum may be there; it is not estimated). Any other flat unknown is
+//! *undetermined*: the data do not fix it, and the cost may go on falling as it moves without
+//! end (a rate running off to 0 on its log scale: an infimum, not a minimum). A point with an
+//! undetermined unknown is not certified, and neither is one where every unknown is flat: a
+//! run that collapses into a region where the model no longer depends on the unknowns (rates
+//! underflowing to 0, every rate at a bound of a saturated model) has found a plateau, not a
+//! minimum.
 //!
 //! The measure is computed from an integration, and carries its error: the driver measures
 //! it again at a tenth of the integrator's tolerance and reports the difference as
-//! `error`. The point is certified when optimality + error ≤ gtol and some unknown is not
-//! flat, or when the model passes through the data to the integration's accuracy:
-//! ‖r‖ ≤ τ ‖W^½ b‖ with τ = max(1e-10, 10·rtol) (1e-10 for a fixed step), a cost within
-//! τ² ‖W^½ b‖² of the least possible cost 0 ([`exact_fit_tolerance`]). Noise-free data are
-//! fitted only as exactly as the model is integrated: below that the first-order test
-//! measures the integration's error, not the fit. Non-finite r, g or A never pass.
+//! `error`. The point is certified when no unknown is undetermined, not every unknown is
+//! flat, and either optimality + error ≤ gtol or the model passes through the data to the
+//! integration's accuracy: ‖r‖ ≤ τ ‖W^½ b‖ with τ = min(1e-6, max(1e-10, 10·rtol)) (1e-10
+//! for a fixed step), a cost within τ² ‖W^½ b‖² of the least possible cost 0
+//! ([`exact_fit_tolerance`]). Noise-free data are fitted only as exactly as the model is
+//! integrated: below that the first-order test measures the integration's error, not the
+//! fit; above 1e-6 a fit is not exact, however loose the integration. Non-finite r, g or A
+//! never pass.
 
 use serde::Serialize;
 use sysid_ode::System;
@@ -44,13 +50,19 @@ use crate::problem::Problem;
 /// ‖W^½ r‖ / ‖W^½ b‖ at or below which the model passes through the data (ε = 0 to rounding).
 pub const EXACT_FIT: f64 = 1e-10;
 
+/// The largest τ: a fit whose residuals are above a millionth of the data is not exact,
+/// however loosely the model is integrated (at rtol 0.05, 10·rtol would call a residual of
+/// half the data an exact fit).
+pub const MAX_EXACT_FIT: f64 = 1e-6;
+
 /// τ: ‖W^½ r‖ / ‖W^½ b‖ at or below which the model passes through the data as exactly as
-/// `problem` integrates it: [`EXACT_FIT`], or 10·rtol for an adaptive integration.
+/// `problem` integrates it: [`EXACT_FIT`], or 10·rtol for an adaptive integration, at most
+/// [`MAX_EXACT_FIT`].
 pub fn exact_fit_tolerance<S: System>(problem: &Problem<S>) -> f64 {
     let integrator = problem.integrator();
     match integrator.fixed_step {
         Some(_) => EXACT_FIT,
-        None => EXACT_FIT.max(10.0 * integrator.rtol),
+        None => (10.0 * integrator.rtol).clamp(EXACT_FIT, MAX_EXACT_FIT),
     }
 }
 
@@ -96,12 +108,32 @@ pub struct Certificate {
     pub flat: Vec<bool>,
     /// The direction the data cannot identify, when the normal matrix is singular there.
     pub null_space: Option<NullSpace>,
+    /// With noise scales set in closed form (see [`drive`](crate::drive)): the largest
+    /// relative change |ln(ŝ/s)| their closed form would still make at the point; it must be
+    /// at most gtol too. `None` without noise scales.
+    pub scales: Option<f64>,
 }
 
 impl Certificate {
-    /// Whether the point is certified: the first-order test holds (or ε = 0 to rounding).
+    /// Whether the point is certified: the first-order test holds (or ε = 0 to rounding),
+    /// no unknown is undetermined and not every unknown is flat.
     pub fn holds(&self) -> bool {
-        self.exact_fit || (self.optimality + self.error <= self.gtol && !self.plateau())
+        (self.exact_fit || self.optimality + self.error <= self.gtol)
+            && self.scales.is_none_or(|m| m <= self.gtol)
+            && !self.plateau()
+            && !self.has_undetermined()
+    }
+
+    /// The unknowns (indices) the model does not respond to at the point and that do not
+    /// rest on a bound: the data do not determine them, and the cost may go on falling as
+    /// they move (module docs).
+    pub fn undetermined(&self) -> Vec<usize> {
+        (0..self.flat.len()).filter(|&i| self.flat[i] && self.active[i].is_none()).collect()
+    }
+
+    /// Whether some unknown is [`undetermined`](Self::undetermined).
+    pub fn has_undetermined(&self) -> bool {
+        self.flat.iter().zip(&self.active).any(|(f, a)| *f && a.is_none())
     }
 
     /// Whether every unknown is flat: the point is a plateau of the cost, which the
@@ -126,6 +158,7 @@ impl Certificate {
             active: vec![None; k],
             flat: vec![false; k],
             null_space: None,
+            scales: None,
         }
     }
 }
@@ -149,6 +182,13 @@ pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f6
         let responds = a.sqrt() * u.coordinate_scale(lin.z[i]) > gtol * norm_r;
         if !responds {
             measure.flat[i] = true;
+            // Resting exactly on a bound (where the box put it), it is held there.
+            let (lo, hi) = u.coordinate_bounds();
+            measure.active[i] = match lin.z[i] {
+                z if z <= lo => Some(Bound::Lower),
+                z if z >= hi => Some(Bound::Upper),
+                _ => None,
+            };
             continue;
         }
         if g == 0.0 {
@@ -174,7 +214,7 @@ pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f6
 pub struct Measure {
     /// max_i m_i over the unknowns that are not flat.
     pub value: f64,
-    /// Per unknown: the bound it is held on.
+    /// Per unknown: the bound it is held on (a flat unknown resting on a bound included).
     pub active: Vec<Option<Bound>>,
     /// Per unknown: flat (module docs).
     pub flat: Vec<bool>,
@@ -217,6 +257,7 @@ pub fn certify<S: System>(
         active,
         flat,
         null_space,
+        scales: None,
     }
 }
 
@@ -242,5 +283,45 @@ impl NullSpace {
             }
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn certificate(flat: Vec<bool>, active: Vec<Option<Bound>>) -> Certificate {
+        Certificate {
+            optimality: 1e-9,
+            error: 0.0,
+            gtol: 1e-6,
+            exact_fit: false,
+            active,
+            flat,
+            null_space: None,
+            scales: None,
+        }
+    }
+
+    /// A flat unknown off its bounds is undetermined and blocks the verdict; one resting on
+    /// a bound does not; every unknown flat is a plateau; scales still moving block too.
+    #[test]
+    fn undetermined_unknowns_and_moving_scales_are_not_converged() {
+        assert!(certificate(vec![false, false], vec![None, None]).holds());
+        let c = certificate(vec![false, true], vec![None, None]);
+        assert_eq!(c.undetermined(), vec![1]);
+        assert!(!c.holds());
+        let c = certificate(vec![false, true], vec![None, Some(Bound::Lower)]);
+        assert!(c.undetermined().is_empty() && c.holds());
+        assert!(!certificate(vec![true, true], vec![Some(Bound::Lower); 2]).holds());
+        let mut c = certificate(vec![false], vec![None]);
+        c.scales = Some(2e-6);
+        assert!(!c.holds());
+        c.scales = Some(5e-7);
+        assert!(c.holds());
+        // An exact fit does not excuse an unknown the data do not see.
+        let mut c = certificate(vec![false, true], vec![None, None]);
+        c.exact_fit = true;
+        assert!(!c.holds());
     }
 }

@@ -49,10 +49,10 @@ pub fn drive<S: System>(
     step: &mut impl Step<S>,
     start: &[f64],
 ) -> Result<Estimate, FitError> {
+    options.validate()?;
     if problem.scales().is_empty() {
         return drive_once(problem, method, options, step, start);
     }
-    options.validate()?;
     let gtol = options.gtol_for(problem.integrator().rtol);
     let mut sigma = problem.scale_values();
     let mut z = start.to_vec();
@@ -80,7 +80,7 @@ pub fn drive<S: System>(
             || rounds.len() + 1 >= MAX_ROUNDS;
         rounds.push(estimate);
         if last {
-            return Ok(crate::assemble::with_scales(problem, &held, rounds, moved, gtol));
+            return Ok(crate::assemble::with_scales(problem, &held, rounds, moved));
         }
         sigma = next.expect("a finite move");
         z = rounds.last().expect("a round").values.clone();
@@ -97,7 +97,6 @@ fn drive_once<S: System>(
     step: &mut impl Step<S>,
     start: &[f64],
 ) -> Result<Estimate, FitError> {
-    options.validate()?;
     let started = Instant::now();
     let z0 = start_coordinates(problem, start)?;
     let mut ev = Evaluations::new(problem, options.integration_budget(problem.unknowns().len()));

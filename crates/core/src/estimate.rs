@@ -146,6 +146,12 @@ impl Estimate {
             .collect()
     }
 
+    /// The unknowns the model does not respond to at the reported point, off their bounds:
+    /// the data do not determine them ([`Certificate::undetermined`]).
+    pub fn undetermined(&self) -> Vec<&str> {
+        self.certificate.undetermined().into_iter().map(|i| self.names[i].as_str()).collect()
+    }
+
     /// Every estimated unknown's name: the free ones, then the noise scales.
     pub fn all_names(&self) -> Vec<String> {
         self.names.iter().cloned().chain(self.scales.iter().map(|s| s.name.clone())).collect()
@@ -263,13 +269,17 @@ impl Serialize for FitRecord<'_> {
         st.serialize_field("termination_code", &e.termination.code())?;
         st.serialize_field("optimality", &Num(e.certificate.optimality))?;
         st.serialize_field("optimality_error", &Num(e.certificate.error))?;
+        if let Some(moved) = e.certificate.scales {
+            st.serialize_field("scale_optimality", &Num(moved))?;
+        }
         st.serialize_field("gtol", &e.certificate.gtol)?;
         st.serialize_field("exact_fit", &e.certificate.exact_fit)?;
         st.serialize_field("corner", &e.certificate.corner())?;
         let active = e.active_bounds();
-        let (names, bounds): (Vec<String>, Vec<Bound>) =
+        let (held, bounds): (Vec<String>, Vec<Bound>) =
             active.iter().map(|(n, b)| (n.to_string(), *b)).unzip();
-        st.serialize_field("active_bounds", &Named(&names, &bounds))?;
+        st.serialize_field("active_bounds", &Named(&held, &bounds))?;
+        st.serialize_field("undetermined", &e.undetermined())?;
         st.serialize_field("dof", &e.dof)?;
         let finite =
             |&[a, b]: &[f64; 2]| (a.is_finite() && b.is_finite()).then_some([Num(a), Num(b)]);
@@ -321,12 +331,27 @@ impl Estimate {
     /// The certificate's verdict in words: "yes (first-order optimality 3.1e-9 ≤ gtol 1e-6)".
     pub fn verdict(&self) -> String {
         let c = &self.certificate;
-        if c.exact_fit {
-            "yes (the model passes through the data: ε = 0 to rounding)".into()
-        } else if !c.optimality.is_finite() {
+        if !c.optimality.is_finite() {
             "no (the reported point could not be evaluated)".into()
         } else if c.plateau() {
             "no (a plateau: the model responds to no unknown there)".into()
+        } else if c.has_undetermined() {
+            let names = self.undetermined();
+            format!(
+                "no ({} {} not determined: the model does not respond to {} there; a flat direction, not a minimum)",
+                names.join(", "),
+                if names.len() == 1 { "is" } else { "are" },
+                if names.len() == 1 { "it" } else { "them" }
+            )
+        } else if let Some(moved) = c.scales.filter(|m| m.is_nan() || *m > c.gtol)
+            && (c.exact_fit || c.optimality + c.error <= c.gtol)
+        {
+            format!(
+                "no (the noise scales' closed form would still move them by {moved:.2e} relative > gtol {:.0e})",
+                c.gtol
+            )
+        } else if c.exact_fit {
+            "yes (the model passes through the data: ε = 0 to rounding)".into()
         } else if c.holds() && c.corner() {
             format!(
                 "yes (first-order optimality {:.2e} ± {:.0e} ≤ gtol {:.0e}), at a corner of the box: every unknown on a bound",

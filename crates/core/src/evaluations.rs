@@ -10,7 +10,7 @@
 use std::cell::Cell;
 
 use nalgebra::DVector;
-use sysid_ode::{Counts, OdeError, System};
+use sysid_ode::{Counts, OdeError, Scheme, System};
 
 use crate::evaluate::Linearization;
 use crate::problem::Problem;
@@ -29,6 +29,10 @@ pub struct Evaluations<'p, S> {
 /// The tightest relative tolerance [`Evaluations::finer`] refines to.
 pub const FINEST_RTOL: f64 = 1e-12;
 
+/// The relative tolerance of the error-controlled integration a fixed-step run's
+/// certificate is measured against ([`Evaluations::reference`]).
+pub const REFERENCE_RTOL: f64 = 1e-10;
+
 impl<'p, S: System> Evaluations<'p, S> {
     /// Evaluations of `problem` with a budget of `budget` integrations.
     pub fn new(problem: &'p Problem<S>, budget: u64) -> Self {
@@ -41,8 +45,10 @@ impl<'p, S: System> Evaluations<'p, S> {
     }
 
     /// The problem integrated at a tenth of the current rtol and atol, or `None` where that
-    /// cannot be more accurate: a fixed step (whose discrete cost is smooth in z, so its
-    /// sensitivities are exact for it), or rtol already at [`FINEST_RTOL`].
+    /// cannot be more accurate: a fixed step (the run keeps the scheme it was given), or
+    /// rtol already at [`FINEST_RTOL`]. An atol above rtol is taken as rtol first: an
+    /// absolute tolerance larger than the relative one controls nothing for states of order
+    /// 1 (`--atol 1e300` would otherwise be "refined" to 1e299).
     pub fn finer(&self) -> Option<Problem<S>> {
         let problem = self.problem();
         let integrator = problem.integrator();
@@ -51,8 +57,32 @@ impl<'p, S: System> Evaluations<'p, S> {
         }
         let mut finer = *integrator;
         finer.rtol *= 0.1;
-        finer.atol *= 0.1;
+        finer.atol = integrator.atol.min(integrator.rtol) * 0.1;
         problem.clone().with_integrator(finer).ok()
+    }
+
+    /// The problem as the certificate measures its integration error against: [`finer`]
+    /// for an error-controlled integration; for a fixed step, the same model integrated
+    /// with error control at rtol [`REFERENCE_RTOL`] (DOPRI5, or the Rosenbrock scheme of a
+    /// fixed-step Rosenbrock run), so that a step too coarse to resolve the model shows in
+    /// the error instead of passing as exact.
+    ///
+    /// [`finer`]: Self::finer
+    pub fn reference(&self) -> Option<Problem<S>> {
+        let problem = self.problem();
+        let integrator = problem.integrator();
+        if integrator.fixed_step.is_none() {
+            return self.finer();
+        }
+        let mut reference = *integrator;
+        reference.fixed_step = None;
+        reference.scheme = match integrator.scheme {
+            Scheme::Rk4 | Scheme::Dopri5 | Scheme::Auto => Scheme::Dopri5,
+            stiff @ (Scheme::Rodas4 | Scheme::Rodas5p) => stiff,
+        };
+        reference.rtol = REFERENCE_RTOL;
+        reference.atol = integrator.atol.min(REFERENCE_RTOL) * 0.1;
+        problem.clone().with_integrator(reference).ok()
     }
 
     /// Evaluates from now on with `problem` (one of [`finer`](Self::finer)'s).

@@ -125,6 +125,23 @@ pub struct Planned<S> {
     pub(crate) slots: Vec<Wrt>,
 }
 
+impl<S> Planned<S> {
+    /// The same experiment with its system mapped by `f`.
+    pub(crate) fn map_system<T>(self, f: impl Fn(Arc<S>) -> T) -> Planned<T> {
+        Planned {
+            name: self.name,
+            also: self.also,
+            system: Arc::new(f(self.system)),
+            t0: self.t0,
+            initial: self.initial,
+            parameters: self.parameters,
+            data: self.data,
+            plan: self.plan,
+            slots: self.slots,
+        }
+    }
+}
+
 impl<S> Clone for Planned<S> {
     fn clone(&self) -> Self {
         Self {

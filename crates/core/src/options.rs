@@ -44,6 +44,23 @@ pub enum OptionsError {
 }
 
 impl OptionsError {
+    /// The option, as its field is named (`gtol`, `max_iterations`): a caller names it as
+    /// its user spells it (`--gtol`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Negative { name, .. }
+            | Self::NotPositive { name, .. }
+            | Self::OutOfRange { name, .. }
+            | Self::Zero { name } => name,
+        }
+    }
+
+    /// What is wrong, without the name: "must lie in (0, 1), got 2".
+    pub fn problem(&self) -> String {
+        let text = self.to_string();
+        text.strip_prefix(self.name()).map_or(text.clone(), |rest| rest.trim_start().to_string())
+    }
+
     /// Checks that `value` is finite and ≥ 0.
     pub fn non_negative(name: &'static str, value: f64) -> Result<(), Self> {
         if value >= 0.0 && value.is_finite() { Ok(()) } else { Err(Self::Negative { name, value }) }

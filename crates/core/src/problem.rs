@@ -2,6 +2,8 @@
 //! and the data. It knows nothing of methods; it evaluates the least-squares quantities every
 //! method needs.
 
+use std::sync::Arc;
+
 use sysid_ode::{Integrator, Observable, System};
 
 use crate::data::Data;
@@ -55,6 +57,23 @@ impl<S> Clone for Problem<S> {
             held: self.held.clone(),
             scales: self.scales.clone(),
             experiments: self.experiments.clone(),
+            integrator: self.integrator,
+            quadrature_rtol: self.quadrature_rtol,
+        }
+    }
+}
+
+impl<S> Problem<S> {
+    /// The same problem with each experiment's system mapped by `f`: to an enum of several
+    /// system types, say, so that code working on any of them is compiled once.
+    pub fn map_system<T>(self, f: impl Fn(Arc<S>) -> T) -> Problem<T> {
+        Problem {
+            declared: self.declared,
+            free: self.free,
+            unknowns: self.unknowns,
+            held: self.held,
+            scales: self.scales,
+            experiments: self.experiments.into_iter().map(|e| e.map_system(&f)).collect(),
             integrator: self.integrator,
             quadrature_rtol: self.quadrature_rtol,
         }
@@ -238,7 +257,8 @@ impl<S: System> Problem<S> {
             self.scales.retain(|&s| s != j);
         }
         if self.free.is_empty() && self.scales.is_empty() {
-            return Err(ProblemError::NoUnknowns);
+            let list: Vec<String> = fixed.iter().map(|(n, v)| format!("{n} = {v}")).collect();
+            return Err(ProblemError::AllFixed(list.join(", ")));
         }
         self.replan()
     }

@@ -155,6 +155,9 @@ pub enum Termination {
         optimality: f64,
         /// Whether the point is a plateau: the model responds to no unknown there.
         plateau: bool,
+        /// The unknowns the model does not respond to there, off their bounds: the data do
+        /// not determine them ([`Certificate::undetermined`](crate::Certificate::undetermined)).
+        undetermined: Vec<String>,
     },
     /// The iteration budget ran out.
     MaxIterations,
@@ -208,6 +211,18 @@ impl fmt::Display for Termination {
                 f,
                 "stalled at iteration {iteration}: {rule}, on a plateau: the model responds to no unknown there, so no test can tell it from a minimum"
             ),
+            Termination::Stalled { rule, iteration, undetermined, .. }
+                if !undetermined.is_empty() =>
+            {
+                write!(
+                    f,
+                    "stalled at iteration {iteration}: {rule}, but {} {} not determined: the model does not respond to {} there, and the cost may fall further as {} (a flat direction, not a minimum)",
+                    undetermined.join(", "),
+                    if undetermined.len() == 1 { "is" } else { "are" },
+                    if undetermined.len() == 1 { "it" } else { "them" },
+                    if undetermined.len() == 1 { "it moves" } else { "they move" }
+                )
+            }
             Termination::Stalled { rule, iteration, optimality, .. } => write!(
                 f,
                 "stalled at iteration {iteration}: {rule}, but the point is not a minimum (first-order optimality {optimality:.2e})"

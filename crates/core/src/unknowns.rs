@@ -3,6 +3,12 @@
 
 use serde::{Deserialize, Serialize};
 
+/// ln of the smallest positive normal number: the least coordinate a log-scale value keeps.
+const LN_SMALLEST: f64 = -708.396_418_532_264_1;
+/// ln of the largest finite number, less a little: the largest coordinate a log-scale value
+/// keeps.
+const LN_LARGEST: f64 = 709.782_712_893_383_9;
+
 /// One quantity to identify: a parameter, or the initial value of a state (named after the
 /// state).
 ///
@@ -83,13 +89,16 @@ impl Unknown {
     pub fn coordinate(&self, value: f64) -> f64 {
         if self.log { value.ln() } else { value }
     }
-    /// The value of a coordinate z.
+    /// The value of a coordinate z. On a log scale the value is a positive normal number
+    /// whatever z is: a coordinate that runs off towards ±∞ (a rate driven to 0) gives the
+    /// smallest or largest one, never 0 or ∞ (the certificate then finds the unknown
+    /// undetermined: the model no longer responds to it).
     pub fn value(&self, z: f64) -> f64 {
-        if self.log { z.exp() } else { z }
+        if self.log { z.clamp(LN_SMALLEST, LN_LARGEST).exp() } else { z }
     }
     /// d value / d z: 1, or the value itself on a log scale.
     pub fn scale(&self, z: f64) -> f64 {
-        if self.log { z.exp() } else { 1.0 }
+        if self.log { self.value(z) } else { 1.0 }
     }
     /// The scale of the coordinate at z, by which the certificate tells a flat unknown
     /// (docs of [`certificate`](crate::certificate)): 1 on a log scale (an e-fold of the
@@ -226,5 +235,24 @@ impl Unknowns {
             *zi = c;
         }
         clipped
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A log-scale coordinate run off towards ±∞ (a step in a flat direction) still gives a
+    /// positive normal value, never 0 or ∞; within range the value is exp(z) to the bit.
+    #[test]
+    fn a_log_scale_value_is_never_zero_or_infinite() {
+        let u = Unknown::new("k", 1.0).log();
+        for z in [-1e4, -746.0, -708.5, 709.9, 1e4] {
+            let v = u.value(z);
+            assert!(v >= f64::MIN_POSITIVE && v.is_finite(), "z = {z}: {v}");
+            assert_eq!(u.scale(z).to_bits(), v.to_bits());
+        }
+        assert_eq!(u.value(-3.5).to_bits(), (-3.5f64).exp().to_bits());
+        assert_eq!(Unknown::new("x", 0.0).value(-1e4).to_bits(), (-1e4f64).to_bits());
     }
 }

@@ -55,6 +55,16 @@ impl Default for MultistartOptions {
     }
 }
 
+impl MultistartOptions {
+    /// Checks the options, naming the first that cannot be used by its field.
+    pub fn validate(&self) -> Result<(), sysid_core::OptionsError> {
+        if self.starts == 0 {
+            return Err(sysid_core::OptionsError::Zero { name: "starts" });
+        }
+        sysid_core::OptionsError::positive("spread", self.spread)
+    }
+}
+
 /// The outcome of a multistart run.
 #[derive(Clone, Debug)]
 pub struct Multistart {
@@ -191,6 +201,7 @@ where
     S: System + Sync,
     M: Method<S> + Sync + ?Sized,
 {
+    options.validate()?;
     let started = std::time::Instant::now();
     let starts = starts(problem, options);
     let runs: Vec<(Estimate, usize)> = starts
@@ -345,6 +356,7 @@ mod tests {
                 active: vec![None],
                 flat: vec![false],
                 null_space: None,
+                scales: None,
             },
             history: Vec::new(),
             elapsed: Duration::ZERO,

@@ -249,6 +249,9 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
     fn fit_at(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {
         let unknown = &self.problem.unknowns().list()[self.i];
         let value = unknown.value(z);
+        if self.problem.unknowns().len() == 1 {
+            return Ok(self.likelihood_at(z));
+        }
         let name = unknown.name.clone();
         let fixed = self.problem.clone().with_fixed(&[(name, value)])?;
         let start: Vec<f64> = from
@@ -262,6 +265,22 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         let mut estimates = e.values.clone();
         estimates.insert(self.i, value);
         Ok(Point { value, nll: nll(&e), converged: e.converged(), estimates })
+    }
+
+    /// The profile of the only unknown: nothing is re-optimised (but the noise scales set in
+    /// closed form), so the profile is the likelihood itself; ∞ where the model cannot be
+    /// integrated.
+    fn likelihood_at(&self, z: f64) -> Point {
+        let value = self.problem.unknowns().list()[self.i].value(z);
+        let problem = match self.problem.scales().is_empty() {
+            true => Some(self.problem.clone()),
+            false => self.problem.optimal_scales(&[value]).map(|s| self.problem.with_scales(&s)),
+        };
+        let nll = problem
+            .and_then(|p| p.nll_at(&[z]).ok().flatten())
+            .filter(|v| !v.is_nan())
+            .unwrap_or(f64::INFINITY);
+        Point { value, nll, converged: nll.is_finite(), estimates: vec![value] }
     }
 
     /// Walks one side from the optimum `at` (direction ±1 in the coordinate).

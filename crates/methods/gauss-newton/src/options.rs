@@ -60,9 +60,9 @@ impl GaussNewtonOptions {
         self
     }
 
-    /// Checks the options.
+    /// Checks the method's own options (the driver's are checked by
+    /// [`drive`](sysid_core::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
-        self.driver.validate()?;
         OptionsError::positive("tolerance", self.tolerance)?;
         OptionsError::within("armijo", self.armijo, 0.0, 1.0)
     }

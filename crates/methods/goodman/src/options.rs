@@ -51,9 +51,9 @@ impl GoodmanOptions {
         self
     }
 
-    /// Checks the options.
+    /// Checks the method's own options (the driver's are checked by
+    /// [`drive`](sysid_core::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
-        self.driver.validate()?;
         OptionsError::non_negative("cost_tolerance", self.cost_tolerance)
     }
 }

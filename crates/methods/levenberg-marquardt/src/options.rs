@@ -46,9 +46,9 @@ impl Default for LevenbergMarquardtOptions {
 }
 
 impl LevenbergMarquardtOptions {
-    /// Checks the options.
+    /// Checks the method's own options (the driver's are checked by
+    /// [`drive`](sysid_core::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
-        self.driver.validate()?;
         OptionsError::positive("factor", self.factor)
     }
 }

@@ -15,9 +15,9 @@ pub struct MultipleShootingOptions {
 }
 
 impl MultipleShootingOptions {
-    /// Checks the options.
+    /// Checks the method's own options (the driver's are checked by
+    /// [`drive`](sysid_core::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
-        self.driver.validate()?;
         if self.intervals == Some(0) {
             return Err(OptionsError::Zero { name: "intervals" });
         }
