@@ -308,17 +308,23 @@ fn measured_series(
                 })?;
                 let mut list = Vec::with_capacity(rows.len());
                 for &row in &rows {
-                    match sigmas[row] {
-                        Some(s) if s > 0.0 && s.is_finite() => list.push(s),
-                        other => {
+                    let checked = match sigmas[row] {
+                        Some(s) => crate::file::check_sigma(s).map(|()| s),
+                        None => {
+                            Err("must be a positive number where it is measured, got an empty cell"
+                                .into())
+                        }
+                    };
+                    match checked {
+                        Ok(s) => list.push(s),
+                        Err(m) => {
                             return Err(at_cell(
                                 table,
                                 text,
                                 column,
                                 row,
                                 format!(
-                                    "column `{column}`, the σ of `{name}`: {} at t = {}: σ must be a positive number where `{name}` is measured",
-                                    other.map_or("an empty cell".to_string(), |s| s.to_string()),
+                                    "column `{column}`: the σ of `{name}` at t = {} {m}",
                                     times[row]
                                 ),
                             ));
@@ -332,6 +338,22 @@ fn measured_series(
                 Noise::Known(vec![1.0; t.len()])
             }
         };
+        if let (Noise::Known(sigmas), Transform::Lin) = (&noise, transform) {
+            for (&row, sigma) in rows.iter().zip(sigmas) {
+                let value = cells[row].unwrap_or_default();
+                if value.abs() / sigma > LARGEST {
+                    return Err(at_cell(
+                        table,
+                        text,
+                        name,
+                        row,
+                        format!(
+                            "column `{name}`: {value:e} is too large for least squares with σ = {sigma:e}: its weighted square overflows (the largest usable magnitude is {LARGEST:.1e}·σ)"
+                        ),
+                    ));
+                }
+            }
+        }
         data = data.series_with_noise(name, &t, &v, noise, transform);
     }
     if data.series.is_empty() {

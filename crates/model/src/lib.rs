@@ -52,11 +52,11 @@ mod system;
 pub mod table;
 mod tape;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use sysid_ode::{Inputs, Signature};
 
-pub use error::{ModelError, line_column};
+pub use error::{ModelError, SourceMap, line_column};
 pub use file::{
     DataSpec, ExperimentSpec, Expression, ModelFile, NoiseSpec, OutputSpec, RecordKind, SetValue,
 };
@@ -94,6 +94,19 @@ impl Model {
 
     fn located(&self, message: String) -> ModelError {
         ModelError::file(&self.file.path.display().to_string(), message)
+    }
+
+    /// Every file the model is read from: the model file (or an imported problem's files)
+    /// and its data files, those held in memory left out.
+    pub fn inputs(&self) -> Vec<PathBuf> {
+        let f = &self.file;
+        let held = |p: &Path| f.tables.iter().any(|t| t.0 == p);
+        std::iter::once(f.path.clone())
+            .chain(f.sources.iter().cloned())
+            .chain(f.data.file.iter().cloned())
+            .chain(f.experiments.iter().map(|e| e.file.clone()))
+            .filter(|p| !held(p))
+            .collect()
     }
 
     /// The data file named in `[data] file`.

@@ -208,8 +208,13 @@ struct Plan<'a> {
 
 impl Model {
     /// The identification problem of the model file: its `[data]` (or `data` instead) as one
-    /// experiment, or each of its `[[experiments]]`.
+    /// experiment, or each of its `[[experiments]]`. An error in an imported problem's text
+    /// is located where the user wrote its subject ([`SourceMap`](crate::SourceMap)).
     pub fn problem(&self, data: Option<&Path>) -> Result<Problem<ModelSystem>, ModelError> {
+        self.build_problem(data).map_err(|e| self.file.source_map.locate(e))
+    }
+
+    fn build_problem(&self, data: Option<&Path>) -> Result<Problem<ModelSystem>, ModelError> {
         let f = &self.file;
         let plans: Vec<Plan<'_>> = if f.experiments.is_empty() {
             let file = match data {
@@ -556,8 +561,14 @@ impl Model {
                             Observable::State(i) => &self.file.states[i],
                             Observable::Output(o) => &self.file.outputs[o].name,
                         };
+                        // At the σ expression, where it is one.
                         let at =
-                            self.file.outputs.iter().find(|o| &o.name == name).map_or(0, |o| o.at);
+                            self.file.outputs.iter().find(|o| &o.name == name).map_or(0, |o| {
+                                match &o.noise {
+                                    crate::NoiseSpec::Expression(e) => e.at,
+                                    _ => o.at,
+                                }
+                            });
                         return Err(ModelError::at(
                             &self.file.path.display().to_string(),
                             &self.file.text,

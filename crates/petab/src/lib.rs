@@ -36,7 +36,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 use sysid_model::table::Table;
-use sysid_model::{Model, ModelError, ModelFile};
+use sysid_model::{Model, ModelError, ModelFile, SourceMap};
 
 use math::{Math, Rel, parse_formula};
 use sbml::{Initial, Sbml};
@@ -113,9 +113,7 @@ pub fn import(yaml: &Path) -> Result<Imported, ModelError> {
         return Err(ModelError::file(&name, "`sbml_files` must name exactly one SBML file"));
     };
     let sbml_path = base.join(sbml_file);
-    let sbml_text = std::fs::read_to_string(&sbml_path).map_err(|e| {
-        ModelError::file(&sbml_path.display().to_string(), format!("cannot be read: {e}"))
-    })?;
+    let sbml_text = sbml::read_text(&sbml_path)?;
     let sbml = Sbml::parse(&sbml_text, &sbml_path.display().to_string())?;
     let read_all = |files: &[String], what: &str| -> Result<Vec<Tsv>, ModelError> {
         if files.is_empty() {
@@ -129,7 +127,18 @@ pub fn import(yaml: &Path) -> Result<Imported, ModelError> {
         measurements: read_all(&sub.measurement_files, "measurement")?,
         observables: read_all(&sub.observable_files, "observable")?,
     };
-    Builder::new((&sbml, sbml_path.display().to_string()), &tables, yaml)?.build()
+    let mut imported =
+        Builder::new((&sbml, sbml_path.display().to_string()), &tables, yaml)?.build()?;
+    imported.model.file.sources = std::iter::once(sbml_path)
+        .chain(std::iter::once(base.join(&problem.parameter_file)))
+        .chain(
+            [&sub.condition_files, &sub.measurement_files, &sub.observable_files]
+                .into_iter()
+                .flatten()
+                .map(|f| base.join(f)),
+        )
+        .collect();
+    Ok(imported)
 }
 
 fn first_line(s: &str) -> &str {
@@ -160,6 +169,14 @@ struct Observable {
     formula: Math,
     noise: Math,
     transform: &'static str,
+    /// Where its formula and its noise formula are written, as errors there begin.
+    formula_at: ModelError,
+    noise_at: ModelError,
+}
+
+/// `template` (an error at a cell, its message the cell's prefix) with `message`.
+fn at(template: &ModelError, message: impl std::fmt::Display) -> ModelError {
+    ModelError { message: format!("{}{message}", template.message), ..template.clone() }
 }
 
 /// An output of the model file: one observable with one set of replacements.
@@ -221,6 +238,10 @@ struct Simulation {
     also: Vec<String>,
 }
 
+/// The largest measurement the importer takes: the square of a larger one overflows for
+/// any σ below 1, and no measured quantity is that large in any unit.
+const MAX_MEASUREMENT: f64 = 1e150;
+
 /// Stands for the output's own value in a σ expression until the output is named.
 const OWN: &str = "\u{1}own\u{1}";
 
@@ -274,6 +295,7 @@ impl<'a> Builder<'a> {
         };
         b.read_parameters()?;
         b.read_observables()?;
+        b.check_conditions()?;
         b.name_ids();
         b.name_overrides();
         b.resolve_rules()?;
@@ -281,13 +303,20 @@ impl<'a> Builder<'a> {
         Ok(b)
     }
 
+    /// The parameter table. PEtab v1 requires `parameterScale` in every row and both
+    /// bounds of an estimated parameter (a number: `inf` and `-inf` are numbers, an empty
+    /// cell or `nan` is not); a table without them is refused where the value is missing.
     fn read_parameters(&mut self) -> Result<(), ModelError> {
         let t = &self.tables.parameters;
         let id = t.required("parameterId")?;
-        let scale = t.column("parameterScale");
-        let (lower, upper) = (t.column("lowerBound"), t.column("upperBound"));
+        let scale = t.required("parameterScale")?;
         let nominal = t.required("nominalValue")?;
         let estimate = t.required("estimate")?;
+        let any_estimated = (0..t.rows.len()).any(|row| t.cell(row, estimate).text == "1");
+        let (lower, upper) = match any_estimated {
+            true => (Some(t.required("lowerBound")?), Some(t.required("upperBound")?)),
+            false => (t.column("lowerBound"), t.column("upperBound")),
+        };
         for row in 0..t.rows.len() {
             let pid = t.cell(row, id);
             if pid.text.is_empty() {
@@ -299,10 +328,22 @@ impl<'a> Builder<'a> {
                 "0" => false,
                 other => return Err(e.err(format!("`{other}`: estimate is 0 or 1"))),
             };
-            let scale_name = scale_of(scale.map(|c| t.cell(row, c)), "scale")?;
+            let scale_cell = t.cell(row, scale);
+            if scale_cell.text.is_empty() {
+                return Err(scale_cell.err(format!(
+                    "`{}` has no scale: parameterScale is lin, log or log10 in every row",
+                    pid.text
+                )));
+            }
+            let scale_name = scale_of(Some(scale_cell), "scale")?;
             let log = scale_name != "lin";
             let bound = |column: Option<usize>, default: f64| -> Result<f64, ModelError> {
                 match column.map(|c| t.cell(row, c)) {
+                    Some(c) if estimated && c.is_blank() => Err(c.err(format!(
+                        "`{}` is estimated, so it needs this bound: a number (inf and -inf are numbers), not `{}`",
+                        pid.text,
+                        if c.text.is_empty() { "" } else { c.text }
+                    ))),
                     Some(c) if !c.is_blank() => c.number(),
                     _ => Ok(default),
                 }
@@ -337,6 +378,28 @@ impl<'a> Builder<'a> {
         Ok(())
     }
 
+    /// Every condition is defined once over the condition tables: a second row with the
+    /// same `conditionId` would be ignored (PEtab v1 requires the ids to be unique).
+    fn check_conditions(&self) -> Result<(), ModelError> {
+        let mut seen: HashMap<&str, (&str, usize)> = HashMap::new();
+        for t in &self.tables.conditions {
+            let id = t.required("conditionId")?;
+            for row in 0..t.rows.len() {
+                let c = t.cell(row, id);
+                if c.text.is_empty() {
+                    return Err(c.err("a condition needs an id"));
+                }
+                if let Some((file, line)) = seen.insert(c.text, (&t.file, t.line(row))) {
+                    return Err(c.err(format!(
+                        "condition `{}` is defined a second time (first at {file}:{line}): each conditionId is one row",
+                        c.text
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
     fn read_observables(&mut self) -> Result<(), ModelError> {
         for t in &self.tables.observables {
             let id = t.required("observableId")?;
@@ -346,7 +409,7 @@ impl<'a> Builder<'a> {
                 let oid = t.cell(row, id);
                 let parse = |c: Cell<'_>| {
                     parse_formula(c.text).map_err(|e| {
-                        let mut err = c.err(format!("`{}`: {}", c.text, e.message));
+                        let mut err = c.err(format!("`{}`: {}", abbreviated(c.text), e.message));
                         err.column = err.column.map(|col| col + e.position);
                         err
                     })
@@ -370,6 +433,8 @@ impl<'a> Builder<'a> {
                     formula: parse(t.cell(row, formula))?,
                     noise: parse(t.cell(row, noise))?,
                     transform,
+                    formula_at: t.cell(row, formula).err(""),
+                    noise_at: t.cell(row, noise).err(""),
                 };
                 if self.observables.insert(oid.text.to_string(), observable).is_some() {
                     return Err(oid.err(format!("observable `{}` is defined twice", oid.text)));
@@ -613,18 +678,23 @@ impl<'a> Builder<'a> {
         let outputs = self.output_names(&measured.outputs, &dynamics.states, &parameters);
         let (measured, experiments) =
             self.merge_same_simulations(measured, &parameters, &dynamics.states)?;
-        let text =
+        let (text, source_map) =
             self.model_text(&dynamics, &measured, (&parameters, &extras), &outputs, &experiments)?;
-        let mut file = ModelFile::parse(&text, self.yaml).map_err(|e| ModelError {
-            message: format!(
-                "the model file made of this PEtab problem is refused, which is a bug of the importer: {} (line {} of the text it made)",
-                e.message,
-                e.line.unwrap_or(0)
-            ),
-            line: None,
-            column: None,
-            ..e
+        // An error in the text is the user's where the map knows the line's origin (a
+        // division by 0 in a formula, say); elsewhere it is the importer's.
+        let mut file = ModelFile::parse(&text, self.yaml).map_err(|e| {
+            source_map.find(&e).unwrap_or_else(|| ModelError {
+                message: format!(
+                    "the model file made of this PEtab problem is refused, which is a bug of the importer: {} (line {} of the text it made)",
+                    e.message,
+                    e.line.unwrap_or(0)
+                ),
+                line: None,
+                column: None,
+                ..e
+            })
         })?;
+        file.source_map = source_map;
         for (spec, (_, rows)) in file.experiments.clone().iter().zip(&measured.experiments) {
             file.tables.push((spec.file.clone(), data_table(spec, rows, &outputs)?));
         }
@@ -860,6 +930,11 @@ impl<'a> Builder<'a> {
         if !value.is_finite() {
             return Err(value_cell.err("the measurement is not finite"));
         }
+        if value.abs() > MAX_MEASUREMENT {
+            return Err(value_cell.err(format!(
+                "{value:e} is too large for least squares: its square over σ² overflows for any σ below 1 (the largest usable magnitude is {MAX_MEASUREMENT:e}; a unit slip?)"
+            )));
+        }
         if observable.transform != "lin" && value <= 0.0 {
             return Err(value_cell.err(format!(
                 "{value} is not positive, and `{}` is measured on the {} scale",
@@ -876,8 +951,13 @@ impl<'a> Builder<'a> {
             sigma: match noise_math.number() {
                 Some(v) if v > 0.0 && v.is_finite() => Sigma::Number(v),
                 Some(v) => {
-                    let c = t.cell_named(row, "noiseParameters").unwrap_or(oc);
-                    return Err(c.err(format!("σ of `{}` is {v}: it must be positive", oc.text)));
+                    let message = format!("σ of `{}` is {v}: it must be positive", oc.text);
+                    let placeholder =
+                        observable.noise.names().iter().any(|n| n.starts_with("noiseParameter"));
+                    return Err(match (placeholder, t.cell_named(row, "noiseParameters")) {
+                        (true, Some(c)) => c.err(message),
+                        _ => at(&observable.noise_at, message),
+                    });
                 }
                 None => Sigma::Expression(noise_math.render(&|n| {
                     if n == OWN { OWN.to_string() } else { self.name(n) }
@@ -1011,8 +1091,11 @@ impl<'a> Builder<'a> {
         (parameters, extras): (&[String], &[String]),
         output_names: &[String],
         experiment_names: &[String],
-    ) -> Result<String, ModelError> {
+    ) -> Result<(String, SourceMap), ModelError> {
         let mut text = String::new();
+        let mut map = SourceMap::new(self.yaml.display().to_string());
+        // The line the next `writeln!` writes.
+        let line = |text: &String| text.matches('\n').count() + 1;
         let quote = |names: &[String]| {
             names.iter().map(|n| format!("\"{}\"", self.name(n))).collect::<Vec<_>>().join(", ")
         };
@@ -1025,47 +1108,66 @@ impl<'a> Builder<'a> {
         let _ = writeln!(text, "parameters = [{}]\n", quote(parameters));
         let _ = writeln!(text, "[equations]");
         for (x, e) in &d.equations {
+            if let Some(origin) = self.sbml_origin(x) {
+                map.record(line(&text), 1, origin);
+            }
             let _ = writeln!(text, "{} = \"{}\"", self.name(x), self.render(e));
         }
         let _ = writeln!(text, "\n[initial]");
         for (x, e) in &d.initial {
+            if let Some(origin) = self.sbml_origin(x) {
+                map.record(line(&text), 1, origin);
+            }
             let value = e.number().map_or_else(|| format!("\"{}\"", self.render(e)), toml_number);
             let _ = writeln!(text, "{} = {value}", self.name(x));
         }
         let _ = writeln!(text, "\n[known]");
-        let mut unknowns = String::new();
+        let mut unknowns = Vec::new();
         for p in parameters {
             match self.parameters.get(p) {
-                Some((q, _)) if q.estimate => {
-                    let _ = writeln!(unknowns, "{} = {}", self.name(p), unknown_entry(q));
-                }
+                Some((q, _)) if q.estimate => unknowns.push((p, q)),
                 _ => {
+                    if let Some(origin) = self.parameter_origin(p).or_else(|| self.sbml_origin(p)) {
+                        map.record(line(&text), 1, origin);
+                    }
                     let _ =
                         writeln!(text, "{} = {}", self.name(p), toml_number(self.known_value(p)?));
                 }
             }
         }
-        for x in extras {
-            let (q, _) = &self.parameters[x];
-            let _ = writeln!(unknowns, "{} = {}", self.name(x), unknown_entry(q));
-        }
+        unknowns.extend(extras.iter().map(|x| (x, &self.parameters[x].0)));
         let _ = writeln!(text, "\n[outputs]");
         for (o, name) in m.outputs.iter().zip(output_names) {
             let sigma = match &o.sigma {
                 Sigma::Number(v) => toml_number(*v),
                 Sigma::Expression(e) => format!("\"{}\"", e.replace(OWN, name)),
             };
-            let _ = writeln!(
-                text,
+            let entry = format!(
                 "{name} = {{ value = \"{}\", sigma = {sigma}, transform = \"{}\" }}",
                 o.value, o.transform
             );
+            if let Some(observable) = self.observables.get(&o.observable) {
+                let sigma_at =
+                    entry.find(", sigma =").map_or(1, |b| entry[..b].chars().count() + 3);
+                map.record(line(&text), 1, observable.formula_at.clone());
+                map.record(line(&text), sigma_at, observable.noise_at.clone());
+            }
+            let _ = writeln!(text, "{entry}");
         }
-        let _ = writeln!(text, "\n[unknowns]\n{unknowns}");
+        let _ = writeln!(text, "\n[unknowns]");
+        for (p, q) in unknowns {
+            if let Some(origin) = self.parameter_origin(p) {
+                map.record(line(&text), 1, origin);
+            }
+            let _ = writeln!(text, "{} = {}", self.name(p), unknown_entry(q));
+        }
+        let _ = writeln!(text);
         let measurement_file = Path::new(&self.tables.measurements[0].file)
             .file_name()
             .map_or("measurements".into(), |f| f.to_string_lossy().to_string());
-        for (simulation, name) in m.simulations.iter().zip(experiment_names) {
+        for ((simulation, name), (key, _)) in
+            m.simulations.iter().zip(experiment_names).zip(&m.experiments)
+        {
             let _ = writeln!(text, "[[experiments]]");
             let _ = writeln!(text, "name = \"{name}\"");
             if !simulation.also.is_empty() {
@@ -1076,13 +1178,23 @@ impl<'a> Builder<'a> {
             }
             let _ = writeln!(text, "file = \"{measurement_file}#{name}\"");
             let (set, initial) = &simulation.settings;
+            let condition = self.condition_origin(&key.sim);
             if !set.is_empty() {
+                if let Some(origin) = &condition {
+                    map.record(line(&text), 1, origin.clone());
+                }
                 let _ = writeln!(text, "set = {{ {} }}", set.join(", "));
             }
             if let Some(pre) = &simulation.preequilibrate {
+                if let Some(origin) = key.pre.as_deref().and_then(|p| self.condition_origin(p)) {
+                    map.record(line(&text), 1, origin);
+                }
                 let _ = writeln!(text, "preequilibrate = {{ {} }}", pre.join(", "));
             }
             if !initial.is_empty() {
+                if let Some(origin) = &condition {
+                    map.record(line(&text), 1, origin.clone());
+                }
                 let _ = writeln!(text, "initial = {{ {} }}", initial.join(", "));
             }
             if simulation.steady {
@@ -1094,7 +1206,33 @@ impl<'a> Builder<'a> {
             text,
             "[integrator]\nmethod = \"rodas5p\"\nrtol = 1e-8\natol = 1e-12\nmax_steps = 200000"
         );
-        Ok(text)
+        Ok((text, map))
+    }
+
+    /// Where the SBML declares `id`, as an error there begins.
+    fn sbml_origin(&self, id: &str) -> Option<ModelError> {
+        let &(line, column) = self.sbml.positions.get(id)?;
+        Some(ModelError {
+            file: self.sbml_file.clone(),
+            line: Some(line),
+            column: Some(column),
+            message: String::new(),
+        })
+    }
+
+    /// The parameter table's row of `id`, as an error there begins.
+    fn parameter_origin(&self, id: &str) -> Option<ModelError> {
+        let (_, row) = self.parameters.get(id)?;
+        let t = &self.tables.parameters;
+        Some(t.cell(*row, t.column("parameterId")?).err(""))
+    }
+
+    /// The condition table's row of condition `id`, as an error there begins.
+    fn condition_origin(&self, id: &str) -> Option<ModelError> {
+        self.tables.conditions.iter().find_map(|t| {
+            let row = condition_row(t, id)?;
+            Some(t.cell(row, t.column("conditionId")?).err(""))
+        })
     }
 
     fn render(&self, m: &Math) -> String {
@@ -1267,12 +1405,37 @@ fn placeholders(
             None => Math::Name((*v).to_string()),
         })
     });
-    match m.names().into_iter().find(|n| n.starts_with(&prefix) && n.ends_with(&suffix)) {
-        None => Ok(m),
-        Some(n) => Err(given.unwrap_or(observable).err(format!(
+    if let Some(n) = m.names().into_iter().find(|n| n.starts_with(&prefix) && n.ends_with(&suffix))
+    {
+        return Err(given.unwrap_or(observable).err(format!(
             "`{n}` of observable `{}` is not given a value in `{column}`",
             observable.text
-        ))),
+        )));
+    }
+    // As many values as placeholders: a value more has nothing to replace.
+    let used = formula
+        .names()
+        .iter()
+        .filter_map(|n| n.strip_prefix(&prefix)?.strip_suffix(&suffix)?.parse::<usize>().ok())
+        .max()
+        .unwrap_or(0);
+    if list.len() > used {
+        return Err(given.unwrap_or(observable).err(format!(
+            "{} value{} for observable `{}`, whose {kind} formula has {used} placeholder{} ({prefix}1{suffix}, …): one value per placeholder",
+            list.len(),
+            if list.len() == 1 { "" } else { "s" },
+            observable.text,
+            if used == 1 { "" } else { "s" }
+        )));
+    }
+    Ok(m)
+}
+
+/// `text` as an error quotes it: at most 60 characters, the rest replaced by `…`.
+fn abbreviated(text: &str) -> String {
+    match text.char_indices().nth(60) {
+        Some((cut, _)) => format!("{}…", &text[..cut]),
+        None => text.to_string(),
     }
 }
 

@@ -269,7 +269,7 @@ pub struct FormulaError {
 /// `time` are the time.
 pub fn parse_formula(text: &str) -> Result<Math, FormulaError> {
     let tokens = lex(text)?;
-    let mut p = Parser { tokens, at: 0, end: text.chars().count() };
+    let mut p = Parser { tokens, at: 0, end: text.chars().count(), depth: 0 };
     let e = p.sum()?;
     match p.peek() {
         None => Ok(e),
@@ -357,7 +357,13 @@ struct Parser {
     tokens: Vec<(Token, usize)>,
     at: usize,
     end: usize,
+    /// How deeply the expression being read nests (parentheses, signs, exponents, calls).
+    depth: usize,
 }
+
+/// How deeply a formula may nest: as deep as a model file's expressions
+/// ([`sysid_model::expr::MAX_DEPTH`]), which a deeper one could not be written as.
+pub const MAX_DEPTH: usize = sysid_model::expr::MAX_DEPTH;
 
 impl Parser {
     fn peek(&self) -> Option<(Token, usize)> {
@@ -422,7 +428,25 @@ impl Parser {
         Ok(e)
     }
 
+    /// Every nesting passes through here: a parenthesis or a call's argument (via
+    /// [`sum`](Self::sum)), a sign, an exponent. Refused beyond [`MAX_DEPTH`], where the
+    /// recursion would otherwise run out of stack.
     fn unary(&mut self) -> Result<Math, FormulaError> {
+        if self.depth >= MAX_DEPTH {
+            return Err(FormulaError {
+                position: self.here(),
+                message: format!(
+                    "the formula nests more than {MAX_DEPTH} levels deep (parentheses, signs, powers and function calls)"
+                ),
+            });
+        }
+        self.depth += 1;
+        let e = self.signed();
+        self.depth -= 1;
+        e
+    }
+
+    fn signed(&mut self) -> Result<Math, FormulaError> {
         match self.peek() {
             Some((Token::Op('-'), _)) => {
                 self.at += 1;
@@ -564,6 +588,17 @@ mod tests {
         assert_eq!(show("2 * -b"), "2e0 * -b");
         assert_eq!(show("log10(x)"), format!("log(x) / {:e}", 10f64.ln()));
         assert_eq!(show("1e-3 * time"), "1e-3 * t");
+    }
+
+    #[test]
+    fn formulas_nest_at_most_max_depth_deep() {
+        let nested = |n: usize| format!("{}a{}", "(".repeat(n), ")".repeat(n));
+        assert!(parse_formula(&nested(MAX_DEPTH - 1)).is_ok());
+        for deep in [nested(10_000), format!("{}a", "-".repeat(200_000)), "a^".repeat(5_000) + "a"]
+        {
+            let e = parse_formula(&deep).unwrap_err();
+            assert!(e.message.contains("nests more than 200 levels"), "{}", e.message);
+        }
     }
 
     #[test]

@@ -86,23 +86,53 @@ pub struct Sbml {
     pub reactions: Vec<Reaction>,
     /// The events.
     pub events: Vec<Event>,
+    /// Line and column of the element that declares each id (compartments, species,
+    /// parameters, reactions, events, function definitions), for errors found later.
+    pub positions: HashMap<String, (usize, usize)>,
 }
 
 struct Reader<'a> {
     doc: &'a Document<'a>,
     file: &'a str,
     functions: HashMap<String, (Vec<String>, Math)>,
+    /// How deeply the MathML being read nests.
+    depth: std::cell::Cell<usize>,
 }
+
+/// How deeply MathML may nest: as deep as a model file's expressions, which a deeper one
+/// could not be written as (and the reader's recursion stays within its stack).
+pub const MAX_DEPTH: usize = sysid_model::expr::MAX_DEPTH;
 
 impl Reader<'_> {
     fn err(&self, node: Node<'_, '_>, message: impl Into<String>) -> ModelError {
-        let pos = self.doc.text_pos_at(node.range().start);
+        let (line, column) = self.position(node);
         ModelError {
             file: self.file.to_string(),
-            line: Some(pos.row as usize),
-            column: Some(pos.col as usize),
+            line: Some(line),
+            column: Some(column),
             message: message.into(),
         }
+    }
+
+    /// The line and column where `node` starts.
+    fn position(&self, node: Node<'_, '_>) -> (usize, usize) {
+        let pos = self.doc.text_pos_at(node.range().start);
+        (pos.row as usize, pos.col as usize)
+    }
+
+    /// Refuses an id declared twice (SBML's ids are one namespace), and records where each
+    /// is declared.
+    fn declare(&self, node: Node<'_, '_>, kind: &str, sbml: &mut Sbml) -> Result<(), ModelError> {
+        let id = id(node);
+        let at = self.position(node);
+        if let Some(&(line, column)) = sbml.positions.get(id) {
+            return Err(self.err(
+                node,
+                format!("{kind} `{id}` is declared a second time (first at line {line}, column {column}): every id is declared once"),
+            ));
+        }
+        sbml.positions.insert(id.to_string(), at);
+        Ok(())
     }
 
     fn number(&self, node: Node<'_, '_>, attribute: &str) -> Result<Option<f64>, ModelError> {
@@ -127,6 +157,20 @@ impl Reader<'_> {
     }
 
     fn math(&self, node: Node<'_, '_>) -> Result<Math, ModelError> {
+        let depth = self.depth.get();
+        if depth >= MAX_DEPTH {
+            return Err(self.err(
+                node,
+                format!("the MathML nests more than {MAX_DEPTH} levels deep (<apply>, <piecewise>, <semantics>)"),
+            ));
+        }
+        self.depth.set(depth + 1);
+        let m = self.math_element(node);
+        self.depth.set(depth);
+        m
+    }
+
+    fn math_element(&self, node: Node<'_, '_>) -> Result<Math, ModelError> {
         let text = || node.text().unwrap_or_default().trim().to_string();
         Ok(match node.tag_name().name() {
             "ci" => Math::Name(text()),
@@ -349,6 +393,47 @@ fn id<'a>(node: Node<'a, '_>) -> &'a str {
         .unwrap_or("?")
 }
 
+/// The text of the SBML file at `path`: UTF-8, or ISO 8859-1 (Latin-1) where its XML
+/// declaration says so. Any other byte that is not UTF-8 is refused at its line and column,
+/// naming the byte.
+pub fn read_text(path: &std::path::Path) -> Result<String, ModelError> {
+    let file = path.display().to_string();
+    let bytes =
+        std::fs::read(path).map_err(|e| ModelError::file(&file, format!("cannot be read: {e}")))?;
+    let error = match String::from_utf8(bytes) {
+        Ok(text) => return Ok(text),
+        Err(e) => e,
+    };
+    let bytes = error.as_bytes();
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(200)]).to_lowercase();
+    let declared = head
+        .split("encoding=")
+        .nth(1)
+        .and_then(|rest| rest.trim_start_matches(['"', '\'']).split(['"', '\'']).next())
+        .map(str::trim)
+        .unwrap_or("");
+    if matches!(declared, "iso-8859-1" | "iso8859-1" | "latin1" | "latin-1" | "l1") {
+        // Latin-1 maps each byte to the code point of the same number.
+        return Ok(bytes.iter().map(|&b| char::from(b)).collect());
+    }
+    let at = error.utf8_error().valid_up_to();
+    let (line, column) = sysid_model::line_column(&String::from_utf8_lossy(&bytes[..at]), at);
+    Err(ModelError {
+        file,
+        line: Some(line),
+        column: Some(column),
+        message: format!(
+            "byte 0x{:02X} is not UTF-8, and the XML declaration does not name another encoding sysid reads ({}): save the file as UTF-8 (or declare encoding=\"ISO-8859-1\" if it is Latin-1)",
+            bytes[at],
+            if declared.is_empty() {
+                "it names none".to_string()
+            } else {
+                format!("it says {declared}")
+            }
+        ),
+    })
+}
+
 impl Sbml {
     /// Whether an event sets `id`.
     pub fn set_by_events(&self, id: &str) -> bool {
@@ -367,7 +452,8 @@ impl Sbml {
                 message: format!("not valid XML: {e}"),
             }
         })?;
-        let mut r = Reader { doc: &doc, file, functions: HashMap::new() };
+        let mut r =
+            Reader { doc: &doc, file, functions: HashMap::new(), depth: Default::default() };
         let root = doc.root_element();
         let model =
             child(root, "model").ok_or_else(|| r.err(root, "no <model> in the SBML file"))?;
@@ -375,6 +461,9 @@ impl Sbml {
             return Err(r.err(model, "conversion factors are not supported"));
         }
         let mut out = Sbml::default();
+        // The names each piece of mathematics uses, where it is, and what it is: checked once
+        // every id is known.
+        let mut uses: Vec<(Vec<String>, Node<'_, '_>, String)> = Vec::new();
         for f in list(model, "listOfFunctionDefinitions") {
             let math = child(f, "math")
                 .ok_or_else(|| r.err(f, format!("function `{}` has no <math>", id(f))))?;
@@ -394,13 +483,16 @@ impl Sbml {
             }
             let body =
                 body.ok_or_else(|| r.err(lambda, format!("function `{}` has no body", id(f))))?;
+            r.declare(f, "function definition", &mut out)?;
             r.functions.insert(id(f).to_string(), (parameters, body));
         }
         for c in list(model, "listOfCompartments") {
+            r.declare(c, "compartment", &mut out)?;
             let size = r.number(c, "size")?.or(r.number(c, "volume")?).unwrap_or(1.0);
             out.compartments.push((id(c).to_string(), size));
         }
         for s in list(model, "listOfSpecies") {
+            r.declare(s, "species", &mut out)?;
             if s.attribute("conversionFactor").is_some() {
                 return Err(
                     r.err(s, format!("species `{}`: conversion factors are not supported", id(s)))
@@ -412,19 +504,32 @@ impl Sbml {
                     (None, Some(a)) => Some(Initial::Amount(a)),
                     (None, None) => None,
                 };
+            let compartment = s.attribute("compartment").unwrap_or_default().to_string();
+            if !out.compartments.iter().any(|c| c.0 == compartment) {
+                return Err(r.err(
+                    s,
+                    format!(
+                        "species `{}` is in compartment `{compartment}`, which is not declared",
+                        id(s)
+                    ),
+                ));
+            }
             out.species.push(Species {
                 id: id(s).to_string(),
-                compartment: s.attribute("compartment").unwrap_or_default().to_string(),
+                compartment,
                 initial,
                 amount: Reader::flag(s, "hasOnlySubstanceUnits"),
                 fixed: Reader::flag(s, "boundaryCondition") || Reader::flag(s, "constant"),
             });
         }
         for p in list(model, "listOfParameters") {
+            r.declare(p, "parameter", &mut out)?;
             out.parameters.push((id(p).to_string(), r.number(p, "value")?.unwrap_or(f64::NAN)));
         }
         for a in list(model, "listOfInitialAssignments") {
-            out.initial_assignments.push((id(a).to_string(), r.math_of(a)?));
+            let math = r.math_of(a)?;
+            uses.push((math.names(), a, format!("the initial assignment of `{}`", id(a))));
+            out.initial_assignments.push((id(a).to_string(), math));
         }
         let compartment = |name: &str| out.compartments.iter().any(|c| c.0 == name);
         for rule in list(model, "listOfRules") {
@@ -440,6 +545,7 @@ impl Sbml {
                 ));
             }
             let math = r.math_of(rule)?;
+            uses.push((math.names(), rule, format!("the {kind} of `{variable}`")));
             match kind {
                 "assignmentRule" => out.assignment_rules.push((variable, math)),
                 "rateRule" => out.rate_rules.push((variable, math)),
@@ -448,6 +554,9 @@ impl Sbml {
         }
         for event in list(model, "listOfEvents") {
             let eid = id(event).to_string();
+            if event.attribute("id").is_some() {
+                r.declare(event, "event", &mut out)?;
+            }
             if let Some(delay) = child(event, "delay") {
                 return Err(r.err(delay, format!("event `{eid}`: delays are not supported")));
             }
@@ -461,9 +570,12 @@ impl Sbml {
                 .map(|a| Ok((id(a).to_string(), r.math_of(a)?)))
                 .collect::<Result<Vec<_>, ModelError>>()?;
             let pos = doc.text_pos_at(event.range().start);
+            let trigger = r.math_of(trigger)?;
+            let names = assignments.iter().flat_map(|(_, m)| m.names()).chain(trigger.names());
+            uses.push((names.collect(), event, format!("event `{eid}`")));
             out.events.push(Event {
                 id: eid,
-                trigger: r.math_of(trigger)?,
+                trigger,
                 initially_true,
                 assignments,
                 at: (pos.row as usize, pos.col as usize),
@@ -473,6 +585,7 @@ impl Sbml {
             return Err(r.err(c, "constraints are not supported"));
         }
         for reaction in list(model, "listOfReactions") {
+            r.declare(reaction, "reaction", &mut out)?;
             let rid = id(reaction).to_string();
             if Reader::flag(reaction, "fast") {
                 return Err(r.err(
@@ -490,6 +603,12 @@ impl Sbml {
                             ));
                         }
                         let species = s.attribute("species").unwrap_or_default().to_string();
+                        if !out.species.iter().any(|x| x.id == species) {
+                            return Err(r.err(
+                                s,
+                                format!("reaction `{rid}` refers to species `{species}`, which is not declared"),
+                            ));
+                        }
                         Ok((species, r.number(s, "stoichiometry")?.unwrap_or(1.0)))
                     })
                     .collect()
@@ -513,7 +632,28 @@ impl Sbml {
             let rate = r.math_of(law)?;
             let rate =
                 rate.substitute(&|n| local.iter().find(|l| l.0 == n).map(|l| Math::Num(l.1)));
+            uses.push((rate.names(), reaction, format!("the kinetic law of reaction `{rid}`")));
             out.reactions.push(Reaction { id: rid, reactants, products, rate });
+        }
+        // Every name the mathematics uses is declared: a compartment, species or parameter.
+        for (names, node, what) in uses {
+            for name in names {
+                let known = out.species.iter().any(|x| x.id == name)
+                    || out.parameters.iter().any(|p| p.0 == name)
+                    || out.compartments.iter().any(|c| c.0 == name);
+                if known {
+                    continue;
+                }
+                let message = match out.reactions.iter().any(|x| x.id == name) {
+                    true => format!(
+                        "{what} uses the rate of reaction `{name}` (its id as a symbol), which is not supported"
+                    ),
+                    false => format!(
+                        "{what} uses `{name}`, which is no compartment, species or parameter of the model"
+                    ),
+                };
+                return Err(r.err(node, message));
+            }
         }
         Ok(out)
     }

@@ -92,12 +92,26 @@ impl Tsv {
                 });
             }
         }
-        let rows = lines
-            .map(|(i, l)| {
-                let (cells, starts) = split(l);
-                Row { line: i + 1, cells, starts }
-            })
-            .collect();
+        let mut rows = Vec::new();
+        for (i, l) in lines {
+            let (cells, starts) = split(l);
+            // Trailing empty cells are tolerated (editors leave them); a value beyond the
+            // header has no column to belong to.
+            if let Some(extra) = (headers.len()..cells.len()).find(|&c| !cells[c].is_empty()) {
+                return Err(ModelError {
+                    file: file.to_string(),
+                    line: Some(i + 1),
+                    column: Some(starts[extra]),
+                    message: format!(
+                        "this row has {} cells and the header {} columns: `{}` belongs to no column",
+                        cells.len(),
+                        headers.len(),
+                        cells[extra]
+                    ),
+                });
+            }
+            rows.push(Row { line: i + 1, cells, starts });
+        }
         Ok(Self { file: file.to_string(), headers, rows })
     }
 
@@ -114,6 +128,11 @@ impl Tsv {
             column: None,
             message: format!("no column `{name}` (columns: {})", self.headers.join(", ")),
         })
+    }
+
+    /// The line of row `row` in the file.
+    pub fn line(&self, row: usize) -> usize {
+        self.rows[row].line
     }
 
     /// The column names.
@@ -164,5 +183,13 @@ mod tests {
         assert_eq!((e.line, e.column), (Some(3), Some(4)));
         assert!(e.to_string().starts_with("f.tsv:3:4: column `b`: `x` is not a number"), "{e}");
         assert_eq!(parse_number("-Inf"), Some(f64::NEG_INFINITY));
+    }
+
+    #[test]
+    fn a_value_beyond_the_header_is_refused_where_it_is() {
+        let e = Tsv::parse("a\tb\n1\t2\t3\n", "f.tsv").unwrap_err();
+        assert_eq!((e.line, e.column), (Some(2), Some(5)));
+        assert!(e.message.contains("`3` belongs to no column"), "{e}");
+        assert!(Tsv::parse("a\tb\n1\t2\t\n", "f.tsv").is_ok());
     }
 }

@@ -30,11 +30,22 @@ pub struct ReportError {
     pub message: String,
 }
 
-/// Writes `figure` to `<stem>.png` and `<stem>.svg` and returns the two paths.
+/// The two files [`save`] writes for `stem`: `<stem>.png` and `<stem>.svg`.
+pub fn figure_paths(stem: &Path) -> [PathBuf; 2] {
+    [stem.with_extension("png"), stem.with_extension("svg")]
+}
+
+/// Writes `figure` to `<stem>.png` and `<stem>.svg` and returns the two paths. A file that
+/// cannot be created is reported with the system's reason, before anything is drawn.
 pub fn save(figure: &impl Figure, stem: &Path) -> Result<[PathBuf; 2], ReportError> {
     init_fonts();
-    let png = stem.with_extension("png");
-    let svg = stem.with_extension("svg");
+    let [png, svg] = figure_paths(stem);
+    for path in [&png, &svg] {
+        std::fs::File::create(path).map_err(|e| ReportError {
+            path: path.clone(),
+            message: format!("cannot be written: {e}"),
+        })?;
+    }
     let fail = |path: &Path| {
         let path = path.to_path_buf();
         move |e: String| ReportError { path, message: e }

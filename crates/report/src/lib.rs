@@ -40,7 +40,7 @@ mod run;
 
 pub use accuracy::{Accuracy, Spread};
 pub use basin::{Basin, BasinPanel, Cell};
-pub use chart::{DrawResult, Figure, ReportError, save};
+pub use chart::{DrawResult, Figure, ReportError, figure_paths, save};
 pub use convergence::{Convergence, History};
 pub use cost::{Cost, CostBar};
 pub use look::{Look, look};

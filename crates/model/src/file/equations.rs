@@ -128,11 +128,7 @@ fn read_sigma(
             let e = r.expression_with_names(v, &what, &resolve, &scope.sigma_names(output))?;
             if e.program.is_constant() {
                 let sigma = e.program.eval::<f64>(0.0, &[], &[], &[]);
-                if !(sigma > 0.0 && sigma.is_finite()) {
-                    return Err(
-                        r.err(v.span().start, format!("{what} must be positive, got {sigma}"))
-                    );
-                }
+                check_sigma(sigma).map_err(|m| r.err(v.span().start, format!("{what} {m}")))?;
                 return Ok(NoiseSpec::Number(sigma));
             }
             Ok(NoiseSpec::Expression(e))
@@ -154,10 +150,28 @@ fn read_sigma(
         }
         _ => {
             let sigma = r.number(v, &what)?;
-            if sigma <= 0.0 {
-                return Err(r.err(v.span().start, format!("{what} must be positive, got {sigma}")));
-            }
+            check_sigma(sigma).map_err(|m| r.err(v.span().start, format!("{what} {m}")))?;
             Ok(NoiseSpec::Number(sigma))
         }
     }
+}
+
+/// The smallest and largest σ a fit can weigh a residual by: beyond them the weight 1/σ²
+/// overflows or vanishes.
+pub const SIGMA_RANGE: (f64, f64) = (1e-150, 1e150);
+
+/// Checks a known σ: positive, and within [`SIGMA_RANGE`]; the error says what is wrong
+/// without naming the σ.
+pub fn check_sigma(sigma: f64) -> Result<(), String> {
+    let (lo, hi) = SIGMA_RANGE;
+    if !(sigma > 0.0 && sigma.is_finite()) {
+        return Err(format!("must be positive, got {sigma}"));
+    }
+    if !(lo..=hi).contains(&sigma) {
+        return Err(format!(
+            "must lie between {lo:e} and {hi:e}, got {sigma:e}: its weight 1/σ² would {} (a unit slip?)",
+            if sigma < lo { "overflow" } else { "vanish" }
+        ));
+    }
+    Ok(())
 }

@@ -19,6 +19,7 @@ mod reader;
 mod values;
 
 use data::read_data;
+pub use equations::{SIGMA_RANGE, check_sigma};
 use equations::{read_equations, read_outputs};
 use experiments::read_experiments;
 use integrator::read_integrator;
@@ -173,6 +174,12 @@ pub struct ModelFile {
     /// Data tables held in memory, by the data-file path they stand for: an imported
     /// problem's measurements (a PEtab measurement table), read instead of that file.
     pub tables: Vec<(PathBuf, crate::table::Table)>,
+    /// The files an imported problem was made from besides `path` (a PEtab problem's SBML
+    /// and tables); empty for a model file.
+    pub sources: Vec<PathBuf>,
+    /// Where an imported problem's lines come from, so that an error found in its text later
+    /// (σ at the start, say) names the user's file ([`SourceMap`](crate::SourceMap)).
+    pub source_map: crate::SourceMap,
 }
 
 /// The top-level keys: the sections of a model file.
@@ -263,6 +270,8 @@ impl ModelFile {
             integrator,
             states_at: names.states_at,
             tables: Vec::new(),
+            sources: Vec::new(),
+            source_map: crate::SourceMap::default(),
         })
     }
 }
