@@ -1,16 +1,15 @@
 //! `sysid compare`: every chosen method on the same data from the same start.
 
 use clap::Args;
-use sysid_core::{Compared, Estimate, Problem, compact, compact_header, comparison};
+use sysid_core::{Compared, Estimate, compact, compact_header, comparison};
 use sysid_montecarlo::multistart::Starts;
-use sysid_ode::System;
 use sysid_registry::ENTRIES;
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArgs, SourceArgs, StartsArgs};
 use crate::output::emit;
 use crate::problem::{
-    Context, WithProblem, best_of_starts, method, no_source, prepare, with_problem, with_starts,
+    AnyProblem, Context, best_of_starts, method, no_source, problem, with_starts,
 };
 
 /// Arguments of `sysid compare`.
@@ -49,6 +48,7 @@ pub struct Row {
 /// Runs `sysid compare`.
 pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
+    args.integrator.validate()?;
     args.starts.options()?;
     let methods = match &args.methods {
         Some(list) => sysid_registry::parse_list(list)?,
@@ -64,13 +64,30 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         }
         (false, source) => vec![source.clone()],
     };
+    let settings = args.options.settings();
+    let starts = args.starts.options()?;
     let mut json = Vec::new();
     let mut tables = Vec::new();
     for source in &sources {
-        let with = CompareProblem { methods: &methods, args };
-        let (table, records) = with_problem(source, with)?;
-        tables.push(table);
-        json.extend(records);
+        let (problem, context) = problem(source, &args.integrator, &args.options)?;
+        let mut rows = Vec::with_capacity(methods.len());
+        for name in &methods {
+            let m = method(name, &settings)?;
+            let result = match &starts {
+                Some(options) => best_of_starts(&problem, &*m, options)
+                    .map(|(e, s)| (e, Some(s)))
+                    .map_err(|e| e.to_string()),
+                None => m.fit(&problem).map(|e| (e, None)).map_err(|e| e.to_string()),
+            };
+            rows.push(Row { method: name.clone(), result });
+        }
+        json.extend(rows.iter().map(|row| match &row.result {
+            Ok((e, starts)) => with_starts(e.record(&context.name), starts.as_ref()),
+            Err(message) => serde_json::json!({
+                "system": context.name, "method": row.method, "converged": false, "error": message,
+            }),
+        }));
+        tables.push(text(&problem, &context, &rows, args.verbose));
     }
     match args.format {
         Format::Json => emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?,
@@ -80,66 +97,26 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     Ok(Outcome::Success)
 }
 
-struct CompareProblem<'a> {
-    methods: &'a [String],
-    args: &'a CompareArgs,
-}
-
-impl WithProblem for CompareProblem<'_> {
-    type Output = (String, Vec<serde_json::Value>);
-
-    fn run<S: System + Clone + Send + Sync + 'static>(
-        self,
-        problem: Problem<S>,
-        context: Context,
-    ) -> anyhow::Result<Self::Output> {
-        let problem = prepare(problem, &self.args.integrator, &self.args.options)?;
-        let settings = self.args.options.settings();
-        let starts = self.args.starts.options()?;
-        let mut rows = Vec::with_capacity(self.methods.len());
-        for name in self.methods {
-            let m = method::<S>(name, &settings)?;
-            let result = match &starts {
-                Some(options) => best_of_starts(&problem, &*m, options)
-                    .map(|(e, s)| (e, Some(s)))
-                    .map_err(|e| e.to_string()),
-                None => m.fit(&problem).map(|e| (e, None)).map_err(|e| e.to_string()),
-            };
-            rows.push(Row { method: name.clone(), result });
-        }
-        let json = rows
-            .iter()
-            .map(|row| match &row.result {
-                Ok((e, starts)) => with_starts(e.record(&context.name), starts.as_ref()),
-                Err(message) => serde_json::json!({
-                    "system": context.name, "method": row.method, "converged": false, "error": message,
-                }),
-            })
-            .collect();
-        let compared: Vec<Compared<'_>> = rows
-            .iter()
-            .map(|row| Compared {
-                method: &row.method,
-                fit: row.result.as_ref().map(|r| &r.0).map_err(String::as_str),
-                note: row.result.as_ref().ok().and_then(|r| r.1.as_ref()).map(|s| {
-                    match self.args.verbose {
-                        true => s.to_string(),
-                        false => {
-                            format!("best of {} starts ({} reached it)", s.count, s.reached_best)
-                        }
-                    }
-                }),
-            })
-            .collect();
-        let text = match self.args.verbose {
-            true => format!(
-                "{}: {}\n{}",
-                context.name,
-                context.summary,
-                comparison(&problem.names(), context.expected.as_ref(), &compared)
-            ),
-            false => compact(&context.name, &compared),
-        };
-        Ok((text, json))
+/// One system's rows as text: a table per system (`verbose`) or a line per method.
+fn text(problem: &AnyProblem, context: &Context, rows: &[Row], verbose: bool) -> String {
+    let compared: Vec<Compared<'_>> = rows
+        .iter()
+        .map(|row| Compared {
+            method: &row.method,
+            fit: row.result.as_ref().map(|r| &r.0).map_err(String::as_str),
+            note: row.result.as_ref().ok().and_then(|r| r.1.as_ref()).map(|s| match verbose {
+                true => s.to_string(),
+                false => format!("best of {} starts ({} reached it)", s.count, s.reached_best),
+            }),
+        })
+        .collect();
+    match verbose {
+        true => format!(
+            "{}: {}\n{}",
+            context.name,
+            context.summary,
+            comparison(&problem.names(), context.expected.as_ref(), &compared)
+        ),
+        false => compact(&context.name, &compared),
     }
 }

@@ -1,13 +1,12 @@
 //! `sysid fit`.
 
 use clap::Args;
-use sysid_core::{Estimate, Problem};
-use sysid_ode::System;
+use sysid_core::Estimate;
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
 use crate::output::emit;
-use crate::problem::{Context, WithProblem, fit_from_starts, prepare, with_problem, with_starts};
+use crate::problem::{Context, fit_from_starts, problem, with_starts};
 
 /// Arguments of `sysid fit`.
 #[derive(Args, Debug)]
@@ -31,43 +30,27 @@ pub struct FitArgs {
 /// Runs `sysid fit`.
 pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
+    args.integrator.validate()?;
     args.starts.options()?;
     sysid_registry::parse_list(&args.method.method)?;
-    with_problem(&args.source, FitProblem { args })
-}
-
-struct FitProblem<'a> {
-    args: &'a FitArgs,
-}
-
-impl WithProblem for FitProblem<'_> {
-    type Output = Outcome;
-
-    fn run<S: System + Clone + Send + Sync + 'static>(
-        self,
-        problem: Problem<S>,
-        context: Context,
-    ) -> anyhow::Result<Outcome> {
-        let args = self.args;
-        let problem = prepare(problem, &args.integrator, &args.options)?;
-        let settings = args.options.settings();
-        let (estimate, starts) =
-            fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
-        match args.format {
-            Format::Json => {
-                let record = with_starts(estimate.record(&context.name), starts.as_ref());
-                emit(&format!("{}\n", serde_json::to_string_pretty(&record)?))?
-            }
-            Format::Table => {
-                let mut text = table(&context, &estimate);
-                if let Some(s) = &starts {
-                    text += &format!("\n  starts       {}\n", s);
-                }
-                emit(&text)?
-            }
+    let (problem, context) = problem(&args.source, &args.integrator, &args.options)?;
+    let settings = args.options.settings();
+    let (estimate, starts) =
+        fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
+    match args.format {
+        Format::Json => {
+            let record = with_starts(estimate.record(&context.name), starts.as_ref());
+            emit(&format!("{}\n", serde_json::to_string_pretty(&record)?))?
         }
-        Ok(if estimate.converged() { Outcome::Success } else { Outcome::NotConverged })
+        Format::Table => {
+            let mut text = table(&context, &estimate);
+            if let Some(s) = &starts {
+                text += &format!("\n  starts       {}\n", s);
+            }
+            emit(&text)?
+        }
     }
+    Ok(if estimate.converged() { Outcome::Success } else { Outcome::NotConverged })
 }
 
 /// The readable report: the problem and the method, then the estimates next to the

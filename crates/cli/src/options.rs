@@ -1,5 +1,11 @@
 //! The option groups several commands share: where the problem comes from, the method and
 //! its budgets, multistart, the integrator, and the output format.
+//!
+//! Options are checked once, by the libraries that use them (`DriverOptions`, `Settings`,
+//! `MultistartOptions`, `Integrator`); each names the setting it refuses by its field, and
+//! [`flag`] says how the command line spells it. Numbers are read by [`count`] and
+//! [`number`], so that `--rtol -1e-8` reaches the check and is refused by name rather than
+//! taken for another option.
 
 use std::path::PathBuf;
 
@@ -7,6 +13,47 @@ use clap::{Args, ValueEnum};
 use sysid_core::DriverOptions;
 use sysid_ode::{Integrator, Scheme};
 use sysid_registry::{ENTRIES, Role, Settings, Start};
+
+/// The command line's spelling of a library setting: the fields whose flag is not the
+/// field's name with `-` for `_`.
+const FLAGS: &[(&str, &str)] = &[("spread", "--start-spread"), ("starts", "--starts")];
+
+/// The flag of the setting `field` (`gtol` → `--gtol`, `max_iterations` →
+/// `--max-iterations`, `spread` → `--start-spread`).
+pub fn flag(field: &str) -> String {
+    match FLAGS.iter().find(|(f, _)| *f == field) {
+        Some((_, flag)) => (*flag).to_string(),
+        None => format!("--{}", field.replace('_', "-")),
+    }
+}
+
+/// The error of a setting the libraries refused, with its flag.
+fn refused(field: &str, problem: impl std::fmt::Display) -> anyhow::Error {
+    anyhow::anyhow!("{} {problem}", flag(field))
+}
+
+/// A count (`--max-iterations 20`): a whole number ≥ 0; anything else, a negative number
+/// included, is refused with what was given.
+pub fn count(s: &str) -> Result<usize, String> {
+    s.trim().parse::<usize>().map_err(|_| match s.trim().parse::<f64>() {
+        Ok(v) if v < 0.0 => format!("must be a whole number ≥ 0, got {v}"),
+        Ok(v) => format!("must be a whole number, got {v}"),
+        Err(_) => format!("`{s}` is not a whole number"),
+    })
+}
+
+/// A seed: a whole number ≥ 0.
+pub fn seed(s: &str) -> Result<u64, String> {
+    s.trim().parse::<u64>().map_err(|_| match s.trim().parse::<f64>() {
+        Ok(v) => format!("must be a whole number ≥ 0, got {v}"),
+        Err(_) => format!("`{s}` is not a whole number"),
+    })
+}
+
+/// A number (`--rtol 1e-8`, `--rtol -1e-8`): any float, checked where it is used.
+pub fn number(s: &str) -> Result<f64, String> {
+    s.trim().parse::<f64>().map_err(|_| format!("`{s}` is not a number"))
+}
 
 /// Output format of reports.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
@@ -39,7 +86,7 @@ pub struct SourceArgs {
     pub data: Option<PathBuf>,
     /// Seed of the synthetic data: a catalogue system's noise (fixed data ignore it), and a
     /// study's trials (trial i draws from the random stream i of this seed).
-    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1, value_parser = seed, allow_hyphen_values = true)]
     pub seed: u64,
 }
 
@@ -93,23 +140,23 @@ pub enum QlStart {
 #[derive(Args, Debug, Clone, Default)]
 pub struct MethodArgs {
     /// Most updates of the unknowns (default 50).
-    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = count, allow_hyphen_values = true)]
     pub max_iterations: Option<usize>,
     /// The certificate's tolerance: a fit converged when the first-order optimality of the
     /// point it returns (the largest cosine between the residual and a sensitivity of a free
     /// unknown; 0 at a minimum, at most 1) is at most this (default 1e-6, or 100·rtol for an
     /// integrator looser than rtol 1e-8).
-    #[arg(long, value_name = "TOL", allow_hyphen_values = true)]
+    #[arg(long, value_name = "TOL", value_parser = number, allow_hyphen_values = true)]
     pub gtol: Option<f64>,
     /// Hard budget of model integrations per fit, line-search and halving trials included
     /// (default 10·(k + 1)·(max iterations + 1) for k unknowns).
-    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = seed, allow_hyphen_values = true)]
     pub max_integrations: Option<u64>,
     /// First trajectory of quasilinearization: the model from the guess, or the data.
     #[arg(long, value_enum, default_value_t = QlStart::Guess)]
     pub ql_start: QlStart,
     /// Shooting intervals of multiple-shooting (default: one per 5 sample times, at most 10).
-    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = count, allow_hyphen_values = true)]
     pub shooting_intervals: Option<usize>,
     /// Hold an unknown at a value for this run, without editing the model file; it then
     /// counts as known (degrees of freedom, certificate). Repeatable.
@@ -133,26 +180,16 @@ impl MethodArgs {
         Settings { driver, ql_start, shooting_intervals: self.shooting_intervals }
     }
 
-    /// Checks the options before anything runs.
+    /// Checks the options before anything runs (the registry's check, each refusal naming
+    /// its flag).
     pub fn validate(&self) -> anyhow::Result<()> {
-        if self.shooting_intervals == Some(0) {
-            anyhow::bail!("--shooting-intervals must be at least 1");
-        }
         for (i, (name, _)) in self.fix.iter().enumerate() {
             if self.fix[..i].iter().any(|(n, _)| n == name) {
                 anyhow::bail!("--fix {name}=… is given twice: fix each unknown once");
             }
         }
-        self.settings().driver.validate().map_err(|e| anyhow::anyhow!("{}", cli_names(e)))
+        self.settings().validate().map_err(|e| refused(e.name(), e.problem()))
     }
-}
-
-/// An options error with the command line's spelling of the option.
-fn cli_names(e: sysid_core::OptionsError) -> String {
-    e.to_string()
-        .replace("gtol", "--gtol")
-        .replace("max_integrations", "--max-integrations")
-        .replace("max_iterations", "--max-iterations")
 }
 
 /// `NAME=VALUE` of `--fix`.
@@ -178,25 +215,22 @@ pub struct StartsArgs {
     /// N − 1 starts within the bounds of unknowns bounded on both sides, ±ρ (--start-spread)
     /// around the guess for the others. Prints the best fit and how many starts reached it,
     /// with the distinct minima found.
-    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = count, allow_hyphen_values = true)]
     pub starts: Option<usize>,
     /// Seed of the starts' Latin hypercube (default 1).
-    #[arg(long, value_name = "SEED", allow_negative_numbers = true)]
+    #[arg(long, value_name = "SEED", value_parser = seed, allow_hyphen_values = true)]
     pub starts_seed: Option<u64>,
     /// ρ of --starts for unknowns without two bounds: guess·(1 + ρu), u uniform on [−1, 1]
     /// (guess·(1 + ρ)^u on a log scale, ρu for a guess of 0). Default 0.5.
-    #[arg(long, value_name = "RHO", allow_hyphen_values = true)]
+    #[arg(long, value_name = "RHO", value_parser = number, allow_hyphen_values = true)]
     pub start_spread: Option<f64>,
 }
 
 impl StartsArgs {
-    /// The multistart options, when --starts was given.
+    /// The multistart options, when --starts was given (checked by the multistart's own
+    /// check, each refusal naming its flag).
     pub fn options(&self) -> anyhow::Result<Option<sysid_montecarlo::MultistartOptions>> {
         let defaults = sysid_montecarlo::MultistartOptions::default();
-        let spread = self.start_spread.unwrap_or(defaults.spread);
-        if !(spread > 0.0 && spread.is_finite()) {
-            anyhow::bail!("--start-spread must be a positive number, got {spread}");
-        }
         let Some(starts) = self.starts else {
             if self.start_spread.is_some() || self.starts_seed.is_some() {
                 let option =
@@ -205,14 +239,13 @@ impl StartsArgs {
             }
             return Ok(None);
         };
-        if starts == 0 {
-            anyhow::bail!("--starts must be at least 1");
-        }
-        Ok(Some(sysid_montecarlo::MultistartOptions {
+        let options = sysid_montecarlo::MultistartOptions {
             starts,
             seed: self.starts_seed.unwrap_or(defaults.seed),
-            spread,
-        }))
+            spread: self.start_spread.unwrap_or(defaults.spread),
+        };
+        options.validate().map_err(|e| refused(e.name(), e.problem()))?;
+        Ok(Some(options))
     }
 }
 
@@ -252,16 +285,19 @@ pub struct IntegratorArgs {
     #[arg(long, value_enum, value_name = "SCHEME")]
     pub integrator: Option<SchemeArg>,
     /// Relative tolerance of the integrator (default: the system's).
-    #[arg(long, value_name = "RTOL", allow_negative_numbers = true)]
+    #[arg(long, value_name = "RTOL", value_parser = number, allow_hyphen_values = true)]
     pub rtol: Option<f64>,
-    /// Absolute tolerance of the integrator (default: the system's).
-    #[arg(long, value_name = "ATOL", allow_negative_numbers = true)]
+    /// Absolute tolerance of the integrator, ≥ 0 (default: the system's; 0 controls the
+    /// relative error alone).
+    #[arg(long, value_name = "ATOL", value_parser = number, allow_hyphen_values = true)]
     pub atol: Option<f64>,
-    /// A fixed step size (required by rk4; turns error control off for the others).
-    #[arg(long = "fixed-step", value_name = "H", allow_negative_numbers = true)]
+    /// A fixed step size (required by rk4; turns error control off for the others). The
+    /// certificate then measures the fit against an error-controlled integration (rtol
+    /// 1e-10): a step too coarse for the model shows as an integration error.
+    #[arg(long = "fixed-step", value_name = "H", value_parser = number, allow_hyphen_values = true)]
     pub fixed_step: Option<f64>,
     /// Step budget of one integration (default 100000).
-    #[arg(long, value_name = "N", allow_negative_numbers = true)]
+    #[arg(long, value_name = "N", value_parser = count, allow_hyphen_values = true)]
     pub max_steps: Option<usize>,
 }
 
@@ -275,9 +311,9 @@ impl IntegratorArgs {
             || self.max_steps.is_some()
     }
 
-    /// `integrator` with the settings given on the command line.
+    /// `integrator` with the settings given on the command line, checked by the
+    /// integrator's own check (a refusal names its flag).
     pub fn apply_to(&self, integrator: Integrator) -> anyhow::Result<Integrator> {
-        self.validate()?;
         let mut out = integrator;
         if let Some(scheme) = self.integrator {
             out.scheme = scheme.into();
@@ -290,36 +326,13 @@ impl IntegratorArgs {
             out.fixed_step = self.fixed_step;
         }
         out.max_steps = self.max_steps.unwrap_or(out.max_steps);
-        if out.scheme == Scheme::Rk4 && out.fixed_step.is_none() {
-            anyhow::bail!("--integrator rk4 needs a step size: add --fixed-step H");
-        }
-        out.validate().map_err(|e| anyhow::anyhow!("integrator: {e}"))?;
+        out.validate().map_err(|e| refused(e.name, e.problem))?;
         Ok(out)
     }
 
-    /// Checks each value given, naming its option (the combination with the system's or
-    /// model file's settings is checked once applied).
-    fn validate(&self) -> anyhow::Result<()> {
-        if let Some(rtol) = self.rtol
-            && !(rtol > 0.0 && rtol < 1.0)
-        {
-            anyhow::bail!(
-                "--rtol must be positive and below 1 (a relative error of 100 % or more controls nothing), got {rtol}"
-            );
-        }
-        if let Some(atol) = self.atol
-            && !(atol >= 0.0 && atol.is_finite())
-        {
-            anyhow::bail!("--atol must be non-negative, got {atol}");
-        }
-        if let Some(h) = self.fixed_step
-            && !(h > 0.0 && h.is_finite())
-        {
-            anyhow::bail!("--fixed-step must be positive, got {h}");
-        }
-        if self.max_steps == Some(0) {
-            anyhow::bail!("--max-steps must be at least 1");
-        }
-        Ok(())
+    /// Checks the values given before anything runs: applied to the default integrator
+    /// (a model file's or system's own settings are checked again when applied to them).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        self.apply_to(Integrator::default()).map(|_| ())
     }
 }

@@ -1,7 +1,7 @@
 //! What the commands write: standard output that tolerates a closed pipe, files written
 //! whole and announced, progress bars, the times of CSV rows, and the multistart line.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -27,6 +27,55 @@ pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
     let rows = text.lines().count().saturating_sub(1);
     let columns = text.lines().next().map_or(0, |h| h.split(',').count());
     eprintln!("wrote {rows} rows of {columns} columns (CSV) to {}", path.display());
+    Ok(())
+}
+
+/// Refuses to write `out` (given by the option `option`) over one of `inputs`, the files
+/// the command reads: same path, or the same file under another name (a link).
+pub fn not_an_input(out: &Path, inputs: &[PathBuf], option: &str) -> anyhow::Result<()> {
+    for input in inputs {
+        if same_file(out, input) {
+            bail!(
+                "{option} {}: that is {}, which this command reads; write the output elsewhere",
+                out.display(),
+                input.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Whether `a` and `b` name the same existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) else { return false };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if (x.dev(), x.ino()) == (y.dev(), y.ino()) {
+            return true;
+        }
+    }
+    let _ = (x, y);
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(p), Ok(q)) if p == q)
+}
+
+/// Checks that a file can be written at `path` before the work that produces it: its folder
+/// exists and is a folder. `option` names the option that gave it.
+pub fn writable(path: &Path, option: &str) -> anyhow::Result<()> {
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    if !folder.is_dir() {
+        bail!(
+            "{option} {}: the folder {} does not exist (create it first)",
+            path.display(),
+            folder.display()
+        );
+    }
+    if path.is_dir() {
+        bail!("{option} {}: that is a folder, not a file", path.display());
+    }
     Ok(())
 }
 

@@ -4,14 +4,12 @@ use std::path::PathBuf;
 
 use anyhow::bail;
 use clap::Args;
-use sysid_core::Problem;
 use sysid_core::format::shortest;
-use sysid_ode::System;
 
 use crate::Outcome;
 use crate::options::{IntegratorArgs, MethodArg, MethodArgs, SourceArgs};
-use crate::output::{spaced, write_output};
-use crate::problem::{Context, WithProblem, fit, prepare, with_problem};
+use crate::output::{not_an_input, spaced, write_output};
+use crate::problem::{fit, problem};
 
 /// Arguments of `sysid predict`.
 #[derive(Args, Debug)]
@@ -19,10 +17,10 @@ pub struct PredictArgs {
     #[command(flatten)]
     source: SourceArgs,
     /// Predict up to this time.
-    #[arg(long, value_name = "T", allow_negative_numbers = true)]
+    #[arg(long, value_name = "T", value_parser = crate::options::number, allow_hyphen_values = true)]
     until: f64,
     /// Spacing of the predicted times (default: 200 intervals from t0 to T).
-    #[arg(long, value_name = "H", allow_negative_numbers = true)]
+    #[arg(long, value_name = "H", value_parser = crate::options::number, allow_hyphen_values = true)]
     step: Option<f64>,
     #[command(flatten)]
     method: MethodArg,
@@ -45,104 +43,90 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
         bail!("--until must be a finite time");
     }
     args.options.validate()?;
+    args.integrator.validate()?;
     sysid_registry::parse_list(&args.method.method)?;
-    with_problem(&args.source, Predict { args })
-}
-
-struct Predict<'a> {
-    args: &'a PredictArgs,
-}
-
-impl WithProblem for Predict<'_> {
-    type Output = Outcome;
-
-    fn run<S: System + Clone + Send + Sync + 'static>(
-        self,
-        problem: Problem<S>,
-        context: Context,
-    ) -> anyhow::Result<Outcome> {
-        let args = self.args;
-        let problem = prepare(problem, &args.integrator, &args.options)?;
-        let experiments: Vec<usize> = match &args.experiment {
-            None => (0..problem.experiments().len()).collect(),
-            Some(name) => match problem.experiments().iter().position(|e| e.answers_to(name)) {
-                Some(i) => vec![i],
-                None => {
-                    let names: Vec<&str> = problem.experiments().iter().map(|e| e.name()).collect();
-                    bail!(
-                        "--experiment {name}: no such experiment (experiments: {})",
-                        names.join(", ")
-                    );
-                }
-            },
-        };
-        for &i in &experiments {
-            let (t0, name) = (problem.experiments()[i].t0(), problem.experiments()[i].name());
-            if args.until <= t0 {
-                bail!("--until {} must lie after t0 = {t0} (experiment `{name}`)", args.until);
-            }
-        }
-        let estimate = fit(&problem, &args.method.method, &args.options.settings())?;
-        if !estimate.converged() {
-            eprintln!(
-                "{}: {} did not converge ({}; {}): no prediction written",
-                context.name,
-                estimate.method,
-                estimate.verdict(),
-                estimate.termination
-            );
-            return Ok(Outcome::NotConverged);
-        }
-        // The band: Student's t for the fit's N − k degrees of freedom.
-        let band = estimate.band();
-        if band.is_none() {
-            eprintln!(
-                "{}: no covariance (no more data than unknowns, or a singular normal matrix): the band columns are empty",
-                context.name
-            );
-        }
-        let several = experiments.len() > 1;
-        let mut text = String::new();
-        for i in experiments {
-            let e = &problem.experiments()[i];
-            let t0 = e.t0();
-            let step = args.step.unwrap_or((args.until - t0) / 200.0);
-            if !(step > 0.0 && step.is_finite()) {
-                bail!("--step must be positive, got {step}");
-            }
-            let what = format!("--step {step:e} from t0 = {t0} to --until {}", args.until);
-            let mut times = spaced(t0, args.until, step, &what)?;
-            if times.last().is_some_and(|&t| t < args.until) {
-                times.push(args.until);
-            }
-            let states = problem.trajectory(i, &estimate.values, band, &times)?;
-            if text.is_empty() {
-                text += if several { "experiment,t" } else { "t" };
-                for s in &states {
-                    text += &format!(",{n},{n}_lower,{n}_upper", n = s.name);
-                }
-                text += "\n";
-            }
-            for (m, t) in times.iter().enumerate() {
-                if several {
-                    text += &format!("{},", e.name());
-                }
-                text += &format!("{t}");
-                for s in &states {
-                    let y = s.values[m];
-                    let y_text = shortest(y);
-                    match &s.half_width {
-                        Some(w) => {
-                            text +=
-                                &format!(",{y_text},{},{}", shortest(y - w[m]), shortest(y + w[m]));
-                        }
-                        None => text += &format!(",{y_text},,"),
-                    }
-                }
-                text += "\n";
-            }
-        }
-        write_output(args.out.as_deref(), &text)?;
-        Ok(Outcome::Success)
+    let (problem, context) = problem(&args.source, &args.integrator, &args.options)?;
+    if let Some(out) = &args.out {
+        not_an_input(out, &context.inputs, "--out")?;
     }
+    let experiments: Vec<usize> = match &args.experiment {
+        None => (0..problem.experiments().len()).collect(),
+        Some(name) => match problem.experiments().iter().position(|e| e.answers_to(name)) {
+            Some(i) => vec![i],
+            None => {
+                let names: Vec<&str> = problem.experiments().iter().map(|e| e.name()).collect();
+                bail!(
+                    "--experiment {name}: no such experiment (experiments: {})",
+                    names.join(", ")
+                );
+            }
+        },
+    };
+    for &i in &experiments {
+        let (t0, name) = (problem.experiments()[i].t0(), problem.experiments()[i].name());
+        if args.until <= t0 {
+            bail!("--until {} must lie after t0 = {t0} (experiment `{name}`)", args.until);
+        }
+    }
+    let estimate = fit(&problem, &args.method.method, &args.options.settings())?;
+    if !estimate.converged() {
+        eprintln!(
+            "{}: {} did not converge ({}; {}): no prediction written",
+            context.name,
+            estimate.method,
+            estimate.verdict(),
+            estimate.termination
+        );
+        return Ok(Outcome::NotConverged);
+    }
+    // The band: Student's t for the fit's N − k degrees of freedom.
+    let band = estimate.band();
+    if band.is_none() {
+        eprintln!(
+            "{}: no covariance (no more data than unknowns, or a singular normal matrix): the band columns are empty",
+            context.name
+        );
+    }
+    let several = experiments.len() > 1;
+    let mut text = String::new();
+    for i in experiments {
+        let e = &problem.experiments()[i];
+        let t0 = e.t0();
+        let step = args.step.unwrap_or((args.until - t0) / 200.0);
+        if !(step > 0.0 && step.is_finite()) {
+            bail!("--step must be positive, got {step}");
+        }
+        let what = format!("--step {step:e} from t0 = {t0} to --until {}", args.until);
+        let mut times = spaced(t0, args.until, step, &what)?;
+        if times.last().is_some_and(|&t| t < args.until) {
+            times.push(args.until);
+        }
+        let states = problem.trajectory(i, &estimate.values, band, &times)?;
+        if text.is_empty() {
+            text += if several { "experiment,t" } else { "t" };
+            for s in &states {
+                text += &format!(",{n},{n}_lower,{n}_upper", n = s.name);
+            }
+            text += "\n";
+        }
+        for (m, t) in times.iter().enumerate() {
+            if several {
+                text += &format!("{},", e.name());
+            }
+            text += &format!("{t}");
+            for s in &states {
+                let y = s.values[m];
+                let y_text = shortest(y);
+                match &s.half_width {
+                    Some(w) => {
+                        text += &format!(",{y_text},{},{}", shortest(y - w[m]), shortest(y + w[m]));
+                    }
+                    None => text += &format!(",{y_text},,"),
+                }
+            }
+            text += "\n";
+        }
+    }
+    write_output(args.out.as_deref(), &text)?;
+    Ok(Outcome::Success)
 }

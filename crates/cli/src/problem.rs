@@ -1,16 +1,23 @@
-//! The set-up of a fit: the problem from a catalogue system or a model file, the command
-//! line's integrator and `--fix`ed unknowns applied, the method from the registry, and one
-//! fit or a multistart, with a start that cannot be used refused as bad input.
+//! The set-up of a fit: the problem from a catalogue system, a model file or a PEtab
+//! problem, the command line's integrator and `--fix`ed unknowns applied, the method from the
+//! registry, and one fit or a multistart, with a start that cannot be used refused as bad
+//! input.
 
 use anyhow::Context as _;
-use sysid_core::{Estimate, Expected, Failure, FitRecord, Method, Problem, Termination};
+use sysid_core::{
+    Estimate, Expected, Failure, FitRecord, Method, Problem, ProblemError, Termination,
+};
 use sysid_montecarlo::MultistartOptions;
 use sysid_montecarlo::multistart::Starts;
-use sysid_ode::{OdeError, System};
+use sysid_ode::OdeError;
 use sysid_registry::{Boxed, Registry, Settings};
-use sysid_systems::{Case, Visit};
+use sysid_systems::Case;
 
+use crate::any::{self, AnySystem};
 use crate::options::{IntegratorArgs, MethodArgs, SourceArgs, StartsArgs};
+
+/// What the commands work on: a problem of any system the command line fits.
+pub type AnyProblem = Problem<AnySystem>;
 
 /// What a report says about the problem besides the fit.
 #[derive(Clone, Debug, Default)]
@@ -21,36 +28,9 @@ pub struct Context {
     pub summary: String,
     /// The reference answer or the truth, if known.
     pub expected: Option<Expected>,
-}
-
-/// Something to do with a problem of any system type.
-pub trait WithProblem {
-    /// What it produces.
-    type Output;
-    /// Does it.
-    fn run<S: System + Clone + Send + Sync + 'static>(
-        self,
-        problem: Problem<S>,
-        context: Context,
-    ) -> anyhow::Result<Self::Output>;
-}
-
-struct Catalogue<W> {
-    seed: u64,
-    with: W,
-}
-
-impl<W: WithProblem> Visit for Catalogue<W> {
-    type Output = anyhow::Result<W::Output>;
-    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
-        let problem = case.problem(self.seed).with_context(|| format!("system {}", case.name))?;
-        let context = Context {
-            name: case.name.into(),
-            summary: case.summary.into(),
-            expected: case.expectation(),
-        };
-        self.with.run(problem, context)
-    }
+    /// The files the problem was read from (none for a catalogue system): no command writes
+    /// over them.
+    pub inputs: Vec<std::path::PathBuf>,
 }
 
 /// The error of a command given neither a system nor a model file.
@@ -62,37 +42,63 @@ pub fn no_source() -> anyhow::Error {
     )
 }
 
-/// The catalogue system `name` handed to `visit`, or an error naming the systems there are.
-pub fn visit_system<V: Visit>(name: &str, visit: V) -> anyhow::Result<V::Output> {
-    sysid_systems::visit(name, visit).ok_or_else(|| {
+/// The catalogue case `name`, or an error naming the systems there are.
+pub fn case(name: &str) -> anyhow::Result<Case<AnySystem>> {
+    any::case(name).ok_or_else(|| {
         anyhow::anyhow!("unknown system `{name}` (systems: {})", sysid_systems::NAMES.join(", "))
     })
 }
 
-/// Builds the problem of `source` and hands it to `with`.
-pub fn with_problem<W: WithProblem>(source: &SourceArgs, with: W) -> anyhow::Result<W::Output> {
-    match (&source.system, source.file()) {
-        (Some(name), _) => visit_system(name, Catalogue { seed: source.seed, with })?,
-        (None, Some(path)) => {
-            let model = source.load(path)?;
-            let problem = model.problem(source.data.as_deref())?;
-            let context = Context {
-                name: path.display().to_string(),
-                summary: source.kind().into(),
-                ..Context::default()
-            };
-            with.run(problem, context)
+impl SourceArgs {
+    /// The problem of `--system` (with `--seed`), `--model` (with `--data`) or `--petab`, as
+    /// its source defines it.
+    pub fn problem(&self) -> anyhow::Result<(AnyProblem, Context)> {
+        match (&self.system, self.file()) {
+            (Some(name), _) => {
+                let case = case(name)?;
+                let problem =
+                    case.problem(self.seed).with_context(|| format!("system {}", case.name))?;
+                let context = Context {
+                    name: case.name.into(),
+                    summary: case.summary.into(),
+                    expected: case.expectation(),
+                    inputs: Vec::new(),
+                };
+                Ok((problem, context))
+            }
+            (None, Some(path)) => {
+                let model = self.load(path)?;
+                let problem = any::model_problem(model.problem(self.data.as_deref())?);
+                let context = Context {
+                    name: path.display().to_string(),
+                    summary: self.kind().into(),
+                    expected: None,
+                    inputs: model.inputs().into_iter().chain(self.data.clone()).collect(),
+                };
+                Ok((problem, context))
+            }
+            (None, None) => Err(no_source()),
         }
-        (None, None) => Err(no_source()),
     }
 }
 
-/// The problem with the command line's integrator settings and `--fix`ed unknowns.
-pub fn prepare<S: System>(
-    problem: Problem<S>,
+/// The problem of `source` with the command line's integrator settings and `--fix`ed
+/// unknowns.
+pub fn problem(
+    source: &SourceArgs,
     integrator: &IntegratorArgs,
     options: &MethodArgs,
-) -> anyhow::Result<Problem<S>> {
+) -> anyhow::Result<(AnyProblem, Context)> {
+    let (problem, context) = source.problem()?;
+    Ok((prepare(problem, integrator, options)?, context))
+}
+
+/// `problem` with the command line's integrator settings and `--fix`ed unknowns.
+pub fn prepare(
+    problem: AnyProblem,
+    integrator: &IntegratorArgs,
+    options: &MethodArgs,
+) -> anyhow::Result<AnyProblem> {
     let problem = match integrator.given() {
         true => {
             let settings = integrator.apply_to(*problem.integrator())?;
@@ -100,23 +106,24 @@ pub fn prepare<S: System>(
         }
         false => problem,
     };
-    Ok(problem.with_fixed(&options.fix)?)
+    problem.with_fixed(&options.fix).map_err(|e| match e {
+        ProblemError::AllFixed(_) | ProblemError::NotAnUnknown { .. } => {
+            anyhow::anyhow!("--fix: {e}")
+        }
+        e => e.into(),
+    })
 }
 
 /// The registry's method called `name` (usable from several threads, as studies run them).
-pub fn method<S: System>(name: &str, settings: &Settings) -> anyhow::Result<Boxed<S>> {
+pub fn method(name: &str, settings: &Settings) -> anyhow::Result<Boxed<AnySystem>> {
     Ok(Registry::standard().build(name, settings)?)
 }
 
 /// Fits with the named method. A start that cannot be used is bad input, not a result of the
 /// method: a model that cannot be evaluated there, or unknowns the data cannot tell apart
 /// there before any step was taken.
-pub fn fit<S: System>(
-    problem: &Problem<S>,
-    name: &str,
-    settings: &Settings,
-) -> anyhow::Result<Estimate> {
-    let m = method::<S>(name, settings)?;
+pub fn fit(problem: &AnyProblem, name: &str, settings: &Settings) -> anyhow::Result<Estimate> {
+    let m = method(name, settings)?;
     let estimate = m.fit(problem)?;
     if let Some(message) = unusable_start(problem, &estimate, m.start_point()) {
         anyhow::bail!(message);
@@ -126,8 +133,8 @@ pub fn fit<S: System>(
 
 /// Fits with the named method from the problem's guess, or from the starts of `--starts`
 /// (the best fit, and what the starts found). The start is unusable only when every start is.
-pub fn fit_from_starts<S: System + Sync>(
-    problem: &Problem<S>,
+pub fn fit_from_starts(
+    problem: &AnyProblem,
     name: &str,
     settings: &Settings,
     starts: &StartsArgs,
@@ -135,20 +142,19 @@ pub fn fit_from_starts<S: System + Sync>(
     let Some(options) = starts.options()? else {
         return Ok((fit(problem, name, settings)?, None));
     };
-    let (best, starts) = best_of_starts(problem, &*method::<S>(name, settings)?, &options)?;
+    let (best, starts) = best_of_starts(problem, &*method(name, settings)?, &options)?;
     Ok((best, Some(starts)))
 }
 
 /// `m` from the starts of `options`: the best fit and what the starts found. The start is
 /// unusable only when every start is.
-pub fn best_of_starts<S, M>(
-    problem: &Problem<S>,
+pub fn best_of_starts<M>(
+    problem: &AnyProblem,
     m: &M,
     options: &MultistartOptions,
 ) -> anyhow::Result<(Estimate, Starts)>
 where
-    S: System + Sync,
-    M: Method<S> + Sync + ?Sized,
+    M: Method<AnySystem> + Sync + ?Sized,
 {
     let run = sysid_montecarlo::multistart(m, problem, options)?;
     if let Some(message) = unusable_start(problem, &run.best, m.start_point()) {
@@ -166,16 +172,36 @@ pub fn with_starts(record: FitRecord<'_>, starts: Option<&Starts>) -> serde_json
     value
 }
 
+/// "k1 = 1e300, k2 = 0.5": the values of the unknowns at `at`, the ten farthest from 1 in
+/// magnitude when there are more (where a start that cannot be integrated usually goes wrong).
+fn point(problem: &AnyProblem, at: &[f64]) -> String {
+    let names = problem.names();
+    let mut order: Vec<usize> = (0..at.len()).collect();
+    if at.len() > 10 {
+        let far = |v: f64| v.abs().ln().abs();
+        order.sort_by(|&a, &b| far(at[b]).total_cmp(&far(at[a])));
+        order.truncate(10);
+        order.sort_unstable();
+    }
+    let list: Vec<String> = order
+        .iter()
+        .map(|&i| format!("{} = {}", names[i], sysid_core::format::shortest(at[i])))
+        .collect();
+    match at.len() > 10 {
+        true => format!("{}, … ({} unknowns)", list.join(", "), at.len()),
+        false => list.join(", "),
+    }
+}
+
 /// Why the start cannot be used, if it cannot; `start_point` is what the method integrates
 /// from there ([`Method::start_point`]).
-fn unusable_start<S: System>(
-    problem: &Problem<S>,
-    e: &Estimate,
-    start_point: &str,
-) -> Option<String> {
+fn unusable_start(problem: &AnyProblem, e: &Estimate, start_point: &str) -> Option<String> {
     match &e.termination {
         Termination::StartFailed(Failure::Integration { error, at }) => {
-            let mut message = format!("the model cannot be integrated from {start_point}: {error}");
+            let mut message = format!(
+                "the model cannot be integrated from {start_point} ({}): {error}",
+                point(problem, at)
+            );
             // Steps that shrink to nothing with the sensitivities, where the model alone
             // integrates at the same tolerances: say so, and what usually causes it.
             if matches!(error, OdeError::StepSizeTooSmall { .. })
@@ -187,9 +213,12 @@ fn unusable_start<S: System>(
             }
             Some(message)
         }
-        Termination::StartFailed(failure) => {
-            Some(format!("the starting guess cannot be used: {failure}"))
-        }
+        Termination::StartFailed(failure) => Some(match failure.at() {
+            Some(at) => {
+                format!("the starting guess cannot be used ({}): {failure}", point(problem, at))
+            }
+            None => format!("the starting guess cannot be used: {failure}"),
+        }),
         Termination::Failed { failure: Failure::Singular { .. }, .. } if e.iterations == 0 => {
             let space = e.certificate.null_space.as_ref()?;
             Some(format!(
@@ -199,6 +228,18 @@ fn unusable_start<S: System>(
                 space.combination()
             ))
         }
+        _ if e.iterations == 0 && e.certificate.plateau() && e.certificate.exact_fit => {
+            Some(format!(
+                "the data cannot identify {}: no measured value depends on {} (the data are matched whatever {} are: measurements only where the model does not respond to the unknowns, such as known initial values at t0): add data, or fix them",
+                e.names.join(", "),
+                if e.names.len() == 1 { "it" } else { "them" },
+                if e.names.len() == 1 { "its value" } else { "their values" }
+            ))
+        }
+        _ if e.iterations == 0 && e.certificate.plateau() => Some(format!(
+            "the starting guess cannot be used ({}): no measured value responds to any unknown there (a plateau, where no method can find a direction): move the guess",
+            point(problem, &e.values)
+        )),
         _ => None,
     }
 }

@@ -2,16 +2,15 @@
 
 use anyhow::bail;
 use clap::Args;
-use sysid_core::{Estimate, Problem};
-use sysid_ode::System;
+use sysid_core::Estimate;
 use sysid_profile::{
     Outcome as Traced, Point, Profile, ProfileOptions, nll, profile, threshold_95,
 };
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
-use crate::output::emit;
-use crate::problem::{Context, WithProblem, fit_from_starts, method, prepare, with_problem};
+use crate::output::{emit, not_an_input, writable};
+use crate::problem::{Context, fit_from_starts, method, problem};
 
 /// How many times a profile that finds a better optimum fits again from there.
 const MAX_RESTARTS: usize = 5;
@@ -31,7 +30,13 @@ pub struct ProfileArgs {
     #[arg(long)]
     simultaneous: bool,
     /// Most points per side of a profile.
-    #[arg(long, default_value_t = 60, value_name = "N")]
+    #[arg(
+        long,
+        default_value_t = 60,
+        value_name = "N",
+        value_parser = crate::options::count,
+        allow_hyphen_values = true
+    )]
     max_points: usize,
     /// Also draw the profiles: FILE.png and FILE.svg (FILE without extension), one column
     /// per unknown, ΔNLL with the threshold and the interval above, the others' paths below.
@@ -51,108 +56,102 @@ pub struct ProfileArgs {
 /// Runs `sysid profile`.
 pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
+    args.integrator.validate()?;
     args.starts.options()?;
     sysid_registry::parse_list(&args.method.method)?;
     if args.max_points == 0 {
         bail!("--max-points must be at least 1");
     }
-    with_problem(&args.source, ProfileProblem { args })
-}
-
-struct ProfileProblem<'a> {
-    args: &'a ProfileArgs,
-}
-
-impl WithProblem for ProfileProblem<'_> {
-    type Output = Outcome;
-
-    fn run<S: System + Clone + Send + Sync + 'static>(
-        self,
-        problem: Problem<S>,
-        context: Context,
-    ) -> anyhow::Result<Outcome> {
-        let args = self.args;
-        let problem = prepare(problem, &args.integrator, &args.options)?;
-        let names = problem.names();
-        let only = match &args.only {
-            None => Vec::new(),
-            Some(list) => list
-                .split(',')
-                .map(|n| {
-                    let n = n.trim();
-                    if n.is_empty() {
-                        bail!("--only: an empty name in `{list}` (two commas, or one at an end)");
-                    }
-                    names.iter().position(|x| x == n).ok_or_else(|| {
-                        anyhow::anyhow!(
-                            "--only: `{n}` is not an unknown (unknowns: {})",
-                            names.join(", ")
-                        )
-                    })
-                })
-                .collect::<anyhow::Result<Vec<usize>>>()?,
-        };
-        if let Some(twice) = only.iter().enumerate().find(|(k, i)| only[..*k].contains(i)) {
-            bail!("--only: `{}` is named twice", names[*twice.1]);
-        }
-        let settings = args.options.settings();
-        let (mut optimum, _) =
-            fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
-        let certified = optimum.converged();
-        let m = method::<S>(&args.method.method, &settings)?;
-        let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));
-        let options =
-            ProfileOptions { max_steps: args.max_points, threshold, ..ProfileOptions::default() };
-        let mut better = Vec::new();
-        let profiles = loop {
-            match profile(&*m, &problem, &optimum, &only, &options)? {
-                Traced::Profiles(p) => break p,
-                Traced::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
-                    eprintln!(
-                        "better optimum found along a profile (NLL {} against {}): fitting again from there",
-                        point.nll,
-                        nll(&optimum)
-                    );
-                    optimum = m.fit_from(&problem, &point.estimates)?;
-                    better.push(point);
-                }
-                Traced::BetterOptimum(_) => {
-                    bail!(
-                        "the profiles found a better optimum {MAX_RESTARTS} times over: the fits along them do not reach the minimum"
-                    )
-                }
-            }
-        };
-        if let Some(stem) = &args.figure {
-            let title = format!("{}: profile likelihoods", context.name);
-            let figure = sysid_report::Profiles::new(
-                title,
-                &problem,
-                &optimum,
-                options.threshold,
-                &profiles,
-            );
-            let [png, svg] = sysid_report::save(&figure, stem)?;
-            eprintln!("wrote {} and {}", png.display(), svg.display());
-        }
-        match args.format {
-            Format::Json => {
-                let json = serde_json::json!({
-                    "optimum": optimum.record(&context.name),
-                    "from_certified_optimum": certified && better.is_empty(),
-                    "better_optimum_found": better,
-                    "threshold": options.threshold,
-                    "profiles": profiles
-                        .iter()
-                        .map(|p| (p.name.clone(), serde_json::json!(p.record())))
-                        .collect::<serde_json::Map<_, _>>(),
-                });
-                emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?
-            }
-            Format::Table => emit(&table(&context, &optimum, certified, &better, &profiles))?,
-        }
-        Ok(Outcome::Success)
+    if args.options.max_iterations == Some(0) {
+        bail!(
+            "--max-iterations 0: a profile fits the optimum and re-optimises the other unknowns at every point, which takes at least 1 iteration"
+        );
     }
+    let (problem, context) = problem(&args.source, &args.integrator, &args.options)?;
+    // Where the figure goes is checked before the work, not after it.
+    if let Some(stem) = &args.figure {
+        for path in sysid_report::figure_paths(stem) {
+            writable(&path, "--figure")?;
+            not_an_input(&path, &context.inputs, "--figure")?;
+        }
+    }
+    let names = problem.names();
+    let only = match &args.only {
+        None => Vec::new(),
+        Some(list) => list
+            .split(',')
+            .map(|n| {
+                let n = n.trim();
+                if n.is_empty() {
+                    bail!("--only: an empty name in `{list}` (two commas, or one at an end)");
+                }
+                names.iter().position(|x| x == n).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "--only: `{n}` is not an unknown (unknowns: {})",
+                        names.join(", ")
+                    )
+                })
+            })
+            .collect::<anyhow::Result<Vec<usize>>>()?,
+    };
+    if let Some(twice) = only.iter().enumerate().find(|(k, i)| only[..*k].contains(i)) {
+        bail!("--only: `{}` is named twice", names[*twice.1]);
+    }
+    let settings = args.options.settings();
+    let (mut optimum, _) = fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
+    let certified = optimum.converged();
+    let m = method(&args.method.method, &settings)?;
+    let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));
+    let options =
+        ProfileOptions { max_steps: args.max_points, threshold, ..ProfileOptions::default() };
+    let mut better = Vec::new();
+    let profiles = loop {
+        match profile(&*m, &problem, &optimum, &only, &options)? {
+            Traced::Profiles(p) => break p,
+            Traced::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
+                eprintln!(
+                    "better optimum found along a profile (NLL {} against {}): fitting again from there",
+                    point.nll,
+                    nll(&optimum)
+                );
+                optimum = m.fit_from(&problem, &point.estimates)?;
+                better.push(point);
+            }
+            Traced::BetterOptimum(_) => {
+                bail!(
+                    "the profiles found a better optimum {MAX_RESTARTS} times over: the fits along them do not reach the minimum (the last fit from such a point: {}; {}). Raise --max-iterations, or try another --method",
+                    optimum.verdict(),
+                    optimum.termination
+                )
+            }
+        }
+    };
+    match args.format {
+        Format::Json => {
+            let json = serde_json::json!({
+                "optimum": optimum.record(&context.name),
+                "from_certified_optimum": certified && better.is_empty(),
+                "better_optimum_found": better,
+                "threshold": options.threshold,
+                "profiles": profiles
+                    .iter()
+                    .map(|p| (p.name.clone(), serde_json::json!(p.record())))
+                    .collect::<serde_json::Map<_, _>>(),
+            });
+            emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?
+        }
+        Format::Table => emit(&table(&context, &optimum, certified, &better, &profiles))?,
+    }
+    // The results are out before the figure is drawn: a figure that cannot be written
+    // loses nothing.
+    if let Some(stem) = &args.figure {
+        let title = format!("{}: profile likelihoods", context.name);
+        let figure =
+            sysid_report::Profiles::new(title, &problem, &optimum, options.threshold, &profiles);
+        let [png, svg] = sysid_report::save(&figure, stem)?;
+        eprintln!("wrote {} and {}", png.display(), svg.display());
+    }
+    Ok(Outcome::Success)
 }
 
 /// The readable report: the optimum's NLL, then a line per unknown.

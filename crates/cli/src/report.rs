@@ -23,22 +23,22 @@ pub struct ReportArgs {
     #[arg(long, value_name = "A,B", help = methods_help())]
     methods: Option<String>,
     /// Trials of each system's study.
-    #[arg(long, default_value_t = 500, value_name = "N", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 500, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     trials: usize,
     /// Start perturbation ρ of the studies (see `sysid study --help`).
-    #[arg(long, default_value_t = 0.3, value_name = "RHO", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.3, value_name = "RHO", value_parser = crate::options::number, allow_hyphen_values = true)]
     perturb: f64,
     /// Points per axis of the basin maps.
-    #[arg(long, default_value_t = 25, value_name = "G", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 25, value_name = "G", value_parser = crate::options::count, allow_hyphen_values = true)]
     grid: usize,
     /// Spread of the basin maps: starts from truth·(1 − s) to truth·(1 + s).
-    #[arg(long, default_value_t = 0.9, value_name = "S", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.9, value_name = "S", value_parser = crate::options::number, allow_hyphen_values = true)]
     basin_spread: f64,
     /// Starts of each method's multistart on the default data.
-    #[arg(long, default_value_t = 20, value_name = "N", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 20, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     starts: usize,
     /// Seed of the data, the trials, the default-start fits and the multistarts.
-    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1, value_parser = crate::options::seed, allow_hyphen_values = true)]
     seed: u64,
     /// Replace files at the report's paths that no report wrote. Without it such files are
     /// refused; the files an earlier report wrote (listed in OUT/.sysid-report) are always
@@ -75,6 +75,19 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
         Some(list) => sysid_registry::parse_list(list)?,
         None => ReportOptions::default().methods,
     };
+    // The report writes README.md in --out and a folder per PEtab problem in --out/petab:
+    // neither may be where it reads the PEtab problems from.
+    if args.petab.is_dir() {
+        for written in [args.out.clone(), args.out.join("petab")] {
+            if written.canonicalize().ok() == args.petab.canonicalize().ok() {
+                anyhow::bail!(
+                    "--out {}: the report would write into {}, where it reads the PEtab problems (--petab): choose another --out",
+                    args.out.display(),
+                    args.petab.display()
+                );
+            }
+        }
+    }
     let options = ReportOptions {
         out: args.out.clone(),
         systems,

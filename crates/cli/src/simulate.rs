@@ -5,13 +5,11 @@ use std::path::{Path, PathBuf};
 use anyhow::{anyhow, bail};
 use clap::Args;
 use sysid_core::{Data, Record};
-use sysid_ode::System;
-use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
 use crate::options::SourceArgs;
-use crate::output::{intervals, parse_times, write_output};
-use crate::problem::{no_source, visit_system};
+use crate::output::{intervals, not_an_input, parse_times, writable, write_output};
+use crate::problem::{case, no_source};
 
 /// Arguments of `sysid simulate`.
 #[derive(Args, Debug)]
@@ -32,7 +30,7 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "NAME")]
     experiment: Option<String>,
     /// Sample spacing for a catalogue record given as a function (continuous systems).
-    #[arg(long, default_value_t = 0.001, value_name = "DT", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.001, value_name = "DT", value_parser = crate::options::number, allow_hyphen_values = true)]
     step: f64,
     /// Write to this file instead of standard output.
     #[arg(long, value_name = "FILE")]
@@ -41,12 +39,15 @@ pub struct SimulateArgs {
 
 /// Runs `sysid simulate`.
 pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
+    if let Some(out) = &args.out {
+        writable(out, "--out")?;
+    }
     let text = match (&args.source.system, args.source.file()) {
         (Some(name), _) => {
             if !(args.step > 0.0 && args.step.is_finite()) {
                 bail!("--step must be positive, got {}", args.step);
             }
-            let data = visit_system(name, DataOf { seed: args.source.seed })??;
+            let data = case(name)?.data(args.source.seed)?;
             data_csv(&data, args.step)?
         }
         (None, Some(path)) => model_csv(path, args)?,
@@ -74,18 +75,12 @@ fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
         set.push((name.trim().to_string(), value));
     }
     let model = args.source.load(path)?;
-    Ok(model.simulate(&set, args.source.data.as_deref(), &times, args.experiment.as_deref())?)
-}
-
-struct DataOf {
-    seed: u64,
-}
-
-impl Visit for DataOf {
-    type Output = anyhow::Result<Data>;
-    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
-        Ok(case.data(self.seed)?)
+    if let Some(out) = &args.out {
+        let inputs: Vec<PathBuf> =
+            model.inputs().into_iter().chain(args.source.data.clone()).collect();
+        not_an_input(out, &inputs, "--out")?;
     }
+    Ok(model.simulate(&set, args.source.data.as_deref(), &times, args.experiment.as_deref())?)
 }
 
 /// The data as CSV, a record given as a function sampled every `step` (rounded to divide

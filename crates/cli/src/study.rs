@@ -7,14 +7,13 @@ use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
 use sysid_montecarlo::files::{self, RunOptions, Shard};
 use sysid_montecarlo::{Scenario, Study, StudySpec, basin};
-use sysid_ode::System;
 use sysid_registry::Role;
-use sysid_systems::{Case, Visit};
 
 use crate::Outcome;
+use crate::any::{AnySystem, model_problem};
 use crate::options::{IntegratorArgs, MethodArgs, SourceArgs};
-use crate::output::{emit, progress_bar};
-use crate::problem::{fit, method, no_source, prepare, visit_system};
+use crate::output::{emit, not_an_input, progress_bar};
+use crate::problem::{case, fit, method, no_source, prepare};
 
 /// The help of `--methods`: the registry's study methods.
 fn methods_help() -> String {
@@ -34,14 +33,14 @@ pub struct StudyArgs {
     #[arg(long, default_value = Role::Reference.method(), value_name = "METHOD")]
     reference: String,
     /// Number of trials.
-    #[arg(long, default_value_t = 100, value_name = "N", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 100, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     trials: usize,
     /// Noise level, a multiple of the system's σ.
-    #[arg(long, default_value_t = 1.0, value_name = "K", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 1.0, value_name = "K", value_parser = crate::options::number, allow_hyphen_values = true)]
     noise: f64,
     /// Start perturbation ρ: each unknown starts at truth·(1 + ρu), u uniform on [−1, 1]
     /// (truth·(1 + ρ)^u on a log scale, truth + ρu for a truth of 0).
-    #[arg(long, default_value_t = 0.2, value_name = "RHO", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 0.2, value_name = "RHO", value_parser = crate::options::number, allow_hyphen_values = true)]
     perturb: f64,
     /// The study's directory: trials.jsonl, summary.json, summary.md (basin.json, basin.md).
     #[arg(long, value_name = "DIR")]
@@ -66,7 +65,7 @@ pub struct StudyArgs {
     basin: Option<String>,
     /// When stderr is not a terminal (a batch job's log), print a plain line with the
     /// count of trials done every this many seconds (0: never).
-    #[arg(long, default_value_t = 60.0, value_name = "SECONDS", allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 60.0, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
     log_every: f64,
     /// Points per axis of the basin map.
     #[arg(
@@ -74,7 +73,7 @@ pub struct StudyArgs {
         default_value_t = 41,
         value_name = "G",
         requires = "basin",
-        allow_negative_numbers = true
+        value_parser = crate::options::count, allow_hyphen_values = true
     )]
     grid: usize,
     #[command(flatten)]
@@ -105,6 +104,7 @@ pub struct MergeArgs {
 /// Runs `sysid study`.
 pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
+    args.integrator.validate()?;
     if !(args.log_every >= 0.0 && args.log_every.is_finite()) {
         bail!(
             "--log-every must be a non-negative number of seconds (0: never), got {}",
@@ -122,10 +122,20 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     match (&args.source.system, args.source.file()) {
         (Some(name), _) => {
             let settings = method_settings(args);
-            visit_system(name, FromCase { args, methods, settings })?
+            let mut case = case(name)?;
+            case.integrator = args.integrator.apply_to(case.integrator)?;
+            let scenario = Scenario::from_case(&case)
+                .and_then(|s| s.with_fixed(&args.options.fix))
+                .with_context(|| format!("system {}", case.name))?;
+            run_scenario(args, case.name, scenario, methods, settings)
         }
         (None, Some(path)) => {
             let model = args.source.load(path)?;
+            let inputs: Vec<PathBuf> =
+                model.inputs().into_iter().chain(args.source.data.clone()).collect();
+            for name in files::OWNED {
+                not_an_input(&args.out.join(name), &inputs, "--out")?;
+            }
             let mut settings = method_settings(args);
             // A PEtab problem's SBML and tables are in the model it was imported as and the
             // data tables it holds in memory.
@@ -154,7 +164,7 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
                 settings.insert(format!("data of {}", e.name), digest);
             }
             let problem = prepare(
-                model.problem(args.source.data.as_deref())?,
+                model_problem(model.problem(args.source.data.as_deref())?),
                 &args.integrator,
                 &args.options,
             )?;
@@ -175,12 +185,6 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
         }
         (None, None) => Err(no_source()),
     }
-}
-
-struct FromCase<'a> {
-    args: &'a StudyArgs,
-    methods: Vec<String>,
-    settings: BTreeMap<String, String>,
 }
 
 /// The method options beyond the driver's that change results, for study.json.
@@ -205,21 +209,10 @@ fn sha256_of(bytes: &[u8]) -> String {
     format!("sha256:{}", digest.iter().map(|b| format!("{b:02x}")).collect::<String>())
 }
 
-impl Visit for FromCase<'_> {
-    type Output = anyhow::Result<Outcome>;
-    fn visit<S: System + Clone + Send + Sync + 'static>(self, mut case: Case<S>) -> Self::Output {
-        case.integrator = self.args.integrator.apply_to(case.integrator)?;
-        let scenario = Scenario::from_case(&case)
-            .and_then(|s| s.with_fixed(&self.args.options.fix))
-            .with_context(|| format!("system {}", case.name))?;
-        run_scenario(self.args, case.name, scenario, self.methods, self.settings)
-    }
-}
-
-fn run_scenario<S: System + Clone + Send + Sync + 'static>(
+fn run_scenario(
     args: &StudyArgs,
     system: &str,
-    scenario: Scenario<S>,
+    scenario: Scenario<AnySystem>,
     methods: Vec<String>,
     settings: BTreeMap<String, String>,
 ) -> anyhow::Result<Outcome> {
@@ -236,7 +229,7 @@ fn run_scenario<S: System + Clone + Send + Sync + 'static>(
         driver: method_settings.driver,
         settings,
     };
-    let build = |m: &str| method::<S>(m, &method_settings);
+    let build = |m: &str| method(m, &method_settings);
     let fits = methods.iter().map(|m| build(m)).collect::<anyhow::Result<Vec<_>>>()?;
     let study = Study::new(spec, scenario, fits, build(&args.reference)?)?;
     if let Some(axes) = &args.basin {

@@ -2,6 +2,8 @@
 //! per file, and the generic methods instantiated once for all of them).
 
 mod cli;
+mod contract;
+mod edges;
 mod model_files;
 mod petab;
 mod study;

@@ -244,6 +244,16 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
     let Some(first) = dirs.first() else {
         return Err(StudyError::Setup("no shard directories to merge".into()));
     };
+    // The merge reads the shards' files and writes the same names in `out`.
+    if let Ok(target) = out.canonicalize()
+        && let Some(dir) = dirs.iter().find(|d| d.canonicalize().is_ok_and(|d| d == target))
+    {
+        return Err(StudyError::Setup(format!(
+            "{} is one of the shards being merged ({}): merge into a new directory, or the shard's files would be overwritten",
+            out.display(),
+            dir.display()
+        )));
+    }
     let mut headers = Vec::new();
     let mut locks = BTreeMap::new();
     for dir in dirs {

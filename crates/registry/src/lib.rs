@@ -19,7 +19,7 @@
 //! ```
 #![warn(missing_docs)]
 
-use sysid_core::{DriverOptions, Estimate, FitError, Method, Problem};
+use sysid_core::{DriverOptions, Estimate, FitError, Method, OptionsError, Problem};
 use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
 use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_levenberg_marquardt::{LevenbergMarquardt, LevenbergMarquardtOptions};
@@ -41,6 +41,18 @@ pub struct Settings {
     pub ql_start: Start,
     /// The number of shooting intervals of `multiple-shooting` (None: chosen from the data).
     pub shooting_intervals: Option<usize>,
+}
+
+impl Settings {
+    /// Checks the settings, naming the first that cannot be used by its field
+    /// ([`OptionsError::name`]): the driver's, then `shooting_intervals`.
+    pub fn validate(&self) -> Result<(), OptionsError> {
+        self.driver.validate()?;
+        if self.shooting_intervals == Some(0) {
+            return Err(OptionsError::Zero { name: "shooting_intervals" });
+        }
+        Ok(())
+    }
 }
 
 /// Where a method is used when nobody names one.

@@ -98,6 +98,25 @@ pub fn truth_integrator() -> Integrator {
     Integrator::dopri5(1e-12, 1e-14)
 }
 
+impl<S> Case<S> {
+    /// The same case with its system mapped by `f` (to an enum of several system types, say).
+    pub fn map_system<T>(self, f: impl FnOnce(S) -> T) -> Case<T> {
+        Case {
+            name: self.name,
+            summary: self.summary,
+            time_unit: self.time_unit,
+            system: f(self.system),
+            t0: self.t0,
+            known: self.known,
+            unknowns: self.unknowns,
+            integrator: self.integrator,
+            data: self.data,
+            truth: self.truth,
+            reference: self.reference,
+        }
+    }
+}
+
 impl<S: System + Clone> Case<S> {
     /// The data for `seed`: the same on every machine (ChaCha8 seeded by `seed`, noise drawn
     /// series after series, in time order).

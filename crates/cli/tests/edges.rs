@@ -1,0 +1,508 @@
+//! The edges a new user probes: bad PEtab tables and SBML, absurd options, unit slips in the
+//! data, outputs aimed at inputs. Every refusal is exit 2 with one line naming the file, row
+//! and column, or the option; no run aborts, panics, claims a convergence that is not one, or
+//! writes over a file it reads.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn sysid(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .current_dir(root())
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).to_string()
+}
+
+/// Exit 2, nothing on stdout, one line on stderr containing every one of `needles`.
+#[track_caller]
+fn refused(args: &[&str], needles: &[&str]) -> String {
+    let out = sysid(args);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}{}", text(&out.stdout));
+    assert!(out.stdout.is_empty(), "{args:?} printed {}", text(&out.stdout));
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: not one line: {stderr}");
+    for needle in needles {
+        assert!(stderr.contains(needle), "{args:?}: `{needle}` not in {stderr}");
+    }
+    stderr
+}
+
+/// The JSON of a run that ends with exit 0 or 1.
+#[track_caller]
+fn json(args: &[&str]) -> Value {
+    let mut all = args.to_vec();
+    all.extend(["--format", "json"]);
+    let out = sysid(&all);
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{args:?}: {}", text(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{args:?}: {e}"))
+}
+
+/// A scratch folder, removed at the end.
+struct Scratch(PathBuf);
+
+impl Scratch {
+    fn new(tag: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("sysid-edges-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("a scratch folder");
+        Self(dir)
+    }
+    fn path(&self, name: &str) -> String {
+        self.0.join(name).display().to_string()
+    }
+    fn write(&self, name: &str, text: &str) -> String {
+        std::fs::write(self.0.join(name), text).expect("writes");
+        self.path(name)
+    }
+    /// A copy of `examples/kinetics` (model.toml, data.csv), its data changed by `data`.
+    fn kinetics(&self, data: impl Fn(String) -> String) -> String {
+        let example = root().join("examples/kinetics");
+        let read = |f: &str| std::fs::read_to_string(example.join(f)).expect("the example");
+        self.write("data.csv", &data(read("data.csv")));
+        self.write("model.toml", &read("model.toml"))
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// A unit slip in the data (0.170053 written as 170053.0) makes the best fit want no second
+/// reaction: k2 runs off to 0 on its log scale. No method may call that converged or give it
+/// a standard error, and no log-scale estimate is ever 0.
+#[test]
+fn a_rate_running_off_to_zero_is_not_a_minimum() {
+    let s = Scratch::new("slip");
+    let model = s.kinetics(|d| d.replace("7.5,0.170053", "7.5,170053.0"));
+    for method in
+        ["levenberg-marquardt", "hybrid-newton", "multiple-shooting", "gauss-newton-ls", "goodman"]
+    {
+        let fit = json(&["fit", "--model", &model, "--method", method]);
+        assert_eq!(fit["converged"], false, "{method}: {fit}");
+        for name in ["k1", "k2"] {
+            let v = fit["estimates"][name].as_f64().expect("a number");
+            assert!(v > 0.0 && v.is_finite(), "{method}: {name} = {v}");
+            assert!(fit["std_errors"][name].is_null(), "{method}: {}", fit["std_errors"]);
+        }
+        let undetermined: Vec<&str> =
+            fit["undetermined"].as_array().unwrap().iter().filter_map(Value::as_str).collect();
+        if ["levenberg-marquardt", "hybrid-newton"].contains(&method) {
+            assert_eq!(undetermined, ["k2"], "{method}: {fit}");
+            assert!(fit["estimates"]["k2"].as_f64().unwrap() < 1e-6);
+        }
+    }
+    let out = sysid(&["fit", "--model", &model, "--method", "levenberg-marquardt"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(text(&out.stdout).contains("k2 is not determined"), "{}", text(&out.stdout));
+}
+
+/// Integrator settings that cannot resolve the model are seen by the certificate, and an
+/// "exact fit" is exact: `--atol 1e300` and `--fixed-step 1e300` do not converge, `--rtol
+/// 0.05` is no exact fit, while `--atol 0` (documented as allowed) fits as the default does.
+#[test]
+fn integrator_settings_cannot_fake_a_convergence() {
+    let model = root().join("examples/kinetics/model.toml").display().to_string();
+    let reference = json(&["fit", "--model", &model]);
+    assert_eq!(reference["converged"], true);
+    let k2 = reference["estimates"]["k2"].as_f64().unwrap();
+    for settings in [["--atol", "1e300"], ["--fixed-step", "1e300"]] {
+        let fit = json(&["fit", "--model", &model, settings[0], settings[1]]);
+        assert_eq!(fit["converged"], false, "{settings:?}: {fit}");
+        assert!(fit["estimates"]["k2"].as_f64().unwrap() > 0.0, "{settings:?}");
+    }
+    let fit = json(&["fit", "--model", &model, "--integrator", "rk4", "--fixed-step", "0.5"]);
+    assert_eq!(fit["converged"], false, "a coarse fixed step: {fit}");
+    assert!(fit["optimality_error"].as_f64().unwrap() > fit["gtol"].as_f64().unwrap());
+    let fit = json(&["fit", "--model", &model, "--rtol", "0.05"]);
+    assert_eq!(fit["exact_fit"], false, "{fit}");
+    assert!(fit["optimality"].as_f64().unwrap() > 0.0);
+    let fit = json(&["fit", "--model", &model, "--atol", "0"]);
+    assert_eq!(fit["converged"], true, "{fit}");
+    assert!((fit["estimates"]["k2"].as_f64().unwrap() / k2 - 1.0).abs() < 1e-7);
+}
+
+/// Relative weights mean what they say: scaling them all by 1e-312 changes no standard
+/// error (before, k1's overflowed to ∞).
+#[test]
+fn weights_are_relative() {
+    let s = Scratch::new("weights");
+    let model = s.kinetics(|d| d);
+    let tiny = s.write(
+        "tiny.toml",
+        &std::fs::read_to_string(&model).unwrap().replace("B = 10000.0", "B = 1e-308"),
+    );
+    let (a, b) = (json(&["fit", "--model", &model]), json(&["fit", "--model", &tiny]));
+    for name in ["k1", "k2"] {
+        let (x, y) = (a["std_errors"][name].as_f64().unwrap(), b["std_errors"][name].as_f64());
+        let y = y.unwrap_or_else(|| panic!("{name}: {}", b["std_errors"]));
+        assert!((x / y - 1.0).abs() < 1e-9, "{name}: {x} against {y}");
+    }
+}
+
+/// Nothing is written over a file the command reads, by any name.
+#[test]
+fn no_command_writes_over_its_inputs() {
+    let s = Scratch::new("inputs");
+    let model = s.kinetics(|d| d);
+    let data = s.path("data.csv");
+    let before = std::fs::read(&data).unwrap();
+    std::fs::hard_link(&data, s.0.join("linked.csv")).unwrap();
+    for out in [data.clone(), model.clone(), s.path("linked.csv")] {
+        refused(
+            &["simulate", "--model", &model, "--times", "0:1:0.5", "--out", &out],
+            &["--out", "which this command reads"],
+        );
+        refused(&["predict", "--model", &model, "--until", "20", "--out", &out], &["--out"]);
+    }
+    // A data file that a figure would be written over (its name ends in .svg).
+    std::fs::copy(&data, s.0.join("observed.svg")).unwrap();
+    let observed = s.path("observed.svg");
+    refused(
+        &["profile", "--model", &model, "--data", &observed, "--figure", &s.path("observed")],
+        &["--figure", "which this command reads"],
+    );
+    assert_eq!(std::fs::read(&observed).unwrap(), before, "the data file was changed");
+    assert_eq!(std::fs::read(&data).unwrap(), before, "the data file was changed");
+    // The figure's folder is checked before any fit.
+    refused(
+        &["profile", "--model", &model, "--figure", "/no/such/folder/fig"],
+        &["--figure", "/no/such/folder", "does not exist"],
+    );
+}
+
+/// Merging shards into one of them is refused, not blamed on "another sysid".
+#[test]
+fn merging_into_a_shard_is_refused() {
+    let s = Scratch::new("merge");
+    let (a, b) = (s.path("a"), s.path("b"));
+    for (shard, dir) in [("1/2", &a), ("2/2", &b)] {
+        let out = sysid(&[
+            "study",
+            "--system",
+            "falling-body",
+            "--trials",
+            "2",
+            "--shard",
+            shard,
+            "--out",
+            dir,
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    }
+    let before = std::fs::read(Path::new(&a).join("trials.jsonl")).unwrap();
+    let stderr = refused(&["merge", &a, &b, "--out", &a], &["one of the shards"]);
+    assert!(!stderr.contains("another sysid"), "{stderr}");
+    assert_eq!(std::fs::read(Path::new(&a).join("trials.jsonl")).unwrap(), before);
+}
+
+/// What was refused and should not have been: a profile of one free unknown (the
+/// likelihood itself: nothing to re-optimise).
+#[test]
+fn a_profile_of_one_unknown_is_its_likelihood() {
+    let model = root().join("examples/kinetics/model.toml").display().to_string();
+    let p = json(&["profile", "--model", &model, "--fix", "k1=0.7935075228697671"]);
+    let profile = &p["profiles"]["k2"];
+    assert_eq!(profile["label"], "identifiable", "{p}");
+    let [low, high] =
+        [profile["interval"][0].as_f64().unwrap(), profile["interval"][1].as_f64().unwrap()];
+    // The Student-t interval of the same one-unknown fit, for comparison: the profile's is
+    // the likelihood-ratio one, equal to it to first order for a nearly linear model.
+    let fit = json(&["fit", "--model", &model, "--fix", "k1=0.7935075228697671"]);
+    let t =
+        [fit["intervals"]["k2"][0].as_f64().unwrap(), fit["intervals"]["k2"][1].as_f64().unwrap()];
+    assert!(
+        (low / t[0] - 1.0).abs() < 2e-3 && (high / t[1] - 1.0).abs() < 2e-3,
+        "{low}, {high} against {t:?}"
+    );
+}
+
+/// Options: negative numbers reach the option's own check; settings out of reach are
+/// refused naming the option; `--fix` on everything says `--fix`.
+#[test]
+fn absurd_options_are_refused_by_name() {
+    let model = root().join("examples/kinetics/model.toml").display().to_string();
+    let fit = |extra: &[&'static str]| -> Vec<String> {
+        ["fit", "--model", model.as_str()].iter().chain(extra).map(|s| s.to_string()).collect()
+    };
+    for (extra, needles) in [
+        (vec!["--rtol", "-1e-8"], vec!["--rtol", "got -1e-8"]),
+        (vec!["--rtol", "1e-300"], vec!["--rtol", "at least 1e-14"]),
+        (vec!["--atol", "-1"], vec!["--atol"]),
+        (vec!["--gtol", "2"], vec!["--gtol"]),
+        (vec!["--max-iterations", "-1"], vec!["--max-iterations", "got -1"]),
+        (vec!["--max-steps", "0"], vec!["--max-steps"]),
+        (vec!["--starts", "0"], vec!["--starts"]),
+        (vec!["--starts", "3", "--start-spread", "-1"], vec!["--start-spread"]),
+        (vec!["--shooting-intervals", "0"], vec!["--shooting-intervals"]),
+        (vec!["--integrator", "rk4"], vec!["--fixed-step"]),
+        (vec!["--fix", "k1=0.7", "--fix", "k2=0.3"], vec!["--fix", "every unknown"]),
+    ] {
+        let args = fit(&extra);
+        refused(&args.iter().map(String::as_str).collect::<Vec<_>>(), &needles);
+    }
+    refused(
+        &["profile", "--model", &model, "--max-iterations", "0"],
+        &["--max-iterations 0", "re-optimises"],
+    );
+    refused(&["profile", "--model", &model, "--max-points", "-3"], &["--max-points"]);
+}
+
+/// Bad model files and data: each refused at its file, line and column, with the cause.
+#[test]
+fn bad_values_are_refused_where_they_are_written() {
+    let s = Scratch::new("values");
+    let model = s.kinetics(|d| d);
+    let read = |p: &str| std::fs::read_to_string(p).unwrap();
+    // A σ whose weight overflows.
+    let sigma = s.write(
+        "sigma.toml",
+        &read(&model).replace(
+            "[data.weights]\nB = 10000.0",
+            "[outputs]\nBo = { value = \"B\", sigma = 1e-320 }",
+        ),
+    );
+    s.write("sigma.csv", &read(&s.path("data.csv")).replace("t,B", "t,Bo"));
+    let sigma_text = read(&sigma).replace("file = \"data.csv\"", "file = \"sigma.csv\"");
+    let sigma = s.write("sigma.toml", &sigma_text);
+    refused(&["fit", "--model", &sigma], &["sigma.toml:", "sigma must lie between", "1e-320"]);
+    // A measurement that overflows with its σ.
+    let known = s.write("known.toml", &sigma_text.replace("sigma = 1e-320", "sigma = 1.0"));
+    s.write("sigma.csv", &read(&s.path("sigma.csv")).replace("7.5,0.170053", "7.5,1e300"));
+    refused(&["fit", "--model", &known], &["sigma.csv:17:", "too large for least squares"]);
+    // A guess at which the model cannot be integrated names the unknown.
+    let huge =
+        s.write("huge.toml", &read(&model).replace("guess = 1.0, log = true", "guess = 1e300"));
+    refused(&["fit", "--model", &huge], &["k1 = 1e300", "cannot be integrated"]);
+    // Data that no unknown affects: only the known initial values at t0.
+    s.write("t0.csv", "t,A,B,C\n0.0,1.0,0.0,0.0\n");
+    refused(
+        &["fit", "--model", &model, "--data", &s.path("t0.csv")],
+        &["cannot identify k1, k2", "no measured value depends on them"],
+    );
+}
+
+/// The PEtab problem `Boehm_JProteomeRes2014` copied into a scratch folder, one of its files
+/// changed by `edit`; returns the YAML's path.
+fn boehm_with(s: &Scratch, file: &str, edit: impl Fn(&str) -> Vec<u8>) -> String {
+    let source = root().join("tests/data/petab/Boehm_JProteomeRes2014");
+    for entry in std::fs::read_dir(&source).unwrap() {
+        let path = entry.unwrap().path();
+        std::fs::copy(&path, s.0.join(path.file_name().unwrap())).unwrap();
+    }
+    let target = s.0.join(file);
+    let original = std::fs::read_to_string(&target).unwrap();
+    std::fs::write(&target, edit(&original)).unwrap();
+    s.path("Boehm_JProteomeRes2014.yaml")
+}
+
+/// A change to a file's text, giving its new bytes.
+type Edit = Box<dyn Fn(&str) -> Vec<u8>>;
+
+const OBSERVABLES: &str = "observables_Boehm_JProteomeRes2014.tsv";
+const PARAMETERS: &str = "parameters_Boehm_JProteomeRes2014.tsv";
+const MEASUREMENTS: &str = "measurementData_Boehm_JProteomeRes2014.tsv";
+const CONDITIONS: &str = "experimentalCondition_Boehm_JProteomeRes2014.tsv";
+const SBML: &str = "model_Boehm_JProteomeRes2014.xml";
+
+/// PEtab tables and SBML as a probe writes them wrong: every one refused in the user's file,
+/// at the row (or line) and column, with the cause; deep nesting refused, never a stack
+/// overflow.
+#[test]
+fn bad_petab_problems_are_refused_where_they_are_wrong() {
+    let first = "(100 * pApB + 200";
+    let cases: Vec<(&str, &str, Edit, Vec<&str>)> = vec![
+        (
+            "parens",
+            OBSERVABLES,
+            Box::new(move |t| {
+                t.replacen(
+                    first,
+                    &format!("{}100{} * pApB + (200", "(".repeat(10_000), ")".repeat(10_000)),
+                    1,
+                )
+                .into()
+            }),
+            vec![OBSERVABLES, ":2:", "observableFormula", "nests more than 200 levels"],
+        ),
+        (
+            "minus",
+            OBSERVABLES,
+            Box::new(move |t| {
+                t.replacen(first, &format!("({}100 * pApB + 200", "-".repeat(200_000)), 1).into()
+            }),
+            vec![OBSERVABLES, ":2:", "nests more than 200 levels"],
+        ),
+        (
+            "apply",
+            SBML,
+            Box::new(|t| {
+                let deep = format!(
+                    "{}<cn>0</cn>{}",
+                    "<apply><plus/>".repeat(10_000),
+                    "</apply>".repeat(10_000)
+                );
+                t.replacen("<ci> BaF3_Epo </ci>", &format!("<ci> BaF3_Epo </ci>{deep}"), 1).into()
+            }),
+            vec![SBML, "MathML nests more than 200 levels"],
+        ),
+        (
+            "division",
+            OBSERVABLES,
+            Box::new(move |t| t.replacen(first, "(pApB / 0 + 200", 1).into()),
+            vec![OBSERVABLES, ":2:", "observableFormula", "division by a constant zero"],
+        ),
+        (
+            "ci",
+            SBML,
+            Box::new(|t| t.replacen("<ci> STAT5B </ci>", "<ci> nosuchthing </ci>", 1).into()),
+            vec![SBML, "uses `nosuchthing`", "no compartment, species or parameter"],
+        ),
+        (
+            "species",
+            SBML,
+            Box::new(|t| {
+                let line = t.lines().find(|l| l.contains("<species id=\"STAT5A\"")).unwrap();
+                t.replacen(line, &format!("{line}\n{line}"), 1).into()
+            }),
+            vec![SBML, ":49:", "species `STAT5A` is declared a second time"],
+        ),
+        (
+            "latin1",
+            SBML,
+            Box::new(|t| {
+                let mut bytes = t.replacen("<model ", "<!-- caf\u{e9} --><model ", 1).into_bytes();
+                let at = bytes.windows(2).position(|w| w == [0xC3, 0xA9]).unwrap();
+                bytes.splice(at..at + 2, [0xE9]);
+                bytes
+            }),
+            vec![SBML, "byte 0xE9 is not UTF-8"],
+        ),
+        (
+            "noise",
+            OBSERVABLES,
+            Box::new(|t| {
+                t.replacen("\tnoiseParameter1_pSTAT5A_rel", "\t-noiseParameter1_pSTAT5A_rel", 1)
+                    .into()
+            }),
+            vec![OBSERVABLES, ":2:", "noiseFormula", "σ must be positive"],
+        ),
+        (
+            "duplicate",
+            CONDITIONS,
+            Box::new(|_| {
+                "conditionId\tconditionName\tratio\nmodel1_data1\tc1\t0.693\nmodel1_data1\tc1\t0.5\n".into()
+            }),
+            vec![CONDITIONS, ":3:1:", "defined a second time"],
+        ),
+        (
+            "nan-bound",
+            PARAMETERS,
+            Box::new(|t| {
+                t.replacen(
+                    "log10\t1E-05\t100000\t0.026982514033029",
+                    "log10\tNaN\t100000\t0.026982514033029",
+                    1,
+                )
+                .into()
+            }),
+            vec![PARAMETERS, ":2:", "lowerBound", "needs this bound"],
+        ),
+        (
+            "empty-bound",
+            PARAMETERS,
+            Box::new(|t| {
+                t.replacen(
+                    "log10\t1E-05\t100000\t0.026982514033029",
+                    "log10\t1E-05\t\t0.026982514033029",
+                    1,
+                )
+                .into()
+            }),
+            vec![PARAMETERS, ":2:", "upperBound", "needs this bound"],
+        ),
+        (
+            "no-bounds",
+            PARAMETERS,
+            Box::new(|t| {
+                t.lines()
+                    .map(|l| {
+                        let cells: Vec<&str> = l.split('\t').collect();
+                        [&cells[..3], &cells[5..]].concat().join("\t")
+                    })
+                    .collect::<Vec<_>>()
+                    .join("\n")
+                    .into()
+            }),
+            vec![PARAMETERS, "no column `lowerBound`"],
+        ),
+        (
+            "empty-scale",
+            PARAMETERS,
+            Box::new(|t| {
+                t.replacen(
+                    "log10\t1E-05\t100000\t0.026982514033029",
+                    "\t1E-05\t100000\t0.026982514033029",
+                    1,
+                )
+                .into()
+            }),
+            vec![PARAMETERS, ":2:", "parameterScale", "has no scale"],
+        ),
+        (
+            "noise-parameters",
+            MEASUREMENTS,
+            Box::new(|t| t.replacen("\tsd_pSTAT5A_rel\t", "\tsd_pSTAT5A_rel;2\t", 1).into()),
+            vec![MEASUREMENTS, ":2:", "noiseParameters", "2 values", "1 placeholder"],
+        ),
+        (
+            "observable-parameters",
+            MEASUREMENTS,
+            Box::new(|t| t.replacen("\t\tsd_pSTAT5A_rel\t", "\t3\tsd_pSTAT5A_rel\t", 1).into()),
+            vec![MEASUREMENTS, ":2:", "observableParameters", "0 placeholders"],
+        ),
+        (
+            "long-row",
+            MEASUREMENTS,
+            Box::new(|t| {
+                t.replacen(
+                    "\tmodel1_data1_pSTAT5A_rel\r\n",
+                    "\tmodel1_data1_pSTAT5A_rel\textra\r\n",
+                    1,
+                )
+                .into()
+            }),
+            vec![MEASUREMENTS, ":2:", "`extra` belongs to no column"],
+        ),
+    ];
+    for (tag, file, edit, needles) in cases {
+        let s = Scratch::new(&format!("petab-{tag}"));
+        let yaml = boehm_with(&s, file, edit);
+        let stderr = refused(&["fit", "--petab", &yaml, "--max-iterations", "0"], &needles);
+        assert!(!stderr.contains("bug of the importer"), "{tag}: {stderr}");
+        assert!(stderr.len() < 1_000, "{tag}: a line of {} characters", stderr.len());
+    }
+    // Latin-1 declared as such is read.
+    let s = Scratch::new("petab-latin1-declared");
+    let yaml = boehm_with(&s, SBML, |t| {
+        t.replacen("encoding=\"UTF-8\"", "encoding=\"ISO-8859-1\"", 1)
+            .replacen("<model ", "<!-- caf\u{e9} --><model ", 1)
+            .chars()
+            .map(|c| c as u32 as u8)
+            .collect()
+    });
+    let fit = json(&["fit", "--petab", &yaml, "--max-iterations", "0"]);
+    assert!((fit["nll"].as_f64().unwrap() - 138.22199693517703).abs() < 1e-3, "{fit}");
+}
