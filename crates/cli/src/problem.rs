@@ -202,6 +202,14 @@ fn unusable_start(problem: &AnyProblem, e: &Estimate, start_point: &str) -> Opti
                 "the model cannot be integrated from {start_point} ({}): {error}",
                 point(problem, at)
             );
+            if let (OdeError::TooManySteps { .. }, Some(h)) =
+                (error, problem.integrator().fixed_step)
+            {
+                message.push_str(&format!(
+                    " (every step is the fixed step {h:e}: the span needs more than --max-steps {} of them)",
+                    problem.integrator().max_steps
+                ));
+            }
             // Steps that shrink to nothing with the sensitivities, where the model alone
             // integrates at the same tolerances: say so, and what usually causes it.
             if matches!(error, OdeError::StepSizeTooSmall { .. })

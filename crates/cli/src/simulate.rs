@@ -42,11 +42,11 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
     if let Some(out) = &args.out {
         writable(out, "--out")?;
     }
+    if !(args.step > 0.0 && args.step.is_finite()) {
+        bail!("--step must be a positive number, got {}", args.step);
+    }
     let text = match (&args.source.system, args.source.file()) {
         (Some(name), _) => {
-            if !(args.step > 0.0 && args.step.is_finite()) {
-                bail!("--step must be positive, got {}", args.step);
-            }
             let data = case(name)?.data(args.source.seed)?;
             data_csv(&data, args.step)?
         }

@@ -129,9 +129,11 @@ fn integrator_settings_cannot_fake_a_convergence() {
     let fit = json(&["fit", "--model", &model, "--rtol", "0.05"]);
     assert_eq!(fit["exact_fit"], false, "{fit}");
     assert!(fit["optimality"].as_f64().unwrap() > 0.0);
-    let fit = json(&["fit", "--model", &model, "--atol", "0"]);
-    assert_eq!(fit["converged"], true, "{fit}");
-    assert!((fit["estimates"]["k2"].as_f64().unwrap() / k2 - 1.0).abs() < 1e-7);
+    for atol in ["0", "1e-320"] {
+        let fit = json(&["fit", "--model", &model, "--atol", atol]);
+        assert_eq!(fit["converged"], true, "--atol {atol}: {fit}");
+        assert!((fit["estimates"]["k2"].as_f64().unwrap() / k2 - 1.0).abs() < 1e-7);
+    }
 }
 
 /// Relative weights mean what they say: scaling them all by 1e-312 changes no standard
@@ -258,6 +260,15 @@ fn absurd_options_are_refused_by_name() {
         &["--max-iterations 0", "re-optimises"],
     );
     refused(&["profile", "--model", &model, "--max-points", "-3"], &["--max-points"]);
+    refused(&["simulate", "--model", &model, "--times", "0:1:1", "--step", "nan"], &["--step"]);
+    refused(
+        &["fit", "--model", &model, "--integrator", "rk4", "--fixed-step", "1e-320"],
+        &["fixed step", "--max-steps"],
+    );
+    refused(
+        &["study", "--system", "falling-body", "--noise", "1e-320", "--out", "/nonexistent/x"],
+        &["--noise", "between 1e-150 and 1e150"],
+    );
 }
 
 /// Bad model files and data: each refused at its file, line and column, with the cause.
@@ -472,6 +483,20 @@ fn bad_petab_problems_are_refused_where_they_are_wrong() {
             MEASUREMENTS,
             Box::new(|t| t.replacen("\t\tsd_pSTAT5A_rel\t", "\t3\tsd_pSTAT5A_rel\t", 1).into()),
             vec![MEASUREMENTS, ":2:", "observableParameters", "0 placeholders"],
+        ),
+        (
+            "id",
+            PARAMETERS,
+            Box::new(|t| t.replacen("\nEpo_degradation_BaF3\t", "\n1e-320\t", 1).into()),
+            vec![PARAMETERS, ":2:1:", "not a valid parameter id"],
+        ),
+        (
+            "overflow",
+            MEASUREMENTS,
+            Box::new(|t| {
+                t.replacen("\t7.90107299873911\t0.0\t", "\t7.90107299873911\t1e400\t", 1).into()
+            }),
+            vec![MEASUREMENTS, ":2:", "`1e400` is beyond the largest number"],
         ),
         (
             "long-row",

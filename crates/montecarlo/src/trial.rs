@@ -84,6 +84,12 @@ impl StudySpec {
                 self.noise
             )));
         }
+        if !(1e-150..=1e150).contains(&self.noise) {
+            return Err(StudyError::Setup(format!(
+                "--noise must lie between 1e-150 and 1e150 (a multiple of σ), got {:e}: beyond them the weights 1/(noise·σ)² overflow or vanish",
+                self.noise
+            )));
+        }
         if !(self.perturb >= 0.0 && self.perturb.is_finite()) {
             return Err(StudyError::Setup(format!(
                 "--perturb must be non-negative, got {}",

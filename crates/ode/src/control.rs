@@ -77,7 +77,14 @@ pub(crate) fn initial_step<R: Rhs>(
         }
     }
     let (dnf, dny) = ((dnf / n).sqrt(), (dny / n).sqrt());
-    let mut h = if dnf <= 1e-5 || dny <= 1e-5 { 1e-6 } else { 0.01 * dny / dnf };
+    // A scale so small that the ratio overflows (atol 1e-320 for a state at 0) says no more
+    // than none: Hairer's default then.
+    let ratio = 0.01 * dny / dnf;
+    let mut h = if dnf <= 1e-5 || dny <= 1e-5 || !(ratio > 0.0 && ratio.is_finite()) {
+        1e-6
+    } else {
+        ratio
+    };
     h = h.min(ev.cfg.max_step);
     for i in 0..w.x.len() {
         w.tmp[i] = w.x[i] + dir * h * w.k[0][i];
@@ -93,5 +100,7 @@ pub(crate) fn initial_step<R: Rhs>(
     let der2 = (der2 / n).sqrt() / h;
     let der12 = der2.abs().max(dnf);
     let h1 = if der12 <= 1e-15 { (h * 1e-3).max(1e-6) } else { (0.01 / der12).powf(0.2) };
+    // Likewise where the second derivative's estimate overflows: the first guess stands.
+    let h1 = if h1 > 0.0 { h1 } else { h };
     (100.0 * h).min(h1).min(ev.cfg.max_step)
 }

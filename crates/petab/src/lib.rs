@@ -319,9 +319,7 @@ impl<'a> Builder<'a> {
         };
         for row in 0..t.rows.len() {
             let pid = t.cell(row, id);
-            if pid.text.is_empty() {
-                return Err(pid.err("a parameter needs an id"));
-            }
+            pid.id("parameter")?;
             let e = t.cell(row, estimate);
             let estimated = match e.text {
                 "1" => true,
@@ -386,9 +384,7 @@ impl<'a> Builder<'a> {
             let id = t.required("conditionId")?;
             for row in 0..t.rows.len() {
                 let c = t.cell(row, id);
-                if c.text.is_empty() {
-                    return Err(c.err("a condition needs an id"));
-                }
+                c.id("condition")?;
                 if let Some((file, line)) = seen.insert(c.text, (&t.file, t.line(row))) {
                     return Err(c.err(format!(
                         "condition `{}` is defined a second time (first at {file}:{line}): each conditionId is one row",
@@ -407,6 +403,7 @@ impl<'a> Builder<'a> {
             let noise = t.required("noiseFormula")?;
             for row in 0..t.rows.len() {
                 let oid = t.cell(row, id);
+                oid.id("observable")?;
                 let parse = |c: Cell<'_>| {
                     parse_formula(c.text).map_err(|e| {
                         let mut err = c.err(format!("`{}`: {}", abbreviated(c.text), e.message));

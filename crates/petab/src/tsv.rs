@@ -50,7 +50,28 @@ impl<'a> Cell<'a> {
 
     /// The cell as a number (`inf`, `-inf` included), or an error naming it.
     pub fn number(&self) -> Result<f64, ModelError> {
-        parse_number(self.text).ok_or_else(|| self.err(format!("`{}` is not a number", self.text)))
+        parse_number(self.text).ok_or_else(|| match self.text.trim().parse::<f64>() {
+            Ok(v) if v.is_infinite() => self.err(format!(
+                "`{}` is beyond the largest number (1.8e308); write inf for infinity",
+                self.text
+            )),
+            _ => self.err(format!("`{}` is not a number", self.text)),
+        })
+    }
+
+    /// The cell as an id (PEtab's `^[a-zA-Z_]\w*$`), or an error naming `what` it is.
+    pub fn id(&self, what: &str) -> Result<&'a str, ModelError> {
+        let mut chars = self.text.chars();
+        let valid = chars.next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+            && chars.all(|c| c.is_ascii_alphanumeric() || c == '_');
+        match valid {
+            true => Ok(self.text),
+            false if self.text.is_empty() => Err(self.err(format!("a {what} needs an id"))),
+            false => Err(self.err(format!(
+                "`{}` is not a valid {what} id: letters, digits and _, not starting with a digit",
+                self.text
+            ))),
+        }
     }
 }
 
@@ -61,7 +82,8 @@ pub fn parse_number(text: &str) -> Option<f64> {
         "inf" | "+inf" | "infinity" => Some(f64::INFINITY),
         "-inf" | "-infinity" => Some(f64::NEG_INFINITY),
         "nan" => None,
-        _ => t.parse::<f64>().ok().filter(|v| !v.is_nan()),
+        // A finite literal that overflows (1e400) is no number: inf is written as such.
+        _ => t.parse::<f64>().ok().filter(|v| v.is_finite()),
     }
 }
 
