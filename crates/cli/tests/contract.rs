@@ -131,11 +131,13 @@ fn conforms(v: &Value, ty: &str) -> Result<(), String> {
 struct Contract {
     docs: Docs,
     seen: BTreeMap<String, BTreeSet<String>>,
+    /// Whether some fit named an undetermined unknown (so that check ran).
+    undetermined_seen: bool,
 }
 
 impl Contract {
     fn new() -> Self {
-        Self { docs: Docs::read(), seen: BTreeMap::new() }
+        Self { docs: Docs::read(), seen: BTreeMap::new(), undetermined_seen: false }
     }
 
     /// `v` holds exactly keys of the table `heading`, each of its documented type, and
@@ -181,15 +183,20 @@ impl Contract {
             v["active_bounds"].as_object().expect("bounds").keys().map(|s| s.as_str()).collect(),
             "active_bounds",
         );
-        within(
-            v["undetermined"]
-                .as_array()
-                .expect("list")
-                .iter()
-                .map(|s| s.as_str().expect("a name"))
-                .collect(),
-            "undetermined",
-        );
+        let undetermined: Vec<&str> = v["undetermined"]
+            .as_array()
+            .expect("list")
+            .iter()
+            .map(|s| s.as_str().expect("a name"))
+            .collect();
+        if !undetermined.is_empty() {
+            assert_eq!(
+                v["converged"], false,
+                "{what}: converged with {undetermined:?} undetermined"
+            );
+            self.undetermined_seen = true;
+        }
+        within(undetermined, "undetermined");
         if let Some(at) = v.get("failed_at") {
             within(
                 at.as_object().expect("failed_at").keys().map(|s| s.as_str()).collect(),
@@ -383,6 +390,14 @@ fn every_documented_key_holds_in_every_kind_of_run() {
             .replace("file = \"data.csv\"", &format!("file = \"{data}\"")),
     );
     let kinetics_model = kinetics.join("model.toml").display().to_string();
+    let slipped =
+        std::fs::read_to_string(&data).expect("the data").replace("7.5,0.170053", "7.5,170053.0");
+    let slipped = case_file(&dir, "slipped.csv", &slipped);
+    let slip = case_file(
+        &dir,
+        "slip.toml",
+        &model.replace("file = \"data.csv\"", &format!("file = \"{slipped}\"")),
+    );
     let boehm = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
     let fits: Vec<Vec<&str>> = vec![
         // No bounds (the paper's example).
@@ -401,6 +416,8 @@ fn every_documented_key_holds_in_every_kind_of_run() {
         vec!["fit", "--model", &product, "--method", "levenberg-marquardt"],
         // A PEtab problem (noise scales, log10 scales, bounds).
         vec!["fit", "--petab", boehm, "--method", "levenberg-marquardt"],
+        // A rate running off to 0 (a unit slip in the data): undetermined.
+        vec!["fit", "--model", &slip, "--method", "levenberg-marquardt"],
         // Quasilinearization's and multiple shooting's diagnostics.
         vec!["fit", "--system", "van-der-pol", "--method", "quasilinearization"],
         vec!["fit", "--system", "van-der-pol", "--method", "multiple-shooting"],
@@ -410,6 +427,7 @@ fn every_documented_key_holds_in_every_kind_of_run() {
         contract.fit(&fit, &format!("{args:?}"));
         table_agrees(args, &fit);
     }
+    assert!(contract.undetermined_seen, "no run had an undetermined unknown");
     // Multistart.
     let args =
         ["fit", "--system", "lotka-volterra", "--method", "gauss-newton-ls", "--starts", "4"];

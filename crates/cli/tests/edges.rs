@@ -229,6 +229,23 @@ fn a_profile_of_one_unknown_is_its_likelihood() {
         (low / t[0] - 1.0).abs() < 2e-3 && (high / t[1] - 1.0).abs() < 2e-3,
         "{low}, {high} against {t:?}"
     );
+    // A continuous record has no likelihood, only ε: its profile is ε/2, as the optimum's
+    // (before, every point was ∞ and the interval collapsed onto the optimum). ε/2 is
+    // quadratic in y(0) here, so the interval is the optimum ± √(2·1.92/a), a = ∂²(ε/2)/∂y².
+    let p = json(&[
+        "profile",
+        "--system",
+        "falling-body-continuous",
+        "--fix",
+        "v=-0.25",
+        "--fix",
+        "g=32.5",
+    ]);
+    let y = &p["profiles"]["y"];
+    let (low, high) = (y["interval"][0].as_f64().unwrap(), y["interval"][1].as_f64().unwrap());
+    let at = p["optimum"]["estimates"]["y"].as_f64().unwrap();
+    assert!((high - at) > 0.5 && (at - low) > 0.5, "{y}");
+    assert!(((high - at) / (at - low) - 1.0).abs() < 1e-3, "symmetric for a quadratic: {y}");
 }
 
 /// Options: negative numbers reach the option's own check; settings out of reach are
@@ -530,4 +547,22 @@ fn bad_petab_problems_are_refused_where_they_are_wrong() {
     });
     let fit = json(&["fit", "--petab", &yaml, "--max-iterations", "0"]);
     assert!((fit["nll"].as_f64().unwrap() - 138.22199693517703).abs() < 1e-3, "{fit}");
+}
+
+/// A fit whose last round was certified with the noise scales still moving (the iteration
+/// budget ran out between rounds) is not converged, and has no standard errors: they were
+/// the last round's, at scales that are not the estimate's.
+#[test]
+fn unsettled_noise_scales_leave_no_standard_errors() {
+    let args = ["fit", "--model", "examples/two-doses/model.toml", "--max-iterations", "10"];
+    let fit = json(&args);
+    let (moved, gtol) = (fit["scale_optimality"].as_f64().unwrap(), fit["gtol"].as_f64().unwrap());
+    assert!(moved > gtol, "the scales settled within 10 iterations: {fit}");
+    assert!(fit["optimality"].as_f64().unwrap() <= gtol, "{fit}");
+    assert_eq!(fit["converged"], false);
+    for key in ["std_errors", "intervals"] {
+        assert!(fit[key].as_object().unwrap().values().all(Value::is_null), "{key}: {fit}");
+    }
+    let out = sysid(&args);
+    assert!(text(&out.stdout).contains("the noise scales' closed form would still move them"));
 }

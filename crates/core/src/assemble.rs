@@ -7,7 +7,7 @@ use std::time::Instant;
 use nalgebra::DMatrix;
 use sysid_ode::System;
 
-use crate::certificate::{Certificate, certify, optimality};
+use crate::certificate::{Certificate, certify, exact_fit_tolerance, optimality};
 use crate::confidence::interval;
 use crate::estimate::{Estimate, ExperimentFit, Iteration, ScaleEstimate};
 use crate::evaluate::Linearization;
@@ -147,14 +147,33 @@ impl Record<'_> {
         let certificate = match &lin {
             Some(lin) => {
                 let mut certificate = certify(problem, lin, self.gtol, self.options.max_condition);
-                if !certificate.exact_fit
+                let fixed = problem.integrator().fixed_step.is_some();
+                // A fixed step's cost is the model's only as far as the step resolves it:
+                // its error is always measured, an exact fit included, and a reference that
+                // cannot be integrated leaves the claim unproven (∞).
+                if (fixed || !certificate.exact_fit)
                     && certificate.optimality.is_finite()
                     && let Some(finer) = ev.reference()
-                    && let Ok(fine) = finer.linearize(&point.z)
                 {
-                    ev.add(fine.counts);
-                    let value = optimality(&finer, &fine, self.gtol).value;
-                    certificate.error = (certificate.optimality - value).abs();
+                    match finer.linearize(&point.z) {
+                        Ok(fine) => {
+                            ev.add(fine.counts);
+                            if fixed && certificate.exact_fit {
+                                let tau = exact_fit_tolerance(problem) * problem.data_norm();
+                                if fine.norm > tau {
+                                    certificate.exact_fit = false;
+                                    certificate.optimality =
+                                        optimality(problem, lin, self.gtol).value;
+                                }
+                            }
+                            let value = optimality(&finer, &fine, self.gtol).value;
+                            if !certificate.exact_fit {
+                                certificate.error = (certificate.optimality - value).abs();
+                            }
+                        }
+                        Err(_) if fixed => certificate.error = f64::INFINITY,
+                        Err(_) => {}
+                    }
                 }
                 certificate
             }
@@ -290,6 +309,11 @@ pub(crate) fn with_scales<S: System>(
         };
     }
     let converged = e.certificate.holds();
+    if !converged {
+        // The last round's uncertainty was of a certified point; with the scales still
+        // moving the whole is not one.
+        (e.std_errors, e.intervals, e.covariance) = (None, None, None);
+    }
     let counts_per_scale = held.scale_samples();
     e.scales = held
         .scales()

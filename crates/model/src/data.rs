@@ -338,7 +338,12 @@ fn measured_series(
                 Noise::Known(vec![1.0; t.len()])
             }
         };
-        if let (Noise::Known(sigmas), Transform::Lin) = (&noise, transform) {
+        // A known σ (a number or a column); an expression's is known only in the fit.
+        let known = matches!(
+            output.map(|o| &model.outputs[o].noise),
+            Some(NoiseSpec::Number(_) | NoiseSpec::Column(_))
+        );
+        if let (Noise::Known(sigmas), Transform::Lin, true) = (&noise, transform, known) {
             for (&row, sigma) in rows.iter().zip(sigmas) {
                 let value = cells[row].unwrap_or_default();
                 if value.abs() / sigma > LARGEST {

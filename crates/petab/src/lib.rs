@@ -238,9 +238,12 @@ struct Simulation {
     also: Vec<String>,
 }
 
-/// The largest measurement the importer takes: the square of a larger one overflows for
-/// any σ below 1, and no measured quantity is that large in any unit.
+/// The largest measurement the importer takes: no measured quantity is that large in any
+/// unit, and the weighted square of a larger one overflows for σ below about 1e-4.
 const MAX_MEASUREMENT: f64 = 1e150;
+
+/// The largest |measurement|/σ a known σ allows: beyond it the weighted square overflows.
+const MAX_WEIGHTED: f64 = 1.3e154;
 
 /// Stands for the output's own value in a σ expression until the output is named.
 const OWN: &str = "\u{1}own\u{1}";
@@ -523,14 +526,30 @@ impl<'a> Builder<'a> {
         }
         let mut resolved: HashMap<String, Math> = HashMap::new();
         for key in raw.keys() {
-            let m = resolve(key, &raw, &mut resolved, &mut Vec::new()).map_err(|cycle| {
-                ModelError::file(
+            let m = resolve(key, &raw, &mut resolved, &mut Vec::new()).map_err(|e| match e {
+                Unresolved::Cycle(cycle) => ModelError::file(
                     &self.sbml_file,
                     format!(
                         "assignment rules refer to each other in a cycle: {}",
                         cycle.join(" → ")
                     ),
-                )
+                ),
+                Unresolved::Chain(rule) => self.sbml_origin(&rule).map_or_else(
+                    || ModelError::file(&self.sbml_file, "assignment rules chain too deeply"),
+                    |at| ModelError {
+                        message: format!(
+                            "the rule of `{rule}` starts a chain of more than {MAX_CHAIN} assignment rules, each using the next"
+                        ),
+                        ..at
+                    },
+                ),
+                Unresolved::Composed(rule, message) => {
+                    let message = format!("the assignment rule of `{rule}` {message}");
+                    match self.sbml_origin(&rule) {
+                        Some(at) => ModelError { message, ..at },
+                        None => ModelError::file(&self.sbml_file, message),
+                    }
+                }
             })?;
             resolved.insert(key.clone(), m);
         }
@@ -929,7 +948,7 @@ impl<'a> Builder<'a> {
         }
         if value.abs() > MAX_MEASUREMENT {
             return Err(value_cell.err(format!(
-                "{value:e} is too large for least squares: its square over σ² overflows for any σ below 1 (the largest usable magnitude is {MAX_MEASUREMENT:e}; a unit slip?)"
+                "{value:e} is too large for least squares: no measured quantity is that large, and its weighted square overflows for σ below about 1e-4 (the largest magnitude taken is {MAX_MEASUREMENT:e}; a unit slip?)"
             )));
         }
         if observable.transform != "lin" && value <= 0.0 {
@@ -946,9 +965,17 @@ impl<'a> Builder<'a> {
             observable: oc.text.to_string(),
             value: value_math.render(&|n| self.name(n)),
             sigma: match noise_math.number() {
-                Some(v) if v > 0.0 && v.is_finite() => Sigma::Number(v),
+                Some(v) if sysid_model::file::check_sigma(v).is_ok() => {
+                    if observable.transform == "lin" && value.abs() / v > MAX_WEIGHTED {
+                        return Err(value_cell.err(format!(
+                            "{value:e} is too large for least squares with σ = {v:e}: its weighted square overflows (the largest usable magnitude is {MAX_WEIGHTED:.1e}·σ)"
+                        )));
+                    }
+                    Sigma::Number(v)
+                }
                 Some(v) => {
-                    let message = format!("σ of `{}` is {v}: it must be positive", oc.text);
+                    let problem = sysid_model::file::check_sigma(v).err().unwrap_or_default();
+                    let message = format!("σ of `{}` {problem}", oc.text);
                     let placeholder =
                         observable.noise.names().iter().any(|n| n.starts_with("noiseParameter"));
                     return Err(match (placeholder, t.cell_named(row, "noiseParameters")) {
@@ -1533,19 +1560,36 @@ fn names_in(text: &str) -> Vec<String> {
     out
 }
 
+/// The longest chain of assignment rules, each using the next, that is resolved: the
+/// resolution recurses along it.
+const MAX_CHAIN: usize = 1_000;
+
+/// Why a rule could not be resolved.
+enum Unresolved {
+    /// Rules that use each other in a cycle, in order.
+    Cycle(Vec<String>),
+    /// A chain longer than [`MAX_CHAIN`], from this rule.
+    Chain(String),
+    /// The rule's expression, resolved, would exceed the composed limits: which, and why.
+    Composed(String, String),
+}
+
 fn resolve(
     key: &str,
     raw: &HashMap<String, Math>,
     done: &mut HashMap<String, Math>,
     stack: &mut Vec<String>,
-) -> Result<Math, Vec<String>> {
+) -> Result<Math, Unresolved> {
     if let Some(m) = done.get(key) {
         return Ok(m.clone());
     }
     if stack.iter().any(|s| s == key) {
         let mut cycle = stack.clone();
         cycle.push(key.to_string());
-        return Err(cycle);
+        return Err(Unresolved::Cycle(cycle));
+    }
+    if stack.len() >= MAX_CHAIN {
+        return Err(Unresolved::Chain(stack[0].clone()));
     }
     stack.push(key.to_string());
     let m = &raw[key];
@@ -1557,6 +1601,10 @@ fn resolve(
         }
     }
     stack.pop();
+    let measures: HashMap<&String, (usize, usize)> =
+        replacements.iter().map(|(n, r)| (n, r.measure())).collect();
+    math::check_composed(m.measure_with(&|n| measures.get(&n.to_string()).copied()))
+        .map_err(|message| Unresolved::Composed(key.to_string(), message))?;
     let out = m.substitute(&|n| replacements.get(n).cloned());
     done.insert(key.to_string(), out.clone());
     Ok(out)

@@ -71,6 +71,31 @@ pub enum Math {
     Piecewise(Vec<(Math, Math)>, Option<Box<Math>>),
 }
 
+/// The deepest expression the importer composes (function definitions inlined, rules put
+/// into each other): every tree it walks stays within the stack at this depth. (What it
+/// writes must also pass the model file's own limit, [`MAX_DEPTH`] levels of its syntax.)
+pub const MAX_COMPOSED_DEPTH: usize = 2_000;
+
+/// The most nodes an expression the importer composes may have: rules that each use the
+/// previous one twice would otherwise double it with every rule.
+pub const MAX_COMPOSED_SIZE: usize = 1_000_000;
+
+/// Checks the measure of a composed expression ([`Math::measure_with`]); the error says what
+/// is exceeded.
+pub fn check_composed((depth, size): (usize, usize)) -> Result<(), String> {
+    if depth > MAX_COMPOSED_DEPTH {
+        return Err(format!(
+            "nests {depth} levels deep once its functions and rules are put in place (at most {MAX_COMPOSED_DEPTH})"
+        ));
+    }
+    if size > MAX_COMPOSED_SIZE {
+        return Err(format!(
+            "grows to {size} terms once its functions and rules are put in place (at most {MAX_COMPOSED_SIZE})"
+        ));
+    }
+    Ok(())
+}
+
 /// The functions of the model file's language with one argument.
 pub const UNARY: &[&str] = &["exp", "log", "sqrt", "sin", "cos", "tan", "tanh", "abs"];
 
@@ -110,6 +135,38 @@ impl Math {
                 }
             }
         }
+    }
+
+    /// The depth (a number or a name is 0 deep) and the number of nodes of the expression
+    /// that [`substitute`](Self::substitute) would make with replacements of the depths and
+    /// sizes `with` gives, computed without making it.
+    pub fn measure_with(&self, with: &dyn Fn(&str) -> Option<(usize, usize)>) -> (usize, usize) {
+        let mut children: Vec<(usize, usize)> = Vec::new();
+        match self {
+            Math::Name(n) => return with(n).unwrap_or((0, 1)),
+            Math::Num(_) | Math::Time => return (0, 1),
+            Math::Neg(a) | Math::Not(a) => children.push(a.measure_with(with)),
+            Math::Sub(a, b) | Math::Div(a, b) | Math::Pow(a, b) | Math::Compare(_, a, b) => {
+                children.extend([a.measure_with(with), b.measure_with(with)]);
+            }
+            Math::Add(v) | Math::Mul(v) | Math::Call(_, v) | Math::And(v) | Math::Or(v) => {
+                children.extend(v.iter().map(|a| a.measure_with(with)));
+            }
+            Math::Piecewise(pieces, otherwise) => {
+                for (value, condition) in pieces {
+                    children.extend([value.measure_with(with), condition.measure_with(with)]);
+                }
+                children.extend(otherwise.iter().map(|o| o.measure_with(with)));
+            }
+        }
+        let depth = children.iter().map(|c| c.0).max().unwrap_or(0) + 1;
+        let size = children.iter().fold(1usize, |n, c| n.saturating_add(c.1));
+        (depth, size)
+    }
+
+    /// The depth and the number of nodes ([`measure_with`](Self::measure_with)).
+    pub fn measure(&self) -> (usize, usize) {
+        self.measure_with(&|_| None)
     }
 
     /// The expression with every name for which `with` gives an expression replaced by it.

@@ -360,6 +360,11 @@ impl Reader<'_> {
                         format!("`{f}` takes {} arguments, given {}", parameters.len(), args.len()),
                     ));
                 }
+                let measures: Vec<(usize, usize)> = args.iter().map(Math::measure).collect();
+                let composed = body
+                    .measure_with(&|n| parameters.iter().position(|p| p == n).map(|i| measures[i]));
+                crate::math::check_composed(composed)
+                    .map_err(|m| self.err(op, format!("this call of `{f}` {m}")))?;
                 body.substitute(&|n| {
                     parameters.iter().position(|p| p == n).map(|i| args[i].clone())
                 })
@@ -406,10 +411,12 @@ pub fn read_text(path: &std::path::Path) -> Result<String, ModelError> {
     };
     let bytes = error.as_bytes();
     let head = String::from_utf8_lossy(&bytes[..bytes.len().min(200)]).to_lowercase();
+    // encoding = "…" in the declaration, spaces around `=` allowed.
     let declared = head
-        .split("encoding=")
-        .nth(1)
-        .and_then(|rest| rest.trim_start_matches(['"', '\'']).split(['"', '\'']).next())
+        .split_once("encoding")
+        .and_then(|(_, rest)| rest.trim_start().strip_prefix('='))
+        .map(|rest| rest.trim_start().trim_start_matches(['"', '\'']))
+        .and_then(|rest| rest.split(['"', '\'']).next())
         .map(str::trim)
         .unwrap_or("");
     if matches!(declared, "iso-8859-1" | "iso8859-1" | "latin1" | "latin-1" | "l1") {
@@ -464,6 +471,8 @@ impl Sbml {
         // The names each piece of mathematics uses, where it is, and what it is: checked once
         // every id is known.
         let mut uses: Vec<(Vec<String>, Node<'_, '_>, String)> = Vec::new();
+        // What rules and assignments set, where, and what sets it.
+        let mut targets: Vec<(String, Node<'_, '_>, &str)> = Vec::new();
         for f in list(model, "listOfFunctionDefinitions") {
             let math = child(f, "math")
                 .ok_or_else(|| r.err(f, format!("function `{}` has no <math>", id(f))))?;
@@ -527,6 +536,7 @@ impl Sbml {
             out.parameters.push((id(p).to_string(), r.number(p, "value")?.unwrap_or(f64::NAN)));
         }
         for a in list(model, "listOfInitialAssignments") {
+            targets.push((id(a).to_string(), a, "the initial assignment"));
             let math = r.math_of(a)?;
             uses.push((math.names(), a, format!("the initial assignment of `{}`", id(a))));
             out.initial_assignments.push((id(a).to_string(), math));
@@ -544,6 +554,7 @@ impl Sbml {
                     format!("rules on compartments are not supported (compartment `{variable}`)"),
                 ));
             }
+            targets.push((variable.clone(), rule, "the rule"));
             let math = r.math_of(rule)?;
             uses.push((math.names(), rule, format!("the {kind} of `{variable}`")));
             match kind {
@@ -566,6 +577,9 @@ impl Sbml {
                 let v = v.trim();
                 v == "true" || v == "1"
             });
+            for a in list(event, "listOfEventAssignments") {
+                targets.push((id(a).to_string(), a, "the event assignment"));
+            }
             let assignments = list(event, "listOfEventAssignments")
                 .map(|a| Ok((id(a).to_string(), r.math_of(a)?)))
                 .collect::<Result<Vec<_>, ModelError>>()?;
@@ -634,6 +648,17 @@ impl Sbml {
                 rate.substitute(&|n| local.iter().find(|l| l.0 == n).map(|l| Math::Num(l.1)));
             uses.push((rate.names(), reaction, format!("the kinetic law of reaction `{rid}`")));
             out.reactions.push(Reaction { id: rid, reactants, products, rate });
+        }
+        for (target, node, what) in targets {
+            let declared = out.species.iter().any(|x| x.id == target)
+                || out.parameters.iter().any(|p| p.0 == target)
+                || out.compartments.iter().any(|c| c.0 == target);
+            if !declared {
+                return Err(r.err(
+                    node,
+                    format!("{what} sets `{target}`, which is no declared compartment, species or parameter"),
+                ));
+            }
         }
         // Every name the mathematics uses is declared: a compartment, species or parameter.
         for (names, node, what) in uses {

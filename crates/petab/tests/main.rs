@@ -409,3 +409,71 @@ fn conditions_that_set_the_same_values_share_one_experiment() {
     let problem = bachmann.model.problem(None).expect("a problem");
     assert_eq!(problem.experiments().len(), 12);
 }
+
+/// What the importer composes stays within bounds: rules that each use the previous one
+/// twice (an expression that doubles with every rule), function definitions nested in each
+/// other, and a rule setting something undeclared are refused at the SBML element, never
+/// a stack overflow or a run out of memory.
+#[test]
+fn composed_expressions_are_bounded() {
+    let math =
+        |body: &str| format!("<math xmlns=\"http://www.w3.org/1998/Math/MathML\">{body}</math>");
+    // a0 = 1, a_i = a_{i-1} + a_{i-1}: 2^40 terms at a40.
+    let doubling =
+        |t: String| {
+            let parameters: String = (0..=40)
+                .map(|i| format!("<parameter id=\"a{i}\" value=\"1\" constant=\"false\"/>"))
+                .collect();
+            let rules: String = (1..=40)
+                .map(|i| {
+                    let j = i - 1;
+                    format!(
+                        "<assignmentRule variable=\"a{i}\">{}</assignmentRule>",
+                        math(&format!("<apply><plus/><ci>a{j}</ci><ci>a{j}</ci></apply>"))
+                    )
+                })
+                .collect();
+            t.replacen("</listOfParameters>", &format!("{parameters}</listOfParameters>"), 1)
+                .replacen("<listOfRules>", &format!("<listOfRules>{rules}"), 1)
+        };
+    let e = error_of(&edited("doubling", "model_", doubling));
+    assert!(e.contains("model_Boehm_JProteomeRes2014.xml:") && e.contains("grows to"), "{e}");
+    // f_i(x) = f_{i-1}(f_{i-1}(…x…)), nested 150 deep each: 150^3 levels at f3's call.
+    let functions = |t: String| {
+        let nest = |f: &str| {
+            let mut body = "<ci>x</ci>".to_string();
+            for _ in 0..150 {
+                body = format!("<apply><ci>{f}</ci>{body}</apply>");
+            }
+            body
+        };
+        let mut defs = format!(
+            "<functionDefinition id=\"f0\">{}</functionDefinition>",
+            math(
+                "<lambda><bvar><ci>x</ci></bvar><apply><plus/><ci>x</ci><cn>1</cn></apply></lambda>"
+            )
+        );
+        for i in 1..=3 {
+            defs += &format!(
+                "<functionDefinition id=\"f{i}\">{}</functionDefinition>",
+                math(&format!(
+                    "<lambda><bvar><ci>x</ci></bvar>{}</lambda>",
+                    nest(&format!("f{}", i - 1))
+                ))
+            );
+        }
+        t.replacen(
+            "<listOfCompartments>",
+            &format!(
+                "<listOfFunctionDefinitions>{defs}</listOfFunctionDefinitions><listOfCompartments>"
+            ),
+            1,
+        )
+        .replacen("<ci> k_phos </ci>", "<apply><ci>f3</ci><ci> k_phos </ci></apply>", 1)
+    };
+    let e = error_of(&edited("functions", "model_", functions));
+    assert!(e.contains("model_Boehm_JProteomeRes2014.xml:") && e.contains("levels deep"), "{e}");
+    let undeclared = |t: String| t.replacen("variable=\"BaF3_Epo\"", "variable=\"nothing\"", 1);
+    let e = error_of(&edited("target", "model_", undeclared));
+    assert!(e.contains(":93:") && e.contains("sets `nothing`"), "{e}");
+}

@@ -276,8 +276,14 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             true => Some(self.problem.clone()),
             false => self.problem.optimal_scales(&[value]).map(|s| self.problem.with_scales(&s)),
         };
+        // As [`nll`] has it: the likelihood, or ε/2 where there is none (a continuous
+        // record).
         let nll = problem
-            .and_then(|p| p.nll_at(&[z]).ok().flatten())
+            .and_then(|p| match p.nll_at(&[z]) {
+                Ok(Some(v)) => Some(v),
+                Ok(None) => p.cost(&[z]).ok().map(|(cost, _)| 0.5 * cost),
+                Err(_) => None,
+            })
             .filter(|v| !v.is_nan())
             .unwrap_or(f64::INFINITY);
         Point { value, nll, converged: nll.is_finite(), estimates: vec![value] }
