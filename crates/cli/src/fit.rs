@@ -5,7 +5,7 @@ use sysid_core::Estimate;
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
-use crate::output::emit;
+use crate::output::{emit, not_an_input, writable};
 use crate::problem::{Context, fit_from_starts, problem, with_starts};
 
 /// Arguments of `sysid fit`.
@@ -25,6 +25,10 @@ pub struct FitArgs {
     starts: StartsArgs,
     #[command(flatten)]
     integrator: IntegratorArgs,
+    /// With --starts: draw the waterfall (every start's final objective, sorted) to
+    /// STEM.png and STEM.svg.
+    #[arg(long, value_name = "STEM")]
+    waterfall: Option<std::path::PathBuf>,
 }
 
 /// Runs `sysid fit`.
@@ -34,6 +38,16 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
     args.starts.options()?;
     sysid_registry::parse_list(&args.method.method)?;
     let (problem, context) = problem(&args.source, &args.integrator, &args.options)?;
+    // Where the figure goes is checked before the work, not after it.
+    if let Some(stem) = &args.waterfall {
+        if args.starts.starts.is_none() {
+            anyhow::bail!("--waterfall needs --starts N");
+        }
+        for path in sysid_report::figure_paths(stem) {
+            writable(&path, "--waterfall")?;
+            not_an_input(&path, &context.inputs, "--waterfall")?;
+        }
+    }
     let settings = args.options.settings();
     let (estimate, starts) =
         fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
@@ -49,6 +63,27 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
             }
             emit(&text)?
         }
+    }
+    // The results are out before the figure is drawn: a figure that cannot be written
+    // loses nothing.
+    if let (Some(stem), Some(s)) = (&args.waterfall, &starts) {
+        let figure = sysid_report::Waterfall {
+            title: format!(
+                "{}: {} starts of {}",
+                std::path::Path::new(&context.name)
+                    .file_name()
+                    .map_or(context.name.clone(), |n| n.to_string_lossy().into_owned()),
+                s.count,
+                estimate.method
+            ),
+            starts: s
+                .waterfall
+                .iter()
+                .filter_map(|o| o.objective.map(|v| (v, o.converged)))
+                .collect(),
+        };
+        let [png, svg] = sysid_report::save(&figure, stem)?;
+        eprintln!("wrote {} and {}", png.display(), svg.display());
     }
     Ok(if estimate.converged() { Outcome::Success } else { Outcome::NotConverged })
 }

@@ -139,7 +139,7 @@ pub enum QlStart {
 /// The command-line options every fitting command shares.
 #[derive(Args, Debug, Clone, Default)]
 pub struct MethodArgs {
-    /// Most updates of the unknowns (default 50).
+    /// Most updates of the unknowns (default 1000).
     #[arg(long, value_name = "N", value_parser = count, allow_hyphen_values = true)]
     pub max_iterations: Option<usize>,
     /// The certificate's tolerance: a fit converged when the first-order optimality of the
@@ -211,15 +211,24 @@ fn parse_fix(s: &str) -> Result<(String, f64), String> {
 /// `--starts`: multistart for `fit` and `compare`.
 #[derive(Args, Debug, Clone, Default)]
 pub struct StartsArgs {
-    /// Fit from N starts instead of one, in parallel: the guess, then a Latin hypercube of
-    /// N − 1 starts within the bounds of unknowns bounded on both sides, ±ρ (--start-spread)
-    /// around the guess for the others. Prints the best fit and how many starts reached it,
-    /// with the distinct minima found.
+    /// Fit from N starts instead of one, in parallel: the guess, then N − 1 starts drawn
+    /// uniformly on each unknown's scale within its bounds (--start-sampling), ±ρ
+    /// (--start-spread) around the guess for unknowns without two bounds. Prints the best
+    /// fit, how many starts reached it (converged within 0.1 of its objective), the
+    /// distinct minima and every start's outcome (the waterfall, in the JSON).
     #[arg(long, value_name = "N", value_parser = count, allow_hyphen_values = true)]
     pub starts: Option<usize>,
-    /// Seed of the starts' Latin hypercube (default 1).
+    /// Seed of the starts' draws (default 1).
     #[arg(long, value_name = "SEED", value_parser = seed, allow_hyphen_values = true)]
     pub starts_seed: Option<u64>,
+    /// How the starts after the guess are drawn: uniformly on each unknown's scale, every
+    /// start independently (the field's way), or a Latin hypercube (one start in each Nth of
+    /// every unknown's range).
+    #[arg(long, value_enum, value_name = "HOW")]
+    pub start_sampling: Option<SamplingArg>,
+    /// Draw all N starts; without it the first start is the problem's guess.
+    #[arg(long)]
+    pub starts_without_guess: bool,
     /// ρ of --starts for unknowns without two bounds: guess·(1 + ρu), u uniform on [−1, 1]
     /// (guess·(1 + ρ)^u on a log scale, ρu for a guess of 0). Default 0.5.
     #[arg(long, value_name = "RHO", value_parser = number, allow_hyphen_values = true)]
@@ -232,9 +241,13 @@ impl StartsArgs {
     pub fn options(&self) -> anyhow::Result<Option<sysid_montecarlo::MultistartOptions>> {
         let defaults = sysid_montecarlo::MultistartOptions::default();
         let Some(starts) = self.starts else {
-            if self.start_spread.is_some() || self.starts_seed.is_some() {
-                let option =
-                    if self.start_spread.is_some() { "--start-spread" } else { "--starts-seed" };
+            let given = [
+                (self.start_spread.is_some(), "--start-spread"),
+                (self.starts_seed.is_some(), "--starts-seed"),
+                (self.start_sampling.is_some(), "--start-sampling"),
+                (self.starts_without_guess, "--starts-without-guess"),
+            ];
+            if let Some((_, option)) = given.iter().find(|g| g.0) {
                 anyhow::bail!("{option} needs --starts N");
             }
             return Ok(None);
@@ -243,10 +256,24 @@ impl StartsArgs {
             starts,
             seed: self.starts_seed.unwrap_or(defaults.seed),
             spread: self.start_spread.unwrap_or(defaults.spread),
+            sampling: match self.start_sampling {
+                Some(SamplingArg::LatinHypercube) => sysid_montecarlo::Sampling::LatinHypercube,
+                Some(SamplingArg::Uniform) | None => sysid_montecarlo::Sampling::Uniform,
+            },
+            guess: !self.starts_without_guess,
         };
         options.validate().map_err(|e| refused(e.name(), e.problem()))?;
         Ok(Some(options))
     }
+}
+
+/// `--start-sampling`: how multistart draws its starts.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum SamplingArg {
+    /// Each unknown uniformly on its scale within its bounds, every start independently.
+    Uniform,
+    /// A Latin hypercube: one start in each Nth of every unknown's range.
+    LatinHypercube,
 }
 
 /// The integration scheme, by its command-line name.

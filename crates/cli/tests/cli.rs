@@ -317,6 +317,7 @@ fn compare_lists_every_method_as_json() {
             "gauss-newton-fd",
             "levenberg-marquardt",
             "hybrid-newton",
+            "nl2sol",
             "multiple-shooting",
             "quasilinearization",
             "quasilinearization-data"
@@ -703,4 +704,47 @@ fn profile_prints_intervals_and_verdicts() {
         assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
         assert!(stderr.contains(needle), "{stderr}");
     }
+}
+
+#[test]
+fn starts_are_drawn_as_asked_and_their_waterfall_is_drawn() {
+    let dir = std::env::temp_dir().join(format!("sysid-cli-waterfall-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let stem = dir.join("w").display().to_string();
+    let args = ["fit", "--system", "lotka-volterra", "--method", "gauss-newton-ls"];
+    let run = |extra: &[&str]| {
+        let out = sysid(&[&args[..], &["--format", "json", "--starts", "6"], extra].concat());
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["starts"].clone()
+    };
+    let s = run(&["--starts-without-guess", "--waterfall", &stem]);
+    assert_eq!((s["sampling"].as_str(), s["guess"].as_bool()), (Some("uniform"), Some(false)));
+    let rows = s["waterfall"].as_array().unwrap();
+    assert_eq!(rows.len(), 6);
+    let mut seen: Vec<u64> = rows.iter().map(|r| r["start"].as_u64().unwrap()).collect();
+    seen.sort_unstable();
+    assert_eq!(seen, [0, 1, 2, 3, 4, 5], "every start once");
+    // Reached: converged within 0.1 of the best objective (ε/2 here, no likelihood).
+    let best = rows[0]["objective"].as_f64().unwrap();
+    let within = rows
+        .iter()
+        .filter(|r| r["converged"] == true && r["objective"].as_f64().unwrap() - best <= 0.1)
+        .count();
+    assert_eq!(Some(within as u64), s["reached_best"].as_u64(), "{s}");
+    let per_minute = s["converged"].as_f64().unwrap() / (s["elapsed_ms"].as_f64().unwrap() / 6e4);
+    assert!((s["converged_per_minute"].as_f64().unwrap() / per_minute - 1.0).abs() < 1e-9);
+    for ext in ["png", "svg"] {
+        let path = dir.join(format!("w.{ext}"));
+        assert!(std::fs::metadata(&path).unwrap().len() > 1000, "{}", path.display());
+    }
+    let lhs = run(&["--start-sampling", "latin-hypercube"]);
+    assert_eq!(
+        (lhs["sampling"].as_str(), lhs["guess"].as_bool()),
+        (Some("latin-hypercube"), Some(true))
+    );
+    // The figure needs starts.
+    let alone = sysid(&[&args[..], &["--waterfall", &stem]].concat());
+    assert_eq!(alone.status.code(), Some(2));
+    assert!(text(&alone.stderr).contains("--waterfall needs --starts"), "{}", text(&alone.stderr));
+    let _ = std::fs::remove_dir_all(&dir);
 }

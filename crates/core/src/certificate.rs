@@ -209,6 +209,41 @@ pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f6
     measure
 }
 
+/// The point `lin.z` with every undetermined unknown (flat, off its bounds) moved onto the
+/// bound its descent direction −g_i points at (the nearer bound where g_i = 0), where the
+/// move is one the cost cannot feel: √a_i·d_i ≤ gtol‖r‖, the test by which the optimality
+/// holds a responsive unknown on a bound. `None` when no unknown moves. A flat unknown a
+/// hair's breadth from its bound (a rate at 1.00001e-5 against its bound 1e-5) is then on
+/// it and held; one with room to run stays undetermined.
+pub fn onto_bounds<S: System>(
+    problem: &Problem<S>,
+    lin: &Linearization,
+    gtol: f64,
+) -> Option<Vec<f64>> {
+    let measure = optimality(problem, lin, gtol);
+    let mut z = lin.z.clone();
+    let mut moved = false;
+    for (i, u) in problem.unknowns().list().iter().enumerate() {
+        if !measure.flat[i] || measure.active[i].is_some() {
+            continue;
+        }
+        let (g, a) = (lin.gradient[i], lin.normal[(i, i)]);
+        let (lo, hi) = u.coordinate_bounds();
+        let target = match g {
+            g if g > 0.0 => lo,
+            g if g < 0.0 => hi,
+            _ if z[i] - lo <= hi - z[i] => lo,
+            _ => hi,
+        };
+        let felt = a.sqrt() * (target - z[i]).abs();
+        if target.is_finite() && felt <= gtol * lin.norm {
+            z[i] = target;
+            moved = true;
+        }
+    }
+    moved.then_some(z)
+}
+
 /// The first-order optimality measure at a point ([`optimality`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Measure {

@@ -30,7 +30,7 @@ use std::time::Instant;
 use sysid_ode::System;
 
 use crate::assemble::{Ending, Record, is_better};
-use crate::certificate::optimality;
+use crate::certificate::{onto_bounds, optimality};
 use crate::error::FitError;
 use crate::estimate::{Estimate, Iteration};
 use crate::evaluations::Evaluations;
@@ -113,6 +113,8 @@ fn drive_once<S: System>(
     // Steps taken past a stopping rule that fired where the certificate fails, and the
     // certificate of the iterate the last rule stopped at.
     let (mut extra, mut verdict) = (0, None);
+    // Whether the undetermined unknowns near a bound were moved onto it (once a run).
+    let mut onto_bound = false;
     let mut precision = Precision::default();
     let ending = 'run: loop {
         let mut measure =
@@ -167,6 +169,32 @@ fn drive_once<S: System>(
             // A stopping rule: the certificate judges the point. Where it fails because the
             // integration is not accurate enough to tell, the run goes on at a finer one.
             let judged = record.judge(&ev, &current);
+            // An undetermined unknown within a hair of its bound: onto it, once, where the
+            // cost does not rise beyond what the move's size allows.
+            if !judged.1.holds()
+                && !onto_bound
+                && let Some(lin) = &current.linearization
+                && let Some(z) = onto_bounds(ev.problem(), lin, gtol)
+            {
+                onto_bound = true;
+                match step.restart(&ev, &Iterate::new(z, f64::NAN)) {
+                    Ok(moved) if moved.cost <= current.cost * (1.0 + 2.0 * gtol) => {
+                        step_norm = Some(distance(&moved.z, &current.z));
+                        let previous = std::mem::replace(&mut current, moved);
+                        if is_better(&previous, best.as_ref().map(|b| &b.1)) {
+                            best = Some((iteration, previous));
+                        }
+                        iteration += 1;
+                        continue 'run;
+                    }
+                    // Where the move is felt after all, the method goes on from where it
+                    // was, its state evaluated there again.
+                    _ => match step.restart(&ev, &current) {
+                        Ok(again) => current = again,
+                        Err(failure) => break Ending::Failed { iteration, failure },
+                    },
+                }
+            }
             if judged.1.holds() || extra >= EXTRA_STEPS {
                 verdict = Some(judged);
                 break Ending::Rule(rule);

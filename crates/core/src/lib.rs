@@ -47,7 +47,8 @@ mod unknowns;
 
 pub use bounded::{BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box};
 pub use certificate::{
-    Bound, Certificate, EXACT_FIT, Measure, NullSpace, certify, exact_fit_tolerance, optimality,
+    Bound, Certificate, EXACT_FIT, Measure, NullSpace, certify, exact_fit_tolerance, onto_bounds,
+    optimality,
 };
 pub use confidence::{Z95, band_half_width, interval, t95};
 pub use data::{Data, Record, Samples, Series};

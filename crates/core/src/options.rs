@@ -99,7 +99,7 @@ pub const DEFAULT_GTOL: f64 = 1e-6;
 pub const MAX_DERIVED_GTOL: f64 = 1e-3;
 
 /// Options of the iteration driver, the same for every method (a method's options embed
-/// them). Defaults: 50 iterations, step tolerance 1e-10, gradient tolerance 1e-10, gtol
+/// them). Defaults: 1000 iterations, step tolerance 1e-10, gradient tolerance 1e-10, gtol
 /// 100·rtol within [[`DEFAULT_GTOL`], [`MAX_DERIVED_GTOL`]], singular above condition 1e12, integration budget
 /// 10·(k + 1)·(max_iterations + 1) for k unknowns.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -129,7 +129,7 @@ pub struct DriverOptions {
 impl Default for DriverOptions {
     fn default() -> Self {
         Self {
-            max_iterations: 50,
+            max_iterations: 1000,
             step_tolerance: 1e-10,
             gradient_tolerance: 1e-10,
             gtol: None,

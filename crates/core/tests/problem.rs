@@ -316,3 +316,35 @@ fn the_differenced_hessian_is_the_full_hessian() {
         }
     }
 }
+
+/// A rate the data barely see (g at t ≤ 2e-3 against data 100 off): flat. Its descent points
+/// at its lower bound; 3.3e-4 away (on its log scale) the move is one the cost cannot feel,
+/// and `onto_bounds` puts it there; with no bound, or one 690 e-folds away, it stays where it
+/// is (undetermined).
+#[test]
+fn a_flat_unknown_a_hair_from_its_bound_is_moved_onto_it() {
+    let with = |g: Unknown| {
+        Problem::builder(fall())
+            .known("y", 0.0)
+            .known("v", 0.0)
+            .unknown_with(g)
+            .data(Data::discrete().series("y", &[1e-3, 2e-3], &[-100.0, -100.0]))
+            .build()
+            .unwrap()
+    };
+    let near = with(Unknown::new("g", 30.0).log().min(29.99).max(100.0));
+    let lin = near.linearize(&near.unknowns().coordinates(&[30.0])).unwrap();
+    let measure = sysid_core::optimality(&near, &lin, 1e-6);
+    assert!(measure.flat[0] && measure.active[0].is_none(), "flat, off its bound: {measure:?}");
+    let z = sysid_core::onto_bounds(&near, &lin, 1e-6).expect("moved");
+    assert_eq!(z[0], 29.99f64.ln());
+    let moved = near.linearize(&z).unwrap();
+    let held = sysid_core::optimality(&near, &moved, 1e-6);
+    assert_eq!(held.active[0], Some(sysid_core::Bound::Lower), "held on it");
+    for far in [Unknown::new("g", 30.0).log(), Unknown::new("g", 30.0).log().min(1e-299)] {
+        let p = with(far);
+        let lin = p.linearize(&p.unknowns().coordinates(&[30.0])).unwrap();
+        assert!(sysid_core::optimality(&p, &lin, 1e-6).flat[0]);
+        assert_eq!(sysid_core::onto_bounds(&p, &lin, 1e-6), None);
+    }
+}

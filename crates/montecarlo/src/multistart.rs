@@ -1,27 +1,31 @@
-//! Multistart: one method from many starts on one problem, the best fit kept, and the minima
-//! the starts found.
+//! Multistart: one method from many starts on one problem, the best fit kept, the minima the
+//! starts found, and every start's outcome (the waterfall).
 //!
-//! The starts are a Latin hypercube of N points (ChaCha8 seeded by [`MultistartOptions::seed`]):
-//! each unknown's range is cut into N strata of equal width and every stratum holds one start.
-//! The range of an unknown with both bounds is its box (in its coordinates: between the logs
-//! of the bounds on a log scale); any other unknown spreads ±ρ around its guess, as a study's
-//! starts spread around the truth: guess·(1 + ρu) with u on [−1, 1], guess·(1 + ρ)^u on a log
+//! The starts are drawn (ChaCha8 seeded by [`MultistartOptions::seed`]) as the field draws
+//! them (pyPESTO, Data2Dynamics, PEtab.jl): [`Sampling::Uniform`], each unknown uniformly on
+//! its own scale within its bounds (between the logs of the bounds on a log scale), every
+//! unknown and every start independently. [`Sampling::LatinHypercube`] cuts each unknown's
+//! range into N strata of equal width instead, one start in each. An unknown without two
+//! finite bounds spreads ±ρ around its guess under either sampling, as a study's starts
+//! spread around the truth: guess·(1 + ρu) with u on [−1, 1], guess·(1 + ρ)^u on a log
 //! scale, ρu for a guess of 0, then moved onto a one-sided bound it falls outside of. The
-//! problem's own guess is the first start, so that N starts never do worse than one.
+//! problem's own guess is the first start unless [`MultistartOptions::guess`] is false, so
+//! that N starts never do worse than one.
 //!
 //! The fits run on rayon. A drawn start whose fit cannot even begin (the model cannot be
 //! integrated there, or its cost overflows) is redrawn, uniformly over the same ranges, up
 //! to [`MAX_REDRAWS`] times; the redraws are counted (`redrawn`). Fits are ranked by what
-//! they minimise: the negative log-likelihood where there is one (with noise scales
-//! estimated, ε ends every fit at about the number of data and ranks nothing), else ε. The
-//! best fit is the converged one with the least objective, unless a fit that did not
-//! converge ended lower (by more than [`SAME_MINIMUM_RTOL`] of ε): a certified point is
-//! then not reported as the best when a lower one was found (a corner of the box where every
-//! bound is active is a certified point of the bounded problem, and often a poor one), and
-//! the lowest is reported, not converged. With none converged, the least objective of all. A
-//! start reached the best minimum when its fit converged to an objective within
-//! [`SAME_MINIMUM_RTOL`] of ε of the best; the distinct minima are the converged fits
-//! grouped the same way, least first.
+//! they minimise: the negative log-likelihood (with the priors' term where there are
+//! priors) where there is one (with noise scales estimated, ε ends every fit at about the
+//! number of data and ranks nothing), else ε/2. The best fit is the converged one with the
+//! least objective, unless a fit that did not converge ended lower (by more than
+//! [`SAME_MINIMUM_RTOL`] of ε): a certified point is then not reported as the best when a
+//! lower one was found (a corner of the box where every bound is active is a certified point
+//! of the bounded problem, and often a poor one), and the lowest is reported, not converged.
+//! With none converged, the least objective of all. A start *reached the best* when its fit
+//! converged to an objective within [`REACHED`] of the best's (the field's threshold for a
+//! successful start); the distinct minima are the converged fits grouped by
+//! [`SAME_MINIMUM_RTOL`], least first.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -38,20 +42,51 @@ pub const SAME_MINIMUM_RTOL: f64 = 1e-6;
 /// The most times one drawn start is redrawn when its fit cannot begin there.
 pub const MAX_REDRAWS: usize = 10;
 
+/// A start reached the best when its fit converged to an objective (negative log-likelihood)
+/// within this of the best's: the threshold the field counts successful starts by (Hass et
+/// al., Bioinformatics 2019; Fröhlich and Sorger, PLoS Comput. Biol. 2022).
+pub const REACHED: f64 = 0.1;
+
+/// How the starts after the guess are drawn.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Sampling {
+    /// Each unknown uniformly on its scale within its bounds, independently (the field's
+    /// default: pyPESTO, Data2Dynamics).
+    #[default]
+    Uniform,
+    /// A Latin hypercube: each unknown's range cut into N strata, one start in each.
+    LatinHypercube,
+}
+
+impl Sampling {
+    /// Its name on the command line and in the JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampling::Uniform => "uniform",
+            Sampling::LatinHypercube => "latin-hypercube",
+        }
+    }
+}
+
 /// How many starts, drawn how.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MultistartOptions {
-    /// N, the number of starts (the guess included).
+    /// N, the number of starts (the guess included when [`guess`](Self::guess)).
     pub starts: usize,
-    /// Seed of the Latin hypercube.
+    /// Seed of the draws.
     pub seed: u64,
     /// ρ, the spread around the guess of unknowns without two bounds.
     pub spread: f64,
+    /// How the starts are drawn.
+    pub sampling: Sampling,
+    /// Whether the problem's guess is the first start (else all N are drawn).
+    pub guess: bool,
 }
 
 impl Default for MultistartOptions {
     fn default() -> Self {
-        Self { starts: 10, seed: 1, spread: 0.5 }
+        Self { starts: 10, seed: 1, spread: 0.5, sampling: Sampling::Uniform, guess: true }
     }
 }
 
@@ -79,15 +114,19 @@ pub struct Multistart {
 pub struct Starts {
     /// N.
     pub count: usize,
-    /// The Latin hypercube's seed.
+    /// The draws' seed.
     pub seed: u64,
     /// ρ.
     pub spread: f64,
+    /// How the starts were drawn.
+    pub sampling: Sampling,
+    /// Whether start 0 is the problem's guess.
+    pub guess: bool,
     /// The start of the best fit (0 is the problem's guess).
     pub best_start: usize,
     /// Starts whose fit converged.
     pub converged: usize,
-    /// Starts whose fit converged to the best minimum.
+    /// Starts whose fit converged to within [`REACHED`] of the best objective.
     pub reached_best: usize,
     /// Drawn starts replaced because the fit could not begin there (each at most
     /// [`MAX_REDRAWS`] times).
@@ -95,6 +134,31 @@ pub struct Starts {
     /// The distinct minima the converged fits reached, least objective first.
     pub minima: Vec<Minimum>,
     /// Wall-clock time of all the fits, in milliseconds.
+    pub elapsed_ms: f64,
+    /// Converged fits per minute of wall-clock time (the field's measure of a multistart's
+    /// efficiency, with `reached_best`).
+    pub converged_per_minute: f64,
+    /// Every start's outcome, least objective first (the waterfall plot's data).
+    pub waterfall: Vec<Outcome>,
+}
+
+/// One start's outcome: a row of the waterfall.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Outcome {
+    /// The start (0 is the guess when the guess is a start).
+    pub start: usize,
+    /// The objective the starts are ranked by: the negative log-likelihood plus the priors'
+    /// term where there is a likelihood, else ε/2 (null where the fit could not begin).
+    pub objective: Option<f64>,
+    /// ε at the fit's end (null where it is not finite: the fit could not begin).
+    pub cost: Option<f64>,
+    /// Whether the fit converged.
+    pub converged: bool,
+    /// Its termination code (docs/terminations.md).
+    pub termination_code: String,
+    /// Its iterations.
+    pub iterations: usize,
+    /// Wall-clock time of the fit (redraws included), in milliseconds.
     pub elapsed_ms: f64,
 }
 
@@ -114,12 +178,18 @@ impl std::fmt::Display for Starts {
             .collect();
         write!(
             f,
-            "{} in {:.1} ms (the guess, then a Latin hypercube, seed {}, ρ {}): {} converged, {} reached the best (start {}); {}: {}",
+            "{} in {:.1} ms ({}{}, seed {}, ρ {}): {} converged ({:.1} per minute), {} reached the best to within {REACHED} (start {}); {}: {}",
             plural(self.count, "start"),
             self.elapsed_ms,
+            if self.guess { "the guess, then " } else { "" },
+            match self.sampling {
+                Sampling::Uniform => "uniform on each scale",
+                Sampling::LatinHypercube => "a Latin hypercube",
+            },
             self.seed,
             self.spread,
             self.converged,
+            self.converged_per_minute,
             self.reached_best,
             self.best_start,
             match self.minima.len() {
@@ -151,26 +221,32 @@ pub struct Minimum {
     pub estimates: serde_json::Map<String, serde_json::Value>,
 }
 
-/// The N starts of `problem` (values, in the problem's order), the guess first.
+/// The N starts of `problem` (values, in the problem's order), the guess first where
+/// [`MultistartOptions::guess`].
 pub fn starts<S: System>(problem: &Problem<S>, options: &MultistartOptions) -> Vec<Vec<f64>> {
     let n = options.starts.max(1);
+    let drawn = if options.guess { n - 1 } else { n };
     let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
     let unknowns = problem.unknowns().list();
-    let mut columns: Vec<Vec<f64>> = Vec::with_capacity(unknowns.len());
-    for u in unknowns {
-        let mut strata: Vec<usize> = (0..n - 1).collect();
-        strata.shuffle(&mut rng);
-        let column = strata
-            .into_iter()
-            .map(|s| {
-                let fraction = (s as f64 + rng.random::<f64>()) / (n - 1) as f64;
-                draw(u, fraction, options.spread)
-            })
-            .collect();
-        columns.push(column);
-    }
-    let mut starts = vec![problem.guesses()];
-    starts.extend((0..n - 1).map(|j| columns.iter().map(|c| c[j]).collect()));
+    let columns: Vec<Vec<f64>> = unknowns
+        .iter()
+        .map(|u| {
+            let fractions: Vec<f64> = match options.sampling {
+                Sampling::Uniform => (0..drawn).map(|_| rng.random::<f64>()).collect(),
+                Sampling::LatinHypercube => {
+                    let mut strata: Vec<usize> = (0..drawn).collect();
+                    strata.shuffle(&mut rng);
+                    strata
+                        .into_iter()
+                        .map(|s| (s as f64 + rng.random::<f64>()) / drawn as f64)
+                        .collect()
+                }
+            };
+            fractions.into_iter().map(|f| draw(u, f, options.spread)).collect()
+        })
+        .collect();
+    let mut starts = if options.guess { vec![problem.guesses()] } else { Vec::new() };
+    starts.extend((0..drawn).map(|j| columns.iter().map(|c| c[j]).collect()));
     starts
 }
 
@@ -204,14 +280,15 @@ where
     options.validate()?;
     let started = std::time::Instant::now();
     let starts = starts(problem, options);
-    let runs: Vec<(Estimate, usize)> = starts
+    let runs: Vec<(Estimate, usize, f64)> = starts
         .par_iter()
         .enumerate()
         .map(|(j, start)| {
+            let began = std::time::Instant::now();
             let mut fit = method.fit_from(problem, start)?;
             let mut redrawn = 0;
             // The guess (start 0) is the user's: it is kept whatever happens there.
-            if j > 0 {
+            if j > 0 || !options.guess {
                 let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
                 rng.set_stream(j as u64);
                 while redrawn < MAX_REDRAWS
@@ -227,24 +304,29 @@ where
                     redrawn += 1;
                 }
             }
-            Ok((fit, redrawn))
+            Ok((fit, redrawn, began.elapsed().as_secs_f64() * 1e3))
         })
         .collect::<Result<_, FitError>>()?;
     let redrawn = runs.iter().map(|r| r.1).sum();
+    let times: Vec<f64> = runs.iter().map(|r| r.2).collect();
     let fits: Vec<Estimate> = runs.into_iter().map(|r| r.0).collect();
     let mut summary = summarise(&fits, options);
     summary.redrawn = redrawn;
     summary.elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
+    summary.converged_per_minute = summary.converged as f64 / (summary.elapsed_ms / 6e4);
+    for row in &mut summary.waterfall {
+        row.elapsed_ms = times[row.start];
+    }
     let best = fits.into_iter().nth(summary.best_start).expect("the best start's fit");
     Ok(Multistart { best, starts: summary })
 }
 
-/// What the fits minimise, in units of ε/2: the negative log-likelihood where the fit has
-/// one (it differs from ε/2 by a constant when σ is known, and is the objective when noise
-/// scales are estimated, where ε at every round's end is about the number of data), else
-/// ε/2.
-fn objective(f: &Estimate) -> f64 {
-    f.nll.unwrap_or(f.cost / 2.0)
+/// What the fits minimise, in units of ε/2: the negative log-likelihood plus the priors'
+/// term where the fit has a likelihood (it differs from ε/2 by a constant when σ is known,
+/// and is the objective when noise scales are estimated, where ε at every round's end is
+/// about the number of data), else ε/2.
+pub fn objective(f: &Estimate) -> f64 {
+    f.nll.map_or(f.cost / 2.0, |nll| nll + f.prior.unwrap_or(0.0))
 }
 
 /// [`SAME_MINIMUM_RTOL`] of ε, in the objective's units: ½·rtol·ε (for known σ exactly the
@@ -301,20 +383,47 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
     let minima = minima.into_iter().map(|(_, m)| m).collect();
     let best = &fits[best_start];
     let reached_best = if best.converged() {
-        fits.iter().filter(|f| f.converged() && same_minimum(f, best)).count()
+        let threshold = REACHED.max(resolution(best, best));
+        fits.iter()
+            .filter(|f| {
+                f.converged()
+                    && (same_minimum(f, best) || objective(f) - objective(best) <= threshold)
+            })
+            .count()
     } else {
         0
     };
+    let mut waterfall: Vec<Outcome> = fits
+        .iter()
+        .enumerate()
+        .map(|(start, f)| Outcome {
+            start,
+            objective: Some(objective(f)).filter(|v| !v.is_nan()),
+            cost: Some(f.cost).filter(|c| c.is_finite()),
+            converged: f.converged(),
+            termination_code: f.termination.code(),
+            iterations: f.iterations,
+            elapsed_ms: 0.0,
+        })
+        .collect();
+    waterfall.sort_by(|a, b| {
+        let key = |o: &Outcome| o.objective.unwrap_or(f64::INFINITY);
+        key(a).total_cmp(&key(b)).then(a.start.cmp(&b.start))
+    });
     Starts {
         count: fits.len(),
         seed: options.seed,
         spread: options.spread,
+        sampling: options.sampling,
+        guess: options.guess,
         best_start,
         converged: fits.iter().filter(|f| f.converged()).count(),
         reached_best,
         redrawn: 0,
         minima,
         elapsed_ms: 0.0,
+        converged_per_minute: 0.0,
+        waterfall,
     }
 }
 

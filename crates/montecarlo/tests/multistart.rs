@@ -3,7 +3,7 @@
 
 use sysid_core::Unknown;
 use sysid_montecarlo::multistart::{SAME_MINIMUM_RTOL, starts};
-use sysid_montecarlo::{MultistartOptions, multistart};
+use sysid_montecarlo::{MultistartOptions, Sampling, multistart};
 use sysid_ode::testing::assert_close;
 use sysid_registry::{Registry, Settings};
 
@@ -12,7 +12,12 @@ fn the_latin_hypercube_puts_one_start_in_every_stratum() {
     // compartment-chain: 23 unknowns bounded below only, spread ±ρ around the guess.
     let case = sysid_systems::compartment_chain::compartment_chain();
     let problem = case.problem(1).unwrap();
-    let options = MultistartOptions { starts: 21, seed: 7, spread: 0.5 };
+    let options = MultistartOptions {
+        starts: 21,
+        seed: 7,
+        sampling: Sampling::LatinHypercube,
+        ..Default::default()
+    };
     let list = starts(&problem, &options);
     assert_eq!(list.len(), 21);
     assert_eq!(list[0], problem.guesses(), "the guess is the first start");
@@ -43,7 +48,15 @@ fn an_unknown_with_two_bounds_is_drawn_from_its_box_on_its_scale() {
     case.unknowns[0] = Unknown::new("a", 1.2).min(0.5).max(2.5);
     case.unknowns[1] = Unknown::new("b", 0.8).min(0.01).max(100.0).log();
     let problem = case.problem(1).unwrap();
-    let list = starts(&problem, &MultistartOptions { starts: 11, seed: 3, spread: 0.5 });
+    let list = starts(
+        &problem,
+        &MultistartOptions {
+            starts: 11,
+            seed: 3,
+            sampling: Sampling::LatinHypercube,
+            ..Default::default()
+        },
+    );
     let mut a: Vec<usize> =
         list[1..].iter().map(|s| ((s[0] - 0.5) / 2.0 * 10.0) as usize).collect();
     let mut b: Vec<usize> =
@@ -67,7 +80,7 @@ fn lotka_volterra_multistart_finds_the_true_minimum_and_counts_the_others() {
     let single = method.fit(&problem).unwrap();
     assert!(single.cost > 1e4, "from the guess alone: the spurious minimum, ε = {}", single.cost);
 
-    let options = MultistartOptions { starts: 12, seed: 1, spread: 0.5 };
+    let options = MultistartOptions { starts: 12, seed: 1, ..Default::default() };
     let run = multistart(&*method, &problem, &options).unwrap();
     let s = &run.starts;
     assert!(run.best.converged());
@@ -78,7 +91,8 @@ fn lotka_volterra_multistart_finds_the_true_minimum_and_counts_the_others() {
         run.best.cost.to_bits(),
         "the best is the first minimum"
     );
-    assert_eq!(s.minima[0].count, s.reached_best);
+    // Reached: converged within 0.1 of the best objective, the one minimum included.
+    assert!(s.minima[0].count <= s.reached_best);
     assert!(s.reached_best >= 1 && s.reached_best < s.converged, "{s:?}");
     assert!(s.minima.len() >= 2, "the spurious minimum of the guess is among them: {s:?}");
     assert!(s.minima.windows(2).all(|w| w[0].cost * (1.0 + SAME_MINIMUM_RTOL) < w[1].cost));

@@ -100,11 +100,11 @@ impl Entry {
 }
 
 /// Every method sysid offers, in the order tables list them.
-pub static ENTRIES: [Entry; 10] = [
+pub static ENTRIES: [Entry; 11] = [
     Entry {
         name: "goodman",
         description: "Goodman 1966: Newton iteration on the initial values, full steps",
-        roles: &[Role::Default, Role::Study, Role::Report],
+        roles: &[Role::Study, Role::Report],
         build: |s| Built::Goodman(Goodman::new(goodman(s))),
     },
     Entry {
@@ -153,6 +153,15 @@ pub static ENTRIES: [Entry; 10] = [
         build: |s| {
             let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
             Built::LevenbergMarquardt(LevenbergMarquardt::hybrid(options))
+        },
+    },
+    Entry {
+        name: "nl2sol",
+        description: "Dennis–Gay–Welsch's adaptive model (NL2SOL) in the same trust region: Gauss–Newton's, or Gauss–Newton's plus a structured secant correction, whichever predicts better",
+        roles: &[Role::Default],
+        build: |s| {
+            let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
+            Built::LevenbergMarquardt(LevenbergMarquardt::adaptive(options))
         },
     },
     Entry {

@@ -37,6 +37,7 @@ mod petab;
 mod prediction;
 mod profiles;
 mod run;
+mod waterfall;
 
 pub use accuracy::{Accuracy, Spread};
 pub use basin::{Basin, BasinPanel, Cell};
@@ -49,3 +50,4 @@ pub use options::{Observer, Quiet, ReportOptions};
 pub use prediction::{Prediction, PredictionPanel};
 pub use profiles::{ProfilePanel, Profiles};
 pub use run::write_report;
+pub use waterfall::Waterfall;

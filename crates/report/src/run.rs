@@ -183,8 +183,14 @@ impl SystemReport<'_> {
         dir: &Path,
         figures: &mut Vec<(String, String)>,
     ) -> anyhow::Result<Vec<(String, Result<Starts, String>)>> {
-        let options =
-            MultistartOptions { starts: self.args.starts, seed: self.args.seed, spread: 0.5 };
+        // The report's figures were drawn from Latin-hypercube starts (the sampling before the
+        // field's uniform one became the default); they stay comparable run to run.
+        let options = MultistartOptions {
+            starts: self.args.starts,
+            seed: self.args.seed,
+            sampling: sysid_montecarlo::Sampling::LatinHypercube,
+            ..Default::default()
+        };
         let mut runs = Vec::new();
         for m in self.methods {
             let run = sysid_montecarlo::multistart(&*method::<S>(m)?, problem, &options);

@@ -15,6 +15,11 @@ pub enum Hessian {
     /// fast, else A = ∂U/∂z, half the full Hessian of ε, from forward differences of U (the
     /// sensitivities' gradient; k more linearizations per iterate, [`sysid_core::differenced_hessian`]).
     Hybrid,
+    /// Dennis, Gay and Welsch's adaptive model (NL2SOL; ACM TOMS 7, 1981, 348–368): JᵀWJ,
+    /// or JᵀWJ + S with S a secant approximation of Σ rᵢ∇²rᵢ updated from the gradients at
+    /// the ends of every accepted step (no extra integration), whichever of the two
+    /// predicted the last step's decrease better.
+    Adaptive,
 }
 
 /// Options with MINPACK's defaults.

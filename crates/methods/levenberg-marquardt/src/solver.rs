@@ -23,6 +23,7 @@
 //! floor let the iteration cycle between two points on Boehm's problem, forever 3e-6 from
 //! certified.)
 
+use nalgebra::{DMatrix, DVector};
 use sysid_core::{
     Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Linearization,
     Method, Problem, Proposal, Rule, Step, actual_decrease, differenced_hessian, drive,
@@ -55,6 +56,13 @@ impl LevenbergMarquardt {
     pub fn hybrid(options: LevenbergMarquardtOptions) -> Self {
         Self { options: LevenbergMarquardtOptions { hessian: Hessian::Hybrid, ..options } }
     }
+
+    /// NL2SOL's adaptive model in the same trust region: Gauss–Newton's, or Gauss–Newton's
+    /// plus a structured secant approximation of the rest of the Hessian, whichever predicted
+    /// the last step better.
+    pub fn adaptive(options: LevenbergMarquardtOptions) -> Self {
+        Self { options: LevenbergMarquardtOptions { hessian: Hessian::Adaptive, ..options } }
+    }
 }
 
 impl<S: System> Method<S> for LevenbergMarquardt {
@@ -62,6 +70,7 @@ impl<S: System> Method<S> for LevenbergMarquardt {
         match self.options.hessian {
             Hessian::GaussNewton => "levenberg-marquardt",
             Hessian::Hybrid => "hybrid-newton",
+            Hessian::Adaptive => "nl2sol",
         }
     }
 
@@ -74,6 +83,7 @@ impl<S: System> Method<S> for LevenbergMarquardt {
             proposed: None,
             newton: None,
             fall: None,
+            secant: Secant::default(),
         };
         let name = Method::<S>::name(self);
         drive(problem, name, &self.options.driver, &mut step, start)
@@ -91,6 +101,65 @@ struct TrustRegion<'o> {
     proposed: Option<CurveStep>,
     newton: Option<Linearization>,
     fall: Option<f64>,
+    /// The adaptive model's secant part and which model it uses.
+    secant: Secant,
+}
+
+/// NL2SOL's S ≈ Σ rᵢ∇²rᵢ (half of it, in the units of A = JᵀWJ: the model is
+/// ε + 2Uᵀδ + δᵀ(A + S)δ), and whether the step uses A + S (the augmented model) or A.
+#[derive(Default)]
+struct Secant {
+    s: Option<DMatrix<f64>>,
+    augmented: bool,
+}
+
+impl Secant {
+    /// The structured secant update after the accepted step `step` = z₊ − z from `from` to
+    /// `to`: y# = (U₊ − U) − A₊·step is what Σ rᵢ∇²rᵢ did along the step; S₊ satisfies
+    /// S₊·step = y# with the least change (the symmetric rank-two update of Dennis, Gay and
+    /// Welsch, with y = U₊ − U in the role of the metric), after sizing S by
+    /// τ = min(1, |stepᵀy#| / |stepᵀS step|). Skipped where yᵀstep ≤ 0.
+    fn update(&mut self, from: &Linearization, to: &Linearization, step: &DVector<f64>) {
+        let k = step.len();
+        let y = &to.gradient - &from.gradient;
+        let ys = y.dot(step);
+        if !(ys > 0.0 && ys.is_finite()) {
+            return;
+        }
+        let sharp = &y - &to.normal * step;
+        let s = self.s.get_or_insert_with(|| DMatrix::zeros(k, k));
+        let s_step = &*s * step;
+        let curvature = step.dot(&s_step);
+        let tau = match curvature.abs() > 0.0 {
+            true => (step.dot(&sharp).abs() / curvature.abs()).min(1.0),
+            false => 1.0,
+        };
+        let residual = &sharp - &s_step * tau;
+        let update = (&residual * y.transpose() + &y * residual.transpose()) / ys
+            - (&y * y.transpose()) * (residual.dot(step) / (ys * ys));
+        let next = &*s * tau + update;
+        if next.iter().all(|v| v.is_finite()) {
+            *s = next;
+        }
+    }
+
+    /// A + S where the augmented model is used and S is known.
+    fn model(&self, lin: &Linearization) -> Option<DMatrix<f64>> {
+        match (&self.s, self.augmented) {
+            (Some(s), true) => Some(&lin.normal + s),
+            _ => None,
+        }
+    }
+
+    /// After a step from `from` with decrease `actual`: the model that predicted it better is
+    /// the next step's.
+    fn choose(&mut self, from: &Linearization, step: &DVector<f64>, actual: f64) {
+        let Some(s) = &self.s else { return };
+        let linear = 2.0 * from.gradient.dot(step);
+        let gauss_newton = -(linear + step.dot(&(&from.normal * step)));
+        let augmented = gauss_newton - step.dot(&(s * step));
+        self.augmented = (augmented - actual).abs() < (gauss_newton - actual).abs();
+    }
 }
 
 impl TrustRegion<'_> {
@@ -115,6 +184,11 @@ impl TrustRegion<'_> {
         ev: &Evaluations<'_, S>,
         lin: &Linearization,
     ) -> Result<(), Failure> {
+        if self.options.hessian == Hessian::Adaptive {
+            self.newton =
+                self.secant.model(lin).map(|normal| Linearization { normal, ..lin.clone() });
+            return Ok(());
+        }
         // An exact fit's 0/0 counts as fast.
         let fast = self.fall.is_none_or(|f| f >= FAST_FALL || f.is_nan());
         if self.options.hessian == Hessian::GaussNewton || fast {
@@ -134,7 +208,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
     /// the step again at the point the last round ended, with new weights, where a Newton
     /// model kept from that round would be the old problem's.
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
-        (self.newton, self.fall) = (None, None);
+        (self.newton, self.fall, self.secant) = (None, None, Secant::default());
         let lin = ev.linearize(&z)?;
         self.curve.rescale(&lin);
         let scaled = self.curve.scaled_norm(&z);
@@ -196,9 +270,25 @@ impl<S: System> Step<S> for TrustRegion<'_> {
             } else if rho >= 0.75 || trial.lambda == 0.0 {
                 self.radius = 2.0 * trial.scaled_norm;
             }
+            if self.options.hessian == Hessian::Adaptive && evaluated.is_some() {
+                self.secant.choose(lin, &trial.delta, decrease);
+            }
             if let Some(l) = evaluated.filter(|_| rho >= 1e-4) {
                 self.fall = Some((lin.cost - l.cost) / lin.cost);
+                if self.options.hessian == Hessian::Adaptive {
+                    let step = DVector::from_iterator(
+                        l.z.len(),
+                        l.z.iter().zip(&lin.z).map(|(a, b)| a - b),
+                    );
+                    self.secant.update(lin, &l, &step);
+                }
                 return Ok(Advance::Moved(Iterate::linearized(l)));
+            }
+            // The other model may predict the rejected step's outcome better: the retry
+            // uses it.
+            if self.options.hessian == Hessian::Adaptive {
+                self.newton =
+                    self.secant.model(lin).map(|normal| Linearization { normal, ..lin.clone() });
             }
             if trial.delta.norm() <= negligible || !(self.radius > 0.0 && self.radius.is_finite()) {
                 return Ok(Advance::Stop(Rule::Step));

@@ -1,4 +1,5 @@
-//! Levenberg–Marquardt and the Fletcher–Xu hybrid against an independent reference: Goodman's
+//! Levenberg–Marquardt, the Fletcher–Xu hybrid and NL2SOL's adaptive model against an
+//! independent reference: Goodman's
 //! method with step halving on the same data from the same start, on every catalogue system,
 //! and the paper's example.
 //! (Its certificate on bounds, outliers, tiny rates and blow-ups is checked with every other
@@ -14,7 +15,7 @@ use sysid_systems::{Case, Visit};
 struct BothMethods;
 
 impl Visit for BothMethods {
-    type Output = (f64, f64, f64, bool);
+    type Output = (f64, f64, f64, f64, bool);
     fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
         let problem = case.problem(1).unwrap();
         let lm = LevenbergMarquardt::default().fit(&problem).unwrap();
@@ -22,20 +23,23 @@ impl Visit for BothMethods {
         let hybrid = LevenbergMarquardt::hybrid(Default::default()).fit(&problem).unwrap();
         assert!(hybrid.converged(), "{}: {}", case.name, hybrid.termination);
         assert_eq!(hybrid.method, "hybrid-newton");
+        let adaptive = LevenbergMarquardt::adaptive(Default::default()).fit(&problem).unwrap();
+        assert!(adaptive.converged(), "{}: {}", case.name, adaptive.termination);
+        assert_eq!(adaptive.method, "nl2sol");
         let reference =
             Goodman::new(GoodmanOptions::default().with_step_halving(true)).fit(&problem).unwrap();
         assert!(reference.converged(), "{}: {}", case.name, reference.termination);
-        (lm.cost, hybrid.cost, reference.cost, lm.active_bounds().is_empty())
+        (lm.cost, hybrid.cost, adaptive.cost, reference.cost, lm.active_bounds().is_empty())
     }
 }
 
 #[test]
 fn every_catalogue_minimum_is_goodmans() {
     for name in sysid_systems::NAMES {
-        let (lm, hybrid, goodman, _) = sysid_systems::visit(name, BothMethods).unwrap();
+        let (lm, hybrid, adaptive, goodman, _) = sysid_systems::visit(name, BothMethods).unwrap();
         // All stop where the certificate holds (optimality ≤ 1e-6): the costs of one minimum
         // then agree to far below 1e-8 (van-der-pol-three-point's ε ≈ 1e-25 is an exact fit).
-        for cost in [lm, hybrid] {
+        for cost in [lm, hybrid, adaptive] {
             if goodman > 1e-20 {
                 assert_close(cost, goodman, 1e-8);
             } else {
@@ -47,7 +51,7 @@ fn every_catalogue_minimum_is_goodmans() {
 
 #[test]
 fn the_compartment_chain_holds_its_rate_on_the_bound() {
-    let (_, _, _, free) = sysid_systems::visit("compartment-chain", BothMethods).unwrap();
+    let (_, _, _, _, free) = sysid_systems::visit("compartment-chain", BothMethods).unwrap();
     assert!(!free, "d1's lower bound is active at the minimum");
 }
 
