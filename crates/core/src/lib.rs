@@ -70,4 +70,4 @@ pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};
 pub use table::{Compared, Expected, compact, compact_header, comparison};
 pub use termination::{Failure, Rule, Termination};
 pub use trust::{Curve, CurveStep, actual_decrease, differenced_hessian, halve_along_curve};
-pub use unknowns::{Prior, Unknown, Unknowns};
+pub use unknowns::{Distribution, Initialization, Prior, Unknown, Unknowns};

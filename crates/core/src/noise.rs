@@ -44,6 +44,15 @@ impl Transform {
         }
     }
 
+    /// T⁻¹(y): y, e^y or 10^y.
+    pub fn invert(self, y: f64) -> f64 {
+        match self {
+            Transform::Lin => y,
+            Transform::Log => y.exp(),
+            Transform::Log10 => 10f64.powf(y),
+        }
+    }
+
     /// dT/dx.
     pub fn derivative(self, x: f64) -> f64 {
         match self {

@@ -36,6 +36,79 @@ pub struct Unknown {
     /// A normal prior, added to the objective (none: the likelihood alone).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub prior: Option<Prior>,
+    /// How multistart draws its starts (none: uniformly on its scale within its bounds).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub initialization: Option<Initialization>,
+}
+
+/// The distribution multistart draws an unknown's starts from (PEtab's
+/// `initializationPriorType` and `initializationPriorParameters`): `distribution` with
+/// parameters (a, b) of T(θ), T the identity, ln or log10 (`on`); a draw outside the bounds
+/// is moved onto the nearer one.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Initialization {
+    /// The distribution.
+    pub distribution: Distribution,
+    /// Its first parameter: the lower end, the mean or the location.
+    pub a: f64,
+    /// Its second parameter: the upper end, the standard deviation or the scale.
+    pub b: f64,
+    /// The scale it is on.
+    pub on: crate::Transform,
+}
+
+/// A distribution of [`Initialization`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Distribution {
+    /// Uniform on [a, b].
+    Uniform,
+    /// Normal with mean a and standard deviation b.
+    Normal,
+    /// Laplace with location a and scale b.
+    Laplace,
+}
+
+impl Distribution {
+    /// Its name in model files: "uniform", "normal", "laplace".
+    pub fn name(self) -> &'static str {
+        match self {
+            Distribution::Uniform => "uniform",
+            Distribution::Normal => "normal",
+            Distribution::Laplace => "laplace",
+        }
+    }
+}
+
+impl Initialization {
+    /// Whether the parameters describe a distribution: finite, a < b for a uniform one,
+    /// b > 0 otherwise.
+    pub fn is_valid(&self) -> bool {
+        let finite = self.a.is_finite() && self.b.is_finite();
+        finite
+            && match self.distribution {
+                Distribution::Uniform => self.a < self.b,
+                Distribution::Normal | Distribution::Laplace => self.b > 0.0,
+            }
+    }
+
+    /// The value θ at quantile u ∈ (0, 1) of the distribution (of T(θ)).
+    pub fn quantile(&self, u: f64) -> f64 {
+        use cdflib::traits::ContinuousCdf;
+        let (a, b) = (self.a, self.b);
+        let u = u.clamp(f64::MIN_POSITIVE, 1.0 - f64::EPSILON);
+        let x = match self.distribution {
+            Distribution::Uniform => a + u * (b - a),
+            Distribution::Normal => cdflib::Normal::new(a, b)
+                .inverse_cdf(u)
+                .unwrap_or(if u < 0.5 { a - b } else { a + b }),
+            Distribution::Laplace => {
+                let c = u - 0.5;
+                a - b * c.signum() * (1.0 - 2.0 * c.abs()).ln()
+            }
+        };
+        self.on.invert(x)
+    }
 }
 
 /// A normal prior on an unknown θ: the objective gains ½((T(θ) − mean)/sd)², T the identity,
@@ -66,7 +139,15 @@ impl Prior {
 impl Unknown {
     /// An unbounded unknown on a linear scale.
     pub fn new(name: impl Into<String>, guess: f64) -> Self {
-        Self { name: name.into(), guess, min: None, max: None, log: false, prior: None }
+        Self {
+            name: name.into(),
+            guess,
+            min: None,
+            max: None,
+            log: false,
+            prior: None,
+            initialization: None,
+        }
     }
     /// With a lower bound.
     pub fn min(self, min: f64) -> Self {
@@ -83,6 +164,10 @@ impl Unknown {
     /// With a normal prior.
     pub fn prior(self, prior: Prior) -> Self {
         Self { prior: Some(prior), ..self }
+    }
+    /// With the distribution multistart draws its starts from.
+    pub fn initialization(self, initialization: Initialization) -> Self {
+        Self { initialization: Some(initialization), ..self }
     }
 
     /// The coordinate z of a value.
@@ -139,6 +224,16 @@ impl Unknown {
             {
                 return Err(format!("a log-scale unknown needs a positive min, got {m}"));
             }
+        }
+        if let Some(i) = &self.initialization
+            && !i.is_valid()
+        {
+            return Err(format!(
+                "an initialization needs finite parameters, a < b for a uniform one and b > 0 otherwise: got {} with a = {}, b = {}",
+                i.distribution.name(),
+                i.a,
+                i.b
+            ));
         }
         if let Some(p) = &self.prior {
             if !(p.mean.is_finite() && p.sd > 0.0 && p.sd.is_finite()) {

@@ -487,7 +487,25 @@ fn unknowns() {
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, scale = 1 }}\n"),
-            "models/m.toml:10:18: [unknowns] k: unknown key `scale` (keys: guess, min, max, log, prior)",
+            "models/m.toml:10:18: [unknowns] k: unknown key `scale` (keys: guess, min, max, log, prior, initialization)",
+        ),
+        (
+            format!(
+                "{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, initialization = {{ distribution = \"beta\", a = 0, b = 1 }} }}\n"
+            ),
+            "models/m.toml:10:52: [unknowns] k.initialization.distribution: `beta` (distributions: uniform, normal, laplace)",
+        ),
+        (
+            format!(
+                "{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, initialization = {{ distribution = \"normal\", a = 0, b = -1 }} }}\n"
+            ),
+            "models/m.toml:10:73: [unknowns] k.initialization: a normal one needs b > 0, got a = 0, b = -1",
+        ),
+        (
+            format!(
+                "{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, initialization = {{ distribution = \"uniform\", a = 0 }} }}\n"
+            ),
+            "models/m.toml:10:35: [unknowns] k.initialization: an initialization needs `b`",
         ),
         (
             format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ scale = 1, guess = \"a\" }}\n"),

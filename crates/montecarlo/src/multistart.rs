@@ -9,7 +9,9 @@
 //! finite bounds spreads ±ρ around its guess under either sampling, as a study's starts
 //! spread around the truth: guess·(1 + ρu) with u on [−1, 1], guess·(1 + ρ)^u on a log
 //! scale, ρu for a guess of 0, then moved onto a one-sided bound it falls outside of. The
-//! problem's own guess is the first start unless [`MultistartOptions::guess`] is false, so
+//! An unknown with an [`Initialization`](sysid_core::Initialization) (PEtab's
+//! `initializationPriorType`) is drawn from it instead, at the same uniform or stratified
+//! quantile, and moved into its bounds. The problem's own guess is the first start unless [`MultistartOptions::guess`] is false, so
 //! that N starts never do worse than one.
 //!
 //! The fits run on rayon. A drawn start whose fit cannot even begin (the model cannot be
@@ -250,8 +252,20 @@ pub fn starts<S: System>(problem: &Problem<S>, options: &MultistartOptions) -> V
     starts
 }
 
-/// The value of an unknown at `fraction` ∈ [0, 1] of its range.
+/// The value of an unknown at `fraction` ∈ [0, 1] of its range: the quantile of its
+/// initialization where it has one (moved into its bounds), else uniform on its scale within
+/// its bounds, or spread around its guess.
 fn draw(u: &Unknown, fraction: f64, spread: f64) -> f64 {
+    let clamp =
+        |v: f64| v.clamp(u.min.unwrap_or(f64::NEG_INFINITY), u.max.unwrap_or(f64::INFINITY));
+    if let Some(init) = &u.initialization {
+        let v = clamp(init.quantile(fraction));
+        // A draw a log scale cannot hold (a normal one on the value, below 0 with no lower
+        // bound) falls back to the default.
+        if v.is_finite() && (!u.log || v > 0.0) {
+            return v;
+        }
+    }
     let (lo, hi) = u.coordinate_bounds();
     if lo.is_finite() && hi.is_finite() {
         return u.value(lo + fraction * (hi - lo));
@@ -264,7 +278,7 @@ fn draw(u: &Unknown, fraction: f64, spread: f64) -> f64 {
     } else {
         u.guess * (1.0 + spread * t)
     };
-    value.clamp(u.min.unwrap_or(f64::NEG_INFINITY), u.max.unwrap_or(f64::INFINITY))
+    clamp(value)
 }
 
 /// Fits `problem` with `method` from the starts of `options`, on rayon.

@@ -103,3 +103,52 @@ fn lotka_volterra_multistart_finds_the_true_minimum_and_counts_the_others() {
     let again = multistart(&*method, &problem, &options).unwrap();
     assert_eq!(again.starts.minima, s.minima);
 }
+
+/// An unknown with an initialization is drawn from it (PEtab's initializationPriorType):
+/// 2 000 uniform draws of a normal one on log10 have the normal's mean and sd on log10 (to
+/// the sampling error, 4 standard errors), and never leave the bounds; a Latin hypercube of a
+/// Laplace one puts each stratum's draw at that stratum's quantiles.
+#[test]
+fn an_initialization_is_the_distribution_of_the_starts() {
+    use sysid_core::{Distribution, Initialization, Transform};
+    let mut case = sysid_systems::lotka_volterra::lotka_volterra();
+    let normal = Initialization {
+        distribution: Distribution::Normal,
+        a: -1.0,
+        b: 0.5,
+        on: Transform::Log10,
+    };
+    case.unknowns[0] = Unknown::new("a", 0.1).min(1e-3).max(10.0).log().initialization(normal);
+    let laplace =
+        Initialization { distribution: Distribution::Laplace, a: 2.0, b: 0.1, on: Transform::Lin };
+    case.unknowns[1] = Unknown::new("b", 2.0).min(1.8).initialization(laplace);
+    let problem = case.problem(1).unwrap();
+    let n = 2000;
+    let options = MultistartOptions { starts: n, seed: 5, guess: false, ..Default::default() };
+    let list = starts(&problem, &options);
+    assert_eq!(list.len(), n, "without the guess every start is drawn");
+    let x: Vec<f64> = list.iter().map(|s| s[0].log10()).collect();
+    assert!(list.iter().all(|s| (1e-3..=10.0).contains(&s[0]) && s[1] >= 1.8), "within bounds");
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let sd = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt();
+    // log10 a is normal(−1, 0.5) truncated at ±4 sd (the bounds −3 and 1): mean and sd are
+    // the normal's to well below the sampling error.
+    assert!((mean + 1.0).abs() < 4.0 * 0.5 / (n as f64).sqrt(), "mean {mean}");
+    assert!((sd - 0.5).abs() < 4.0 * 0.5 / (2.0 * n as f64).sqrt(), "sd {sd}");
+    // b: Laplace(2, 0.1) moved onto its bound 1.8 below it (a share e^{−2}/2 ≈ 6.8 %).
+    let on_bound = list.iter().filter(|s| s[1] <= 1.8).count() as f64 / n as f64;
+    assert!((on_bound - (-2f64).exp() / 2.0).abs() < 4.0 * (0.068f64 * 0.932 / n as f64).sqrt());
+    // A Latin hypercube: stratum j's draw lies between the quantiles j/N and (j+1)/N.
+    let lhs = MultistartOptions {
+        starts: 11,
+        seed: 2,
+        sampling: Sampling::LatinHypercube,
+        ..Default::default()
+    };
+    let mut b: Vec<f64> = starts(&problem, &lhs)[1..].iter().map(|s| s[1]).collect();
+    b.sort_by(f64::total_cmp);
+    for (j, v) in b.iter().enumerate() {
+        let (lo, hi) = (laplace.quantile(j as f64 / 10.0), laplace.quantile((j + 1) as f64 / 10.0));
+        assert!(*v >= lo.max(1.8) && *v <= hi.max(1.8), "stratum {j}: {v} not in [{lo}, {hi}]");
+    }
+}

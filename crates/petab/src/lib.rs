@@ -162,6 +162,9 @@ struct Parameter {
     log: bool,
     /// A normal prior: mean, sd, and the scale it is normal on.
     prior: Option<(f64, f64, &'static str)>,
+    /// Where multistart draws its starts: distribution, its two parameters, and the scale
+    /// it is on (none: uniform on its scale within its bounds).
+    initialization: Option<(&'static str, f64, f64, &'static str)>,
 }
 
 /// An observable of the observable table.
@@ -356,6 +359,14 @@ impl<'a> Builder<'a> {
                 upper: bound(upper, f64::INFINITY)?,
                 log,
                 prior: if estimated { prior(t, row, scale_name)? } else { None },
+                initialization: None,
+            };
+            let p = Parameter {
+                initialization: match estimated {
+                    true => initialization(t, row, scale_name, p.lower, p.upper)?,
+                    false => None,
+                },
+                ..p
             };
             if estimated {
                 let c = t.cell(row, nominal);
@@ -1662,6 +1673,65 @@ fn prior(
     }
 }
 
+/// Where multistart draws the starts of row `row` (PEtab's `initializationPriorType` and
+/// `initializationPriorParameters`, the latter defaulting to the bounds for the uniform
+/// types): `None` for the default, uniform on the parameter's scale within its bounds.
+fn initialization(
+    t: &Tsv,
+    row: usize,
+    scale: &'static str,
+    lower: f64,
+    upper: f64,
+) -> Result<Option<(&'static str, f64, f64, &'static str)>, ModelError> {
+    let Some(kind) = t.cell_named(row, "initializationPriorType").filter(|c| !c.is_blank()) else {
+        return Ok(None);
+    };
+    let (distribution, on) = match kind.text {
+        "parameterScaleUniform" => ("uniform", scale),
+        "uniform" => ("uniform", "lin"),
+        "normal" => ("normal", "lin"),
+        "laplace" => ("laplace", "lin"),
+        "logNormal" => ("normal", "log"),
+        "logLaplace" => ("laplace", "log"),
+        "parameterScaleNormal" => ("normal", scale),
+        "parameterScaleLaplace" => ("laplace", scale),
+        other => {
+            return Err(kind.err(format!(
+                "an initialization prior of type `{other}` is not one of PEtab's (parameterScaleUniform, uniform, normal, laplace, logNormal, logLaplace, parameterScaleNormal, parameterScaleLaplace)"
+            )));
+        }
+    };
+    let cell = t.cell_named(row, "initializationPriorParameters").filter(|c| !c.is_blank());
+    let Some(cell) = cell else {
+        return match (kind.text, lower.is_finite() && upper.is_finite()) {
+            // The default: uniform on the scale within the bounds, as without the column.
+            ("parameterScaleUniform", _) => Ok(None),
+            ("uniform", true) => Ok(Some(("uniform", lower, upper, "lin"))),
+            _ => Err(kind.err(format!(
+                "`{}` needs `initializationPriorParameters` (two numbers, `a;b`)",
+                kind.text
+            ))),
+        };
+    };
+    let values: Vec<f64> = cell
+        .text
+        .split(';')
+        .map(|v| tsv::parse_number(v).ok_or_else(|| cell.err(format!("`{v}` is not a number"))))
+        .collect::<Result<_, _>>()?;
+    let [a, b] = values[..] else {
+        return Err(cell.err(format!("`{}`: two numbers, `a;b`", cell.text)));
+    };
+    let valid =
+        a.is_finite() && b.is_finite() && if distribution == "uniform" { a < b } else { b > 0.0 };
+    if !valid {
+        let rule = if distribution == "uniform" { "a < b" } else { "b > 0" };
+        return Err(
+            cell.err(format!("`{}`: a {distribution} one needs finite a;b with {rule}", cell.text))
+        );
+    }
+    Ok(Some((distribution, a, b, on)))
+}
+
 fn unknown_entry(p: &Parameter) -> String {
     let mut s = format!("{{ guess = {}", toml_number(p.nominal));
     if p.lower.is_finite() {
@@ -1679,6 +1749,14 @@ fn unknown_entry(p: &Parameter) -> String {
             ", prior = {{ mean = {}, sd = {}, on = \"{on}\" }}",
             toml_number(mean),
             toml_number(sd)
+        );
+    }
+    if let Some((distribution, a, b, on)) = p.initialization {
+        let _ = write!(
+            s,
+            ", initialization = {{ distribution = \"{distribution}\", a = {}, b = {}, on = \"{on}\" }}",
+            toml_number(a),
+            toml_number(b)
         );
     }
     s.push_str(" }");

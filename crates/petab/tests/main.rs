@@ -477,3 +477,65 @@ fn composed_expressions_are_bounded() {
     let e = error_of(&edited("target", "model_", undeclared));
     assert!(e.contains(":93:") && e.contains("sets `nothing`"), "{e}");
 }
+
+/// PEtab's initialization priors become the unknowns' initializations, on the scale PEtab
+/// gives them; `uniform` without parameters is the bounds on the linear scale;
+/// `parameterScaleUniform` without parameters is the default (none); a type PEtab does not
+/// know, or one that needs parameters without them, is refused at its cell.
+#[test]
+fn initialization_priors_are_imported() {
+    let with = |types: [&'static str; 3], parameters: [&'static str; 3]| {
+        move |text: String| {
+            let mut lines: Vec<String> = text.lines().map(String::from).collect();
+            lines[0] += "\tinitializationPriorType\tinitializationPriorParameters";
+            for (i, line) in lines.iter_mut().enumerate().skip(1) {
+                let j = (i - 1).min(2);
+                *line += &format!("\t{}\t{}", types[j], parameters[j]);
+            }
+            lines.join("\n") + "\n"
+        }
+    };
+    let path = edited(
+        "initialization",
+        "parameters",
+        with(["logNormal", "uniform", "parameterScaleUniform"], ["-3;0.5", "", ""]),
+    );
+    let problem = import(&path).expect("imports").model.problem(None).expect("a problem");
+    let list = problem.unknowns().list();
+    use sysid_core::{Distribution, Initialization, Transform};
+    assert_eq!(
+        list[0].initialization,
+        Some(Initialization {
+            distribution: Distribution::Normal,
+            a: -3.0,
+            b: 0.5,
+            on: Transform::Log
+        })
+    );
+    assert_eq!(
+        list[1].initialization,
+        Some(Initialization {
+            distribution: Distribution::Uniform,
+            a: 1e-5,
+            b: 1e5,
+            on: Transform::Lin
+        })
+    );
+    assert!(list[2..].iter().all(|u| u.initialization.is_none()), "the default");
+    for (types, parameters, says) in [
+        (
+            ["beta", "", ""],
+            ["", "", ""],
+            "an initialization prior of type `beta` is not one of PEtab's",
+        ),
+        (["normal", "", ""], ["", "", ""], "`normal` needs `initializationPriorParameters`"),
+        (
+            ["laplace", "", ""],
+            ["1;-2", "", ""],
+            "`1;-2`: a laplace one needs finite a;b with b > 0",
+        ),
+    ] {
+        let e = error_of(&edited("initialization-bad", "parameters", with(types, parameters)));
+        assert!(e.contains("parameters_Boehm_JProteomeRes2014.tsv:2:") && e.contains(says), "{e}");
+    }
+}

@@ -1,7 +1,7 @@
 //! What is known and what is unknown: `[unknowns]`, `[initial]` and `[known]`, which together
 //! (with what every experiment sets) give every state and parameter exactly once.
 
-use sysid_core::{Prior, Transform, Unknown};
+use sysid_core::{Distribution, Initialization, Prior, Transform, Unknown};
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
@@ -274,17 +274,89 @@ fn read_unknown(
                 }
             },
             "prior" => u.prior = Some(read_prior(r, name, v)?),
+            "initialization" => u.initialization = Some(read_initialization(r, name, v)?),
             other => {
                 return Err(r.err(
                     k.span().start,
                     format!(
-                        "[unknowns] {name}: unknown key `{other}` (keys: guess, min, max, log, prior)"
+                        "[unknowns] {name}: unknown key `{other}` (keys: guess, min, max, log, prior, initialization)"
                     ),
                 ));
             }
         }
     }
     Ok(u)
+}
+
+/// Reads `initialization = { distribution, a, b, on }`: where multistart draws this unknown's
+/// starts, a `uniform` (a, b the ends), `normal` (mean, sd) or `laplace` (location, scale)
+/// distribution of the value (`on = "lin"`, the default), its ln (`"log"`) or its log10.
+fn read_initialization(
+    r: &Reader<'_>,
+    name: &str,
+    value: &Spanned<DeValue<'_>>,
+) -> Result<Initialization, ModelError> {
+    let what = format!("[unknowns] {name}.initialization");
+    let t = r.table(value, &what)?;
+    let needed = |key: &str| {
+        t.get(key).ok_or_else(|| {
+            r.err(value.span().start, format!("{what}: an initialization needs `{key}`"))
+        })
+    };
+    let kind = needed("distribution")?;
+    let distribution = match r.string(kind, &format!("{what}.distribution"))? {
+        "uniform" => Distribution::Uniform,
+        "normal" => Distribution::Normal,
+        "laplace" => Distribution::Laplace,
+        other => {
+            return Err(r.err(
+                kind.span().start,
+                format!("{what}.distribution: `{other}` (distributions: uniform, normal, laplace)"),
+            ));
+        }
+    };
+    let a = r.number(needed("a")?, &format!("{what}.a"))?;
+    let b = r.number(needed("b")?, &format!("{what}.b"))?;
+    let mut on = Transform::Lin;
+    for (k, v) in t.iter() {
+        match k.get_ref().as_ref() {
+            "distribution" | "a" | "b" => {}
+            "on" => on = read_scale(r, v, &format!("{what}.on"))?,
+            other => {
+                return Err(r.err(
+                    k.span().start,
+                    format!("{what}: unknown key `{other}` (keys: distribution, a, b, on)"),
+                ));
+            }
+        }
+    }
+    let init = Initialization { distribution, a, b, on };
+    if !init.is_valid() {
+        let at = t.get("b").map_or(value.span().start, |v| v.span().start);
+        let rule = match distribution {
+            Distribution::Uniform => "a < b",
+            _ => "b > 0",
+        };
+        return Err(r.err(
+            at,
+            format!("{what}: a {} one needs {rule}, got a = {a}, b = {b}", distribution.name()),
+        ));
+    }
+    Ok(init)
+}
+
+/// Reads a scale: "lin", "log" or "log10".
+fn read_scale(
+    r: &Reader<'_>,
+    v: &Spanned<DeValue<'_>>,
+    what: &str,
+) -> Result<Transform, ModelError> {
+    match r.string(v, what)? {
+        "lin" => Ok(Transform::Lin),
+        "log" => Ok(Transform::Log),
+        "log10" => Ok(Transform::Log10),
+        other => Err(r.err(v.span().start, format!("{what}: `{other}` (scales: lin, log, log10)"))),
+    }
 }
 
 /// Reads `prior = { mean, sd, on }`: a normal prior on the value (`on = "lin"`, the default),
@@ -311,19 +383,7 @@ fn read_prior(
     for (k, v) in t.iter() {
         match k.get_ref().as_ref() {
             "mean" | "sd" => {}
-            "on" => {
-                on = match r.string(v, &format!("{what}.on"))? {
-                    "lin" => Transform::Lin,
-                    "log" => Transform::Log,
-                    "log10" => Transform::Log10,
-                    other => {
-                        return Err(r.err(
-                            v.span().start,
-                            format!("{what}.on: `{other}` (scales: lin, log, log10)"),
-                        ));
-                    }
-                };
-            }
+            "on" => on = read_scale(r, v, &format!("{what}.on"))?,
             other => {
                 return Err(r.err(
                     k.span().start,
