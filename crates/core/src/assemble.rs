@@ -16,7 +16,7 @@ use crate::linalg::NormalFactor;
 use crate::options::DriverOptions;
 use crate::problem::Problem;
 use crate::step::Iterate;
-use crate::termination::{Failure, Rule, Termination};
+use crate::termination::{Failure, PROGRESS_WINDOW, Rule, Termination};
 
 /// How the loop ended, before the certificate judges it.
 pub(crate) enum Ending {
@@ -104,6 +104,10 @@ impl Record<'_> {
                     .as_ref()
                     .map(|s| undetermined_names(ev.problem(), &s.3))
                     .unwrap_or_default(),
+                moving: match rule {
+                    Rule::Progress => moving(ev.problem(), &history),
+                    _ => Vec::new(),
+                },
             },
             Ending::MaxIterations => Termination::MaxIterations,
             Ending::Failed { failure: Failure::Budget { integrations }, .. } => {
@@ -306,6 +310,7 @@ pub(crate) fn with_scales<S: System>(
             optimality: e.certificate.optimality.max(moved),
             plateau: false,
             undetermined: Vec::new(),
+            moving: Vec::new(),
         };
     }
     let converged = e.certificate.holds();
@@ -391,4 +396,32 @@ impl<S: System> Problem<S> {
         }
         Some(cov)
     }
+}
+
+/// The unknowns whose coordinates moved most over the last [`PROGRESS_WINDOW`] iterations
+/// of `history`: those that moved at least a tenth of the most any did, most first, at
+/// most 5.
+fn moving<S: System>(problem: &Problem<S>, history: &[Iteration]) -> Vec<String> {
+    let (Some(last), Some(then)) =
+        (history.last(), history.len().checked_sub(PROGRESS_WINDOW + 1).map(|i| &history[i]))
+    else {
+        return Vec::new();
+    };
+    let list = problem.unknowns().list();
+    let mut moved: Vec<(f64, &str)> = list
+        .iter()
+        .enumerate()
+        .map(|(i, u)| {
+            let d = u.coordinate(last.values[i]) - u.coordinate(then.values[i]);
+            (if d.is_nan() { 0.0 } else { d.abs() }, u.name.as_str())
+        })
+        .collect();
+    moved.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let most = moved.first().map_or(0.0, |m| m.0);
+    moved
+        .into_iter()
+        .filter(|m| most > 0.0 && m.0 >= 0.1 * most)
+        .take(5)
+        .map(|m| m.1.to_string())
+        .collect()
 }

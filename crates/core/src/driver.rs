@@ -7,7 +7,9 @@
 //!
 //! At each iterate, in order: record it; stop if ε = 0 exactly ([`Rule::ExactFit`]) or if
 //! the first-order optimality there is below the gradient tolerance ([`Rule::Gradient`],
-//! where the method computed the model's sensitivities at the iterate); ask the method for a
+//! where the method computed the model's sensitivities at the iterate), or if ε fell by less
+//! than 1e-6 of itself over the last 100 iterations ([`Rule::Progress`]: a crawl, whose
+//! termination names the unknowns still moving); ask the method for a
 //! proposal (a failure, such as a singular matrix, ends the run); stop on the method's own
 //! rule or when the proposed step is below the step tolerance ([`Rule::Step`]); stop at the
 //! iteration budget; let the method move (a failure ends the run; halving or a line search
@@ -38,7 +40,7 @@ use crate::method::start_coordinates;
 use crate::options::DriverOptions;
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate, Step};
-use crate::termination::Rule;
+use crate::termination::{PROGRESS, PROGRESS_WINDOW, Rule};
 
 /// Runs `step` from `start` (values of the free unknowns) on `problem` and returns the
 /// estimate of method `method`. `Err` only for misuse: invalid options or start.
@@ -147,7 +149,18 @@ fn drive_once<S: System>(
             break Ending::Rule(Rule::ExactFit);
         }
         let gradient = measure.is_some_and(|m| m <= options.gradient_tolerance.min(gtol));
-        let mut fired = pending.take().or(gradient.then_some(Rule::Gradient));
+        // A crawl: ε fell by less than PROGRESS of itself over the last PROGRESS_WINDOW
+        // iterations.
+        let crawled = history.len() > PROGRESS_WINDOW && {
+            let then = history[history.len() - 1 - PROGRESS_WINDOW].cost;
+            then.is_finite()
+                && current.cost.is_finite()
+                && then - current.cost <= PROGRESS * current.cost.abs()
+        };
+        let mut fired = pending
+            .take()
+            .or(gradient.then_some(Rule::Gradient))
+            .or(crawled.then_some(Rule::Progress));
         let mut proposal = None;
         if fired.is_none() {
             let p = match step.propose(&ev, &current) {

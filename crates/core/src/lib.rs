@@ -68,6 +68,6 @@ pub use plan::{PlannedNoise, PlannedSeries, RESIDUAL_PANELS, Sample, Sampled};
 pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL, SINGLE_EXPERIMENT};
 pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};
 pub use table::{Compared, Expected, compact, compact_header, comparison};
-pub use termination::{Failure, Rule, Termination};
+pub use termination::{Failure, PROGRESS, PROGRESS_WINDOW, Rule, Termination};
 pub use trust::{Curve, CurveStep, actual_decrease, differenced_hessian, halve_along_curve};
 pub use unknowns::{Distribution, Initialization, Prior, Unknown, Unknowns};

@@ -28,7 +28,16 @@ pub enum Rule {
     NoDescent,
     /// ε is exactly 0: the model passes through every data point.
     ExactFit,
+    /// ε fell by less than [`PROGRESS`] of itself over the last [`PROGRESS_WINDOW`]
+    /// iterations (the driver's rule, for every method): a crawl along a sloppy direction.
+    Progress,
 }
+
+/// The iterations over which [`Rule::Progress`] measures the fall of ε.
+pub const PROGRESS_WINDOW: usize = 100;
+
+/// The fall of ε, relative to ε, below which [`PROGRESS_WINDOW`] iterations made no progress.
+pub const PROGRESS: f64 = 1e-6;
 
 impl Rule {
     /// The rule's snake_case name.
@@ -40,6 +49,7 @@ impl Rule {
             Rule::CostChange => "cost_change",
             Rule::NoDescent => "no_descent",
             Rule::ExactFit => "exact_fit",
+            Rule::Progress => "progress",
         }
     }
 }
@@ -53,6 +63,7 @@ impl fmt::Display for Rule {
             Rule::CostChange => "cost change below tolerance",
             Rule::NoDescent => "no step along the search direction reduced the cost",
             Rule::ExactFit => "the model passes through the data (ε = 0)",
+            Rule::Progress => "the cost fell by less than 1e-6 of itself over 100 iterations",
         })
     }
 }
@@ -158,6 +169,9 @@ pub enum Termination {
         /// The unknowns the model does not respond to there, off their bounds: the data do
         /// not determine them ([`Certificate::undetermined`](crate::Certificate::undetermined)).
         undetermined: Vec<String>,
+        /// After [`Rule::Progress`]: the unknowns still moving over its window, most first
+        /// (those whose coordinate moved at least a tenth of the most any did, at most 5).
+        moving: Vec<String>,
     },
     /// The iteration budget ran out.
     MaxIterations,
@@ -221,6 +235,16 @@ impl fmt::Display for Termination {
                     if undetermined.len() == 1 { "is" } else { "are" },
                     if undetermined.len() == 1 { "it" } else { "them" },
                     if undetermined.len() == 1 { "it moves" } else { "they move" }
+                )
+            }
+            Termination::Stalled { rule, iteration, optimality, moving, .. }
+                if !moving.is_empty() =>
+            {
+                write!(
+                    f,
+                    "stalled at iteration {iteration}: {rule}, along a sloppy direction: {} still {} (first-order optimality {optimality:.2e}: not a certified minimum)",
+                    moving.join(", "),
+                    if moving.len() == 1 { "moves" } else { "move" }
                 )
             }
             Termination::Stalled { rule, iteration, optimality, .. } => write!(
