@@ -1662,15 +1662,19 @@ fn prior(
     let Some(cell) = t.cell_named(row, "objectivePriorParameters").filter(|c| !c.is_blank()) else {
         return Err(kind.err("the prior needs `objectivePriorParameters`: mean;sd"));
     };
-    let values: Vec<f64> = cell
-        .text
-        .split(';')
-        .map(|v| tsv::parse_number(v).ok_or_else(|| cell.err(format!("`{v}` is not a number"))))
-        .collect::<Result<_, _>>()?;
+    let values = numbers(&cell)?;
     match values[..] {
         [mean, sd] if mean.is_finite() && sd > 0.0 && sd.is_finite() => Ok(Some((mean, sd, on))),
         _ => Err(cell.err(format!("`{}`: a normal prior is mean;sd with sd > 0", cell.text))),
     }
+}
+
+/// The numbers of a `;`-separated cell (prior and initialization parameters).
+fn numbers(cell: &tsv::Cell<'_>) -> Result<Vec<f64>, ModelError> {
+    cell.text
+        .split(';')
+        .map(|v| tsv::parse_number(v).ok_or_else(|| cell.err(format!("`{v}` is not a number"))))
+        .collect()
 }
 
 /// Where multistart draws the starts of row `row` (PEtab's `initializationPriorType` and
@@ -1713,11 +1717,7 @@ fn initialization(
             ))),
         };
     };
-    let values: Vec<f64> = cell
-        .text
-        .split(';')
-        .map(|v| tsv::parse_number(v).ok_or_else(|| cell.err(format!("`{v}` is not a number"))))
-        .collect::<Result<_, _>>()?;
+    let values = numbers(&cell)?;
     let [a, b] = values[..] else {
         return Err(cell.err(format!("`{}`: two numbers, `a;b`", cell.text)));
     };

@@ -143,10 +143,10 @@ impl Secant {
         }
     }
 
-    /// A + S where the augmented model is used and S is known.
-    fn model(&self, lin: &Linearization) -> Option<DMatrix<f64>> {
+    /// `lin` with A + S in place of A, where the augmented model is used and S is known.
+    fn model(&self, lin: &Linearization) -> Option<Linearization> {
         match (&self.s, self.augmented) {
-            (Some(s), true) => Some(&lin.normal + s),
+            (Some(s), true) => Some(Linearization { normal: &lin.normal + s, ..lin.clone() }),
             _ => None,
         }
     }
@@ -185,8 +185,7 @@ impl TrustRegion<'_> {
         lin: &Linearization,
     ) -> Result<(), Failure> {
         if self.options.hessian == Hessian::Adaptive {
-            self.newton =
-                self.secant.model(lin).map(|normal| Linearization { normal, ..lin.clone() });
+            self.newton = self.secant.model(lin);
             return Ok(());
         }
         // An exact fit's 0/0 counts as fast.
@@ -287,8 +286,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
             // The other model may predict the rejected step's outcome better: the retry
             // uses it.
             if self.options.hessian == Hessian::Adaptive {
-                self.newton =
-                    self.secant.model(lin).map(|normal| Linearization { normal, ..lin.clone() });
+                self.newton = self.secant.model(lin);
             }
             if trial.delta.norm() <= negligible || !(self.radius > 0.0 && self.radius.is_finite()) {
                 return Ok(Advance::Stop(Rule::Step));
