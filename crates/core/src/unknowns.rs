@@ -179,7 +179,13 @@ impl Unknown {
     /// smallest or largest one, never 0 or ∞ (the certificate then finds the unknown
     /// undetermined: the model no longer responds to it).
     pub fn value(&self, z: f64) -> f64 {
-        if self.log { z.clamp(LN_SMALLEST, LN_LARGEST).exp() } else { z }
+        if !self.log {
+            return z;
+        }
+        // exp(ln b) may round to a neighbour of b: a coordinate on its bound is the bound's
+        // value itself, not a rounding outside it.
+        let value = z.clamp(LN_SMALLEST, LN_LARGEST).exp();
+        value.max(self.min.unwrap_or(0.0)).min(self.max.unwrap_or(f64::INFINITY))
     }
     /// d value / d z: 1, or the value itself on a log scale.
     pub fn scale(&self, z: f64) -> f64 {
@@ -349,5 +355,23 @@ mod tests {
         }
         assert_eq!(u.value(-3.5).to_bits(), (-3.5f64).exp().to_bits());
         assert_eq!(Unknown::new("x", 0.0).value(-1e4).to_bits(), (-1e4f64).to_bits());
+    }
+
+    /// A log-scale unknown on its bound reports the bound itself: exp(ln 1e-5) rounds to
+    /// 9.999999999999997e-6, which an importer reading the estimate back refuses as outside
+    /// [1e-5, 1000].
+    #[test]
+    fn a_log_scale_value_on_its_bound_is_the_bound() {
+        let (lo, hi) = (1e-5_f64, 1e3_f64);
+        assert!(lo.ln().exp() < lo, "the rounding this guards against");
+        let u = Unknown::new("k", 1.0).min(lo).max(hi).log();
+        let (zlo, zhi) = u.coordinate_bounds();
+        assert_eq!(u.value(zlo).to_bits(), lo.to_bits());
+        assert_eq!(u.value(zhi).to_bits(), hi.to_bits());
+        for b in [1e-10_f64, 3e-7, 0.1, 7.0, 1e5, 1e8] {
+            let u = Unknown::new("k", 1.0).min(b).max(b * 10.0).log();
+            let (zlo, zhi) = u.coordinate_bounds();
+            assert!(u.value(zlo) >= b && u.value(zhi) <= b * 10.0, "{b}");
+        }
     }
 }
