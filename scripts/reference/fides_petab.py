@@ -57,11 +57,18 @@ def measure(folder: Path, starts: int, budget: float, output_root: Path) -> dict
     petab_problem = petab.Problem.from_yaml(str(yaml))
     # AMICI cannot import observable or noise parameters that differ between time points
     # (Fiedler): PEtab's own flattening gives the same problem in a form it reads.
-    if petab.lint.measurement_table_has_timepoint_specific_mappings(petab_problem.measurement_df):
+    flat = petab.lint.measurement_table_has_timepoint_specific_mappings(
+        petab_problem.measurement_df
+    )
+    if flat:
         petab.flatten_timepoint_specific_output_overrides(petab_problem)
+    # The flattened problem has other observables: its compiled model is kept apart, or a
+    # model compiled earlier from the unflattened tables is reused and fails with
+    # "tuple.index(x): x not in tuple" (Bruno, Crauste, Fujita).
+    model_name = folder.name + ("_flat" if flat else "")
     compiled = time.perf_counter()
     importer = pypesto.petab.PetabImporter(
-        petab_problem, output_folder=str(output_root / folder.name), model_name=folder.name
+        petab_problem, output_folder=str(output_root / model_name), model_name=model_name
     )
     problem = importer.create_problem()
     compiled = time.perf_counter() - compiled
