@@ -50,6 +50,10 @@ pub struct ReportArgs {
     /// directory does not exist.
     #[arg(long, default_value = "tests/data/petab", value_name = "DIR")]
     petab: PathBuf,
+    /// Starts of the default method's multistart on each PEtab problem, drawn uniformly on
+    /// each unknown's scale within its bounds (or from its initialization prior); 0: none.
+    #[arg(long, default_value_t = 20, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
+    petab_starts: usize,
 }
 
 /// The help of `--methods`: the registry's report methods.
@@ -100,6 +104,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
         seed: args.seed,
         force: args.force,
         petab: args.petab.is_dir().then(|| args.petab.clone()),
+        petab_starts: args.petab_starts,
     };
     write_report(&options, &Bars::default())?;
     Ok(Outcome::Success)

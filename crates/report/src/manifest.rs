@@ -61,7 +61,9 @@ impl Manifest {
             planned.push("petab/petab.json".into());
         }
         for problem in petab {
-            for f in ["profiles.json", "profiles.png", "profiles.svg"] {
+            for f in
+                ["profiles.json", "profiles.png", "profiles.svg", "waterfall.png", "waterfall.svg"]
+            {
                 planned.push(format!("petab/{problem}/{f}"));
             }
         }

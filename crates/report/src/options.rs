@@ -31,6 +31,8 @@ pub struct ReportOptions {
     /// A directory of PEtab problems (a folder each) for the report's PEtab section; none:
     /// no section.
     pub petab: Option<PathBuf>,
+    /// Starts of the default method's multistart on each PEtab problem (0: none).
+    pub petab_starts: usize,
 }
 
 impl Default for ReportOptions {
@@ -47,6 +49,7 @@ impl Default for ReportOptions {
             seed: 1,
             force: false,
             petab: None,
+            petab_starts: 20,
         }
     }
 }

@@ -1,13 +1,18 @@
 //! The PEtab section: every problem of a directory of PEtab problems (tests/data/petab)
 //! imported, its NLL at the nominal parameters beside the stored reference
-//! (`references.tsv`), and fits from nominal by the default method and by
-//! Levenberg–Marquardt: the NLL they end at, their iterations and time, certified or not.
+//! (`references.tsv`), fits from nominal by the default method and by
+//! Levenberg–Marquardt (the NLL they end at, their iterations and time, certified or not),
+//! and a multistart of the default method as the field runs one (starts drawn uniformly on
+//! each unknown's scale within its bounds, or from its initialization prior): the best
+//! objective beside the best known one (`best_known.tsv`), how many starts reached it, the
+//! time per start, and the waterfall figure.
 
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 
 use serde_json::json;
+use sysid_montecarlo::MultistartOptions;
 use sysid_ode::System as _;
 use sysid_registry::{Registry, Role, Settings};
 
@@ -33,12 +38,16 @@ struct Fit {
 struct Row {
     problem: String,
     reference: Option<f64>,
+    /// The least objective known (`best_known.tsv`).
+    best_known: Option<f64>,
     outcome: Result<Numbers, String>,
 }
 
 struct Numbers {
     /// The caption of its profiles figure, where they were traced.
     profiles: Option<String>,
+    /// The multistart, where one was asked for.
+    starts: Option<Starts>,
     states: usize,
     unknowns: usize,
     experiments: usize,
@@ -47,9 +56,28 @@ struct Numbers {
     fits: Vec<Fit>,
 }
 
-/// The reference NLLs of `references.tsv` in `dir`: problem → NLL.
-fn references(dir: &Path) -> Vec<(String, f64)> {
-    let Ok(text) = std::fs::read_to_string(dir.join("references.tsv")) else {
+/// A multistart of the default method on one problem.
+struct Starts {
+    count: usize,
+    /// The least objective (NLL plus the priors' term) any start ended at.
+    best: Option<f64>,
+    converged: usize,
+    /// Converged starts whose objective is within [`REACHED`] of the best known one (of
+    /// the best found, where none is known or the best found is lower).
+    reached: usize,
+    /// The median wall time of one start (the starts run two at a time on two cores).
+    median_seconds: f64,
+    seconds: f64,
+    converged_per_minute: f64,
+}
+
+/// The field's tolerance for a start that found the optimum (pyPESTO, Fröhlich & Sorger
+/// 2022): within 0.1 of the best objective.
+const REACHED: f64 = sysid_montecarlo::REACHED;
+
+/// The values of a `problem<TAB>value…` table in `dir`: problem → value.
+fn table(dir: &Path, file: &str) -> Vec<(String, f64)> {
+    let Ok(text) = std::fs::read_to_string(dir.join(file)) else {
         return Vec::new();
     };
     text.lines()
@@ -84,7 +112,13 @@ pub(crate) fn problems(dir: &Path) -> Vec<String> {
 
 /// Imports, evaluates and fits one problem; traces its profiles (into `out`) where the
 /// Levenberg–Marquardt fit certifies and it has at most [`PROFILED_UNKNOWNS`] free unknowns.
-fn numbers(yaml: &Path, out: &Path, observer: &dyn Observer) -> Result<Numbers, String> {
+fn numbers(
+    yaml: &Path,
+    out: &Path,
+    multistart: &MultistartOptions,
+    best_known: Option<f64>,
+    observer: &dyn Observer,
+) -> Result<Numbers, String> {
     let started = Instant::now();
     let imported = sysid_petab::import(yaml).map_err(|e| e.to_string())?;
     let problem = imported.model.problem(None).map_err(|e| e.to_string())?;
@@ -130,8 +164,13 @@ fn numbers(yaml: &Path, out: &Path, observer: &dyn Observer) -> Result<Numbers, 
             ));
         }
     }
+    let starts = match multistart.starts {
+        0 => None,
+        _ => Some(starts(&problem, yaml, out, multistart, best_known, observer)?),
+    };
     Ok(Numbers {
         profiles,
+        starts,
         states: problem.experiments()[0].system().signature().n_states(),
         unknowns: problem.names().len(),
         experiments: problem.experiments().len(),
@@ -141,16 +180,75 @@ fn numbers(yaml: &Path, out: &Path, observer: &dyn Observer) -> Result<Numbers, 
     })
 }
 
+/// The default method's multistart on `problem`, its waterfall drawn into `out`.
+fn starts<S: sysid_ode::System + Sync>(
+    problem: &sysid_core::Problem<S>,
+    yaml: &Path,
+    out: &Path,
+    options: &MultistartOptions,
+    best_known: Option<f64>,
+    observer: &dyn Observer,
+) -> Result<Starts, String> {
+    let name = Role::Default.method();
+    let method =
+        Registry::standard().build(name, &Settings::default()).map_err(|e| e.to_string())?;
+    let run = sysid_montecarlo::multistart(method.as_ref(), problem, options)
+        .map_err(|e| e.to_string())?;
+    let s = &run.starts;
+    let objectives: Vec<(f64, bool)> =
+        s.waterfall.iter().filter_map(|o| o.objective.map(|v| (v, o.converged))).collect();
+    let best = objectives.iter().map(|o| o.0).min_by(f64::total_cmp);
+    let target = match (best, best_known) {
+        (Some(b), Some(k)) => b.min(k),
+        (b, k) => b.or(k).unwrap_or(f64::NAN),
+    };
+    let reached = objectives.iter().filter(|o| o.1 && o.0 <= target + REACHED).count();
+    let mut times: Vec<f64> = s.waterfall.iter().map(|o| o.elapsed_ms / 1e3).collect();
+    times.sort_by(f64::total_cmp);
+    let median_seconds = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
+    std::fs::create_dir_all(out).map_err(|e| e.to_string())?;
+    let problem_name = yaml.file_stem().map_or(String::new(), |s| s.to_string_lossy().to_string());
+    let figure = crate::Waterfall {
+        title: format!("{problem_name}: {} starts of {name}", s.count),
+        starts: objectives,
+    };
+    crate::save(&figure, &out.join("waterfall")).map_err(|e| format!("waterfall: {e}"))?;
+    observer.note(&format!(
+        "{}: {} starts in {:.1} s, {} converged, {reached} reached the best",
+        yaml.display(),
+        s.count,
+        s.elapsed_ms / 1e3,
+        s.converged
+    ));
+    Ok(Starts {
+        count: s.count,
+        best,
+        converged: s.converged,
+        reached,
+        median_seconds,
+        seconds: s.elapsed_ms / 1e3,
+        converged_per_minute: s.converged_per_minute,
+    })
+}
+
 /// The problems of `dir` (a folder each, with its YAML of the same name), their numbers
 /// written to `out/petab/petab.json`; the section's Markdown.
-pub(crate) fn section(dir: &Path, out: &Path, observer: &dyn Observer) -> anyhow::Result<String> {
-    let references = references(dir);
+pub(crate) fn section(
+    dir: &Path,
+    out: &Path,
+    multistart: &MultistartOptions,
+    observer: &dyn Observer,
+) -> anyhow::Result<String> {
+    let references = table(dir, "references.tsv");
+    let known = table(dir, "best_known.tsv");
     let mut rows = Vec::new();
     for name in problems(dir) {
         let yaml = dir.join(&name).join(format!("{name}.yaml"));
-        let outcome = numbers(&yaml, &out.join("petab").join(&name), observer);
+        let best_known = known.iter().find(|r| r.0 == name).map(|r| r.1);
+        let outcome =
+            numbers(&yaml, &out.join("petab").join(&name), multistart, best_known, observer);
         let reference = references.iter().find(|r| r.0 == name).map(|r| r.1);
-        rows.push(Row { problem: name, reference, outcome });
+        rows.push(Row { problem: name, reference, best_known, outcome });
     }
     let json: Vec<serde_json::Value> = rows.iter().map(row_json).collect();
     std::fs::create_dir_all(out.join("petab"))?;
@@ -171,6 +269,16 @@ fn row_json(r: &Row) -> serde_json::Value {
             "unknowns": n.unknowns,
             "experiments": n.experiments,
             "import_ms": n.import_ms,
+            "best_known": r.best_known,
+            "starts": n.starts.as_ref().map(|s| json!({
+                "count": s.count,
+                "best": s.best,
+                "converged": s.converged,
+                "reached_best_known": s.reached,
+                "median_seconds": s.median_seconds,
+                "seconds": s.seconds,
+                "converged_per_minute": s.converged_per_minute,
+            })),
             "fits": n.fits.iter().map(|f| json!({
                 "method": f.method,
                 "nll": f.nll,
@@ -245,6 +353,7 @@ fn markdown(dir: &Path, rows: &[Row]) -> String {
         }
     }
     md.push('\n');
+    md += &starts_markdown(rows);
     for r in rows {
         if let Ok(Numbers { profiles: Some(caption), .. }) = &r.outcome {
             let _ = writeln!(
@@ -266,5 +375,56 @@ fn markdown(dir: &Path, rows: &[Row]) -> String {
          (docs/petab.md). A fit that is not certified keeps its best point: its NLL is never \
          above the NLL at nominal.\n"
     );
+    md
+}
+
+/// The multistart table and the waterfall figures.
+fn starts_markdown(rows: &[Row]) -> String {
+    let with: Vec<(&Row, &Starts)> = rows
+        .iter()
+        .filter_map(|r| match &r.outcome {
+            Ok(Numbers { starts: Some(s), .. }) => Some((r, s)),
+            _ => None,
+        })
+        .collect();
+    let Some((_, first)) = with.first() else { return String::new() };
+    let default = Role::Default.method();
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "### PEtab problems: {} starts each\n\n\
+         {default} from {} starts drawn as the field draws them (uniform on each unknown's \
+         scale within its bounds, or from its PEtab initialization prior; nominal not among \
+         them), two at a time on two cores. The objective is the NLL plus the priors' term \
+         (what pyPESTO minimises). Best known: the least objective known for the problem, with \
+         its source, in `best_known.tsv` beside the problems. Reached: converged starts within \
+         {REACHED} of the best known value (or of the best found, where that is lower). Time \
+         per start: the median wall time of one fit.\n",
+        first.count, first.count
+    );
+    let _ = writeln!(
+        md,
+        "| problem | best known | best found | converged | reached | time per start (s) | total (s) | converged per minute |\n\
+         |---|---|---|---|---|---|---|---|"
+    );
+    for (r, s) in &with {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {} / {} | {} | {:.2} | {:.1} | {:.1} |",
+            r.problem,
+            number(r.best_known),
+            number(s.best),
+            s.converged,
+            s.count,
+            s.reached,
+            s.median_seconds,
+            s.seconds,
+            s.converged_per_minute
+        );
+    }
+    md.push('\n');
+    for (r, _) in &with {
+        let _ = writeln!(md, "![{0} waterfall](petab/{0}/waterfall.png)\n", r.problem);
+    }
     md
 }

@@ -76,7 +76,14 @@ fn write_sections(
     let petab = match &args.petab {
         Some(dir) => {
             let t = Instant::now();
-            let md = crate::petab::section(dir, &args.out, observer)?;
+            let multistart = sysid_montecarlo::MultistartOptions {
+                starts: args.petab_starts,
+                seed: args.seed,
+                sampling: sysid_montecarlo::Sampling::Uniform,
+                guess: false,
+                ..Default::default()
+            };
+            let md = crate::petab::section(dir, &args.out, &multistart, observer)?;
             observer.note(&format!("PEtab problems: done in {:.1} s", t.elapsed().as_secs_f64()));
             md
         }
