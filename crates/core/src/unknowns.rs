@@ -182,10 +182,14 @@ impl Unknown {
         if !self.log {
             return z;
         }
-        // exp(ln b) may round to a neighbour of b: a coordinate on its bound is the bound's
-        // value itself, not a rounding outside it.
-        let value = z.clamp(LN_SMALLEST, LN_LARGEST).exp();
-        value.max(self.min.unwrap_or(0.0)).min(self.max.unwrap_or(f64::INFINITY))
+        // exp(ln b) may round to a neighbour of b: a coordinate on (or past) its bound is
+        // the bound's value itself.
+        let (lo, hi) = self.coordinate_bounds();
+        match (self.min, self.max) {
+            (Some(min), _) if z <= lo => min.max(f64::MIN_POSITIVE),
+            (_, Some(max)) if z >= hi => max.min(f64::MAX),
+            _ => z.clamp(LN_SMALLEST, LN_LARGEST).exp(),
+        }
     }
     /// d value / d z: 1, or the value itself on a log scale.
     pub fn scale(&self, z: f64) -> f64 {
