@@ -180,6 +180,18 @@ fn numbers(
     })
 }
 
+/// The least of the starts' objectives (`(objective, converged)` each), and how many
+/// converged within [`REACHED`] of the best known objective, or of the best found where that
+/// is lower or none is known.
+fn reached(objectives: &[(f64, bool)], best_known: Option<f64>) -> (Option<f64>, usize) {
+    let best = objectives.iter().map(|o| o.0).filter(|v| v.is_finite()).min_by(f64::total_cmp);
+    let target = match (best, best_known) {
+        (Some(b), Some(k)) => b.min(k),
+        (b, k) => b.or(k).unwrap_or(f64::NAN),
+    };
+    (best, objectives.iter().filter(|o| o.1 && o.0 <= target + REACHED).count())
+}
+
 /// The default method's multistart on `problem`, its waterfall drawn into `out`.
 fn starts<S: sysid_ode::System + Sync>(
     problem: &sysid_core::Problem<S>,
@@ -197,12 +209,7 @@ fn starts<S: sysid_ode::System + Sync>(
     let s = &run.starts;
     let objectives: Vec<(f64, bool)> =
         s.waterfall.iter().filter_map(|o| o.objective.map(|v| (v, o.converged))).collect();
-    let best = objectives.iter().map(|o| o.0).min_by(f64::total_cmp);
-    let target = match (best, best_known) {
-        (Some(b), Some(k)) => b.min(k),
-        (b, k) => b.or(k).unwrap_or(f64::NAN),
-    };
-    let reached = objectives.iter().filter(|o| o.1 && o.0 <= target + REACHED).count();
+    let (best, reached) = reached(&objectives, best_known);
     let mut times: Vec<f64> = s.waterfall.iter().map(|o| o.elapsed_ms / 1e3).collect();
     times.sort_by(f64::total_cmp);
     let median_seconds = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
@@ -427,4 +434,22 @@ fn starts_markdown(rows: &[Row]) -> String {
         let _ = writeln!(md, "![{0} waterfall](petab/{0}/waterfall.png)\n", r.problem);
     }
     md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_start_reaches_the_best_known_value_only_converged_and_within_the_tolerance() {
+        let starts = [(10.05, true), (10.2, true), (10.01, false), (12.0, true), (f64::NAN, false)];
+        // Known 10.0: 10.05 reached; 10.2 is 0.2 above; 10.01 did not converge.
+        assert_eq!(reached(&starts, Some(10.0)), (Some(10.01), 1));
+        // The best found is lower than the known value: it is the yardstick.
+        assert_eq!(reached(&starts, Some(11.0)), (Some(10.01), 1));
+        assert_eq!(reached(&starts, None), (Some(10.01), 1));
+        // Nothing within 0.1 of a lower known value.
+        assert_eq!(reached(&starts, Some(9.0)), (Some(10.01), 0));
+        assert_eq!(reached(&[], Some(9.0)), (None, 0));
+    }
 }
