@@ -16,7 +16,8 @@ use sysid_registry::{ENTRIES, Role, Settings, Start};
 
 /// The command line's spelling of a library setting: the fields whose flag is not the
 /// field's name with `-` for `_`.
-const FLAGS: &[(&str, &str)] = &[("spread", "--start-spread"), ("starts", "--starts")];
+const FLAGS: &[(&str, &str)] =
+    &[("spread", "--start-spread"), ("starts", "--starts"), ("budget", "--starts-budget")];
 
 /// The flag of the setting `field` (`gtol` → `--gtol`, `max_iterations` →
 /// `--max-iterations`, `spread` → `--start-spread`).
@@ -233,6 +234,11 @@ pub struct StartsArgs {
     /// (guess·(1 + ρ)^u on a log scale, ρu for a guess of 0). Default 0.5.
     #[arg(long, value_name = "RHO", value_parser = number, allow_hyphen_values = true)]
     pub start_spread: Option<f64>,
+    /// Wall-clock seconds after which no further start begins: the starts are taken in
+    /// order, so those fitted are the first ones (the JSON's `not_started` counts the rest);
+    /// a fit already begun runs to its end. Default: no limit.
+    #[arg(long, value_name = "SECONDS", value_parser = number, allow_hyphen_values = true)]
+    pub starts_budget: Option<f64>,
 }
 
 impl StartsArgs {
@@ -246,6 +252,7 @@ impl StartsArgs {
                 (self.starts_seed.is_some(), "--starts-seed"),
                 (self.start_sampling.is_some(), "--start-sampling"),
                 (self.starts_without_guess, "--starts-without-guess"),
+                (self.starts_budget.is_some(), "--starts-budget"),
             ];
             if let Some((_, option)) = given.iter().find(|g| g.0) {
                 anyhow::bail!("{option} needs --starts N");
@@ -261,7 +268,24 @@ impl StartsArgs {
                 Some(SamplingArg::Uniform) | None => sysid_montecarlo::Sampling::Uniform,
             },
             guess: !self.starts_without_guess,
+            budget: None,
         };
+        // Seconds that a Duration cannot hold (or not positive) are refused by name.
+        let budget = match self.starts_budget {
+            Some(seconds) => Some(
+                std::time::Duration::try_from_secs_f64(seconds)
+                    .ok()
+                    .filter(|d| !d.is_zero())
+                    .ok_or_else(|| {
+                        refused(
+                            "budget",
+                            format!("must be a positive number of seconds, got {seconds:?}"),
+                        )
+                    })?,
+            ),
+            None => None,
+        };
+        let options = sysid_montecarlo::MultistartOptions { budget, ..options };
         options.validate().map_err(|e| refused(e.name(), e.problem()))?;
         Ok(Some(options))
     }

@@ -54,6 +54,15 @@ pub struct ReportArgs {
     /// each unknown's scale within its bounds (or from its initialization prior); 0: none.
     #[arg(long, default_value_t = 20, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     petab_starts: usize,
+    /// Wall-clock seconds after which a PEtab problem's multistart begins no further start
+    /// (the first starts are the ones fitted; the report gives how many).
+    #[arg(long, default_value_t = 120.0, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
+    petab_budget: f64,
+    /// Most iterations of every fit in the catalogue's sections (studies, basin maps,
+    /// multistarts, profiles) and of every PEtab profile point; the PEtab section's fits and
+    /// multistarts keep the methods' own budget.
+    #[arg(long, default_value_t = sysid_report::CATALOGUE_ITERATIONS, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
+    max_iterations: usize,
 }
 
 /// The help of `--methods`: the registry's report methods.
@@ -105,6 +114,8 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
         force: args.force,
         petab: args.petab.is_dir().then(|| args.petab.clone()),
         petab_starts: args.petab_starts,
+        petab_budget: args.petab_budget,
+        max_iterations: args.max_iterations,
     };
     write_report(&options, &Bars::default())?;
     Ok(Outcome::Success)

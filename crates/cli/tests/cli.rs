@@ -177,7 +177,7 @@ fn a_negative_number_reaches_the_options_own_check() {
         "--max-steps",
         "--shooting-intervals",
     ];
-    let multistart = ["--starts", "--starts-seed", "--start-spread"];
+    let multistart = ["--starts", "--starts-seed", "--start-spread", "--starts-budget"];
     let study_options =
         [&fitting[..], &["--trials", "--noise", "--perturb", "--shard", "--log-every"]].concat();
     // Each subcommand: the arguments that make the rest valid, and the options to try.
@@ -212,6 +212,8 @@ fn a_negative_number_reaches_the_options_own_check() {
                 "--seed",
                 "--starts",
                 "--petab-starts",
+                "--petab-budget",
+                "--max-iterations",
             ],
         ),
         ("merge", vec![&out, "--out", &out], vec![]),

@@ -34,6 +34,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use sysid_core::format::significant;
 use sysid_core::{Estimate, FitError, Method, Problem, Termination, Unknown};
 use sysid_ode::System;
@@ -84,11 +85,22 @@ pub struct MultistartOptions {
     pub sampling: Sampling,
     /// Whether the problem's guess is the first start (else all N are drawn).
     pub guess: bool,
+    /// Wall-clock time after which no further start begins (None: all N run). The starts
+    /// are taken in order, so those fitted are always the first ones; the first always runs,
+    /// and a fit already begun runs to its end.
+    pub budget: Option<std::time::Duration>,
 }
 
 impl Default for MultistartOptions {
     fn default() -> Self {
-        Self { starts: 10, seed: 1, spread: 0.5, sampling: Sampling::Uniform, guess: true }
+        Self {
+            starts: 10,
+            seed: 1,
+            spread: 0.5,
+            sampling: Sampling::Uniform,
+            guess: true,
+            budget: None,
+        }
     }
 }
 
@@ -97,6 +109,9 @@ impl MultistartOptions {
     pub fn validate(&self) -> Result<(), sysid_core::OptionsError> {
         if self.starts == 0 {
             return Err(sysid_core::OptionsError::Zero { name: "starts" });
+        }
+        if let Some(budget) = self.budget {
+            sysid_core::OptionsError::positive("budget", budget.as_secs_f64())?;
         }
         sysid_core::OptionsError::positive("spread", self.spread)
     }
@@ -114,8 +129,10 @@ pub struct Multistart {
 /// What the starts found: the `starts` object of the fit JSON.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Starts {
-    /// N.
+    /// The starts fitted: N, unless the time budget left some out.
     pub count: usize,
+    /// Starts drawn but not fitted because the time budget had run out (0 without one).
+    pub not_started: usize,
     /// The draws' seed.
     pub seed: u64,
     /// ρ.
@@ -202,6 +219,9 @@ impl std::fmt::Display for Starts {
         )?;
         if self.redrawn > 0 {
             write!(f, "; {} redrawn where the fit could not begin", plural(self.redrawn, "start"))?;
+        }
+        if self.not_started > 0 {
+            write!(f, "; {} more drawn, not begun within the time budget", self.not_started)?;
         }
         Ok(())
     }
@@ -294,38 +314,60 @@ where
     options.validate()?;
     let started = std::time::Instant::now();
     let starts = starts(problem, options);
-    let runs: Vec<(Estimate, usize, f64)> = starts
-        .par_iter()
-        .enumerate()
-        .map(|(j, start)| {
-            let began = std::time::Instant::now();
-            let mut fit = method.fit_from(problem, start)?;
-            let mut redrawn = 0;
-            // The guess (start 0) is the user's: it is kept whatever happens there.
-            if j > 0 || !options.guess {
-                let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
-                rng.set_stream(j as u64);
-                while redrawn < MAX_REDRAWS
-                    && matches!(fit.termination, Termination::StartFailed(_))
-                {
-                    let again: Vec<f64> = problem
-                        .unknowns()
-                        .list()
-                        .iter()
-                        .map(|u| draw(u, rng.random::<f64>(), options.spread))
-                        .collect();
-                    fit = method.fit_from(problem, &again)?;
-                    redrawn += 1;
-                }
+    // A queue in start order, served by one task per thread: once the budget is spent no
+    // task takes another start, so the starts fitted are the first ones, whatever the timing.
+    let next = AtomicUsize::new(0);
+    let fit_start = |j: usize| -> Result<(Estimate, usize, f64), FitError> {
+        let began = std::time::Instant::now();
+        let mut fit = method.fit_from(problem, &starts[j])?;
+        let mut redrawn = 0;
+        // The guess (start 0) is the user's: it is kept whatever happens there.
+        if j > 0 || !options.guess {
+            let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
+            rng.set_stream(j as u64);
+            while redrawn < MAX_REDRAWS && matches!(fit.termination, Termination::StartFailed(_)) {
+                let again: Vec<f64> = problem
+                    .unknowns()
+                    .list()
+                    .iter()
+                    .map(|u| draw(u, rng.random::<f64>(), options.spread))
+                    .collect();
+                fit = method.fit_from(problem, &again)?;
+                redrawn += 1;
             }
-            Ok((fit, redrawn, began.elapsed().as_secs_f64() * 1e3))
+        }
+        Ok((fit, redrawn, began.elapsed().as_secs_f64() * 1e3))
+    };
+    let spent = || options.budget.is_some_and(|b| started.elapsed() >= b);
+    let mut runs: Vec<(usize, (Estimate, usize, f64))> = (0..rayon::current_num_threads())
+        .into_par_iter()
+        .map(|_| {
+            let mut mine = Vec::new();
+            loop {
+                if spent() && next.load(Ordering::SeqCst) > 0 {
+                    break;
+                }
+                let j = next.fetch_add(1, Ordering::SeqCst);
+                if j >= starts.len() {
+                    break;
+                }
+                mine.push((j, fit_start(j)?));
+            }
+            Ok(mine)
         })
-        .collect::<Result<_, FitError>>()?;
+        .collect::<Result<Vec<_>, FitError>>()?
+        .into_iter()
+        .flatten()
+        .collect();
+    runs.sort_by_key(|r| r.0);
+    let runs: Vec<(Estimate, usize, f64)> = runs.into_iter().map(|r| r.1).collect();
+    let not_started = starts.len() - runs.len();
     let redrawn = runs.iter().map(|r| r.1).sum();
     let times: Vec<f64> = runs.iter().map(|r| r.2).collect();
     let fits: Vec<Estimate> = runs.into_iter().map(|r| r.0).collect();
     let mut summary = summarise(&fits, options);
     summary.redrawn = redrawn;
+    summary.not_started = not_started;
     summary.elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
     summary.converged_per_minute = summary.converged as f64 / (summary.elapsed_ms / 6e4);
     for row in &mut summary.waterfall {
@@ -426,6 +468,7 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
     });
     Starts {
         count: fits.len(),
+        not_started: 0,
         seed: options.seed,
         spread: options.spread,
         sampling: options.sampling,

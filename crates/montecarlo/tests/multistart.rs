@@ -152,3 +152,29 @@ fn an_initialization_is_the_distribution_of_the_starts() {
         assert!(*v >= lo.max(1.8) && *v <= hi.max(1.8), "stratum {j}: {v} not in [{lo}, {hi}]");
     }
 }
+
+#[test]
+fn a_time_budget_fits_the_first_starts_and_counts_the_rest() {
+    let case = sysid_systems::lotka_volterra::lotka_volterra();
+    let problem = case.problem(1).unwrap();
+    let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
+    let options = MultistartOptions { starts: 12, seed: 4, ..Default::default() };
+    let all = multistart(&*method, &problem, &options).unwrap().starts;
+    assert_eq!((all.count, all.not_started, all.waterfall.len()), (12, 0, 12));
+    // A budget spent before the first start ends: the first start still runs (one per
+    // thread may have begun), no start after the budget begins.
+    let budget = Some(std::time::Duration::from_nanos(1));
+    let cut = multistart(&*method, &problem, &MultistartOptions { budget, ..options }).unwrap();
+    let s = &cut.starts;
+    assert!(s.count >= 1 && s.count <= rayon::current_num_threads(), "{} fitted", s.count);
+    assert_eq!(s.count + s.not_started, 12);
+    // The fitted starts are the first ones, each ending where it ends without a budget.
+    let mut fitted: Vec<usize> = s.waterfall.iter().map(|o| o.start).collect();
+    fitted.sort_unstable();
+    assert_eq!(fitted, (0..s.count).collect::<Vec<_>>());
+    for o in &s.waterfall {
+        let same = all.waterfall.iter().find(|a| a.start == o.start).unwrap();
+        assert_eq!((o.objective, o.iterations), (same.objective, same.iterations));
+    }
+    assert!(s.to_string().contains("not begun within the time budget") || s.not_started == 0);
+}

@@ -58,7 +58,10 @@ struct Numbers {
 
 /// A multistart of the default method on one problem.
 struct Starts {
+    /// The starts fitted.
     count: usize,
+    /// The starts drawn and left out because the time budget ran out.
+    not_started: usize,
     /// The least objective (NLL plus the priors' term) any start ended at.
     best: Option<f64>,
     converged: usize,
@@ -116,6 +119,7 @@ fn numbers(
     yaml: &Path,
     out: &Path,
     multistart: &MultistartOptions,
+    profile_settings: &Settings,
     best_known: Option<f64>,
     observer: &dyn Observer,
 ) -> Result<Numbers, String> {
@@ -155,8 +159,9 @@ fn numbers(
             let t = Instant::now();
             std::fs::create_dir_all(out).map_err(|e| e.to_string())?;
             let name = yaml.file_stem().map_or(String::new(), |s| s.to_string_lossy().to_string());
-            profiles = crate::profiles::write_profiles(&name, &problem, &fit, out, m)
-                .map_err(|e| format!("profiles: {e}"))?;
+            profiles =
+                crate::profiles::write_profiles(&name, &problem, &fit, out, m, profile_settings)
+                    .map_err(|e| format!("profiles: {e}"))?;
             observer.note(&format!(
                 "{}: profiles in {:.1} s",
                 yaml.display(),
@@ -221,14 +226,16 @@ fn starts<S: sysid_ode::System + Sync>(
     };
     crate::save(&figure, &out.join("waterfall")).map_err(|e| format!("waterfall: {e}"))?;
     observer.note(&format!(
-        "{}: {} starts in {:.1} s, {} converged, {reached} reached the best",
+        "{}: {} starts ({} left out by the time budget) in {:.1} s, {} converged, {reached} reached the best",
         yaml.display(),
         s.count,
+        s.not_started,
         s.elapsed_ms / 1e3,
         s.converged
     ));
     Ok(Starts {
         count: s.count,
+        not_started: s.not_started,
         best,
         converged: s.converged,
         reached,
@@ -244,6 +251,7 @@ pub(crate) fn section(
     dir: &Path,
     out: &Path,
     multistart: &MultistartOptions,
+    profile_settings: &Settings,
     observer: &dyn Observer,
 ) -> anyhow::Result<String> {
     let references = table(dir, "references.tsv");
@@ -252,8 +260,14 @@ pub(crate) fn section(
     for name in problems(dir) {
         let yaml = dir.join(&name).join(format!("{name}.yaml"));
         let best_known = known.iter().find(|r| r.0 == name).map(|r| r.1);
-        let outcome =
-            numbers(&yaml, &out.join("petab").join(&name), multistart, best_known, observer);
+        let outcome = numbers(
+            &yaml,
+            &out.join("petab").join(&name),
+            multistart,
+            profile_settings,
+            best_known,
+            observer,
+        );
         let reference = references.iter().find(|r| r.0 == name).map(|r| r.1);
         rows.push(Row { problem: name, reference, best_known, outcome });
     }
@@ -263,7 +277,7 @@ pub(crate) fn section(
         &out.join("petab/petab.json"),
         &serde_json::to_string_pretty(&json).expect("JSON"),
     )?;
-    Ok(markdown(dir, &rows))
+    Ok(markdown(dir, &rows, multistart, profile_settings))
 }
 
 fn row_json(r: &Row) -> serde_json::Value {
@@ -279,6 +293,7 @@ fn row_json(r: &Row) -> serde_json::Value {
             "best_known": r.best_known,
             "starts": n.starts.as_ref().map(|s| json!({
                 "count": s.count,
+                "not_started": s.not_started,
                 "best": s.best,
                 "converged": s.converged,
                 "reached_best_known": s.reached,
@@ -303,7 +318,12 @@ fn number(v: Option<f64>) -> String {
     v.map_or("—".into(), |v| format!("{v:.6}"))
 }
 
-fn markdown(dir: &Path, rows: &[Row]) -> String {
+fn markdown(
+    dir: &Path,
+    rows: &[Row],
+    multistart: &MultistartOptions,
+    profile_settings: &Settings,
+) -> String {
     let [default, lm] = methods();
     let mut md = String::new();
     let _ = writeln!(
@@ -360,7 +380,7 @@ fn markdown(dir: &Path, rows: &[Row]) -> String {
         }
     }
     md.push('\n');
-    md += &starts_markdown(rows);
+    md += &starts_markdown(rows, multistart);
     for r in rows {
         if let Ok(Numbers { profiles: Some(caption), .. }) = &r.outcome {
             let _ = writeln!(
@@ -373,7 +393,10 @@ fn markdown(dir: &Path, rows: &[Row]) -> String {
     let _ = writeln!(
         md,
         "Profiles are traced where the {lm} fit certifies and the problem has at most \
-         {PROFILED_UNKNOWNS} free unknowns.\n"
+         {PROFILED_UNKNOWNS} free unknowns, each point re-optimised with at most {} \
+         iterations (the report's `--max-iterations`; the fits above have the default \
+         method's budget).\n",
+        profile_settings.driver.max_iterations
     );
     let _ = writeln!(
         md,
@@ -386,7 +409,7 @@ fn markdown(dir: &Path, rows: &[Row]) -> String {
 }
 
 /// The multistart table and the waterfall figures.
-fn starts_markdown(rows: &[Row]) -> String {
+fn starts_markdown(rows: &[Row], options: &MultistartOptions) -> String {
     let with: Vec<(&Row, &Starts)> = rows
         .iter()
         .filter_map(|r| match &r.outcome {
@@ -394,35 +417,44 @@ fn starts_markdown(rows: &[Row]) -> String {
             _ => None,
         })
         .collect();
-    let Some((_, first)) = with.first() else { return String::new() };
+    if with.is_empty() {
+        return String::new();
+    }
+    let budget = options.budget.map_or(String::new(), |b| {
+        format!(
+            " A problem's multistart begins no start after {:.0} s; the starts are taken in \
+             order, so those fitted are the first ones, and `fitted` says how many.",
+            b.as_secs_f64()
+        )
+    });
     let default = Role::Default.method();
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "### PEtab problems: {} starts each\n\n\
-         {default} from {} starts drawn as the field draws them (uniform on each unknown's \
+        "### PEtab problems: up to {n} starts each\n\n\
+         {default} from {n} starts drawn as the field draws them (uniform on each unknown's \
          scale within its bounds, or from its PEtab initialization prior; nominal not among \
          them), two at a time on two cores. The objective is the NLL plus the priors' term \
          (what pyPESTO minimises). Best known: the least objective known for the problem, with \
          its source, in `best_known.tsv` beside the problems. Reached: converged starts within \
          {REACHED} of the best known value (or of the best found, where that is lower). Time \
-         per start: the median wall time of one fit.\n",
-        first.count, first.count
+         per start: the median wall time of one fit.{budget}\n",
+        n = options.starts
     );
     let _ = writeln!(
         md,
-        "| problem | best known | best found | converged | reached | time per start (s) | total (s) | converged per minute |\n\
-         |---|---|---|---|---|---|---|---|"
+        "| problem | best known | best found | fitted | converged | reached | time per start (s) | total (s) | converged per minute |\n\
+         |---|---|---|---|---|---|---|---|---|"
     );
     for (r, s) in &with {
         let _ = writeln!(
             md,
-            "| {} | {} | {} | {} / {} | {} | {:.2} | {:.1} | {:.1} |",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.1} | {:.1} |",
             r.problem,
             number(r.best_known),
             number(s.best),
-            s.converged,
             s.count,
+            s.converged,
             s.reached,
             s.median_seconds,
             s.seconds,

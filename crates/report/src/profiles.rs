@@ -260,7 +260,7 @@ where
 }
 
 /// The profile likelihoods of every unknown around `optimum`, each point re-optimised by
-/// `method` (`dir/profiles.json`, drawn as `dir/profiles.png|svg`); the figure's caption, or
+/// `method` with `settings` (`dir/profiles.json`, drawn as `dir/profiles.png|svg`); the figure's caption, or
 /// None when a profile found a lower point than the fit (then said in `profiles.json`).
 pub(crate) fn write_profiles<S: System + Sync>(
     name: &str,
@@ -268,10 +268,10 @@ pub(crate) fn write_profiles<S: System + Sync>(
     optimum: &Estimate,
     dir: &Path,
     method_name: &str,
+    settings: &Settings,
 ) -> anyhow::Result<Option<String>> {
     let options = ProfileOptions::default();
-    let method: sysid_registry::Boxed<S> =
-        Registry::standard().build(method_name, &Settings::default())?;
+    let method: sysid_registry::Boxed<S> = Registry::standard().build(method_name, settings)?;
     let profiles = match profile(&*method, problem, optimum, &[], &options)? {
         Traced::Profiles(p) => p,
         Traced::BetterOptimum(point) => {

@@ -14,7 +14,7 @@ use sysid_montecarlo::{
     MultistartOptions, Scenario, Study, StudySpec, Summary, TrialRecord, basin,
 };
 use sysid_ode::System;
-use sysid_registry::{Boxed, Registry, Role, Settings};
+use sysid_registry::{Boxed, Registry, Role};
 use sysid_systems::{Case, Visit};
 
 use crate::accuracy::{Accuracy, Spread};
@@ -29,9 +29,9 @@ use crate::options::{Observer, ReportOptions};
 use crate::prediction::{Prediction, PredictionPanel};
 use crate::profiles::write_profiles;
 
-/// The registry's method `name`, with the default settings.
-fn method<S: System>(name: &str) -> anyhow::Result<Boxed<S>> {
-    Ok(Registry::standard().build(name, &Settings::default())?)
+/// The registry's method `name`, with the catalogue sections' settings.
+fn method<S: System>(name: &str, args: &ReportOptions) -> anyhow::Result<Boxed<S>> {
+    Ok(Registry::standard().build(name, &args.settings())?)
 }
 
 /// Writes the report under `args.out` and returns the path of its README.md.
@@ -81,9 +81,11 @@ fn write_sections(
                 seed: args.seed,
                 sampling: sysid_montecarlo::Sampling::Uniform,
                 guess: false,
+                budget: Some(std::time::Duration::from_secs_f64(args.petab_budget)),
                 ..Default::default()
             };
-            let md = crate::petab::section(dir, &args.out, &multistart, observer)?;
+            let md =
+                crate::petab::section(dir, &args.out, &multistart, &args.settings(), observer)?;
             observer.note(&format!("PEtab problems: done in {:.1} s", t.elapsed().as_secs_f64()));
             md
         }
@@ -116,7 +118,7 @@ impl Visit for SystemReport<'_> {
         // Convergence from the default start.
         let mut fits = Vec::new();
         for m in self.methods {
-            let fit = method::<S>(m)?.fit(&problem).map_err(|e| e.to_string());
+            let fit = method::<S>(m, args)?.fit(&problem).map_err(|e| e.to_string());
             fits.push((m.clone(), fit));
         }
         write_convergence(&dir, &fits)?;
@@ -136,7 +138,7 @@ impl Visit for SystemReport<'_> {
         let multistart = self.multistart(case.name, &problem, &dir, &mut figures)?;
 
         // Fit and prediction, by the reference method.
-        let fitted = method::<S>(Role::Reference.method())?.fit(&problem)?;
+        let fitted = method::<S>(Role::Reference.method(), args)?.fit(&problem)?;
         if fitted.converged() {
             prediction(&case, &problem, &fitted, &dir)?;
             figures.push((
@@ -200,7 +202,7 @@ impl SystemReport<'_> {
         };
         let mut runs = Vec::new();
         for m in self.methods {
-            let run = sysid_montecarlo::multistart(&*method::<S>(m)?, problem, &options);
+            let run = sysid_montecarlo::multistart(&*method::<S>(m, self.args)?, problem, &options);
             runs.push((m.clone(), run.map(|r| r.starts).map_err(|e| e.to_string())));
         }
         let json: Vec<serde_json::Value> = runs
@@ -249,7 +251,9 @@ impl SystemReport<'_> {
         figures: &mut Vec<(String, String)>,
     ) -> anyhow::Result<()> {
         let reference = Role::Reference.method();
-        if let Some(caption) = write_profiles(system, problem, optimum, dir, reference)? {
+        if let Some(caption) =
+            write_profiles(system, problem, optimum, dir, reference, &self.args.settings())?
+        {
             figures.push(("profiles".into(), caption));
         }
         Ok(())
@@ -274,11 +278,12 @@ impl SystemReport<'_> {
             perturb: args.perturb,
             seed: args.seed,
             fixed: Vec::new(),
-            driver: Default::default(),
+            driver: args.settings().driver,
             settings: Default::default(),
         };
-        let fits = self.methods.iter().map(|m| method::<S>(m)).collect::<anyhow::Result<_>>()?;
-        let study = Study::new(spec, scenario, fits, method::<S>(Role::Reference.method())?)?;
+        let fits =
+            self.methods.iter().map(|m| method::<S>(m, args)).collect::<anyhow::Result<_>>()?;
+        let study = Study::new(spec, scenario, fits, method::<S>(Role::Reference.method(), args)?)?;
         let summary = run_study(&study, &dir.join("study"), self.observer)?;
         draw_study(case, &summary, dir)?;
         figures.push((
@@ -297,12 +302,13 @@ impl SystemReport<'_> {
         ));
         let basin_spec =
             StudySpec { perturb: args.basin_spread, trials: 1, ..study.spec().clone() };
-        let fits = self.methods.iter().map(|m| method::<S>(m)).collect::<anyhow::Result<_>>()?;
+        let fits =
+            self.methods.iter().map(|m| method::<S>(m, args)).collect::<anyhow::Result<_>>()?;
         let basin_study = Study::new(
             basin_spec,
             study.scenario().clone(),
             fits,
-            method::<S>(Role::Reference.method())?,
+            method::<S>(Role::Reference.method(), args)?,
         )?;
         let numbers = draw_basin(case, &basin_study, args.grid, dir, self.observer)?;
         figures.push((
