@@ -270,19 +270,17 @@ impl StartsArgs {
             guess: !self.starts_without_guess,
             budget: None,
         };
-        // Seconds that a Duration cannot hold (or not positive) are refused by name.
+        // Seconds that a Duration cannot hold are refused here, a zero budget by the
+        // multistart's own check.
         let budget = match self.starts_budget {
-            Some(seconds) => Some(
-                std::time::Duration::try_from_secs_f64(seconds)
-                    .ok()
-                    .filter(|d| !d.is_zero())
-                    .ok_or_else(|| {
-                        refused(
-                            "budget",
-                            format!("must be a positive number of seconds, got {seconds:?}"),
-                        )
-                    })?,
-            ),
+            Some(seconds) => {
+                Some(std::time::Duration::try_from_secs_f64(seconds).map_err(|_| {
+                    refused(
+                        "budget",
+                        format!("must be a positive number of seconds, got {seconds:?}"),
+                    )
+                })?)
+            }
             None => None,
         };
         let options = sysid_montecarlo::MultistartOptions { budget, ..options };

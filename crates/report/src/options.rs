@@ -47,7 +47,8 @@ pub struct ReportOptions {
 /// (the methods' default was 50 until it grew to 1 000 for the PEtab problems): the
 /// catalogue's converging fits need fewer, and a fit that fails (a slow crawl, a profile
 /// point that cannot be fitted) then costs a bounded time in every study trial, basin start
-/// and profile point. At 1 000, van-der-pol-three-point's profiles alone took 17 minutes.
+/// and profile point. At 1 000, van-der-pol-three-point's section took 17 minutes, most of it in
+/// profile points that do not converge.
 pub const CATALOGUE_ITERATIONS: usize = 50;
 
 impl Default for ReportOptions {
