@@ -154,3 +154,28 @@ fn the_default_fit_of_boehm_holds_under_independent_checks() {
     let (fall, at) = largest_fall(&away);
     assert!(fall > 1e-3, "the check cannot tell a point 0.1 away: {fall:e} along {at}");
 }
+
+/// Elowitz from the published nominal values: init_Z_mRNA drifts from 19 towards its lower
+/// bound, where the data hardly see it. With Moré's scaling kept whole the default crept there
+/// a hundredth of a decade an iteration and stopped uncertified (NLL −63.23972); with the
+/// scaling's memory fading it certifies. Checked by a second method from the returned point.
+#[test]
+fn the_default_fit_of_elowitz_certifies_where_an_unknown_drifts_out_of_sight() {
+    let imported =
+        sysid_petab::import(std::path::Path::new(&problem("Elowitz_Nature2000"))).expect("imports");
+    let problem = imported.model.problem(None).expect("a problem");
+    let registry = sysid_registry::Registry::standard();
+    let settings = sysid_registry::Settings::default();
+    let default = registry.build(sysid_registry::Role::Default.method(), &settings).unwrap();
+    let fit = default.fit(&problem).expect("fits");
+    assert!(fit.converged(), "{}", fit.termination);
+    let nll = fit.nll.expect("a likelihood");
+    // pyPESTO + fides from the same start: −63.2032 (scripts/reference); the stalled run's
+    // −63.23972 is above what this fit must reach.
+    assert!(nll < -63.2397, "{nll}");
+
+    let second = registry.build("levenberg-marquardt", &settings).unwrap();
+    let again = second.fit_from(&problem, &fit.values).expect("fits");
+    assert!(again.converged(), "{}", again.termination);
+    assert!((again.nll.unwrap() - nll).abs() <= 1e-6, "{} against {nll}", again.nll.unwrap());
+}

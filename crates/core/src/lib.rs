@@ -69,5 +69,7 @@ pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL, SINGLE_EXPERIMENT};
 pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};
 pub use table::{Compared, Expected, compact, compact_header, comparison};
 pub use termination::{Failure, PROGRESS, PROGRESS_WINDOW, Rule, Termination};
-pub use trust::{Curve, CurveStep, actual_decrease, differenced_hessian, halve_along_curve};
+pub use trust::{
+    Curve, CurveStep, SCALE_MEMORY, actual_decrease, differenced_hessian, halve_along_curve,
+};
 pub use unknowns::{Distribution, Initialization, Prior, Unknown, Unknowns};

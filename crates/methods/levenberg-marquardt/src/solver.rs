@@ -5,8 +5,9 @@
 //!
 //!   m_λ(δ) = ε + 2Uᵀδ + δᵀAδ + λ‖Dδ‖²   over the box lo − z ≤ δ ≤ hi − z,
 //!
-//! with D = diag(d), d_i the largest √A_ii seen so far (Moré's scaling: the iteration does not
-//! depend on the units of the unknowns). λ = 0, the Gauss–Newton step, when that step lies in
+//! with D = diag(d), d_i ← max(√A_ii, 0.9·d_i) at each iterate (Moré's scaling, with a memory
+//! that fades: [`sysid_core::SCALE_MEMORY`]; the iteration does not depend on the units of the
+//! unknowns). λ = 0, the Gauss–Newton step, when that step lies in
 //! the trust region ‖Dδ‖ ≤ Δ (within Moré's 10 %); otherwise λ > 0 is found with ‖Dδ(λ)‖
 //! within 10 % of Δ, by bisection in log λ from the last λ (‖Dδ(λ)‖ falls as λ grows). The
 //! ratio of the actual to the predicted decrease,
