@@ -259,6 +259,19 @@ impl StartsArgs {
             }
             return Ok(None);
         };
+        // Seconds that a Duration cannot hold are refused here, a zero budget by the
+        // multistart's own check.
+        let budget = self
+            .starts_budget
+            .map(|seconds| {
+                std::time::Duration::try_from_secs_f64(seconds).map_err(|_| {
+                    refused(
+                        "budget",
+                        format!("must be a positive number of seconds, got {seconds:?}"),
+                    )
+                })
+            })
+            .transpose()?;
         let options = sysid_montecarlo::MultistartOptions {
             starts,
             seed: self.starts_seed.unwrap_or(defaults.seed),
@@ -268,22 +281,8 @@ impl StartsArgs {
                 Some(SamplingArg::Uniform) | None => sysid_montecarlo::Sampling::Uniform,
             },
             guess: !self.starts_without_guess,
-            budget: None,
+            budget,
         };
-        // Seconds that a Duration cannot hold are refused here, a zero budget by the
-        // multistart's own check.
-        let budget = match self.starts_budget {
-            Some(seconds) => {
-                Some(std::time::Duration::try_from_secs_f64(seconds).map_err(|_| {
-                    refused(
-                        "budget",
-                        format!("must be a positive number of seconds, got {seconds:?}"),
-                    )
-                })?)
-            }
-            None => None,
-        };
-        let options = sysid_montecarlo::MultistartOptions { budget, ..options };
         options.validate().map_err(|e| refused(e.name(), e.problem()))?;
         Ok(Some(options))
     }

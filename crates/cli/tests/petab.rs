@@ -97,10 +97,13 @@ fn compare_and_predict_read_a_petab_problem() {
 /// g²/2c of the parabola through three points, with c > 0), while 0.1 away on every
 /// coordinate the same check finds one. The NLL is the published optimum's (the parameter
 /// table's nominal values) or lower.
-#[test]
-fn the_default_fit_of_boehm_holds_under_independent_checks() {
-    let imported = sysid_petab::import(std::path::Path::new(&problem("Boehm_JProteomeRes2014")))
-        .expect("imports");
+/// The default method's fit of the PEtab problem `name` from its nominal values, asserted
+/// converged, and certified again, at the same NLL to 1e-6, by levenberg-marquardt started
+/// from the point it returns: the problem, the fit and its NLL.
+fn default_fit_confirmed_by_a_second_method(
+    name: &str,
+) -> (sysid_core::Problem<sysid_model::ModelSystem>, sysid_core::Estimate, f64) {
+    let imported = sysid_petab::import(std::path::Path::new(&problem(name))).expect("imports");
     let problem = imported.model.problem(None).expect("a problem");
     let registry = sysid_registry::Registry::standard();
     let settings = sysid_registry::Settings::default();
@@ -108,14 +111,20 @@ fn the_default_fit_of_boehm_holds_under_independent_checks() {
     let fit = default.fit(&problem).expect("fits");
     assert!(fit.converged(), "{}", fit.termination);
     let nll = fit.nll.expect("a likelihood");
-    let nominal = problem.unknowns().coordinates(&problem.guesses());
-    let at_nominal = problem.nll_at(&nominal).unwrap().unwrap();
-    assert!(nll <= at_nominal, "{nll} above the published optimum's {at_nominal}");
 
     let second = registry.build("levenberg-marquardt", &settings).unwrap();
     let again = second.fit_from(&problem, &fit.values).expect("fits");
     assert!(again.converged(), "{}", again.termination);
     assert!((again.nll.unwrap() - nll).abs() <= 1e-6, "{} against {nll}", again.nll.unwrap());
+    (problem, fit, nll)
+}
+
+#[test]
+fn the_default_fit_of_boehm_holds_under_independent_checks() {
+    let (problem, fit, nll) = default_fit_confirmed_by_a_second_method("Boehm_JProteomeRes2014");
+    let nominal = problem.unknowns().coordinates(&problem.guesses());
+    let at_nominal = problem.nll_at(&nominal).unwrap().unwrap();
+    assert!(nll <= at_nominal, "{nll} above the published optimum's {at_nominal}");
 
     let mut tight = *problem.integrator();
     (tight.rtol, tight.atol) = (problem.integrator().rtol * 1e-3, problem.integrator().atol * 1e-3);
@@ -161,21 +170,8 @@ fn the_default_fit_of_boehm_holds_under_independent_checks() {
 /// scaling's memory fading it certifies. Checked by a second method from the returned point.
 #[test]
 fn the_default_fit_of_elowitz_certifies_where_an_unknown_drifts_out_of_sight() {
-    let imported =
-        sysid_petab::import(std::path::Path::new(&problem("Elowitz_Nature2000"))).expect("imports");
-    let problem = imported.model.problem(None).expect("a problem");
-    let registry = sysid_registry::Registry::standard();
-    let settings = sysid_registry::Settings::default();
-    let default = registry.build(sysid_registry::Role::Default.method(), &settings).unwrap();
-    let fit = default.fit(&problem).expect("fits");
-    assert!(fit.converged(), "{}", fit.termination);
-    let nll = fit.nll.expect("a likelihood");
+    let (_, _, nll) = default_fit_confirmed_by_a_second_method("Elowitz_Nature2000");
     // pyPESTO + fides from the same start: −63.2032 (scripts/reference); the stalled run's
     // −63.23972 is above what this fit must reach.
     assert!(nll < -63.2397, "{nll}");
-
-    let second = registry.build("levenberg-marquardt", &settings).unwrap();
-    let again = second.fit_from(&problem, &fit.values).expect("fits");
-    assert!(again.converged(), "{}", again.termination);
-    assert!((again.nll.unwrap() - nll).abs() <= 1e-6, "{} against {nll}", again.nll.unwrap());
 }

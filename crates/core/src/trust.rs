@@ -6,8 +6,8 @@
 //!   m_λ(δ) = ε + 2Uᵀδ + δᵀAδ + λ‖Dδ‖²   over the box lo − z ≤ δ ≤ hi − z,
 //!
 //! with D = diag(d), d_i ← max(√A_ii, [`SCALE_MEMORY`]·d_i) at each iterate: Moré's scaling
-//! (the curve does not depend on the units of the unknowns), with a memory that fades. λ = 0 is the Gauss–Newton step; as λ grows, ‖Dδ(λ)‖
-//! falls and δ turns towards steepest descent. [`Curve::within`] finds the λ whose step has a
+//! (the curve does not depend on the units of the unknowns), with a memory that fades. λ = 0
+//! is the Gauss–Newton step; as λ grows, ‖Dδ(λ)‖ falls and δ turns towards steepest descent. [`Curve::within`] finds the λ whose step has a
 //! given scaled length Δ (within Moré's 10 %), by bisection in log λ from the last λ.
 //!
 //! Shortening a step along the curve rather than along its line is what makes it work in a
@@ -111,12 +111,12 @@ impl Curve {
         self.scale.resize(k, 0.0);
         for (i, d) in self.scale.iter_mut().enumerate() {
             let now = lin.normal[(i, i)].max(0.0).sqrt();
-            *d = match (now > 0.0, *d > 0.0) {
-                (true, _) => (SCALE_MEMORY * *d).max(now),
-                // A column the data do not see keeps its scale (1 if it never had one).
-                (false, true) => *d,
-                (false, false) => 1.0,
-            };
+            // A column the data do not see keeps its scale (1 if it never had one).
+            if now > 0.0 {
+                *d = (SCALE_MEMORY * *d).max(now);
+            } else if *d == 0.0 {
+                *d = 1.0;
+            }
         }
     }
 

@@ -260,8 +260,9 @@ where
 }
 
 /// The profile likelihoods of every unknown around `optimum`, each point re-optimised by
-/// `method` with `settings` (`dir/profiles.json`, drawn as `dir/profiles.png|svg`); the figure's caption, or
-/// None when a profile found a lower point than the fit (then said in `profiles.json`).
+/// `method` with `settings` (`dir/profiles.json`, drawn as `dir/profiles.png|svg`); the
+/// figure's caption, or None when a profile found a lower point than the fit (then said in
+/// `profiles.json`).
 pub(crate) fn write_profiles<S: System + Sync>(
     name: &str,
     problem: &Problem<S>,
