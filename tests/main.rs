@@ -9,6 +9,7 @@ mod budget;
 mod certificate;
 mod docs;
 mod experiments;
+mod geodesic;
 mod hard;
 mod model_twins;
 mod paper_goodman_1966;

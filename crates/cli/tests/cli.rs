@@ -328,6 +328,7 @@ fn compare_lists_every_method_as_json() {
             "levenberg-marquardt",
             "hybrid-newton",
             "nl2sol",
+            "geodesic-lm",
             "multiple-shooting",
             "quasilinearization",
             "quasilinearization-data"

@@ -33,6 +33,7 @@ mod evaluate;
 mod evaluations;
 mod experiment;
 pub mod format;
+mod geodesic;
 mod linalg;
 mod method;
 mod noise;
@@ -58,6 +59,7 @@ pub use estimate::{Estimate, ExperimentFit, FitRecord, Iteration, ScaleEstimate}
 pub use evaluate::{Linearization, Observed, WeightedResiduals};
 pub use evaluations::{Evaluations, FINEST_RTOL};
 pub use experiment::{Experiment, Planned, Setting, SettingFunction, SlotJacobian};
+pub use geodesic::{Accelerated, GEODESIC_H, GEODESIC_RATIO, Geodesic};
 pub use linalg::{NormalFactor, Singular, as_faer};
 pub use method::{Method, start_coordinates};
 pub use noise::{

@@ -100,7 +100,7 @@ impl Entry {
 }
 
 /// Every method sysid offers, in the order tables list them.
-pub static ENTRIES: [Entry; 11] = [
+pub static ENTRIES: [Entry; 12] = [
     Entry {
         name: "goodman",
         description: "Goodman 1966: Newton iteration on the initial values, full steps",
@@ -162,6 +162,15 @@ pub static ENTRIES: [Entry; 11] = [
         build: |s| {
             let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
             Built::LevenbergMarquardt(LevenbergMarquardt::adaptive(options))
+        },
+    },
+    Entry {
+        name: "geodesic-lm",
+        description: "Transtrum–Sethna 2012: Levenberg–Marquardt's trust region, each step bent along the valley by its second-order term (one more plain integration per trial)",
+        roles: &[],
+        build: |s| {
+            let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
+            Built::LevenbergMarquardt(LevenbergMarquardt::geodesic(options))
         },
     },
     Entry {

@@ -10,7 +10,10 @@
 //! `hybrid-newton`; IMA J. Numer. Anal. 7, 1987): Gauss–Newton's model while ε falls by at
 //! least [`FAST_FALL`] of itself per step, the full Hessian of ε by differences of the
 //! sensitivities' gradient once it falls more slowly, where large residuals make the
-//! Gauss–Newton model misjudge the curvature.
+//! Gauss–Newton model misjudge the curvature. It also runs NL2SOL's adaptive model
+//! ([`LevenbergMarquardt::adaptive`], `nl2sol`, the default) and Transtrum and Sethna's
+//! geodesic acceleration ([`LevenbergMarquardt::geodesic`], `geodesic-lm`), each trial step
+//! bent along the valley by the residuals' second derivative along it.
 //!
 //! Why written here rather than taken from a crate: the step needs the shared driver's
 //! Jacobian from forward sensitivities, its integration budget and its certificate, and a box

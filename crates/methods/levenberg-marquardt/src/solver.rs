@@ -26,8 +26,9 @@
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Linearization,
-    Method, Problem, Proposal, Rule, Step, actual_decrease, differenced_hessian, drive,
+    Accelerated, Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Geodesic,
+    Iterate, Linearization, Method, Problem, Proposal, Rule, Step, actual_decrease,
+    differenced_hessian, drive,
 };
 use sysid_ode::System;
 
@@ -58,6 +59,18 @@ impl LevenbergMarquardt {
         Self { options: LevenbergMarquardtOptions { hessian: Hessian::Hybrid, ..options } }
     }
 
+    /// Transtrum and Sethna's geodesic Levenberg–Marquardt: Gauss–Newton's model, each step
+    /// bent along the valley by its second-order term ([`sysid_core::Geodesic`]).
+    pub fn geodesic(options: LevenbergMarquardtOptions) -> Self {
+        Self {
+            options: LevenbergMarquardtOptions {
+                hessian: Hessian::GaussNewton,
+                geodesic: true,
+                ..options
+            },
+        }
+    }
+
     /// NL2SOL's adaptive model in the same trust region: Gauss–Newton's, or Gauss–Newton's
     /// plus a structured secant approximation of the rest of the Hessian, whichever predicted
     /// the last step better.
@@ -69,6 +82,7 @@ impl LevenbergMarquardt {
 impl<S: System> Method<S> for LevenbergMarquardt {
     fn name(&self) -> &str {
         match self.options.hessian {
+            Hessian::GaussNewton if self.options.geodesic => "geodesic-lm",
             Hessian::GaussNewton => "levenberg-marquardt",
             Hessian::Hybrid => "hybrid-newton",
             Hessian::Adaptive => "nl2sol",
@@ -85,6 +99,7 @@ impl<S: System> Method<S> for LevenbergMarquardt {
             newton: None,
             fall: None,
             secant: Secant::default(),
+            geodesic: Geodesic::default(),
         };
         let name = Method::<S>::name(self);
         drive(problem, name, &self.options.driver, &mut step, start)
@@ -104,6 +119,8 @@ struct TrustRegion<'o> {
     fall: Option<f64>,
     /// The adaptive model's secant part and which model it uses.
     secant: Secant,
+    /// The plain residuals at the iterate, for the steps' geodesic acceleration.
+    geodesic: Geodesic,
 }
 
 /// NL2SOL's S ≈ Σ rᵢ∇²rᵢ (half of it, in the units of A = JᵀWJ: the model is
@@ -165,14 +182,30 @@ impl Secant {
 
 impl TrustRegion<'_> {
     /// The trial step for the current radius from the iterate `lin`: on Newton's model when
-    /// there is one at this iterate, else on Gauss–Newton's.
+    /// there is one at this iterate, else on Gauss–Newton's; with geodesic acceleration, bent
+    /// by its second-order term, the radius halved (without a linearization) while the path
+    /// bends too much over the step.
     fn step<S: System>(
         &mut self,
-        problem: &Problem<S>,
+        ev: &Evaluations<'_, S>,
         lin: &Linearization,
     ) -> Result<CurveStep, Failure> {
-        let model = self.newton.as_ref().filter(|n| n.z == lin.z).unwrap_or(lin);
-        self.curve.within(problem, model, self.radius, self.options.driver.max_condition)
+        let problem = ev.problem();
+        let max_condition = self.options.driver.max_condition;
+        let negligible = negligible_step(problem, &lin.z, self.options.driver.step_tolerance);
+        loop {
+            let model = self.newton.as_ref().filter(|n| n.z == lin.z).unwrap_or(lin);
+            let v = self.curve.within(problem, model, self.radius, max_condition)?;
+            if !self.options.geodesic {
+                return Ok(v);
+            }
+            match self.geodesic.accelerate(ev, model, &self.curve, &v, max_condition)? {
+                Accelerated::Step(step) => return Ok(step),
+                Accelerated::Unavailable => return Ok(v),
+                Accelerated::TooCurved if v.delta.norm() <= negligible => return Ok(v),
+                Accelerated::TooCurved => self.radius = 0.5 * v.scaled_norm,
+            }
+        }
     }
 
     /// The hybrid's model at the iterate `lin`: Gauss–Newton's after a step that lowered ε
@@ -228,7 +261,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         let lin = current.linearization.as_ref().expect("the iterates are linearized");
         self.curve.rescale(lin);
         self.model(ev, lin)?;
-        let trial = self.step(ev.problem(), lin)?;
+        let trial = self.step(ev, lin)?;
         let z = ev.problem().unknowns().moved(&current.z, trial.delta.as_slice(), 1.0);
         let condition = Some(trial.condition);
         self.proposed = Some(trial);
@@ -244,12 +277,10 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         let problem = ev.problem();
         let lin = current.linearization.as_ref().expect("the iterates are linearized");
         let resolution = problem.integrator().rtol * lin.cost;
-        let step_tolerance = problem.resolvable_step(self.options.driver.step_tolerance);
-        let z_norm = current.z.iter().map(|v| v * v).sum::<f64>().sqrt();
-        let negligible = step_tolerance * (z_norm + step_tolerance);
+        let negligible = negligible_step(problem, &current.z, self.options.driver.step_tolerance);
         let mut trial = match self.proposed.take() {
             Some(trial) => trial,
-            None => self.step(problem, lin)?,
+            None => self.step(ev, lin)?,
         };
         let mut z = proposal.z;
         for _ in 0..=self.options.max_rejections {
@@ -292,9 +323,17 @@ impl<S: System> Step<S> for TrustRegion<'_> {
             if trial.delta.norm() <= negligible || !(self.radius > 0.0 && self.radius.is_finite()) {
                 return Ok(Advance::Stop(Rule::Step));
             }
-            trial = self.step(problem, lin)?;
+            trial = self.step(ev, lin)?;
             z = problem.unknowns().moved(&current.z, trial.delta.as_slice(), 1.0);
         }
         Ok(Advance::Stop(Rule::NoDescent))
     }
+}
+
+/// The step length below which a step does not count: tol·(‖z‖ + tol), tol the resolvable
+/// step tolerance.
+fn negligible_step<S: System>(problem: &Problem<S>, z: &[f64], step_tolerance: f64) -> f64 {
+    let step_tolerance = problem.resolvable_step(step_tolerance);
+    let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+    step_tolerance * (z_norm + step_tolerance)
 }
