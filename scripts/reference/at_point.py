@@ -1,0 +1,58 @@
+"""AMICI's objective (through pyPESTO: NLL plus the priors' term) at the points of
+tests/data/petab/best_points.tsv: an independent evaluation of the best known values sysid
+found away from the nominal parameters. Not run by any test; its output is quoted in
+tests/data/petab/best_known.tsv and in the test that checks the points
+(crates/cli/tests/petab.rs).
+
+    python3 -m venv venv && venv/bin/pip install amici pypesto fides petab scipy
+    PATH=venv/bin:$PATH venv/bin/python scripts/reference/at_point.py tests/data/petab
+
+Printed on this machine (amici and pypesto of November 2026, AMICI's default tolerances):
+
+    Elowitz_Nature2000 -63.25202347360725
+"""
+
+import argparse
+import csv
+import os
+from collections import defaultdict
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+import petab.v1 as petab  # noqa: E402
+import pypesto.petab  # noqa: E402
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("folder", type=Path, help="tests/data/petab")
+    parser.add_argument("--amici-dir", type=Path, default=Path("/tmp/amici_models"))
+    args = parser.parse_args()
+    points = defaultdict(dict)
+    with open(args.folder / "best_points.tsv", newline="") as f:
+        for row in csv.DictReader(f, delimiter="\t"):
+            points[row["problem"]][row["parameterId"]] = float(row["value"])
+    for name, values in points.items():
+        # The copies in tests/data/petab leave the visualisation tables out.
+        config = yaml.safe_load((args.folder / name / f"{name}.yaml").read_text())
+        for entry in config["problems"]:
+            entry.pop("visualization_files", None)
+        problem = petab.Problem.from_yaml(config, base_path=str(args.folder / name))
+        importer = pypesto.petab.PetabImporter(
+            problem, output_folder=str(args.amici_dir / name), model_name=name
+        )
+        objective = importer.create_problem()
+        scales = problem.parameter_df["parameterScale"]
+        x = []
+        for i in objective.x_free_indices:
+            pid = objective.x_names[i]
+            v = values[pid]
+            x.append({"lin": v, "log": np.log(v), "log10": np.log10(v)}[scales[pid]])
+        print(name, float(objective.objective(np.array(x))))
+
+
+if __name__ == "__main__":
+    main()
