@@ -10,6 +10,7 @@
 //! Jacobian) keeps its dependence on the initial values, which the implicit-function
 //! formula −J⁻¹ ∂f/∂α would lose.
 
+use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
 use sysid_core::{Setting, SettingFunction, Unknown};
@@ -31,9 +32,18 @@ pub(crate) struct SteadyState {
     names: Vec<String>,
     uses: Vec<usize>,
     experiment: String,
-    /// The last point and its steady state (None: not found there).
-    cache: Mutex<Option<(Vec<f64>, Option<Solved>)>>,
+    /// The last points met and their steady states (None: not found there), the newest
+    /// first: see [`CACHED`].
+    cache: Mutex<VecDeque<(Vec<f64>, Option<Solved>)>>,
 }
+
+/// How many points' steady states are kept. Every state's initial value asks for the steady
+/// state at the same point, so one evaluation solves once; fits running side by side (a
+/// multistart's starts, a study's trials) each keep their point in the cache. With one entry
+/// they evicted each other's, and each of Weber's 7 states solved again: a start from
+/// nominal took 60 s beside two others instead of 7 s alone, and the lock, held over the
+/// solve, made the fits wait for each other.
+const CACHED: usize = 64;
 
 /// A steady state and its derivatives ∂y/∂v (n × n_v, row by row).
 #[derive(Clone)]
@@ -77,7 +87,7 @@ impl SteadyState {
             names,
             uses,
             experiment: experiment.to_string(),
-            cache: Mutex::new(None),
+            cache: Mutex::new(VecDeque::with_capacity(CACHED)),
         }
     }
 
@@ -94,14 +104,20 @@ impl SteadyState {
     }
 
     fn solved(&self, v: &[f64]) -> Option<Solved> {
-        let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((at, solved)) = cache.as_ref()
-            && at.iter().zip(v).all(|(a, b)| a.to_bits() == b.to_bits())
+        let same = |at: &[f64]| at.iter().zip(v).all(|(a, b)| a.to_bits() == b.to_bits());
         {
-            return solved.clone();
+            let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+            if let Some((_, solved)) = cache.iter().find(|(at, _)| same(at)) {
+                return solved.clone();
+            }
         }
+        // Solved without the lock: fits on other threads need their own points meanwhile.
         let solved = self.solve(v);
-        *cache = Some((v.to_vec(), solved.clone()));
+        let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+        if cache.len() == CACHED {
+            cache.pop_back();
+        }
+        cache.push_front((v.to_vec(), solved.clone()));
         solved
     }
 

@@ -241,6 +241,26 @@ atol = 1e-12
             0.5 * d
         );
     }
+    // Fits side by side (a multistart's starts) share the steady state's cache: two threads
+    // at 100 points each, more than the cache holds, each cost the closed form's at its own
+    // point, none another thread's steady state.
+    std::thread::scope(|scope| {
+        for thread in 0..2 {
+            let (problem, cost) = (&problem, &cost);
+            scope.spawn(move || {
+                for i in 0..100 {
+                    let a0 = 1.0 + 0.01 * i as f64 + 0.5 * thread as f64;
+                    let z = problem.unknowns().coordinates(&[b, k1, a0]);
+                    let got = problem.linearize(&z).unwrap().cost;
+                    let want = cost(b, k1, a0);
+                    assert!(
+                        (got - want).abs() <= 1e-8,
+                        "thread {thread}, A0 {a0}: {got} vs {want}"
+                    );
+                }
+            });
+        }
+    });
     let _ = std::fs::remove_dir_all(&dir);
 }
 
