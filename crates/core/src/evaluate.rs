@@ -67,6 +67,14 @@ pub struct Linearization {
     pub counts: Counts,
 }
 
+impl Linearization {
+    /// The decrease of ε the Gauss–Newton model predicts for the step δ from here:
+    /// ε − m₀(δ) = −(2Uᵀδ + δᵀAδ).
+    pub fn predicted_decrease(&self, delta: &DVector<f64>) -> f64 {
+        -(2.0 * self.gradient.dot(delta) + delta.dot(&(&self.normal * delta)))
+    }
+}
+
 /// One experiment's rows at a point.
 struct Rows {
     r: Vec<f64>,

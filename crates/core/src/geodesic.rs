@@ -119,7 +119,7 @@ impl Geodesic {
             return Ok(Accelerated::TooCurved);
         }
         let delta = DVector::from_fn(k, |i, _| (v.delta[i] + 0.5 * a[i]).clamp(lo[i], hi[i]));
-        let predicted = -(2.0 * lin.gradient.dot(&delta) + delta.dot(&(&lin.normal * &delta)));
+        let predicted = lin.predicted_decrease(&delta);
         if !(predicted > 0.0 && predicted.is_finite()) {
             return Ok(Accelerated::Unavailable);
         }

@@ -7,8 +7,9 @@
 //!
 //! with D = diag(d), d_i ← max(√A_ii, [`SCALE_MEMORY`]·d_i) at each iterate: Moré's scaling
 //! (the curve does not depend on the units of the unknowns), with a memory that fades. λ = 0
-//! is the Gauss–Newton step; as λ grows, ‖Dδ(λ)‖ falls and δ turns towards steepest descent. [`Curve::within`] finds the λ whose step has a
-//! given scaled length Δ (within Moré's 10 %), by bisection in log λ from the last λ.
+//! is the Gauss–Newton step; as λ grows, ‖Dδ(λ)‖ falls and δ turns towards steepest descent.
+//! [`Curve::within`] finds the λ whose step has a given scaled length Δ (within Moré's 10 %),
+//! by bisection in log λ from the last λ.
 //!
 //! Shortening a step along the curve rather than along its line is what makes it work in a
 //! sloppy direction: where the Gauss–Newton model overshoots 70 times along one direction (as
@@ -125,7 +126,7 @@ impl Curve {
     pub fn first(&mut self, lin: &Linearization, delta: DVector<f64>) -> CurveStep {
         self.rescale(lin);
         self.lambda = 0.0;
-        let predicted = -(2.0 * lin.gradient.dot(&delta) + delta.dot(&(&lin.normal * &delta)));
+        let predicted = lin.predicted_decrease(&delta);
         CurveStep {
             scaled_norm: self.scaled_norm(delta.as_slice()),
             delta,
@@ -157,7 +158,7 @@ impl Curve {
         let solution = minimise_in_box(&model, (lo, hi), &vec![0.0; k], max_condition)?;
         let delta = DVector::from_vec(solution.x);
         let scaled_norm = self.scaled_norm(delta.as_slice());
-        let predicted = -(2.0 * lin.gradient.dot(&delta) + delta.dot(&(&lin.normal * &delta)));
+        let predicted = lin.predicted_decrease(&delta);
         Ok(CurveStep { delta, scaled_norm, predicted, lambda, condition: solution.condition })
     }
 

@@ -141,37 +141,25 @@ pub static ENTRIES: [Entry; 12] = [
         name: "levenberg-marquardt",
         description: "Levenberg–Marquardt, Moré's scaled trust region, bounds inside the step",
         roles: &[Role::Report],
-        build: |s| {
-            let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
-            Built::LevenbergMarquardt(LevenbergMarquardt::new(options))
-        },
+        build: |s| Built::LevenbergMarquardt(LevenbergMarquardt::new(levenberg_marquardt(s))),
     },
     Entry {
         name: "hybrid-newton",
         description: "Fletcher–Xu 1987: Levenberg–Marquardt's trust region, on the full Hessian of ε (differenced sensitivity gradient) once ε falls slowly",
         roles: &[],
-        build: |s| {
-            let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
-            Built::LevenbergMarquardt(LevenbergMarquardt::hybrid(options))
-        },
+        build: |s| Built::LevenbergMarquardt(LevenbergMarquardt::hybrid(levenberg_marquardt(s))),
     },
     Entry {
         name: "nl2sol",
         description: "Dennis–Gay–Welsch's adaptive model (NL2SOL) in the same trust region: Gauss–Newton's, or Gauss–Newton's plus a structured secant correction, whichever predicts better",
         roles: &[Role::Default],
-        build: |s| {
-            let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
-            Built::LevenbergMarquardt(LevenbergMarquardt::adaptive(options))
-        },
+        build: |s| Built::LevenbergMarquardt(LevenbergMarquardt::adaptive(levenberg_marquardt(s))),
     },
     Entry {
         name: "geodesic-lm",
         description: "Transtrum–Sethna 2012: Levenberg–Marquardt's trust region, each step bent along the valley by its second-order term (one more plain integration per trial)",
         roles: &[],
-        build: |s| {
-            let options = LevenbergMarquardtOptions { driver: s.driver, ..Default::default() };
-            Built::LevenbergMarquardt(LevenbergMarquardt::geodesic(options))
-        },
+        build: |s| Built::LevenbergMarquardt(LevenbergMarquardt::geodesic(levenberg_marquardt(s))),
     },
     Entry {
         name: "multiple-shooting",
@@ -203,6 +191,10 @@ fn goodman(s: &Settings) -> GoodmanOptions {
 
 fn gauss_newton(s: &Settings, line_search: bool) -> GaussNewtonOptions {
     GaussNewtonOptions { driver: s.driver, line_search, ..GaussNewtonOptions::default() }
+}
+
+fn levenberg_marquardt(s: &Settings) -> LevenbergMarquardtOptions {
+    LevenbergMarquardtOptions { driver: s.driver, ..Default::default() }
 }
 
 fn quasilinearization(s: &Settings, start: Start) -> Quasilinearization {

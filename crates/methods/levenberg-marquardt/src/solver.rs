@@ -173,8 +173,7 @@ impl Secant {
     /// the next step's.
     fn choose(&mut self, from: &Linearization, step: &DVector<f64>, actual: f64) {
         let Some(s) = &self.s else { return };
-        let linear = 2.0 * from.gradient.dot(step);
-        let gauss_newton = -(linear + step.dot(&(&from.normal * step)));
+        let gauss_newton = from.predicted_decrease(step);
         let augmented = gauss_newton - step.dot(&(s * step));
         self.augmented = (augmented - actual).abs() < (gauss_newton - actual).abs();
     }
