@@ -389,22 +389,31 @@ impl Graph {
                     }
                 }
                 Term::Pow(a, b) => {
-                    // a^b (db ln a + b da / a)
+                    // a^b ln a · db + b a^(b−1) · da, each term in the form that has its
+                    // limit at a = 0 (a Hill term Z^n with Z, or its initial value, on a
+                    // bound of 0): a^b ln a → 0 for b > 0, b a^(b−1) → 0 for b > 1 (and
+                    // b for b = 1), where a^b (db ln a + b da / a) is 0 · ∞ = NaN.
                     let (da, db) = (dx(a), dx(b));
                     let along_b = if self.is_zero(db) {
                         zero
                     } else {
                         let ln = self.func(Func::Log, a);
-                        self.mul(db, ln)
+                        let power_ln = self.mul(id, ln);
+                        // a^b ln a where a ≠ 0 (NaN below 0, as a^b), its limit 0 at a = 0.
+                        let above = self.less(zero, a, power_ln, zero);
+                        let limit = self.less(a, zero, power_ln, above);
+                        self.mul(db, limit)
                     };
                     let along_a = if self.is_zero(da) {
                         zero
                     } else {
-                        let scaled = self.mul(b, da);
-                        self.div(scaled, a)
+                        let one = self.constant(1.0);
+                        let lower = self.sub(b, one);
+                        let power = self.pow(a, lower);
+                        let slope = self.mul(b, power);
+                        self.mul(slope, da)
                     };
-                    let rate = self.add(along_b, along_a);
-                    self.mul(id, rate)
+                    self.add(along_b, along_a)
                 }
                 Term::Func(f, a) => {
                     let da = dx(a);

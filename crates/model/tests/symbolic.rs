@@ -272,6 +272,42 @@ file = "unused.csv"
     agree(&Model { file }, 400, 7);
 }
 
+/// x^k at x = 0, where x^k (k ln x · dx/x …) is 0 · ∞: the derivatives are their limits,
+/// from the closed forms ∂/∂x = k x^(k−1) and ∂/∂k = x^k ln x → 0 (for k > 0). A Hill
+/// term Z^n whose Z, or its initial value, sits on a bound of 0 (Borghans' calcium model,
+/// n estimated) made every step onto that bound a failed integration.
+#[test]
+fn a_variable_power_of_zero_has_its_limits_as_derivatives() {
+    let derivatives = |text: &str, x: f64, k: f64| {
+        let program = Program::compile(&parse(text).expect("parses"), &resolve).expect("compiles");
+        let linearized = Linearized::new(std::slice::from_ref(&program), (2, 1, 0));
+        let mut w = linearized.workspace();
+        linearized.eval(0.0, &[x, 0.5], &[k], &[], &mut w);
+        let mut gradient = [0.0; 3];
+        for (&(_, column), &r) in linearized.pattern().iter().zip(linearized.entries()) {
+            gradient[column as usize] = w[r as usize];
+        }
+        (w[linearized.values()[0] as usize], gradient[0], gradient[2])
+    };
+    // (x, k) → (x^k, ∂/∂x, ∂/∂k).
+    for (x, k, want) in [
+        (0.0, 3.5, (0.0, 0.0, 0.0)),
+        (0.0, 1.0, (0.0, 1.0, 0.0)),
+        (0.0, 0.5, (0.0, f64::INFINITY, 0.0)),
+        (2.0, 3.0, (8.0, 12.0, 8.0 * 2.0_f64.ln())),
+    ] {
+        let got = derivatives("x^k", x, k);
+        let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-15 * b.abs();
+        assert!(
+            close(got.0, want.0) && close(got.1, want.1) && close(got.2, want.2),
+            "x^k at x = {x}, k = {k}: {got:?}, want {want:?}"
+        );
+    }
+    // Below 0 the power of a variable exponent is not defined, nor are its derivatives.
+    let below = derivatives("x^k", -0.5, 2.5);
+    assert!(below.0.is_nan() && below.2.is_nan(), "{below:?}");
+}
+
 /// A parameter that enters only an output has sensitivities S = 0 for all t, which the
 /// integration does not carry: with such a column among those asked for, the others are the
 /// same, bit for bit, as without it (the same augmented system is integrated), and the
