@@ -363,6 +363,12 @@ fn table_agrees(args: &[&str], fit: &Value) {
             line("  nll          ")
                 .starts_with(&format!("  nll          {}", significant(nll, 10)))
         );
+        let error = fit["nll_error"].as_f64().expect("nll_error where nll is");
+        assert_eq!(
+            line("  nll          ").contains(&format!(" ± {error:.1e} (integration)")),
+            error > 0.0,
+            "{args:?}: nll_error {error} and the table's nll line disagree"
+        );
     }
 }
 

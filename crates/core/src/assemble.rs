@@ -173,6 +173,7 @@ impl Record<'_> {
                             let value = optimality(&finer, &fine, self.gtol).value;
                             if !certificate.exact_fit {
                                 certificate.error = (certificate.optimality - value).abs();
+                                certificate.cost_error = (lin.cost - fine.cost).abs();
                             }
                         }
                         Err(_) if fixed => certificate.error = f64::INFINITY,

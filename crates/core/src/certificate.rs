@@ -98,6 +98,9 @@ pub struct Certificate {
     /// The integration error of `optimality`, measured by integrating again at a tenth of
     /// the tolerance (0 where not measured: an exact fit, a point that failed).
     pub error: f64,
+    /// The integration error of ε at the point, |ε − ε′| with ε′ from the same integration
+    /// again at a tenth of the tolerance (0 where `error` is not measured).
+    pub cost_error: f64,
     /// The tolerance it was held to.
     pub gtol: f64,
     /// The model passes through the data (ε = 0 to rounding).
@@ -153,6 +156,7 @@ impl Certificate {
         Self {
             optimality: f64::INFINITY,
             error: 0.0,
+            cost_error: 0.0,
             gtol,
             exact_fit: false,
             active: vec![None; k],
@@ -287,6 +291,7 @@ pub fn certify<S: System>(
     Certificate {
         optimality: if exact_fit { 0.0 } else { value },
         error: 0.0,
+        cost_error: 0.0,
         gtol,
         exact_fit,
         active,
@@ -329,6 +334,7 @@ mod tests {
         Certificate {
             optimality: 1e-9,
             error: 0.0,
+            cost_error: 0.0,
             gtol: 1e-6,
             exact_fit: false,
             active,

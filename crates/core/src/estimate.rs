@@ -125,6 +125,12 @@ pub struct ScaleEstimate {
 }
 
 impl Estimate {
+    /// The integration error of [`nll`](Self::nll): half the certificate's `cost_error` (the
+    /// NLL is ε/2 plus terms that do not depend on the integration). None where `nll` is.
+    pub fn nll_error(&self) -> Option<f64> {
+        self.nll.map(|_| 0.5 * self.certificate.cost_error)
+    }
+
     /// Whether the fit converged: the reported point passes the certificate (a first-order
     /// optimality test that does not trust the method's stopping rule).
     pub fn converged(&self) -> bool {
@@ -269,6 +275,7 @@ impl Serialize for FitRecord<'_> {
         st.serialize_field("termination_code", &e.termination.code())?;
         st.serialize_field("optimality", &Num(e.certificate.optimality))?;
         st.serialize_field("optimality_error", &Num(e.certificate.error))?;
+        st.serialize_field("cost_error", &Num(e.certificate.cost_error))?;
         if let Some(moved) = e.certificate.scales {
             st.serialize_field("scale_optimality", &Num(moved))?;
         }
@@ -306,6 +313,7 @@ impl Serialize for FitRecord<'_> {
         }
         st.serialize_field("counts", &e.counts)?;
         st.serialize_field("nll", &e.nll.map(Num))?;
+        st.serialize_field("nll_error", &e.nll_error().map(Num))?;
         if let Some(prior) = e.prior {
             st.serialize_field("prior", &Num(prior))?;
         }

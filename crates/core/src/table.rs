@@ -118,8 +118,13 @@ impl Estimate {
                 }
                 _ => String::new(),
             };
+            // The integration's share of the figure, where the certificate measured it.
+            let error = match self.nll_error() {
+                Some(e) if e > 0.0 => format!(" ± {e:.1e} (integration)"),
+                _ => String::new(),
+            };
             out += &format!(
-                "  nll          {} (negative log-likelihood{criteria})\n",
+                "  nll          {}{error} (negative log-likelihood{criteria})\n",
                 significant(nll, 10)
             );
         }

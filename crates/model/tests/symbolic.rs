@@ -297,7 +297,7 @@ fn a_variable_power_of_zero_has_its_limits_as_derivatives() {
         (2.0, 3.0, (8.0, 12.0, 8.0 * 2.0_f64.ln())),
     ] {
         let got = derivatives("x^k", x, k);
-        let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-15 * b.abs();
+        let close = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a - b).abs() <= 1e-15 * b.abs();
         assert!(
             close(got.0, want.0) && close(got.1, want.1) && close(got.2, want.2),
             "x^k at x = {x}, k = {k}: {got:?}, want {want:?}"

@@ -517,6 +517,7 @@ mod tests {
             certificate: Certificate {
                 optimality: if converged { 0.0 } else { 0.5 },
                 error: 0.0,
+                cost_error: 0.0,
                 gtol: 1e-6,
                 exact_fit: false,
                 active: vec![None],
