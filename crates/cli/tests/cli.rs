@@ -466,9 +466,10 @@ fn quasilinearization_from_the_cli() {
 #[test]
 fn a_failure_after_the_start_exits_1_with_the_best_iterate() {
     // argmin's full-step Gauss–Newton on Boehm's STAT5 problem from its published optimum:
-    // its steps climb to a corner of the box where the model responds to no unknown (the
-    // gradient 2e-21), and the run stops there, stalled on a plateau; the report keeps the
-    // best iterate (the start) and its history.
+    // its steps climb to a corner of the box where the model responds to no unknown, and the
+    // run stops there: stalled on the plateau (the gradient 2e-21) or at the normal matrix
+    // it makes singular (k_phos), whichever the integration's last digits show first; the
+    // report keeps the best iterate (the start) and its history.
     let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/boehm/model.toml");
     let model = model.to_str().unwrap();
     let args = ["fit", "--model", model, "--method", "gauss-newton"];
@@ -476,7 +477,8 @@ fn a_failure_after_the_start_exits_1_with_the_best_iterate() {
     assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(json["converged"], false);
-    assert_eq!(json["termination_code"], "stalled_gradient");
+    let code = json["termination_code"].as_str().unwrap();
+    assert!(["stalled_gradient", "singular"].contains(&code), "{code}");
     let (best, last) =
         (json["best_iteration"].as_u64().unwrap(), json["iterations"].as_u64().unwrap());
     assert!(best < last, "best {best}, last {last}");

@@ -641,6 +641,13 @@ impl<S: System> Problem<S> {
 
 /// ∂slot/∂z of experiment `e` as a dense slots × k matrix: the slot Jacobian times the chain
 /// of each free unknown.
+/// Per slot (row of ∂slot/∂z), the most any free coordinate moves it, max_j |∂slot/∂z_j|:
+/// the factor of its sensitivity column in the Jacobian the fit uses (a log-scale unknown's
+/// value, 1 on a linear scale), which the integration's error control measures it in.
+fn coordinate_weights(dz: &DMatrix<f64>) -> Vec<f64> {
+    dz.row_iter().map(|row| row.iter().fold(0.0_f64, |m, x| m.max(x.abs()))).collect()
+}
+
 fn slot_matrix<S: System>(
     e: &Planned<S>,
     v: &[f64],
@@ -706,18 +713,22 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
     let n = y0.len();
     let slots: &[sysid_ode::Wrt] = if at.jacobian { &e.slots } else { &[] };
     let ns = slots.len();
-    // The states and (when asked) their sensitivities to the slots at every sample time.
-    let solved = if at.jacobian {
-        Solved::Sensitivities(ivp.solve_sensitivities(at.integrator, slots, times)?)
-    } else {
-        Solved::States(ivp.solve(at.integrator, times)?)
+    // ∂slot/∂z; the identity (slot j is free unknown j) leaves the gradients as they are.
+    let dz = at.jacobian.then(|| slot_matrix(e, at.v, at.free_index, at.chain, k));
+    // The states and (when asked) their sensitivities to the slots at every sample time,
+    // each column's error controlled in the fit's coordinates.
+    let solved = match &dz {
+        Some(d) => {
+            let weights = coordinate_weights(d);
+            let sol = ivp.weighted(&weights).solve_sensitivities(at.integrator, slots, times)?;
+            Solved::Sensitivities(sol)
+        }
+        None => Solved::States(ivp.solve(at.integrator, times)?),
     };
     let counts = match &solved {
         Solved::Sensitivities(sol) => sol.counts(),
         Solved::States(sol) => sol.counts(),
     };
-    // ∂slot/∂z; the identity (slot j is free unknown j) leaves the gradients as they are.
-    let dz = at.jacobian.then(|| slot_matrix(e, at.v, at.free_index, at.chain, k));
     let identity = dz.as_ref().is_some_and(|d| {
         d.nrows() == k
             && (0..k).all(|i| (0..k).all(|j| if i == j { true } else { d[(i, j)] == 0.0 }))

@@ -68,7 +68,7 @@ impl<R: Rhs> Stepper<R> for Dopri5 {
         h: f64,
     ) -> Result<f64, FactorError> {
         let n = w.x.len();
-        let [k1, k2, k3, k4, k5, k6, k7, _] = &mut w.k;
+        let [k1, k2, k3, k4, k5, k6, k7, e] = &mut w.k;
         // Slices of one length: the loops below run without bounds checks.
         let (x, tmp, xn) = (&w.x[..n], &mut w.tmp[..n], &mut w.x_new[..n]);
         for i in 0..n {
@@ -103,15 +103,12 @@ impl<R: Rhs> Stepper<R> for Dopri5 {
         }
         ev.f(t + h, xn, k7);
         let k7 = &k7[..n];
-        let (rtol, atol) = (ev.cfg.rtol, ev.cfg.atol);
-        let mut sum = 0.0;
+        let e = &mut e[..n];
         for i in 0..n {
-            let e =
+            e[i] =
                 h * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
-            let q = crate::control::scaled(e, atol + rtol * x[i].abs().max(xn[i].abs()));
-            sum += q * q;
         }
-        Ok((sum / n as f64).sqrt())
+        Ok(ev.error_norm(e, x, xn))
     }
 
     /// Hairer's form: the cubic Hermite interpolant through both ends and their slopes, plus

@@ -11,7 +11,7 @@ use crate::interpolant::{DenseSolution, Interpolant};
 use crate::jacobian::JacobianProducts;
 use crate::lu::FactorError;
 use crate::options::Integrator;
-use crate::rhs::Rhs;
+use crate::rhs::{Columns, Rhs};
 use crate::signal::Side;
 use crate::system::{Function, Observable, System};
 use crate::wrt::{Wrt, parameter_seeds, wrt_name};
@@ -28,6 +28,9 @@ pub struct Ivp<'a, S> {
     pub y0: &'a [f64],
     /// Parameter values α.
     pub p: &'a [f64],
+    /// Per sensitivity column of [`solve_sensitivities`](Self::solve_sensitivities), the
+    /// factor w_j of the units its error is controlled in (see [`weighted`](Self::weighted)).
+    weights: Option<&'a [f64]>,
 }
 
 /// The state at a list of times.
@@ -167,6 +170,8 @@ pub struct SensitivityRhs<'a, S> {
     implicit: Option<Box<AugmentedMatrix>>,
     /// The switches that move with a parameter ([`System::moving_switches`]).
     moving: Vec<(f64, usize, f64)>,
+    /// The atol factor of every column (see [`Ivp::weighted`]).
+    atol: Vec<f64>,
 }
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
@@ -193,7 +198,19 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
             jp: DMatrix::zeros(jn, jnp),
             implicit: None,
             moving: sys.moving_switches(p),
+            atol: vec![1.0; wrt.len()],
         }
+    }
+
+    /// Column j's error controlled as w_j·S_j: the atol factor 1/w_j (1 for a weight that
+    /// is 0 or not finite).
+    pub fn weighted(mut self, weights: &[f64]) -> Self {
+        assert_eq!(weights.len(), self.wrt.len(), "a weight per sensitivity column");
+        for (c, &w) in self.atol.iter_mut().zip(weights) {
+            let w = w.abs();
+            *c = if w > 0.0 && w.is_finite() { 1.0 / w } else { 1.0 };
+        }
+        self
     }
 
     /// The initial augmented state [y0; S(t0)] for these columns.
@@ -214,6 +231,10 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
 impl<S: System> Rhs for SensitivityRhs<'_, S> {
     fn dim(&self) -> usize {
         self.sys.signature().n_states() * (1 + self.wrt.len())
+    }
+
+    fn columns(&self) -> Option<Columns<'_>> {
+        Some(Columns { n: self.sys.signature().n_states(), atol: &self.atol })
     }
 
     // The sensitivities' right-hand side J·S + ∂g/∂α is as free of t as g is.
@@ -305,7 +326,18 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
 impl<'a, S: System> Ivp<'a, S> {
     /// The problem y' = g(t, y, α, u(t)), y(t0) = y0.
     pub fn new(system: &'a S, t0: f64, y0: &'a [f64], p: &'a [f64]) -> Self {
-        Self { system, t0, y0, p }
+        Self { system, t0, y0, p, weights: None }
+    }
+
+    /// Error control of the sensitivities in the units they are used in: column j of
+    /// [`solve_sensitivities`](Self::solve_sensitivities) is controlled as w_j·∂y/∂z_j, its
+    /// error scale atol/w_j + rtol·|∂y/∂z_j| (the states' is atol + rtol·|y|). For a fit in
+    /// ln p, w_j = p: the error of ∂y/∂ln p is what the fit sees, and controlling ∂y/∂p to
+    /// atol instead asks a column of a parameter of 1e7 for 1e7 times the accuracy the fit
+    /// uses. A weight that is 0 or not finite counts as 1. Without it (the default) every
+    /// column has w_j = 1.
+    pub fn weighted(self, weights: &'a [f64]) -> Self {
+        Self { weights: Some(weights), ..self }
     }
 
     fn check(&self) -> Result<(), OdeError> {
@@ -359,6 +391,10 @@ impl<'a, S: System> Ivp<'a, S> {
         let moving = moving_columns(self.system, self.p, wrt);
         let integrated: Vec<Wrt> = moving.iter().map(|&j| wrt[j]).collect();
         let mut rhs = SensitivityRhs::new(self.system, self.p, &integrated);
+        if let Some(weights) = self.weights {
+            let moving_weights: Vec<f64> = moving.iter().map(|&j| weights[j]).collect();
+            rhs = rhs.weighted(&moving_weights);
+        }
         let x0 = rhs.initial_state(self.y0);
         let mut data = vec![0.0; times.len() * x0.len()];
         let counts = sample(integrator, &mut rhs, self.t0, &x0, times, &self.stops(), &mut data)?;

@@ -4,6 +4,15 @@
 use crate::lu::FactorError;
 use crate::signal::Side;
 
+/// The sensitivity columns of an augmented state x = [y; S], for the error norm.
+#[derive(Clone, Copy, Debug)]
+pub struct Columns<'a> {
+    /// The number of states n: x = [y; S], S n × k row by row.
+    pub n: usize,
+    /// The factor of atol in each column's units (k of them).
+    pub atol: &'a [f64],
+}
+
 /// A first-order system dx/dt = f(t, x) on a flat state vector: the level the integrators
 /// work at. [`System`](crate::System)s are turned into an `Rhs` with or without their
 /// sensitivities by this crate; implement it directly for anything else.
@@ -20,6 +29,13 @@ pub trait Rhs {
     /// or other derived quantities): a blow-up is reported on a state when one grew.
     fn states(&self) -> usize {
         self.dim()
+    }
+    /// The sensitivity columns' layout, for their error control: x = [y; S] with n states
+    /// and S (n × k, row by row), and per column the factor c_j of atol in its units (see
+    /// [`Ivp::weighted`](crate::Ivp::weighted)). None (the default): every component is
+    /// measured alone, against atol + rtol·|x_i|.
+    fn columns(&self) -> Option<Columns<'_>> {
+        None
     }
     /// Whether f does not depend on t: a Rosenbrock step then takes ∂f/∂t = 0 without
     /// evaluating f again. Default: false (∂f/∂t is differenced).
