@@ -330,12 +330,12 @@ impl<'a, S: System> Ivp<'a, S> {
     }
 
     /// Error control of the sensitivities in the units they are used in: column j of
-    /// [`solve_sensitivities`](Self::solve_sensitivities) is controlled as w_j·∂y/∂z_j, its
-    /// error scale atol/w_j + rtol·|∂y/∂z_j| (the states' is atol + rtol·|y|). For a fit in
-    /// ln p, w_j = p: the error of ∂y/∂ln p is what the fit sees, and controlling ∂y/∂p to
-    /// atol instead asks a column of a parameter of 1e7 for 1e7 times the accuracy the fit
-    /// uses. A weight that is 0 or not finite counts as 1. Without it (the default) every
-    /// column has w_j = 1.
+    /// [`solve_sensitivities`](Self::solve_sensitivities), S_j = ∂y/∂(slot j), is controlled
+    /// as w_j·S_j, entry by entry to max(atol/w_j, rtol·m_j) + rtol·|S_ij| with m_j the
+    /// column's largest entry (the states to atol + rtol·|y_i|). For a fit in ln p, w_j = p:
+    /// the fit uses p·∂y/∂p, and its absolute floor is atol in those units. A weight that is
+    /// 0 or not finite counts as 1. Without it (the default) every column has w_j = 1; the
+    /// column-relative floor rtol·m_j holds either way.
     pub fn weighted(self, weights: &'a [f64]) -> Self {
         Self { weights: Some(weights), ..self }
     }
