@@ -11,7 +11,7 @@ use crate::interpolant::{DenseSolution, Interpolant};
 use crate::jacobian::JacobianProducts;
 use crate::lu::FactorError;
 use crate::options::Integrator;
-use crate::rhs::{Columns, Rhs};
+use crate::rhs::Rhs;
 use crate::signal::Side;
 use crate::system::{Function, Observable, System};
 use crate::wrt::{Wrt, parameter_seeds, wrt_name};
@@ -233,8 +233,8 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         self.sys.signature().n_states() * (1 + self.wrt.len())
     }
 
-    fn columns(&self) -> Option<Columns<'_>> {
-        Some(Columns { n: self.sys.signature().n_states(), atol: &self.atol })
+    fn column_atol(&self) -> Option<&[f64]> {
+        Some(&self.atol)
     }
 
     // The sensitivities' right-hand side J·S + ∂g/∂α is as free of t as g is.

@@ -106,7 +106,7 @@ pub use jacobian::JacobianProducts;
 pub use lu::{FactorError, Lu};
 pub use options::{Integrator, InvalidSetting, MIN_RTOL, Scheme};
 pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput};
-pub use rhs::{Columns, Rhs};
+pub use rhs::Rhs;
 pub use signal::{Inputs, Interpolation, Side, Signal};
 pub use sparse::SparseJacobian;
 pub use system::{Function, Observable, Scalar, Signature, System};

@@ -4,15 +4,6 @@
 use crate::lu::FactorError;
 use crate::signal::Side;
 
-/// The sensitivity columns of an augmented state x = [y; S], for the error norm.
-#[derive(Clone, Copy, Debug)]
-pub struct Columns<'a> {
-    /// The number of states n: x = [y; S], S n × k row by row.
-    pub n: usize,
-    /// The factor of atol in each column's units (k of them).
-    pub atol: &'a [f64],
-}
-
 /// A first-order system dx/dt = f(t, x) on a flat state vector: the level the integrators
 /// work at. [`System`](crate::System)s are turned into an `Rhs` with or without their
 /// sensitivities by this crate; implement it directly for anything else.
@@ -30,11 +21,11 @@ pub trait Rhs {
     fn states(&self) -> usize {
         self.dim()
     }
-    /// The sensitivity columns' layout, for their error control: x = [y; S] with n states
-    /// and S (n × k, row by row), and per column the factor c_j of atol in its units (see
-    /// [`Ivp::weighted`](crate::Ivp::weighted)). None (the default): every component is
-    /// measured alone, against atol + rtol·|x_i|.
-    fn columns(&self) -> Option<Columns<'_>> {
+    /// For an augmented state x = [y; S] (n states, S n × k row by row, so n = dim/(1 + k)):
+    /// per sensitivity column, the factor c_j of atol in its units (see
+    /// [`Ivp::weighted`](crate::Ivp::weighted)), for its error control. None (the default):
+    /// every component is measured alone, against atol + rtol·|x_i|.
+    fn column_atol(&self) -> Option<&[f64]> {
         None
     }
     /// Whether f does not depend on t: a Rosenbrock step then takes ∂f/∂t = 0 without

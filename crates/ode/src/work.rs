@@ -115,7 +115,7 @@ impl<R: Rhs> Evaluator<'_, R> {
 
     /// The error norm sqrt(mean((e_i / sk_i)²)), sk_i = atol + rtol·max(|x_i|, |x̂_i|).
     ///
-    /// For an augmented state [y; S] whose right-hand side gives its [columns](Rhs::columns),
+    /// For an augmented state [y; S] whose right-hand side gives its [columns](Rhs::column_atol),
     /// a sensitivity S_ij is measured as a component of its column, a vector:
     /// sk_ij = max(atol·c_j, rtol·m_j) + rtol·max(|S_ij|, |Ŝ_ij|), m_j the column's largest
     /// entry at either end of the step. An entry 1e-8 of its column's largest (a state the
@@ -126,20 +126,16 @@ impl<R: Rhs> Evaluator<'_, R> {
         let (rtol, atol) = (self.cfg.rtol, self.cfg.atol);
         let len = e.len();
         let scale = |i: usize, floor: f64| floor + rtol * x[i].abs().max(xn[i].abs());
+        // Without sensitivity columns every component is a state.
+        let columns = self.rhs.column_atol().unwrap_or(&[]);
+        let k = columns.len();
+        let n = len / (1 + k);
         let mut sum = 0.0;
-        let Some(columns) = self.rhs.columns() else {
-            for (i, &ei) in e.iter().enumerate() {
-                let q = crate::control::scaled(ei, scale(i, atol));
-                sum += q * q;
-            }
-            return (sum / len as f64).sqrt();
-        };
-        let (n, k) = (columns.n, columns.atol.len());
         for (i, &ei) in e[..n].iter().enumerate() {
             let q = crate::control::scaled(ei, scale(i, atol));
             sum += q * q;
         }
-        for (j, c) in columns.atol.iter().enumerate() {
+        for (j, c) in columns.iter().enumerate() {
             let mut largest = 0.0_f64;
             for i in 0..n {
                 let at = n + i * k + j;
