@@ -433,6 +433,27 @@ impl<S: System> Problem<S> {
             .collect()
     }
 
+    /// The noise scale of each row of [`residuals`](Self::residuals): its index in
+    /// [`scales`](Self::scales) for a sample whose σ is s·f with s a noise scale, None for any
+    /// other row (other samples, noise rows, priors).
+    pub fn scale_rows(&self) -> Vec<Option<usize>> {
+        let mut rows = Vec::with_capacity(self.n_residuals());
+        for e in &self.experiments {
+            for s in &e.sampled().series {
+                let g = match s.noise {
+                    PlannedNoise::Scale { unknown, .. } => {
+                        self.scales.iter().position(|&j| j == unknown)
+                    }
+                    _ => None,
+                };
+                rows.extend(std::iter::repeat_n(g, s.samples.len()));
+            }
+            rows.extend(std::iter::repeat_n(None, e.noise_rows()));
+        }
+        rows.extend(std::iter::repeat_n(None, self.n_priors()));
+        rows
+    }
+
     /// Each noise scale's value given the free unknowns at `values`: ŝ² = mean over its
     /// samples of ((T(h) − T(b))/f)², clamped to the scale's bounds. None where the model
     /// cannot be evaluated.
@@ -440,22 +461,12 @@ impl<S: System> Problem<S> {
         let z = self.unknowns.coordinates(values);
         let (r, _) = self.residuals(&z).ok()?;
         let mut sums = vec![(0.0, 0usize); self.scales.len()];
-        let mut row = 0;
-        for e in &self.experiments {
-            for s in &e.sampled().series {
-                if let PlannedNoise::Scale { unknown, .. } = s.noise
-                    && let Some(g) = self.scales.iter().position(|&j| j == unknown)
-                {
-                    // r = (T(h) − T(b))/(s f): (r s)² is the squared scaled residual.
-                    let scale = self.held[unknown];
-                    for i in row..row + s.samples.len() {
-                        sums[g].0 += (r[i] * scale).powi(2);
-                        sums[g].1 += 1;
-                    }
-                }
-                row += s.samples.len();
+        for (r, g) in r.iter().zip(self.scale_rows()) {
+            if let Some(g) = g {
+                // r = (T(h) − T(b))/(s f): (r s)² is the squared scaled residual.
+                sums[g].0 += (r * self.held[self.scales[g]]).powi(2);
+                sums[g].1 += 1;
             }
-            row += e.noise_rows();
         }
         let out: Vec<f64> = sums
             .iter()
