@@ -1,0 +1,55 @@
+"""A pyPESTO objective over a :class:`sysid.Problem`: pyPESTO's optimisers, profiles and
+samplers on sysid's integration and sensitivities.
+
+    import pypesto, pypesto.optimize
+    import sysid, sysid.pypesto
+    p = sysid.Problem.from_petab("Boehm_JProteomeRes2014.yaml")
+    problem = sysid.pypesto.problem(p)
+    result = pypesto.optimize.minimize(problem, n_starts=10)
+
+The objective is :meth:`sysid.Problem.objective` (the NLL plus the priors' term) on the
+parameter scale (ln of a log-scaled unknown's value), with its gradient and, as the Hessian,
+the Fisher information (:meth:`sysid.Problem.fisher`). pyPESTO is not a dependency of sysid:
+this module imports it when called.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def objective(p):
+    """A ``pypesto.Objective`` giving fun, grad and the Fisher information as hess, on the
+    parameter scale; the model is integrated once per point asked for."""
+    import pypesto
+
+    cache = {}
+
+    def at(x):
+        key = np.asarray(x, dtype=float).tobytes()
+        if key not in cache:
+            cache.clear()
+            value, gradient = p.objective_and_gradient(np.asarray(x, dtype=float), scale="parameter")
+            cache[key] = (value, gradient)
+        return cache[key]
+
+    return pypesto.Objective(
+        fun=lambda x: at(x)[0],
+        grad=lambda x: at(x)[1],
+        hess=lambda x: p.fisher(np.asarray(x, dtype=float), scale="parameter"),
+        x_names=list(p.parameter_names),
+    )
+
+
+def problem(p, **kwargs):
+    """A ``pypesto.Problem``: :func:`objective` with the bounds on the parameter scale;
+    ``kwargs`` go to ``pypesto.Problem`` (``x_guesses`` on the parameter scale, for example)."""
+    import pypesto
+
+    lo, hi = p.bounds
+    scales = p.scales
+    lb = np.array([np.log(v) if s == "log" else v for v, s in zip(lo, scales)])
+    ub = np.array([np.log(v) if s == "log" else v for v, s in zip(hi, scales)])
+    return pypesto.Problem(
+        objective=objective(p), lb=lb, ub=ub, x_names=list(p.parameter_names), **kwargs
+    )

@@ -1,0 +1,579 @@
+//! `sysid._sysid`: the compiled half of the `sysid` Python package (crates/python/python/sysid
+//! holds the rest, and the documentation a Python user reads).
+//!
+//! A [`Problem`] is a PEtab problem or a model file, imported and compiled once. Its objective,
+//! gradient, Fisher information, weighted residuals and Jacobian are evaluated at a point given
+//! on the linear scale (the parameters' values) or on sysid's parameter scale (ln of a value
+//! for a log-scaled unknown, the value itself otherwise), as numpy arrays. `fit` runs any
+//! method of the registry, from the problem's guess or from N starts, and returns the fit's
+//! JSON object of docs/json.md as a string, which the Python side wraps. The GIL is released
+//! while the model is integrated. Bad input raises `ValueError`; what the model or the method
+//! cannot do raises `sysid.SysidError`, with the command line's message.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use nalgebra::DMatrix;
+use numpy::ndarray::Array2;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1};
+use pyo3::create_exception;
+use pyo3::exceptions::{PyException, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use sysid_core::{Linearization, Problem, Unknown};
+use sysid_model::ModelSystem;
+use sysid_montecarlo::{MultistartOptions, Sampling};
+use sysid_registry::{Registry, Role, Settings};
+
+create_exception!(
+    _sysid,
+    SysidError,
+    PyException,
+    "What a model or a method cannot do: a model that cannot be integrated at the point asked \
+     for, a file that cannot be read, a start every method fails from."
+);
+
+fn sysid_error(message: impl std::fmt::Display) -> PyErr {
+    SysidError::new_err(message.to_string())
+}
+
+/// A numpy vector.
+type Array1<'py> = Bound<'py, PyArray1<f64>>;
+/// A numpy matrix.
+type Array2Py<'py> = Bound<'py, PyArray2<f64>>;
+
+/// The scale a point or a derivative is given on.
+#[derive(Clone, Copy, PartialEq)]
+enum Scale {
+    /// The parameters' values.
+    Linear,
+    /// sysid's coordinates: ln(value) for a log-scaled unknown, the value otherwise.
+    Parameter,
+}
+
+impl Scale {
+    fn parse(name: &str) -> PyResult<Self> {
+        match name {
+            "linear" => Ok(Self::Linear),
+            "parameter" => Ok(Self::Parameter),
+            _ => Err(PyValueError::new_err(format!(
+                "scale must be \"linear\" or \"parameter\", not {name:?}"
+            ))),
+        }
+    }
+}
+
+/// A parameter estimation problem: a PEtab problem or a model file with its data.
+#[pyclass(name = "Problem", module = "sysid._sysid", frozen)]
+struct PyProblem {
+    problem: Arc<Problem<ModelSystem>>,
+    name: String,
+}
+
+/// A point's evaluation: the problem with the noise scales at the point's, its linearization
+/// at the point's free unknowns, and ∂value/∂coordinate of every parameter (1 on a linear
+/// scale, the value on a log scale).
+struct Evaluated {
+    problem: Problem<ModelSystem>,
+    lin: Linearization,
+    chain: Vec<f64>,
+}
+
+impl PyProblem {
+    /// The parameters: the free unknowns, then the noise scales (which the fits set in closed
+    /// form, and which PEtab and pyPESTO count among the parameters).
+    fn parameters(&self) -> Vec<&Unknown> {
+        let declared = self.problem.declared();
+        let scales = self.problem.scales().iter().map(|&j| &declared[j]);
+        self.problem.unknowns().list().iter().chain(scales).collect()
+    }
+
+    /// The coordinates of the point `x` given on `scale`, checked.
+    fn coordinates(&self, x: &[f64], scale: Scale) -> PyResult<Vec<f64>> {
+        let unknowns = self.parameters();
+        if x.len() != unknowns.len() {
+            return Err(PyValueError::new_err(format!(
+                "x has {} entries; the problem has {} unknowns ({})",
+                x.len(),
+                unknowns.len(),
+                self.parameter_names().join(", ")
+            )));
+        }
+        for (u, &v) in unknowns.iter().zip(x) {
+            if !v.is_finite() {
+                return Err(PyValueError::new_err(format!("x[{}] = {v} is not finite", u.name)));
+            }
+            if scale == Scale::Linear && u.log && v <= 0.0 {
+                return Err(PyValueError::new_err(format!(
+                    "{} = {v}: a log-scaled unknown must be positive on the linear scale",
+                    u.name
+                )));
+            }
+        }
+        Ok(match scale {
+            Scale::Linear => unknowns.iter().zip(x).map(|(u, &v)| u.coordinate(v)).collect(),
+            Scale::Parameter => x.to_vec(),
+        })
+    }
+
+    /// The point's values on the linear scale.
+    fn values(&self, z: &[f64]) -> Vec<f64> {
+        self.parameters().iter().zip(z).map(|(u, &z)| u.value(z)).collect()
+    }
+
+    /// The evaluation at x (given on `scale`), the model integrated with its sensitivities
+    /// with the GIL released.
+    fn evaluate(&self, py: Python<'_>, x: &[f64], scale: Scale) -> PyResult<Evaluated> {
+        let z = self.coordinates(x, scale)?;
+        let k = self.problem.unknowns().len();
+        let values = self.values(&z);
+        let problem = self.problem.with_scales(&values[k..]);
+        let lin = py
+            .allow_threads(|| problem.residuals_and_jacobian(&z[..k]))
+            .map_err(|e| sysid_error(format!("the model cannot be integrated at x: {e}")))?;
+        let chain = self.parameters().iter().zip(&z).map(|(u, &z)| u.scale(z)).collect();
+        Ok(Evaluated { problem, lin, chain })
+    }
+}
+
+impl Evaluated {
+    fn rows(&self) -> &sysid_core::WeightedResiduals {
+        self.lin.residuals.as_ref().expect("discrete data have residual rows")
+    }
+
+    /// The negative log-likelihood.
+    fn nll(&self) -> PyResult<f64> {
+        self.problem.nll(&self.lin).ok_or_else(|| {
+            sysid_error("the problem's data are a continuous record: it has no likelihood")
+        })
+    }
+
+    /// The objective: the NLL plus the priors' term.
+    fn objective(&self) -> PyResult<f64> {
+        Ok(self.nll()? + self.problem.prior_nll(&self.lin).unwrap_or(0.0))
+    }
+
+    /// The gradient of the NLL (`priors` false) or of the objective, with respect to the
+    /// parameters on `scale`. A noise scale s of σ = s·f enters each of its rows as
+    /// ln σ + ½ r², r ∝ 1/s: ∂/∂s = (1 − r²)/s.
+    fn gradient(&self, priors: bool, scale: Scale) -> Vec<f64> {
+        let rows = self.rows();
+        let n = rows.r.len() - if priors { 0 } else { self.problem.n_priors() };
+        let mut g: Vec<f64> =
+            rows.jacobian.rows(0, n).tr_mul(&rows.r.rows(0, n)).iter().copied().collect();
+        let sigma = self.problem.scale_values();
+        let mut dscale = vec![0.0; sigma.len()];
+        for (r, s) in rows.r.iter().zip(self.problem.scale_rows()) {
+            if let Some(s) = s {
+                dscale[s] += (1.0 - r * r) / sigma[s];
+            }
+        }
+        let k = g.len();
+        // In coordinates: ∂/∂z = ∂/∂value · ∂value/∂z.
+        g.extend(dscale.iter().zip(&self.chain[k..]).map(|(d, c)| d * c));
+        match scale {
+            Scale::Parameter => g,
+            Scale::Linear => g.iter().zip(&self.chain).map(|(g, c)| g / c).collect(),
+        }
+    }
+
+    /// The Fisher information of the objective on `scale`: JᵀJ (or the exact information
+    /// where σ depends on the unknowns) for the free unknowns, 2·n_s/s² for a noise scale s
+    /// of n_s samples (a normal's information about its σ), 0 between the two.
+    fn fisher(&self, scale: Scale) -> DMatrix<f64> {
+        let k = self.lin.normal.nrows();
+        let sigma = self.problem.scale_values();
+        let mut f = DMatrix::zeros(k + sigma.len(), k + sigma.len());
+        f.view_mut((0, 0), (k, k)).copy_from(&self.lin.normal);
+        for (g, n) in self.problem.scale_samples().iter().enumerate() {
+            let c = self.chain[k + g];
+            f[(k + g, k + g)] = 2.0 * *n as f64 * (c / sigma[g]).powi(2);
+        }
+        if scale == Scale::Linear {
+            for i in 0..f.nrows() {
+                for j in 0..f.ncols() {
+                    f[(i, j)] /= self.chain[i] * self.chain[j];
+                }
+            }
+        }
+        f
+    }
+
+    /// The weighted residuals and their Jacobian on `scale`: ∂r/∂s = −r/s for a noise
+    /// scale's rows.
+    fn jacobian(&self, scale: Scale) -> DMatrix<f64> {
+        let rows = self.rows();
+        let k = rows.jacobian.ncols();
+        let sigma = self.problem.scale_values();
+        let mut j = DMatrix::zeros(rows.r.len(), k + sigma.len());
+        j.view_mut((0, 0), (rows.r.len(), k)).copy_from(&rows.jacobian);
+        for (i, s) in self.problem.scale_rows().into_iter().enumerate() {
+            if let Some(s) = s {
+                j[(i, k + s)] = -rows.r[i] / sigma[s] * self.chain[k + s];
+            }
+        }
+        if scale == Scale::Linear {
+            for (col, c) in self.chain.iter().enumerate() {
+                j.column_mut(col).unscale_mut(*c);
+            }
+        }
+        j
+    }
+}
+
+fn matrix<'py>(py: Python<'py>, m: &DMatrix<f64>) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_fn((m.nrows(), m.ncols()), |(i, j)| m[(i, j)]).into_pyarray(py)
+}
+
+#[pymethods]
+impl PyProblem {
+    /// Imports a PEtab problem from its YAML file.
+    #[staticmethod]
+    fn from_petab(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let model = py
+            .allow_threads(|| sysid_petab::import(&path))
+            .map_err(|e| sysid_error(format!("{}: {e}", path.display())))?
+            .model;
+        let problem = model.problem(None).map_err(sysid_error)?;
+        Ok(Self { problem: Arc::new(problem), name: path.display().to_string() })
+    }
+
+    /// Reads a model file (TOML), with its data from `data` (a CSV file) or from the file's
+    /// own `[data]` table.
+    #[staticmethod]
+    #[pyo3(signature = (path, data=None))]
+    fn from_model(py: Python<'_>, path: PathBuf, data: Option<PathBuf>) -> PyResult<Self> {
+        let model = py.allow_threads(|| sysid_model::Model::load(&path)).map_err(sysid_error)?;
+        let problem = model.problem(data.as_deref()).map_err(sysid_error)?;
+        Ok(Self { problem: Arc::new(problem), name: path.display().to_string() })
+    }
+
+    /// The same problem integrated with other tolerances or another scheme.
+    #[pyo3(signature = (rtol=None, atol=None, scheme=None))]
+    fn with_integrator(
+        &self,
+        rtol: Option<f64>,
+        atol: Option<f64>,
+        scheme: Option<&str>,
+    ) -> PyResult<Self> {
+        let mut integrator = *self.problem.integrator();
+        if let Some(rtol) = rtol {
+            integrator.rtol = rtol;
+        }
+        if let Some(atol) = atol {
+            integrator.atol = atol;
+        }
+        if let Some(scheme) = scheme {
+            integrator.scheme =
+                serde_json::from_value(serde_json::Value::from(scheme)).map_err(|_| {
+                    PyValueError::new_err(format!(
+                        "unknown scheme {scheme:?} (schemes: dopri5, rk4, rodas4, rodas5p, auto)"
+                    ))
+                })?;
+        }
+        integrator.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let problem = (*self.problem)
+            .clone()
+            .with_integrator(integrator)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        Ok(Self { problem: Arc::new(problem), name: self.name.clone() })
+    }
+
+    /// The file the problem was read from.
+    #[getter]
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The parameters' names, in the order of every array: the unknowns, then the noise
+    /// scales.
+    #[getter]
+    fn parameter_names(&self) -> Vec<String> {
+        self.parameters().iter().map(|u| u.name.clone()).collect()
+    }
+
+    /// The parameters' starting values (PEtab's nominal values), on the linear scale.
+    #[getter]
+    fn nominal<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        self.parameters().iter().map(|u| u.guess).collect::<Vec<_>>().into_pyarray(py)
+    }
+
+    /// (lower, upper) on the linear scale; ±inf where there is no bound.
+    #[getter]
+    fn bounds<'py>(&self, py: Python<'py>) -> (Array1<'py>, Array1<'py>) {
+        let list = self.parameters();
+        let lo: Vec<f64> = list.iter().map(|u| u.min.unwrap_or(f64::NEG_INFINITY)).collect();
+        let hi: Vec<f64> = list.iter().map(|u| u.max.unwrap_or(f64::INFINITY)).collect();
+        (lo.into_pyarray(py), hi.into_pyarray(py))
+    }
+
+    /// Each parameter's scale: "log" (estimated as ln of its value; PEtab's log and log10
+    /// both) or "lin".
+    #[getter]
+    fn scales(&self) -> Vec<&'static str> {
+        self.parameters().iter().map(|u| if u.log { "log" } else { "lin" }).collect()
+    }
+
+    /// The names of the experiments (PEtab's simulation conditions), in order.
+    #[getter]
+    fn experiments(&self) -> Vec<String> {
+        self.problem.experiments().iter().map(|e| e.name().to_string()).collect()
+    }
+
+    /// The point `x` on the parameter scale.
+    fn to_parameter_scale<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        Ok(self.coordinates(x.as_slice()?, Scale::Linear)?.into_pyarray(py))
+    }
+
+    /// The point `z` (on the parameter scale) on the linear scale.
+    fn to_linear_scale<'py>(
+        &self,
+        py: Python<'py>,
+        z: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let z = self.coordinates(z.as_slice()?, Scale::Parameter)?;
+        Ok(self.values(&z).into_pyarray(py))
+    }
+
+    /// The negative log-likelihood at x (priors excluded, as the fit JSON's `nll`).
+    #[pyo3(signature = (x, scale="linear"))]
+    fn nll(&self, py: Python<'_>, x: PyReadonlyArray1<'_, f64>, scale: &str) -> PyResult<f64> {
+        self.evaluate(py, x.as_slice()?, Scale::parse(scale)?)?.nll()
+    }
+
+    /// The negative log-likelihood at x and its gradient on `scale`.
+    #[pyo3(signature = (x, scale="linear"))]
+    fn nll_and_gradient<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray1<'py, f64>,
+        scale: &str,
+    ) -> PyResult<(f64, Bound<'py, PyArray1<f64>>)> {
+        let scale = Scale::parse(scale)?;
+        let e = self.evaluate(py, x.as_slice()?, scale)?;
+        Ok((e.nll()?, e.gradient(false, scale).into_pyarray(py)))
+    }
+
+    /// The objective the fits minimise at x: the NLL plus the priors' negative log-density
+    /// where the problem has priors (what pyPESTO minimises), the NLL otherwise.
+    #[pyo3(signature = (x, scale="linear"))]
+    fn objective(
+        &self,
+        py: Python<'_>,
+        x: PyReadonlyArray1<'_, f64>,
+        scale: &str,
+    ) -> PyResult<f64> {
+        self.evaluate(py, x.as_slice()?, Scale::parse(scale)?)?.objective()
+    }
+
+    /// The objective and its gradient on `scale`.
+    #[pyo3(signature = (x, scale="linear"))]
+    fn objective_and_gradient<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray1<'py, f64>,
+        scale: &str,
+    ) -> PyResult<(f64, Bound<'py, PyArray1<f64>>)> {
+        let scale = Scale::parse(scale)?;
+        let e = self.evaluate(py, x.as_slice()?, scale)?;
+        Ok((e.objective()?, e.gradient(true, scale).into_pyarray(py)))
+    }
+
+    /// The Fisher information of the objective at x on `scale`: the Gauss–Newton
+    /// approximation of its Hessian (JᵀJ of the weighted residuals, or the exact Fisher
+    /// information where σ depends on the unknowns; the priors' rows included), with each
+    /// noise scale's own information 2·n/s².
+    #[pyo3(signature = (x, scale="linear"))]
+    fn fisher<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray1<'py, f64>,
+        scale: &str,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let scale = Scale::parse(scale)?;
+        Ok(matrix(py, &self.evaluate(py, x.as_slice()?, scale)?.fisher(scale)))
+    }
+
+    /// The weighted residuals r and their Jacobian ∂r/∂x on `scale`: a row per measurement,
+    /// then a row per measurement whose σ is a function of the unknowns, then a row per
+    /// prior. ½‖r‖² is the objective less terms that depend on the noise scales and σ
+    /// functions alone (constant where there are none).
+    #[pyo3(signature = (x, scale="linear"))]
+    fn residuals_and_jacobian<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray1<'py, f64>,
+        scale: &str,
+    ) -> PyResult<(Array1<'py>, Array2Py<'py>)> {
+        let scale = Scale::parse(scale)?;
+        let e = self.evaluate(py, x.as_slice()?, scale)?;
+        let r: Vec<f64> = e.rows().r.iter().copied().collect();
+        Ok((r.into_pyarray(py), matrix(py, &e.jacobian(scale))))
+    }
+
+    /// Every state of experiment `experiment` (an index or a name) at `times`, at x (the
+    /// nominal values when None): a dict of state name to array.
+    #[pyo3(signature = (times, x=None, experiment=None, scale="linear"))]
+    fn simulate<'py>(
+        &self,
+        py: Python<'py>,
+        times: PyReadonlyArray1<'py, f64>,
+        x: Option<PyReadonlyArray1<'py, f64>>,
+        experiment: Option<Bound<'py, PyAny>>,
+        scale: &str,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let scale = Scale::parse(scale)?;
+        let z = match &x {
+            Some(x) => self.coordinates(x.as_slice()?, scale)?,
+            None => self.parameters().iter().map(|u| u.coordinate(u.guess)).collect(),
+        };
+        let k = self.problem.unknowns().len();
+        let values = self.problem.unknowns().values(&z[..k]);
+        let names = self.experiments();
+        let index = match experiment {
+            None => 0,
+            Some(e) => match e.extract::<usize>() {
+                Ok(i) if i < names.len() => i,
+                Ok(i) => {
+                    return Err(PyValueError::new_err(format!(
+                        "experiment {i}: the problem has {} experiments",
+                        names.len()
+                    )));
+                }
+                Err(_) => {
+                    let name: String = e.extract()?;
+                    names.iter().position(|n| *n == name).ok_or_else(|| {
+                        PyValueError::new_err(format!(
+                            "no experiment {name:?} (experiments: {})",
+                            names.join(", ")
+                        ))
+                    })?
+                }
+            },
+        };
+        let times = times.as_slice()?.to_vec();
+        if let Some(t) = times.iter().find(|t| !t.is_finite()) {
+            return Err(PyValueError::new_err(format!("times: {t} is not finite")));
+        }
+        if times.windows(2).any(|w| w[1] < w[0]) {
+            return Err(PyValueError::new_err("times must be in increasing order"));
+        }
+        let problem = &self.problem;
+        let states = py
+            .allow_threads(|| problem.trajectory(index, &values, None, &times))
+            .map_err(|e| sysid_error(format!("the model cannot be integrated at x: {e}")))?;
+        let out = PyDict::new(py);
+        for s in states {
+            out.set_item(s.name, s.values.into_pyarray(py))?;
+        }
+        Ok(out)
+    }
+
+    /// Fits the problem: a `sysid.FitResult` over the fit's JSON object (docs/json.md).
+    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, fix=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn fit<'py>(
+        &self,
+        py: Python<'py>,
+        method: Option<&str>,
+        starts: Option<usize>,
+        seed: u64,
+        sampling: &str,
+        include_nominal: bool,
+        max_iterations: Option<usize>,
+        gtol: Option<f64>,
+        max_integrations: Option<u64>,
+        fix: Option<std::collections::BTreeMap<String, f64>>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let name = method.unwrap_or(Role::Default.method());
+        let mut settings = Settings::default();
+        if let Some(n) = max_iterations {
+            settings.driver.max_iterations = n;
+        }
+        settings.driver.gtol = gtol;
+        settings.driver.max_integrations = max_integrations;
+        settings.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let method = Registry::standard()
+            .build(name, &settings)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let fix: Vec<(String, f64)> = fix.unwrap_or_default().into_iter().collect();
+        let problem = match fix.is_empty() {
+            false => Arc::new(
+                (*self.problem)
+                    .clone()
+                    .with_fixed(&fix)
+                    .map_err(|e| PyValueError::new_err(format!("fix: {e}")))?,
+            ),
+            true => Arc::clone(&self.problem),
+        };
+        let options = match starts {
+            None => None,
+            Some(n) => {
+                let sampling = match sampling {
+                    "uniform" => Sampling::Uniform,
+                    "latin-hypercube" => Sampling::LatinHypercube,
+                    _ => {
+                        return Err(PyValueError::new_err(format!(
+                            "sampling must be \"uniform\" or \"latin-hypercube\", not {sampling:?}"
+                        )));
+                    }
+                };
+                let options = MultistartOptions {
+                    starts: n,
+                    seed,
+                    sampling,
+                    guess: include_nominal,
+                    ..MultistartOptions::default()
+                };
+                options.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
+                Some(options)
+            }
+        };
+        let outcome = py.allow_threads(|| match &options {
+            None => method.fit(&problem).map(|e| (e, None)),
+            Some(options) => sysid_montecarlo::multistart(&*method, &problem, options)
+                .map(|run| (run.best, Some(run.starts))),
+        });
+        let (estimate, starts) = outcome.map_err(sysid_error)?;
+        if estimate.start_failed() {
+            return Err(sysid_error(format!("the start cannot be used: {}", estimate.termination)));
+        }
+        let mut value =
+            serde_json::to_value(estimate.record(&self.name)).expect("a fit record serialises");
+        if let (Some(s), Some(map)) = (starts, value.as_object_mut()) {
+            map.insert("starts".into(), serde_json::to_value(s).expect("starts serialise"));
+        }
+        py.import("sysid._result")?.getattr("FitResult")?.call1((value.to_string(),))
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "sysid.Problem({:?}: {} unknowns, {} experiments)",
+            self.name,
+            self.problem.unknowns().len(),
+            self.problem.experiments().len()
+        )
+    }
+}
+
+/// The method names `fit` accepts, in the registry's order, the default first.
+#[pyfunction]
+fn methods() -> Vec<&'static str> {
+    let mut names = Registry::<ModelSystem>::standard().names();
+    let default = Role::Default.method();
+    names.retain(|n| *n != default);
+    names.insert(0, default);
+    names
+}
+
+#[pymodule]
+fn _sysid(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyProblem>()?;
+    m.add("SysidError", m.py().get_type::<SysidError>())?;
+    m.add_function(wrap_pyfunction!(methods, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,236 @@
+"""Tests of the sysid Python package, run against the installed package:
+
+    pip install ./crates/python scipy pypesto
+    python -m unittest discover -s crates/python/tests -v
+
+Every number is checked against an independent reference: AMICI's NLL at nominal, central
+differences at tight tolerances, the closed form of a falling body, the command line's fit.
+"""
+
+import csv
+import json
+import logging
+import os
+import subprocess
+import unittest
+
+import numpy as np
+
+import sysid
+
+ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
+PETAB = os.path.join(ROOT, "tests", "data", "petab")
+BOEHM = os.path.join(PETAB, "Boehm_JProteomeRes2014", "Boehm_JProteomeRes2014.yaml")
+FALLING = os.path.join(ROOT, "examples", "falling-body", "model.toml")
+
+
+def reference_nll(problem):
+    """AMICI's NLL at nominal (tests/data/petab/references.tsv)."""
+    with open(os.path.join(PETAB, "references.tsv")) as f:
+        for row in csv.DictReader(f, delimiter="\t"):
+            if row["problem"] == problem:
+                return float(row["nll"])
+    raise KeyError(problem)
+
+
+class Boehm(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.p = sysid.Problem.from_petab(BOEHM)
+        # Central differences need an integration whose error is far below h²·f‴.
+        cls.tight = cls.p.with_integrator(rtol=1e-12, atol=1e-14)
+        lo, hi = cls.p.bounds
+        z = cls.p.to_parameter_scale(cls.p.nominal) + 0.1
+        cls.z = np.clip(z, np.log(lo) + 0.2, np.log(hi) - 0.2)
+
+    def test_the_parameters_are_petabs_estimated_ones(self):
+        # The six rates and the three noise scales (which sysid's fits set in closed form).
+        self.assertEqual(len(self.p.parameter_names), 9)
+        self.assertEqual(self.p.parameter_names[-3:], ["sd_pSTAT5A_rel", "sd_pSTAT5B_rel", "sd_rSTAT5A_rel"])
+        self.assertEqual(self.p.scales, ["log"] * 9)
+        lo, hi = self.p.bounds
+        np.testing.assert_array_equal(lo, np.full(9, 1e-5))
+        np.testing.assert_array_equal(hi, np.full(9, 1e5))
+
+    def test_the_nll_at_nominal_is_amicis(self):
+        # AMICI checks its own value to 1e-3.
+        nll = self.p.nll(self.p.nominal)
+        self.assertAlmostEqual(nll, reference_nll("Boehm_JProteomeRes2014"), delta=1e-3)
+        # Boehm has no priors: the objective is the NLL.
+        self.assertEqual(self.p.objective(self.p.nominal), nll)
+
+    def test_the_gradient_is_the_central_differences(self):
+        value, gradient = self.tight.objective_and_gradient(self.z, scale="parameter")
+        h = 1e-4
+        fd = np.array(
+            [
+                (self.tight.objective(self.z + h * e, scale="parameter") - self.tight.objective(self.z - h * e, scale="parameter")) / (2 * h)
+                for e in np.eye(len(self.z))
+            ]
+        )
+        # h² f‴/6 and the integration's 1e-12 relative error over h: about 1e-7 relative.
+        np.testing.assert_allclose(gradient, fd, rtol=2e-6, atol=1e-6 * np.abs(gradient).max())
+        self.assertEqual(value, self.tight.objective(self.z, scale="parameter"))
+        # Without priors the NLL's gradient is the objective's.
+        np.testing.assert_array_equal(self.tight.nll_and_gradient(self.z, scale="parameter")[1], gradient)
+
+    def test_the_linear_scale_is_the_chain_rule(self):
+        x = self.p.to_linear_scale(self.z)
+        np.testing.assert_allclose(np.log(x), self.z, rtol=1e-15)
+        _, g_parameter = self.p.objective_and_gradient(self.z, scale="parameter")
+        _, g_linear = self.p.objective_and_gradient(x)
+        # ∂f/∂ln x = x ∂f/∂x.
+        np.testing.assert_allclose(g_linear * x, g_parameter, rtol=1e-12)
+        f_parameter = self.p.fisher(self.z, scale="parameter")
+        f_linear = self.p.fisher(x)
+        np.testing.assert_allclose(f_linear * np.outer(x, x), f_parameter, rtol=1e-12)
+
+    def test_the_fisher_information_is_jtj_and_the_scales_own(self):
+        r, jac = self.p.residuals_and_jacobian(self.z, scale="parameter")
+        fisher = self.p.fisher(self.z, scale="parameter")
+        k = 6
+        np.testing.assert_allclose(fisher[:k, :k], jac[:, :k].T @ jac[:, :k], rtol=1e-12)
+        # A normal's information about ln σ is 2 per sample: 16 samples per noise scale.
+        np.testing.assert_allclose(np.diag(fisher)[k:], [32.0, 32.0, 32.0], rtol=1e-15)
+        self.assertTrue(np.all(fisher[:k, k:] == 0.0))
+        # The residuals' Jacobian with respect to ln s is −r on the scale's rows.
+        self.assertEqual(jac.shape, (len(r), 9))
+        for col in range(k, 9):
+            rows = jac[:, col] != 0.0
+            self.assertEqual(rows.sum(), 16)
+            np.testing.assert_allclose(jac[rows, col], -r[rows], rtol=1e-15)
+
+    def test_the_fit_is_the_command_lines(self):
+        fit = self.p.fit()
+        self.assertTrue(fit.converged, fit.termination)
+        # The same fit from the command line (`cargo test` builds it; CI runs these tests
+        # after it): the same numbers, up to the rounding of another build profile.
+        target = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
+        clis = [os.path.join(target, d, "sysid") for d in ("release", "debug")]
+        cli = next((c for c in clis if os.path.exists(c)), None)
+        if cli is None:
+            self.fail(f"no sysid binary at {' or '.join(clis)}: run `cargo build` first")
+        out = subprocess.run([cli, "fit", "--petab", BOEHM, "--format", "json"], capture_output=True, text=True, check=True)
+        record = json.loads(out.stdout)
+        self.assertAlmostEqual(fit.nll, record["nll"], delta=1e-9)
+        self.assertEqual(list(fit.estimates), list(record["estimates"]))
+        for name, value in record["estimates"].items():
+            self.assertAlmostEqual(fit.estimates[name], value, delta=1e-6 * abs(value))
+        # tests/data/petab/best_known.tsv: 138.221976.
+        self.assertAlmostEqual(fit.nll, 138.221976, delta=1e-6)
+        self.assertEqual(fit.parameter_names, self.p.parameter_names)
+        # The fitted point's objective, evaluated afresh, is the fit's.
+        self.assertAlmostEqual(self.p.objective(fit.x), fit.objective, delta=1e-6)
+
+    def test_a_multistart_reports_its_waterfall(self):
+        fit = self.p.fit(starts=4, seed=3, max_iterations=200)
+        w = fit.waterfall
+        self.assertEqual(len(w["objective"]), 4)
+        self.assertEqual(sorted(w["start"]), [0, 1, 2, 3])
+        self.assertTrue(np.all(np.diff(w["objective"]) >= 0))
+        self.assertEqual(fit.starts["count"], 4)
+        self.assertEqual(fit.starts["converged"], int(w["converged"].sum()))
+        self.assertEqual(fit.nll + fit.prior, w["objective"][0])
+
+    def test_scipy_minimises_it(self):
+        from scipy.optimize import minimize
+
+        lo, hi = self.p.bounds
+        result = minimize(
+            self.p.objective_and_gradient,
+            self.z,
+            args=("parameter",),
+            jac=True,
+            method="L-BFGS-B",
+            bounds=list(zip(np.log(lo), np.log(hi))),
+            options={"maxiter": 2000},
+        )
+        # L-BFGS-B's own stopping rule: within 1e-3 of the certified optimum (138.221976).
+        self.assertLess(result.fun, 138.221976 + 1e-3)
+
+    def test_pypesto_and_fides_minimise_it(self):
+        # CI installs both (.ci/run); a machine without them skips, saying so.
+        try:
+            import fides  # noqa: F401
+            import pypesto.optimize
+        except ImportError as e:
+            self.skipTest(f"{e.name} is not installed (pip install pypesto fides)")
+        import sysid.pypesto
+
+        problem = sysid.pypesto.problem(self.p, x_guesses=[self.z])
+        self.assertEqual(problem.x_names, self.p.parameter_names)
+        fun, grad, hess = problem.objective(self.z, sensi_orders=(0, 1, 2))
+        self.assertEqual(fun, self.p.objective(self.z, scale="parameter"))
+        np.testing.assert_array_equal(hess, self.p.fisher(self.z, scale="parameter"))
+        # fides with the Fisher information as its Hessian (no quasi-Newton update): the
+        # field's trust-region optimiser on sysid's objective, gradient and FIM.
+        result = pypesto.optimize.minimize(
+            problem,
+            optimizer=pypesto.optimize.FidesOptimizer(hessian_update=None, verbose=logging.WARNING),
+            n_starts=1,
+            progress_bar=False,
+        )
+        best = result.optimize_result[0]
+        np.testing.assert_array_equal(best.x0, self.z)
+        self.assertLess(best.fval, 138.221976 + 1e-3)
+
+    def test_bad_input_raises_with_the_reason(self):
+        with self.assertRaisesRegex(ValueError, "x has 3 entries; the problem has 9 unknowns"):
+            self.p.nll(np.ones(3))
+        with self.assertRaisesRegex(ValueError, "k_phos = -1.*must be positive"):
+            x = self.p.nominal.copy()
+            x[5] = -1.0
+            self.p.nll(x)
+        with self.assertRaisesRegex(ValueError, 'scale must be "linear" or "parameter"'):
+            self.p.nll(self.p.nominal, scale="log10")
+        with self.assertRaisesRegex(ValueError, "unknown method|no method"):
+            self.p.fit(method="newton")
+        with self.assertRaisesRegex(sysid.SysidError, "nowhere.yaml"):
+            sysid.Problem.from_petab(os.path.join(PETAB, "nowhere.yaml"))
+
+
+class Readme(unittest.TestCase):
+    def test_the_readmes_example_runs_as_written(self):
+        with open(os.path.join(ROOT, "README.md")) as f:
+            text = f.read()
+        blocks = [b.split("```", 1)[0] for b in text.split("```python\n")[1:]]
+        self.assertEqual(len(blocks), 1, "one Python example in the README")
+        self.assertLessEqual(len(blocks[0].strip().splitlines()), 12)
+        cwd = os.getcwd()
+        try:
+            os.chdir(ROOT)
+            exec(compile(blocks[0], "README.md", "exec"), {})
+        finally:
+            os.chdir(cwd)
+
+
+class FallingBody(unittest.TestCase):
+    """Goodman's falling body (examples/falling-body): y = y0 + v0 t + g t²/2."""
+
+    def test_the_fit_is_the_papers(self):
+        p = sysid.Problem.from_model(FALLING)
+        self.assertEqual(p.parameter_names, ["y", "v", "g"])
+        self.assertEqual(p.scales, ["lin"] * 3)
+        fit = p.fit(method="goodman")
+        self.assertTrue(fit.converged)
+        np.testing.assert_allclose(fit.x, [-0.25, -0.25, 32.5], rtol=1e-10)
+
+    def test_simulate_is_the_closed_form(self):
+        p = sysid.Problem.from_model(FALLING)
+        t = np.linspace(0.0, 3.0, 7)
+        x = np.array([-0.25, -0.25, 32.5])
+        states = p.simulate(t, x)
+        self.assertEqual(list(states), ["y", "v"])
+        np.testing.assert_allclose(states["y"], -0.25 - 0.25 * t + 16.25 * t**2, rtol=1e-8)
+        np.testing.assert_allclose(states["v"], -0.25 + 32.5 * t, rtol=1e-8)
+
+    def test_the_residuals_jacobian_is_the_closed_forms(self):
+        # r = y(t) − b at t = 0, 1, 2, 3: ∂r/∂(y0, v0, g) = (1, t, t²/2).
+        p = sysid.Problem.from_model(FALLING)
+        _, jac = p.residuals_and_jacobian(p.nominal)
+        t = np.arange(4.0)
+        np.testing.assert_allclose(jac, np.column_stack([np.ones(4), t, t**2 / 2]), atol=1e-9)
+
+
+if __name__ == "__main__":
+    unittest.main()
