@@ -1,6 +1,7 @@
 //! `sysid compare`: every chosen method on the same data from the same start.
 
 use clap::Args;
+use sysid_core::format::significant;
 use sysid_core::{Compared, Estimate, compact, compact_header, comparison};
 use sysid_montecarlo::multistart::Starts;
 use sysid_registry::ENTRIES;
@@ -24,7 +25,8 @@ pub struct CompareArgs {
     #[arg(long, value_name = "A,B,C")]
     methods: Option<String>,
     /// Per system, a table with each method's estimates next to the truth or reference
-    /// answer, its termination and its multistart, instead of one line per method.
+    /// answer, its termination and its multistart, instead of one line per method (one
+    /// system) or the matrix of systems and methods (several).
     #[arg(long)]
     verbose: bool,
     /// Output format: tables, or a JSON list of fit objects (one per method, converged or
@@ -68,6 +70,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     let starts = args.starts.options()?;
     let mut json = Vec::new();
     let mut tables = Vec::new();
+    let mut summaries = Vec::new();
     for source in &sources {
         let (problem, context) = problem(source, &args.integrator, &args.options)?;
         let mut rows = Vec::with_capacity(methods.len());
@@ -88,13 +91,105 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
             }),
         }));
         tables.push(text(&problem, &context, &rows, args.verbose));
+        summaries.push(Summary { system: context.name, rows });
     }
     match args.format {
         Format::Json => emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?,
         Format::Table if args.verbose => emit(&tables.join("\n"))?,
+        Format::Table if summaries.len() > 1 => emit(&matrix(&methods, &summaries))?,
         Format::Table => emit(&(compact_header() + &tables.concat()))?,
     }
     Ok(Outcome::Success)
+}
+
+/// One system's outcomes.
+struct Summary {
+    system: String,
+    rows: Vec<Row>,
+}
+
+/// Two costs of converged fits within this relative distance are the same minimum.
+const SAME_MINIMUM: f64 = 1e-6;
+
+/// Several systems at a glance: a row per method, a column per system (numbered, named
+/// below with the least cost and how many methods reached it), each cell ✓ and the
+/// iterations of a converged fit, ✗ and the iterations of one that did not converge, ! for a
+/// method that refused the problem; then every fit that did not converge, with why.
+fn matrix(methods: &[String], systems: &[Summary]) -> String {
+    let width = methods.iter().map(String::len).max().unwrap_or(6).max(6);
+    let mut out = format!(
+        "{} methods on {} systems, each from the system's default start.\n✓ n: converged (the \
+         certificate holds) after n iterations; ✗ n: did not; !: refused the problem.\n\
+         `--verbose` prints every fit in full, `--format json` as JSON.\n\n{:width$}",
+        methods.len(),
+        systems.len(),
+        "",
+    );
+    for j in 1..=systems.len() {
+        out += &format!(" {j:>5}");
+    }
+    out.push('\n');
+    for (i, method) in methods.iter().enumerate() {
+        out += &format!("{method:width$}");
+        for s in systems {
+            let cell = match &s.rows[i].result {
+                Ok((e, _)) => {
+                    format!("{} {}", if e.converged() { '✓' } else { '✗' }, e.iterations)
+                }
+                Err(_) => "!".into(),
+            };
+            out += &format!(" {cell:>5}");
+        }
+        out.push('\n');
+    }
+    out.push('\n');
+    let name_width = systems.iter().map(|s| s.system.len()).max().unwrap_or(6);
+    let mut failures = Vec::new();
+    for (j, s) in systems.iter().enumerate() {
+        let fits: Vec<&Estimate> =
+            s.rows.iter().filter_map(|r| r.result.as_ref().ok()).map(|r| &r.0).collect();
+        let elapsed: f64 = fits.iter().map(|e| e.elapsed.as_secs_f64()).sum();
+        let converged: Vec<&&Estimate> = fits.iter().filter(|e| e.converged()).collect();
+        let best = converged.iter().min_by(|a, b| a.cost.total_cmp(&b.cost));
+        let least = best.map_or(f64::INFINITY, |e| e.cost);
+        // Where the model passes through the data, ε is the integration's noise: every
+        // exact fit is the minimum.
+        let exact = best.is_some_and(|e| e.certificate.exact_fit);
+        let reached = converged
+            .iter()
+            .filter(|e| match exact {
+                true => e.certificate.exact_fit,
+                false => e.cost - least <= SAME_MINIMUM * least.abs(),
+            })
+            .count();
+        let minimum = match (least.is_finite(), exact) {
+            (false, _) => "no method converged".into(),
+            (true, true) => format!("an exact fit (reached by {reached})"),
+            (true, false) => format!("least ε {} (reached by {reached})", significant(least, 10)),
+        };
+        out += &format!("{:>3} {:name_width$}  {minimum}, {:.2} s\n", j + 1, s.system, elapsed);
+        for row in &s.rows {
+            match &row.result {
+                Ok((e, _)) if !e.converged() => failures.push(format!(
+                    "  {} on {}: {} after {} iteration{} (ε {})",
+                    row.method,
+                    s.system,
+                    e.termination.code(),
+                    e.iterations,
+                    if e.iterations == 1 { "" } else { "s" },
+                    significant(e.cost, 10)
+                )),
+                Ok(_) => {}
+                Err(message) => {
+                    failures.push(format!("  {} on {}: {message}", row.method, s.system))
+                }
+            }
+        }
+    }
+    if !failures.is_empty() {
+        out += &format!("\nNot converged ({}):\n{}\n", failures.len(), failures.join("\n"));
+    }
+    out
 }
 
 /// One system's rows as text: a table per system (`verbose`) or a line per method.

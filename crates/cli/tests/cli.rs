@@ -345,6 +345,75 @@ fn compare_lists_every_method_as_json() {
 }
 
 #[test]
+fn compare_all_is_a_matrix_of_methods_and_systems_on_one_screen() {
+    let out = sysid(&["compare", "--all"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let all = text(&out.stdout);
+    assert!(all.lines().count() <= 60, "{} lines:\n{all}", all.lines().count());
+    let systems = text(&sysid(&["systems"]).stdout);
+    let names: Vec<&str> = systems.lines().map(|l| l.split_whitespace().next().unwrap()).collect();
+    for (j, name) in names.iter().enumerate() {
+        let legend = format!("{:>3} {name} ", j + 1);
+        assert!(all.lines().any(|l| l.starts_with(&legend)), "no `{legend}`:\n{all}");
+    }
+    // Each cell is what the fit's JSON says: ✓ or ✗ and its iterations.
+    let args = ["compare", "--all", "--methods", "goodman,nl2sol"];
+    let table = text(&sysid(&args).stdout);
+    let json: serde_json::Value =
+        serde_json::from_slice(&sysid(&[&args[..], &["--format", "json"]].concat()).stdout)
+            .unwrap();
+    let fits = json.as_array().unwrap();
+    for method in ["goodman", "nl2sol"] {
+        let row = table.lines().find(|l| l.starts_with(&format!("{method} "))).unwrap();
+        let cells: Vec<String> = row[method.len()..]
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .chunks(2)
+            .map(|c| c.join(" "))
+            .collect();
+        let expected: Vec<String> = names
+            .iter()
+            .map(|system| {
+                let f = fits.iter().find(|f| f["system"] == *system && f["method"] == method);
+                let f = f.unwrap();
+                let mark = if f["converged"].as_bool().unwrap() { '✓' } else { '✗' };
+                format!("{mark} {}", f["iterations"])
+            })
+            .collect();
+        assert_eq!(cells, expected, "{table}");
+    }
+    // The legend's least cost is the least of the converged fits, and a fit that did not
+    // converge is listed with its termination code.
+    for (j, system) in names.iter().enumerate() {
+        let converged: Vec<f64> = fits
+            .iter()
+            .filter(|f| f["system"] == *system && f["converged"] == true)
+            .map(|f| f["cost"].as_f64().unwrap())
+            .collect();
+        let least = converged.iter().copied().fold(f64::INFINITY, f64::min);
+        let line =
+            table.lines().find(|l| l.starts_with(&format!("{:>3} {system} ", j + 1))).unwrap();
+        let exact = fits.iter().any(|f| f["system"] == *system && f["exact_fit"] == true);
+        if exact {
+            assert!(line.contains("an exact fit (reached by "), "{line}");
+        } else {
+            let shown = line.split("least ε ").nth(1).unwrap().split(' ').next().unwrap();
+            let shown: f64 = shown.parse().unwrap();
+            // Ten significant digits.
+            assert!((shown - least).abs() <= 1e-9 * least, "{line}: least {least}");
+        }
+        for f in fits.iter().filter(|f| f["system"] == *system && f["converged"] == false) {
+            let listed = format!(
+                "  {} on {system}: {} after",
+                f["method"].as_str().unwrap(),
+                f["termination_code"].as_str().unwrap()
+            );
+            assert!(table.contains(&listed), "`{listed}` missing:\n{table}");
+        }
+    }
+}
+
+#[test]
 fn compare_prints_a_line_per_method_or_a_table_per_system() {
     let args = ["compare", "--system", "short-period", "--methods", "goodman,gauss-newton-ls"];
     let out = sysid(&[&args[..], &["--verbose"]].concat());
