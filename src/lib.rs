@@ -31,7 +31,7 @@ pub use sysid_systems as systems;
 
 /// The names most programs need.
 pub mod prelude {
-    pub use sysid_core::{Data, Estimate, Method, Problem, Termination, Unknown};
+    pub use sysid_core::{Data, Driven, Estimate, Method, Problem, Termination, Unknown};
     pub use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions};
     pub use sysid_goodman::{Goodman, GoodmanOptions};
     pub use sysid_levenberg_marquardt::{LevenbergMarquardt, LevenbergMarquardtOptions};

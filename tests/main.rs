@@ -12,4 +12,5 @@ mod experiments;
 mod geodesic;
 mod hard;
 mod model_twins;
+mod options;
 mod paper_goodman_1966;

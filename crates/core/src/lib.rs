@@ -65,7 +65,7 @@ pub use method::{Method, start_coordinates};
 pub use noise::{
     LN_2PI, NOISE_ROW_SHIFT, Noise, NoiseArgs, NoiseFunction, NoiseGradient, Transform,
 };
-pub use options::{DEFAULT_GTOL, DriverOptions, MAX_DERIVED_GTOL, OptionsError};
+pub use options::{DEFAULT_GTOL, Driven, DriverOptions, MAX_DERIVED_GTOL, OptionsError};
 pub use plan::{PlannedNoise, PlannedSeries, RESIDUAL_PANELS, Sample, Sampled};
 pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL, SINGLE_EXPERIMENT};
 pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};

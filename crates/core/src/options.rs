@@ -139,6 +139,68 @@ impl Default for DriverOptions {
     }
 }
 
+/// Options that hold the driver's ([`DriverOptions`]): a setter for each of its budgets and
+/// tolerances, the same on every method's options.
+///
+/// ```
+/// use sysid_core::{Driven, DriverOptions};
+///
+/// let options = DriverOptions::default().with_max_iterations(200).with_gtol(1e-8);
+/// assert_eq!((options.max_iterations, options.gtol), (200, Some(1e-8)));
+/// ```
+pub trait Driven: Sized {
+    /// The driver's options inside.
+    fn driver_mut(&mut self) -> &mut DriverOptions;
+
+    /// With these driver options.
+    fn with_driver(mut self, driver: DriverOptions) -> Self {
+        *self.driver_mut() = driver;
+        self
+    }
+
+    /// With at most `max_iterations` updates of the unknowns.
+    fn with_max_iterations(mut self, max_iterations: usize) -> Self {
+        self.driver_mut().max_iterations = max_iterations;
+        self
+    }
+
+    /// With the step tolerance ([`DriverOptions::step_tolerance`]).
+    fn with_step_tolerance(mut self, step_tolerance: f64) -> Self {
+        self.driver_mut().step_tolerance = step_tolerance;
+        self
+    }
+
+    /// With the gradient tolerance ([`DriverOptions::gradient_tolerance`]).
+    fn with_gradient_tolerance(mut self, gradient_tolerance: f64) -> Self {
+        self.driver_mut().gradient_tolerance = gradient_tolerance;
+        self
+    }
+
+    /// With the certificate's tolerance ([`DriverOptions::gtol`]).
+    fn with_gtol(mut self, gtol: f64) -> Self {
+        self.driver_mut().gtol = Some(gtol);
+        self
+    }
+
+    /// With the condition number above which a normal matrix is singular.
+    fn with_max_condition(mut self, max_condition: f64) -> Self {
+        self.driver_mut().max_condition = max_condition;
+        self
+    }
+
+    /// With at most `max_integrations` integrations of the model.
+    fn with_max_integrations(mut self, max_integrations: u64) -> Self {
+        self.driver_mut().max_integrations = Some(max_integrations);
+        self
+    }
+}
+
+impl Driven for DriverOptions {
+    fn driver_mut(&mut self) -> &mut DriverOptions {
+        self
+    }
+}
+
 impl DriverOptions {
     /// Checks the options.
     pub fn validate(&self) -> Result<(), OptionsError> {

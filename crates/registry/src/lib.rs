@@ -19,7 +19,7 @@
 //! ```
 #![warn(missing_docs)]
 
-use sysid_core::{DriverOptions, Estimate, FitError, Method, OptionsError, Problem};
+use sysid_core::{Driven, DriverOptions, Estimate, FitError, Method, OptionsError, Problem};
 use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};
 use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_levenberg_marquardt::{LevenbergMarquardt, LevenbergMarquardtOptions};
@@ -41,6 +41,12 @@ pub struct Settings {
     pub ql_start: Start,
     /// The number of shooting intervals of `multiple-shooting` (None: chosen from the data).
     pub shooting_intervals: Option<usize>,
+}
+
+impl Driven for Settings {
+    fn driver_mut(&mut self) -> &mut DriverOptions {
+        &mut self.driver
+    }
 }
 
 impl Settings {

@@ -1,7 +1,7 @@
 //! Options of the Gauss–Newton baseline.
 
 use serde::{Deserialize, Serialize};
-use sysid_core::{DriverOptions, OptionsError};
+use sysid_core::{Driven, DriverOptions, OptionsError};
 
 /// Where the Jacobian of the residuals comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -54,10 +54,24 @@ impl Default for GaussNewtonOptions {
 }
 
 impl GaussNewtonOptions {
-    /// The same options with another iteration budget.
-    pub fn with_max_iterations(mut self, max_iterations: usize) -> Self {
-        self.driver.max_iterations = max_iterations;
-        self
+    /// The same options with argmin's stopping tolerance.
+    pub fn with_tolerance(self, tolerance: f64) -> Self {
+        Self { tolerance, ..self }
+    }
+
+    /// The same options with the line search on or off.
+    pub fn with_line_search(self, line_search: bool) -> Self {
+        Self { line_search, ..self }
+    }
+
+    /// The same options with the line search's Armijo constant.
+    pub fn with_armijo(self, armijo: f64) -> Self {
+        Self { armijo, ..self }
+    }
+
+    /// The same options with another Jacobian.
+    pub fn with_jacobian(self, jacobian: JacobianSource) -> Self {
+        Self { jacobian, ..self }
     }
 
     /// Checks the method's own options (the driver's are checked by
@@ -65,5 +79,11 @@ impl GaussNewtonOptions {
     pub fn validate(&self) -> Result<(), OptionsError> {
         OptionsError::positive("tolerance", self.tolerance)?;
         OptionsError::within("armijo", self.armijo, 0.0, 1.0)
+    }
+}
+
+impl Driven for GaussNewtonOptions {
+    fn driver_mut(&mut self) -> &mut DriverOptions {
+        &mut self.driver
     }
 }

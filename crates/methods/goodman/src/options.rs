@@ -1,7 +1,7 @@
 //! Options of Goodman's method.
 
 use serde::{Deserialize, Serialize};
-use sysid_core::{DriverOptions, OptionsError};
+use sysid_core::{Driven, DriverOptions, OptionsError};
 
 /// Options with documented defaults. The defaults run the paper's method as published: a
 /// full Newton step every iteration, no safeguard.
@@ -45,15 +45,20 @@ impl GoodmanOptions {
         Self { cost_tolerance, ..self }
     }
 
-    /// The same options with another iteration budget.
-    pub fn with_max_iterations(mut self, max_iterations: usize) -> Self {
-        self.driver.max_iterations = max_iterations;
-        self
+    /// The same options with at most `max_halvings` halvings of one step.
+    pub fn with_max_halvings(self, max_halvings: usize) -> Self {
+        Self { max_halvings, ..self }
     }
 
     /// Checks the method's own options (the driver's are checked by
     /// [`drive`](sysid_core::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
         OptionsError::non_negative("cost_tolerance", self.cost_tolerance)
+    }
+}
+
+impl Driven for GoodmanOptions {
+    fn driver_mut(&mut self) -> &mut DriverOptions {
+        &mut self.driver
     }
 }

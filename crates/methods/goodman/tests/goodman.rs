@@ -1,7 +1,7 @@
 //! Goodman's method beyond the paper's example: convergence rate, termination reasons,
 //! initial time inside the data, outputs, scales and bounds.
 
-use sysid_core::{Data, Failure, FitError, Method, Problem, Termination, Unknown};
+use sysid_core::{Data, Driven, Failure, FitError, Method, Problem, Termination, Unknown};
 use sysid_goodman::{Goodman, GoodmanOptions};
 use sysid_ode::testing::{Decay, assert_close};
 use sysid_ode::{Integrator, Ivp, OdeError, Scalar, Signature, System};

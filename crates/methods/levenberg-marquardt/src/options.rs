@@ -1,7 +1,7 @@
 //! Options of Levenberg–Marquardt.
 
 use serde::{Deserialize, Serialize};
-use sysid_core::{DriverOptions, OptionsError};
+use sysid_core::{Driven, DriverOptions, OptionsError};
 
 /// The curvature of the model a step minimises: m_λ's A.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -58,9 +58,35 @@ impl Default for LevenbergMarquardtOptions {
 }
 
 impl LevenbergMarquardtOptions {
+    /// The same options with the first radius `factor`·‖D z₀‖.
+    pub fn with_factor(self, factor: f64) -> Self {
+        Self { factor, ..self }
+    }
+
+    /// The same options with at most `max_rejections` trial steps rejected in a row.
+    pub fn with_max_rejections(self, max_rejections: usize) -> Self {
+        Self { max_rejections, ..self }
+    }
+
+    /// The same options with another model curvature.
+    pub fn with_hessian(self, hessian: Hessian) -> Self {
+        Self { hessian, ..self }
+    }
+
+    /// The same options with geodesic acceleration on or off.
+    pub fn with_geodesic(self, geodesic: bool) -> Self {
+        Self { geodesic, ..self }
+    }
+
     /// Checks the method's own options (the driver's are checked by
     /// [`drive`](sysid_core::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
         OptionsError::positive("factor", self.factor)
+    }
+}
+
+impl Driven for LevenbergMarquardtOptions {
+    fn driver_mut(&mut self) -> &mut DriverOptions {
+        &mut self.driver
     }
 }

@@ -1,7 +1,7 @@
 //! Options of multiple shooting.
 
 use serde::{Deserialize, Serialize};
-use sysid_core::{DriverOptions, OptionsError};
+use sysid_core::{Driven, DriverOptions, OptionsError};
 
 /// Options of [`MultipleShooting`](crate::MultipleShooting).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -15,6 +15,11 @@ pub struct MultipleShootingOptions {
 }
 
 impl MultipleShootingOptions {
+    /// The same options with `intervals` shooting intervals.
+    pub fn with_intervals(self, intervals: usize) -> Self {
+        Self { intervals: Some(intervals), ..self }
+    }
+
     /// Checks the method's own options (the driver's are checked by
     /// [`drive`](sysid_core::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
@@ -22,5 +27,11 @@ impl MultipleShootingOptions {
             return Err(OptionsError::Zero { name: "intervals" });
         }
         Ok(())
+    }
+}
+
+impl Driven for MultipleShootingOptions {
+    fn driver_mut(&mut self) -> &mut DriverOptions {
+        &mut self.driver
     }
 }

@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use sysid_core::{DriverOptions, OptionsError};
+use sysid_core::{Driven, DriverOptions, OptionsError};
 
 /// A trajectory of all states as a function of time: `f(t, y)` writes y(t).
 pub type StateFunction = Arc<dyn Fn(f64, &mut [f64]) + Send + Sync>;
@@ -48,15 +48,15 @@ impl QuasilinearizationOptions {
         Self { start, ..self }
     }
 
-    /// The same options with another iteration budget.
-    pub fn with_max_iterations(mut self, max_iterations: usize) -> Self {
-        self.driver.max_iterations = max_iterations;
-        self
-    }
-
     /// Checks the method's own options (the driver's are checked by
     /// [`drive`](sysid_core::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
         Ok(())
+    }
+}
+
+impl Driven for QuasilinearizationOptions {
+    fn driver_mut(&mut self) -> &mut DriverOptions {
+        &mut self.driver
     }
 }
