@@ -13,7 +13,15 @@
 //! * [`multiple_shooting`] (`sysid-multiple-shooting`): Bock's multiple shooting with
 //!   condensing and an exact-penalty line search;
 //! * [`model`] (`sysid-model`): model files (TOML + expressions) and CSV data;
-//! * [`systems`] (`sysid-systems`): the benchmark catalogue.
+//! * [`petab`] (`sysid-petab`): PEtab problems imported as model files;
+//! * [`systems`] (`sysid-systems`): the benchmark catalogue;
+//! * [`registry`] (`sysid-registry`): every method by name, built with shared settings;
+//! * [`montecarlo`] (`sysid-montecarlo`): multistart, Monte-Carlo studies and basin maps;
+//! * [`profile`] (`sysid-profile`): profile likelihoods.
+//!
+//! Runnable examples (`examples/*.rs`): `cargo run --release --example logistic` (one method
+//! on your own ODE), `--example compare_methods` (every method on a catalogue system),
+//! `--example petab` (a PEtab problem from its nominal point and from 10 starts).
 #![warn(missing_docs)]
 
 pub use sysid_core as core;
@@ -24,6 +32,7 @@ pub use sysid_model as model;
 pub use sysid_montecarlo as montecarlo;
 pub use sysid_multiple_shooting as multiple_shooting;
 pub use sysid_ode as ode;
+pub use sysid_petab as petab;
 pub use sysid_profile as profile;
 pub use sysid_quasilinearization as quasilinearization;
 pub use sysid_registry as registry;
