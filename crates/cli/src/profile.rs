@@ -4,16 +4,13 @@ use anyhow::bail;
 use clap::Args;
 use sysid_core::Estimate;
 use sysid_profile::{
-    Outcome as Traced, Point, Profile, ProfileOptions, nll, profile, threshold_95,
+    Point, Profile, ProfileOptions, Profiled, nll, profile_from_optimum, threshold_95,
 };
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
 use crate::output::{emit, not_an_input, writable};
 use crate::problem::{Context, fit_from_starts, method, problem};
-
-/// How many times a profile that finds a better optimum fits again from there.
-const MAX_RESTARTS: usize = 5;
 
 /// Arguments of `sysid profile`.
 #[derive(Args, Debug)]
@@ -98,34 +95,25 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
         bail!("--only: `{}` is named twice", names[*twice.1]);
     }
     let settings = args.options.settings();
-    let (mut optimum, _) = fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
+    let (optimum, _) = fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
     let certified = optimum.converged();
     let m = method(&args.method.method, &settings)?;
     let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));
     let options =
         ProfileOptions { max_steps: args.max_points, threshold, ..ProfileOptions::default() };
-    let mut better = Vec::new();
-    let profiles = loop {
-        match profile(&*m, &problem, &optimum, &only, &options)? {
-            Traced::Profiles(p) => break p,
-            Traced::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
-                eprintln!(
-                    "better optimum found along a profile (NLL {} against {}): fitting again from there",
-                    point.nll,
-                    nll(&optimum)
-                );
-                optimum = m.fit_from(&problem, &point.estimates)?;
-                better.push(point);
-            }
-            Traced::BetterOptimum(_) => {
-                bail!(
-                    "the profiles found a better optimum {MAX_RESTARTS} times over: the fits along them do not reach the minimum (the last fit from such a point: {}; {}). Raise --max-iterations, or try another --method",
-                    optimum.verdict(),
-                    optimum.termination
-                )
-            }
-        }
-    };
+    let Profiled { optimum, better, profiles } = profile_from_optimum(
+        &*m,
+        &problem,
+        optimum,
+        &only,
+        &options,
+        |point, was| {
+            eprintln!(
+                "better optimum found along a profile (NLL {} against {was}): fitting again from there",
+                point.nll
+            );
+        },
+    )?;
     match args.format {
         Format::Json => {
             let json = serde_json::json!({

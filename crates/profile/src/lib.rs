@@ -40,6 +40,67 @@ pub enum ProfileError {
     /// An unknown could not be held at a value (the problem says why).
     #[error(transparent)]
     Problem(#[from] ProblemError),
+    /// The profiles kept finding points below the optimum: the fits along them do not reach
+    /// the minimum.
+    #[error(
+        "the profiles found a better optimum {MAX_RESTARTS} times over: the fits along them do not reach the minimum (the last fit from such a point: {verdict}; {termination}). Raise the iteration budget, or try another method"
+    )]
+    NoOptimum {
+        /// The last fit's verdict.
+        verdict: String,
+        /// How it ended.
+        termination: String,
+    },
+}
+
+/// How many times [`profile_from_optimum`] fits again from a better point a profile found.
+pub const MAX_RESTARTS: usize = 5;
+
+/// What [`profile_from_optimum`] found.
+#[derive(Clone, Debug)]
+pub struct Profiled {
+    /// The optimum the profiles are around: the fit given, or the last fit from a better
+    /// point.
+    pub optimum: Estimate,
+    /// The better points the profiles found, each followed by a fit from there.
+    pub better: Vec<Point>,
+    /// The profiles.
+    pub profiles: Vec<Profile>,
+}
+
+/// [`profile`], fitting again with `method` from any point a profile finds below the
+/// optimum (at most [`MAX_RESTARTS`] times), until the profiles start from the lowest point
+/// they see. `on_better` hears of each such point with the NLL it improves on.
+pub fn profile_from_optimum<S, M>(
+    method: &M,
+    problem: &Problem<S>,
+    optimum: Estimate,
+    only: &[usize],
+    options: &ProfileOptions,
+    mut on_better: impl FnMut(&Point, f64),
+) -> Result<Profiled, ProfileError>
+where
+    S: System + Sync,
+    M: Method<S> + Sync + ?Sized,
+{
+    let mut optimum = optimum;
+    let mut better = Vec::new();
+    loop {
+        match profile(method, problem, &optimum, only, options)? {
+            Outcome::Profiles(profiles) => return Ok(Profiled { optimum, better, profiles }),
+            Outcome::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
+                on_better(&point, nll(&optimum));
+                optimum = method.fit_from(problem, &point.estimates)?;
+                better.push(point);
+            }
+            Outcome::BetterOptimum(_) => {
+                return Err(ProfileError::NoOptimum {
+                    verdict: optimum.verdict().to_string(),
+                    termination: optimum.termination.to_string(),
+                });
+            }
+        }
+    }
 }
 
 /// χ²₁(0.95)/2: the pointwise 95 % threshold of ΔNLL.
