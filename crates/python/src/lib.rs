@@ -550,6 +550,83 @@ impl PyProblem {
         py.import("sysid._result")?.getattr("FitResult")?.call1((value.to_string(),))
     }
 
+    /// Profile likelihoods around the fit `method` reaches from the nominal point: each
+    /// unknown of `only` (names; every free unknown by default) held along a path while the
+    /// others are fitted again, to where ΔNLL crosses the 95 % threshold (χ²₁/2, or χ²ₖ/2
+    /// with `simultaneous`). A `sysid.ProfileResult` over the JSON object of `sysid profile
+    /// --format json` (docs/json.md).
+    #[pyo3(signature = (method=None, only=None, simultaneous=false, max_points=60, max_iterations=None))]
+    fn profile<'py>(
+        &self,
+        py: Python<'py>,
+        method: Option<&str>,
+        only: Option<Vec<String>>,
+        simultaneous: bool,
+        max_points: usize,
+        max_iterations: Option<usize>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let name = method.unwrap_or(Role::Default.method());
+        let mut settings = Settings::default();
+        if let Some(n) = max_iterations {
+            settings.driver.max_iterations = n;
+        }
+        settings.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
+        if max_points == 0 || settings.driver.max_iterations == 0 {
+            return Err(PyValueError::new_err(
+                "max_points and max_iterations must be at least 1: a profile re-optimises the others at every point",
+            ));
+        }
+        let method = Registry::standard()
+            .build(name, &settings)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let names = self.problem.names();
+        let mut which = Vec::new();
+        for n in only.unwrap_or_default() {
+            let i = names.iter().position(|x| *x == n).ok_or_else(|| {
+                PyValueError::new_err(format!(
+                    "only: {n:?} is not a profiled unknown (unknowns: {}; noise scales set in closed form are not profiled)",
+                    names.join(", ")
+                ))
+            })?;
+            if which.contains(&i) {
+                return Err(PyValueError::new_err(format!("only: {n:?} is named twice")));
+            }
+            which.push(i);
+        }
+        let threshold = sysid_profile::threshold_95(simultaneous.then_some(names.len()));
+        let options = sysid_profile::ProfileOptions {
+            max_steps: max_points,
+            threshold,
+            ..Default::default()
+        };
+        let problem = &self.problem;
+        let profiled = py.allow_threads(|| {
+            let optimum = method.fit(problem)?;
+            let certified = optimum.converged();
+            sysid_profile::profile_from_optimum(
+                &*method,
+                problem,
+                optimum,
+                &which,
+                &options,
+                |_, _| {},
+            )
+            .map(|p| (p, certified))
+        });
+        let (p, certified) = profiled.map_err(sysid_error)?;
+        let json = serde_json::json!({
+            "optimum": p.optimum.record(&self.name),
+            "from_certified_optimum": certified && p.better.is_empty(),
+            "better_optimum_found": p.better,
+            "threshold": threshold,
+            "profiles": p.profiles
+                .iter()
+                .map(|q| (q.name.clone(), serde_json::json!(q.record())))
+                .collect::<serde_json::Map<_, _>>(),
+        });
+        py.import("sysid._result")?.getattr("ProfileResult")?.call1((json.to_string(),))
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "sysid.Problem({:?}: {} unknowns, {} experiments)",

@@ -224,6 +224,30 @@ class FallingBody(unittest.TestCase):
         np.testing.assert_allclose(states["y"], -0.25 - 0.25 * t + 16.25 * t**2, rtol=1e-8)
         np.testing.assert_allclose(states["v"], -0.25 + 32.5 * t, rtol=1e-8)
 
+    def test_the_profiles_are_the_closed_form(self):
+        # The model is linear in (y0, v0, g) and σ = 1: each profile is the parabola
+        # ΔNLL = (θ − θ̂)²/(2 C_ii), C = (JᵀJ)⁻¹, which crosses the threshold at
+        # θ̂ ± √(2·threshold·C_ii).
+        p = sysid.Problem.from_model(FALLING)
+        result = p.profile()
+        self.assertTrue(result.from_certified_optimum)
+        self.assertAlmostEqual(result.threshold, 3.841458820694124 / 2, delta=1e-15)
+        t = np.arange(4.0)
+        jac = np.column_stack([np.ones(4), t, t**2 / 2])
+        cov = np.linalg.inv(jac.T @ jac)
+        for i, name in enumerate(p.parameter_names):
+            profile = result.profiles[name]
+            half = np.sqrt(2 * result.threshold * cov[i, i])
+            expected = (result.optimum.x[i] - half, result.optimum.x[i] + half)
+            np.testing.assert_allclose(profile.interval, expected, rtol=1e-10, atol=1e-10)
+            self.assertEqual(profile.label, "identifiable")
+            self.assertTrue(np.all(np.diff(profile.values) > 0))
+            self.assertEqual(profile.estimates.shape, (len(profile.values), 3))
+        only = p.profile(only=["g"])
+        self.assertEqual(list(only.profiles), ["g"])
+        with self.assertRaisesRegex(ValueError, 'only: "h" is not a profiled unknown'):
+            p.profile(only=["h"])
+
     def test_the_residuals_jacobian_is_the_closed_forms(self):
         # r = y(t) − b at t = 0, 1, 2, 3: ∂r/∂(y0, v0, g) = (1, t, t²/2).
         p = sysid.Problem.from_model(FALLING)

@@ -25,6 +25,6 @@ message the command line prints. The GIL is released while the model is integrat
 """
 
 from ._sysid import Problem, SysidError, methods
-from ._result import FitResult
+from ._result import FitResult, Profile, ProfileResult
 
-__all__ = ["Problem", "FitResult", "SysidError", "methods"]
+__all__ = ["Problem", "FitResult", "Profile", "ProfileResult", "SysidError", "methods"]

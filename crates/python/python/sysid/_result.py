@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -12,9 +12,9 @@ class FitResult:
     """A fit, as ``sysid fit --format json`` prints it (docs/json.md: every key is in
     :attr:`record`); the common ones as attributes, arrays in the problem's order."""
 
-    def __init__(self, record: str) -> None:
+    def __init__(self, record: Union[str, Dict[str, Any]]) -> None:
         #: The fit's JSON object (docs/json.md), as a dict.
-        self.record: Dict[str, Any] = json.loads(record)
+        self.record: Dict[str, Any] = json.loads(record) if isinstance(record, str) else record
         r = self.record
         #: The unknowns' names, in the order of :attr:`x`.
         self.parameter_names: List[str] = list(r["estimates"])
@@ -74,3 +74,47 @@ class FitResult:
     def __repr__(self) -> str:
         state = "converged" if self.converged else f"not converged ({self.termination_code})"
         return f"FitResult(nll={self.nll!r}, {state}, {self.iterations} iterations)"
+
+
+class Profile:
+    """One unknown's profile likelihood (docs/json.md, "A profile")."""
+
+    def __init__(self, name: str, record: Dict[str, Any]) -> None:
+        #: The unknown.
+        self.name = name
+        low, high = record["interval"]
+        #: The 95 % interval (low, high); None at an end whose side did not cross the threshold.
+        self.interval: Tuple[Optional[float], Optional[float]] = (low, high)
+        #: ``identifiable``, ``practically_non_identifiable`` or ``structurally_non_identifiable``.
+        self.label: str = record["label"]
+        points = record["points"]
+        #: The profiled unknown's values, increasing, the optimum's included.
+        self.values = np.array([p["value"] for p in points], dtype=float)
+        #: The NLL minimised over the others at each value (nan where it could not be evaluated).
+        self.nll = np.array([np.nan if p["nll"] is None else p["nll"] for p in points], dtype=float)
+        #: Whether each point's fit converged.
+        self.converged = np.array([p["converged"] for p in points], dtype=bool)
+        #: Every unknown's value at each point (a row per point).
+        self.estimates = np.array([p["estimates"] for p in points], dtype=float)
+
+    def __repr__(self) -> str:
+        return f"Profile({self.name!r}, interval={self.interval}, {self.label})"
+
+
+class ProfileResult:
+    """Profile likelihoods, as ``sysid profile --format json`` prints them (docs/json.md)."""
+
+    def __init__(self, record: str) -> None:
+        #: The JSON object, as a dict.
+        self.record: Dict[str, Any] = json.loads(record)
+        #: The fit the profiles are around.
+        self.optimum = FitResult(self.record["optimum"])
+        #: That fit converged and no profile found a lower point.
+        self.from_certified_optimum: bool = self.record["from_certified_optimum"]
+        #: ΔNLL at which a profile side ends.
+        self.threshold: float = self.record["threshold"]
+        #: The profiles by unknown.
+        self.profiles: Dict[str, Profile] = {n: Profile(n, p) for n, p in self.record["profiles"].items()}
+
+    def __repr__(self) -> str:
+        return f"ProfileResult({len(self.profiles)} profiles, threshold {self.threshold})"

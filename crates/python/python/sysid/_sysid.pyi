@@ -5,7 +5,7 @@ from typing import Dict, List, Literal, Optional, Sequence, Tuple, Union
 import numpy as np
 import numpy.typing as npt
 
-from ._result import FitResult
+from ._result import FitResult, ProfileResult
 
 Scale = Literal["linear", "parameter"]
 Array = npt.ArrayLike
@@ -72,3 +72,11 @@ class Problem:
         max_integrations: Optional[int] = None,
         fix: Optional[Dict[str, float]] = None,
     ) -> FitResult: ...
+    def profile(
+        self,
+        method: Optional[str] = None,
+        only: Optional[Sequence[str]] = None,
+        simultaneous: bool = False,
+        max_points: int = 60,
+        max_iterations: Optional[int] = None,
+    ) -> ProfileResult: ...
