@@ -2,10 +2,7 @@
 
 use anyhow::bail;
 use clap::Args;
-use sysid_core::Estimate;
-use sysid_profile::{
-    Point, Profile, ProfileOptions, Profiled, nll, profile_from_optimum, threshold_95,
-};
+use sysid_profile::{ProfileOptions, Profiled, nll, profile_from_optimum, threshold_95};
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
@@ -96,46 +93,30 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     }
     let settings = args.options.settings();
     let (optimum, _) = fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
-    let certified = optimum.converged();
     let m = method(&args.method.method, &settings)?;
     let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));
     let options =
         ProfileOptions { max_steps: args.max_points, threshold, ..ProfileOptions::default() };
-    let Profiled { optimum, better, profiles } = profile_from_optimum(
-        &*m,
-        &problem,
-        optimum,
-        &only,
-        &options,
-        |point, was| {
-            eprintln!(
-                "better optimum found along a profile (NLL {} against {was}): fitting again from there",
-                point.nll
-            );
-        },
-    )?;
+    let profiled = profile_from_optimum(&*m, &problem, optimum, &only, &options, |point, was| {
+        eprintln!(
+            "better optimum found along a profile (NLL {} against {was}): fitting again from there",
+            point.nll
+        );
+    })?;
     match args.format {
         Format::Json => {
-            let json = serde_json::json!({
-                "optimum": optimum.record(&context.name),
-                "from_certified_optimum": certified && better.is_empty(),
-                "better_optimum_found": better,
-                "threshold": options.threshold,
-                "profiles": profiles
-                    .iter()
-                    .map(|p| (p.name.clone(), serde_json::json!(p.record())))
-                    .collect::<serde_json::Map<_, _>>(),
-            });
-            emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?
+            let record = profiled.record(&context.name, options.threshold);
+            emit(&format!("{}\n", serde_json::to_string_pretty(&record)?))?
         }
-        Format::Table => emit(&table(&context, &optimum, certified, &better, &profiles))?,
+        Format::Table => emit(&table(&context, &profiled))?,
     }
+    let Profiled { optimum, profiles, .. } = &profiled;
     // The results are out before the figure is drawn: a figure that cannot be written
     // loses nothing.
     if let Some(stem) = &args.figure {
         let title = format!("{}: profile likelihoods", context.name);
         let figure =
-            sysid_report::Profiles::new(title, &problem, &optimum, options.threshold, &profiles);
+            sysid_report::Profiles::new(title, &problem, optimum, options.threshold, profiles);
         let [png, svg] = sysid_report::save(&figure, stem)?;
         eprintln!("wrote {} and {}", png.display(), svg.display());
     }
@@ -143,20 +124,15 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
 }
 
 /// The readable report: the optimum's NLL, then a line per unknown.
-fn table(
-    context: &Context,
-    optimum: &Estimate,
-    certified: bool,
-    better: &[Point],
-    profiles: &[Profile],
-) -> String {
+fn table(context: &Context, profiled: &Profiled) -> String {
+    let Profiled { certified, optimum, better, profiles } = profiled;
     let mut text = format!(
         "{}: profile likelihoods ({}), NLL at the optimum {}\n",
         context.name,
         optimum.method,
         nll(optimum)
     );
-    if !certified {
+    if !*certified {
         text += "  warning: the fit did not certify its optimum; the profiles start from its best point\n";
     }
     if !better.is_empty() {

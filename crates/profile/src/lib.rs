@@ -28,7 +28,7 @@
 
 use rayon::prelude::*;
 use serde::Serialize;
-use sysid_core::{Estimate, FitError, Method, Problem, ProblemError};
+use sysid_core::{Estimate, FitError, FitRecord, Method, Problem, ProblemError};
 use sysid_ode::System;
 
 /// Why profiling could not run.
@@ -59,6 +59,8 @@ pub const MAX_RESTARTS: usize = 5;
 /// What [`profile_from_optimum`] found.
 #[derive(Clone, Debug)]
 pub struct Profiled {
+    /// Whether the fit given converged (its certificate held).
+    pub certified: bool,
     /// The optimum the profiles are around: the fit given, or the last fit from a better
     /// point.
     pub optimum: Estimate,
@@ -83,11 +85,14 @@ where
     S: System + Sync,
     M: Method<S> + Sync + ?Sized,
 {
+    let certified = optimum.converged();
     let mut optimum = optimum;
     let mut better = Vec::new();
     loop {
         match profile(method, problem, &optimum, only, options)? {
-            Outcome::Profiles(profiles) => return Ok(Profiled { optimum, better, profiles }),
+            Outcome::Profiles(profiles) => {
+                return Ok(Profiled { certified, optimum, better, profiles });
+            }
             Outcome::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
                 on_better(&point, nll(&optimum));
                 optimum = method.fit_from(problem, &point.estimates)?;
@@ -197,6 +202,36 @@ impl Profile {
     pub fn record(&self) -> Record<'_> {
         Record { interval: self.interval, label: self.label, points: &self.points }
     }
+}
+
+impl Profiled {
+    /// The JSON object of `sysid profile --format json` (docs/json.md) for the problem
+    /// called `system`, the profiles ended at ΔNLL `threshold`.
+    pub fn record<'a>(&'a self, system: &'a str, threshold: f64) -> ProfiledRecord<'a> {
+        ProfiledRecord {
+            optimum: self.optimum.record(system),
+            from_certified_optimum: self.certified && self.better.is_empty(),
+            better_optimum_found: &self.better,
+            threshold,
+            profiles: &self.profiles,
+        }
+    }
+}
+
+/// The JSON of `sysid profile` ([`Profiled::record`]): the profiles by name.
+#[derive(Serialize)]
+pub struct ProfiledRecord<'a> {
+    optimum: FitRecord<'a>,
+    from_certified_optimum: bool,
+    better_optimum_found: &'a [Point],
+    threshold: f64,
+    #[serde(serialize_with = "by_name")]
+    profiles: &'a [Profile],
+}
+
+/// The profiles as an object: name → [`Profile::record`], in their order.
+fn by_name<S: serde::Serializer>(profiles: &&[Profile], s: S) -> Result<S::Ok, S::Error> {
+    s.collect_map(profiles.iter().map(|p| (&p.name, p.record())))
 }
 
 /// A profile without its name ([`Profile::record`]).

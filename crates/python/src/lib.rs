@@ -10,6 +10,7 @@
 //! while the model is integrated. Bad input raises `ValueError`; what the model or the method
 //! cannot do raises `sysid.SysidError`, with the command line's message.
 
+use std::borrow::Cow;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -73,8 +74,9 @@ struct PyProblem {
 /// A point's evaluation: the problem with the noise scales at the point's, its linearization
 /// at the point's free unknowns, and ∂value/∂coordinate of every parameter (1 on a linear
 /// scale, the value on a log scale).
-struct Evaluated {
-    problem: Problem<ModelSystem>,
+struct Evaluated<'a> {
+    /// The problem itself where it has no noise scales; else a copy with the point's.
+    problem: Cow<'a, Problem<ModelSystem>>,
     lin: Linearization,
     chain: Vec<f64>,
 }
@@ -123,20 +125,36 @@ impl PyProblem {
 
     /// The evaluation at x (given on `scale`), the model integrated with its sensitivities
     /// with the GIL released.
-    fn evaluate(&self, py: Python<'_>, x: &[f64], scale: Scale) -> PyResult<Evaluated> {
+    fn evaluate(&self, py: Python<'_>, x: &[f64], scale: Scale) -> PyResult<Evaluated<'_>> {
         let z = self.coordinates(x, scale)?;
         let k = self.problem.unknowns().len();
-        let values = self.values(&z);
-        let problem = self.problem.with_scales(&values[k..]);
+        let problem = match self.problem.scales().is_empty() {
+            true => Cow::Borrowed(&*self.problem),
+            false => Cow::Owned(self.problem.with_scales(&self.values(&z)[k..])),
+        };
         let lin = py
             .allow_threads(|| problem.residuals_and_jacobian(&z[..k]))
             .map_err(|e| sysid_error(format!("the model cannot be integrated at x: {e}")))?;
         let chain = self.parameters().iter().zip(&z).map(|(u, &z)| u.scale(z)).collect();
         Ok(Evaluated { problem, lin, chain })
     }
+
+    /// The NLL (`priors` false) or the objective at x, and its gradient on `scale`.
+    fn value_and_gradient<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray1<'py, f64>,
+        scale: &str,
+        priors: bool,
+    ) -> PyResult<(f64, Array1<'py>)> {
+        let scale = Scale::parse(scale)?;
+        let e = self.evaluate(py, x.as_slice()?, scale)?;
+        let value = if priors { e.objective()? } else { e.nll()? };
+        Ok((value, e.gradient(priors, scale).into_pyarray(py)))
+    }
 }
 
-impl Evaluated {
+impl Evaluated<'_> {
     fn rows(&self) -> &sysid_core::WeightedResiduals {
         self.lin.residuals.as_ref().expect("discrete data have residual rows")
     }
@@ -158,14 +176,22 @@ impl Evaluated {
     /// ln σ + ½ r², r ∝ 1/s: ∂/∂s = (1 − r²)/s.
     fn gradient(&self, priors: bool, scale: Scale) -> Vec<f64> {
         let rows = self.rows();
-        let n = rows.r.len() - if priors { 0 } else { self.problem.n_priors() };
-        let mut g: Vec<f64> =
-            rows.jacobian.rows(0, n).tr_mul(&rows.r.rows(0, n)).iter().copied().collect();
+        // The linearization's U = Jᵀr is the objective's gradient; the NLL's leaves out the
+        // priors' rows, the last ones.
+        let mut g: Vec<f64> = match priors || self.problem.n_priors() == 0 {
+            true => self.lin.gradient.iter().copied().collect(),
+            false => {
+                let n = rows.r.len() - self.problem.n_priors();
+                rows.jacobian.rows(0, n).tr_mul(&rows.r.rows(0, n)).iter().copied().collect()
+            }
+        };
         let sigma = self.problem.scale_values();
         let mut dscale = vec![0.0; sigma.len()];
-        for (r, s) in rows.r.iter().zip(self.problem.scale_rows()) {
-            if let Some(s) = s {
-                dscale[s] += (1.0 - r * r) / sigma[s];
+        if !sigma.is_empty() {
+            for (r, s) in rows.r.iter().zip(self.problem.scale_rows()) {
+                if let Some(s) = s {
+                    dscale[s] += (1.0 - r * r) / sigma[s];
+                }
             }
         }
         let k = g.len();
@@ -352,10 +378,8 @@ impl PyProblem {
         py: Python<'py>,
         x: PyReadonlyArray1<'py, f64>,
         scale: &str,
-    ) -> PyResult<(f64, Bound<'py, PyArray1<f64>>)> {
-        let scale = Scale::parse(scale)?;
-        let e = self.evaluate(py, x.as_slice()?, scale)?;
-        Ok((e.nll()?, e.gradient(false, scale).into_pyarray(py)))
+    ) -> PyResult<(f64, Array1<'py>)> {
+        self.value_and_gradient(py, x, scale, false)
     }
 
     /// The objective the fits minimise at x: the NLL plus the priors' negative log-density
@@ -377,10 +401,8 @@ impl PyProblem {
         py: Python<'py>,
         x: PyReadonlyArray1<'py, f64>,
         scale: &str,
-    ) -> PyResult<(f64, Bound<'py, PyArray1<f64>>)> {
-        let scale = Scale::parse(scale)?;
-        let e = self.evaluate(py, x.as_slice()?, scale)?;
-        Ok((e.objective()?, e.gradient(true, scale).into_pyarray(py)))
+    ) -> PyResult<(f64, Array1<'py>)> {
+        self.value_and_gradient(py, x, scale, true)
     }
 
     /// The Fisher information of the objective at x on `scale`: the Gauss–Newton
@@ -600,31 +622,22 @@ impl PyProblem {
             ..Default::default()
         };
         let problem = &self.problem;
-        let profiled = py.allow_threads(|| {
-            let optimum = method.fit(problem)?;
-            let certified = optimum.converged();
-            sysid_profile::profile_from_optimum(
-                &*method,
-                problem,
-                optimum,
-                &which,
-                &options,
-                |_, _| {},
-            )
-            .map(|p| (p, certified))
-        });
-        let (p, certified) = profiled.map_err(sysid_error)?;
-        let json = serde_json::json!({
-            "optimum": p.optimum.record(&self.name),
-            "from_certified_optimum": certified && p.better.is_empty(),
-            "better_optimum_found": p.better,
-            "threshold": threshold,
-            "profiles": p.profiles
-                .iter()
-                .map(|q| (q.name.clone(), serde_json::json!(q.record())))
-                .collect::<serde_json::Map<_, _>>(),
-        });
-        py.import("sysid._result")?.getattr("ProfileResult")?.call1((json.to_string(),))
+        let profiled = py
+            .allow_threads(|| {
+                let optimum = method.fit(problem)?;
+                sysid_profile::profile_from_optimum(
+                    &*method,
+                    problem,
+                    optimum,
+                    &which,
+                    &options,
+                    |_, _| {},
+                )
+            })
+            .map_err(sysid_error)?;
+        let json = serde_json::to_string(&profiled.record(&self.name, threshold))
+            .expect("a profile record serialises");
+        py.import("sysid._result")?.getattr("ProfileResult")?.call1((json,))
     }
 
     fn __repr__(&self) -> String {
