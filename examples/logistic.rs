@@ -7,20 +7,19 @@ use sysid::prelude::*;
 
 /// The model, written once, generic over the scalar: f64 for the states, dual numbers for
 /// the sensitivities.
-struct Logistic(Signature);
+struct Logistic;
 
-impl System for Logistic {
-    fn signature(&self) -> &Signature {
-        &self.0
-    }
-    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+impl Ode for Logistic {
+    const STATES: &[&str] = &["x"];
+    const PARAMETERS: &[&str] = &["r", "K"];
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], dy: &mut [T]) {
         dy[0] = p[0] * y[0] * (-(y[0] / p[1]) + 1.0);
     }
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (t, x) = ([0.0, 1.0, 2.0, 4.0, 6.0, 8.0], [0.5, 1.3, 2.7, 7.5, 9.5, 10.0]);
-    let problem = Problem::builder(Logistic(Signature::new(&["x"], &["r", "K"])))
+    let problem = Problem::ode(Logistic)
         .known("x", 0.5)
         .unknown("r", 0.8)
         .unknown("K", 8.0)

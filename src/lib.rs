@@ -45,6 +45,6 @@ pub mod prelude {
     pub use sysid_goodman::{Goodman, GoodmanOptions};
     pub use sysid_levenberg_marquardt::{LevenbergMarquardt, LevenbergMarquardtOptions};
     pub use sysid_multiple_shooting::{MultipleShooting, MultipleShootingOptions};
-    pub use sysid_ode::{Integrator, Scalar, Signature, System};
+    pub use sysid_ode::{Integrator, Ode, Scalar, Signature, System};
     pub use sysid_quasilinearization::{Quasilinearization, QuasilinearizationOptions};
 }

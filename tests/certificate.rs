@@ -15,7 +15,7 @@ use nalgebra::DMatrix;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use sysid::core::{Problem, Termination, exact_fit_tolerance};
+use sysid::core::{Problem, Termination, method::exact_fit_tolerance};
 use sysid::montecarlo::perturb;
 use sysid::ode::{Integrator, System};
 use sysid::registry::{Boxed, Registry, Settings};

@@ -5,7 +5,10 @@
 //! third-order term, O(h‖v‖) relative.
 
 use nalgebra::{DMatrix, DVector};
-use sysid::core::{Accelerated, Curve, Evaluations, Geodesic, Problem};
+use sysid::core::{
+    Problem,
+    method::{Accelerated, Curve, Evaluations, Geodesic},
+};
 use sysid::model::{Model, ModelSystem};
 
 const TIMES: [f64; 6] = [0.0, 0.5, 1.0, 2.0, 3.0, 5.0];

@@ -2,7 +2,10 @@
 
 use clap::Args;
 use sysid_core::format::significant;
-use sysid_core::{Compared, Estimate, compact, compact_header, comparison};
+use sysid_core::{
+    Estimate,
+    format::{Compared, compact, compact_header, comparison},
+};
 use sysid_montecarlo::multistart::Starts;
 use sysid_registry::ENTRIES;
 

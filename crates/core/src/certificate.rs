@@ -57,7 +57,7 @@ pub const MAX_EXACT_FIT: f64 = 1e-6;
 
 /// τ: ‖W^½ r‖ / ‖W^½ b‖ at or below which the model passes through the data as exactly as
 /// `problem` integrates it: [`EXACT_FIT`], or 10·rtol for an adaptive integration, at most
-/// [`MAX_EXACT_FIT`].
+/// [`MAX_EXACT_FIT`](crate::method::MAX_EXACT_FIT).
 pub fn exact_fit_tolerance<S: System>(problem: &Problem<S>) -> f64 {
     let integrator = problem.integrator();
     match integrator.fixed_step {
@@ -111,7 +111,7 @@ pub struct Certificate {
     pub flat: Vec<bool>,
     /// The direction the data cannot identify, when the normal matrix is singular there.
     pub null_space: Option<NullSpace>,
-    /// With noise scales set in closed form (see [`drive`](crate::drive)): the largest
+    /// With noise scales set in closed form (see [`drive`](crate::method::drive)): the largest
     /// relative change |ln(ŝ/s)| their closed form would still make at the point; it must be
     /// at most gtol too. `None` without noise scales.
     pub scales: Option<f64>,

@@ -32,7 +32,7 @@ pub struct Iteration {
     /// The unknowns at the iterate (values).
     pub values: Vec<f64>,
     /// What the method measured at the iterate besides ε, by name
-    /// ([`Iterate::diagnostics`](crate::Iterate::diagnostics)).
+    /// ([`Iterate::diagnostics`](crate::method::Iterate::diagnostics)).
     pub diagnostics: Diagnostics,
 }
 

@@ -207,7 +207,7 @@ impl<S: System> Problem<S> {
     /// Discrete data give one row per sample (and a noise row per sample whose σ is a
     /// function of the unknowns). A continuous record gives one row per node of a composite
     /// Gauss–Legendre rule (4 nodes per panel; panels between the samples of a sampled
-    /// record, [`RESIDUAL_PANELS`](crate::RESIDUAL_PANELS) panels over the span for a record
+    /// record, 256 panels over the span for a record
     /// given as a function), so that ‖r‖² is the quadrature of ε.
     pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, OdeError> {
         self.linearize_sampled(z)

@@ -63,7 +63,7 @@ impl<'p, S: System> Evaluations<'p, S> {
 
     /// The problem as the certificate measures its integration error against: [`finer`]
     /// for an error-controlled integration; for a fixed step, the same model integrated
-    /// with error control at rtol [`REFERENCE_RTOL`] (DOPRI5, or the Rosenbrock scheme of a
+    /// with error control at rtol [`REFERENCE_RTOL`](crate::method::REFERENCE_RTOL) (DOPRI5, or the Rosenbrock scheme of a
     /// fixed-step Rosenbrock run), so that a step too coarse to resolve the model shows in
     /// the error instead of passing as exact.
     ///

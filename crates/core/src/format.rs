@@ -1,5 +1,8 @@
 //! Numbers for people: the one formatter of every table sysid prints (the command line's,
 //! the studies' summaries, the report's), and the shortest exact form.
+//! Also the comparison tables of `sysid compare` and the catalogue's expected values.
+
+pub use crate::table::{Compared, Expected, compact, compact_header, comparison};
 
 /// `v` in `digits` significant digits: fixed-point in [1e-3, 1e5), exponent form outside
 /// (3.000e7 rather than 30000000), "—" for NaN. Tables print ten digits where estimates are

@@ -1,30 +1,67 @@
 //! # sysid-core: the vocabulary every identification method shares
 //!
-//! * [`Problem`]: a [`System`](sysid_ode::System), its known initial values and parameters,
-//!   the [`Unknown`]s with starting guesses (optional bounds, optional log scale), and the
-//!   measurements [`Data`]: discrete samples of states or outputs with a weight per output
-//!   (Goodman 1966, eq. 32), or a continuous record (eq. 16–17).
+//! The crate root holds what a user of the methods needs:
+//! * [`Problem`] (built with [`Problem::builder`]): a [`System`](sysid_ode::System), its known
+//!   initial values and parameters, the [`Unknown`]s with starting guesses (optional bounds,
+//!   optional log scale), and the measurements [`Data`]: discrete samples of states or outputs
+//!   with a weight per output (Goodman 1966, eq. 32) or a [`Noise`] model, or a continuous
+//!   record (eq. 16–17); several [`Experiment`]s when the data come from different settings.
 //! * [`Problem::linearize`]: one integration with sensitivities gives the cost
 //!   ε = Σ_o w_o Σ_m r_{o,m}² (no factor ½; the integral for a record), U = Σ w r S (eq. 12,
 //!   22) and A = Σ w Sᵀ S (eq. 15, 24), and for discrete data the weighted residuals and
-//!   their Jacobian.
-//! * [`NormalFactor`]: the symmetric normal equations solved by Cholesky after Jacobi
-//!   scaling, with the scale-free condition number and, when singular, the unknowns the data
-//!   cannot tell apart.
-//! * [`drive`]: the iteration driver every method uses. A method supplies its [`Step`]; the
-//!   driver owns the loop, the history, the budgets ([`DriverOptions`], [`Evaluations`]),
-//!   the step test, the best iterate, and the [`Certificate`] at the returned point, a
-//!   first-order optimality test that decides whether the fit converged.
+//!   their Jacobian ([`Linearization`]).
+//! * [`Method`]: the trait every method implements, and [`DriverOptions`] (budgets,
+//!   tolerances), set on any method's options through the [`Driven`] trait's `with_*` setters.
 //! * [`Estimate`]: values, standard errors, 95 % intervals (Student's t) and covariance
-//!   (s² A⁻¹, s² = ε/(N − k)), cost, iterations, [`Termination`], the certificate,
-//!   per-iteration history, time and work; the JSON of `sysid fit` ([`Estimate::record`]).
-//! * [`Method`]: the trait every method crate implements.
+//!   (s² A⁻¹, s² = ε/(N − k)), cost, iterations, [`Termination`], the [`Certificate`] (a
+//!   first-order optimality test at the returned point that decides whether the fit
+//!   converged), per-iteration history, time and work; the JSON of `sysid fit`
+//!   ([`Estimate::record`]).
+//!
+//! The modules hold the rest, named for who uses them:
+//! * [`method`]: for writing a method. The driver [`drive`](method::drive) owns the loop, the
+//!   history, the budgets, the step test, the best iterate and the certificate; a method
+//!   supplies its [`Step`](method::Step). Trust regions along a curve, bounded subproblems,
+//!   geodesic acceleration and the normal equations ([`NormalFactor`](method::NormalFactor):
+//!   Cholesky after Jacobi scaling, the scale-free condition number, and when singular the
+//!   unknowns the data cannot tell apart).
+//! * [`plan`]: for crates that build problems from files (model files, PEtab): experiments,
+//!   settings and noise models as laid out in a built problem.
+//! * [`confidence`]: Student's t and the intervals it gives.
+//! * [`format`](mod@format): numbers and tables for people.
+//!
+//! ```
+//! use sysid_core::{Data, Problem, Unknown};
+//! use sysid_ode::{Scalar, Signature, System};
+//!
+//! /// Exponential decay x' = −k x.
+//! struct Decay(Signature);
+//! impl System for Decay {
+//!     fn signature(&self) -> &Signature { &self.0 }
+//!     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+//!         dy[0] = -(p[0] * y[0]);
+//!     }
+//! }
+//!
+//! let t = [0.5, 1.0, 2.0];
+//! let x: Vec<f64> = t.iter().map(|t: &f64| 2.0 * (-0.7 * t).exp()).collect();
+//! let problem = Problem::builder(Decay(Signature::new(&["x"], &["k"])))
+//!     .unknown("x", 1.0)
+//!     .unknown_with(Unknown::new("k", 0.5).min(0.0).max(10.0))
+//!     .data(Data::discrete().series("x", &t, &x))
+//!     .build()?;
+//! // The cost at the true values is zero; at the guesses it is not.
+//! let lin = problem.linearize(&[2.0, 0.7])?;
+//! assert!(lin.cost < 1e-12);
+//! assert!(problem.linearize(&problem.guesses())?.cost > 0.1);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 #![warn(missing_docs)]
 
 mod assemble;
 mod bounded;
 mod certificate;
-mod confidence;
+pub mod confidence;
 mod data;
 mod driver;
 mod error;
@@ -32,13 +69,13 @@ mod estimate;
 mod evaluate;
 mod evaluations;
 mod experiment;
+mod fit;
 pub mod format;
 mod geodesic;
 mod linalg;
-mod method;
 mod noise;
 mod options;
-mod plan;
+pub mod plan;
 mod problem;
 mod step;
 mod table;
@@ -46,32 +83,45 @@ mod termination;
 mod trust;
 mod unknowns;
 
-pub use bounded::{BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box};
-pub use certificate::{
-    Bound, Certificate, EXACT_FIT, Measure, NullSpace, certify, exact_fit_tolerance, onto_bounds,
-    optimality,
-};
-pub use confidence::{Z95, band_half_width, interval, t95};
+// The user's vocabulary: a problem, its unknowns and data, the options, the estimate.
+pub use certificate::{Bound, Certificate, Measure, NullSpace};
 pub use data::{Data, Record, Samples, Series};
-pub use driver::drive;
 pub use error::{FitError, ProblemError};
 pub use estimate::{Estimate, ExperimentFit, FitRecord, Iteration, ScaleEstimate};
-pub use evaluate::{Linearization, Observed, WeightedResiduals};
-pub use evaluations::{Evaluations, FINEST_RTOL};
-pub use experiment::{Experiment, Planned, Setting, SettingFunction, SlotJacobian};
-pub use geodesic::{Accelerated, GEODESIC_H, GEODESIC_RATIO, Geodesic};
-pub use linalg::{NormalFactor, Singular, as_faer};
-pub use method::{Method, start_coordinates};
-pub use noise::{
-    LN_2PI, NOISE_ROW_SHIFT, Noise, NoiseArgs, NoiseFunction, NoiseGradient, Transform,
-};
-pub use options::{DEFAULT_GTOL, Driven, DriverOptions, MAX_DERIVED_GTOL, OptionsError};
-pub use plan::{PlannedNoise, PlannedSeries, RESIDUAL_PANELS, Sample, Sampled};
-pub use problem::{Problem, ProblemBuilder, QUADRATURE_RTOL, SINGLE_EXPERIMENT};
-pub use step::{Advance, Diagnostics, Iterate, Proposal, Step};
-pub use table::{Compared, Expected, compact, compact_header, comparison};
-pub use termination::{Failure, PROGRESS, PROGRESS_WINDOW, Rule, Termination};
-pub use trust::{
-    Curve, CurveStep, SCALE_MEMORY, actual_decrease, differenced_hessian, halve_along_curve,
-};
+pub use evaluate::{Linearization, WeightedResiduals};
+pub use experiment::{Experiment, Setting};
+pub use fit::Method;
+pub use noise::{Noise, Transform};
+pub use options::{DEFAULT_GTOL, Driven, DriverOptions, OptionsError};
+pub use problem::{Problem, ProblemBuilder};
+pub use step::Diagnostics;
+pub use termination::{Failure, Rule, Termination};
 pub use unknowns::{Distribution, Initialization, Prior, Unknown, Unknowns};
+
+pub mod method {
+    //! For writing a method: the driver that owns the loop, the step a method proposes, trust
+    //! regions along a curve, bounded subproblems, geodesic acceleration, the normal equations,
+    //! and the first-order certificate. A user who calls methods needs none of it.
+    //!
+    //! A method implements [`Step`] and calls [`drive`]; docs/methods.md ("Adding a method") walks
+    //! through one.
+
+    pub use crate::bounded::{
+        BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box,
+    };
+    pub use crate::certificate::{
+        EXACT_FIT, MAX_EXACT_FIT, certify, exact_fit_tolerance, onto_bounds, optimality,
+    };
+    pub use crate::driver::drive;
+    pub use crate::evaluate::Observed;
+    pub use crate::evaluations::{Evaluations, FINEST_RTOL, REFERENCE_RTOL};
+    pub use crate::fit::start_coordinates;
+    pub use crate::geodesic::{Accelerated, GEODESIC_H, GEODESIC_RATIO, Geodesic};
+    pub use crate::linalg::{NormalFactor, Singular, as_faer};
+    pub use crate::options::MAX_DERIVED_GTOL;
+    pub use crate::step::{Advance, Iterate, Proposal, Step};
+    pub use crate::termination::{PROGRESS, PROGRESS_WINDOW};
+    pub use crate::trust::{
+        Curve, CurveStep, SCALE_MEMORY, actual_decrease, differenced_hessian, halve_along_curve,
+    };
+}

@@ -1,6 +1,10 @@
 //! The measurements resolved against the system and checked: which state or output each
 //! series measures, on what scale, with what noise, on one sorted time grid; a continuous
 //! record also as residual rows at the nodes of a composite Gauss–Legendre rule.
+//!
+//! This module is for crates that build problems from files (model files, PEtab): it also
+//! holds how experiments, their settings and the noise models are laid out once a problem is
+//! built. A user who writes a [`Problem`](crate::Problem) with its builder needs none of it.
 
 use std::sync::Arc;
 
@@ -8,7 +12,11 @@ use sysid_ode::{Interpolation, Observable, Record, RecordedOutput, Signal, Syste
 
 use crate::data::{Data, Record as Kind, Samples, Series};
 use crate::error::ProblemError;
-use crate::noise::{Noise, NoiseFunction, Transform};
+use crate::noise::{Noise, Transform};
+
+pub use crate::experiment::{Planned, SettingFunction, SlotJacobian};
+pub use crate::noise::{LN_2PI, NOISE_ROW_SHIFT, NoiseArgs, NoiseFunction, NoiseGradient};
+pub use crate::problem::{QUADRATURE_RTOL, SINGLE_EXPERIMENT};
 
 /// The measurements resolved against the system.
 #[derive(Clone, Debug)]
@@ -123,7 +131,7 @@ impl Plan {
 }
 
 /// Panels per record span of a record given as a function, in its residual form.
-pub const RESIDUAL_PANELS: usize = 256;
+pub(crate) const RESIDUAL_PANELS: usize = 256;
 
 // Gauss–Legendre, 4 points on [−1, 1].
 const GL4: [(f64, f64); 4] = [

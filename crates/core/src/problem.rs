@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use sysid_ode::{Integrator, Observable, System};
+use sysid_ode::{Integrator, Observable, Ode, OdeSystem, System};
 
 use crate::data::Data;
 use crate::error::ProblemError;
@@ -28,7 +28,7 @@ pub const SINGLE_EXPERIMENT: &str = "data";
 ///
 /// The unknowns the methods move (their coordinates z) are the *free* ones: not fixed with
 /// [`with_fixed`](Self::with_fixed), and not noise scales, which the driver sets in closed
-/// form (see [`drive`](crate::drive)).
+/// form (see [`drive`](crate::method::drive)).
 #[derive(Debug)]
 pub struct Problem<S> {
     /// Every unknown, in the order given.
@@ -77,6 +77,15 @@ impl<S> Problem<S> {
             integrator: self.integrator,
             quadrature_rtol: self.quadrature_rtol,
         }
+    }
+}
+
+impl<O: Ode> Problem<OdeSystem<O>> {
+    /// Starts building a problem for the equations `ode` (the simple case: named states and
+    /// parameters, no inputs or outputs); the same as
+    /// [`builder`](Problem::builder)`(OdeSystem::new(ode))`.
+    pub fn ode(ode: O) -> ProblemBuilder<OdeSystem<O>> {
+        Problem::builder(OdeSystem::new(ode))
     }
 }
 

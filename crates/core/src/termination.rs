@@ -104,7 +104,7 @@ pub enum Failure {
 
 impl Failure {
     /// A singular matrix, its unknowns (indices into `names`) named.
-    pub fn singular(singular: &crate::Singular, names: &[String]) -> Self {
+    pub fn singular(singular: &crate::linalg::Singular, names: &[String]) -> Self {
         Failure::Singular {
             unknowns: singular.unknowns.iter().map(|&i| names[i].clone()).collect(),
             condition: singular.condition,

@@ -18,7 +18,7 @@ const LN_LARGEST: f64 = 709.782_712_893_383_9;
 ///
 /// Bounds hold inside every method's step (on the log scale as [ln min, ln max]): Goodman's
 /// projected Newton step and quasilinearization's least squares solve the step's subproblem
-/// within the box ([`minimise_in_box`](crate::minimise_in_box)); the argmin baseline maps
+/// within the box ([`minimise_in_box`](crate::method::minimise_in_box)); the argmin baseline maps
 /// the unknown to a free coordinate and holds it on its bound where the projected
 /// Gauss–Newton model does.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -196,7 +196,7 @@ impl Unknown {
         if self.log { self.value(z) } else { 1.0 }
     }
     /// The scale of the coordinate at z, by which the certificate tells a flat unknown
-    /// (docs of [`certificate`](crate::certificate)): 1 on a log scale (an e-fold of the
+    /// (docs of [`Certificate`](crate::Certificate)): 1 on a log scale (an e-fold of the
     /// value); on a linear scale the larger of |z|, |guess| and 1 (a generous scale, so that
     /// a linear unknown of small magnitude is not called flat).
     pub fn coordinate_scale(&self, z: f64) -> f64 {

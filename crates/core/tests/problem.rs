@@ -249,7 +249,7 @@ fn observed_values_and_bands_of_a_linear_model() {
         &[0.04, 0.01, -0.002, 0.01, 0.09, 0.003, -0.002, 0.003, 0.25],
     );
     let times = [-1.0, 0.0, 0.5, 1.0, 2.5, 6.0];
-    let quantile = sysid_core::t95(problem.dof().unwrap()).unwrap();
+    let quantile = sysid_core::confidence::t95(problem.dof().unwrap()).unwrap();
     let seen = problem.observed(&values, Some((&cov, quantile)), &times).unwrap();
     assert_eq!(seen.len(), 1);
     assert_eq!(seen[0].name, "y");
@@ -275,7 +275,7 @@ fn observed_values_and_bands_of_a_linear_model() {
 /// here (ε ≈ 1.6e4), so the added term is most of the (θ, θ) entry.
 #[test]
 fn the_differenced_hessian_is_the_full_hessian() {
-    use sysid_core::{Evaluations, differenced_hessian};
+    use sysid_core::method::{Evaluations, differenced_hessian};
     let problem = Problem::builder(fall())
         .t0(1.0)
         .unknown("y", 0.5)
@@ -334,17 +334,17 @@ fn a_flat_unknown_a_hair_from_its_bound_is_moved_onto_it() {
     };
     let near = with(Unknown::new("g", 30.0).log().min(29.99).max(100.0));
     let lin = near.linearize(&near.unknowns().coordinates(&[30.0])).unwrap();
-    let measure = sysid_core::optimality(&near, &lin, 1e-6);
+    let measure = sysid_core::method::optimality(&near, &lin, 1e-6);
     assert!(measure.flat[0] && measure.active[0].is_none(), "flat, off its bound: {measure:?}");
-    let z = sysid_core::onto_bounds(&near, &lin, 1e-6).expect("moved");
+    let z = sysid_core::method::onto_bounds(&near, &lin, 1e-6).expect("moved");
     assert_eq!(z[0].to_bits(), 29.99f64.ln().to_bits(), "exactly on it");
     let moved = near.linearize(&z).unwrap();
-    let held = sysid_core::optimality(&near, &moved, 1e-6);
+    let held = sysid_core::method::optimality(&near, &moved, 1e-6);
     assert_eq!(held.active[0], Some(sysid_core::Bound::Lower), "held on it");
     for far in [Unknown::new("g", 30.0).log(), Unknown::new("g", 30.0).log().min(1e-299)] {
         let p = with(far);
         let lin = p.linearize(&p.unknowns().coordinates(&[30.0])).unwrap();
-        assert!(sysid_core::optimality(&p, &lin, 1e-6).flat[0]);
-        assert_eq!(sysid_core::onto_bounds(&p, &lin, 1e-6), None);
+        assert!(sysid_core::method::optimality(&p, &lin, 1e-6).flat[0]);
+        assert_eq!(sysid_core::method::onto_bounds(&p, &lin, 1e-6), None);
     }
 }

@@ -4,8 +4,8 @@
 //! unknown still moving; a method that makes progress is not stopped by it.
 
 use sysid_core::{
-    Advance, Data, DriverOptions, Evaluations, Failure, Iterate, PROGRESS_WINDOW, Problem,
-    Proposal, Rule, Step, Termination, drive,
+    Data, DriverOptions, Failure, Problem, Rule, Termination,
+    method::{Advance, Evaluations, Iterate, PROGRESS_WINDOW, Proposal, Step, drive},
 };
 use sysid_systems::FallingBody;
 
@@ -78,5 +78,5 @@ fn a_crawl_is_stopped_and_names_what_moves() {
     assert!(e.iterations > 2 * PROGRESS_WINDOW, "{} iterations", e.iterations);
     assert!((e.values[0] - 787.0 / 24.5).abs() <= 0.02, "g = {}", e.values[0]);
     // The module docs and the termination text speak of 100 iterations and 1e-6.
-    assert_eq!((PROGRESS_WINDOW, sysid_core::PROGRESS), (100, 1e-6));
+    assert_eq!((PROGRESS_WINDOW, sysid_core::method::PROGRESS), (100, 1e-6));
 }

@@ -8,8 +8,8 @@ use std::sync::Arc;
 
 use num_dual::Dual64;
 use sysid_core::{
-    Experiment, Noise, NoiseArgs, NoiseFunction, NoiseGradient, Problem, ProblemError, Setting,
-    SettingFunction,
+    Experiment, Noise, Problem, ProblemError, Setting,
+    plan::{NoiseArgs, NoiseFunction, NoiseGradient, SettingFunction},
 };
 use sysid_ode::{Ivp, Observable, ObservableGradient, Scalar};
 
@@ -223,7 +223,7 @@ impl Model {
             };
             let start = Start { t0: f.data.t0, at: f.data.t0_at, table: "[data]" };
             vec![Plan {
-                name: sysid_core::SINGLE_EXPERIMENT.into(),
+                name: sysid_core::plan::SINGLE_EXPERIMENT.into(),
                 file,
                 start,
                 set: Vec::new(),
@@ -518,7 +518,7 @@ impl Model {
                 .series
                 .iter()
                 .filter_map(|s| match &s.noise {
-                    sysid_core::PlannedNoise::Function(n) => Some((s, n.clone())),
+                    sysid_core::plan::PlannedNoise::Function(n) => Some((s, n.clone())),
                     _ => None,
                 })
                 .collect();
@@ -600,7 +600,7 @@ impl Model {
     }
 
     fn in_experiment(&self, name: &str, e: ModelError) -> ModelError {
-        if name == sysid_core::SINGLE_EXPERIMENT {
+        if name == sysid_core::plan::SINGLE_EXPERIMENT {
             return e;
         }
         ModelError { message: format!("experiment `{name}`: {}", e.message), ..e }

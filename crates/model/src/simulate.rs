@@ -57,7 +57,7 @@ impl Model {
                 v.push((name.clone(), value));
             }
             vec![(
-                sysid_core::SINGLE_EXPERIMENT.to_string(),
+                sysid_core::plan::SINGLE_EXPERIMENT.to_string(),
                 self.system(Inputs::default()),
                 f.data.t0,
                 self.point_from(&v)?,

@@ -13,7 +13,7 @@
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
-use sysid_core::{Setting, SettingFunction, Unknown};
+use sysid_core::{Setting, Unknown, plan::SettingFunction};
 use sysid_ode::{Integrator, Ivp, System, Wrt};
 
 use crate::ModelSystem;

@@ -4,7 +4,7 @@
 use nalgebra::DMatrix;
 use rand::Rng;
 use rand_distr::StandardNormal;
-use sysid_core::{Data, NormalFactor, Problem, Samples, Series, Transform};
+use sysid_core::{Data, Problem, Samples, Series, Transform, method::NormalFactor};
 use sysid_ode::System;
 use sysid_systems::{Case, DataSource};
 

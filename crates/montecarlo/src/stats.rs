@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::trial::{REFERENCE, StudySpec, TrialRecord};
 
-pub use sysid_core::Z95;
+pub use sysid_core::confidence::Z95;
 
 /// What a study established, written to `summary.json`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

@@ -109,5 +109,5 @@ pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput
 pub use rhs::Rhs;
 pub use signal::{Inputs, Interpolation, Side, Signal};
 pub use sparse::SparseJacobian;
-pub use system::{Function, Observable, Scalar, Signature, System};
+pub use system::{Function, Observable, Ode, OdeSystem, Scalar, Signature, System};
 pub use wrt::{Wrt, wrt_name};

@@ -318,3 +318,69 @@ impl<S: System> System for &S {
         (**self).jacobians(t, y, p, u, jy, jp)
     }
 }
+
+/// The simple case of a [`System`]: y' = f(t, y, α) with named states and parameters, no
+/// inputs and no outputs (the states are what is measured). Implement it on a type of your
+/// own and wrap it with [`OdeSystem::new`] (or `Problem::ode` in sysid-core) where a
+/// [`System`] is wanted; implement [`System`] instead for inputs, outputs, switches or
+/// hand-written Jacobians.
+///
+/// ```
+/// use sysid_ode::{Ode, OdeSystem, Scalar, System};
+/// /// dx/dt = −k x
+/// struct Decay;
+/// impl Ode for Decay {
+///     const STATES: &[&str] = &["x"];
+///     const PARAMETERS: &[&str] = &["k"];
+///     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], dy: &mut [T]) {
+///         dy[0] = -(p[0] * y[0]);
+///     }
+/// }
+/// let decay = OdeSystem::new(Decay);
+/// assert_eq!(decay.signature().n_states(), 1);
+/// assert_eq!(decay.signature().parameters(), ["k"]);
+/// ```
+pub trait Ode: Send + Sync {
+    /// The states' names, in the order of y.
+    const STATES: &'static [&'static str];
+    /// The parameters' names, in the order of α.
+    const PARAMETERS: &'static [&'static str];
+    /// Whether f depends on t only through y (default: false). A Rosenbrock step then takes
+    /// ∂f/∂t = 0 instead of differencing it.
+    const AUTONOMOUS: bool = false;
+
+    /// The right-hand side dy = f(t, y, α), written once for any [`Scalar`] so that the
+    /// sensitivities come from dual numbers.
+    fn rhs<T: Scalar>(&self, t: f64, y: &[T], p: &[T], dy: &mut [T]);
+}
+
+/// An [`Ode`] as a [`System`]: the signature built once from its names.
+#[derive(Debug, Clone)]
+pub struct OdeSystem<O> {
+    ode: O,
+    signature: Signature,
+}
+
+impl<O: Ode> OdeSystem<O> {
+    /// The system of `ode`.
+    pub fn new(ode: O) -> Self {
+        OdeSystem { ode, signature: Signature::new(O::STATES, O::PARAMETERS) }
+    }
+
+    /// The wrapped equations.
+    pub fn ode(&self) -> &O {
+        &self.ode
+    }
+}
+
+impl<O: Ode> System for OdeSystem<O> {
+    fn signature(&self) -> &Signature {
+        &self.signature
+    }
+    fn rhs<T: Scalar>(&self, t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        self.ode.rhs(t, y, p, dy)
+    }
+    fn autonomous(&self) -> bool {
+        O::AUTONOMOUS
+    }
+}

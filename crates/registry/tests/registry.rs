@@ -3,8 +3,8 @@
 //! method reports.
 
 use sysid_core::{
-    Advance, DriverOptions, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem,
-    Proposal, Rule, Step, drive,
+    DriverOptions, Estimate, Failure, FitError, Method, Problem, Rule,
+    method::{Advance, Evaluations, Iterate, Proposal, Step, drive},
 };
 use sysid_ode::System;
 use sysid_registry::{ENTRIES, Registry, RegistryError, Role, Settings, parse_list};

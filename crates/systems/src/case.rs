@@ -3,7 +3,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use sysid_core::{Data, Expected, Problem, ProblemError, Unknown};
+use sysid_core::{Data, Problem, ProblemError, Unknown, format::Expected};
 use sysid_ode::{Integrator, Ivp, OdeError, Scheme, System};
 
 /// A published or exact answer a fit must reproduce, with the tolerance that applies.

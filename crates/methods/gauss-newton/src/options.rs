@@ -75,7 +75,7 @@ impl GaussNewtonOptions {
     }
 
     /// Checks the method's own options (the driver's are checked by
-    /// [`drive`](sysid_core::drive), once).
+    /// [`drive`](sysid_core::method::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
         OptionsError::positive("tolerance", self.tolerance)?;
         OptionsError::within("armijo", self.armijo, 0.0, 1.0)

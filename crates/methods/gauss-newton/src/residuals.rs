@@ -12,7 +12,7 @@ use std::cell::RefCell;
 
 use argmin::core::{CostFunction, Error, Gradient, Jacobian, Operator};
 use nalgebra::{DMatrix, DVector};
-use sysid_core::{Evaluations, Failure, Linearization};
+use sysid_core::{Failure, Linearization, method::Evaluations};
 use sysid_ode::System;
 
 use crate::bounds::Map;

@@ -13,8 +13,11 @@ use argmin::solver::linesearch::BacktrackingLineSearch;
 use argmin::solver::linesearch::condition::ArmijoCondition;
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, Bound, Estimate, Evaluations, Failure, FitError, Iterate, Method, NormalFactor,
-    Problem, Proposal, Quadratic, Rule, Step, drive, minimise_in_box,
+    Bound, Estimate, Failure, FitError, Method, Problem, Rule,
+    method::{
+        Advance, Evaluations, Iterate, NormalFactor, Proposal, Quadratic, Step, drive,
+        minimise_in_box,
+    },
 };
 use sysid_ode::System;
 

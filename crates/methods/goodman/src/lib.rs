@@ -18,7 +18,7 @@
 //! full steps, so a poor start can diverge. [`GoodmanOptions::step_halving`] adds a
 //! safeguard (off by default, to keep the paper's method).
 //!
-//! **When it stops.** The shared driver ([`sysid_core::drive`]) applies the step and gradient
+//! **When it stops.** The shared driver ([`sysid_core::method::drive`]) applies the step and gradient
 //! tests, the budgets and the certificate; see [`Termination`](sysid_core::Termination):
 //! converged, stalled (a rule fired where the cost is not stationary), iteration or
 //! integration budget, a singular normal matrix, or an integration failure with its time; a

@@ -51,7 +51,7 @@ impl GoodmanOptions {
     }
 
     /// Checks the method's own options (the driver's are checked by
-    /// [`drive`](sysid_core::drive), once).
+    /// [`drive`](sysid_core::method::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
         OptionsError::non_negative("cost_tolerance", self.cost_tolerance)
     }

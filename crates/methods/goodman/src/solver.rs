@@ -3,8 +3,8 @@
 
 use nalgebra::DVector;
 use sysid_core::{
-    Advance, Curve, Estimate, Evaluations, Failure, FitError, Iterate, Method, Problem, Proposal,
-    Rule, Step, drive, halve_along_curve,
+    Estimate, Failure, FitError, Method, Problem, Rule,
+    method::{Advance, Curve, Evaluations, Iterate, Proposal, Step, drive, halve_along_curve},
 };
 use sysid_ode::System;
 

@@ -12,7 +12,7 @@
 //!
 //! With bounds on the unknowns the step is the projected Newton step: δc minimises the
 //! quadratic model ε + 2U*ᵀδ + δᵀAδ, whose minimiser without bounds is eq. (14), over the box
-//! the bounds leave (`sysid_core::minimise_in_box`, an active-set method). An unknown is held
+//! the bounds leave (`sysid_core::method::minimise_in_box`, an active-set method). An unknown is held
 //! on its bound when the model's multiplier (U* + Aδ)_i pushes it outwards, and released only
 //! when it points inwards: the active set is that of the model's minimiser, not the sign of
 //! U* at the iterate, so a bound is not entered and left on alternate iterations.
@@ -23,7 +23,10 @@
 //! at the returned point still names the combination the data cannot identify.
 
 use nalgebra::DVector;
-use sysid_core::{Bound, Linearization, Quadratic, Singular, minimise_in_box};
+use sysid_core::{
+    Bound, Linearization,
+    method::{Quadratic, Singular, minimise_in_box},
+};
 
 /// μ of the regularised step as a multiple of k / max_condition: the Jacobi-scaled matrix
 /// plus μI then has a condition of at most (k + μ)/μ ≈ max_condition / 100.
@@ -38,7 +41,7 @@ fn regularised(
     lin: &Linearization,
     (lo, hi): (&[f64], &[f64]),
     max_condition: f64,
-) -> Option<sysid_core::BoxSolution> {
+) -> Option<sysid_core::method::BoxSolution> {
     let k = lin.gradient.len();
     let largest = (0..k).map(|i| lin.normal[(i, i)]).fold(0.0, f64::max);
     if !(largest > 0.0 && largest.is_finite()) {

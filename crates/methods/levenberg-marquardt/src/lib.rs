@@ -4,7 +4,7 @@
 //! the column norms of W½J, and the radius updated from the ratio of the actual to the
 //! predicted decrease of ε. Bounds are inside the step: each trial step minimises the
 //! Gauss–Newton model plus λ‖Dδ‖² over the box the bounds leave (the active-set method of
-//! [`sysid_core::minimise_in_box`]), so no step is clipped after the fact.
+//! [`sysid_core::method::minimise_in_box`]), so no step is clipped after the fact.
 //!
 //! The same trust region runs Fletcher and Xu's hybrid ([`LevenbergMarquardt::hybrid`],
 //! `hybrid-newton`; IMA J. Numer. Anal. 7, 1987): Gauss–Newton's model while ε falls by at

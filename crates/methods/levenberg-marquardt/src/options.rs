@@ -13,7 +13,7 @@ pub enum Hessian {
     GaussNewton,
     /// Fletcher and Xu's hybrid (IMA J. Numer. Anal. 7, 1987, 371–389): JᵀWJ while ε falls
     /// fast, else A = ∂U/∂z, half the full Hessian of ε, from forward differences of U (the
-    /// sensitivities' gradient; k more linearizations per iterate, [`sysid_core::differenced_hessian`]).
+    /// sensitivities' gradient; k more linearizations per iterate, [`sysid_core::method::differenced_hessian`]).
     Hybrid,
     /// Dennis, Gay and Welsch's adaptive model (NL2SOL; ACM TOMS 7, 1981, 348–368): JᵀWJ,
     /// or JᵀWJ + S with S a secant approximation of Σ rᵢ∇²rᵢ updated from the gradients at
@@ -38,7 +38,7 @@ pub struct LevenbergMarquardtOptions {
     #[serde(default)]
     pub hessian: Hessian,
     /// Bend each step along the valley by Transtrum and Sethna's geodesic acceleration (two
-    /// plain integrations per iterate and one per further trial; [`sysid_core::Geodesic`]).
+    /// plain integrations per iterate and one per further trial; [`sysid_core::method::Geodesic`]).
     /// Default off: measured on the PEtab problems it costs 2–3 times the time for the same
     /// share of starts reaching the best value (docs/methods.md).
     #[serde(default)]
@@ -79,7 +79,7 @@ impl LevenbergMarquardtOptions {
     }
 
     /// Checks the method's own options (the driver's are checked by
-    /// [`drive`](sysid_core::drive), once).
+    /// [`drive`](sysid_core::method::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
         OptionsError::positive("factor", self.factor)
     }

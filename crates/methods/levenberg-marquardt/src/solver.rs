@@ -6,7 +6,7 @@
 //!   m_λ(δ) = ε + 2Uᵀδ + δᵀAδ + λ‖Dδ‖²   over the box lo − z ≤ δ ≤ hi − z,
 //!
 //! with D = diag(d), d_i ← max(√A_ii, 0.9·d_i) at each iterate (Moré's scaling, with a memory
-//! that fades: [`sysid_core::SCALE_MEMORY`]; the iteration does not depend on the units of the
+//! that fades: [`sysid_core::method::SCALE_MEMORY`]; the iteration does not depend on the units of the
 //! unknowns). λ = 0, the Gauss–Newton step, when that step lies in
 //! the trust region ‖Dδ‖ ≤ Δ (within Moré's 10 %); otherwise λ > 0 is found with ‖Dδ(λ)‖
 //! within 10 % of Δ, by bisection in log λ from the last λ (‖Dδ(λ)‖ falls as λ grows). The
@@ -26,9 +26,11 @@
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Accelerated, Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Geodesic,
-    Iterate, Linearization, Method, Problem, Proposal, Rule, Step, actual_decrease,
-    differenced_hessian, drive,
+    Estimate, Failure, FitError, Linearization, Method, Problem, Rule,
+    method::{
+        Accelerated, Advance, Curve, CurveStep, Evaluations, Geodesic, Iterate, Proposal, Step,
+        actual_decrease, differenced_hessian, drive,
+    },
 };
 use sysid_ode::System;
 
@@ -60,7 +62,7 @@ impl LevenbergMarquardt {
     }
 
     /// Transtrum and Sethna's geodesic Levenberg–Marquardt: Gauss–Newton's model, each step
-    /// bent along the valley by its second-order term ([`sysid_core::Geodesic`]).
+    /// bent along the valley by its second-order term ([`sysid_core::method::Geodesic`]).
     pub fn geodesic(options: LevenbergMarquardtOptions) -> Self {
         Self {
             options: LevenbergMarquardtOptions {

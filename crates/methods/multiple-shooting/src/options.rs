@@ -21,7 +21,7 @@ impl MultipleShootingOptions {
     }
 
     /// Checks the method's own options (the driver's are checked by
-    /// [`drive`](sysid_core::drive), once).
+    /// [`drive`](sysid_core::method::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
         if self.intervals == Some(0) {
             return Err(OptionsError::Zero { name: "intervals" });

@@ -18,7 +18,7 @@
 //! Each experiment has a grid of its own; a problem's grids are shot one after the other.
 
 use nalgebra::{DMatrix, DVector};
-use sysid_core::{Planned, Problem, Transform};
+use sysid_core::{Problem, Transform, plan::Planned};
 use sysid_ode::{Counts, Integrator, Ivp, Observable, ObservableGradient, OdeError, System, Wrt};
 
 /// One shooting interval: its start τ_j and the times it is evaluated at (its samples, then

@@ -44,9 +44,12 @@
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, BoxSolution, Curve, Estimate, Evaluations, Failure, FitError, Iterate,
-    LinearLeastSquares, Linearization, Method, PlannedNoise, Problem, Proposal, Rule, Step, drive,
-    halve_along_curve, minimise_in_box,
+    Estimate, Failure, FitError, Linearization, Method, Problem, Rule,
+    method::{
+        Advance, BoxSolution, Curve, Evaluations, Iterate, LinearLeastSquares, Proposal, Step,
+        drive, halve_along_curve, minimise_in_box,
+    },
+    plan::PlannedNoise,
 };
 use sysid_ode::System;
 

@@ -49,7 +49,7 @@ impl QuasilinearizationOptions {
     }
 
     /// Checks the method's own options (the driver's are checked by
-    /// [`drive`](sysid_core::drive), once).
+    /// [`drive`](sysid_core::method::drive), once).
     pub fn validate(&self) -> Result<(), OptionsError> {
         Ok(())
     }

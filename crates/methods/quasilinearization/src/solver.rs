@@ -3,8 +3,11 @@
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Advance, Curve, CurveStep, Estimate, Evaluations, Failure, FitError, Iterate, Linearization,
-    Method, PlannedNoise, Problem, Proposal, Rule, Step, drive, halve_along_curve,
+    Estimate, Failure, FitError, Linearization, Method, Problem, Rule,
+    method::{
+        Advance, Curve, CurveStep, Evaluations, Iterate, Proposal, Step, drive, halve_along_curve,
+    },
+    plan::PlannedNoise,
 };
 use sysid_ode::{Counts, System};
 

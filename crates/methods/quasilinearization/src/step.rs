@@ -18,7 +18,11 @@
 //! dense solution and linearised around next.
 
 use nalgebra::{DMatrix, DVector};
-use sysid_core::{LinearLeastSquares, Linearization, Planned, Singular, minimise_in_box};
+use sysid_core::{
+    Linearization,
+    method::{LinearLeastSquares, Singular, minimise_in_box},
+    plan::Planned,
+};
 use sysid_ode::{
     Counts, DenseSolution, FactorError, Function, Integrator, IterationMatrix, JacobianProducts,
     Observable, OdeError, Rhs, Side, System, integrate, rhs_jump, stops,

@@ -9,7 +9,7 @@
 //! that is one unknown itself). Known values stay constants of the model.
 
 use nalgebra::DMatrix;
-use sysid_core::{Data, Planned, Problem, Record as Kind, Samples};
+use sysid_core::{Data, Problem, Record as Kind, Samples, plan::Planned};
 use sysid_ode::{Counts, DenseSolution, Interpolation, Ivp, OdeError, Record, Signal, System, Wrt};
 
 use crate::options::{Start, StateFunction};
