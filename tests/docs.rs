@@ -143,3 +143,32 @@ fn every_path_the_docs_name_exists() {
     }
     assert!(missing.is_empty(), "paths in the docs that do not exist:\n{}", missing.join("\n"));
 }
+
+#[test]
+fn the_readmes_layout_lists_every_crate() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = read("README.md");
+    let layout = readme.split("## Layout").nth(1).expect("the README has a Layout section");
+    let mut manifests = Vec::new();
+    for dir in ["crates", "crates/methods"] {
+        for entry in std::fs::read_dir(root.join(dir)).expect("the crates' directory") {
+            let path = entry.expect("a directory entry").path();
+            if path.join("Cargo.toml").exists() {
+                manifests.push(path.join("Cargo.toml"));
+            }
+        }
+    }
+    assert!(manifests.len() >= 17, "found only {} crates", manifests.len());
+    for manifest in manifests {
+        let text = std::fs::read_to_string(&manifest).expect("a manifest");
+        let name = text
+            .lines()
+            .find_map(|l| l.strip_prefix("name = \"").and_then(|n| n.strip_suffix('"')))
+            .unwrap_or_else(|| panic!("{} has no name", manifest.display()));
+        let dir = manifest.parent().and_then(|d| d.file_name()).and_then(|d| d.to_str());
+        let dir = dir.expect("a crate directory");
+        let line = layout.lines().find(|l| l.trim_start().starts_with(&format!("{dir}/")));
+        let line = line.unwrap_or_else(|| panic!("the README's layout lacks crates/…/{dir}/"));
+        assert!(line.contains(name), "the README's layout line of {dir}/ does not name {name}");
+    }
+}

@@ -3,7 +3,6 @@
 //! Exit codes: 0 success, 1 the method did not converge (its report is still printed),
 //! 2 bad input (one line on stderr, nothing on stdout); docs/terminations.md has them all.
 
-mod any;
 mod compare;
 mod fit;
 mod options;

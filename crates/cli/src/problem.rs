@@ -5,7 +5,7 @@
 
 use anyhow::Context as _;
 use sysid_core::{
-    Estimate, Expected, Failure, FitRecord, Method, Problem, ProblemError, Termination,
+    Estimate, Failure, FitRecord, Method, Problem, ProblemError, Termination, format::Expected,
 };
 use sysid_montecarlo::MultistartOptions;
 use sysid_montecarlo::multistart::Starts;
@@ -13,8 +13,8 @@ use sysid_ode::OdeError;
 use sysid_registry::{Boxed, Registry, Settings};
 use sysid_systems::Case;
 
-use crate::any::{self, AnySystem};
 use crate::options::{IntegratorArgs, MethodArgs, SourceArgs, StartsArgs};
+use sysid_registry::any::{self, AnySystem};
 
 /// What the commands work on: a problem of any system the command line fits.
 pub type AnyProblem = Problem<AnySystem>;

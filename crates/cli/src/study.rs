@@ -10,10 +10,10 @@ use sysid_montecarlo::{Scenario, Study, StudySpec, basin};
 use sysid_registry::Role;
 
 use crate::Outcome;
-use crate::any::{AnySystem, model_problem};
 use crate::options::{IntegratorArgs, MethodArgs, SourceArgs};
 use crate::output::{emit, not_an_input, progress_bar};
 use crate::problem::{case, fit, method, no_source, prepare};
+use sysid_registry::any::{AnySystem, model_problem};
 
 /// The help of `--methods`: the registry's study methods.
 fn methods_help() -> String {

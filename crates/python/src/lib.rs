@@ -1,7 +1,8 @@
 //! `sysid._sysid`: the compiled half of the `sysid` Python package (crates/python/python/sysid
 //! holds the rest, and the documentation a Python user reads).
 //!
-//! A [`Problem`] is a PEtab problem or a model file, imported and compiled once. Its objective,
+//! A [`Problem`] is a PEtab problem, a model file (imported and compiled once) or a system of
+//! the benchmark catalogue with its data. Its objective,
 //! gradient, Fisher information, weighted residuals and Jacobian are evaluated at a point given
 //! on the linear scale (the parameters' values) or on sysid's parameter scale (ln of a value
 //! for a log-scaled unknown, the value itself otherwise), as numpy arrays. `fit` runs any
@@ -22,8 +23,8 @@ use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use sysid_core::{Linearization, Problem, Unknown};
-use sysid_model::ModelSystem;
 use sysid_montecarlo::{MultistartOptions, Sampling};
+use sysid_registry::any::{self, AnySystem};
 use sysid_registry::{Registry, Role, Settings};
 
 create_exception!(
@@ -64,10 +65,11 @@ impl Scale {
     }
 }
 
-/// A parameter estimation problem: a PEtab problem or a model file with its data.
+/// A parameter estimation problem: a PEtab problem, a model file with its data, or a system of
+/// the catalogue.
 #[pyclass(name = "Problem", module = "sysid._sysid", frozen)]
 struct PyProblem {
-    problem: Arc<Problem<ModelSystem>>,
+    problem: Arc<Problem<AnySystem>>,
     name: String,
 }
 
@@ -76,7 +78,7 @@ struct PyProblem {
 /// scale, the value on a log scale).
 struct Evaluated<'a> {
     /// The problem itself where it has no noise scales; else a copy with the point's.
-    problem: Cow<'a, Problem<ModelSystem>>,
+    problem: Cow<'a, Problem<AnySystem>>,
     lin: Linearization,
     chain: Vec<f64>,
 }
@@ -260,7 +262,7 @@ impl PyProblem {
             .allow_threads(|| sysid_petab::import(&path))
             .map_err(|e| sysid_error(format!("{}: {e}", path.display())))?
             .model;
-        let problem = model.problem(None).map_err(sysid_error)?;
+        let problem = any::model_problem(model.problem(None).map_err(sysid_error)?);
         Ok(Self { problem: Arc::new(problem), name: path.display().to_string() })
     }
 
@@ -270,8 +272,25 @@ impl PyProblem {
     #[pyo3(signature = (path, data=None))]
     fn from_model(py: Python<'_>, path: PathBuf, data: Option<PathBuf>) -> PyResult<Self> {
         let model = py.allow_threads(|| sysid_model::Model::load(&path)).map_err(sysid_error)?;
-        let problem = model.problem(data.as_deref()).map_err(sysid_error)?;
+        let problem = any::model_problem(model.problem(data.as_deref()).map_err(sysid_error)?);
         Ok(Self { problem: Arc::new(problem), name: path.display().to_string() })
+    }
+
+    /// A system of the benchmark catalogue (`sysid list` names them) with its data: the
+    /// published record, or synthetic data drawn with `seed` (the command line's `--seed`).
+    #[staticmethod]
+    #[pyo3(signature = (name, seed=1))]
+    fn from_catalogue(py: Python<'_>, name: &str, seed: u64) -> PyResult<Self> {
+        let case = any::case(name).ok_or_else(|| {
+            PyValueError::new_err(format!(
+                "unknown system {name:?} (systems: {})",
+                sysid_systems::NAMES.join(", ")
+            ))
+        })?;
+        let problem = py
+            .allow_threads(|| case.problem(seed))
+            .map_err(|e| sysid_error(format!("system {name}: {e}")))?;
+        Ok(Self { problem: Arc::new(problem), name: name.to_string() })
     }
 
     /// The same problem integrated with other tolerances or another scheme.
@@ -305,7 +324,7 @@ impl PyProblem {
         Ok(Self { problem: Arc::new(problem), name: self.name.clone() })
     }
 
-    /// The file the problem was read from.
+    /// The file the problem was read from, or the catalogue system's name.
     #[getter]
     fn name(&self) -> &str {
         &self.name
@@ -653,7 +672,7 @@ impl PyProblem {
 /// The method names `fit` accepts, in the registry's order, the default first.
 #[pyfunction]
 fn methods() -> Vec<&'static str> {
-    let mut names = Registry::<ModelSystem>::standard().names();
+    let mut names = Registry::<AnySystem>::standard().names();
     let default = Role::Default.method();
     names.retain(|n| *n != default);
     names.insert(0, default);

@@ -24,6 +24,16 @@ BOEHM = os.path.join(PETAB, "Boehm_JProteomeRes2014", "Boehm_JProteomeRes2014.ya
 FALLING = os.path.join(ROOT, "examples", "falling-body", "model.toml")
 
 
+def cli():
+    """The sysid binary `cargo build` made (CI runs these tests after it)."""
+    target = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
+    clis = [os.path.join(target, d, "sysid") for d in ("release", "debug")]
+    found = next((c for c in clis if os.path.exists(c)), None)
+    if found is None:
+        raise AssertionError(f"no sysid binary at {' or '.join(clis)}: run `cargo build` first")
+    return found
+
+
 def reference_nll(problem):
     """AMICI's NLL at nominal (tests/data/petab/references.tsv)."""
     with open(os.path.join(PETAB, "references.tsv")) as f:
@@ -105,12 +115,7 @@ class Boehm(unittest.TestCase):
         self.assertTrue(fit.converged, fit.termination)
         # The same fit from the command line (`cargo test` builds it; CI runs these tests
         # after it): the same numbers, up to the rounding of another build profile.
-        target = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
-        clis = [os.path.join(target, d, "sysid") for d in ("release", "debug")]
-        cli = next((c for c in clis if os.path.exists(c)), None)
-        if cli is None:
-            self.fail(f"no sysid binary at {' or '.join(clis)}: run `cargo build` first")
-        out = subprocess.run([cli, "fit", "--petab", BOEHM, "--format", "json"], capture_output=True, text=True, check=True)
+        out = subprocess.run([cli(), "fit", "--petab", BOEHM, "--format", "json"], capture_output=True, text=True, check=True)
         record = json.loads(out.stdout)
         self.assertAlmostEqual(fit.nll, record["nll"], delta=1e-9)
         self.assertEqual(list(fit.estimates), list(record["estimates"]))
@@ -254,6 +259,51 @@ class FallingBody(unittest.TestCase):
         _, jac = p.residuals_and_jacobian(p.nominal)
         t = np.arange(4.0)
         np.testing.assert_allclose(jac, np.column_stack([np.ones(4), t, t**2 / 2]), atol=1e-9)
+
+
+class Catalogue(unittest.TestCase):
+    """The benchmark catalogue's systems, by the names `sysid list` prints."""
+
+    def test_the_falling_body_is_the_papers(self):
+        p = sysid.Problem.from_catalogue("falling-body")
+        self.assertEqual(p.name, "falling-body")
+        fit = p.fit(method="goodman")
+        self.assertTrue(fit.converged, fit.termination)
+        # Goodman (1966): y0 = −0.25, v0 = −0.25, g = 32.5, exact in the model's quadratic.
+        np.testing.assert_allclose(fit.x, [-0.25, -0.25, 32.5], rtol=1e-10)
+
+    def test_synthetic_data_are_the_command_lines(self):
+        # Lotka–Volterra with data drawn with seed 3: the command line's `--seed 3` draws the
+        # same data, so the two fits agree.
+        p = sysid.Problem.from_catalogue("lotka-volterra", seed=3)
+        fit = p.fit()
+        self.assertTrue(fit.converged, fit.termination)
+        out = subprocess.run(
+            [cli(), "fit", "--system", "lotka-volterra", "--seed", "3", "--format", "json"],
+            capture_output=True, text=True, check=True,
+        )
+        record = json.loads(out.stdout)
+        self.assertEqual(list(fit.estimates), list(record["estimates"]))
+        for name, value in record["estimates"].items():
+            self.assertAlmostEqual(fit.estimates[name], value, delta=1e-8 * abs(value))
+        # Another seed draws other data.
+        other = sysid.Problem.from_catalogue("lotka-volterra", seed=4)
+        self.assertNotEqual(other.nll(p.nominal), p.nll(p.nominal))
+
+    def test_the_gradient_is_the_central_differences(self):
+        p = sysid.Problem.from_catalogue("lotka-volterra", seed=3).with_integrator(rtol=1e-12, atol=1e-14)
+        x = p.nominal
+        _, gradient = p.nll_and_gradient(x)
+        h = 1e-5
+        fd = np.array([(p.nll(x + h * e) - p.nll(x - h * e)) / (2 * h) for e in np.eye(len(x))])
+        np.testing.assert_allclose(gradient, fd, rtol=1e-6)
+
+    def test_bad_names_and_records_raise_with_the_reason(self):
+        with self.assertRaisesRegex(ValueError, r'unknown system "nope" \(systems: falling-body, '):
+            sysid.Problem.from_catalogue("nope")
+        continuous = sysid.Problem.from_catalogue("falling-body-continuous")
+        with self.assertRaisesRegex(sysid.SysidError, "continuous record: it has no likelihood"):
+            continuous.nll(continuous.nominal)
 
 
 if __name__ == "__main__":

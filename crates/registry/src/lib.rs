@@ -1,10 +1,13 @@
-//! # sysid-registry: every method by name
+//! # sysid-registry: every method and every system by name
 //!
 //! The one table of the identification methods sysid offers, [`ENTRIES`]: a name, what the
 //! method is, the roles it plays when no method is named ([`Role`]), and how to build it with
 //! the [`Settings`] every method shares. The command line (its help texts and default lists),
 //! the criterion benches, the Monte-Carlo studies and the report all take their methods from
 //! here, so a new method is one line of the table (docs/methods.md, "Adding a method").
+//!
+//! [`any`] is the other half: every system sysid fits by name (the catalogue's, a model
+//! file's, a PEtab problem's) as one type, [`AnySystem`].
 //!
 //! ```
 //! use sysid_registry::{Registry, Role, Settings};
@@ -18,6 +21,10 @@
 //! assert!(registry.build("newton", &Settings::default()).is_err());
 //! ```
 #![warn(missing_docs)]
+
+pub mod any;
+
+pub use any::AnySystem;
 
 use sysid_core::{Driven, DriverOptions, Estimate, FitError, Method, OptionsError, Problem};
 use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions, JacobianSource};

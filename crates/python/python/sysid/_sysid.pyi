@@ -17,12 +17,15 @@ def methods() -> List[str]:
     """The method names :meth:`Problem.fit` accepts, the default first."""
 
 class Problem:
-    """A parameter estimation problem: a PEtab problem or a model file with its data."""
+    """A parameter estimation problem: a PEtab problem, a model file with its data, or a
+    system of the benchmark catalogue."""
 
     @staticmethod
     def from_petab(path: str) -> "Problem": ...
     @staticmethod
     def from_model(path: str, data: Optional[str] = None) -> "Problem": ...
+    @staticmethod
+    def from_catalogue(name: str, seed: int = 1) -> "Problem": ...
     def with_integrator(
         self,
         rtol: Optional[float] = None,

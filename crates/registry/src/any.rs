@@ -1,7 +1,8 @@
-//! Every system the command line can fit, as one type: the catalogue's systems and a model
-//! file's (a PEtab problem is one too). The commands work on `Problem<AnySystem>`, so each is
-//! a plain function, and the methods are compiled once for all of them instead of once per
-//! system type; the match on the variant costs nothing next to an evaluation of the model.
+//! Every system sysid can fit by name, as one type: the catalogue's systems and a model
+//! file's (a PEtab problem is one too). The command line and the Python package work on
+//! `Problem<AnySystem>`, so each command is a plain function, and the methods are compiled
+//! once for all of them instead of once per system type; the match on the variant costs
+//! nothing next to an evaluation of the model.
 
 use std::sync::Arc;
 
@@ -16,7 +17,7 @@ use sysid_systems::{
 
 macro_rules! any_system {
     ($($variant:ident($ty:ty)),* $(,)?) => {
-        /// One of the systems the command line fits.
+        /// One of the systems sysid fits by name: a catalogue system or a model file's.
         #[derive(Clone, Debug)]
         pub enum AnySystem {
             $(
