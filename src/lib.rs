@@ -39,6 +39,30 @@ pub use sysid_registry as registry;
 pub use sysid_systems as systems;
 
 /// The names most programs need.
+///
+/// A fit's [`Estimate`](sysid_core::Estimate) holds the values with their standard errors,
+/// 95 % intervals and covariance, the [`Termination`](sysid_core::Termination) and the
+/// certificate's verdict, the history and the work done. Goodman's falling body, fitted to
+/// the paper's data:
+///
+/// ```
+/// use sysid::prelude::*;
+/// use sysid::systems::falling_body::falling_body;
+///
+/// let problem = falling_body().problem(1)?;
+/// let fit = Goodman::default().fit(&problem)?;
+/// assert!(fit.converged());
+/// assert_eq!(fit.termination.code(), "converged_gradient");
+/// assert_eq!(fit.names, ["y", "v", "g"]);
+/// assert!((fit.value("g").unwrap() - 32.5).abs() < 1e-9); // the paper's g
+/// // s² = ε/(N − k) = 1.25 with one degree of freedom; SE(g) = √(s² (A⁻¹)_gg) = √1.25.
+/// let se = fit.std_errors.as_ref().unwrap();
+/// assert!((se[2] - 1.25f64.sqrt()).abs() < 1e-9);
+/// let [lo, hi] = fit.intervals.as_ref().unwrap()[2]; // Student's t with 1 dof: 12.706
+/// assert!((hi - lo - 2.0 * 12.706_204_736 * se[2]).abs() < 1e-6);
+/// println!("{fit}");
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 pub mod prelude {
     pub use sysid_core::{Data, Driven, Estimate, Method, Problem, Termination, Unknown};
     pub use sysid_gauss_newton::{GaussNewton, GaussNewtonOptions};

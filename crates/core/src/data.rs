@@ -63,6 +63,23 @@ pub enum Record {
 }
 
 /// The measurements of a problem.
+///
+/// ```
+/// use sysid_core::{Data, Noise, Transform};
+///
+/// let (t, b) = ([1.0, 2.0, 3.0], [0.9, 0.8, 0.7]);
+/// // Weighted least squares: ε = Σ w (x(t) − b)², here w = 4 = 1/σ² for σ = 0.5.
+/// let wls = Data::discrete().weighted_series("x", 4.0, &t, &b);
+/// assert_eq!(wls.n_observations(), Some(3));
+/// // The likelihood with σ = 0.1 known: the fit reports the negative log-likelihood too.
+/// let known = Noise::Known(vec![0.1; 3]);
+/// let likelihood = Data::discrete().series_with_noise("x", &t, &b, known, Transform::Lin);
+/// assert!(likelihood.has_noise_model() && !wls.has_noise_model());
+/// // A continuous record over [0, 3]: ε = ∫ (x(t) − b(t))² dt, b joined by straight lines.
+/// // Its samples count as the observations of the degrees of freedom N − k.
+/// let record = Data::continuous(0.0, 3.0).series("x", &[0.0, 1.5, 3.0], &[1.0, 0.8, 0.7]);
+/// assert_eq!(record.n_observations(), Some(3));
+/// ```
 #[derive(Clone, Debug)]
 pub struct Data {
     /// Discrete or continuous.

@@ -29,6 +29,37 @@ pub const SINGLE_EXPERIMENT: &str = "data";
 /// The unknowns the methods move (their coordinates z) are the *free* ones: not fixed with
 /// [`with_fixed`](Self::with_fixed), and not noise scales, which the driver sets in closed
 /// form (see [`drive`](crate::method::drive)).
+///
+/// Two experiments of x' = −k x sharing the rate k, one from a known initial value and one
+/// from an unknown one:
+///
+/// ```
+/// use sysid_core::{Data, Experiment, Problem, Setting};
+/// use sysid_ode::testing::Decay;
+///
+/// let t = [1.0, 2.0];
+/// let run = |name: &str, x0: Setting, b: [f64; 2]| Experiment {
+///     name: name.into(),
+///     also: Vec::new(),
+///     system: Decay::new(),
+///     t0: 0.0,
+///     initial: vec![x0],
+///     parameters: vec![Setting::Unknown("k".into())],
+///     data: Data::discrete().series("x", &t, &b),
+/// };
+/// let (e1, e2) = ((-0.5f64).exp(), (-1.0f64).exp()); // k = 0.5
+/// let problem = Problem::builder(Decay::new())
+///     .unknown("k", 0.3)
+///     .unknown("x0", 1.0)
+///     .experiment(run("known start", Setting::Value(1.0), [e1, e2]))
+///     .experiment(run("unknown start", Setting::Unknown("x0".into()), [3.0 * e1, 3.0 * e2]))
+///     .build()?;
+/// assert_eq!(problem.names(), ["k", "x0"]);
+/// assert_eq!((problem.experiments().len(), problem.n_observations()), (2, Some(4)));
+/// // At the truth (k = 0.5, x0 = 3) both experiments fit exactly.
+/// assert!(problem.linearize(&[0.5, 3.0])?.cost < 1e-12);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
 #[derive(Debug)]
 pub struct Problem<S> {
     /// Every unknown, in the order given.

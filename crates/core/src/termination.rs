@@ -151,6 +151,20 @@ impl fmt::Display for Failure {
 
 /// Why a method stopped. Not converging is a result, not an error; whether the returned
 /// point is a minimum is the certificate's verdict ([`Estimate::converged`](crate::Estimate::converged)).
+///
+/// Each has a stable code (the JSON's `termination_code`, docs/terminations.md) and a
+/// sentence for people:
+///
+/// ```
+/// use sysid_core::{Rule, Termination};
+///
+/// let done = Termination::Converged(Rule::Step);
+/// assert_eq!(done.code(), "converged_step");
+/// assert_eq!(Termination::Converged(Rule::ExactFit).code(), "exact_fit");
+/// assert_eq!(Termination::MaxIterations.code(), "max_iterations");
+/// assert!(done.failure().is_none());
+/// println!("{done}"); // converged: step below tolerance
+/// ```
 #[derive(Clone, Debug, PartialEq)]
 pub enum Termination {
     /// A stopping rule fired and the certificate holds at the returned point.

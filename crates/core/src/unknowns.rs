@@ -21,6 +21,16 @@ const LN_LARGEST: f64 = 709.782_712_893_383_9;
 /// within the box ([`minimise_in_box`](crate::method::minimise_in_box)); the argmin baseline maps
 /// the unknown to a free coordinate and holds it on its bound where the projected
 /// Gauss–Newton model does.
+///
+/// ```
+/// use sysid_core::Unknown;
+///
+/// let k = Unknown::new("k", 0.5).min(1e-3).max(10.0).log();
+/// // The methods move z = ln k; estimates, errors and bounds are reported on k itself.
+/// assert_eq!(k.coordinate(0.5), 0.5f64.ln());
+/// assert!((k.value(k.coordinate(2.0)) - 2.0).abs() < 1e-15);
+/// assert_eq!(k.coordinate_bounds(), (1e-3f64.ln(), 10f64.ln()));
+/// ```
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Unknown {
     /// A parameter's name, or a state's name for its initial value.
