@@ -4,7 +4,8 @@
 //! method is, the roles it plays when no method is named ([`Role`]), and how to build it with
 //! the [`Settings`] every method shares. The command line (its help texts and default lists),
 //! the criterion benches, the Monte-Carlo studies and the report all take their methods from
-//! here, so a new method is one line of the table (docs/methods.md, "Adding a method").
+//! here, so a new method is one entry of the table (docs/methods.md, "Adding a method", lists
+//! the seven files a method of a new crate touches).
 //!
 //! [`any`] is the other half: every system sysid fits by name (the catalogue's, a model
 //! file's, a PEtab problem's) as one type, [`AnySystem`].
