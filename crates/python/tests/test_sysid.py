@@ -28,10 +28,11 @@ def cli():
     """The sysid binary `cargo build` made (CI runs these tests after it)."""
     target = os.environ.get("CARGO_TARGET_DIR", os.path.join(ROOT, "target"))
     clis = [os.path.join(target, d, "sysid") for d in ("release", "debug")]
-    found = next((c for c in clis if os.path.exists(c)), None)
-    if found is None:
+    found = [c for c in clis if os.path.exists(c)]
+    if not found:
         raise AssertionError(f"no sysid binary at {' or '.join(clis)}: run `cargo build` first")
-    return found
+    # The newer of the two: an old release build may predate the code under test.
+    return max(found, key=os.path.getmtime)
 
 
 def reference_nll(problem):
