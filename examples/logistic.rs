@@ -7,6 +7,7 @@ use sysid::prelude::*;
 
 /// The model, written once, generic over the scalar: f64 for the states, dual numbers for
 /// the sensitivities.
+#[derive(Clone, Debug)]
 struct Logistic;
 
 impl Ode for Logistic {

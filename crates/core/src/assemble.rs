@@ -262,7 +262,7 @@ impl Record<'_> {
 }
 
 /// The estimate of a fit in rounds between closed-form updates of the noise scales (see
-/// [`drive`](crate::drive)): the last round's, on the whole history, with the scales at the
+/// [`drive`](crate::method::drive)): the last round's, on the whole history, with the scales at the
 /// values that round held (`held`) and their part of the certificate, `moved`, the largest
 /// relative change the closed form would still make.
 pub(crate) fn with_scales<S: System>(

@@ -25,27 +25,29 @@
 //!   geodesic acceleration and the normal equations ([`NormalFactor`](method::NormalFactor):
 //!   Cholesky after Jacobi scaling, the scale-free condition number, and when singular the
 //!   unknowns the data cannot tell apart).
-//! * [`plan`]: for crates that build problems from files (model files, PEtab): experiments,
-//!   settings and noise models as laid out in a built problem.
+//! * [`plan`]: a built problem's experiments and data as the methods and importers see them
+//!   (samples, residual rows, noise layouts), and the traits behind [`Noise::Function`] and
+//!   [`Setting::Function`] (σ or a setting as a function of the unknowns).
 //! * [`confidence`]: Student's t and the intervals it gives.
 //! * [`format`](mod@format): numbers and tables for people.
 //!
 //! ```
 //! use sysid_core::{Data, Problem, Unknown};
-//! use sysid_ode::{Scalar, Signature, System};
+//! use sysid_ode::{Ode, Scalar};
 //!
 //! /// Exponential decay x' = −k x.
-//! struct Decay(Signature);
-//! impl System for Decay {
-//!     fn signature(&self) -> &Signature { &self.0 }
-//!     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+//! struct Decay;
+//! impl Ode for Decay {
+//!     const STATES: &[&str] = &["x"];
+//!     const PARAMETERS: &[&str] = &["k"];
+//!     fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], dy: &mut [T]) {
 //!         dy[0] = -(p[0] * y[0]);
 //!     }
 //! }
 //!
 //! let t = [0.5, 1.0, 2.0];
 //! let x: Vec<f64> = t.iter().map(|t: &f64| 2.0 * (-0.7 * t).exp()).collect();
-//! let problem = Problem::builder(Decay(Signature::new(&["x"], &["k"])))
+//! let problem = Problem::ode(Decay)
 //!     .unknown("x", 1.0)
 //!     .unknown_with(Unknown::new("k", 0.5).min(0.0).max(10.0))
 //!     .data(Data::discrete().series("x", &t, &x))
@@ -84,11 +86,11 @@ mod trust;
 mod unknowns;
 
 // The user's vocabulary: a problem, its unknowns and data, the options, the estimate.
-pub use certificate::{Bound, Certificate, Measure, NullSpace};
+pub use certificate::{Bound, Certificate, NullSpace};
 pub use data::{Data, Record, Samples, Series};
 pub use error::{FitError, ProblemError};
 pub use estimate::{Estimate, ExperimentFit, FitRecord, Iteration, ScaleEstimate};
-pub use evaluate::{Linearization, WeightedResiduals};
+pub use evaluate::{Linearization, Observed, WeightedResiduals};
 pub use experiment::{Experiment, Setting};
 pub use fit::Method;
 pub use noise::{Noise, Transform};
@@ -110,10 +112,9 @@ pub mod method {
         BoxSolution, LinearLeastSquares, Quadratic, Subproblem, minimise_in_box,
     };
     pub use crate::certificate::{
-        EXACT_FIT, MAX_EXACT_FIT, certify, exact_fit_tolerance, onto_bounds, optimality,
+        EXACT_FIT, MAX_EXACT_FIT, Measure, certify, exact_fit_tolerance, onto_bounds, optimality,
     };
     pub use crate::driver::drive;
-    pub use crate::evaluate::Observed;
     pub use crate::evaluations::{Evaluations, FINEST_RTOL, REFERENCE_RTOL};
     pub use crate::fit::start_coordinates;
     pub use crate::geodesic::{Accelerated, GEODESIC_H, GEODESIC_RATIO, Geodesic};

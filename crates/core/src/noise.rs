@@ -9,7 +9,7 @@
 //! to the negative log-likelihood (PEtab's convention; the last terms make it a density of m
 //! itself). σ is one of: known (a number or a data column, per sample), a plain unknown
 //! scale s times known factors (σ_m = s·f_m, eliminated in closed form: see
-//! [`drive`](crate::drive)), or a function of time, the states, the quantity's value, the
+//! [`drive`](crate::method::drive)), or a function of time, the states, the quantity's value, the
 //! parameters and the unknowns. Series without a noise model keep their weights
 //! w = 1/σ² as relative weights (Goodman's eq. 32): the least-squares cost ε is the same, and
 //! the covariance is scaled by the residual variance as it always was.

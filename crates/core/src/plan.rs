@@ -2,9 +2,12 @@
 //! series measures, on what scale, with what noise, on one sorted time grid; a continuous
 //! record also as residual rows at the nodes of a composite Gauss–Legendre rule.
 //!
-//! This module is for crates that build problems from files (model files, PEtab): it also
-//! holds how experiments, their settings and the noise models are laid out once a problem is
-//! built. A user who writes a [`Problem`](crate::Problem) with its builder needs none of it.
+//! This module is for the crates that work on a built problem's layout: methods that form
+//! residual rows themselves (quasilinearization, multiple shooting) and importers (model
+//! files, PEtab). It also holds the traits behind [`Noise::Function`]
+//! and [`Setting::Function`](crate::Setting::Function), for σ or a setting that is a function
+//! of the unknowns. A user who builds a [`Problem`](crate::Problem) from numbers and names
+//! needs none of it.
 
 use std::sync::Arc;
 

@@ -1,5 +1,5 @@
 //! The vocabulary between the driver and a method: the iterate, the method's proposal, how
-//! it moved, and the [`Step`] trait a method implements (see [`drive`](crate::drive)).
+//! it moved, and the [`Step`] trait a method implements (see [`drive`](crate::method::drive)).
 
 use sysid_ode::System;
 

@@ -30,7 +30,7 @@ pub struct Start<'a> {
     pub t0: f64,
     /// Byte offset of the `t0` value in the model file, if given.
     pub at: Option<usize>,
-    /// Which table gives it: "[data]" or "experiment `low`".
+    /// Which table gives it: "`[data]`" or "experiment `low`".
     pub table: &'a str,
 }
 

@@ -323,7 +323,8 @@ impl<S: System> System for &S {
 /// inputs and no outputs (the states are what is measured). Implement it on a type of your
 /// own and wrap it with [`OdeSystem::new`] (or `Problem::ode` in sysid-core) where a
 /// [`System`] is wanted; implement [`System`] instead for inputs, outputs, switches or
-/// hand-written Jacobians.
+/// hand-written Jacobians. Derive `Clone` (and `Debug`) on the type for the Monte-Carlo
+/// studies and basin maps, which copy the system into each trial.
 ///
 /// ```
 /// use sysid_ode::{Ode, OdeSystem, Scalar, System};

@@ -276,7 +276,7 @@ impl PyProblem {
         Ok(Self { problem: Arc::new(problem), name: path.display().to_string() })
     }
 
-    /// A system of the benchmark catalogue (`sysid list` names them) with its data: the
+    /// A system of the benchmark catalogue (`sysid systems` names them) with its data: the
     /// published record, or synthetic data drawn with `seed` (the command line's `--seed`).
     #[staticmethod]
     #[pyo3(signature = (name, seed=1))]

@@ -263,7 +263,7 @@ class FallingBody(unittest.TestCase):
 
 
 class Catalogue(unittest.TestCase):
-    """The benchmark catalogue's systems, by the names `sysid list` prints."""
+    """The benchmark catalogue's systems, by the names `sysid systems` prints."""
 
     def test_the_falling_body_is_the_papers(self):
         p = sysid.Problem.from_catalogue("falling-body")
