@@ -659,6 +659,30 @@ impl PyProblem {
         py.import("sysid._result")?.getattr("ProfileResult")?.call1((json,))
     }
 
+    /// For scripts/python/overhead.py: the seconds per evaluation of what a Rust program calls
+    /// for the NLL and its gradient at the point `z` on the parameter scale (its noise scales
+    /// taken as the problem holds them), `repeat` times in a loop without Python, so that the
+    /// binding's cost is measured against it in the same process.
+    fn _rust_seconds_per_evaluation(
+        &self,
+        py: Python<'_>,
+        z: PyReadonlyArray1<'_, f64>,
+        repeat: usize,
+    ) -> PyResult<f64> {
+        let mut z = self.coordinates(z.as_slice()?, Scale::Parameter)?;
+        z.truncate(self.problem.unknowns().len());
+        let problem = &self.problem;
+        py.allow_threads(|| {
+            let start = std::time::Instant::now();
+            for _ in 0..repeat.max(1) {
+                let lin = problem.residuals_and_jacobian(&z)?;
+                std::hint::black_box((problem.nll(&lin), &lin.gradient));
+            }
+            Ok(start.elapsed().as_secs_f64() / repeat.max(1) as f64)
+        })
+        .map_err(|e: sysid_ode::OdeError| sysid_error(e))
+    }
+
     fn __repr__(&self) -> String {
         format!(
             "sysid.Problem({:?}: {} unknowns, {} experiments)",
