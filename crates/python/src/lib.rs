@@ -25,7 +25,7 @@ use pyo3::types::PyDict;
 use sysid_core::{Linearization, Problem, Unknown};
 use sysid_montecarlo::{MultistartOptions, Sampling};
 use sysid_registry::any::{self, AnySystem};
-use sysid_registry::{Registry, Role, Settings};
+use sysid_registry::{Boxed, Registry, Role, Settings};
 
 create_exception!(
     _sysid,
@@ -247,6 +247,29 @@ impl Evaluated<'_> {
         }
         j
     }
+}
+
+/// The settings every method shares, with the driver's budgets and tolerance where given.
+fn settings(
+    max_iterations: Option<usize>,
+    gtol: Option<f64>,
+    max_integrations: Option<u64>,
+) -> PyResult<Settings> {
+    let mut settings = Settings::default();
+    if let Some(n) = max_iterations {
+        settings.driver.max_iterations = n;
+    }
+    settings.driver.gtol = gtol;
+    settings.driver.max_integrations = max_integrations;
+    settings.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(settings)
+}
+
+/// The registry's method `name` (the default when None), built with `settings`.
+fn build(name: Option<&str>, settings: &Settings) -> PyResult<Boxed<AnySystem>> {
+    Registry::standard()
+        .build(name.unwrap_or(Role::Default.method()), settings)
+        .map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
 fn matrix<'py>(py: Python<'py>, m: &DMatrix<f64>) -> Bound<'py, PyArray2<f64>> {
@@ -530,17 +553,8 @@ impl PyProblem {
         max_integrations: Option<u64>,
         fix: Option<std::collections::BTreeMap<String, f64>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let name = method.unwrap_or(Role::Default.method());
-        let mut settings = Settings::default();
-        if let Some(n) = max_iterations {
-            settings.driver.max_iterations = n;
-        }
-        settings.driver.gtol = gtol;
-        settings.driver.max_integrations = max_integrations;
-        settings.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
-        let method = Registry::standard()
-            .build(name, &settings)
-            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let settings = settings(max_iterations, gtol, max_integrations)?;
+        let method = build(method, &settings)?;
         let fix: Vec<(String, f64)> = fix.unwrap_or_default().into_iter().collect();
         let problem = match fix.is_empty() {
             false => Arc::new(
@@ -606,20 +620,13 @@ impl PyProblem {
         max_points: usize,
         max_iterations: Option<usize>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let name = method.unwrap_or(Role::Default.method());
-        let mut settings = Settings::default();
-        if let Some(n) = max_iterations {
-            settings.driver.max_iterations = n;
-        }
-        settings.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let settings = settings(max_iterations, None, None)?;
         if max_points == 0 || settings.driver.max_iterations == 0 {
             return Err(PyValueError::new_err(
                 "max_points and max_iterations must be at least 1: a profile re-optimises the others at every point",
             ));
         }
-        let method = Registry::standard()
-            .build(name, &settings)
-            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        let method = build(method, &settings)?;
         let names = self.problem.names();
         let mut which = Vec::new();
         for n in only.unwrap_or_default() {
