@@ -100,7 +100,13 @@ impl SourceArgs {
     /// Reads `path`: a model file, or the PEtab problem imported as one.
     pub fn load(&self, path: &std::path::Path) -> anyhow::Result<sysid_model::Model> {
         match self.petab {
-            Some(_) => Ok(sysid_petab::import(path)?.model),
+            Some(_) => {
+                let imported = sysid_petab::import(path)?;
+                for warning in &imported.warnings {
+                    eprintln!("warning: {warning}");
+                }
+                Ok(imported.model)
+            }
             None => Ok(sysid_model::Model::load(path)?),
         }
     }

@@ -836,6 +836,29 @@ fn a_file_with_every_section_reads_every_value() {
     assert_eq!(file.states_at, at("[\"x\", \"y\"]"));
 }
 
+/// A prior's distribution: normal by default, `"laplace"` with location `mean` and scale
+/// `sd`; any other is refused at its value.
+#[test]
+fn a_prior_is_normal_or_laplace() {
+    use sysid_core::{Prior, Transform};
+    let prior = |spec: &str| {
+        let text = format!("{HEAD}{EQ}{INIT}[unknowns]\nk = {{ guess = 1, prior = {spec} }}\n");
+        ModelFile::parse(&text, Path::new("models/m.toml")).map(|f| f.unknowns[0].prior)
+    };
+    assert_eq!(
+        prior("{ mean = 0.5, sd = 2, on = \"log\" }").unwrap(),
+        Some(Prior::normal(0.5, 2.0, Transform::Log))
+    );
+    assert_eq!(
+        prior("{ mean = 0, sd = 3, distribution = \"laplace\" }").unwrap(),
+        Some(Prior::laplace(0.0, 3.0, Transform::Lin))
+    );
+    assert_eq!(
+        prior("{ mean = 0, sd = 3, distribution = \"cauchy\" }").unwrap_err().to_string(),
+        "models/m.toml:10:61: [unknowns] k.prior.distribution: `cauchy` (normal, laplace)"
+    );
+}
+
 /// A model whose equations do not mention t and which has no inputs is autonomous, and its
 /// Rosenbrock steps skip ∂f/∂t; t in an equation, or an input, makes it depend on time.
 #[test]

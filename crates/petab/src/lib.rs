@@ -49,6 +49,10 @@ pub struct Imported {
     pub model: Model,
     /// The model file's text (what `sysid` would read as `--model`, but for the data).
     pub text: String,
+    /// What the import changed that the user should know of, each naming the file, line and
+    /// id (an estimated parameter's nominal value outside its bounds, moved onto the bound
+    /// as the fits' start).
+    pub warnings: Vec<String>,
 }
 
 #[derive(Deserialize)]
@@ -160,8 +164,8 @@ struct Parameter {
     lower: f64,
     upper: f64,
     log: bool,
-    /// A normal prior: mean, sd, and the scale it is normal on.
-    prior: Option<(f64, f64, &'static str)>,
+    /// A prior: distribution, mean or location, sd or scale, and the scale it is on.
+    prior: Option<PriorEntry>,
     /// Where multistart draws its starts: distribution, its two parameters, and the scale
     /// it is on (none: uniform on its scale within its bounds).
     initialization: Option<(&'static str, f64, f64, &'static str)>,
@@ -270,6 +274,8 @@ struct Builder<'a> {
     /// parameters that carry the setting into the model file: a switch (0 by default, 1
     /// where a condition sets it) and the value it sets.
     overrides: Vec<Override>,
+    /// See [`Imported::warnings`].
+    warnings: Vec<String>,
 }
 
 /// A species whose initial value a condition sets: its initial value in the model file is
@@ -298,6 +304,7 @@ impl<'a> Builder<'a> {
             parameters: BTreeMap::new(),
             observables: HashMap::new(),
             overrides: Vec::new(),
+            warnings: Vec::new(),
         };
         b.read_parameters()?;
         b.read_observables()?;
@@ -352,8 +359,9 @@ impl<'a> Builder<'a> {
                     _ => Ok(default),
                 }
             };
+            let nominal_cell = t.cell(row, nominal);
             let p = Parameter {
-                nominal: t.cell(row, nominal).number()?,
+                nominal: nominal_cell.number()?,
                 estimate: estimated,
                 lower: bound(lower, f64::NEG_INFINITY)?,
                 upper: bound(upper, f64::INFINITY)?,
@@ -368,13 +376,31 @@ impl<'a> Builder<'a> {
                 },
                 ..p
             };
+            let mut p = p;
             if estimated {
-                let c = t.cell(row, nominal);
-                if !p.nominal.is_finite() || p.nominal < p.lower || p.nominal > p.upper {
+                let c = nominal_cell;
+                if !p.nominal.is_finite() {
                     return Err(c.err(format!(
-                        "nominal value {} of `{}` is not within its bounds [{}, {}]",
-                        p.nominal, pid.text, p.lower, p.upper
+                        "nominal value {} of `{}` is not a finite number",
+                        p.nominal, pid.text
                     )));
+                }
+                if p.lower > p.upper {
+                    return Err(c.err(format!(
+                        "`{}` has its lower bound {} above its upper bound {}",
+                        pid.text, p.lower, p.upper
+                    )));
+                }
+                // PEtab does not require the nominal value within the bounds (Lang's
+                // kDpApc_1: 0 on a log scale bounded by 1e-24): the fits start from the
+                // nearest bound, and the import says so.
+                if p.nominal < p.lower || p.nominal > p.upper {
+                    let moved = p.nominal.clamp(p.lower, p.upper);
+                    self.warnings.push(c.err(format!(
+                        "nominal value {} of `{}` is outside its bounds [{}, {}]: the fits start from {moved}, and the NLL at nominal is taken there",
+                        p.nominal, pid.text, p.lower, p.upper
+                    )).to_string());
+                    p.nominal = moved;
                 }
                 if log && !(p.lower > 0.0 || p.lower == f64::NEG_INFINITY && p.nominal > 0.0) {
                     return Err(c.err(format!(
@@ -725,7 +751,7 @@ impl<'a> Builder<'a> {
         for (spec, (_, rows)) in file.experiments.clone().iter().zip(&measured.experiments) {
             file.tables.push((spec.file.clone(), data_table(spec, rows, &outputs)?));
         }
-        Ok(Imported { model: Model { file }, text })
+        Ok(Imported { model: Model { file }, text, warnings: self.warnings.clone() })
     }
 
     /// The states (the species no assignment rule gives, and the parameters with rate
@@ -968,8 +994,9 @@ impl<'a> Builder<'a> {
                 oc.text, observable.transform
             )));
         }
-        let formula = placeholders(t, row, oc, &observable.formula, "observable")?;
-        let noise = placeholders(t, row, oc, &observable.noise, "noise")?;
+        let [formula, noise] =
+            placeholders(t, row, oc, [&observable.formula, &observable.noise], "observable")?;
+        let [noise, _] = placeholders(t, row, oc, [&noise, &Math::Num(0.0)], "noise")?;
         let value_math = self.resolve_names(&self.dynamic(&formula), oc, states, None)?;
         let noise_math = self.resolve_names(&self.dynamic(&noise), oc, states, Some(oc.text))?;
         let output = Output {
@@ -1415,16 +1442,19 @@ impl<'a> Builder<'a> {
     }
 }
 
-/// `formula` with row `row`'s observable or noise parameters (`kind`) in place of
+/// `formulas` with row `row`'s observable or noise parameters (`kind`) in place of their
 /// `{kind}Parameter{n}_{observableId}`: numbers or parameter ids, `;`-separated in the row's
-/// `{kind}Parameters` cell. One left without a value is an error at that cell.
+/// `{kind}Parameters` cell. One left without a value is an error at that cell. The
+/// observable's parameters replace their placeholders in its noise formula too (`formulas`
+/// is then the observable and the noise formula: Raia's σ = a + b · (the observable) repeats
+/// the observable's scaling); the noise parameters are the noise formula's alone.
 fn placeholders(
     t: &Tsv,
     row: usize,
     observable: Cell<'_>,
-    formula: &Math,
+    formulas: [&Math; 2],
     kind: &str,
-) -> Result<Math, ModelError> {
+) -> Result<[Math; 2], ModelError> {
     let column = format!("{kind}Parameters");
     let given = t.cell_named(row, &column);
     let list: Vec<&str> = match given {
@@ -1433,27 +1463,26 @@ fn placeholders(
     };
     let prefix = format!("{kind}Parameter");
     let suffix = format!("_{}", observable.text);
-    let m = formula.substitute(&|n| {
-        let k: usize = n.strip_prefix(&prefix)?.strip_suffix(&suffix)?.parse().ok()?;
-        list.get(k.checked_sub(1)?).map(|v| match tsv::parse_number(v) {
-            Some(x) => Math::Num(x),
-            None => Math::Name((*v).to_string()),
+    let index =
+        |n: &str| -> Option<usize> { n.strip_prefix(&prefix)?.strip_suffix(&suffix)?.parse().ok() };
+    let replaced = formulas.map(|f| {
+        f.substitute(&|n| {
+            list.get(index(n)?.checked_sub(1)?).map(|v| match tsv::parse_number(v) {
+                Some(x) => Math::Num(x),
+                None => Math::Name((*v).to_string()),
+            })
         })
     });
-    if let Some(n) = m.names().into_iter().find(|n| n.starts_with(&prefix) && n.ends_with(&suffix))
-    {
-        return Err(given.unwrap_or(observable).err(format!(
-            "`{n}` of observable `{}` is not given a value in `{column}`",
-            observable.text
-        )));
+    for m in &replaced {
+        if let Some(n) = m.names().into_iter().find(|n| index(n).is_some()) {
+            return Err(given.unwrap_or(observable).err(format!(
+                "`{n}` of observable `{}` is not given a value in `{column}`",
+                observable.text
+            )));
+        }
     }
     // As many values as placeholders: a value more has nothing to replace.
-    let used = formula
-        .names()
-        .iter()
-        .filter_map(|n| n.strip_prefix(&prefix)?.strip_suffix(&suffix)?.parse::<usize>().ok())
-        .max()
-        .unwrap_or(0);
+    let used = formulas.iter().flat_map(|f| f.names()).filter_map(|n| index(&n)).max().unwrap_or(0);
     if list.len() > used {
         return Err(given.unwrap_or(observable).err(format!(
             "{} value{} for observable `{}`, whose {kind} formula has {used} placeholder{} ({prefix}1{suffix}, …): one value per placeholder",
@@ -1463,7 +1492,7 @@ fn placeholders(
             if used == 1 { "" } else { "s" }
         )));
     }
-    Ok(m)
+    Ok(replaced)
 }
 
 /// `text` as an error quotes it: at most 60 characters, the rest replaced by `…`.
@@ -1633,39 +1662,51 @@ fn substitute_deep(m: &Math, with: &HashMap<String, Math>, depth: usize) -> Math
     out
 }
 
+/// A prior as the parameter table gives it: (distribution, mean or location, sd or scale,
+/// the scale it is on).
+type PriorEntry = (&'static str, f64, f64, &'static str);
+
 fn toml_number(v: f64) -> String {
     format!("{v:e}")
 }
 
-/// The objective prior of row `row` of the parameter table: a normal one on the value
-/// (`normal`) or on the parameter's scale (`parameterScaleNormal`); a uniform one adds a
-/// constant within the bounds and leaves the objective's minimum where it is, so it is not
-/// added; any other is refused by name.
-fn prior(
-    t: &Tsv,
-    row: usize,
-    scale: &'static str,
-) -> Result<Option<(f64, f64, &'static str)>, ModelError> {
+/// The objective prior of row `row` of the parameter table, (distribution, mean or
+/// location, sd or scale, scale it is on): a normal or Laplace one on the value (`normal`,
+/// `laplace`) or on the parameter's scale (`parameterScaleNormal`,
+/// `parameterScaleLaplace`); a uniform one adds a constant within the bounds and leaves the
+/// objective's minimum where it is, so it is not added; `logNormal` and `logLaplace`, whose
+/// density in θ has a term ln θ besides the residual, are refused by name.
+fn prior(t: &Tsv, row: usize, scale: &'static str) -> Result<Option<PriorEntry>, ModelError> {
     let Some(kind) = t.cell_named(row, "objectivePriorType").filter(|c| !c.is_blank()) else {
         return Ok(None);
     };
-    let on = match kind.text {
-        "normal" => "lin",
-        "parameterScaleNormal" => scale,
+    let (distribution, on) = match kind.text {
+        "normal" => ("normal", "lin"),
+        "parameterScaleNormal" => ("normal", scale),
+        "laplace" => ("laplace", "lin"),
+        "parameterScaleLaplace" => ("laplace", scale),
         "uniform" | "parameterScaleUniform" => return Ok(None),
         other => {
             return Err(kind.err(format!(
-                "a prior of type `{other}` is not supported (normal, parameterScaleNormal, uniform, parameterScaleUniform)"
+                "a prior of type `{other}` is not supported (normal, parameterScaleNormal, laplace, parameterScaleLaplace, uniform, parameterScaleUniform)"
             )));
         }
     };
     let Some(cell) = t.cell_named(row, "objectivePriorParameters").filter(|c| !c.is_blank()) else {
-        return Err(kind.err("the prior needs `objectivePriorParameters`: mean;sd"));
+        return Err(kind.err(format!(
+            "the prior needs `objectivePriorParameters`: {}",
+            if distribution == "normal" { "mean;sd" } else { "location;scale" }
+        )));
     };
     let values = numbers(&cell)?;
     match values[..] {
-        [mean, sd] if mean.is_finite() && sd > 0.0 && sd.is_finite() => Ok(Some((mean, sd, on))),
-        _ => Err(cell.err(format!("`{}`: a normal prior is mean;sd with sd > 0", cell.text))),
+        [mean, sd] if mean.is_finite() && sd > 0.0 && sd.is_finite() => {
+            Ok(Some((distribution, mean, sd, on)))
+        }
+        _ => Err(cell.err(match distribution {
+            "normal" => format!("`{}`: a normal prior is mean;sd with sd > 0", cell.text),
+            _ => format!("`{}`: a laplace prior is location;scale with scale > 0", cell.text),
+        })),
     }
 }
 
@@ -1743,10 +1784,10 @@ fn unknown_entry(p: &Parameter) -> String {
     if p.log {
         s.push_str(", log = true");
     }
-    if let Some((mean, sd, on)) = p.prior {
+    if let Some((distribution, mean, sd, on)) = p.prior {
         let _ = write!(
             s,
-            ", prior = {{ mean = {}, sd = {}, on = \"{on}\" }}",
+            ", prior = {{ mean = {}, sd = {}, on = \"{on}\", distribution = \"{distribution}\" }}",
             toml_number(mean),
             toml_number(sd)
         );

@@ -67,7 +67,8 @@ pub enum Math {
     Or(Vec<Math>),
     /// Logical not (1 or 0).
     Not(Box<Math>),
-    /// The value of the first piece whose condition holds, else `otherwise` (NaN without).
+    /// The value of the first piece whose condition holds, else `otherwise` (without one,
+    /// the last piece's value: see `write`).
     Piecewise(Vec<(Math, Math)>, Option<Box<Math>>),
 }
 
@@ -277,8 +278,15 @@ impl Math {
             Math::Or(v) => fold(out, "or", v, name),
             Math::Not(a) => call(out, "not", std::slice::from_ref(a)),
             Math::Piecewise(pieces, otherwise) => {
-                // if(c1, v1, if(c2, v2, otherwise)).
-                let last = otherwise.as_deref().cloned().unwrap_or(Math::Num(f64::NAN));
+                // if(c1, v1, if(c2, v2, otherwise)). SBML leaves a piecewise without
+                // `otherwise` undefined where no condition holds; there it takes the last
+                // piece's value (the same wherever the pieces cover every case, as the
+                // tools that write them do: Alkan's `gt` and `leq` of one level).
+                let (pieces, last) = match (otherwise, pieces.split_last()) {
+                    (Some(o), _) => (&pieces[..], (**o).clone()),
+                    (None, Some(((value, _), before))) => (before, value.clone()),
+                    (None, None) => (&pieces[..], Math::Num(f64::NAN)),
+                };
                 let nested = pieces.iter().rev().fold(last, |rest, (value, condition)| {
                     Math::Call("if", vec![condition.clone(), value.clone(), rest])
                 });

@@ -212,6 +212,9 @@ impl Reader<'_> {
                         }
                     }
                 }
+                if pieces.is_empty() && otherwise.is_none() {
+                    return Err(self.err(node, "a <piecewise> with neither a piece nor otherwise"));
+                }
                 Math::Piecewise(pieces, otherwise)
             }
             "apply" => self.apply(node)?,
@@ -242,6 +245,11 @@ impl Reader<'_> {
         let mut children = elements(node);
         let op = children.next().ok_or_else(|| self.err(node, "an empty <apply>"))?;
         let rest: Vec<Node<'_, '_>> = children.collect();
+        // An <apply> around one expression and no operator is that expression, as libSBML
+        // reads it (Beer's kinetic laws wrap a product in a second <apply>).
+        if rest.is_empty() && matches!(op.tag_name().name(), "apply" | "cn" | "piecewise") {
+            return self.math(op);
+        }
         // Qualifiers (<degree>, <logbase>) apart from the arguments.
         let qualifier = |name: &str| -> Result<Option<Math>, ModelError> {
             match rest.iter().find(|n| n.tag_name().name() == name) {
@@ -723,6 +731,39 @@ mod tests {
         let rate = m.reactions[0].rate.render(&|n| n.to_string());
         assert_eq!(rate, "4e0 * 2e-3 / (1e0 + 2e-3)");
         assert_eq!(m.compartments, vec![("c".to_string(), 2.0)]);
+    }
+
+    /// An <apply> around one expression is that expression (Beer's kinetic laws); a
+    /// piecewise without <otherwise> takes its last piece's value where no condition holds
+    /// (Alkan's); one with neither is refused where it is.
+    #[test]
+    fn wrapped_applies_and_piecewise_without_otherwise() {
+        let with_rate = |math: &str| {
+            MODEL.replace(
+                "<apply><ci>mm</ci><ci>k</ci><cn type=\"e-notation\"> 2 <sep/> -3 </cn></apply>",
+                math,
+            )
+        };
+        let rate = |math: &str| {
+            let m = Sbml::parse(&with_rate(math), "m.xml").expect("reads");
+            m.reactions[0].rate.render(&|n| n.to_string())
+        };
+        let wrapped = "<apply><apply><times/><ci>k</ci><ci>A</ci></apply></apply>";
+        assert_eq!(rate(wrapped), "4e0 * A");
+        let piece = |value: &str, rel: &str| {
+            format!("<piece><cn>{value}</cn><apply><{rel}/><ci>A</ci><cn>0</cn></apply></piece>")
+        };
+        let pieces = format!("<piecewise>{}{}</piecewise>", piece("1", "gt"), piece("2", "leq"));
+        assert_eq!(rate(&pieces), "if(gt(A, 0e0), 1e0, 2e0)");
+        let otherwise = format!(
+            "<piecewise>{}{}<otherwise><cn>3</cn></otherwise></piecewise>",
+            piece("1", "gt"),
+            piece("2", "leq")
+        );
+        assert_eq!(rate(&otherwise), "if(gt(A, 0e0), 1e0, if(le(A, 0e0), 2e0, 3e0))");
+        let e = Sbml::parse(&with_rate("<piecewise></piecewise>"), "m.xml").unwrap_err();
+        assert!(e.message.contains("a <piecewise> with neither a piece nor otherwise"), "{e}");
+        assert_eq!(e.line, Some(21));
     }
 
     /// An event is read with its trigger and assignments; one without a trigger, or with a

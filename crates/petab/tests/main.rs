@@ -117,7 +117,17 @@ fn edited(test: &str, file: &str, edit: impl Fn(String) -> String) -> PathBuf {
 /// name starts with its prefix.
 #[allow(clippy::type_complexity)]
 fn edited_files(test: &str, edits: &[(&str, &dyn Fn(String) -> String)]) -> PathBuf {
-    let problem = "Boehm_JProteomeRes2014";
+    edited_problem("Boehm_JProteomeRes2014", test, edits)
+}
+
+/// A copy of `problem` in a directory of its own, each edit applied to the file whose name
+/// starts with its prefix.
+#[allow(clippy::type_complexity)]
+fn edited_problem(
+    problem: &str,
+    test: &str,
+    edits: &[(&str, &dyn Fn(String) -> String)],
+) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("sysid-petab-{test}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a directory");
     for entry in std::fs::read_dir(data().join(problem)).expect("the problem") {
@@ -204,19 +214,43 @@ fn a_prior_is_reported_apart_from_the_likelihood() {
     assert!((prior - expected).abs() <= 1e-12, "{prior} vs {expected}");
     assert!((problem.nll(&lin).expect("a likelihood") + 418.40573341425295).abs() <= 1e-3);
 
-    let dir = std::env::temp_dir().join(format!("sysid-petab-laplace-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("a directory");
-    for entry in std::fs::read_dir(data().join("Bachmann_MSB2011")).expect("the problem") {
-        let path = entry.expect("an entry").path();
-        let text = std::fs::read_to_string(&path).expect("a file");
-        let text = text.replace("parameterScaleNormal", "laplace");
-        std::fs::write(dir.join(path.file_name().expect("a name")), text).expect("written");
+    // The prior as a Laplace one (location, scale b) at μ = 0.5, away from its kink (the
+    // nominal value is the normal prior's mean): |log10 θ − μ|/b + ln(2b), and its gradient
+    // in z = ln θ, sign(log10 θ − μ)/(b ln 10), in place of the normal one's
+    // (log10 θ − μ)/(sd² ln 10); the likelihood's part of the gradient is the same.
+    let mean = 0.5;
+    let with_prior = |kind: &str| {
+        let edit = |t: String| {
+            t.replace("parameterScaleNormal\t0.599470870492697", &format!("{kind}\t{mean}"))
+        };
+        let path = edited_problem("Bachmann_MSB2011", kind, &[("parameters_", &edit)]);
+        let problem = import(&path).expect("imports").model.problem(None).expect("a problem");
+        let z = problem.unknowns().coordinates(&problem.guesses());
+        let lin = problem.linearize(&z).expect("integrates");
+        let j = problem.unknowns().names().iter().position(|n| n == "init_EpoRJAK2");
+        (problem.prior_nll(&lin).expect("a prior"), lin.gradient.clone(), j.expect("estimated"))
+    };
+    let (laplace, g_laplace, j) = with_prior("parameterScaleLaplace");
+    let d = theta.log10() - mean;
+    let expected = d.abs() / sd + (2.0 * sd).ln();
+    assert!((laplace - expected).abs() <= 1e-12, "{laplace} vs {expected}");
+    let (_, g_normal, _) = with_prior("parameterScaleNormal");
+    let ln10 = std::f64::consts::LN_10;
+    for (i, (l, n)) in g_laplace.iter().zip(&g_normal).enumerate() {
+        let expected = if i == j { d.signum() / (sd * ln10) - d / (sd * sd * ln10) } else { 0.0 };
+        assert!(
+            (l - n - expected).abs() <= 1e-9 * (1.0 + n.abs()),
+            "∂/∂z{i}: {l} − {n} vs {expected}"
+        );
     }
-    let e = error_of(&dir.join("Bachmann_MSB2011.yaml"));
+
+    // logNormal's density has a term ln θ besides a residual: refused at its cell.
+    let edit = |t: String| t.replace("parameterScaleNormal", "logNormal");
+    let e = error_of(&edited_problem("Bachmann_MSB2011", "lognormal", &[("parameters_", &edit)]));
     assert!(
-        e.contains("parameters_Bachmann_MSB2011.tsv:")
+        e.contains("parameters_Bachmann_MSB2011.tsv:28:")
             && e.contains(
-                "column `objectivePriorType`: a prior of type `laplace` is not supported"
+                "column `objectivePriorType`: a prior of type `logNormal` is not supported"
             ),
         "{e}"
     );
@@ -538,4 +572,88 @@ fn initialization_priors_are_imported() {
         let e = error_of(&edited("initialization-bad", "parameters", with(types, parameters)));
         assert!(e.contains("parameters_Boehm_JProteomeRes2014.tsv:2:") && e.contains(says), "{e}");
     }
+}
+
+/// A noise formula that repeats its observable's placeholder gets the row's observable
+/// parameter too (as Raia's σ = a + b · scaling · (…)): Boehm with pSTAT5A_rel = s·y,
+/// σ = sd·s and s = 2 in every row has residuals (m − 2y)/(2 sd) = (m/2 − y)/sd, so its NLL
+/// is Boehm's with those measurements halved plus ln 2 per measurement, to 1e-9.
+#[test]
+fn observable_parameters_fill_the_noise_formula_too() {
+    let rows = |halve: bool| {
+        move |t: String| {
+            let mut out = String::new();
+            for line in t.lines() {
+                let mut cells: Vec<String> = line.split('\t').map(String::from).collect();
+                if cells[0] == "pSTAT5A_rel" {
+                    match halve {
+                        true => {
+                            let m: f64 = cells[3].parse().expect("a number");
+                            cells[3] = format!("{:e}", m / 2.0);
+                        }
+                        false => cells[5] = "2".into(),
+                    }
+                }
+                out.push_str(&cells.join("\t"));
+                out.push('\n');
+            }
+            out
+        }
+    };
+    let n = std::fs::read_to_string(
+        data().join("Boehm_JProteomeRes2014/measurementData_Boehm_JProteomeRes2014.tsv"),
+    )
+    .expect("the table")
+    .lines()
+    .filter(|l| l.starts_with("pSTAT5A_rel\t"))
+    .count();
+    let scaled = |t: String| {
+        t.replace(
+            "pSTAT5A_rel\t\t(100 * pApB + 200 * pApA * specC17) / (pApB + STAT5A * specC17 + 2 * pApA * specC17)\tnoiseParameter1_pSTAT5A_rel",
+            "pSTAT5A_rel\t\tobservableParameter1_pSTAT5A_rel * (100 * pApB + 200 * pApA * specC17) / (pApB + STAT5A * specC17 + 2 * pApA * specC17)\tnoiseParameter1_pSTAT5A_rel * observableParameter1_pSTAT5A_rel",
+        )
+    };
+    let placeholders = rows(false);
+    let with = edited_files(
+        "noise-placeholder",
+        &[("observables_", &scaled), ("measurementData_", &placeholders)],
+    );
+    assert!(
+        std::fs::read_to_string(with.with_file_name("observables_Boehm_JProteomeRes2014.tsv"))
+            .expect("written")
+            .contains("\tnoiseParameter1_pSTAT5A_rel * observableParameter1_pSTAT5A_rel")
+    );
+    let halved = rows(true);
+    let reference = edited_files("noise-halved", &[("measurementData_", &halved)]);
+    let nll = |path: &Path| {
+        let problem = import(path).expect("imports").model.problem(None).expect("a problem");
+        let z = problem.unknowns().coordinates(&problem.guesses());
+        problem.nll_at(&z).expect("integrates").expect("a likelihood")
+    };
+    let (a, b) = (nll(&with), nll(&reference));
+    let expected = n as f64 * std::f64::consts::LN_2;
+    assert!(n > 10 && (a - b - expected).abs() <= 1e-9, "{a} − {b} vs {n} ln 2");
+}
+
+/// PEtab allows a nominal value outside the bounds (Lang's kDpApc_1: 0 on a log scale
+/// bounded by 1e-24): the start is moved onto the nearer bound, and the import warns at the
+/// cell, naming the parameter.
+#[test]
+fn a_nominal_value_outside_its_bounds_is_moved_onto_the_bound() {
+    let path = edited("outside-bounds", "parameters_", |t| {
+        t.replace("1E-05\t100000\t0.026982514033029\t1", "1E-05\t100000\t1e6\t1")
+    });
+    let imported = import(&path).expect("imports");
+    let [warning] = imported.warnings.as_slice() else {
+        panic!("one warning: {:?}", imported.warnings)
+    };
+    assert!(
+        warning.contains("parameters_Boehm_JProteomeRes2014.tsv:2:")
+            && warning.contains("nominal value 1000000 of `Epo_degradation_BaF3` is outside its bounds [0.00001, 100000]: the fits start from 100000"),
+        "{warning}"
+    );
+    let problem = imported.model.problem(None).expect("a problem");
+    let j = problem.unknowns().names().iter().position(|n| n == "Epo_degradation_BaF3");
+    assert!((problem.guesses()[j.expect("estimated")] - 1e5).abs() <= 1e-9);
+    assert!(import(&yaml("Boehm_JProteomeRes2014")).expect("imports").warnings.is_empty());
 }

@@ -359,8 +359,9 @@ fn read_scale(
     }
 }
 
-/// Reads `prior = { mean, sd, on }`: a normal prior on the value (`on = "lin"`, the default),
-/// its natural logarithm (`"log"`) or its log10 (`"log10"`).
+/// Reads `prior = { mean, sd, on, distribution }`: a normal prior (`distribution =
+/// "normal"`, the default; or `"laplace"`, mean its location and sd its scale b) on the value
+/// (`on = "lin"`, the default), its natural logarithm (`"log"`) or its log10 (`"log10"`).
 fn read_prior(
     r: &Reader<'_>,
     name: &str,
@@ -380,17 +381,30 @@ fn read_prior(
         return Err(r.err(at, format!("{what}.sd must be positive, got {sd}")));
     }
     let mut on = Transform::Lin;
+    let mut laplace = false;
     for (k, v) in t.iter() {
         match k.get_ref().as_ref() {
             "mean" | "sd" => {}
             "on" => on = read_scale(r, v, &format!("{what}.on"))?,
+            "distribution" => {
+                laplace = match r.string(v, &format!("{what}.distribution"))? {
+                    "normal" => false,
+                    "laplace" => true,
+                    other => {
+                        return Err(r.err(
+                            v.span().start,
+                            format!("{what}.distribution: `{other}` (normal, laplace)"),
+                        ));
+                    }
+                }
+            }
             other => {
                 return Err(r.err(
                     k.span().start,
-                    format!("{what}: unknown key `{other}` (keys: mean, sd, on)"),
+                    format!("{what}: unknown key `{other}` (keys: mean, sd, on, distribution)"),
                 ));
             }
         }
     }
-    Ok(Prior { mean, sd, on })
+    Ok(if laplace { Prior::laplace(mean, sd, on) } else { Prior::normal(mean, sd, on) })
 }
