@@ -4,6 +4,7 @@
 //! 2 bad input (one line on stderr, nothing on stdout); docs/terminations.md has them all.
 
 mod compare;
+mod evaluate;
 mod fit;
 mod options;
 mod output;
@@ -36,6 +37,9 @@ enum Command {
     /// Run several methods on the same data from the same start and print them side by
     /// side: convergence, iterations, cost, time, and each estimate next to the truth.
     Compare(compare::CompareArgs),
+    /// The negative log-likelihood at the nominal values (or --set ones), with --gradient
+    /// its gradient, and the median time of one evaluation after the import (--repeat N).
+    Evaluate(evaluate::EvaluateArgs),
     /// Write a catalogue system's data, or a model file's trajectory, as CSV (header row,
     /// time first).
     Simulate(simulate::SimulateArgs),
@@ -90,6 +94,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Fit(args) => fit::run(&args),
         Command::Compare(args) => compare::run(&args),
+        Command::Evaluate(args) => evaluate::run(&args),
         Command::Simulate(args) => simulate::run(&args),
         Command::Predict(args) => predict::run(&args),
         Command::Study(args) => study::run(&args),

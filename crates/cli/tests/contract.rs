@@ -499,6 +499,23 @@ fn every_documented_key_holds_in_every_kind_of_run() {
             contract.object(point, "A point", &format!("{args:?}: better_optimum_found"));
         }
     }
+    // `evaluate`: a model file with a prior, with and without the gradient; a PEtab problem
+    // whose σ are noise scales (parameters too).
+    let boehm = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
+    for args in [
+        vec!["evaluate", "--model", &with_prior, "--gradient", "--repeat", "3"],
+        vec!["evaluate", "--model", &with_prior],
+        vec!["evaluate", "--petab", boehm, "--gradient"],
+    ] {
+        let e = json(&args);
+        contract.object(&e, "sysid evaluate --format json", &format!("{args:?}"));
+        let names: Vec<&String> = e["parameters"].as_object().expect("parameters").keys().collect();
+        if let Some(g) = e["gradient"].as_object() {
+            assert_eq!(g.keys().collect::<Vec<_>>(), names, "{args:?}: the gradient's names");
+        }
+        let objective = e["nll"].as_f64().expect("nll") + e["prior"].as_f64().unwrap_or(0.0);
+        assert!((e["objective"].as_f64().expect("objective") - objective).abs() <= 1e-12);
+    }
     contract.all_seen(&[
         "sysid fit --format json",
         "History rows",
@@ -512,6 +529,7 @@ fn every_documented_key_holds_in_every_kind_of_run() {
         "sysid profile --format json",
         "A profile",
         "A point",
+        "sysid evaluate --format json",
     ]);
     let _ = std::fs::remove_dir_all(&dir);
 }

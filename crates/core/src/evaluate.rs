@@ -283,6 +283,49 @@ impl<S: System> Problem<S> {
         lin.experiment_costs.last().map(|c| 0.5 * c + offsets)
     }
 
+    /// The negative log-prior at the free unknowns' coordinates z, as
+    /// [`prior_nll`](Self::prior_nll) gives it from a linearization; None without priors.
+    pub fn prior_nll_at(&self, z: &[f64]) -> Option<f64> {
+        let values = self.values_at(z);
+        let terms = self.declared.iter().zip(&values).filter_map(|(u, &v)| {
+            let p = u.prior.as_ref()?;
+            Some(0.5 * p.residual(v).0.powi(2) + p.offset())
+        });
+        (self.n_priors() > 0).then(|| terms.sum())
+    }
+
+    /// The gradient of the NLL (`priors` false) or of the objective, the NLL plus the
+    /// priors' term, at a linearization's point: with respect to the coordinates z of the
+    /// free unknowns, then to those of the noise scales (ln s for a scale on a log scale;
+    /// a scale s of σ = s·f enters each of its rows as ln σ + ½ r², r ∝ 1/s, so
+    /// ∂/∂s = Σ (1 − r²)/s). What PEtab and pyPESTO count as the parameters.
+    pub fn objective_gradient(&self, lin: &Linearization, priors: bool) -> Vec<f64> {
+        let Some(rows) = &lin.residuals else {
+            return lin.gradient.iter().copied().collect();
+        };
+        // The linearization's U = Jᵀr is the objective's gradient; the NLL's leaves out the
+        // priors' rows, the last ones.
+        let mut g: Vec<f64> = match priors || self.n_priors() == 0 {
+            true => lin.gradient.iter().copied().collect(),
+            false => {
+                let n = rows.r.len() - self.n_priors();
+                rows.jacobian.rows(0, n).tr_mul(&rows.r.rows(0, n)).iter().copied().collect()
+            }
+        };
+        let sigma = self.scale_values();
+        let mut dscale = vec![0.0; sigma.len()];
+        for (r, s) in rows.r.iter().zip(self.scale_rows()) {
+            if let Some(s) = s {
+                dscale[s] += (1.0 - r * r) / sigma[s];
+            }
+        }
+        for ((d, &j), s) in dscale.iter().zip(&self.scales).zip(&sigma) {
+            let u = &self.declared[j];
+            g.push(d * u.scale(u.coordinate(*s)));
+        }
+        g
+    }
+
     fn linearize_sampled(&self, z: &[f64]) -> Result<Linearization, OdeError> {
         let k = self.unknowns.len();
         let all = self.evaluate_rows(z, &self.integrator, true)?;

@@ -174,31 +174,9 @@ impl Evaluated<'_> {
     }
 
     /// The gradient of the NLL (`priors` false) or of the objective, with respect to the
-    /// parameters on `scale`. A noise scale s of σ = s·f enters each of its rows as
-    /// ln σ + ½ r², r ∝ 1/s: ∂/∂s = (1 − r²)/s.
+    /// parameters on `scale`.
     fn gradient(&self, priors: bool, scale: Scale) -> Vec<f64> {
-        let rows = self.rows();
-        // The linearization's U = Jᵀr is the objective's gradient; the NLL's leaves out the
-        // priors' rows, the last ones.
-        let mut g: Vec<f64> = match priors || self.problem.n_priors() == 0 {
-            true => self.lin.gradient.iter().copied().collect(),
-            false => {
-                let n = rows.r.len() - self.problem.n_priors();
-                rows.jacobian.rows(0, n).tr_mul(&rows.r.rows(0, n)).iter().copied().collect()
-            }
-        };
-        let sigma = self.problem.scale_values();
-        let mut dscale = vec![0.0; sigma.len()];
-        if !sigma.is_empty() {
-            for (r, s) in rows.r.iter().zip(self.problem.scale_rows()) {
-                if let Some(s) = s {
-                    dscale[s] += (1.0 - r * r) / sigma[s];
-                }
-            }
-        }
-        let k = g.len();
-        // In coordinates: ∂/∂z = ∂/∂value · ∂value/∂z.
-        g.extend(dscale.iter().zip(&self.chain[k..]).map(|(d, c)| d * c));
+        let g = self.problem.objective_gradient(&self.lin, priors);
         match scale {
             Scale::Parameter => g,
             Scale::Linear => g.iter().zip(&self.chain).map(|(g, c)| g / c).collect(),

@@ -1,0 +1,206 @@
+//! `sysid evaluate`: the negative log-likelihood at one point, its gradient, and how long
+//! one evaluation takes.
+
+use std::borrow::Cow;
+use std::time::Instant;
+
+use anyhow::{anyhow, bail};
+use clap::Args;
+
+use crate::Outcome;
+use crate::options::{Format, IntegratorArgs, SourceArgs, count};
+use crate::output::emit;
+use crate::problem::AnyProblem;
+
+/// Arguments of `sysid evaluate`.
+#[derive(Args, Debug)]
+pub struct EvaluateArgs {
+    #[command(flatten)]
+    source: SourceArgs,
+    /// Also the gradient of the NLL with respect to each parameter's value (forward
+    /// sensitivities).
+    #[arg(long)]
+    gradient: bool,
+    /// Evaluate N times and report the median time of one evaluation.
+    #[arg(long, default_value_t = 1, value_name = "N", value_parser = count)]
+    repeat: usize,
+    /// Set a parameter (an unknown or a noise scale) to a value instead of its nominal
+    /// value or guess, e.g. --set k1=0.8. Repeat for several.
+    #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
+    set: Vec<String>,
+    /// Output format: a readable table, or the JSON object of docs/json.md.
+    #[arg(long, value_enum, default_value_t = Format::Table)]
+    format: Format,
+    #[command(flatten)]
+    integrator: IntegratorArgs,
+}
+
+/// One evaluation: the NLL, the priors' term, and the NLL's gradient.
+struct Evaluation {
+    nll: f64,
+    prior: Option<f64>,
+    gradient: Option<Vec<f64>>,
+}
+
+/// Runs `sysid evaluate`.
+pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
+    args.integrator.validate()?;
+    if args.repeat == 0 {
+        bail!("--repeat must be at least 1");
+    }
+    let started = Instant::now();
+    let (problem, context) = args.source.problem()?;
+    let problem = match args.integrator.given() {
+        true => {
+            let settings = args.integrator.apply_to(*problem.integrator())?;
+            problem.with_integrator(settings)?
+        }
+        false => problem,
+    };
+    let import_ms = started.elapsed().as_secs_f64() * 1e3;
+    let (names, values) = point(&problem, &args.set)?;
+    let k = problem.unknowns().len();
+    let held = match problem.scales().is_empty() {
+        true => Cow::Borrowed(&problem),
+        false => Cow::Owned(problem.with_scales(&values[k..])),
+    };
+    let z = problem.unknowns().coordinates(&values[..k]);
+    let mut times = Vec::with_capacity(args.repeat);
+    let mut result = None;
+    for _ in 0..args.repeat {
+        let t = Instant::now();
+        let e = evaluate(&held, &z, &values, args.gradient)?;
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        result = Some(e);
+    }
+    let e = result.expect("at least one evaluation");
+    times.sort_by(f64::total_cmp);
+    let ms = times[times.len() / 2];
+    let text = match args.format {
+        Format::Json => {
+            let object = |v: &[f64]| -> serde_json::Map<String, serde_json::Value> {
+                names.iter().cloned().zip(v.iter().map(|&x| serde_json::json!(x))).collect()
+            };
+            let record = serde_json::json!({
+                "problem": context.name,
+                "nll": e.nll,
+                "prior": e.prior,
+                "objective": e.nll + e.prior.unwrap_or(0.0),
+                "gradient": e.gradient.as_deref().map(object),
+                "parameters": object(&values),
+                "evaluations": args.repeat,
+                "ms_per_evaluation": ms,
+                "import_ms": import_ms,
+            });
+            format!("{}\n", serde_json::to_string_pretty(&record)?)
+        }
+        Format::Table => table(&context.name, &names, &values, &e, ms, import_ms, args.repeat),
+    };
+    emit(&text)?;
+    Ok(Outcome::Success)
+}
+
+/// The parameters (the free unknowns, then the noise scales) and their values: the guesses
+/// and the scales' values, with `--set` applied.
+fn point(problem: &AnyProblem, set: &[String]) -> anyhow::Result<(Vec<String>, Vec<f64>)> {
+    let declared = problem.declared();
+    let parameters: Vec<&sysid_core::Unknown> = problem
+        .unknowns()
+        .list()
+        .iter()
+        .chain(problem.scales().iter().map(|&j| &declared[j]))
+        .collect();
+    let names: Vec<String> = parameters.iter().map(|u| u.name.clone()).collect();
+    let mut values: Vec<f64> =
+        problem.unknowns().guesses().into_iter().chain(problem.scale_values()).collect();
+    for s in set {
+        let (name, value) =
+            s.split_once('=').ok_or_else(|| anyhow!("--set takes NAME=VALUE, got `{s}`"))?;
+        let name = name.trim();
+        let value: f64 =
+            value.trim().parse().map_err(|_| anyhow!("--set {name}: `{value}` is not a number"))?;
+        let Some(i) = names.iter().position(|n| n == name) else {
+            bail!(
+                "--set {name}: not a parameter of the problem (parameters: {})",
+                names.join(", ")
+            );
+        };
+        if !value.is_finite() || (parameters[i].log && value <= 0.0) {
+            bail!(
+                "--set {name}: {value} is not {}",
+                if parameters[i].log {
+                    "a positive number (it is on a log scale)"
+                } else {
+                    "a finite number"
+                }
+            );
+        }
+        values[i] = value;
+    }
+    Ok((names, values))
+}
+
+/// The NLL at z (and the priors' term), with its gradient with respect to the values when
+/// `gradient`.
+fn evaluate(
+    problem: &AnyProblem,
+    z: &[f64],
+    values: &[f64],
+    gradient: bool,
+) -> anyhow::Result<Evaluation> {
+    let no_likelihood =
+        || anyhow!("the problem's data are a continuous record: it has no likelihood");
+    let cannot =
+        |e: sysid_ode::OdeError| anyhow!("the model cannot be integrated at this point: {e}");
+    if !gradient {
+        let nll = problem.nll_at(z).map_err(cannot)?.ok_or_else(no_likelihood)?;
+        return Ok(Evaluation { nll, prior: problem.prior_nll_at(z), gradient: None });
+    }
+    let lin = problem.residuals_and_jacobian(z).map_err(cannot)?;
+    let nll = problem.nll(&lin).ok_or_else(no_likelihood)?;
+    let declared = problem.declared();
+    let parameters =
+        problem.unknowns().list().iter().chain(problem.scales().iter().map(|&j| &declared[j]));
+    // ∂/∂value = ∂/∂z / (∂value/∂z).
+    let g = problem
+        .objective_gradient(&lin, false)
+        .into_iter()
+        .zip(parameters.zip(values))
+        .map(|(g, (u, &v))| g / u.scale(u.coordinate(v)))
+        .collect();
+    Ok(Evaluation { nll, prior: problem.prior_nll(&lin), gradient: Some(g) })
+}
+
+/// The readable report.
+fn table(
+    name: &str,
+    names: &[String],
+    values: &[f64],
+    e: &Evaluation,
+    ms: f64,
+    import_ms: f64,
+    repeat: usize,
+) -> String {
+    let mut out = format!("{name}\n  NLL          {:.10}\n", e.nll);
+    if let Some(p) = e.prior {
+        out += &format!("  prior        {p:.10}\n  objective    {:.10}\n", e.nll + p);
+    }
+    out += &format!(
+        "  time         {ms:.3} ms per evaluation (median of {repeat}){}; import {import_ms:.1} ms\n",
+        if e.gradient.is_some() { " with the gradient" } else { "" }
+    );
+    let width = names.iter().map(|n| n.chars().count()).max().unwrap_or(0).max(9);
+    out += &format!("\n  {:<width$}  {:>16}", "parameter", "value");
+    if e.gradient.is_some() {
+        out += &format!("  {:>16}", "∂NLL/∂value");
+    }
+    out.push('\n');
+    for (i, n) in names.iter().enumerate() {
+        out += &format!("  {n:<width$}  {:>16.9e}", values[i]);
+        if let Some(g) = &e.gradient {
+            out += &format!("  {:>16.9e}", g[i]);
+        }
+        out.push('\n');
+    }
+    out
+}
