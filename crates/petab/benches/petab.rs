@@ -1,8 +1,9 @@
-//! PEtab problems of tests/data/petab: `petab/import/<problem>`, reading the YAML, the SBML
-//! and the tables and compiling the model file and its problem (target ≤ 100 ms each; AMICI's
-//! code generation and compile take 10–13 s); `petab/nll-gradient/<problem>`, the NLL and its
-//! gradient (forward sensitivities) at the nominal parameters (targets: Boehm ≤ 1 ms, AMICI
-//! 6.8 ms; Bachmann ≤ 200 ms, AMICI 2.03 s).
+//! Every PEtab problem of tests/data/petab (23 of Benchmark-Models-PEtab): `petab/import/<problem>`,
+//! reading the YAML, the SBML and the tables and compiling the model file and its problem
+//! (target ≤ 100 ms each; AMICI's code generation and compile take 10–13 s);
+//! `petab/nll-gradient/<problem>`, the NLL and its gradient (forward sensitivities) at the
+//! nominal parameters (targets: Boehm ≤ 1 ms, AMICI 6.8 ms; Bachmann ≤ 200 ms, AMICI 2.03 s).
+//! `cargo bench -p sysid-petab -- Boehm` runs one problem's.
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -10,19 +11,18 @@ use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 
-const PROBLEMS: [&str; 10] = [
-    "Boehm_JProteomeRes2014",
-    "Fujita_SciSignal2010",
-    "Bachmann_MSB2011",
-    "Crauste_CellSystems2017",
-    "Elowitz_Nature2000",
-    "Fiedler_BMCSystBiol2016",
-    "Bruno_JExpBot2016",
-    "Sneyd_PNAS2002",
-    "Borghans_BiophysChem1997",
-    // 109 states, 367 reactions: the largest, measured beside the target.
-    "Smith_BMCSystBiol2013",
-];
+/// The problems: every folder of tests/data/petab, sorted.
+fn problems() -> Vec<String> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .expect("tests/data/petab")
+        .filter_map(Result::ok)
+        .filter(|e| e.path().is_dir())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
 
 fn yaml(problem: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -34,7 +34,7 @@ fn yaml(problem: &str) -> PathBuf {
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("petab/import");
     group.sample_size(10).warm_up_time(Duration::from_millis(500));
-    for problem in PROBLEMS {
+    for problem in &problems() {
         let path = yaml(problem);
         group.bench_function(problem, |b| {
             b.iter(|| {
@@ -46,7 +46,7 @@ fn bench(c: &mut Criterion) {
     group.finish();
     let mut group = c.benchmark_group("petab/nll-gradient");
     group.sample_size(10).warm_up_time(Duration::from_millis(500));
-    for problem in ["Boehm_JProteomeRes2014", "Bachmann_MSB2011", "Fujita_SciSignal2010"] {
+    for problem in &problems() {
         let imported = sysid_petab::import(&yaml(problem)).expect("imports");
         let p = imported.model.problem(None).expect("a problem");
         let z = p.unknowns().coordinates(&p.guesses());
