@@ -10,7 +10,7 @@ use clap::Args;
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, SourceArgs, count};
 use crate::output::emit;
-use crate::problem::AnyProblem;
+use crate::problem::{AnyProblem, with_integrator};
 
 /// Arguments of `sysid evaluate`.
 #[derive(Args, Debug)]
@@ -50,15 +50,11 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
     }
     let started = Instant::now();
     let (problem, context) = args.source.problem()?;
-    let problem = match args.integrator.given() {
-        true => {
-            let settings = args.integrator.apply_to(*problem.integrator())?;
-            problem.with_integrator(settings)?
-        }
-        false => problem,
-    };
+    let problem = with_integrator(problem, &args.integrator)?;
     let import_ms = started.elapsed().as_secs_f64() * 1e3;
-    let (names, values) = point(&problem, &args.set)?;
+    let parameters = problem.parameters();
+    let names: Vec<String> = parameters.iter().map(|u| u.name.clone()).collect();
+    let values = point(&problem, &parameters, &args.set)?;
     let k = problem.unknowns().len();
     let held = match problem.scales().is_empty() {
         true => Cow::Borrowed(&problem),
@@ -69,7 +65,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
     let mut result = None;
     for _ in 0..args.repeat {
         let t = Instant::now();
-        let e = evaluate(&held, &z, &values, args.gradient)?;
+        let e = evaluate(&held, &z, &parameters, &values, args.gradient)?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
         result = Some(e);
     }
@@ -100,17 +96,13 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
     Ok(Outcome::Success)
 }
 
-/// The parameters (the free unknowns, then the noise scales) and their values: the guesses
-/// and the scales' values, with `--set` applied.
-fn point(problem: &AnyProblem, set: &[String]) -> anyhow::Result<(Vec<String>, Vec<f64>)> {
-    let declared = problem.declared();
-    let parameters: Vec<&sysid_core::Unknown> = problem
-        .unknowns()
-        .list()
-        .iter()
-        .chain(problem.scales().iter().map(|&j| &declared[j]))
-        .collect();
-    let names: Vec<String> = parameters.iter().map(|u| u.name.clone()).collect();
+/// The values of `parameters` (the problem's: the free unknowns, then the noise scales):
+/// the guesses and the scales' values, with `--set` applied.
+fn point(
+    problem: &AnyProblem,
+    parameters: &[&sysid_core::Unknown],
+    set: &[String],
+) -> anyhow::Result<Vec<f64>> {
     let mut values: Vec<f64> =
         problem.unknowns().guesses().into_iter().chain(problem.scale_values()).collect();
     for s in set {
@@ -119,7 +111,8 @@ fn point(problem: &AnyProblem, set: &[String]) -> anyhow::Result<(Vec<String>, V
         let name = name.trim();
         let value: f64 =
             value.trim().parse().map_err(|_| anyhow!("--set {name}: `{value}` is not a number"))?;
-        let Some(i) = names.iter().position(|n| n == name) else {
+        let Some(i) = parameters.iter().position(|u| u.name == name) else {
+            let names: Vec<&str> = parameters.iter().map(|u| u.name.as_str()).collect();
             bail!(
                 "--set {name}: not a parameter of the problem (parameters: {})",
                 names.join(", ")
@@ -137,7 +130,7 @@ fn point(problem: &AnyProblem, set: &[String]) -> anyhow::Result<(Vec<String>, V
         }
         values[i] = value;
     }
-    Ok((names, values))
+    Ok(values)
 }
 
 /// The NLL at z (and the priors' term), with its gradient with respect to the values when
@@ -145,6 +138,7 @@ fn point(problem: &AnyProblem, set: &[String]) -> anyhow::Result<(Vec<String>, V
 fn evaluate(
     problem: &AnyProblem,
     z: &[f64],
+    parameters: &[&sysid_core::Unknown],
     values: &[f64],
     gradient: bool,
 ) -> anyhow::Result<Evaluation> {
@@ -158,14 +152,11 @@ fn evaluate(
     }
     let lin = problem.residuals_and_jacobian(z).map_err(cannot)?;
     let nll = problem.nll(&lin).ok_or_else(no_likelihood)?;
-    let declared = problem.declared();
-    let parameters =
-        problem.unknowns().list().iter().chain(problem.scales().iter().map(|&j| &declared[j]));
     // ∂/∂value = ∂/∂z / (∂value/∂z).
     let g = problem
         .objective_gradient(&lin, false)
         .into_iter()
-        .zip(parameters.zip(values))
+        .zip(parameters.iter().zip(values))
         .map(|(g, (u, &v))| g / u.scale(u.coordinate(v)))
         .collect();
     Ok(Evaluation { nll, prior: problem.prior_nll(&lin), gradient: Some(g) })

@@ -99,19 +99,26 @@ pub fn prepare(
     integrator: &IntegratorArgs,
     options: &MethodArgs,
 ) -> anyhow::Result<AnyProblem> {
-    let problem = match integrator.given() {
-        true => {
-            let settings = integrator.apply_to(*problem.integrator())?;
-            problem.with_integrator(settings)?
-        }
-        false => problem,
-    };
-    problem.with_fixed(&options.fix).map_err(|e| match e {
+    with_integrator(problem, integrator)?.with_fixed(&options.fix).map_err(|e| match e {
         ProblemError::AllFixed(_) | ProblemError::NotAnUnknown { .. } => {
             anyhow::anyhow!("--fix: {e}")
         }
         e => e.into(),
     })
+}
+
+/// `problem` with the command line's integrator settings, where any are given.
+pub fn with_integrator(
+    problem: AnyProblem,
+    integrator: &IntegratorArgs,
+) -> anyhow::Result<AnyProblem> {
+    match integrator.given() {
+        true => {
+            let settings = integrator.apply_to(*problem.integrator())?;
+            Ok(problem.with_integrator(settings)?)
+        }
+        false => Ok(problem),
+    }
 }
 
 /// The registry's method called `name` (usable from several threads, as studies run them).

@@ -298,7 +298,7 @@ impl<S: System> Problem<S> {
     /// priors' term, at a linearization's point: with respect to the coordinates z of the
     /// free unknowns, then to those of the noise scales (ln s for a scale on a log scale;
     /// a scale s of σ = s·f enters each of its rows as ln σ + ½ r², r ∝ 1/s, so
-    /// ∂/∂s = Σ (1 − r²)/s). What PEtab and pyPESTO count as the parameters.
+    /// ∂/∂s = Σ (1 − r²)/s): the order of [`parameters`](Self::parameters).
     pub fn objective_gradient(&self, lin: &Linearization, priors: bool) -> Vec<f64> {
         let Some(rows) = &lin.residuals else {
             return lin.gradient.iter().copied().collect();
@@ -312,6 +312,9 @@ impl<S: System> Problem<S> {
                 rows.jacobian.rows(0, n).tr_mul(&rows.r.rows(0, n)).iter().copied().collect()
             }
         };
+        if self.scales.is_empty() {
+            return g;
+        }
         let sigma = self.scale_values();
         let mut dscale = vec![0.0; sigma.len()];
         for (r, s) in rows.r.iter().zip(self.scale_rows()) {

@@ -168,6 +168,13 @@ impl<S: System> Problem<S> {
     pub fn scales(&self) -> &[usize] {
         &self.scales
     }
+    /// The parameters, as PEtab and pyPESTO count them: the free unknowns, then the noise
+    /// scales (which the fits set in closed form). The order of
+    /// [`objective_gradient`](Self::objective_gradient).
+    pub fn parameters(&self) -> Vec<&Unknown> {
+        let scales = self.scales.iter().map(|&j| &self.declared[j]);
+        self.unknowns.list().iter().chain(scales).collect()
+    }
     /// The measurements of the first experiment.
     pub fn data(&self) -> &Data {
         &self.experiments[0].data

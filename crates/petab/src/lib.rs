@@ -369,14 +369,13 @@ impl<'a> Builder<'a> {
                 prior: if estimated { prior(t, row, scale_name)? } else { None },
                 initialization: None,
             };
-            let p = Parameter {
+            let mut p = Parameter {
                 initialization: match estimated {
                     true => initialization(t, row, scale_name, p.lower, p.upper)?,
                     false => None,
                 },
                 ..p
             };
-            let mut p = p;
             if estimated {
                 let c = nominal_cell;
                 if !p.nominal.is_finite() {
@@ -996,7 +995,7 @@ impl<'a> Builder<'a> {
         }
         let [formula, noise] =
             placeholders(t, row, oc, [&observable.formula, &observable.noise], "observable")?;
-        let [noise, _] = placeholders(t, row, oc, [&noise, &Math::Num(0.0)], "noise")?;
+        let [noise] = placeholders(t, row, oc, [&noise], "noise")?;
         let value_math = self.resolve_names(&self.dynamic(&formula), oc, states, None)?;
         let noise_math = self.resolve_names(&self.dynamic(&noise), oc, states, Some(oc.text))?;
         let output = Output {
@@ -1448,13 +1447,13 @@ impl<'a> Builder<'a> {
 /// observable's parameters replace their placeholders in its noise formula too (`formulas`
 /// is then the observable and the noise formula: Raia's σ = a + b · (the observable) repeats
 /// the observable's scaling); the noise parameters are the noise formula's alone.
-fn placeholders(
+fn placeholders<const N: usize>(
     t: &Tsv,
     row: usize,
     observable: Cell<'_>,
-    formulas: [&Math; 2],
+    formulas: [&Math; N],
     kind: &str,
-) -> Result<[Math; 2], ModelError> {
+) -> Result<[Math; N], ModelError> {
     let column = format!("{kind}Parameters");
     let given = t.cell_named(row, &column);
     let list: Vec<&str> = match given {

@@ -87,9 +87,7 @@ impl PyProblem {
     /// The parameters: the free unknowns, then the noise scales (which the fits set in closed
     /// form, and which PEtab and pyPESTO count among the parameters).
     fn parameters(&self) -> Vec<&Unknown> {
-        let declared = self.problem.declared();
-        let scales = self.problem.scales().iter().map(|&j| &declared[j]);
-        self.problem.unknowns().list().iter().chain(scales).collect()
+        self.problem.parameters()
     }
 
     /// The coordinates of the point `x` given on `scale`, checked.
