@@ -11,7 +11,7 @@
 use std::fmt;
 use std::sync::Arc;
 
-use sysid_ode::{System, Wrt};
+use sysid_ode::{Integrator, System, Wrt};
 
 use crate::data::Data;
 use crate::plan::{Plan, Sampled};
@@ -26,6 +26,14 @@ pub trait SettingFunction: Send + Sync {
     fn uses(&self) -> &[usize];
     /// The function as written, for messages.
     fn describe(&self) -> String;
+    /// The same function in a problem integrated by `integrator`, for a function that
+    /// integrates the system itself (a preequilibration's steady state), so that it follows
+    /// the problem's tolerances: [`Problem::with_integrator`](crate::Problem::with_integrator)
+    /// and the problem's build pass theirs. Default: `None`, the function does not integrate.
+    fn with_integrator(&self, integrator: &Integrator) -> Option<Arc<dyn SettingFunction>> {
+        let _ = integrator;
+        None
+    }
 }
 
 /// How an experiment sets one initial value or parameter of its system.
@@ -126,6 +134,18 @@ pub struct Planned<S> {
 }
 
 impl<S> Planned<S> {
+    /// Its settings' functions for a problem integrated by `integrator`
+    /// ([`SettingFunction::with_integrator`]).
+    pub(crate) fn integrate_with(&mut self, integrator: &Integrator) {
+        for s in self.initial.iter_mut().chain(&mut self.parameters) {
+            if let Resolved::Function(g) = s
+                && let Some(h) = g.with_integrator(integrator)
+            {
+                *s = Resolved::Function(h);
+            }
+        }
+    }
+
     /// The same experiment with its system mapped by `f`.
     pub(crate) fn map_system<T>(self, f: impl Fn(Arc<S>) -> T) -> Planned<T> {
         Planned {

@@ -314,6 +314,9 @@ impl<S: System> Problem<S> {
     pub fn with_integrator(mut self, integrator: Integrator) -> Result<Self, ProblemError> {
         integrator.validate().map_err(ProblemError::Integrator)?;
         self.integrator = integrator;
+        for e in &mut self.experiments {
+            e.integrate_with(&integrator);
+        }
         Ok(self)
     }
 
@@ -537,7 +540,10 @@ impl<S: System> ProblemBuilder<S> {
                 });
             }
         }
-        let experiments = resolve_experiments(&declared, experiments)?;
+        let mut experiments = resolve_experiments(&declared, experiments)?;
+        for e in &mut experiments {
+            e.integrate_with(&integrator);
+        }
         let (free, scales) = roles(&declared, &experiments)?;
         for &j in &scales {
             if declared[j].prior.is_some() {

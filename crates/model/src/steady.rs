@@ -2,19 +2,21 @@
 //! under other settings (`preequilibrate` in `[[experiments]]`; PEtab's
 //! `preequilibrationConditionId`).
 //!
-//! The steady state is found by integrating from the initial values under the
-//! preequilibration's parameters to t = 1, 10, 100, … until every |dyᵢ/dt| ≤ atol + rtol·|yᵢ|
-//! (the integrator's tolerances), at most to t = 1e12. Its derivatives with respect to the
-//! unknowns are the forward sensitivities at that time, chained with the derivatives of the
-//! preequilibration's parameters and initial values: a conserved quantity (a singular
-//! Jacobian) keeps its dependence on the initial values, which the implicit-function
-//! formula −J⁻¹ ∂f/∂α would lose.
+//! The steady state and its forward sensitivities S (for the columns the unknowns move) are
+//! integrated together from the initial values under the preequilibration's parameters, to
+//! t = 1, 10, 100, … until both have settled: every |dyᵢ/dt| ≤ atol + rtol·|yᵢ| and every
+//! |dSᵢⱼ/dt| = |(J·S + ∂f/∂α)ᵢⱼ| ≤ atol + rtol·|Sᵢⱼ| (the problem's integrator's tolerances), at
+//! most to t = 1e12. A state can settle before its derivatives do, where a slow mode hardly
+//! moves it: Weber's nominal point settles by t = 1, its sensitivities only by t = 1000. S is
+//! chained with the derivatives of the preequilibration's parameters and initial values: a
+//! conserved quantity (a singular Jacobian) keeps its dependence on the initial values, which
+//! the implicit-function formula −J⁻¹ ∂f/∂α would lose.
 
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
 use sysid_core::{Setting, Unknown, plan::SettingFunction};
-use sysid_ode::{Integrator, Ivp, System, Wrt};
+use sysid_ode::{Integrator, Ivp, Rhs, SensitivityRhs, Side, Wrt};
 
 use crate::ModelSystem;
 
@@ -25,6 +27,7 @@ const LAST: f64 = 1e12;
 /// and computed once per point of the unknowns.
 pub(crate) struct SteadyState {
     system: ModelSystem,
+    /// The integrator of the components [`component`](Self::component) makes.
     integrator: Integrator,
     parameters: Vec<Setting>,
     initial: Vec<Setting>,
@@ -32,9 +35,9 @@ pub(crate) struct SteadyState {
     names: Vec<String>,
     uses: Vec<usize>,
     experiment: String,
-    /// The last points met and their steady states (None: not found there), the newest
-    /// first: see [`CACHED`].
-    cache: Mutex<VecDeque<(Vec<f64>, Option<Solved>)>>,
+    /// The last points met (with the integrator that solved there) and their steady states
+    /// (None: not found there), the newest first: see [`CACHED`].
+    cache: Mutex<VecDeque<Cached>>,
 }
 
 /// How many points' steady states are kept. Every state's initial value asks for the steady
@@ -44,6 +47,9 @@ pub(crate) struct SteadyState {
 /// nominal took 60 s beside two others instead of 7 s alone, and the lock, held over the
 /// solve, made the fits wait for each other.
 const CACHED: usize = 64;
+
+/// A point, the integrator that solved there and its steady state (None: not found).
+type Cached = (Integrator, Vec<f64>, Option<Solved>);
 
 /// A steady state and its derivatives ∂y/∂v (n × n_v, row by row).
 #[derive(Clone)]
@@ -95,6 +101,7 @@ impl SteadyState {
     pub(crate) fn component(self: &Arc<Self>, i: usize, state: &str) -> Component {
         Component {
             steady: self.clone(),
+            integrator: self.integrator,
             state: i,
             text: format!(
                 "the steady state of `{state}` before experiment `{}` (preequilibration)",
@@ -103,26 +110,28 @@ impl SteadyState {
         }
     }
 
-    fn solved(&self, v: &[f64]) -> Option<Solved> {
+    fn solved(&self, v: &[f64], integrator: &Integrator) -> Option<Solved> {
         let same = |at: &[f64]| at.iter().zip(v).all(|(a, b)| a.to_bits() == b.to_bits());
         {
             let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
-            if let Some((_, solved)) = cache.iter().find(|(at, _)| same(at)) {
+            if let Some((_, _, solved)) =
+                cache.iter().find(|(i, at, _)| i == integrator && same(at))
+            {
                 return solved.clone();
             }
         }
         // Solved without the lock: fits on other threads need their own points meanwhile.
-        let solved = self.solve(v);
+        let solved = self.solve(v, integrator);
         let mut cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
         if cache.len() == CACHED {
             cache.pop_back();
         }
-        cache.push_front((v.to_vec(), solved.clone()));
+        cache.push_front((*integrator, v.to_vec(), solved.clone()));
         solved
     }
 
     /// A setting's value at `v`, its gradient into `g`.
-    fn setting(&self, s: &Setting, v: &[f64], g: &mut [f64]) -> f64 {
+    fn setting(&self, s: &Setting, v: &[f64], g: &mut [f64], integrator: &Integrator) -> f64 {
         match s {
             Setting::Value(x) => *x,
             Setting::Unknown(name) => match self.names.iter().position(|n| n == name) {
@@ -132,43 +141,36 @@ impl SteadyState {
                 }
                 None => f64::NAN,
             },
-            Setting::Function(f) => f.eval(v, g),
+            // A steady state that starts from another one solves that with the same tolerances.
+            Setting::Function(f) => match f.with_integrator(integrator) {
+                Some(f) => f.eval(v, g),
+                None => f.eval(v, g),
+            },
         }
     }
 
-    fn solve(&self, v: &[f64]) -> Option<Solved> {
+    fn solve(&self, v: &[f64], integrator: &Integrator) -> Option<Solved> {
         let nv = v.len();
         let (np, n) = (self.parameters.len(), self.initial.len());
         let mut dp = vec![0.0; np * nv];
         let p: Vec<f64> = (0..np)
-            .map(|q| self.setting(&self.parameters[q], v, &mut dp[q * nv..(q + 1) * nv]))
+            .map(|q| {
+                let g = &mut dp[q * nv..(q + 1) * nv];
+                self.setting(&self.parameters[q], v, g, integrator)
+            })
             .collect();
         let mut dy0 = vec![0.0; n * nv];
         let y0: Vec<f64> = (0..n)
-            .map(|i| self.setting(&self.initial[i], v, &mut dy0[i * nv..(i + 1) * nv]))
+            .map(|i| {
+                let g = &mut dy0[i * nv..(i + 1) * nv];
+                self.setting(&self.initial[i], v, g, integrator)
+            })
             .collect();
         if !p.iter().chain(&y0).all(|x| x.is_finite()) {
             return None;
         }
         let sys = &self.system;
-        let (rtol, atol) = (self.integrator.rtol, self.integrator.atol);
-        let steady = |t: f64, y: &[f64]| {
-            let mut f = vec![0.0; n];
-            sys.rhs::<f64>(t, y, &p, &[], &mut f);
-            f.iter().zip(y).all(|(fi, yi)| fi.abs() <= atol + rtol * yi.abs())
-        };
-        // The time the state settles by.
-        let (mut t, mut y) = (0.0, y0.clone());
-        while !steady(t, &y) {
-            let next = if t == 0.0 { 1.0 } else { 10.0 * t };
-            if next > LAST {
-                return None;
-            }
-            let trajectory = Ivp::new(sys, t, &y, &p).solve(&self.integrator, &[next]).ok()?;
-            y = trajectory.state(0).to_vec();
-            t = next;
-        }
-        // The sensitivities to that time, for the columns the unknowns move.
+        // The columns the unknowns move.
         let moved = |rows: &[f64], k: usize| rows[k * nv..(k + 1) * nv].iter().any(|d| *d != 0.0);
         let mut wrt = Vec::new();
         let mut chain: Vec<&[f64]> = Vec::new();
@@ -180,19 +182,27 @@ impl SteadyState {
             wrt.push(Wrt::InitialValue(i));
             chain.push(&dy0[i * nv..(i + 1) * nv]);
         }
-        let mut dy = vec![0.0; n * nv];
-        if wrt.is_empty() || t == 0.0 {
-            if t == 0.0 {
-                dy.copy_from_slice(&dy0);
+        // The state and its sensitivities, integrated on by decades until both settle.
+        let mut augmented = SensitivityRhs::new(sys, &p, &wrt);
+        let mut x = augmented.initial_state(&y0);
+        let mut t = 0.0;
+        while !settled(&mut augmented, t, &x, integrator) {
+            let next = if t == 0.0 { 1.0 } else { 10.0 * t };
+            if next > LAST {
+                return None;
             }
-            return Some(Solved { y, dy });
+            let (y, s) = x.split_at(n);
+            let ivp = Ivp::new(sys, t, y, &p);
+            let trajectory = ivp.solve_sensitivities_from(integrator, &wrt, s, &[next]).ok()?;
+            x[..n].copy_from_slice(trajectory.state(0));
+            x[n..].copy_from_slice(trajectory.sensitivity_slice(0));
+            t = next;
         }
-        let trajectory =
-            Ivp::new(sys, 0.0, &y0, &p).solve_sensitivities(&self.integrator, &wrt, &[t]).ok()?;
-        let s = trajectory.sensitivity(0);
+        let mut dy = vec![0.0; n * nv];
+        let k = wrt.len();
         for i in 0..n {
             for (c, row) in chain.iter().enumerate() {
-                let sic = s[(i, c)];
+                let sic = x[n + i * k + c];
                 if sic != 0.0 {
                     for j in 0..nv {
                         dy[i * nv + j] += sic * row[j];
@@ -200,14 +210,23 @@ impl SteadyState {
                 }
             }
         }
-        let y = trajectory.state(0).to_vec();
+        let y = x[..n].to_vec();
         y.iter().chain(&dy).all(|x| x.is_finite()).then_some(Solved { y, dy })
     }
 }
 
-/// One state's initial value: its component of the steady state.
+/// Whether every component of `x` (a state, or a state and its sensitivities) changes at t
+/// by at most atol + rtol·|xᵢ| per unit time.
+fn settled(rhs: &mut impl Rhs, t: f64, x: &[f64], integrator: &Integrator) -> bool {
+    let mut dx = vec![0.0; x.len()];
+    rhs.eval(t, Side::After, x, &mut dx);
+    dx.iter().zip(x).all(|(d, xi)| d.abs() <= integrator.atol + integrator.rtol * xi.abs())
+}
+
+/// One state's initial value: its component of the steady state, solved with `integrator`.
 pub(crate) struct Component {
     steady: Arc<SteadyState>,
+    integrator: Integrator,
     state: usize,
     text: String,
 }
@@ -215,7 +234,7 @@ pub(crate) struct Component {
 impl SettingFunction for Component {
     fn eval(&self, v: &[f64], gradient: &mut [f64]) -> f64 {
         let nv = v.len();
-        match self.steady.solved(v) {
+        match self.steady.solved(v, &self.integrator) {
             Some(s) => {
                 for &j in &self.steady.uses {
                     gradient[j] = s.dy[self.state * nv + j];
@@ -230,5 +249,13 @@ impl SettingFunction for Component {
     }
     fn describe(&self) -> String {
         self.text.clone()
+    }
+    fn with_integrator(&self, integrator: &Integrator) -> Option<Arc<dyn SettingFunction>> {
+        Some(Arc::new(Component {
+            steady: self.steady.clone(),
+            integrator: *integrator,
+            state: self.state,
+            text: self.text.clone(),
+        }))
     }
 }

@@ -405,6 +405,30 @@ impl<'a, S: System> Ivp<'a, S> {
         Ok(SensitivityTrajectory { times: times.to_vec(), n, k, data, counts })
     }
 
+    /// As [`solve_sensitivities`](Self::solve_sensitivities), from the sensitivities `s0`
+    /// at t0 (n × `wrt.len()`, row by row) in place of the unit columns of the initial values:
+    /// an integration continued from where another stopped. Every column is integrated.
+    pub fn solve_sensitivities_from(
+        &self,
+        integrator: &Integrator,
+        wrt: &[Wrt],
+        s0: &[f64],
+        times: &[f64],
+    ) -> Result<SensitivityTrajectory, OdeError> {
+        self.check()?;
+        check_wrt(self.system, wrt)?;
+        let (n, k) = (self.y0.len(), wrt.len());
+        assert_eq!(s0.len(), n * k, "a sensitivity per state and column");
+        let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
+        if let Some(weights) = self.weights {
+            rhs = rhs.weighted(weights);
+        }
+        let x0: Vec<f64> = self.y0.iter().chain(s0).copied().collect();
+        let mut data = vec![0.0; times.len() * x0.len()];
+        let counts = sample(integrator, &mut rhs, self.t0, &x0, times, &self.stops(), &mut data)?;
+        Ok(SensitivityTrajectory { times: times.to_vec(), n, k, data, counts })
+    }
+
     /// Integrates the state and the sensitivities `wrt` from t0 to `t_hi` and from t0 back to
     /// `t_lo`, handing every accepted step's interpolant of [y; S] to `on_step` (forward steps
     /// first).
