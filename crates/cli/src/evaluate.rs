@@ -25,7 +25,9 @@ pub struct EvaluateArgs {
     #[arg(long, default_value_t = 1, value_name = "N", value_parser = count)]
     repeat: usize,
     /// Set a parameter (an unknown or a noise scale) to a value instead of its nominal
-    /// value or guess, e.g. --set k1=0.8. Repeat for several.
+    /// value or guess, e.g. --set k1=0.8. Repeat for several. Without it a PEtab problem is
+    /// evaluated at its table's nominal values, those outside their bounds included (where
+    /// positive on a log scale), though fits start from the bounds.
     #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
     set: Vec<String>,
     /// Output format: a readable table, or the JSON object of docs/json.md.
@@ -54,7 +56,9 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
     let import_ms = started.elapsed().as_secs_f64() * 1e3;
     let parameters = problem.parameters();
     let names: Vec<String> = parameters.iter().map(|u| u.name.clone()).collect();
-    let values = point(&problem, &parameters, &args.set)?;
+    let published = context.nominal.iter().map(|(name, value)| format!("{name}={value:?}"));
+    let set: Vec<String> = published.chain(args.set.iter().cloned()).collect();
+    let values = point(&problem, &parameters, &set)?;
     let k = problem.unknowns().len();
     let held = match problem.scales().is_empty() {
         true => Cow::Borrowed(&problem),
@@ -97,7 +101,8 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
 }
 
 /// The values of `parameters` (the problem's: the free unknowns, then the noise scales):
-/// the guesses and the scales' values, with `--set` applied.
+/// the guesses and the scales' values, with `set` applied (a PEtab problem's nominal values
+/// outside their bounds, then `--set`).
 fn point(
     problem: &AnyProblem,
     parameters: &[&sysid_core::Unknown],

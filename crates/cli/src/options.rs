@@ -99,15 +99,24 @@ impl SourceArgs {
 
     /// Reads `path`: a model file, or the PEtab problem imported as one.
     pub fn load(&self, path: &std::path::Path) -> anyhow::Result<sysid_model::Model> {
+        Ok(self.load_with_nominal(path)?.0)
+    }
+
+    /// As [`load`](Self::load), with a PEtab problem's nominal values outside their bounds
+    /// ([`sysid_petab::Imported::nominal`]).
+    pub fn load_with_nominal(
+        &self,
+        path: &std::path::Path,
+    ) -> anyhow::Result<(sysid_model::Model, Vec<(String, f64)>)> {
         match self.petab {
             Some(_) => {
                 let imported = sysid_petab::import(path)?;
                 for warning in &imported.warnings {
                     eprintln!("warning: {warning}");
                 }
-                Ok(imported.model)
+                Ok((imported.model, imported.nominal))
             }
-            None => Ok(sysid_model::Model::load(path)?),
+            None => Ok((sysid_model::Model::load(path)?, Vec::new())),
         }
     }
 

@@ -31,6 +31,9 @@ pub struct Context {
     /// The files the problem was read from (none for a catalogue system): no command writes
     /// over them.
     pub inputs: Vec<std::path::PathBuf>,
+    /// Nominal values the problem was published with outside their bounds, by name: the fits
+    /// start from the bounds, `sysid evaluate` takes the NLL here.
+    pub nominal: Vec<(String, f64)>,
 }
 
 /// The error of a command given neither a system nor a model file.
@@ -63,17 +66,19 @@ impl SourceArgs {
                     summary: case.summary.into(),
                     expected: case.expectation(),
                     inputs: Vec::new(),
+                    nominal: Vec::new(),
                 };
                 Ok((problem, context))
             }
             (None, Some(path)) => {
-                let model = self.load(path)?;
+                let (model, nominal) = self.load_with_nominal(path)?;
                 let problem = any::model_problem(model.problem(self.data.as_deref())?);
                 let context = Context {
                     name: path.display().to_string(),
                     summary: self.kind().into(),
                     expected: None,
                     inputs: model.inputs().into_iter().chain(self.data.clone()).collect(),
+                    nominal,
                 };
                 Ok((problem, context))
             }

@@ -71,6 +71,43 @@ fn evaluate_gives_the_nll_and_its_gradient() {
     assert!(out.stdout.is_empty());
 }
 
+/// A nominal value outside its bounds (PEtab allows it; Lang's `sCDKN1B` is 2e-10 above its
+/// upper bound 1.99e-10): `evaluate` takes the NLL at the table's value, the same as `--set`
+/// there, while the fit starts from the bound. Boehm with the upper bound of
+/// `Epo_degradation_BaF3` lowered to 0.02, below its nominal 0.02698: the NLL at nominal is
+/// still Boehm's, AMICI's reference to 1e-3.
+#[test]
+fn evaluate_takes_a_nominal_value_outside_its_bounds_as_published() {
+    let source = PathBuf::from(problem("Boehm_JProteomeRes2014"));
+    let dir = std::env::temp_dir().join(format!("sysid-cli-outside-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for entry in std::fs::read_dir(source.parent().unwrap()).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let text =
+            text.replace("1E-05\t100000\t0.026982514033029", "1E-05\t0.02\t0.026982514033029");
+        std::fs::write(dir.join(path.file_name().unwrap()), text).unwrap();
+    }
+    let edited = dir.join("Boehm_JProteomeRes2014.yaml").display().to_string();
+    let nll = |extra: &[&str]| {
+        let mut args = vec!["evaluate", "--petab", &edited, "--format", "json"];
+        args.extend_from_slice(extra);
+        let out = sysid(&args);
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+        (json["nll"].as_f64().expect("nll"), json["parameters"]["Epo_degradation_BaF3"].clone())
+    };
+    let (published, value) = nll(&[]);
+    assert_eq!(value.as_f64(), Some(0.026982514033029));
+    assert!((published - 138.22199693517703).abs() <= 1e-3, "{published}");
+    let (bound, _) = nll(&["--set", "Epo_degradation_BaF3=0.02"]);
+    assert!((published - bound).abs() > 1e-3, "{published} vs {bound}");
+    let out = sysid(&["fit", "--petab", &edited, "--max-iterations", "0", "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(json["estimates"]["Epo_degradation_BaF3"].as_f64(), Some(0.02));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `nll_error` against the error it estimates: Boehm at nominal integrated at rtol 1e-3 to
 /// 1e-7 with both Rosenbrock schemes, against its NLL at rtol 1e-12 (whose own error is about
 /// 1e-11). The estimate, the change at a tenth of the tolerance, is never below half the

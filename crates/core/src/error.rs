@@ -90,16 +90,6 @@ pub enum ProblemError {
         /// What is wrong.
         message: String,
     },
-    /// Fewer data than unknowns: the unknowns cannot all be determined.
-    #[error(
-        "{observations} data points for {unknowns} unknowns: need at least as many data as unknowns"
-    )]
-    TooFewData {
-        /// Number of measured values.
-        observations: usize,
-        /// Number of unknowns.
-        unknowns: usize,
-    },
     /// Synthetic data could not be simulated.
     #[error("could not simulate the data: {0}")]
     Simulation(String),

@@ -391,8 +391,8 @@ impl<S: System> Problem<S> {
         self.unknowns.list().iter().zip(z).map(|(u, &zi)| u.scale(zi)).collect()
     }
 
-    /// Plans every experiment again (after the unknowns or the data changed) and checks
-    /// that there are enough data.
+    /// Plans every experiment again (after the unknowns or the data changed). Fewer data than
+    /// unknowns is a problem like any other: the fit names what the data cannot determine.
     fn replan(mut self) -> Result<Self, ProblemError> {
         let is_free: Vec<bool> = (0..self.declared.len()).map(|j| self.free.contains(&j)).collect();
         let declared = &self.declared;
@@ -403,12 +403,6 @@ impl<S: System> Problem<S> {
             e.slots = slots(&e.initial, &e.parameters, &is_free);
         }
         self.unknowns = Unknowns::new(self.free.iter().map(|&j| declared[j].clone()).collect());
-        let k = self.free.len() + self.scales.len();
-        if let Some(observations) = self.n_observations()
-            && observations < k
-        {
-            return Err(ProblemError::TooFewData { observations, unknowns: k });
-        }
         self.weigh_scales();
         Ok(self)
     }

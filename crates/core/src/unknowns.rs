@@ -232,12 +232,14 @@ impl Unknown {
         if !self.log {
             return z;
         }
-        // exp(ln b) may round to a neighbour of b: a coordinate on (or past) its bound is
-        // the bound's value itself.
+        // exp(ln b) may round to a neighbour of b: a coordinate on its bound, or past it by
+        // rounding, is the bound's value itself. One further past is its own value (`sysid
+        // evaluate --set` beyond a bound evaluates there, not on the bound).
         let (lo, hi) = self.coordinate_bounds();
+        let near = |b: f64| (z - b).abs() <= 1e-12 * b.abs().max(1.0);
         match (self.min, self.max) {
-            (Some(min), _) if z <= lo => min.max(f64::MIN_POSITIVE),
-            (_, Some(max)) if z >= hi => max.min(f64::MAX),
+            (Some(min), _) if z <= lo && near(lo) => min.max(f64::MIN_POSITIVE),
+            (_, Some(max)) if z >= hi && near(hi) => max.min(f64::MAX),
             _ => z.clamp(LN_SMALLEST, LN_LARGEST).exp(),
         }
     }

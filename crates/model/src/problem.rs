@@ -612,12 +612,6 @@ impl Model {
             _ => self.file.path.display().to_string(),
         };
         match e {
-            ProblemError::TooFewData { observations, unknowns } => ModelError::file(
-                &file,
-                format!(
-                    "{observations} data points for {unknowns} unknowns: need at least as many data as unknowns"
-                ),
-            ),
             ProblemError::InvalidUnknown { .. } | ProblemError::NoUnknowns => {
                 self.located(e.to_string())
             }

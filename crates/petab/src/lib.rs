@@ -53,6 +53,11 @@ pub struct Imported {
     /// id (an estimated parameter's nominal value outside its bounds, moved onto the bound
     /// as the fits' start).
     pub warnings: Vec<String>,
+    /// The parameter table's nominal values that lie outside their bounds, by parameter id,
+    /// where they can be represented on the parameter's scale (positive on a log scale): the
+    /// fits start from the bound, but the NLL at nominal (`sysid evaluate`) is taken here, at
+    /// the point the problem was published with.
+    pub nominal: Vec<(String, f64)>,
 }
 
 #[derive(Deserialize)]
@@ -276,6 +281,8 @@ struct Builder<'a> {
     overrides: Vec<Override>,
     /// See [`Imported::warnings`].
     warnings: Vec<String>,
+    /// See [`Imported::nominal`].
+    outside: Vec<(String, f64)>,
 }
 
 /// A species whose initial value a condition sets: its initial value in the model file is
@@ -305,6 +312,7 @@ impl<'a> Builder<'a> {
             observables: HashMap::new(),
             overrides: Vec::new(),
             warnings: Vec::new(),
+            outside: Vec::new(),
         };
         b.read_parameters()?;
         b.read_observables()?;
@@ -395,10 +403,18 @@ impl<'a> Builder<'a> {
                 // nearest bound, and the import says so.
                 if p.nominal < p.lower || p.nominal > p.upper {
                     let moved = p.nominal.clamp(p.lower, p.upper);
+                    let kept = !log || p.nominal > 0.0;
+                    let nll = match kept {
+                        true => "at the table's value",
+                        false => "there too (a log scale cannot hold the table's value)",
+                    };
                     self.warnings.push(c.err(format!(
-                        "nominal value {} of `{}` is outside its bounds [{}, {}]: the fits start from {moved}, and the NLL at nominal is taken there",
+                        "nominal value {} of `{}` is outside its bounds [{}, {}]: the fits start from {moved}, and the NLL at nominal is taken {nll}",
                         p.nominal, pid.text, p.lower, p.upper
                     )).to_string());
+                    if kept {
+                        self.outside.push((pid.text.to_string(), p.nominal));
+                    }
                     p.nominal = moved;
                 }
                 if log && !(p.lower > 0.0 || p.lower == f64::NEG_INFINITY && p.nominal > 0.0) {
@@ -750,7 +766,12 @@ impl<'a> Builder<'a> {
         for (spec, (_, rows)) in file.experiments.clone().iter().zip(&measured.experiments) {
             file.tables.push((spec.file.clone(), data_table(spec, rows, &outputs)?));
         }
-        Ok(Imported { model: Model { file }, text, warnings: self.warnings.clone() })
+        Ok(Imported {
+            model: Model { file },
+            text,
+            warnings: self.warnings.clone(),
+            nominal: self.outside.clone(),
+        })
     }
 
     /// The states (the species no assignment rule gives, and the parameters with rate

@@ -675,7 +675,8 @@ fn observable_parameters_fill_the_noise_formula_too() {
 
 /// PEtab allows a nominal value outside the bounds (Lang's kDpApc_1: 0 on a log scale
 /// bounded by 1e-24): the start is moved onto the nearer bound, and the import warns at the
-/// cell, naming the parameter.
+/// cell, naming the parameter. The published value is kept for the NLL at nominal where the
+/// scale can hold it (1e6 here), not where it cannot (0 on a log scale).
 #[test]
 fn a_nominal_value_outside_its_bounds_is_moved_onto_the_bound() {
     let path = edited("outside-bounds", "parameters_", |t| {
@@ -687,11 +688,19 @@ fn a_nominal_value_outside_its_bounds_is_moved_onto_the_bound() {
     };
     assert!(
         warning.contains("parameters_Boehm_JProteomeRes2014.tsv:2:")
-            && warning.contains("nominal value 1000000 of `Epo_degradation_BaF3` is outside its bounds [0.00001, 100000]: the fits start from 100000"),
+            && warning.contains("nominal value 1000000 of `Epo_degradation_BaF3` is outside its bounds [0.00001, 100000]: the fits start from 100000, and the NLL at nominal is taken at the table's value"),
         "{warning}"
     );
+    assert_eq!(imported.nominal, vec![("Epo_degradation_BaF3".to_string(), 1e6)]);
     let problem = imported.model.problem(None).expect("a problem");
     let j = problem.unknowns().names().iter().position(|n| n == "Epo_degradation_BaF3");
     assert!((problem.guesses()[j.expect("estimated")] - 1e5).abs() <= 1e-9);
-    assert!(import(&yaml("Boehm_JProteomeRes2014")).expect("imports").warnings.is_empty());
+    let boehm = import(&yaml("Boehm_JProteomeRes2014")).expect("imports");
+    assert!(boehm.warnings.is_empty() && boehm.nominal.is_empty());
+    let path = edited("outside-bounds-zero", "parameters_", |t| {
+        t.replace("1E-05\t100000\t0.026982514033029\t1", "1E-05\t100000\t0\t1")
+    });
+    let imported = import(&path).expect("imports");
+    assert!(imported.warnings[0].contains("the fits start from 0.00001, and the NLL at nominal is taken there too (a log scale cannot hold the table's value)"), "{:?}", imported.warnings);
+    assert!(imported.nominal.is_empty());
 }
