@@ -110,12 +110,16 @@ pub struct ModelRhs<'a, S> {
     u: Vec<f64>,
     /// Allocated on the first implicit step.
     implicit: Option<Box<IterationMatrix>>,
+    /// The work space of the system's own sparse Jacobian, where it has one: f is read from
+    /// that evaluation (compiled for a model file) rather than from `rhs`.
+    work: Vec<f64>,
 }
 
 impl<'a, S: System> ModelRhs<'a, S> {
     /// The right-hand side of `sys` at parameters `p`.
     pub fn new(sys: &'a S, p: &'a [f64]) -> Self {
-        Self { sys, p, u: vec![0.0; sys.signature().n_inputs()], implicit: None }
+        let work = sys.sparse_jacobian(Function::Rhs).map(|j| j.workspace()).unwrap_or_default();
+        Self { sys, p, u: vec![0.0; sys.signature().n_inputs()], implicit: None, work }
     }
 }
 
@@ -125,6 +129,13 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
     }
     fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {
         self.sys.input_values(t, side, &mut self.u);
+        if let Some(jacobian) = self.sys.sparse_jacobian(Function::Rhs) {
+            jacobian.eval(t, x, self.p, &self.u, &mut self.work);
+            for (d, &v) in dx.iter_mut().zip(jacobian.values()) {
+                *d = self.work[v as usize];
+            }
+            return;
+        }
         self.sys.rhs(t, x, self.p, &self.u, dx);
     }
     fn describe(&self, i: usize) -> String {
