@@ -11,6 +11,12 @@
 //! path lands 3e-10 and 7e-10 from the dual one), and fits that stop without converging,
 //! whose path after many iterations far from the minimum amplifies it likewise (LV's
 //! quasilinearization: 3e-11). There it is 1e-9.
+//!
+//! `gauss-newton-fd` differences f, which amplifies f's rounding by the inverse of its step:
+//! the symbolic path reads f from the compiled program that also computes the Jacobian's
+//! entries, the dual path from the interpreter, and the two differ in the last bits. Its
+//! path may then take one iteration more or less; its converged point is held to
+//! [`DIFFERENCED`].
 
 use crate::twins;
 
@@ -22,6 +28,8 @@ use sysid::registry::{Registry, Settings};
 const RTOL: f64 = 1e-12;
 /// Where rounding is amplified (see the module's documentation).
 const AMPLIFIED: f64 = 1e-9;
+/// A differenced Jacobian's fit (see the module's documentation).
+const DIFFERENCED: f64 = 1e-7;
 
 fn within(a: f64, b: f64, rtol: f64) -> bool {
     a.to_bits() == b.to_bits() || (a - b).abs() <= rtol * a.abs().max(b.abs())
@@ -48,10 +56,15 @@ fn every_method_fits_the_twins_as_the_dual_path_does() {
             };
             let kind = |e: &Estimate| std::mem::discriminant(&e.termination);
             assert_eq!(kind(&a), kind(&b), "{what}: {:?} vs {:?}", a.termination, b.termination);
-            assert_eq!(a.iterations, b.iterations, "{what}");
+            let differenced = method_name == "gauss-newton-fd";
+            match differenced {
+                true => assert!(a.iterations.abs_diff(b.iterations) <= 1, "{what}"),
+                false => assert_eq!(a.iterations, b.iterations, "{what}"),
+            }
             let converged = matches!(a.termination, Termination::Converged(_));
             let (cost, estimates) = match (converged, method_name.starts_with("quasilinearization"))
             {
+                _ if differenced => (DIFFERENCED, DIFFERENCED),
                 (true, false) => (RTOL, RTOL),
                 (true, true) => (RTOL, AMPLIFIED),
                 (false, _) => (AMPLIFIED, AMPLIFIED),
@@ -63,8 +76,8 @@ fn every_method_fits_the_twins_as_the_dual_path_does() {
             tight += usize::from(estimates == RTOL);
         }
     }
-    // 5 twins × 10 methods: 50 fits; all but the ten of quasilinearization and two that
-    // stop without converging (LV's goodman and gauss-newton, at their first step) are
-    // held to 1e-12.
+    // 5 twins × 12 methods: 60 fits; all but quasilinearization's ten, gauss-newton-fd's five
+    // and those that stop without converging (LV's goodman and gauss-newton, at their first
+    // step) are held to 1e-12.
     assert!(tight >= 33, "{tight} fits held to 1e-12");
 }
