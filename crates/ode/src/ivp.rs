@@ -123,20 +123,33 @@ impl<'a, S: System> ModelRhs<'a, S> {
     }
 }
 
+/// f(t, y, α, u) into `dx`: from the system's own sparse Jacobian's evaluation where it has
+/// one (for a model file, machine code that computes f with the Jacobian's entries, faster
+/// than its interpreter), in `work`, its work space; else from [`System::rhs`].
+fn rhs_of<S: System>(
+    sys: &S,
+    (t, x, p, u): (f64, &[f64], &[f64], &[f64]),
+    work: &mut [f64],
+    dx: &mut [f64],
+) {
+    match sys.sparse_jacobian(Function::Rhs) {
+        Some(jacobian) if !work.is_empty() => {
+            jacobian.eval(t, x, p, u, work);
+            for (d, &v) in dx.iter_mut().zip(jacobian.values()) {
+                *d = work[v as usize];
+            }
+        }
+        _ => sys.rhs(t, x, p, u, dx),
+    }
+}
+
 impl<S: System> Rhs for ModelRhs<'_, S> {
     fn dim(&self) -> usize {
         self.sys.signature().n_states()
     }
     fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {
         self.sys.input_values(t, side, &mut self.u);
-        if let Some(jacobian) = self.sys.sparse_jacobian(Function::Rhs) {
-            jacobian.eval(t, x, self.p, &self.u, &mut self.work);
-            for (d, &v) in dx.iter_mut().zip(jacobian.values()) {
-                *d = self.work[v as usize];
-            }
-            return;
-        }
-        self.sys.rhs(t, x, self.p, &self.u, dx);
+        rhs_of(self.sys, (t, x, self.p, &self.u), &mut self.work, dx);
     }
     fn describe(&self, i: usize) -> String {
         format!("state {}", self.sys.signature().states()[i])
@@ -183,6 +196,9 @@ pub struct SensitivityRhs<'a, S> {
     moving: Vec<(f64, usize, f64)>,
     /// The atol factor of every column (see [`Ivp::weighted`]).
     atol: Vec<f64>,
+    /// Without columns: the work space of the system's own sparse Jacobian, from whose
+    /// (compiled) evaluation f is read, as [`ModelRhs`] does.
+    work: Vec<f64>,
 }
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
@@ -210,6 +226,11 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
             implicit: None,
             moving: sys.moving_switches(p),
             atol: vec![1.0; wrt.len()],
+            work: match wrt.is_empty() {
+                true => sys.sparse_jacobian(Function::Rhs).map(|j| j.workspace()),
+                false => None,
+            }
+            .unwrap_or_default(),
         }
     }
 
@@ -257,7 +278,7 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         let n = self.sys.signature().n_states();
         self.sys.input_values(t, side, &mut self.u);
         if self.wrt.is_empty() {
-            self.sys.rhs(t, x, self.p, &self.u, dx);
+            rhs_of(self.sys, (t, x, self.p, &self.u), &mut self.work, dx);
             return;
         }
         let (y, s) = x.split_at(n);
