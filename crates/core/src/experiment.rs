@@ -34,6 +34,10 @@ pub trait SettingFunction: Send + Sync {
         let _ = integrator;
         None
     }
+    /// Drops what it keeps of earlier points (a steady state solved there), so that the next
+    /// evaluation computes afresh: for timing one evaluation
+    /// ([`Problem::forget_cached`](crate::Problem::forget_cached)). Default: nothing kept.
+    fn forget(&self) {}
 }
 
 /// How an experiment sets one initial value or parameter of its system.
@@ -142,6 +146,15 @@ impl<S> Planned<S> {
                 && let Some(h) = g.with_integrator(integrator)
             {
                 *s = Resolved::Function(h);
+            }
+        }
+    }
+
+    /// Its settings' functions forget what they keep of earlier points.
+    pub(crate) fn forget_cached(&self) {
+        for s in self.initial.iter().chain(&self.parameters) {
+            if let Resolved::Function(g) = s {
+                g.forget();
             }
         }
     }

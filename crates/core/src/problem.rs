@@ -310,6 +310,16 @@ impl<S: System> Problem<S> {
         self.replan()
     }
 
+    /// Makes the settings that keep results of earlier points (a preequilibration's steady
+    /// state, solved once per point) forget them, so that the next evaluation at a point
+    /// already met costs what it did the first time: `sysid evaluate --repeat` and the
+    /// benchmarks call it before each timed evaluation. The problem's results do not change.
+    pub fn forget_cached(&self) {
+        for e in &self.experiments {
+            e.forget_cached();
+        }
+    }
+
     /// The same problem with another integrator.
     pub fn with_integrator(mut self, integrator: Integrator) -> Result<Self, ProblemError> {
         integrator.validate().map_err(ProblemError::Integrator)?;

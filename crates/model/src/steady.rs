@@ -250,6 +250,9 @@ impl SettingFunction for Component {
     fn describe(&self) -> String {
         self.text.clone()
     }
+    fn forget(&self) {
+        self.steady.cache.lock().unwrap_or_else(|e| e.into_inner()).clear();
+    }
     fn with_integrator(&self, integrator: &Integrator) -> Option<Arc<dyn SettingFunction>> {
         Some(Arc::new(Component {
             steady: self.steady.clone(),
