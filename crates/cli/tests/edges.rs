@@ -82,7 +82,10 @@ impl Drop for Scratch {
 
 /// A unit slip in the data (0.170053 written as 170053.0) makes the best fit want no second
 /// reaction: k2 runs off to 0 on its log scale. No method may call that converged or give it
-/// a standard error, and no log-scale estimate is ever 0.
+/// a standard error, and no log-scale estimate is ever 0. The slipped datum, weighted 1e4,
+/// also pulls B towards its ceiling A₀ = 1, so k1 may run off upwards as well: a method may
+/// stop where B still responds to k1, or where it responds to neither (a plateau); both
+/// name every unknown not determined.
 #[test]
 fn a_rate_running_off_to_zero_is_not_a_minimum() {
     let s = Scratch::new("slip");
@@ -106,13 +109,18 @@ fn a_rate_running_off_to_zero_is_not_a_minimum() {
         let undetermined: Vec<&str> =
             fit["undetermined"].as_array().unwrap().iter().filter_map(Value::as_str).collect();
         if ["levenberg-marquardt", "hybrid-newton", "nl2sol", "geodesic-lm"].contains(&method) {
-            assert_eq!(undetermined, ["k2"], "{method}: {fit}");
+            assert!(undetermined.contains(&"k2"), "{method}: {fit}");
+            if undetermined.contains(&"k1") {
+                assert!(fit["estimates"]["k1"].as_f64().unwrap() > 10.0, "{method}: {fit}");
+            }
             assert!(fit["estimates"]["k2"].as_f64().unwrap() < 1e-6);
         }
     }
     let out = sysid(&["fit", "--model", &model, "--method", "levenberg-marquardt"]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(text(&out.stdout).contains("k2 is not determined"), "{}", text(&out.stdout));
+    let table = text(&out.stdout);
+    let verdict = table.lines().find(|l| l.starts_with("  converged    no")).expect("a verdict");
+    assert!(verdict.contains("not determined") && verdict.contains("k2"), "{table}");
 }
 
 /// Integrator settings that cannot resolve the model are seen by the certificate, and an

@@ -342,7 +342,15 @@ impl Estimate {
         if !c.optimality.is_finite() {
             "no (the reported point could not be evaluated)".into()
         } else if c.plateau() {
-            "no (a plateau: the model responds to no unknown there)".into()
+            let names = self.undetermined();
+            if names.is_empty() {
+                "no (a plateau: the model responds to no unknown there)".into()
+            } else {
+                format!(
+                    "no (a plateau: the model responds to no unknown there; not determined: {})",
+                    names.join(", ")
+                )
+            }
         } else if c.has_undetermined() {
             let names = self.undetermined();
             format!(
