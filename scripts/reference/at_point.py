@@ -9,7 +9,7 @@ tests/data/petab/best_known.tsv and in the test that checks the points
 
 Printed on this machine (amici and pypesto of November 2026, AMICI's default tolerances):
 
-    Elowitz_Nature2000 -63.25202347360725
+    Elowitz_Nature2000 -65.49314849568135
 """
 
 import argparse

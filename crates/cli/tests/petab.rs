@@ -324,10 +324,11 @@ fn the_default_fit_of_fiedler_from_nominal_plus_a_tenth_reaches_the_peers_optimu
 
 /// The best known points away from the nominal values (`best_points.tsv`) are certified
 /// minima at the values `best_known.tsv` gives: Elowitz's, in another basin than the
-/// nominal's (tau_mRNA_GFP 290 against 4e-4) and 0.0123 lower, found by nl2sol with geodesic
-/// acceleration from nominal + 0.1. AMICI evaluates it to −63.2520235
-/// (`scripts/reference/at_point.py`); levenberg-marquardt started there certifies it, at
-/// the problem's tolerances and at tolerances 1000 times tighter.
+/// nominal's and 2.25 lower (−65.493149 against −63.239749), with 9 of its 21 unknowns on
+/// bounds, found by nl2sol from nominal + 0.1 with a first trust radius of ‖D z₀‖. AMICI
+/// evaluates it to −65.4931485 (`scripts/reference/at_point.py`); levenberg-marquardt
+/// started there certifies it, at the problem's tolerances and at tolerances 1000 times
+/// tighter.
 #[test]
 fn the_best_known_points_are_certified_minima_at_their_values() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
