@@ -21,9 +21,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-import yaml  # noqa: E402
-import petab.v1 as petab  # noqa: E402
 import pypesto.petab  # noqa: E402
+
+import published  # noqa: E402
 
 
 def main():
@@ -36,11 +36,7 @@ def main():
         for row in csv.DictReader(f, delimiter="\t"):
             points[row["problem"]][row["parameterId"]] = float(row["value"])
     for name, values in points.items():
-        # The copies in tests/data/petab leave the visualisation tables out.
-        config = yaml.safe_load((args.folder / name / f"{name}.yaml").read_text())
-        for entry in config["problems"]:
-            entry.pop("visualization_files", None)
-        problem = petab.Problem.from_yaml(config, base_path=str(args.folder / name))
+        problem = published.load(args.folder / name, name)
         importer = pypesto.petab.PetabImporter(
             problem, output_folder=str(args.amici_dir / name), model_name=name
         )

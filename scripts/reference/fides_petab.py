@@ -38,6 +38,8 @@ import pypesto  # noqa: E402
 import pypesto.optimize as optimize  # noqa: E402
 import pypesto.petab  # noqa: E402
 
+import published  # noqa: E402
+
 
 def fit(problem, optimizer, x0):
     started = time.perf_counter()
@@ -53,8 +55,7 @@ def fit(problem, optimizer, x0):
 
 
 def measure(folder: Path, starts: int, budget: float, output_root: Path) -> dict:
-    yaml = next(folder.glob("*.yaml"))
-    petab_problem = petab.Problem.from_yaml(str(yaml))
+    petab_problem = published.load(folder, folder.name)
     # AMICI cannot import observable or noise parameters that differ between time points
     # (Fiedler): PEtab's own flattening gives the same problem in a form it reads.
     flat = petab.lint.measurement_table_has_timepoint_specific_mappings(

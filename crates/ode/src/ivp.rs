@@ -226,11 +226,11 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
             implicit: None,
             moving: sys.moving_switches(p),
             atol: vec![1.0; wrt.len()],
-            work: match wrt.is_empty() {
-                true => sys.sparse_jacobian(Function::Rhs).map(|j| j.workspace()),
-                false => None,
-            }
-            .unwrap_or_default(),
+            work: sys
+                .sparse_jacobian(Function::Rhs)
+                .filter(|_| wrt.is_empty())
+                .map(|j| j.workspace())
+                .unwrap_or_default(),
         }
     }
 
