@@ -1,0 +1,389 @@
+//! The parameter table: each parameter's scale, bounds, nominal value, prior and where
+//! multistart draws it; which of them the model file knows and which it estimates.
+
+use std::fmt::Write as _;
+
+use sysid_model::ModelError;
+
+use crate::dynamics::Dynamics;
+use crate::measurements::Measured;
+use crate::observables::Sigma;
+use crate::rendering::toml_number;
+use crate::tsv::{Cell, Tsv};
+use crate::{Builder, tsv};
+
+/// A row of the parameter table.
+#[derive(Clone, Debug)]
+pub(crate) struct Parameter {
+    pub(crate) nominal: f64,
+    pub(crate) estimate: bool,
+    pub(crate) lower: f64,
+    pub(crate) upper: f64,
+    pub(crate) log: bool,
+    /// A prior: distribution, mean or location, sd or scale, and the scale it is on.
+    pub(crate) prior: Option<PriorEntry>,
+    /// Where multistart draws its starts: distribution, its two parameters, and the scale
+    /// it is on (none: uniform on its scale within its bounds).
+    pub(crate) initialization: Option<(&'static str, f64, f64, &'static str)>,
+}
+
+/// A prior as the parameter table gives it: (distribution, mean or location, sd or scale,
+/// the scale it is on).
+pub(crate) type PriorEntry = (&'static str, f64, f64, &'static str);
+
+impl Builder<'_> {
+    /// The parameter table. PEtab v1 requires `parameterScale` in every row and both
+    /// bounds of an estimated parameter (a number: `inf` and `-inf` are numbers, an empty
+    /// cell or `nan` is not); a table without them is refused where the value is missing.
+    pub(crate) fn read_parameters(&mut self) -> Result<(), ModelError> {
+        let t = &self.tables.parameters;
+        let id = t.required("parameterId")?;
+        let scale = t.required("parameterScale")?;
+        let nominal = t.required("nominalValue")?;
+        let estimate = t.required("estimate")?;
+        let any_estimated = (0..t.rows.len()).any(|row| t.cell(row, estimate).text == "1");
+        let (lower, upper) = match any_estimated {
+            true => (Some(t.required("lowerBound")?), Some(t.required("upperBound")?)),
+            false => (t.column("lowerBound"), t.column("upperBound")),
+        };
+        for row in 0..t.rows.len() {
+            let pid = t.cell(row, id);
+            pid.id("parameter")?;
+            let e = t.cell(row, estimate);
+            let estimated = match e.text {
+                "1" => true,
+                "0" => false,
+                other => return Err(e.err(format!("`{other}`: estimate is 0 or 1"))),
+            };
+            let scale_cell = t.cell(row, scale);
+            if scale_cell.text.is_empty() {
+                return Err(scale_cell.err(format!(
+                    "`{}` has no scale: parameterScale is lin, log or log10 in every row",
+                    pid.text
+                )));
+            }
+            let scale_name = scale_of(Some(scale_cell), "scale")?;
+            let log = scale_name != "lin";
+            let bound = |column: Option<usize>, default: f64| -> Result<f64, ModelError> {
+                match column.map(|c| t.cell(row, c)) {
+                    Some(c) if estimated && c.is_blank() => Err(c.err(format!(
+                        "`{}` is estimated, so it needs this bound: a number (inf and -inf are numbers), not `{}`",
+                        pid.text,
+                        if c.text.is_empty() { "" } else { c.text }
+                    ))),
+                    Some(c) if !c.is_blank() => c.number(),
+                    _ => Ok(default),
+                }
+            };
+            let nominal_cell = t.cell(row, nominal);
+            let p = Parameter {
+                nominal: nominal_cell.number()?,
+                estimate: estimated,
+                lower: bound(lower, f64::NEG_INFINITY)?,
+                upper: bound(upper, f64::INFINITY)?,
+                log,
+                prior: if estimated { prior(t, row, scale_name)? } else { None },
+                initialization: None,
+            };
+            let mut p = Parameter {
+                initialization: match estimated {
+                    true => initialization(t, row, scale_name, p.lower, p.upper)?,
+                    false => None,
+                },
+                ..p
+            };
+            if estimated {
+                let c = nominal_cell;
+                if !p.nominal.is_finite() {
+                    return Err(c.err(format!(
+                        "nominal value {} of `{}` is not a finite number",
+                        p.nominal, pid.text
+                    )));
+                }
+                if p.lower > p.upper {
+                    return Err(c.err(format!(
+                        "`{}` has its lower bound {} above its upper bound {}",
+                        pid.text, p.lower, p.upper
+                    )));
+                }
+                // PEtab does not require the nominal value within the bounds (Lang's
+                // kDpApc_1: 0 on a log scale bounded by 1e-24): the fits start from the
+                // nearest bound, and the import says so.
+                if p.nominal < p.lower || p.nominal > p.upper {
+                    let moved = p.nominal.clamp(p.lower, p.upper);
+                    let kept = !log || p.nominal > 0.0;
+                    let nll = match kept {
+                        true => "at the table's value",
+                        false => "there too (a log scale cannot hold the table's value)",
+                    };
+                    self.warnings.push(c.err(format!(
+                        "nominal value {} of `{}` is outside its bounds [{}, {}]: the fits start from {moved}, and the NLL at nominal is taken {nll}",
+                        p.nominal, pid.text, p.lower, p.upper
+                    )).to_string());
+                    if kept {
+                        self.outside.push((pid.text.to_string(), p.nominal));
+                    }
+                    p.nominal = moved;
+                }
+                if log && !(p.lower > 0.0 || p.lower == f64::NEG_INFINITY && p.nominal > 0.0) {
+                    return Err(c.err(format!(
+                        "`{}` is estimated on a log scale, so its bounds and nominal value must be positive",
+                        pid.text
+                    )));
+                }
+            }
+            if self.parameters.insert(pid.text.to_string(), (p, row)).is_some() {
+                return Err(pid.err(format!("parameter `{}` is listed twice", pid.text)));
+            }
+        }
+        Ok(())
+    }
+
+    /// The model's parameters (the SBML's parameters and compartments that are no rule or
+    /// state, and the estimated PEtab parameters an output uses or nothing uses) and the
+    /// unknowns of their own (estimated PEtab parameters only σ and settings use). A PEtab
+    /// parameter that is not estimated is its nominal value wherever it appears.
+    pub(crate) fn split_parameters(
+        &self,
+        d: &Dynamics,
+        m: &Measured,
+    ) -> (Vec<String>, Vec<String>) {
+        let s = self.sbml;
+        let mut parameters: Vec<String> = s
+            .parameters
+            .iter()
+            .map(|p| p.0.clone())
+            .chain(s.compartments.iter().map(|c| c.0.clone()))
+            .filter(|p| !self.rules.contains_key(p) && !d.states.contains(p))
+            .chain(self.overrides.iter().flat_map(|o| [o.switch.clone(), o.value.clone()]))
+            .collect();
+        let sbml_id = |id: &str| {
+            s.parameters.iter().any(|p| p.0 == id)
+                || s.compartments.iter().any(|c| c.0 == id)
+                || s.species.iter().any(|x| x.id == id)
+        };
+        let in_outputs: Vec<String> = m.outputs.iter().flat_map(|o| names_in(&o.value)).collect();
+        let elsewhere: Vec<String> = m
+            .outputs
+            .iter()
+            .filter_map(|o| match &o.sigma {
+                Sigma::Expression(e) => Some(names_in(e)),
+                Sigma::Number(_) => None,
+            })
+            .flatten()
+            .chain(self.condition_values())
+            .chain(d.initial.iter().flat_map(|(_, m)| m.names()).map(|n| self.name(&n)))
+            .chain(d.equations.iter().flat_map(|(_, m)| m.names()).map(|n| self.name(&n)))
+            .collect();
+        let mut extras = Vec::new();
+        for (id, (p, _)) in &self.parameters {
+            if sbml_id(id) || !p.estimate {
+                continue;
+            }
+            let n = self.name(id);
+            if in_outputs.contains(&n) || !elsewhere.contains(&n) {
+                parameters.push(id.clone());
+            } else {
+                extras.push(id.clone());
+            }
+        }
+        (parameters, extras)
+    }
+
+    /// The known value of a model parameter that the parameter table does not estimate:
+    /// its nominal value there, else its SBML value or size.
+    pub(crate) fn known_value(&self, p: &str) -> Result<f64, ModelError> {
+        if self.overrides.iter().any(|o| o.switch == p || o.value == p) {
+            return Ok(0.0);
+        }
+        let s = self.sbml;
+        let value = match self.parameters.get(p) {
+            Some((q, _)) => q.nominal,
+            None => s
+                .parameters
+                .iter()
+                .find(|x| x.0 == p)
+                .map(|x| x.1)
+                .or_else(|| s.compartments.iter().find(|c| c.0 == p).map(|c| c.1))
+                .unwrap_or(f64::NAN),
+        };
+        match value.is_finite() {
+            true => Ok(value),
+            false => Err(ModelError::file(
+                &self.sbml_file,
+                format!("parameter `{p}` has no value, and the parameter table does not give one"),
+            )),
+        }
+    }
+}
+
+/// A scale cell (`parameterScale`, `observableTransformation`): `lin` (also empty or
+/// absent), `log` or `log10`; anything else is an error naming the cell and `what` it is.
+pub(crate) fn scale_of(cell: Option<Cell<'_>>, what: &str) -> Result<&'static str, ModelError> {
+    match cell.map(|c| (c, c.text)) {
+        None | Some((_, "" | "lin")) => Ok("lin"),
+        Some((_, "log")) => Ok("log"),
+        Some((_, "log10")) => Ok("log10"),
+        Some((c, other)) => Err(c.err(format!("`{other}`: the {what} is lin, log or log10"))),
+    }
+}
+
+/// The names of a rendered expression.
+pub(crate) fn names_in(text: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut current = String::new();
+    let mut after_digit = false;
+    for ch in text.chars().chain(std::iter::once(' ')) {
+        if ch.is_alphanumeric() || ch == '_' {
+            if current.is_empty() && (ch.is_ascii_digit() || after_digit) {
+                after_digit = true;
+                continue;
+            }
+            current.push(ch);
+        } else {
+            after_digit = false;
+            if !current.is_empty() {
+                out.push(std::mem::take(&mut current));
+            }
+        }
+    }
+    out
+}
+
+/// The objective prior of row `row` of the parameter table, (distribution, mean or
+/// location, sd or scale, scale it is on): a normal or Laplace one on the value (`normal`,
+/// `laplace`) or on the parameter's scale (`parameterScaleNormal`,
+/// `parameterScaleLaplace`); a uniform one adds a constant within the bounds and leaves the
+/// objective's minimum where it is, so it is not added; `logNormal` and `logLaplace`, whose
+/// density in θ has a term ln θ besides the residual, are refused by name.
+pub(crate) fn prior(
+    t: &Tsv,
+    row: usize,
+    scale: &'static str,
+) -> Result<Option<PriorEntry>, ModelError> {
+    let Some(kind) = t.cell_named(row, "objectivePriorType").filter(|c| !c.is_blank()) else {
+        return Ok(None);
+    };
+    let (distribution, on) = match kind.text {
+        "normal" => ("normal", "lin"),
+        "parameterScaleNormal" => ("normal", scale),
+        "laplace" => ("laplace", "lin"),
+        "parameterScaleLaplace" => ("laplace", scale),
+        "uniform" | "parameterScaleUniform" => return Ok(None),
+        other => {
+            return Err(kind.err(format!(
+                "a prior of type `{other}` is not supported (normal, parameterScaleNormal, laplace, parameterScaleLaplace, uniform, parameterScaleUniform)"
+            )));
+        }
+    };
+    let Some(cell) = t.cell_named(row, "objectivePriorParameters").filter(|c| !c.is_blank()) else {
+        return Err(kind.err(format!(
+            "the prior needs `objectivePriorParameters`: {}",
+            if distribution == "normal" { "mean;sd" } else { "location;scale" }
+        )));
+    };
+    let values = numbers(&cell)?;
+    match values[..] {
+        [mean, sd] if mean.is_finite() && sd > 0.0 && sd.is_finite() => {
+            Ok(Some((distribution, mean, sd, on)))
+        }
+        _ => Err(cell.err(match distribution {
+            "normal" => format!("`{}`: a normal prior is mean;sd with sd > 0", cell.text),
+            _ => format!("`{}`: a laplace prior is location;scale with scale > 0", cell.text),
+        })),
+    }
+}
+
+/// The numbers of a `;`-separated cell (prior and initialization parameters).
+pub(crate) fn numbers(cell: &tsv::Cell<'_>) -> Result<Vec<f64>, ModelError> {
+    cell.text
+        .split(';')
+        .map(|v| tsv::parse_number(v).ok_or_else(|| cell.err(format!("`{v}` is not a number"))))
+        .collect()
+}
+
+/// Where multistart draws the starts of row `row` (PEtab's `initializationPriorType` and
+/// `initializationPriorParameters`, the latter defaulting to the bounds for the uniform
+/// types): `None` for the default, uniform on the parameter's scale within its bounds.
+pub(crate) fn initialization(
+    t: &Tsv,
+    row: usize,
+    scale: &'static str,
+    lower: f64,
+    upper: f64,
+) -> Result<Option<(&'static str, f64, f64, &'static str)>, ModelError> {
+    let Some(kind) = t.cell_named(row, "initializationPriorType").filter(|c| !c.is_blank()) else {
+        return Ok(None);
+    };
+    let (distribution, on) = match kind.text {
+        "parameterScaleUniform" => ("uniform", scale),
+        "uniform" => ("uniform", "lin"),
+        "normal" => ("normal", "lin"),
+        "laplace" => ("laplace", "lin"),
+        "logNormal" => ("normal", "log"),
+        "logLaplace" => ("laplace", "log"),
+        "parameterScaleNormal" => ("normal", scale),
+        "parameterScaleLaplace" => ("laplace", scale),
+        other => {
+            return Err(kind.err(format!(
+                "an initialization prior of type `{other}` is not one of PEtab's (parameterScaleUniform, uniform, normal, laplace, logNormal, logLaplace, parameterScaleNormal, parameterScaleLaplace)"
+            )));
+        }
+    };
+    let cell = t.cell_named(row, "initializationPriorParameters").filter(|c| !c.is_blank());
+    let Some(cell) = cell else {
+        return match (kind.text, lower.is_finite() && upper.is_finite()) {
+            // The default: uniform on the scale within the bounds, as without the column.
+            ("parameterScaleUniform", _) => Ok(None),
+            ("uniform", true) => Ok(Some(("uniform", lower, upper, "lin"))),
+            _ => Err(kind.err(format!(
+                "`{}` needs `initializationPriorParameters` (two numbers, `a;b`)",
+                kind.text
+            ))),
+        };
+    };
+    let values = numbers(&cell)?;
+    let [a, b] = values[..] else {
+        return Err(cell.err(format!("`{}`: two numbers, `a;b`", cell.text)));
+    };
+    let valid =
+        a.is_finite() && b.is_finite() && if distribution == "uniform" { a < b } else { b > 0.0 };
+    if !valid {
+        let rule = if distribution == "uniform" { "a < b" } else { "b > 0" };
+        return Err(
+            cell.err(format!("`{}`: a {distribution} one needs finite a;b with {rule}", cell.text))
+        );
+    }
+    Ok(Some((distribution, a, b, on)))
+}
+
+pub(crate) fn unknown_entry(p: &Parameter) -> String {
+    let mut s = format!("{{ guess = {}", toml_number(p.nominal));
+    if p.lower.is_finite() {
+        let _ = write!(s, ", min = {}", toml_number(p.lower));
+    }
+    if p.upper.is_finite() {
+        let _ = write!(s, ", max = {}", toml_number(p.upper));
+    }
+    if p.log {
+        s.push_str(", log = true");
+    }
+    if let Some((distribution, mean, sd, on)) = p.prior {
+        let _ = write!(
+            s,
+            ", prior = {{ mean = {}, sd = {}, on = \"{on}\", distribution = \"{distribution}\" }}",
+            toml_number(mean),
+            toml_number(sd)
+        );
+    }
+    if let Some((distribution, a, b, on)) = p.initialization {
+        let _ = write!(
+            s,
+            ", initialization = {{ distribution = \"{distribution}\", a = {}, b = {}, on = \"{on}\" }}",
+            toml_number(a),
+            toml_number(b)
+        );
+    }
+    s.push_str(" }");
+    s
+}
