@@ -1,11 +1,13 @@
 //! The measurement tables: each row's experiment (its conditions), output and sample, and
 //! the experiments that are one simulation merged.
 
+use std::collections::HashMap;
+
 use sysid_model::ModelError;
 use sysid_model::table::Table;
 
 use crate::conditions::condition_row;
-use crate::observables::{OWN, Output, Sigma, placeholders};
+use crate::observables::{OWN, Observable, Output, Sigma, placeholders};
 use crate::tsv::{Cell, Tsv};
 use crate::{Builder, at};
 
@@ -23,11 +25,16 @@ pub(crate) struct Key {
 }
 
 /// What the measurement tables give: the outputs, and each experiment's measurements.
+#[derive(Default)]
 pub(crate) struct Measured {
     pub(crate) outputs: Vec<Output>,
     pub(crate) experiments: Vec<(Key, Vec<Sample>)>,
     /// Per experiment, what it sets (filled by [`Builder::merge_same_simulations`]).
     pub(crate) simulations: Vec<Simulation>,
+    /// The output of each (observable, observable parameters, noise parameters) that a row
+    /// has given: rows that repeat them (Beer's 27 132 rows have 72 outputs) are not
+    /// substituted, resolved and rendered again.
+    pub(crate) read: HashMap<[String; 3], usize>,
 }
 
 /// A condition's entries of an experiment's `set`, and of its `initial` (the species it
@@ -54,8 +61,7 @@ pub(crate) const MAX_WEIGHTED: f64 = 1.3e154;
 impl Builder<'_> {
     /// The outputs and the experiments' measurements, from the measurement table.
     pub(crate) fn measured(&self, states: &[String]) -> Result<Measured, ModelError> {
-        let mut measured =
-            Measured { outputs: Vec::new(), experiments: Vec::new(), simulations: Vec::new() };
+        let mut measured = Measured::default();
         for t in &self.tables.measurements {
             for row in 0..t.rows.len() {
                 self.measurement(t, row, states, &mut measured)?;
@@ -80,11 +86,7 @@ impl Builder<'_> {
         states: &[String],
     ) -> Result<(Measured, Vec<String>), ModelError> {
         let names = experiment_names(&measured.experiments);
-        let mut merged = Measured {
-            outputs: measured.outputs,
-            experiments: Vec::new(),
-            simulations: Vec::new(),
-        };
+        let mut merged = Measured { outputs: measured.outputs, ..Measured::default() };
         let mut kept = Vec::new();
         for ((key, samples), name) in measured.experiments.into_iter().zip(names) {
             let Key { pre, sim, steady } = &key;
@@ -184,23 +186,62 @@ impl Builder<'_> {
                 oc.text, observable.transform
             )));
         }
+        let cell_text = |column: &str| t.cell_named(row, column).map_or("", |c| c.text).to_string();
+        let read_key =
+            [oc.text.to_string(), cell_text("observableParameters"), cell_text("noiseParameters")];
+        let index = match measured.read.get(&read_key) {
+            Some(&index) => index,
+            None => {
+                let output = self.output(t, row, oc, observable, states)?;
+                let outputs = &mut measured.outputs;
+                let index = match outputs.iter().position(|o| o == &output) {
+                    Some(i) => i,
+                    None => {
+                        outputs.push(output);
+                        outputs.len() - 1
+                    }
+                };
+                measured.read.insert(read_key, index);
+                index
+            }
+        };
+        let output = &measured.outputs[index];
+        if let Sigma::Number(v) = output.sigma
+            && output.transform == "lin"
+            && value.abs() / v > MAX_WEIGHTED
+        {
+            return Err(value_cell.err(format!(
+                "{value:e} is too large for least squares with σ = {v:e}: its weighted square overflows (the largest usable magnitude is {MAX_WEIGHTED:.1e}·σ)"
+            )));
+        }
+        let key = Key { pre, sim: simulation, steady };
+        match measured.experiments.iter_mut().find(|e| e.0 == key) {
+            Some(e) => e.1.push((time, index, value)),
+            None => measured.experiments.push((key, vec![(time, index, value)])),
+        }
+        Ok(())
+    }
+
+    /// The output row `row` measures: observable `oc` with the row's observable and noise
+    /// parameters in place of its placeholders, its σ a number or an expression.
+    fn output(
+        &self,
+        t: &Tsv,
+        row: usize,
+        oc: Cell<'_>,
+        observable: &Observable,
+        states: &[String],
+    ) -> Result<Output, ModelError> {
         let [formula, noise] =
             placeholders(t, row, oc, [&observable.formula, &observable.noise], "observable")?;
         let [noise] = placeholders(t, row, oc, [&noise], "noise")?;
         let value_math = self.resolve_names(&self.dynamic(&formula), oc, states, None)?;
         let noise_math = self.resolve_names(&self.dynamic(&noise), oc, states, Some(oc.text))?;
-        let output = Output {
+        Ok(Output {
             observable: oc.text.to_string(),
             value: value_math.render(&|n| self.name(n)),
             sigma: match noise_math.number() {
-                Some(v) if sysid_model::file::check_sigma(v).is_ok() => {
-                    if observable.transform == "lin" && value.abs() / v > MAX_WEIGHTED {
-                        return Err(value_cell.err(format!(
-                            "{value:e} is too large for least squares with σ = {v:e}: its weighted square overflows (the largest usable magnitude is {MAX_WEIGHTED:.1e}·σ)"
-                        )));
-                    }
-                    Sigma::Number(v)
-                }
+                Some(v) if sysid_model::file::check_sigma(v).is_ok() => Sigma::Number(v),
                 Some(v) => {
                     let problem = sysid_model::file::check_sigma(v).err().unwrap_or_default();
                     let message = format!("σ of `{}` {problem}", oc.text);
@@ -216,21 +257,7 @@ impl Builder<'_> {
                 })),
             },
             transform: observable.transform,
-        };
-        let outputs = &mut measured.outputs;
-        let index = match outputs.iter().position(|o| o == &output) {
-            Some(i) => i,
-            None => {
-                outputs.push(output);
-                outputs.len() - 1
-            }
-        };
-        let key = Key { pre, sim: simulation, steady };
-        match measured.experiments.iter_mut().find(|e| e.0 == key) {
-            Some(e) => e.1.push((time, index, value)),
-            None => measured.experiments.push((key, vec![(time, index, value)])),
-        }
-        Ok(())
+        })
     }
 }
 
