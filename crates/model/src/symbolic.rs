@@ -22,7 +22,7 @@
 //! numbers would give NaN for an infinite x, and 0 − x is −x, which is −0 at x = +0 (so
 //! |0 − x| has the derivative −1 there, not +1).
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use sysid_ode::SparseJacobian;
 
@@ -337,7 +337,7 @@ impl Graph {
     /// roots depend on, children first: no recursion).
     fn derivatives(&mut self, roots: &[Id], wrt: Slot) -> Vec<Id> {
         let zero = self.constant(0.0);
-        let mut d: HashMap<Id, Id> = HashMap::new();
+        let mut d: HashMap<Id, Id> = HashMap::default();
         for id in self.reachable(roots) {
             let term = self.terms[id as usize];
             let dx = |x: Id| d[&x];
@@ -497,7 +497,8 @@ fn children(term: Term) -> impl Iterator<Item = Id> {
 /// The program computing the terms `outputs` of `graph`, and the register of each.
 fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (Tape, Vec<u32>) {
     let order = graph.reachable(outputs);
-    let mut register: HashMap<Id, u32> = HashMap::with_capacity(order.len());
+    let mut register: HashMap<Id, u32> =
+        HashMap::with_capacity_and_hasher(order.len(), Default::default());
     let mut constants = Vec::new();
     let first_constant = 1 + n + np + nu;
     for &id in &order {
