@@ -1,9 +1,12 @@
 //! Machine code for a model's straight-line program, compiled by Cranelift at load time
 //! (the default `jit` feature).
 //!
-//! The compiled function reads t, y, α and u where they are, keeps every intermediate value
+//! The compiled code reads t, y, α and u where they are, keeps every intermediate value
 //! in machine registers (or Cranelift's spill slots), and writes only the registers of the
 //! work space that are read afterwards (the function values and the Jacobian's entries).
+//! A long program is compiled as several functions of at most [`SEGMENT`] operations, run
+//! one after the other; a value one of them computes and a later one reads passes through
+//! its register of the work space.
 //! Each operation is the one the interpreter performs, in the same order: no contraction
 //! into fused multiply-adds, no reassociation, and the library functions (exp, ln, sin, …,
 //! powi, powf) are the same Rust functions called through the C ABI, so the compiled
@@ -29,9 +32,20 @@ use crate::tape::{Instr, Tape};
 /// The compiled function: (t, y, α, u, work space).
 type Function = extern "C" fn(f64, *const f64, *const f64, *const f64, *mut f64);
 
+/// Most operations compiled into one function. Cranelift's register allocation takes time
+/// that grows faster than the function's length: SalazarCavazos' PEtab problem (75 states)
+/// spent two thirds of its 1.3 s import there, and Laske's (41 states) took 537 ms to import.
+/// Functions of this length, run in turn, compile in time proportional to the program: the
+/// imports took 0.34-0.48 s and 165-220 ms then. The values passed between them are a few
+/// loads and stores per thousand operations; their NLL + gradient took as long as one
+/// function's, within this machine's noise (Laske 108-123 ms against 101 ms, Lucarelli
+/// 270-323 ms against 285-296 ms). 4 096 imported slower and evaluated no faster.
+const SEGMENT: usize = 1024;
+
 /// A tape compiled to machine code.
 pub(crate) struct Compiled {
-    function: Function,
+    /// The functions of the tape's segments, in order.
+    functions: Vec<Function>,
     /// The lengths of y, α and u the code reads.
     inputs: (usize, usize, usize),
     /// The work space's length the code writes within.
@@ -61,7 +75,9 @@ impl Compiled {
         let (n, np, nu) = self.inputs;
         assert!(y.len() >= n && p.len() >= np && u.len() >= nu, "the model's inputs");
         assert!(work.len() >= self.registers, "a work space of {} registers", self.registers);
-        (self.function)(t, y.as_ptr(), p.as_ptr(), u.as_ptr(), work.as_mut_ptr());
+        for function in &self.functions {
+            function(t, y.as_ptr(), p.as_ptr(), u.as_ptr(), work.as_mut_ptr());
+        }
     }
 }
 
@@ -122,24 +138,62 @@ pub(crate) fn compile(tape: &Tape, stores: &[u32]) -> Option<Compiled> {
     builder.symbol("sysid_powf", powf as extern "C" fn(f64, f64) -> f64 as *const u8);
     builder.symbol("sysid_powi", powi as extern "C" fn(f64, i32) -> f64 as *const u8);
     let mut module = JITModule::new(builder);
-    let id = define(&mut module, tape, stores)?;
+    let written = written(tape, stores);
+    let segments = tape.code().len().div_ceil(SEGMENT).max(1);
+    let mut values = vec![None; tape.len()];
+    let mut ids = Vec::with_capacity(segments);
+    for k in 0..segments {
+        ids.push(define(&mut module, tape, (k, segments), (stores, &written), &mut values)?);
+    }
     module.finalize_definitions().ok()?;
-    let code = module.get_finalized_function(id);
-    // SAFETY: `code` was compiled from the signature of `Function` (an f64 and four
+    // SAFETY: each code was compiled from the signature of `Function` (an f64 and four
     // pointers, the host's default calling convention, no result); it reads the first n, n_α
-    // and n_u values behind the pointers y, α, u and writes within the first `registers`
-    // values of the work space, which `Compiled::run` checks.
-    let function = unsafe { std::mem::transmute::<*const u8, Function>(code) };
+    // and n_u values behind the pointers y, α, u and reads and writes within the first
+    // `registers` values of the work space, which `Compiled::run` checks.
+    let functions = ids
+        .iter()
+        .map(|&id| unsafe {
+            std::mem::transmute::<*const u8, Function>(module.get_finalized_function(id))
+        })
+        .collect();
     Some(Compiled {
-        function,
+        functions,
         inputs: tape.dims(),
         registers: tape.len(),
         module: Mutex::new(Some(module)),
     })
 }
 
-/// Declares the library functions and defines the tape's function in `module`.
-fn define(module: &mut JITModule, tape: &Tape, stores: &[u32]) -> Option<FuncId> {
+/// Whether each register is written to the work space by the function that computes it: it
+/// is in `stores`, or a later segment reads it.
+fn written(tape: &Tape, stores: &[u32]) -> Vec<bool> {
+    let first = tape.first();
+    let mut written = vec![false; tape.len()];
+    for &r in stores {
+        written[r as usize] = true;
+    }
+    for (i, instr) in tape.code().iter().enumerate() {
+        for r in instr.operands().map(|r| r as usize) {
+            if r >= first && (r - first) / SEGMENT != i / SEGMENT {
+                written[r] = true;
+            }
+        }
+    }
+    written
+}
+
+/// Declares the library functions and defines the function of segment `k` of `segments` in
+/// `module`: it computes its operations, loading what it reads from the inputs, constants
+/// and (for registers earlier segments computed) the work space, and stores the registers
+/// [`written`] says later code reads; the last segment stores the inputs among `stores` too.
+/// `values` is scratch space of the tape's length, all `None`, and left so.
+fn define(
+    module: &mut JITModule,
+    tape: &Tape,
+    (k, segments): (usize, usize),
+    (stores, written): (&[u32], &[bool]),
+    values: &mut [Option<Value>],
+) -> Option<FuncId> {
     let f64_signature = |module: &JITModule, params: &[types::Type]| {
         let mut s: Signature = module.make_signature();
         s.params.extend(params.iter().map(|&t| AbiParam::new(t)));
@@ -178,80 +232,113 @@ fn define(module: &mut JITModule, tape: &Tape, stores: &[u32]) -> Option<FuncId>
     let powf_ref = module.declare_func_in_func(powf, b.func);
     let powi_ref = module.declare_func_in_func(powi, b.func);
 
-    // The value of every register: t, y, α, u loaded once, constants as immediates.
+    // The value of every register this function reads, on first use: t, y, α and u loaded,
+    // constants as immediates, and the registers earlier segments computed from the work
+    // space.
     let first = tape.first();
     let (n, np, nu) = tape.dims();
-    let mut values: Vec<Option<Value>> = vec![None; tape.len()];
-    values[0] = Some(t);
-    for (r, value) in values.iter_mut().enumerate().take(first).skip(1) {
-        let (from, at) = match r - 1 {
-            i if i < n => (y, i),
-            i if i < n + np => (p, i - n),
-            i if i < n + np + nu => (u, i - n - np),
-            _ => {
-                *value = tape.constant(r).map(|c| b.ins().f64const(c));
-                continue;
-            }
-        };
-        *value = Some(b.ins().load(types::F64, flags, from, offset(at as u32)?));
-    }
-    for (i, instr) in tape.code().iter().enumerate() {
-        let x = |r: u32| values[r as usize].expect("registers are written before they are read");
+    let code = tape.code();
+    let range = k * SEGMENT..((k + 1) * SEGMENT).min(code.len());
+    let mut touched: Vec<usize> = Vec::new();
+    let load = |b: &mut FunctionBuilder, r: usize| -> Option<Value> {
+        Some(match r {
+            0 => t,
+            r if r >= first => b.ins().load(types::F64, flags, work, offset(r as u32)?),
+            r => match r - 1 {
+                i if i < n => b.ins().load(types::F64, flags, y, offset(i as u32)?),
+                i if i < n + np => b.ins().load(types::F64, flags, p, offset((i - n) as u32)?),
+                i if i < n + np + nu => {
+                    b.ins().load(types::F64, flags, u, offset((i - n - np) as u32)?)
+                }
+                _ => b.ins().f64const(tape.constant(r)?),
+            },
+        })
+    };
+    let value = |b: &mut FunctionBuilder,
+                 values: &mut [Option<Value>],
+                 touched: &mut Vec<usize>,
+                 r: usize|
+     -> Option<Value> {
+        if values[r].is_none() {
+            values[r] = Some(load(b, r)?);
+            touched.push(r);
+        }
+        values[r]
+    };
+    for i in range.clone() {
+        let instr = &code[i];
+        let mut args = [None; 4];
+        for (slot, r) in args.iter_mut().zip(instr.operands()) {
+            *slot = Some(value(&mut b, values, &mut touched, r as usize)?);
+        }
+        let x = |j: usize| args[j].expect("an operand");
         let call = |b: &mut FunctionBuilder, f, args: &[Value]| {
             let inst = b.ins().call(f, args);
             b.inst_results(inst)[0]
         };
-        let value = match *instr {
-            Instr::Neg(a) => b.ins().fneg(x(a)),
-            Instr::Add(a, c) => b.ins().fadd(x(a), x(c)),
-            Instr::Sub(a, c) => b.ins().fsub(x(a), x(c)),
-            Instr::Mul(a, c) => b.ins().fmul(x(a), x(c)),
-            Instr::Div(a, c) => b.ins().fdiv(x(a), x(c)),
-            Instr::Square(a) => b.ins().fmul(x(a), x(a)),
-            Instr::Cube(a) => {
-                let square = b.ins().fmul(x(a), x(a));
-                b.ins().fmul(x(a), square)
+        let result = match *instr {
+            Instr::Neg(_) => b.ins().fneg(x(0)),
+            Instr::Add(..) => b.ins().fadd(x(0), x(1)),
+            Instr::Sub(..) => b.ins().fsub(x(0), x(1)),
+            Instr::Mul(..) => b.ins().fmul(x(0), x(1)),
+            Instr::Div(..) => b.ins().fdiv(x(0), x(1)),
+            Instr::Square(_) => b.ins().fmul(x(0), x(0)),
+            Instr::Cube(_) => {
+                let square = b.ins().fmul(x(0), x(0));
+                b.ins().fmul(x(0), square)
             }
-            Instr::PowI(a, k) => {
+            Instr::PowI(_, k) => {
                 let k = b.ins().iconst(types::I32, i64::from(k));
-                call(&mut b, powi_ref, &[x(a), k])
+                call(&mut b, powi_ref, &[x(0), k])
             }
-            Instr::PowF(a, c) | Instr::Pow(a, c) => call(&mut b, powf_ref, &[x(a), x(c)]),
-            Instr::Exp(a) => call(&mut b, unary_refs[0], &[x(a)]),
-            Instr::Log(a) => call(&mut b, unary_refs[1], &[x(a)]),
-            Instr::Sin(a) => call(&mut b, unary_refs[2], &[x(a)]),
-            Instr::Cos(a) => call(&mut b, unary_refs[3], &[x(a)]),
-            Instr::Tan(a) => call(&mut b, unary_refs[4], &[x(a)]),
-            Instr::Tanh(a) => call(&mut b, unary_refs[5], &[x(a)]),
-            Instr::Signum(a) => call(&mut b, unary_refs[6], &[x(a)]),
-            Instr::Sqrt(a) => b.ins().sqrt(x(a)),
-            Instr::Abs(a) => b.ins().fabs(x(a)),
-            Instr::Min(a, c) => {
-                let less = b.ins().fcmp(FloatCC::LessThan, x(c), x(a));
-                b.ins().select(less, x(c), x(a))
+            Instr::PowF(..) | Instr::Pow(..) => call(&mut b, powf_ref, &[x(0), x(1)]),
+            Instr::Exp(_) => call(&mut b, unary_refs[0], &[x(0)]),
+            Instr::Log(_) => call(&mut b, unary_refs[1], &[x(0)]),
+            Instr::Sin(_) => call(&mut b, unary_refs[2], &[x(0)]),
+            Instr::Cos(_) => call(&mut b, unary_refs[3], &[x(0)]),
+            Instr::Tan(_) => call(&mut b, unary_refs[4], &[x(0)]),
+            Instr::Tanh(_) => call(&mut b, unary_refs[5], &[x(0)]),
+            Instr::Signum(_) => call(&mut b, unary_refs[6], &[x(0)]),
+            Instr::Sqrt(_) => b.ins().sqrt(x(0)),
+            Instr::Abs(_) => b.ins().fabs(x(0)),
+            Instr::Min(..) => {
+                let less = b.ins().fcmp(FloatCC::LessThan, x(1), x(0));
+                b.ins().select(less, x(1), x(0))
             }
-            Instr::Max(a, c) => {
-                let greater = b.ins().fcmp(FloatCC::GreaterThan, x(c), x(a));
-                b.ins().select(greater, x(c), x(a))
+            Instr::Max(..) => {
+                let greater = b.ins().fcmp(FloatCC::GreaterThan, x(1), x(0));
+                b.ins().select(greater, x(1), x(0))
             }
-            Instr::Less(a, c, d, e) => {
-                let less = b.ins().fcmp(FloatCC::LessThan, x(a), x(c));
-                b.ins().select(less, x(d), x(e))
+            Instr::Less(..) => {
+                let less = b.ins().fcmp(FloatCC::LessThan, x(0), x(1));
+                b.ins().select(less, x(2), x(3))
             }
         };
-        values[first + i] = Some(value);
+        values[first + i] = Some(result);
+        touched.push(first + i);
     }
     // Constants are in the work space from its start; every other register read afterwards
-    // is written, inputs included (the work space does not hold them).
-    for &r in stores {
-        if tape.constant(r as usize).is_none() {
-            let value = values[r as usize].expect("a computed register");
-            b.ins().store(flags, value, work, offset(r)?);
+    // is written, by the segment that computes it, and the inputs among `stores` (the work
+    // space does not hold them) by the last.
+    for r in range.map(|i| first + i).filter(|&r| written[r]) {
+        let v = values[r].expect("computed here");
+        b.ins().store(flags, v, work, offset(r as u32)?);
+    }
+    if k + 1 == segments {
+        for &r in stores.iter().filter(|&&r| (r as usize) < first) {
+            if tape.constant(r as usize).is_none() {
+                let v = value(&mut b, values, &mut touched, r as usize)?;
+                b.ins().store(flags, v, work, offset(r)?);
+            }
         }
+    }
+    for r in touched {
+        values[r] = None;
     }
     b.ins().return_(&[]);
     b.finalize();
-    let id = module.declare_function("tape", Linkage::Local, &ctx.func.signature).ok()?;
+    let name = format!("tape{k}");
+    let id = module.declare_function(&name, Linkage::Local, &ctx.func.signature).ok()?;
     module.define_function(id, &mut ctx).ok()?;
     module.clear_context(&mut ctx);
     Some(id)

@@ -31,6 +31,37 @@ pub(crate) enum Instr {
     Less(u32, u32, u32, u32),
 }
 
+impl Instr {
+    /// The registers the operation reads.
+    pub(crate) fn operands(&self) -> impl Iterator<Item = u32> {
+        let (list, count) = match *self {
+            Instr::Neg(a)
+            | Instr::Square(a)
+            | Instr::Cube(a)
+            | Instr::PowI(a, _)
+            | Instr::Exp(a)
+            | Instr::Log(a)
+            | Instr::Sqrt(a)
+            | Instr::Sin(a)
+            | Instr::Cos(a)
+            | Instr::Tan(a)
+            | Instr::Tanh(a)
+            | Instr::Abs(a)
+            | Instr::Signum(a) => ([a, 0, 0, 0], 1),
+            Instr::Add(a, c)
+            | Instr::Sub(a, c)
+            | Instr::Mul(a, c)
+            | Instr::Div(a, c)
+            | Instr::PowF(a, c)
+            | Instr::Pow(a, c)
+            | Instr::Min(a, c)
+            | Instr::Max(a, c) => ([a, c, 0, 0], 2),
+            Instr::Less(a, c, d, e) => ([a, c, d, e], 4),
+        };
+        list.into_iter().take(count)
+    }
+}
+
 /// A straight-line program over f64 registers: register 0 holds t, then the n states, the
 /// parameters, the inputs and the constants; instruction i writes register `first + i`,
 /// reading only registers before it.

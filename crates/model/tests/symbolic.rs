@@ -430,3 +430,60 @@ tau = 1.5
         assert!((dtau - (-a - k * grown)).abs() < 1e-8, "{dtau} vs {}", -a - k * grown);
     }
 }
+
+/// A program long enough that the JIT compiles it as several functions (of 1 024 operations
+/// each), values passing between them through the work space: 24 states, each coupled to the
+/// 8 after it by a saturating, oscillating term. Its compiled values and Jacobian equal the
+/// interpreted ones bit for bit, and the dual numbers' to rounding.
+#[test]
+fn a_long_program_compiled_in_segments_is_the_interpreted_one() {
+    let n = 24;
+    let mut text = String::from("states = [");
+    text += &(1..=n).map(|i| format!("\"x{i}\"")).collect::<Vec<_>>().join(", ");
+    text += "]\nparameters = [";
+    text += &(1..=n).map(|i| format!("\"k{i}\"")).collect::<Vec<_>>().join(", ");
+    text += "]\n[equations]\n";
+    for i in 1..=n {
+        let terms: Vec<String> = (1..=8)
+            .map(|d| (i + d - 1) % n + 1)
+            .map(|j| format!("k{j} * x{j} * sin(x{i} - x{j}) / (1 + x{i}^2 + k{i} * x{j})"))
+            .collect();
+        text += &format!("x{i} = \"-k{i} * x{i} * exp(-x{i}) + {}\"\n", terms.join(" + "));
+    }
+    text += "[initial]\n";
+    for i in 1..=n {
+        text += &format!("x{i} = 1.0\n");
+    }
+    text += "[unknowns]\n";
+    for i in 1..=n {
+        text += &format!("k{i} = 0.{i}\n");
+    }
+    text += "[data]\nfile = \"unused.csv\"\n";
+    let file = sysid_model::ModelFile::parse(&text, Path::new("long.toml")).expect("reads");
+    let model = Model { file };
+    let system = model.system(Inputs::new(Vec::new()));
+    let rhs = system.symbolic_rhs().expect("symbolic derivatives");
+    let registers = rhs.workspace().len();
+    assert!(registers > 3 * 1024, "{registers} registers: the program spans three functions");
+    let interpreted = rhs.interpreted();
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    for _ in 0..20 {
+        let mut draw =
+            |len: usize| (0..len).map(|_| rng.random_range(0.1..2.0)).collect::<Vec<f64>>();
+        let (y, p, t) = (draw(n), draw(n), draw(1)[0]);
+        let (mut a, mut b) = (rhs.workspace(), interpreted.workspace());
+        rhs.eval(t, &y, &p, &[], &mut a);
+        interpreted.eval(t, &y, &p, &[], &mut b);
+        for &r in rhs.values().iter().chain(rhs.entries()) {
+            let (u, v) = (a[r as usize], b[r as usize]);
+            assert_eq!(u.to_bits(), v.to_bits(), "register {r}: {u} vs {v}");
+        }
+    }
+    // The first derivatives against dual numbers too (`agree`'s first part), at one point.
+    let (y, p) = (vec![0.7; n], vec![0.3; n]);
+    let a = jacobians(&system, Function::Rhs, (0.5, &y, &p, &[]));
+    let b = jacobians(&system.with_dual_numbers(), Function::Rhs, (0.5, &y, &p, &[]));
+    for (x, z) in a.0.iter().chain(&a.1).zip(b.0.iter().chain(&b.1)) {
+        assert!(rounding(*x, *z), "{x} vs {z}");
+    }
+}
