@@ -32,7 +32,8 @@ pub(crate) enum Instr {
 }
 
 impl Instr {
-    /// The registers the operation reads.
+    /// The registers the operation reads (the JIT's segments pass on those a later one reads).
+    #[cfg(feature = "jit")]
     pub(crate) fn operands(&self) -> impl Iterator<Item = u32> {
         let (list, count) = match *self {
             Instr::Neg(a)
