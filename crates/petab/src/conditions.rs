@@ -5,9 +5,8 @@ use std::collections::HashMap;
 
 use sysid_model::ModelError;
 
-use crate::measurements::ConditionSettings;
-use crate::rendering::toml_number;
-use crate::tsv::{Cell, Tsv};
+use crate::parts::{ConditionSettings, condition_row, toml_number};
+use crate::tsv::Cell;
 use crate::{Builder, tsv};
 
 impl Builder<'_> {
@@ -135,10 +134,4 @@ impl Builder<'_> {
 /// `conditionName`) rather than setting a parameter or species.
 pub(crate) fn is_condition_label(column: &str) -> bool {
     column == "conditionId" || column == "conditionName"
-}
-
-/// The row of `condition` in a condition table.
-pub(crate) fn condition_row(t: &Tsv, condition: &str) -> Option<usize> {
-    let c = t.column("conditionId")?;
-    (0..t.rows.len()).find(|&r| t.cell(r, c).text == condition)
 }

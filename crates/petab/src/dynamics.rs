@@ -6,15 +6,9 @@ use std::collections::HashMap;
 use sysid_model::ModelError;
 
 use crate::math::Math;
+use crate::parts::Dynamics;
 use crate::sbml::Initial;
 use crate::{Builder, math, sbml};
-
-/// The states of the model file, with their equations and initial values.
-pub(crate) struct Dynamics {
-    pub(crate) states: Vec<String>,
-    pub(crate) equations: Vec<(String, Math)>,
-    pub(crate) initial: Vec<(String, Math)>,
-}
 
 /// The longest chain of assignment rules, each using the next, that is resolved: the
 /// resolution recurses along it.

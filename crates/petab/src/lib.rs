@@ -25,6 +25,7 @@
 //!   become an experiment that preequilibrates under its own condition and is measured at
 //!   t = 0.
 //!
+//! `parts` holds what these stages hand each other (outputs, experiments, states).
 //! `rendering` writes the model file's text with a source map back to the tables and the
 //! SBML, so that every error names the file, the line and the column of what caused it.
 //! What is not supported (laplace noise, events that reset states, …) is refused by name.
@@ -37,6 +38,7 @@ pub mod math;
 mod measurements;
 mod observables;
 mod parameters;
+mod parts;
 mod rendering;
 pub mod sbml;
 pub mod tsv;
@@ -47,11 +49,12 @@ use std::path::Path;
 use serde::Deserialize;
 use sysid_model::{Model, ModelError, ModelFile};
 
-use conditions::{condition_row, is_condition_label};
+use conditions::is_condition_label;
 use math::Math;
 use measurements::data_table;
 use observables::Observable;
 use parameters::Parameter;
+use parts::condition_row;
 use sbml::Sbml;
 use tsv::Tsv;
 

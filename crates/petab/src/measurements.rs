@@ -1,55 +1,13 @@
 //! The measurement tables: each row's experiment (its conditions), output and sample, and
 //! the experiments that are one simulation merged.
 
-use std::collections::HashMap;
-
 use sysid_model::ModelError;
 use sysid_model::table::Table;
 
-use crate::conditions::condition_row;
-use crate::observables::{OWN, Observable, Output, Sigma, placeholders};
+use crate::observables::{Observable, placeholders};
+use crate::parts::{Key, Measured, OWN, Output, Sample, Sigma, Simulation, condition_row};
 use crate::tsv::{Cell, Tsv};
 use crate::{Builder, at};
-
-/// A measurement: its time, its output's index and its value.
-pub(crate) type Sample = (f64, usize, f64);
-
-/// What an experiment is made of: its preequilibration condition, its simulation condition,
-/// and whether it then runs to its own steady state (the measurements at time `inf` after a
-/// preequilibration).
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) struct Key {
-    pub(crate) pre: Option<String>,
-    pub(crate) sim: String,
-    pub(crate) steady: bool,
-}
-
-/// What the measurement tables give: the outputs, and each experiment's measurements.
-#[derive(Default)]
-pub(crate) struct Measured {
-    pub(crate) outputs: Vec<Output>,
-    pub(crate) experiments: Vec<(Key, Vec<Sample>)>,
-    /// Per experiment, what it sets (filled by [`Builder::merge_same_simulations`]).
-    pub(crate) simulations: Vec<Simulation>,
-    /// The output of each (observable, observable parameters, noise parameters) that a row
-    /// has given: rows that repeat them (Beer's 27 132 rows have 72 outputs) are not
-    /// substituted, resolved and rendered again.
-    pub(crate) read: HashMap<[String; 3], usize>,
-}
-
-/// A condition's entries of an experiment's `set`, and of its `initial` (the species it
-/// re-initialises after a preequilibration), as model-file text.
-pub(crate) type ConditionSettings = (Vec<String>, Vec<String>);
-
-/// What an experiment sets, as model-file text: its condition's `set` and `initial`
-/// entries, its preequilibration's, whether it runs to its own steady state, and the other
-/// conditions it answers to (`also`: they set the same values).
-pub(crate) struct Simulation {
-    pub(crate) settings: ConditionSettings,
-    pub(crate) preequilibrate: Option<Vec<String>>,
-    pub(crate) steady: bool,
-    pub(crate) also: Vec<String>,
-}
 
 /// The largest measurement the importer takes: no measured quantity is that large in any
 /// unit, and the weighted square of a larger one overflows for σ below about 1e-4.

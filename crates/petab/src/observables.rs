@@ -4,7 +4,7 @@
 use sysid_model::ModelError;
 
 use crate::math::{Math, parse_formula};
-use crate::parameters::scale_of;
+use crate::parts::{OWN, Output, scale_of};
 use crate::tsv::{Cell, Tsv};
 use crate::{Builder, tsv};
 
@@ -17,25 +17,6 @@ pub(crate) struct Observable {
     pub(crate) formula_at: ModelError,
     pub(crate) noise_at: ModelError,
 }
-
-/// An output of the model file: one observable with one set of replacements.
-#[derive(PartialEq)]
-pub(crate) struct Output {
-    pub(crate) observable: String,
-    pub(crate) value: String,
-    pub(crate) sigma: Sigma,
-    pub(crate) transform: &'static str,
-}
-
-#[derive(Clone, PartialEq)]
-pub(crate) enum Sigma {
-    Number(f64),
-    /// An expression in which [`OWN`] stands for the output's own name.
-    Expression(String),
-}
-
-/// Stands for the output's own value in a σ expression until the output is named.
-pub(crate) const OWN: &str = "\u{1}own\u{1}";
 
 impl Builder<'_> {
     pub(crate) fn read_observables(&mut self) -> Result<(), ModelError> {

@@ -5,11 +5,8 @@ use std::fmt::Write as _;
 
 use sysid_model::ModelError;
 
-use crate::dynamics::Dynamics;
-use crate::measurements::Measured;
-use crate::observables::Sigma;
-use crate::rendering::toml_number;
-use crate::tsv::{Cell, Tsv};
+use crate::parts::{Dynamics, Measured, Sigma, scale_of, toml_number};
+use crate::tsv::Tsv;
 use crate::{Builder, tsv};
 
 /// A row of the parameter table.
@@ -214,17 +211,6 @@ impl Builder<'_> {
                 format!("parameter `{p}` has no value, and the parameter table does not give one"),
             )),
         }
-    }
-}
-
-/// A scale cell (`parameterScale`, `observableTransformation`): `lin` (also empty or
-/// absent), `log` or `log10`; anything else is an error naming the cell and `what` it is.
-pub(crate) fn scale_of(cell: Option<Cell<'_>>, what: &str) -> Result<&'static str, ModelError> {
-    match cell.map(|c| (c, c.text)) {
-        None | Some((_, "" | "lin")) => Ok("lin"),
-        Some((_, "log")) => Ok("log"),
-        Some((_, "log10")) => Ok("log10"),
-        Some((c, other)) => Err(c.err(format!("`{other}`: the {what} is lin, log or log10"))),
     }
 }
 

@@ -7,11 +7,9 @@ use std::path::Path;
 use sysid_model::{ModelError, SourceMap};
 
 use crate::Builder;
-use crate::dynamics::Dynamics;
 use crate::math::Math;
-use crate::measurements::Measured;
-use crate::observables::{OWN, Sigma};
 use crate::parameters::unknown_entry;
+use crate::parts::{Dynamics, Measured, OWN, Sigma, toml_number};
 
 impl Builder<'_> {
     /// The model file's text.
@@ -143,8 +141,4 @@ impl Builder<'_> {
     pub(crate) fn render(&self, m: &Math) -> String {
         m.render(&|n| self.name(n))
     }
-}
-
-pub(crate) fn toml_number(v: f64) -> String {
-    format!("{v:e}")
 }
