@@ -242,6 +242,12 @@ impl<S: System> Planned<S> {
         )
     }
 
+    /// The parameters at the unknowns' values `v` (declared order), without the initial
+    /// values (which may need a steady state solved).
+    pub fn parameters_at(&self, v: &[f64]) -> Vec<f64> {
+        self.parameters.iter().map(|s| s.value(v)).collect()
+    }
+
     fn setting(&self, w: Wrt) -> &Resolved {
         match w {
             Wrt::InitialValue(i) => &self.initial[i],

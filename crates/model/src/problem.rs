@@ -525,12 +525,19 @@ impl Model {
             if functions.is_empty() {
                 continue;
             }
-            let (y0, p) = e.point(&v);
             let sampled = e.sampled();
             // The trajectory, unless every σ here is a function of t, the parameters and the
             // unknowns alone (a PEtab noise formula of noise parameters): then σ needs no
-            // integration.
+            // integration, nor the initial values (a steady state to solve, with Isensee's
+            // 123 conditions most of the import's time), which it does not read.
             let model_free = functions.iter().all(|(s, _)| self.sigma_is_model_free(s.observable));
+            let (y0, p) = match model_free {
+                true => (
+                    vec![0.0; sysid_ode::System::signature(e.system()).n_states()],
+                    e.parameters_at(&v),
+                ),
+                false => e.point(&v),
+            };
             let sol = match model_free {
                 true => None,
                 false => match Ivp::new(e.system(), e.t0(), &y0, &p)
