@@ -333,14 +333,49 @@ impl Graph {
         (0..self.terms.len() as Id).filter(|&id| seen[id as usize]).collect()
     }
 
-    /// ∂root/∂`wrt` for every root, built in the graph (forward mode over the terms the
-    /// roots depend on, children first: no recursion).
+    /// ∂root/∂`wrt` for every root, built in the graph.
     fn derivatives(&mut self, roots: &[Id], wrt: Slot) -> Vec<Id> {
+        self.columns(roots, &[wrt]).pop().unwrap_or_default()
+    }
+
+    /// ∂root/∂s for every root and each slot s of `wrt`, built in the graph: forward mode
+    /// over the terms the roots depend on, children first (no recursion). A term that does
+    /// not depend on s has the derivative 0 without being visited: a state's column touches
+    /// the few equations it enters, not the whole right-hand side.
+    fn columns(&mut self, roots: &[Id], wrt: &[Slot]) -> Vec<Vec<Id>> {
         let zero = self.constant(0.0);
-        let mut d: HashMap<Id, Id> = HashMap::default();
-        for id in self.reachable(roots) {
+        let reachable = self.reachable(roots);
+        // Indexed by the terms that exist now: the roots' terms and their children are among
+        // them, the derivatives built below come after.
+        let mut depends = vec![false; self.terms.len()];
+        let mut d = vec![zero; self.terms.len()];
+        wrt.iter().map(|&wrt| self.column(roots, wrt, &reachable, &mut depends, &mut d)).collect()
+    }
+
+    /// One column of [`columns`](Self::columns), in the work space `depends` and `d`.
+    fn column(
+        &mut self,
+        roots: &[Id],
+        wrt: Slot,
+        reachable: &[Id],
+        depends: &mut [bool],
+        d: &mut [Id],
+    ) -> Vec<Id> {
+        let zero = self.constant(0.0);
+        for &id in reachable {
             let term = self.terms[id as usize];
-            let dx = |x: Id| d[&x];
+            depends[id as usize] = match term {
+                Term::Var(slot) => slot == wrt,
+                _ => children(term).any(|c| depends[c as usize]),
+            };
+        }
+        for &id in reachable {
+            if !depends[id as usize] {
+                d[id as usize] = zero;
+                continue;
+            }
+            let term = self.terms[id as usize];
+            let dx = |x: Id| d[x as usize];
             let derivative = match term {
                 Term::Const(_) | Term::Signum(_) => zero,
                 Term::Var(slot) => {
@@ -432,9 +467,9 @@ impl Graph {
                     self.less(a, b, dc, de)
                 }
             };
-            d.insert(id, derivative);
+            d[id as usize] = derivative;
         }
-        roots.iter().map(|r| d[r]).collect()
+        roots.iter().map(|&r| d[r as usize]).collect()
     }
 
     /// The derivative of f(a) (the term `fa`) given da ≠ 0.
@@ -595,16 +630,26 @@ impl Linearized {
         let (mut first, entries) = Self::build(&mut graph, &roots, dims, true);
         first.time_free =
             graph.derivatives(&roots, Slot::Time).into_iter().all(|d| graph.is_zero(d));
-        if curvature {
-            let (second, _) = Self::build(&mut graph, &entries, dims, false);
-            first.curvature = Some(std::sync::Arc::new(second));
+        if !curvature {
+            first.compile();
+            return first;
         }
+        // Compiling takes longer than differentiating: the first derivatives are compiled on
+        // a thread of their own while the second ones are built and compiled here.
+        let second = std::thread::scope(|scope| {
+            let compiling = scope.spawn(|| first.compile());
+            let (mut second, _) = Self::build(&mut graph, &entries, dims, false);
+            second.compile();
+            compiling.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
+            second
+        });
+        first.curvature = Some(std::sync::Arc::new(second));
         first
     }
 
     /// The program of `roots` and their derivatives with respect to the n states and, if
     /// `parameters`, the n_α parameters (all columns share the graph), and the ids of the
-    /// nonzero entries.
+    /// nonzero entries; not compiled yet.
     fn build(
         graph: &mut Graph,
         roots: &[Id],
@@ -613,7 +658,8 @@ impl Linearized {
     ) -> (Self, Vec<Id>) {
         let columns = if parameters { np } else { 0 };
         let slots = (0..n).map(Slot::State).chain((0..columns).map(Slot::Parameter));
-        let columns: Vec<Vec<Id>> = slots.map(|s| graph.derivatives(roots, s)).collect();
+        let slots: Vec<Slot> = slots.collect();
+        let columns = graph.columns(roots, &slots);
         let mut pattern = Vec::new();
         let mut outputs = roots.to_vec();
         for row in 0..roots.len() {
@@ -628,7 +674,7 @@ impl Linearized {
         let (values, entries) = registers.split_at(roots.len());
         let linearized = Self {
             #[cfg(feature = "jit")]
-            compiled: crate::jit::compile(&tape, &registers).map(std::sync::Arc::new),
+            compiled: None,
             tape,
             values: values.to_vec(),
             entries: entries.to_vec(),
@@ -637,6 +683,16 @@ impl Linearized {
             time_free: false,
         };
         (linearized, outputs[roots.len()..].to_vec())
+    }
+
+    /// Compiles the tape to machine code, storing the values and the entries (with the `jit`
+    /// feature; else nothing to do).
+    fn compile(&mut self) {
+        #[cfg(feature = "jit")]
+        {
+            let stores: Vec<u32> = self.values.iter().chain(&self.entries).copied().collect();
+            self.compiled = crate::jit::compile(&self.tape, &stores).map(std::sync::Arc::new);
+        }
     }
 
     /// The same functions, second derivatives included, always interpreted (the reference

@@ -34,8 +34,12 @@ impl ModelSystem {
         inputs: Inputs,
     ) -> Self {
         let dims = (signature.n_states(), signature.n_parameters(), signature.n_inputs());
-        let symbolic =
-            (Linearized::with_curvature(&equations, dims), Linearized::new(&outputs, dims));
+        // The outputs are differentiated and compiled beside the equations.
+        let symbolic = std::thread::scope(|scope| {
+            let outputs = scope.spawn(|| Linearized::new(&outputs, dims));
+            let equations = Linearized::with_curvature(&equations, dims);
+            (equations, outputs.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+        });
         let time_free = symbolic.0.independent_of_time();
         let mut switches: Vec<Switch> = Vec::new();
         for s in equations.iter().flat_map(Program::time_switches) {
