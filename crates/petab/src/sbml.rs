@@ -97,6 +97,9 @@ struct Reader<'a> {
     functions: HashMap<String, (Vec<String>, Math)>,
     /// How deeply the MathML being read nests.
     depth: std::cell::Cell<usize>,
+    /// Where each line of the text starts (a byte offset): positions are found by a binary
+    /// search, not by counting from the start of the file for every element.
+    line_starts: Vec<usize>,
 }
 
 /// How deeply MathML may nest: as deep as a model file's expressions, which a deeper one
@@ -116,8 +119,11 @@ impl Reader<'_> {
 
     /// The line and column where `node` starts.
     fn position(&self, node: Node<'_, '_>) -> (usize, usize) {
-        let pos = self.doc.text_pos_at(node.range().start);
-        (pos.row as usize, pos.col as usize)
+        let at = node.range().start;
+        let line = self.line_starts.partition_point(|&start| start <= at);
+        let start = self.line_starts[line - 1];
+        let text = self.doc.input_text();
+        (line, text.get(start..at).map_or(0, |s| s.chars().count()) + 1)
     }
 
     /// Refuses an id declared twice (SBML's ids are one namespace), and records where each
@@ -467,8 +473,16 @@ impl Sbml {
                 message: format!("not valid XML: {e}"),
             }
         })?;
-        let mut r =
-            Reader { doc: &doc, file, functions: HashMap::new(), depth: Default::default() };
+        let line_starts = std::iter::once(0)
+            .chain(doc.input_text().match_indices('\n').map(|(i, _)| i + 1))
+            .collect();
+        let mut r = Reader {
+            doc: &doc,
+            file,
+            functions: HashMap::new(),
+            depth: Default::default(),
+            line_starts,
+        };
         let root = doc.root_element();
         let model =
             child(root, "model").ok_or_else(|| r.err(root, "no <model> in the SBML file"))?;
@@ -591,7 +605,7 @@ impl Sbml {
             let assignments = list(event, "listOfEventAssignments")
                 .map(|a| Ok((id(a).to_string(), r.math_of(a)?)))
                 .collect::<Result<Vec<_>, ModelError>>()?;
-            let pos = doc.text_pos_at(event.range().start);
+            let (line, column) = r.position(event);
             let trigger = r.math_of(trigger)?;
             let names = assignments.iter().flat_map(|(_, m)| m.names()).chain(trigger.names());
             uses.push((names.collect(), event, format!("event `{eid}`")));
@@ -600,7 +614,7 @@ impl Sbml {
                 trigger,
                 initially_true,
                 assignments,
-                at: (pos.row as usize, pos.col as usize),
+                at: (line, column),
             });
         }
         if let Some(c) = list(model, "listOfConstraints").next() {
