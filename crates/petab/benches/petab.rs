@@ -3,7 +3,10 @@
 //! (target ≤ 100 ms each; AMICI's code generation and compile take 10–13 s);
 //! `petab/nll-gradient/<problem>`, the NLL and its gradient (forward sensitivities) at the
 //! nominal parameters (targets: Boehm ≤ 1 ms, AMICI 6.8 ms; Bachmann ≤ 200 ms, AMICI 2.03 s).
-//! `cargo bench -p sysid-petab -- Boehm` runs one problem's.
+//! `cargo bench -p sysid-petab -- Boehm` runs one problem's. `SYSID_PETAB_DIR=DIR` benches the
+//! problems of another folder instead (a clone of the whole collection:
+//! `SYSID_PETAB_DIR=…/Benchmark-Models cargo bench -p sysid-petab -- petab/import/Laske`);
+//! a problem there that does not import is left out, with its error on stderr.
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -11,24 +14,46 @@ use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 
-/// The problems: every folder of tests/data/petab, sorted.
+/// The folder of the problems: `SYSID_PETAB_DIR`, else tests/data/petab.
+fn folder() -> PathBuf {
+    match std::env::var_os("SYSID_PETAB_DIR") {
+        Some(dir) => PathBuf::from(dir),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab"),
+    }
+}
+
+/// The problems: every folder of [`folder`] whose problem imports, sorted.
 fn problems() -> Vec<String> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .expect("tests/data/petab")
+    let dir = folder();
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
         .filter_map(Result::ok)
         .filter(|e| e.path().is_dir())
         .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|name| match sysid_petab::import(&yaml(name)).map(|i| i.model.problem(None)) {
+            Ok(Ok(_)) => true,
+            Ok(Err(e)) => {
+                eprintln!("{name} left out: {e}");
+                false
+            }
+            Err(e) => {
+                eprintln!("{name} left out: {e}");
+                false
+            }
+        })
         .collect();
     names.sort();
     names
 }
 
+/// The problem's YAML file: NAME.yaml, else `problem.yaml` (Bertozzi's in the collection).
 fn yaml(problem: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../tests/data/petab")
-        .join(problem)
-        .join(format!("{problem}.yaml"))
+    let dir = folder().join(problem);
+    let named = dir.join(format!("{problem}.yaml"));
+    match named.exists() {
+        true => named,
+        false => dir.join("problem.yaml"),
+    }
 }
 
 fn bench(c: &mut Criterion) {
