@@ -123,10 +123,14 @@ const UNARY: [(&str, Unary); 7] = [
     ("sysid_signum", signum),
 ];
 
-/// Compiles `tape`, storing the registers `stores` back into the work space; `None` when
-/// the host has no Cranelift backend or compilation fails (the tape is then interpreted).
-pub(crate) fn compile(tape: &Tape, stores: &[u32]) -> Option<Compiled> {
+/// Compiles `tape`, storing the registers `stores` back into the work space, with the
+/// single-pass register allocator where `quick` (faster to compile, slower to run); `None`
+/// when the host has no Cranelift backend or compilation fails (the tape is then interpreted).
+pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compiled> {
     let mut flags = settings::builder();
+    if quick {
+        flags.set("regalloc_algorithm", "single_pass").ok()?;
+    }
     flags.set("opt_level", "speed").ok()?;
     flags.set("use_colocated_libcalls", "false").ok()?;
     flags.set("is_pic", "false").ok()?;
