@@ -692,6 +692,7 @@ impl Linearized {
     /// Compiles the tape to machine code, storing the values and the entries (with the `jit`
     /// feature; else nothing to do); `quick`: with Cranelift's single-pass register
     /// allocator, which compiles 2–3× faster and runs slower code.
+    #[cfg_attr(not(feature = "jit"), allow(unused_variables))]
     fn compile(&mut self, quick: bool) {
         #[cfg(feature = "jit")]
         {
