@@ -637,9 +637,10 @@ impl Linearized {
         // Compiling takes longer than differentiating: the first derivatives are compiled on
         // a thread of their own while the second ones are built and compiled here. The second
         // derivatives run far less often than the first (once per factorisation, and only
-        // with sensitivities; the values at every stage) and are compiled quickly: Laske's import 74 -> 33 ms, Chen's 608 -> 418 ms,
-        // the NLL + gradient unchanged within the noise (criterion, six problems); the first
-        // derivatives compiled so would make it a third slower.
+        // with sensitivities; the first at every stage) and are compiled quickly: Laske's
+        // import 74 -> 33 ms, Chen's 608 -> 418 ms, the NLL + gradient unchanged within the
+        // noise (criterion, six problems); the first derivatives compiled so would make it a
+        // third slower.
         let second = std::thread::scope(|scope| {
             let compiling = scope.spawn(|| first.compile(false));
             let (mut second, _) = Self::build(&mut graph, &entries, dims, false);
@@ -661,8 +662,8 @@ impl Linearized {
         parameters: bool,
     ) -> (Self, Vec<Id>) {
         let columns = if parameters { np } else { 0 };
-        let slots = (0..n).map(Slot::State).chain((0..columns).map(Slot::Parameter));
-        let slots: Vec<Slot> = slots.collect();
+        let slots: Vec<Slot> =
+            (0..n).map(Slot::State).chain((0..columns).map(Slot::Parameter)).collect();
         let columns = graph.columns(roots, &slots);
         let mut pattern = Vec::new();
         let mut outputs = roots.to_vec();
