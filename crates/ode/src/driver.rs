@@ -44,6 +44,11 @@ pub(crate) fn integrate_selected<R: Rhs>(
     on_step: impl FnMut(&Interpolant),
 ) -> Result<(Counts, Vec<f64>), OdeError> {
     check_inputs(cfg, rhs, (t0, x0), t_end)?;
+    if rhs.n_events() > 0 && t_end < t0 {
+        return Err(OdeError::InvalidSetup(format!(
+            "the model's state events fire integrating forward in time only, not from {t0} back to {t_end}"
+        )));
+    }
     let mut run = Run::new(cfg, rhs, (t0, x0), t_end, wants, on_step);
     if t_end - t0 == 0.0 {
         return Ok((run.ev.counts, x0.to_vec()));
@@ -201,6 +206,12 @@ struct Run<'r, R: Rhs, W, O> {
     stiff_since: Option<f64>,
     wants: W,
     on_step: O,
+    /// The state events' conditions at t ([`Rhs::event_conditions`]; empty without events),
+    /// and at the end of the trial step.
+    conditions: Vec<f64>,
+    conditions_next: Vec<f64>,
+    /// The state at a time inside a step, where an event is being located.
+    inside: Vec<f64>,
 }
 
 impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, W, O> {
@@ -215,7 +226,12 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         let mut work = Work::new(x0.len());
         work.x.copy_from_slice(x0);
         let counts = Counts { integrations: 1, ..Counts::default() };
+        let events = rhs.n_events();
+        let states = if events > 0 { rhs.states() } else { 0 };
         Self {
+            conditions: vec![0.0; events],
+            conditions_next: vec![0.0; events],
+            inside: vec![0.0; states],
             ev: Evaluator { rhs, cfg: *cfg, counts, seg: (t0, t_end), stops: (false, false) },
             work,
             stepper: Active::first(cfg.scheme),
@@ -240,6 +256,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         // A fresh first stage: there is none yet at t0, and at a discontinuity the last step's
         // f(t, x) is the limit from the other side.
         self.ev.f(self.t, &self.work.x, &mut self.work.k[0]);
+        self.update_conditions();
         match self.ev.cfg.fixed_step {
             Some(fixed) => self.fixed_segment(fixed, seg_end),
             None => self.adaptive_segment(seg_end),
@@ -255,10 +272,22 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             self.check_budget()?;
             let t = self.t;
             let t_next = if i + 1 == count { seg_end } else { t + hs };
-            self.stepper
-                .step(&mut self.ev, &mut self.work, t, t_next - t)
-                .map_err(|e| implicit_error(e, t))?;
-            self.accept(t_next)?;
+            // Events inside the step split it: the step is retaken to each one's time.
+            while self.t.to_bits() != t_next.to_bits() {
+                let t = self.t;
+                self.stepper
+                    .step(&mut self.ev, &mut self.work, t, t_next - t)
+                    .map_err(|e| implicit_error(e, t))?;
+                let crossed = self.events_in_step(t_next);
+                if crossed.is_empty() {
+                    self.accept(t_next)?;
+                } else if self.step_to_event(&crossed, t_next)?.is_none() {
+                    return Err(OdeError::InvalidSetup(format!(
+                        "the step to an event at {} failed",
+                        crossed[0].1
+                    )));
+                }
+            }
         }
         Ok(())
     }
@@ -297,6 +326,20 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
                 self.ev.counts.rejected_steps += 1;
                 self.h = hs / self.control().rejected(ln_err);
                 last_rejected = true;
+                continue;
+            }
+            let crossed = self.events_in_step(t_next);
+            if !crossed.is_empty() {
+                // An event inside the step: retaken to land on it, then started afresh.
+                match self.step_to_event(&crossed, t_next)? {
+                    None => {
+                        self.ev.counts.rejected_steps += 1;
+                        self.h = 0.5 * (crossed[0].1 - self.t).abs();
+                        last_rejected = true;
+                    }
+                    Some(tau) if tau.to_bits() == seg_end.to_bits() => return Ok(()),
+                    Some(_) => last_rejected = false,
+                }
                 continue;
             }
             let h_lambda = self.stiffness_estimate(hs);
@@ -421,7 +464,90 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         // The explicit schemes' last stage is f(t_next, x_next): the next step's first.
         self.work.k.swap(0, 6);
         self.t = t_next;
+        std::mem::swap(&mut self.conditions, &mut self.conditions_next);
         Ok(())
+    }
+
+    /// The events' conditions at the current (t, x), where there are events.
+    fn update_conditions(&mut self) {
+        if !self.conditions.is_empty() {
+            let states = self.ev.rhs.states();
+            self.ev.rhs.event_conditions(self.t, &self.work.x[..states], &mut self.conditions);
+        }
+    }
+
+    /// The events whose condition falls from positive to zero or below in the trial step
+    /// from t to t_next (in `work`), each with the time it does so, located on the step's
+    /// interpolant: those at the earliest such time τ (within the time's resolution), in
+    /// order, τ first. Empty without such an event; then the conditions at t_next are kept
+    /// for the step's acceptance.
+    fn events_in_step(&mut self, t_next: f64) -> Vec<(usize, f64)> {
+        if self.conditions.is_empty() {
+            return Vec::new();
+        }
+        let (t, states) = (self.t, self.ev.rhs.states());
+        let next = &mut self.conditions_next;
+        self.ev.rhs.event_conditions(t_next, &self.work.x_new[..states], next);
+        let falling: Vec<usize> =
+            (0..next.len()).filter(|&i| self.conditions[i] > 0.0 && next[i] <= 0.0).collect();
+        if falling.is_empty() {
+            return Vec::new();
+        }
+        <Active as Stepper<R>>::dense(&self.stepper, &mut self.work, t, t_next);
+        let mut all = vec![0.0; self.conditions.len()];
+        let mut located: Vec<(usize, f64)> = falling
+            .into_iter()
+            .map(|i| {
+                let (rhs, inside, interpolant) =
+                    (&mut *self.ev.rhs, &mut self.inside, &self.work.interpolant);
+                let mut condition = |s: f64| {
+                    interpolant.eval_range(s, 0, inside);
+                    rhs.event_conditions(s, inside, &mut all);
+                    all[i]
+                };
+                let ends = (self.conditions[i], self.conditions_next[i]);
+                (i, crate::events::locate(&mut condition, (t, t_next), ends))
+            })
+            .collect();
+        let first = located.iter().map(|e| e.1).fold(t_next, f64::min);
+        located.retain(|e| e.1 - first <= resolution(first));
+        for e in &mut located {
+            e.1 = first;
+        }
+        located
+    }
+
+    /// Fires the events `crossed` (found by [`events_in_step`](Self::events_in_step)) at
+    /// their time τ: the trial step to t_next is retaken to land on τ and accepted, x jumps
+    /// there, and the integration starts afresh. None, with nothing accepted, when the
+    /// retaken step fails its error test.
+    fn step_to_event(
+        &mut self,
+        crossed: &[(usize, f64)],
+        t_next: f64,
+    ) -> Result<Option<f64>, OdeError> {
+        let tau = crossed[0].1;
+        if tau.to_bits() == t_next.to_bits() {
+            self.accept(t_next)?;
+        } else if (tau - self.t).abs() > resolution(self.t) {
+            let err = self.trial_step(tau)?;
+            let passed = err <= 1.0;
+            if !passed && self.ev.cfg.fixed_step.is_none() {
+                return Ok(None);
+            }
+            self.accept(tau)?;
+        }
+        for &(i, _) in crossed {
+            self.ev.rhs.fire(i, tau, &mut self.work.x);
+        }
+        if let Some(i) = self.work.x.iter().position(|v| !v.is_finite()) {
+            let e = OdeError::NonFinite { t: tau, what: self.ev.rhs.describe(i) };
+            return Err(self.explain(e, tau, &self.work.x));
+        }
+        self.t = tau;
+        self.ev.f(tau, &self.work.x, &mut self.work.k[0]);
+        self.update_conditions();
+        Ok(Some(tau))
     }
 
     /// The error to report for a failed integration whose state at t is x: a blow-up when a

@@ -6,6 +6,7 @@ use nalgebra::{DMatrix, DMatrixView, Dyn};
 use crate::counts::Counts;
 use crate::driver::{integrate, integrate_selected};
 use crate::error::OdeError;
+use crate::events;
 use crate::implicit::{AugmentedMatrix, IterationMatrix};
 use crate::interpolant::{DenseSolution, Interpolant};
 use crate::jacobian::JacobianProducts;
@@ -174,6 +175,15 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
             matrix.solve(r);
         }
     }
+    fn n_events(&self) -> usize {
+        self.sys.n_events()
+    }
+    fn event_conditions(&mut self, t: f64, y: &[f64], c: &mut [f64]) {
+        events::conditions(self.sys, t, y, self.p, c);
+    }
+    fn fire(&mut self, i: usize, t: f64, x: &mut [f64]) {
+        events::fire(self.sys, i, t, (self.p, &[], &mut self.u), x);
+    }
 }
 
 /// The model together with its variational equations dS/dt = J_y S + J_α (for parameter
@@ -335,6 +345,18 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         if let Some(matrix) = &mut self.implicit {
             matrix.solve(self.sys, self.wrt, r);
         }
+    }
+
+    fn n_events(&self) -> usize {
+        self.sys.n_events()
+    }
+
+    fn event_conditions(&mut self, t: f64, y: &[f64], c: &mut [f64]) {
+        events::conditions(self.sys, t, y, self.p, c);
+    }
+
+    fn fire(&mut self, i: usize, t: f64, x: &mut [f64]) {
+        events::fire(self.sys, i, t, (self.p, self.wrt, &mut self.u), x);
     }
 
     /// At a switch τ(α_q) the column of α_q jumps by (g₋ − g₊)·∂τ/∂α_q, g₋ the right-hand
@@ -689,6 +711,10 @@ fn moving_columns<S: System>(system: &S, p: &[f64], wrt: &[Wrt]) -> Vec<usize> {
     let Some(sparse) = system.sparse_jacobian(Function::Rhs) else {
         return (0..wrt.len()).collect();
     };
+    // An event's condition or reset may depend on any parameter.
+    if system.n_events() > 0 {
+        return (0..wrt.len()).collect();
+    }
     let mut enters = vec![false; system.signature().n_parameters()];
     for &(_, c) in sparse.pattern() {
         if let Some(q) = (c as usize).checked_sub(n) {

@@ -71,6 +71,7 @@ mod counts;
 mod dopri5;
 mod driver;
 mod error;
+mod events;
 mod implicit;
 mod interpolant;
 mod ivp;

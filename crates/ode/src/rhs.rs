@@ -55,4 +55,20 @@ pub trait Rhs {
     fn cross(&mut self, t: f64, x: &mut [f64], dir: f64) {
         let _ = (t, x, dir);
     }
+    /// How many state events f has (see [`System::n_events`](crate::System::n_events)).
+    /// Default: none.
+    fn n_events(&self) -> usize {
+        0
+    }
+    /// The events' conditions at (t, y), y the leading [`states`](Self::states) components
+    /// of x (all that is read): event i fires where its condition falls from positive to
+    /// zero or below.
+    fn event_conditions(&mut self, t: f64, y: &[f64], c: &mut [f64]) {
+        let _ = (t, y, c);
+    }
+    /// Event `i` fires at t: x jumps to its value just after (the state reset, the
+    /// sensitivities with it).
+    fn fire(&mut self, i: usize, t: f64, x: &mut [f64]) {
+        let _ = (i, t, x);
+    }
 }

@@ -227,6 +227,30 @@ pub trait System: Send + Sync {
         Vec::new()
     }
 
+    /// How many state events the system has: conditions on the state whose crossing resets
+    /// it ([`event_condition`](Self::event_condition), [`event_reset`](Self::event_reset)).
+    /// Default: none.
+    fn n_events(&self) -> usize {
+        0
+    }
+
+    /// Event i's condition c_i(t, y, α): the event fires where c_i falls from positive to
+    /// zero or below, integrating forward (its trigger turning true); the integrators locate
+    /// that time τ by root finding on the step's interpolant. Only called for
+    /// i < [`n_events`](Self::n_events).
+    fn event_condition<T: Scalar>(&self, i: usize, t: f64, y: &[T], p: &[T]) -> T {
+        let _ = (i, t, y, p);
+        T::from(1.0)
+    }
+
+    /// The state just after event i fires at (τ, y): y⁺ = r_i(τ, y, α), written into
+    /// `y_new` (which holds y on entry: components the event leaves alone may stay).
+    /// The sensitivities jump with it: S⁺ = R_y S + R_α + (R_y g⁻ − g⁺)·∂τ/∂z, where
+    /// ∂τ/∂z = −(c_y S + c_α)/(c_y g⁻ + c_t) moves the event with the unknowns.
+    fn event_reset<T: Scalar>(&self, i: usize, t: f64, y: &[T], p: &[T], y_new: &mut [T]) {
+        let _ = (i, t, y, p, y_new);
+    }
+
     /// The right-hand side (or the outputs) with the nonzero entries of its Jacobian, for
     /// systems that can evaluate them directly (default: none, dual numbers are used).
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
@@ -299,6 +323,15 @@ impl<S: System> System for &S {
     }
     fn moving_switches(&self, p: &[f64]) -> Vec<(f64, usize, f64)> {
         (**self).moving_switches(p)
+    }
+    fn n_events(&self) -> usize {
+        (**self).n_events()
+    }
+    fn event_condition<T: Scalar>(&self, i: usize, t: f64, y: &[T], p: &[T]) -> T {
+        (**self).event_condition(i, t, y, p)
+    }
+    fn event_reset<T: Scalar>(&self, i: usize, t: f64, y: &[T], p: &[T], y_new: &mut [T]) {
+        (**self).event_reset(i, t, y, p, y_new)
     }
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
         (**self).sparse_jacobian(function)

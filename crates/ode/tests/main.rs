@@ -4,6 +4,7 @@
 mod common;
 
 mod allocations;
+mod events;
 mod integrators;
 mod sensitivities;
 mod stiff;

@@ -86,6 +86,15 @@ impl System for AnySystem {
     fn moving_switches(&self, p: &[f64]) -> Vec<(f64, usize, f64)> {
         each!(self, s => s.moving_switches(p))
     }
+    fn n_events(&self) -> usize {
+        each!(self, s => s.n_events())
+    }
+    fn event_condition<T: Scalar>(&self, i: usize, t: f64, y: &[T], p: &[T]) -> T {
+        each!(self, s => s.event_condition(i, t, y, p))
+    }
+    fn event_reset<T: Scalar>(&self, i: usize, t: f64, y: &[T], p: &[T], y_new: &mut [T]) {
+        each!(self, s => s.event_reset(i, t, y, p, y_new))
+    }
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
         each!(self, s => s.sparse_jacobian(function))
     }
