@@ -58,7 +58,8 @@ use sysid_ode::{Inputs, Signature};
 
 pub use error::{ModelError, SourceMap, line_column};
 pub use file::{
-    DataSpec, ExperimentSpec, Expression, ModelFile, NoiseSpec, OutputSpec, RecordKind, SetValue,
+    DataSpec, EventSpec, ExperimentSpec, Expression, ModelFile, NoiseSpec, OutputSpec, RecordKind,
+    SetValue,
 };
 pub use system::ModelSystem;
 
@@ -90,6 +91,7 @@ impl Model {
     pub fn system(&self, inputs: Inputs) -> ModelSystem {
         let outputs = self.file.outputs.iter().map(|o| o.value.clone()).collect();
         ModelSystem::new(self.signature(), self.file.equations.clone(), outputs, inputs)
+            .with_events(self.file.events.clone())
     }
 
     fn located(&self, message: String) -> ModelError {

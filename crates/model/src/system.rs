@@ -5,6 +5,7 @@ use std::sync::Arc;
 use sysid_ode::{Function, Inputs, Scalar, Side, Signature, SparseJacobian, System};
 
 use crate::expr::{Program, Switch};
+use crate::file::EventSpec;
 use crate::symbolic::Linearized;
 
 /// A model read from a file: compiled right-hand sides and outputs, their symbolic
@@ -22,6 +23,8 @@ pub struct ModelSystem {
     switches: Arc<Vec<Switch>>,
     /// Whether the equations do not mention t outside their switches in time.
     time_free: bool,
+    /// The state events (`[[events]]`).
+    events: Arc<Vec<EventSpec>>,
 }
 
 impl ModelSystem {
@@ -55,7 +58,13 @@ impl ModelSystem {
             outputs: Arc::new(outputs),
             symbolic: Some(Arc::new(symbolic)),
             inputs,
+            events: Arc::new(Vec::new()),
         }
+    }
+
+    /// The same system with state events.
+    pub fn with_events(self, events: Vec<EventSpec>) -> Self {
+        Self { events: Arc::new(events), ..self }
     }
 
     /// The same equations with other input signals.
@@ -106,6 +115,17 @@ impl System for ModelSystem {
             .iter()
             .filter_map(|s| s.parameter.map(|(q, slope)| (s.at(p), q, slope)))
             .collect()
+    }
+    fn n_events(&self) -> usize {
+        self.events.len()
+    }
+    fn event_condition<T: Scalar>(&self, i: usize, t: f64, y: &[T], p: &[T]) -> T {
+        self.events[i].condition.eval(t, y, p, &[])
+    }
+    fn event_reset<T: Scalar>(&self, i: usize, t: f64, y: &[T], p: &[T], y_new: &mut [T]) {
+        for (state, value) in &self.events[i].resets {
+            y_new[*state] = value.eval(t, y, p, &[]);
+        }
     }
     fn sparse_jacobian(&self, function: Function) -> Option<&dyn SparseJacobian> {
         let symbolic = self.symbolic.as_deref()?;

@@ -4,6 +4,7 @@
 mod common;
 
 mod allocations;
+mod events;
 mod experiments;
 mod expressions;
 mod model_file;

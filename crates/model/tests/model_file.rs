@@ -39,7 +39,7 @@ fn toml_syntax_and_top_level_keys() {
         ),
         (
             String::from("states = [\"x\"]\ncolour = \"red\"\n"),
-            "models/m.toml:2:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator)",
+            "models/m.toml:2:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator, events)",
         ),
         (
             String::from("parameters = [\"k\"]\n"),
@@ -47,11 +47,11 @@ fn toml_syntax_and_top_level_keys() {
         ),
         (
             String::from("colour = 1\nparameters = [\"k\"]\n"),
-            "models/m.toml:1:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator)",
+            "models/m.toml:1:1: unknown key `colour` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator, events)",
         ),
         (
             format!("{OK}[solver]\nmethod = \"x\"\n"),
-            "models/m.toml:11:2: unknown key `solver` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator)",
+            "models/m.toml:11:2: unknown key `solver` (keys: states, parameters, inputs, equations, initial, known, unknowns, outputs, data, experiments, integrator, events)",
         ),
     ]);
 }

@@ -67,6 +67,11 @@ impl Quasilinearization {
             ));
         }
         for e in problem.experiments() {
+            if e.system().n_events() > 0 {
+                return Err(unsupported(
+                    "state events (its linear problems about a trajectory have no resets)".into(),
+                ));
+            }
             for (s, w) in e.slots().iter().enumerate() {
                 let log = e.slot_unknown(s).map(|j| &problem.declared()[j]).filter(|u| u.log);
                 if let (sysid_ode::Wrt::InitialValue(_), Some(u)) = (w, log) {

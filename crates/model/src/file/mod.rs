@@ -12,6 +12,7 @@ use crate::expr::Program;
 
 mod data;
 mod equations;
+mod events;
 mod experiments;
 mod integrator;
 mod names;
@@ -21,6 +22,7 @@ mod values;
 use data::read_data;
 pub use equations::{SIGMA_RANGE, check_sigma};
 use equations::{read_equations, read_outputs};
+use events::read_events;
 use experiments::read_experiments;
 use integrator::read_integrator;
 use names::{Names, Scope};
@@ -119,6 +121,19 @@ pub enum RecordKind {
     Continuous,
 }
 
+/// An event of `[[events]]`: where its condition falls from positive to zero or below
+/// (its trigger turns true, integrating forward), the states `resets` name are set to their
+/// expressions' values just before.
+#[derive(Clone, Debug)]
+pub struct EventSpec {
+    /// The condition: a − b of a trigger `lt(a, b)` or `le(a, b)`, b − a of `gt` or `ge`.
+    pub condition: Program,
+    /// (state, the expression it is reset to).
+    pub resets: Vec<(usize, Program)>,
+    /// Byte offset of the event's table.
+    pub at: usize,
+}
+
 /// The `[data]` table.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DataSpec {
@@ -169,6 +184,8 @@ pub struct ModelFile {
     pub experiments: Vec<ExperimentSpec>,
     /// The integrator (`[integrator]`, default DOPRI5 with rtol 1e-8, atol 1e-10).
     pub integrator: Integrator,
+    /// The `[[events]]`: state resets where a condition on the state turns true.
+    pub events: Vec<EventSpec>,
     /// Byte offset of the `states` key, to locate model-wide errors.
     pub states_at: usize,
     /// Data tables held in memory, by the data-file path they stand for: an imported
@@ -195,6 +212,7 @@ const TOP_LEVEL: &[&str] = &[
     "data",
     "experiments",
     "integrator",
+    "events",
 ];
 
 impl ModelFile {
@@ -252,6 +270,7 @@ impl ModelFile {
             }
         }
         let integrator = read_integrator(&r, doc.get("integrator"))?;
+        let events = read_events(&r, doc.get("events"), &scope, &experiments)?;
         Ok(Self {
             path: path.to_path_buf(),
             text: text.to_string(),
@@ -268,6 +287,7 @@ impl ModelFile {
             data,
             experiments,
             integrator,
+            events,
             states_at: names.states_at,
             tables: Vec::new(),
             sources: Vec::new(),

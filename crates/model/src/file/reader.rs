@@ -156,6 +156,46 @@ impl<'a> Reader<'a> {
         resolve: &dyn Fn(&str) -> Option<Slot>,
         names: &str,
     ) -> Result<Program, ModelError> {
+        self.compiled(value, what, resolve, names, Ok)
+    }
+
+    /// Compiles an event's trigger, a comparison `lt(a, b)`, `le`, `gt` or `ge`, as its
+    /// condition: a − b for lt and le, b − a for gt and ge, which falls through zero where
+    /// the trigger turns true.
+    pub(super) fn trigger(
+        &self,
+        value: &Spanned<DeValue<'_>>,
+        what: &str,
+        resolve: &dyn Fn(&str) -> Option<Slot>,
+        names: &str,
+    ) -> Result<Program, ModelError> {
+        use expr::{Expr, Func, Op};
+        self.compiled(value, what, resolve, names, |parsed| match parsed {
+            Expr::Call(f @ (Func::Lt | Func::Le | Func::Gt | Func::Ge), mut args, _)
+                if args.len() == 2 =>
+            {
+                let (b, a) = (Box::new(args.remove(1)), Box::new(args.remove(0)));
+                Ok(match f {
+                    Func::Lt | Func::Le => Expr::Bin(Op::Sub, a, b),
+                    _ => Expr::Bin(Op::Sub, b, a),
+                })
+            }
+            _ => Err(format!(
+                "{what} must be a comparison, lt(a, b), le(a, b), gt(a, b) or ge(a, b): the event fires where it turns true"
+            )),
+        })
+    }
+
+    /// Parses an expression string, rewrites it by `rewrite` (an error there is located at
+    /// the string) and compiles it, locating its errors in the file.
+    fn compiled(
+        &self,
+        value: &Spanned<DeValue<'_>>,
+        what: &str,
+        resolve: &dyn Fn(&str) -> Option<Slot>,
+        names: &str,
+        rewrite: impl FnOnce(expr::Expr) -> Result<expr::Expr, String>,
+    ) -> Result<Program, ModelError> {
         let text = self.string(value, what)?;
         let start = value.span().start;
         let quote =
@@ -172,6 +212,7 @@ impl<'a> Reader<'a> {
             self.err(char_offset(self.text, start + quote, e.position), message)
         };
         let parsed = expr::parse(text).map_err(locate)?;
+        let parsed = rewrite(parsed).map_err(|m| self.err(start, m))?;
         Program::compile(&parsed, resolve).map_err(locate)
     }
 }

@@ -1,0 +1,110 @@
+//! `[[events]]`: where a condition on the state turns true, states are reset.
+
+use toml::Spanned;
+use toml::de::DeValue;
+
+use super::names::Scope;
+use super::reader::Reader;
+use super::{EventSpec, ExperimentSpec};
+use crate::error::ModelError;
+use crate::expr::Slot;
+
+/// Reads `[[events]]` (optional): an array of tables `{ trigger, set }`, the trigger a
+/// comparison of expressions (`lt(U, 1e-8)`) and `set` a table of states and the expressions
+/// they are reset to, evaluated with the values just before the event.
+pub(super) fn read_events(
+    r: &Reader<'_>,
+    value: Option<&Spanned<DeValue<'_>>>,
+    scope: &Scope,
+    experiments: &[ExperimentSpec],
+) -> Result<Vec<EventSpec>, ModelError> {
+    let Some(value) = value else {
+        return Ok(Vec::new());
+    };
+    let DeValue::Array(items) = value.get_ref() else {
+        return Err(r.err(
+            value.span().start,
+            "`events` must be an array of tables: write each as [[events]]",
+        ));
+    };
+    // The events see states, parameters and t; inputs are refused by name below.
+    let input = std::cell::Cell::new(None::<String>);
+    let resolve = |n: &str| match scope.resolve(n) {
+        Some(Slot::Input(_)) => {
+            input.set(Some(n.to_string()));
+            None
+        }
+        slot => slot,
+    };
+    let no_inputs = |e: ModelError| match input.take() {
+        Some(name) => ModelError {
+            message: format!(
+                "{}: `{name}` is an input, which events may not use",
+                e.message.split(": unknown name").next().unwrap_or_default()
+            ),
+            ..e
+        },
+        None => e,
+    };
+    let mut out = Vec::with_capacity(items.len());
+    for (number, item) in items.iter().enumerate() {
+        let what = format!("event {}", number + 1);
+        let table = r.table(item, "each [[events]]")?;
+        let at = item.span().start;
+        let trigger = table.get("trigger").ok_or_else(|| {
+            r.err(at, format!("[[events]] {what}: `trigger` is missing: the comparison that fires it, like \"lt(x, 1e-8)\""))
+        })?;
+        let condition = r
+            .trigger(trigger, &format!("{what}: trigger"), &resolve, &scope.listed)
+            .map_err(no_inputs)?;
+        let set = table.get("set").ok_or_else(|| {
+            r.err(at, format!("[[events]] {what}: `set` is missing: the states it resets, like {{ x = \"0\" }}"))
+        })?;
+        let mut resets = Vec::new();
+        for (key, value) in r.table(set, &format!("[[events]] {what}: set"))?.iter() {
+            let name = key.get_ref();
+            let Some(i) = scope.states.iter().position(|s| s == name) else {
+                return Err(r.err(
+                    key.span().start,
+                    format!(
+                        "[[events]] {what}: `{name}` is not a state: an event resets states (states: {})",
+                        scope.states.join(", ")
+                    ),
+                ));
+            };
+            let reset = match value.get_ref() {
+                DeValue::String(_) => r
+                    .expression(value, &format!("{what}: {name}"), &resolve, &scope.listed)
+                    .map_err(no_inputs)?,
+                _ => {
+                    let v = r.number(value, &format!("[[events]] {what}: {name}"))?;
+                    crate::expr::Program::compile(&crate::expr::Expr::Num(v), &resolve)
+                        .expect("a number compiles")
+                }
+            };
+            resets.push((i, reset));
+        }
+        if let Some((k, _)) =
+            table.iter().find(|(k, _)| !["trigger", "set"].contains(&k.get_ref().as_ref()))
+        {
+            return Err(r.err(
+                k.span().start,
+                format!("[[events]] {what}: unknown key `{}` (keys: trigger, set)", k.get_ref()),
+            ));
+        }
+        out.push(EventSpec { condition, resets, at });
+    }
+    if let (Some(e), Some(first)) =
+        (experiments.iter().find(|e| e.steady || e.preequilibrate.is_some()), out.first())
+    {
+        let _ = first;
+        return Err(r.err(
+            e.at,
+            format!(
+                "experiment `{}` starts from a steady state, which is solved without the model's [[events]]: events and steady states together are not supported",
+                e.name
+            ),
+        ));
+    }
+    Ok(out)
+}
