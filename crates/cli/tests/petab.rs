@@ -372,3 +372,37 @@ fn the_best_known_points_are_certified_minima_at_their_values() {
         }
     }
 }
+
+/// Liu's event sets the tumour cells U to exactly 0 where they fall below 1e-8, and they stay
+/// there (dU/dt is proportional to U): with ψ = 2e-8 that happens before t = 3 in the virus
+/// condition, while the infected cells I_1 live on.
+#[test]
+fn a_state_reset_by_an_event_is_simulated() {
+    let liu = problem("Liu_IFACPapersOnLine2025");
+    let out = sysid(&[
+        "simulate",
+        "--petab",
+        &liu,
+        "--experiment",
+        "vvDD",
+        "--times",
+        "0:12:3",
+        "--set",
+        "psi=2e-8",
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = String::from_utf8_lossy(&out.stdout).to_string();
+    let header: Vec<&str> = csv.lines().next().expect("a header").split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (u, i1) = (column("U"), column("I_1"));
+    for (m, line) in csv.lines().skip(1).enumerate() {
+        let cells: Vec<f64> = line.split(',').map(|c| c.parse().expect("a number")).collect();
+        match m {
+            0 => assert!(cells[u] > 700.0, "{line}"),
+            _ => {
+                assert_eq!(cells[u].to_bits(), 0.0f64.to_bits(), "{line}");
+                assert!(cells[i1] > 0.0, "{line}");
+            }
+        }
+    }
+}

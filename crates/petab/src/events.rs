@@ -1,9 +1,22 @@
-//! SBML events that fire when time reaches a value, as switches in time.
+//! SBML events: those that fire when time reaches a value and set what nothing else
+//! changes, as switches in time; those that reset states, or fire on a condition of the
+//! state, as the model file's `[[events]]`.
 
 use sysid_model::ModelError;
 
 use crate::Builder;
 use crate::math::{Math, Rel};
+
+/// An event that resets states: the model file's `[[events]]`.
+pub(crate) struct StateEvent {
+    /// The trigger: a comparison (<, ≤, >, ≥) of the dynamics' expressions.
+    pub(crate) trigger: Math,
+    /// (state, value) of each assignment.
+    pub(crate) resets: Vec<(String, Math)>,
+    /// The event's id and its line and column in the SBML file.
+    pub(crate) id: String,
+    pub(crate) at: (usize, usize),
+}
 
 /// One event's setting of a variable: when t reaches τ (`rel` is ≥ or >), the value; whether
 /// its trigger counts as true before the start.
@@ -38,6 +51,11 @@ impl Builder<'_> {
                 column: Some(event.at.1),
                 message: format!("event `{}`: {message}", event.id),
             };
+            if self.is_state_event(event) {
+                let state_event = self.state_event(event).map_err(refuse)?;
+                self.state_events.push(state_event);
+                continue;
+            }
             // Neither time nor species: a number or an expression of parameters.
             let of_parameters = |m: &Math| {
                 let mut time = false;
@@ -132,5 +150,49 @@ impl Builder<'_> {
             self.events.insert(variable, Math::Add(terms));
         }
         Ok(())
+    }
+}
+
+impl Builder<'_> {
+    /// Whether `event` is a state event: it resets a state (a species that reactions or a
+    /// rate rule change, a parameter with a rate rule), or its trigger depends on one.
+    fn is_state_event(&self, event: &crate::sbml::Event) -> bool {
+        let trigger = self.ruled(&event.trigger);
+        event.assignments.iter().any(|(v, _)| self.is_state(v))
+            || trigger.names().iter().any(|n| self.is_state(n))
+    }
+
+    /// Whether `id` is a state that the integration changes: a species that reactions or a
+    /// rate rule change, or a parameter with a rate rule.
+    fn is_state(&self, id: &str) -> bool {
+        let s = self.sbml;
+        s.rate_rules.iter().any(|r| r.0 == id)
+            || s.species.iter().any(|x| x.id == id && !x.fixed && !self.rules.contains_key(id))
+    }
+
+    /// `event` as a model file's `[[events]]` entry: its trigger a comparison, every
+    /// assignment to a state; what else it would need is refused, with the reason.
+    fn state_event(&self, event: &crate::sbml::Event) -> Result<StateEvent, String> {
+        let trigger = self.dynamic(&event.trigger);
+        if !matches!(trigger, Math::Compare(Rel::Lt | Rel::Le | Rel::Gt | Rel::Ge, _, _)) {
+            return Err(
+                "it resets states or depends on them, and its trigger is not one comparison (<, ≤, >, ≥), which is not supported".into(),
+            );
+        }
+        if !event.initially_true {
+            return Err(
+                "its trigger has initialValue=\"false\" (it fires at the start where it holds there), which events that reset states do not support".into(),
+            );
+        }
+        let mut resets = Vec::new();
+        for (variable, value) in &event.assignments {
+            if !self.is_state(variable) {
+                return Err(format!(
+                    "it sets `{variable}`, which is not a state, beside states or on a trigger of states: such an event may only reset states (species that reactions change, variables of rate rules)"
+                ));
+            }
+            resets.push((variable.clone(), self.dynamic(value)));
+        }
+        Ok(StateEvent { trigger, resets, id: event.id.clone(), at: event.at })
     }
 }

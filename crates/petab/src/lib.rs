@@ -9,7 +9,9 @@
 //! * the SBML species, compartments, parameters, reactions and rules become states,
 //!   parameters and equations ([`sbml`] reads the subset it knows and refuses the rest by
 //!   name; `dynamics` resolves the rules and writes the equations);
-//! * SBML events that fire when time reaches a value become switches in time (`events`);
+//! * SBML events that fire when time reaches a value and set what nothing else changes
+//!   become switches in time; events that reset states, or whose trigger depends on the
+//!   state, become the model file's `[[events]]`, located by root finding (`events`);
 //! * each simulation condition becomes an experiment that sets the condition table's
 //!   parameters (`conditions`); its measurements are a data table held in memory, times may
 //!   repeat (`measurements`);
@@ -28,7 +30,7 @@
 //! `parts` holds what these stages hand each other (outputs, experiments, states).
 //! `rendering` writes the model file's text with a source map back to the tables and the
 //! SBML, so that every error names the file, the line and the column of what caused it.
-//! What is not supported (laplace noise, events that reset states, …) is refused by name.
+//! What is not supported (laplace noise, events with delays, …) is refused by name.
 #![warn(missing_docs)]
 
 mod conditions;
@@ -195,6 +197,8 @@ struct Builder<'a> {
     /// What the events make of the variables they set: a switch in time between the
     /// variable's own value (before any event) and the events' values.
     events: HashMap<String, Math>,
+    /// The events that reset states, written as the model file's `[[events]]`.
+    state_events: Vec<events::StateEvent>,
     parameters: BTreeMap<String, (Parameter, usize)>,
     observables: HashMap<String, Observable>,
     /// The species a condition table sets the initial value of, each with the two known
@@ -230,6 +234,7 @@ impl<'a> Builder<'a> {
             names: HashMap::new(),
             rules: HashMap::new(),
             events: HashMap::new(),
+            state_events: Vec::new(),
             parameters: BTreeMap::new(),
             observables: HashMap::new(),
             overrides: Vec::new(),
@@ -266,7 +271,9 @@ impl<'a> Builder<'a> {
                 continue;
             }
             let mut name = id.clone();
-            if s.species.iter().any(|x| x.id == id) && s.set_by_events(&id) {
+            // (A species that reactions change is reset by events as a state, keeping its
+            // name.)
+            if s.species.iter().any(|x| x.id == id && x.fixed) && s.set_by_events(&id) {
                 name.push_str("_before_events");
             }
             while RESERVED.contains(&name.as_str()) || taken.contains(&name) {

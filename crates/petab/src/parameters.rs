@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 
 use sysid_model::ModelError;
 
+use crate::math::Math;
 use crate::parts::{Dynamics, Measured, Sigma, scale_of, toml_number};
 use crate::tsv::Tsv;
 use crate::{Builder, tsv};
@@ -201,7 +202,14 @@ impl Builder<'_> {
                 .iter()
                 .find(|x| x.0 == p)
                 .map(|x| x.1)
+                .filter(|v| v.is_finite())
                 .or_else(|| s.compartments.iter().find(|c| c.0 == p).map(|c| c.1))
+                // A value given only by an initial assignment of numbers (one that the
+                // condition table overrides, so that its rules were left out).
+                .or_else(|| {
+                    let (_, m) = s.initial_assignments.iter().find(|a| a.0 == p)?;
+                    constant_value(&self.ruled(m))
+                })
                 .unwrap_or(f64::NAN),
         };
         match value.is_finite() {
@@ -212,6 +220,13 @@ impl Builder<'_> {
             )),
         }
     }
+}
+
+/// The value of an expression of numbers alone.
+fn constant_value(m: &Math) -> Option<f64> {
+    let parsed = sysid_model::expr::parse(&m.render(&|n| n.to_string())).ok()?;
+    let program = sysid_model::expr::Program::compile(&parsed, &|_| None).ok()?;
+    program.is_constant().then(|| program.eval::<f64>(0.0, &[], &[], &[]))
 }
 
 /// The names of a rendered expression.

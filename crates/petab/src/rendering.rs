@@ -135,6 +135,24 @@ impl Builder<'_> {
             text,
             "[integrator]\nmethod = \"rodas5p\"\nrtol = 1e-8\natol = 1e-12\nmax_steps = 200000"
         );
+        for event in &self.state_events {
+            let origin = ModelError {
+                file: self.sbml_file.clone(),
+                line: Some(event.at.0),
+                column: Some(event.at.1),
+                message: format!("event `{}`: ", event.id),
+            };
+            let _ = writeln!(text, "\n[[events]]");
+            map.record(line(&text), 1, origin.clone());
+            let _ = writeln!(text, "trigger = \"{}\"", self.render(&event.trigger));
+            let resets: Vec<String> = event
+                .resets
+                .iter()
+                .map(|(x, v)| format!("{} = \"{}\"", self.name(x), self.render(v)))
+                .collect();
+            map.record(line(&text), 1, origin);
+            let _ = writeln!(text, "set = {{ {} }}", resets.join(", "));
+        }
         Ok((text, map))
     }
 

@@ -214,7 +214,45 @@ fn an_estimated_event_time_has_its_gradient() {
     let _ = std::fs::remove_dir_all(path.parent().expect("a directory"));
 }
 
-/// What cannot be written as a switch in time is refused, naming the event at its line.
+/// An event at t_on (estimated) resets the state A, which the reaction changes, to 0: A = k·t
+/// before t_on and k·(t − t_on) after. The NLL to 1e-9 and its gradient in k and t_on (the
+/// reset moving with t_on: ∂A/∂t_on = −k after it) to 1e-7 against central differences of
+/// the closed form.
+#[test]
+fn an_event_resets_a_state_with_its_gradient() {
+    let reset =
+        event("reset", &format!("<apply><geq/>{TIME}<ci> t_on </ci></apply>"), "A", "<cn> 0 </cn>");
+    let path = problem(
+        "reset",
+        &sbml(&reset),
+        "k\tlin\t0.01\t10\t0.7\t1\nt_on\tlin\t0.1\t2.9\t1.2\t1\n",
+        &[("only", None)],
+        None,
+    );
+    let (value, gradient) = nll_and_gradient(&path);
+    let at = |k: f64, t_on: f64| {
+        let mut sum = 0.0;
+        for (&t, b) in TIMES.iter().zip(measured(1.5)) {
+            let a = if t < t_on { k * t } else { k * (t - t_on) };
+            let r = (b - a) / SIGMA;
+            sum += 0.5 * r * r + (SIGMA * (2.0 * std::f64::consts::PI).sqrt()).ln();
+        }
+        sum
+    };
+    assert!((value - at(0.7, 1.2)).abs() <= 1e-9, "NLL {value} vs {}", at(0.7, 1.2));
+    let h = 1e-6;
+    let slopes = [
+        (at(0.7 + h, 1.2) - at(0.7 - h, 1.2)) / (2.0 * h),
+        (at(0.7, 1.2 + h) - at(0.7, 1.2 - h)) / (2.0 * h),
+    ];
+    for (g, s) in gradient.iter().zip(slopes) {
+        assert!((g - s).abs() <= 1e-7 * s.abs().max(1.0), "{gradient:?} vs {slopes:?}");
+    }
+    let _ = std::fs::remove_dir_all(path.parent().expect("a directory"));
+}
+
+/// What cannot be written as a switch in time or as a state event is refused, naming the
+/// event at its line.
 #[test]
 fn events_that_are_not_switches_in_time_are_refused_where_written() {
     let refused = |test: &str, events: &str, pre: Option<&str>, expected: &str| {
@@ -230,23 +268,34 @@ fn events_that_are_not_switches_in_time_are_refused_where_written() {
     };
     // The event element is on line 25 of the SBML.
     let e = refused(
-        "reacting",
-        &on("A", "<cn> 0 </cn>"),
+        "state-trigger",
+        &event("pulse", "<apply><geq/><ci> A </ci><cn> 1 </cn></apply>", "S", "<cn> 0 </cn>"),
         None,
-        "event `pulse`: it sets `A`, which reactions change: events may only set what nothing else changes",
+        "event `pulse`: it sets `S`, which is not a state, beside states or on a trigger of states",
     );
     assert!(e.contains("model.xml:25:7:"), "{e}");
+    let reset =
+        event("pulse", "<apply><geq/><ci> A </ci><cn> 1 </cn></apply>", "A", "<cn> 0 </cn>");
+    refused(
+        "initially-false",
+        &reset.replace("initialValue=\"true\"", "initialValue=\"false\""),
+        None,
+        "event `pulse`: its trigger has initialValue=\"false\"",
+    );
+    refused(
+        "two-comparisons",
+        &reset.replace(
+            "<apply><geq/><ci> A </ci><cn> 1 </cn></apply>",
+            "<apply><and/><apply><geq/><ci> A </ci><cn> 1 </cn></apply><apply><geq/><ci> k </ci><cn> 0 </cn></apply></apply>",
+        ),
+        None,
+        "its trigger is not one comparison (<, ≤, >, ≥), which is not supported",
+    );
     refused(
         "compartment",
         &on("c", "<cn> 2 </cn>"),
         None,
         "event `pulse`: it sets `c`, which is no species or parameter",
-    );
-    refused(
-        "state-trigger",
-        &event("pulse", "<apply><geq/><ci> A </ci><cn> 1 </cn></apply>", "S", "<cn> 0 </cn>"),
-        None,
-        "event `pulse`: only triggers that fire when time reaches a value (time ≥ τ) are supported",
     );
     refused(
         "state-value",

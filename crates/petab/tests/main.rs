@@ -53,7 +53,7 @@ fn nll_at_nominal_matches_amicis_reference() {
 /// reference (Beer, Brannmark, Schwen), AMICI 1.0.1's value at rtol 1e-12 where it stores
 /// none (Raia, whose σ repeats its observable's parameter; Alkan, a piecewise without
 /// otherwise), else the NLL of the collection's own simulated data (Raimundez, with Laplace
-/// priors; Armistead, Bertozzi, Blasi, Perelson, Rahman). The NLL of the model alone (no
+/// priors; Armistead, Bertozzi, Blasi, Perelson, Rahman; Liu, whose event resets a state). The NLL of the model alone (no
 /// sensitivities), at the problems' default tolerances.
 #[test]
 fn more_of_the_collection_matches_its_references() {
@@ -75,6 +75,7 @@ fn more_of_the_collection_matches_its_references() {
         ("Brannmark_JBC2010", "Brannmark_JBC2010.yaml"),
         ("Schwen_PONE2014", "Schwen_PONE2014.yaml"),
         ("Blasi_CellSystems2016", "Blasi_CellSystems2016.yaml"),
+        ("Liu_IFACPapersOnLine2025", "Liu_IFACPapersOnLine2025.yaml"),
     ] {
         let path = data().join(problem).join(file);
         let imported = import(&path).unwrap_or_else(|e| panic!("{problem}: {e}"));
@@ -702,4 +703,38 @@ fn a_nominal_value_outside_its_bounds_is_moved_onto_the_bound() {
     let imported = import(&path).expect("imports");
     assert!(imported.warnings[0].contains("the fits start from 0.00001, and the NLL at nominal is taken there too (a log scale cannot hold the table's value)"), "{:?}", imported.warnings);
     assert!(imported.nominal.is_empty());
+}
+
+/// Liu: an event sets the tumour cells U to 0 where they fall below 1e-8 (a state reset on a
+/// condition of the state, located by root finding). At nominal it does not fire; at
+/// ψ = 2e-8 it fires in the virus condition, and there the gradient of the NLL matches
+/// central differences of the NLL on every unknown (each on its log10 scale, step 1e-5,
+/// to 1e-5 relative, or 1e-7 absolute for a component that is nearly zero).
+#[test]
+fn liu_resets_a_state_with_the_gradient_across_the_reset() {
+    let imported = import(&yaml("Liu_IFACPapersOnLine2025")).unwrap_or_else(|e| panic!("{e}"));
+    let p = imported.model.problem(None).unwrap_or_else(|e| panic!("{e}"));
+    let mut values = p.guesses();
+    let psi = p.names().iter().position(|n| n == "psi").expect("ψ is estimated");
+    let nominal = p.nll_at(&p.unknowns().coordinates(&values)).expect("integrates").expect("NLL");
+    values[psi] = 2e-8;
+    let z = p.unknowns().coordinates(&values);
+    let lin = p.linearize(&z).expect("integrates across the event");
+    let nll = p.nll(&lin).expect("a likelihood");
+    assert!((nll - nominal).abs() > 1.0, "ψ moves the fit: {nll} vs {nominal}");
+    let h = 1e-5;
+    for j in 0..z.len() {
+        let at = |d: f64| {
+            let mut moved = z.clone();
+            moved[j] += d;
+            p.nll_at(&moved).expect("integrates").expect("a likelihood")
+        };
+        let slope = (at(h) - at(-h)) / (2.0 * h);
+        let g = lin.gradient[j];
+        assert!(
+            (g - slope).abs() <= 1e-5 * slope.abs() + 1e-7,
+            "{}: gradient {g:e}, central difference {slope:e}",
+            p.names()[j]
+        );
+    }
 }
