@@ -721,3 +721,31 @@ also = ["same-settings", "again"]
         "model.toml:12:9: [[experiments]]: two experiments are called `first`",
     );
 }
+
+/// Laplace noise of an unknown scale b, the rate known: the fit's b is the closed form's
+/// maximum-likelihood scale, the mean absolute residual (to 1e-6 relative), the fit is
+/// certified, and its NLL is n·ln(2b̂) + n (each |d|/b̂ sums to n).
+#[test]
+fn a_laplace_scale_is_fitted_to_the_mean_absolute_residual() {
+    let times: [f64; 5] = [0.5, 1.0, 2.0, 3.0, 4.0];
+    let measured: [f64; 5] = [1.3, 0.9, 0.55, 0.25, 0.18];
+    let mut data = String::from("t,y\n");
+    for (t, m) in times.iter().zip(measured) {
+        data += &format!("{t},{m}\n");
+    }
+    let model = "states = [\"x\"]\nparameters = [\"k\"]\n[equations]\nx = \"-k * x\"\n[initial]\nx = 2.0\n[known]\nk = 0.6\n[outputs]\ny = { value = \"x\", sigma = \"b\", distribution = \"laplace\" }\n[unknowns]\nb = { guess = 0.5, min = 0.001 }\n[data]\nfile = \"data.csv\"\n[integrator]\nrtol = 1e-12\natol = 1e-14\n";
+    let case = Case::new("laplace", model, &data);
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(json["converged"].as_bool(), Some(true), "{json}");
+    let b = json["estimates"]["b"].as_f64().expect("b");
+    let n = times.len() as f64;
+    let mean: f64 =
+        times.iter().zip(measured).map(|(t, m)| (2.0 * (-0.6 * t).exp() - m).abs()).sum::<f64>()
+            / n;
+    assert!((b - mean).abs() <= 1e-6 * mean, "b = {b}, mean |d| = {mean}");
+    let nll = json["nll"].as_f64().expect("nll");
+    let expected = n * (2.0 * mean).ln() + n;
+    assert!((nll - expected).abs() <= 1e-9 * expected.abs().max(1.0), "{nll} vs {expected}");
+}

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use crate::noise::{Noise, Transform};
+use crate::noise::{Noise, NoiseDistribution, Transform};
 
 /// Measured values of one quantity.
 #[derive(Clone)]
@@ -46,6 +46,8 @@ pub struct Series {
     pub noise: Option<Noise>,
     /// The scale the residuals are formed on (discrete data only).
     pub transform: Transform,
+    /// The noise's distribution (discrete data with a noise model only; default normal).
+    pub distribution: NoiseDistribution,
 }
 
 /// Whether the data are samples or a continuous record.
@@ -120,6 +122,7 @@ impl Data {
             sample_weights: None,
             noise: None,
             transform: Transform::Lin,
+            distribution: NoiseDistribution::Normal,
         });
         self
     }
@@ -140,6 +143,7 @@ impl Data {
             sample_weights: None,
             noise: Some(noise),
             transform,
+            distribution: NoiseDistribution::Normal,
         });
         self
     }
@@ -160,6 +164,7 @@ impl Data {
             sample_weights: Some(weights.to_vec()),
             noise: None,
             transform: Transform::Lin,
+            distribution: NoiseDistribution::Normal,
         });
         self
     }
@@ -178,6 +183,7 @@ impl Data {
             sample_weights: None,
             noise: None,
             transform: Transform::Lin,
+            distribution: NoiseDistribution::Normal,
         });
         self
     }

@@ -16,7 +16,7 @@ use sysid_ode::{Counts, Integrator, Ivp, Observable, ObservableGradient, OdeErro
 
 use crate::confidence::band_half_width;
 use crate::experiment::Planned;
-use crate::noise::{LN_2PI, NOISE_ROW_SHIFT, NoiseArgs, NoiseGradient};
+use crate::noise::{NOISE_ROW_SHIFT, NoiseArgs, NoiseDistribution, NoiseGradient};
 use crate::plan::{Plan, PlannedNoise, Sampled};
 use crate::problem::Problem;
 
@@ -114,7 +114,7 @@ impl<S: System> Planned<S> {
         let mut offset = 0.0;
         for s in &sampled.series {
             for m in &s.samples {
-                offset += 0.5 * LN_2PI + s.transform.jacobian_term(m.measured);
+                offset += s.distribution.constant() + s.transform.jacobian_term(m.measured);
                 offset += match s.noise {
                     PlannedNoise::Function(_) => -0.5 * NOISE_ROW_SHIFT,
                     _ => -m.sqrt_weight.ln(),
@@ -827,8 +827,22 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
                 }
             }
             let (th, slope) = (s.transform.apply(h), s.transform.derivative(h));
+            let laplace = s.distribution == NoiseDistribution::Laplace;
             let PlannedNoise::Function(f) = &s.noise else {
                 let w = sample.sqrt_weight;
+                if laplace {
+                    // R = sign(d)·√(2|d|/b); A takes the Fisher information ∇T(h)/b in
+                    // place of the row, whose entries grow without bound as d goes to 0.
+                    let (r, dr) = s.distribution.residual(th - sample.value, w);
+                    out.r.push(r);
+                    out.data_cost += r * r;
+                    out.in_normal.push(false);
+                    if at.jacobian {
+                        out.jacobian.extend(grad.iter().map(|g| dr * slope * g));
+                        out.fisher.extend(grad.iter().map(|g| w * slope * g));
+                    }
+                    continue;
+                }
                 let r = w * (th - sample.value);
                 out.r.push(r);
                 out.data_cost += r * r;
@@ -855,7 +869,13 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
                     ),
                 });
             }
-            let r = (th - sample.value) / sigma;
+            let diff = th - sample.value;
+            // Normal: R = d/σ. Laplace (σ the scale b): R = sign(d)·√(2|d|/b), ∂R/∂d =
+            // 1/√(2|d|b), so that ∂R/∂z = ∂R/∂d·(∂T(h)/∂z − d ∂b/∂z / b) in both.
+            let (r, dr) = match laplace {
+                true => s.distribution.residual(diff, 1.0 / sigma),
+                false => (diff / sigma, 1.0 / sigma),
+            };
             out.r.push(r);
             out.data_cost += r * r;
             out.in_normal.push(false);
@@ -893,10 +913,16 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
                 for (decl, f) in free {
                     dsigma[f] += dv[decl] * at.chain[f];
                 }
-                out.jacobian.extend((0..k).map(|j| (slope * grad[j] - r * dsigma[j]) / sigma));
-                // Fisher rows: ∇T(h)/σ and √2 ∇ln σ.
+                if laplace {
+                    out.jacobian
+                        .extend((0..k).map(|j| dr * (slope * grad[j] - diff * dsigma[j] / sigma)));
+                } else {
+                    out.jacobian.extend((0..k).map(|j| (slope * grad[j] - r * dsigma[j]) / sigma));
+                }
+                // Fisher rows: ∇T(h)/σ, and √2 ∇ln σ (normal) or ∇ln b (Laplace).
+                let ln_scale = if laplace { 1.0 } else { std::f64::consts::SQRT_2 };
                 out.fisher.extend((0..k).map(|j| slope * grad[j] / sigma));
-                out.fisher.extend((0..k).map(|j| std::f64::consts::SQRT_2 * dsigma[j] / sigma));
+                out.fisher.extend((0..k).map(|j| ln_scale * dsigma[j] / sigma));
             }
             noise.push((b, dsigma.iter().map(|d| d / (sigma * b)).collect()));
         }

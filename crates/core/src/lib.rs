@@ -93,7 +93,7 @@ pub use estimate::{Estimate, ExperimentFit, FitRecord, Iteration, ScaleEstimate}
 pub use evaluate::{Linearization, Observed, WeightedResiduals};
 pub use experiment::{Experiment, Setting};
 pub use fit::Method;
-pub use noise::{Noise, Transform};
+pub use noise::{Noise, NoiseDistribution, Transform};
 pub use options::{DEFAULT_GTOL, Driven, DriverOptions, OptionsError};
 pub use problem::{Problem, ProblemBuilder};
 pub use step::Diagnostics;

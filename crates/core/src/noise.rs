@@ -20,6 +20,54 @@ use std::sync::Arc;
 /// ln(2π).
 pub const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
+/// The distribution of a measurement's noise about the model's value, on the series' scale.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NoiseDistribution {
+    /// Normal with standard deviation σ: ½ ln(2πσ²) + ½ R², R = (T(y) − T(m))/σ.
+    #[default]
+    Normal,
+    /// Laplace with scale b (σ is b): ln(2b) + |T(y) − T(m)|/b, written as ½ R² with
+    /// R = sign(d)·√(2|d|/b), d = T(y) − T(m). Its Fisher information about T(y) is 1/b², as
+    /// a normal one's is 1/σ², and about ln b it is 1 (a normal one's about ln σ is 2).
+    Laplace,
+}
+
+impl NoiseDistribution {
+    /// Its name in model files and PEtab tables: "normal" or "laplace".
+    pub fn name(self) -> &'static str {
+        match self {
+            NoiseDistribution::Normal => "normal",
+            NoiseDistribution::Laplace => "laplace",
+        }
+    }
+
+    /// The part of one sample's negative log-likelihood besides ½ R² and ln σ: ½ ln 2π
+    /// (normal), ln 2 (Laplace).
+    pub fn constant(self) -> f64 {
+        match self {
+            NoiseDistribution::Normal => 0.5 * LN_2PI,
+            NoiseDistribution::Laplace => std::f64::consts::LN_2,
+        }
+    }
+
+    /// The residual R of a difference d = T(y) − T(m) at √w = 1/σ, and ∂R/∂d.
+    ///
+    /// Laplace: R = sign(d)·√(2|d|w) and ∂R/∂d = w/√(2|d|w), which grows without bound as d
+    /// goes to 0 (R·∂R/∂d, what the gradient sums, stays w·sign(d)); at d = 0 exactly both
+    /// are taken as 0, a subgradient.
+    pub fn residual(self, d: f64, sqrt_weight: f64) -> (f64, f64) {
+        match self {
+            NoiseDistribution::Normal => (sqrt_weight * d, sqrt_weight),
+            NoiseDistribution::Laplace => {
+                let root = (2.0 * d.abs() * sqrt_weight).sqrt();
+                let slope = if root > 0.0 { sqrt_weight / root } else { 0.0 };
+                (d.signum() * root, slope)
+            }
+        }
+    }
+}
+
 /// The scale residuals are formed on.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -15,7 +15,7 @@ use sysid_ode::{Interpolation, Observable, Record, RecordedOutput, Signal, Syste
 
 use crate::data::{Data, Record as Kind, Samples, Series};
 use crate::error::ProblemError;
-use crate::noise::{Noise, Transform};
+use crate::noise::{Noise, NoiseDistribution, Transform};
 
 pub use crate::experiment::{Planned, SettingFunction, SlotJacobian};
 pub use crate::noise::{LN_2PI, NOISE_ROW_SHIFT, NoiseArgs, NoiseFunction, NoiseGradient};
@@ -52,6 +52,8 @@ pub struct PlannedSeries {
     pub observable: Observable,
     /// The scale its residuals are formed on.
     pub transform: Transform,
+    /// Its noise's distribution.
+    pub distribution: NoiseDistribution,
     /// Its noise.
     pub noise: PlannedNoise,
     /// Its samples.
@@ -235,6 +237,22 @@ fn resolve<S: System>(system: &S, data: &Data, s: &Series) -> Result<Observable,
     if (s.noise.is_some() || s.transform != Transform::Lin) && data.record != Kind::Discrete {
         return Err(invalid("a noise model or a log scale needs discrete data".into()));
     }
+    if s.distribution == NoiseDistribution::Laplace {
+        match &s.noise {
+            None => {
+                return Err(invalid(
+                    "laplace noise needs a noise model: its σ, the Laplace scale b".into(),
+                ));
+            }
+            Some(Noise::Scale { .. }) => {
+                return Err(invalid(
+                    "laplace noise with a σ scale set in closed form (the normal one's) is not supported"
+                        .into(),
+                ));
+            }
+            _ => {}
+        }
+    }
     if let Samples::Points { times, values } = &s.samples {
         if s.transform != Transform::Lin
             && let Some(i) = values.iter().position(|v| *v <= 0.0)
@@ -293,7 +311,7 @@ fn plan_discrete(
                         .collect(),
                 );
                 noises.push((
-                    s.transform,
+                    (s.transform, s.distribution),
                     match &s.noise {
                         None => PlannedNoise::Weights,
                         Some(Noise::Known(_)) => PlannedNoise::Known,
@@ -352,7 +370,8 @@ fn plan_continuous(
         })
         .collect::<Result<Vec<_>, ProblemError>>()?;
     let points = outputs.iter().map(|o| record_nodes(o, (t_lo, t_hi))).collect();
-    let noises = vec![(Transform::Lin, PlannedNoise::Weights); resolved.len()];
+    let noises =
+        vec![((Transform::Lin, NoiseDistribution::Normal), PlannedNoise::Weights); resolved.len()];
     let nodes = gather(resolved, points, noises);
     Ok(Plan::Continuous { span: (t_lo, t_hi), outputs, nodes })
 }
@@ -361,7 +380,7 @@ fn plan_continuous(
 fn gather(
     observables: &[Observable],
     points: Vec<Vec<(f64, f64, f64)>>,
-    noises: Vec<(Transform, PlannedNoise)>,
+    noises: Vec<((Transform, NoiseDistribution), PlannedNoise)>,
 ) -> Sampled {
     let mut times: Vec<f64> = points.iter().flatten().map(|p| p.0).collect();
     times.sort_by(f64::total_cmp);
@@ -370,9 +389,10 @@ fn gather(
         .iter()
         .zip(points)
         .zip(noises)
-        .map(|((&observable, pts), (transform, noise))| PlannedSeries {
+        .map(|((&observable, pts), ((transform, distribution), noise))| PlannedSeries {
             observable,
             transform,
+            distribution,
             noise,
             samples: pts
                 .into_iter()

@@ -360,6 +360,9 @@ fn measured_series(
             }
         }
         data = data.series_with_noise(name, &t, &v, noise, transform);
+        if let (Some(o), Some(series)) = (output, data.series.last_mut()) {
+            series.distribution = model.outputs[o].distribution;
+        }
     }
     if data.series.is_empty() {
         return Err(ModelError::file(

@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use num_dual::Dual64;
 use sysid_core::{
-    Experiment, Noise, Problem, ProblemError, Setting,
+    Experiment, Noise, NoiseDistribution, Problem, ProblemError, Setting,
     plan::{NoiseArgs, NoiseFunction, NoiseGradient, SettingFunction},
 };
 use sysid_ode::{Ivp, Observable, ObservableGradient, Scalar};
@@ -444,9 +444,11 @@ impl Model {
         let mut bare: Vec<&str> = Vec::new();
         for o in &f.outputs {
             if let NoiseSpec::Expression(e) = &o.noise {
-                match &e.bare {
-                    Some(name) => bare.push(name),
-                    None => other.extend(e.uses.iter().map(String::as_str)),
+                // A Laplace scale has no closed form here (the normal σ's is the root mean
+                // square): it is fitted as a function.
+                match (&e.bare, o.distribution) {
+                    (Some(name), NoiseDistribution::Normal) => bare.push(name),
+                    _ => other.extend(e.uses.iter().map(String::as_str)),
                 }
             }
         }

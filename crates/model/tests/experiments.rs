@@ -66,8 +66,12 @@ fn mistakes_in_the_file_are_named_where_they_are() {
         "m.toml:16:1: [unknowns]: `unused` is used nowhere: it is no state or parameter, and no sigma, set, preequilibrate, initial or [initial] expression names it",
     );
     refused(
-        &TWO.replace("sigma = \"s\" }", "sigma = \"s\", distribution = \"laplace\" }"),
-        "m.toml:12:57: [outputs] Bm.distribution: \"laplace\" noise is not supported yet (the likelihood is normal)",
+        &TWO.replace("sigma = \"s\" }", "distribution = \"laplace\" }"),
+        "m.toml:12:1: [outputs] Bm: laplace noise needs a `sigma`, its scale b",
+    );
+    refused(
+        &TWO.replace("sigma = \"s\" }", "sigma = \"s\", distribution = \"cauchy\" }"),
+        "m.toml:12:57: [outputs] Bm.distribution must be \"normal\" or \"laplace\", got \"cauchy\"",
     );
     refused(
         &TWO.replace("sigma = \"s\"", "sigma = -0.1"),

@@ -7,5 +7,6 @@ mod allocations;
 mod events;
 mod experiments;
 mod expressions;
+mod laplace;
 mod model_file;
 mod symbolic;

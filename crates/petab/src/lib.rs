@@ -30,7 +30,7 @@
 //! `parts` holds what these stages hand each other (outputs, experiments, states).
 //! `rendering` writes the model file's text with a source map back to the tables and the
 //! SBML, so that every error names the file, the line and the column of what caused it.
-//! What is not supported (laplace noise, events with delays, …) is refused by name.
+//! What is not supported (events with delays, algebraic rules, …) is refused by name.
 #![warn(missing_docs)]
 
 mod conditions;

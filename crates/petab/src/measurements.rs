@@ -215,6 +215,7 @@ impl Builder<'_> {
                 })),
             },
             transform: observable.transform,
+            distribution: observable.distribution,
         })
     }
 }

@@ -13,6 +13,8 @@ pub(crate) struct Observable {
     pub(crate) formula: Math,
     pub(crate) noise: Math,
     pub(crate) transform: &'static str,
+    /// Its noise distribution: "normal" or "laplace" (σ is then the Laplace scale b).
+    pub(crate) distribution: &'static str,
     /// Where its formula and its noise formula are written, as errors there begin.
     pub(crate) formula_at: ModelError,
     pub(crate) noise_at: ModelError,
@@ -36,23 +38,23 @@ impl Builder<'_> {
                 };
                 let transform =
                     scale_of(t.cell_named(row, "observableTransformation"), "transformation")?;
-                if let Some(c) = t.cell_named(row, "noiseDistribution") {
-                    match c.text {
-                        "" | "normal" => {}
-                        "laplace" => {
-                            return Err(c.err("laplace noise is not supported (only normal)"));
-                        }
+                let distribution = match t.cell_named(row, "noiseDistribution") {
+                    None => "normal",
+                    Some(c) => match c.text {
+                        "" | "normal" => "normal",
+                        "laplace" => "laplace",
                         other => {
-                            return Err(
-                                c.err(format!("`{other}`: the noise distribution is normal"))
-                            );
+                            return Err(c.err(format!(
+                                "`{other}`: the noise distribution is normal or laplace"
+                            )));
                         }
-                    }
-                }
+                    },
+                };
                 let observable = Observable {
                     formula: parse(t.cell(row, formula))?,
                     noise: parse(t.cell(row, noise))?,
                     transform,
+                    distribution,
                     formula_at: t.cell(row, formula).err(""),
                     noise_at: t.cell(row, noise).err(""),
                 };

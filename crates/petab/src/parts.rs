@@ -16,6 +16,8 @@ pub(crate) struct Output {
     pub(crate) value: String,
     pub(crate) sigma: Sigma,
     pub(crate) transform: &'static str,
+    /// "normal" or "laplace".
+    pub(crate) distribution: &'static str,
 }
 
 #[derive(Clone, PartialEq)]

@@ -71,8 +71,12 @@ impl Builder<'_> {
                 Sigma::Number(v) => toml_number(*v),
                 Sigma::Expression(e) => format!("\"{}\"", e.replace(OWN, name)),
             };
+            let distribution = match o.distribution {
+                "normal" => String::new(),
+                other => format!(", distribution = \"{other}\""),
+            };
             let entry = format!(
-                "{name} = {{ value = \"{}\", sigma = {sigma}, transform = \"{}\" }}",
+                "{name} = {{ value = \"{}\", sigma = {sigma}, transform = \"{}\"{distribution} }}",
                 o.value, o.transform
             );
             if let Some(observable) = self.observables.get(&o.observable) {

@@ -319,3 +319,27 @@ fn events_that_are_not_switches_in_time_are_refused_where_written() {
         "a preequilibration (or a steady state) in a model with events (event `pulse`) is not supported",
     );
 }
+
+/// The same model without events (A = k·t), its observable with `noiseDistribution`
+/// `laplace` (σ = 0.1 is the Laplace scale b): the NLL Σ ln(2b) + |m − k t|/b to 1e-9 and
+/// ∂NLL/∂k = Σ sign(k t − m)·t/b to 1e-9 relative.
+#[test]
+fn laplace_noise_is_read_from_the_observable_table() {
+    let path = problem("laplace", &sbml(""), "k\tlin\t0.01\t10\t0.7\t1\n", &[("only", None)], None);
+    let observables = path.with_file_name("observables.tsv");
+    std::fs::write(
+        &observables,
+        format!("observableId\tobservableFormula\tnoiseFormula\tnoiseDistribution\nA_obs\tA\t{SIGMA}\tlaplace\n"),
+    )
+    .expect("written");
+    let (value, gradient) = nll_and_gradient(&path);
+    let (mut expected, mut slope) = (0.0, 0.0);
+    for (&t, m) in TIMES.iter().zip(measured(1.5)) {
+        let d = 0.7 * t - m;
+        expected += (2.0 * SIGMA).ln() + d.abs() / SIGMA;
+        slope += d.signum() * t / SIGMA;
+    }
+    assert!((value - expected).abs() <= 1e-9 * expected.abs(), "NLL {value} vs {expected}");
+    assert!((gradient[0] - slope).abs() <= 1e-9 * slope.abs(), "{gradient:?} vs {slope}");
+    let _ = std::fs::remove_dir_all(path.parent().expect("a directory"));
+}

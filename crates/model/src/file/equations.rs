@@ -1,6 +1,6 @@
 //! The expressions of a model file: `[equations]`, one per state, and `[outputs]`.
 
-use sysid_core::Transform;
+use sysid_core::{NoiseDistribution, Transform};
 use toml::de::{DeTable, DeValue};
 
 use super::names::{Names, Scope};
@@ -61,14 +61,21 @@ pub(super) fn read_outputs(
             let DeValue::Table(t) = value.get_ref() else {
                 let value = r.expression(value, &what, &|n| scope.resolve(n), &scope.listed)?;
                 let (noise, transform) = (NoiseSpec::Weights, Transform::Lin);
-                return Ok(OutputSpec { name, value, noise, transform, at });
+                let distribution = NoiseDistribution::Normal;
+                return Ok(OutputSpec { name, value, noise, transform, distribution, at });
             };
             let expression = t.get("value").ok_or_else(|| {
                 r.err(value.span().start, format!("[outputs] {name}: a table needs `value`, the output's expression"))
             })?;
             let program = r.expression(expression, &what, &|n| scope.resolve(n), &scope.listed)?;
-            let mut output =
-                OutputSpec { name: name.clone(), value: program, noise: NoiseSpec::Weights, transform: Transform::Lin, at };
+            let mut output = OutputSpec {
+                name: name.clone(),
+                value: program,
+                noise: NoiseSpec::Weights,
+                transform: Transform::Lin,
+                distribution: NoiseDistribution::Normal,
+                at,
+            };
             for (k, v) in t.iter() {
                 match k.get_ref().as_ref() {
                     "value" => {}
@@ -86,21 +93,18 @@ pub(super) fn read_outputs(
                             }
                         }
                     }
-                    "distribution" => match r.string(v, &format!("[outputs] {name}.distribution"))? {
-                        "normal" => {}
-                        "laplace" => {
-                            return Err(r.err(
-                                v.span().start,
-                                format!("[outputs] {name}.distribution: \"laplace\" noise is not supported yet (the likelihood is normal)"),
-                            ));
+                    "distribution" => {
+                        output.distribution = match r.string(v, &format!("[outputs] {name}.distribution"))? {
+                            "normal" => NoiseDistribution::Normal,
+                            "laplace" => NoiseDistribution::Laplace,
+                            other => {
+                                return Err(r.err(
+                                    v.span().start,
+                                    format!("[outputs] {name}.distribution must be \"normal\" or \"laplace\", got \"{other}\""),
+                                ));
+                            }
                         }
-                        other => {
-                            return Err(r.err(
-                                v.span().start,
-                                format!("[outputs] {name}.distribution must be \"normal\", got \"{other}\""),
-                            ));
-                        }
-                    },
+                    }
                     other => {
                         return Err(r.err(
                             k.span().start,
@@ -108,6 +112,14 @@ pub(super) fn read_outputs(
                         ));
                     }
                 }
+            }
+            if output.distribution == NoiseDistribution::Laplace
+                && matches!(output.noise, NoiseSpec::Weights)
+            {
+                return Err(r.err(
+                    at,
+                    format!("[outputs] {name}: laplace noise needs a `sigma`, its scale b"),
+                ));
             }
             Ok(output)
         })

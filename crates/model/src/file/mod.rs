@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use sysid_core::{Transform, Unknown};
+use sysid_core::{NoiseDistribution, Transform, Unknown};
 use sysid_ode::{Integrator, Interpolation};
 use toml::de::DeTable;
 
@@ -70,6 +70,8 @@ pub struct OutputSpec {
     pub noise: NoiseSpec,
     /// The scale its residuals are formed on.
     pub transform: Transform,
+    /// The noise's distribution (`distribution`: "normal", the default, or "laplace").
+    pub distribution: NoiseDistribution,
     /// Byte offset of its key.
     pub at: usize,
 }
