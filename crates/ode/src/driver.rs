@@ -488,11 +488,11 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         let (t, states) = (self.t, self.ev.rhs.states());
         let next = &mut self.conditions_next;
         self.ev.rhs.event_conditions(t_next, &self.work.x_new[..states], next);
-        let falling: Vec<usize> =
-            (0..next.len()).filter(|&i| self.conditions[i] > 0.0 && next[i] <= 0.0).collect();
-        if falling.is_empty() {
+        let falls = |i: usize| self.conditions[i] > 0.0 && next[i] <= 0.0;
+        if !(0..next.len()).any(falls) {
             return Vec::new();
         }
+        let falling: Vec<usize> = (0..next.len()).filter(|&i| falls(i)).collect();
         <Active as Stepper<R>>::dense(&self.stepper, &mut self.work, t, t_next);
         let mut all = vec![0.0; self.conditions.len()];
         let mut located: Vec<(usize, f64)> = falling
