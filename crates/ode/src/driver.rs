@@ -281,11 +281,17 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
                 let crossed = self.events_in_step(t_next);
                 if crossed.is_empty() {
                     self.accept(t_next)?;
-                } else if self.step_to_event(&crossed, t_next)?.is_none() {
+                    continue;
+                }
+                let Some(tau) = self.step_to_event(&crossed, t_next)? else {
                     return Err(OdeError::InvalidSetup(format!(
                         "the step to an event at {} failed",
                         crossed[0].1
                     )));
+                };
+                // No step fits between the event and the step's end: it ends there.
+                if (t_next - tau).abs() <= resolution(t_next) {
+                    self.t = t_next;
                 }
             }
         }
@@ -337,7 +343,12 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
                         self.h = 0.5 * (crossed[0].1 - self.t).abs();
                         last_rejected = true;
                     }
-                    Some(tau) if tau.to_bits() == seg_end.to_bits() => return Ok(()),
+                    // An event too close to the segment's end for a step in between: the
+                    // segment ends there, its state the one after the event.
+                    Some(tau) if (seg_end - tau).abs() <= resolution(seg_end) => {
+                        self.t = seg_end;
+                        return Ok(());
+                    }
                     Some(_) => last_rejected = false,
                 }
                 continue;

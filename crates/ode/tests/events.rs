@@ -122,6 +122,19 @@ fn an_event_at_a_time_that_is_a_parameter_moves_with_it() {
     }
 }
 
+/// An event two units in the last place before the end of the integration: no step fits
+/// between them, so the integration ends there with the state after the event (x halved:
+/// 2·4 − 2·T/2 = 4). Before, the step size collapsed there (`StepSizeTooSmall`).
+#[test]
+fn an_event_just_before_the_end_is_fired_and_ends_the_integration() {
+    let sys = Halved(Signature::new(&["x"], &["b", "T"]));
+    let tau = 4.0f64.next_down().next_down();
+    for integrator in integrators() {
+        let sol = Ivp::new(&sys, 0.0, &[0.0], &[2.0, tau]).solve(&integrator, &[4.0]).unwrap();
+        assert_close(sol.state(0)[0], 4.0, 1e-10);
+    }
+}
+
 #[test]
 fn a_condition_already_met_at_the_start_does_not_fire() {
     // x0 = 0.5 < a = 1: the trigger is true from the start, and x only falls.
