@@ -829,26 +829,19 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
             let (th, slope) = (s.transform.apply(h), s.transform.derivative(h));
             let laplace = s.distribution == NoiseDistribution::Laplace;
             let PlannedNoise::Function(f) = &s.noise else {
+                // Normal: R = √w·d. Laplace: R = sign(d)·√(2|d|/b), and A takes the Fisher
+                // information ∇T(h)/b in place of the row, whose entries grow without bound
+                // as d goes to 0.
                 let w = sample.sqrt_weight;
-                if laplace {
-                    // R = sign(d)·√(2|d|/b); A takes the Fisher information ∇T(h)/b in
-                    // place of the row, whose entries grow without bound as d goes to 0.
-                    let (r, dr) = s.distribution.residual(th - sample.value, w);
-                    out.r.push(r);
-                    out.data_cost += r * r;
-                    out.in_normal.push(false);
-                    if at.jacobian {
-                        out.jacobian.extend(grad.iter().map(|g| dr * slope * g));
-                        out.fisher.extend(grad.iter().map(|g| w * slope * g));
-                    }
-                    continue;
-                }
-                let r = w * (th - sample.value);
+                let (r, dr) = s.distribution.residual(th - sample.value, w);
                 out.r.push(r);
                 out.data_cost += r * r;
-                out.in_normal.push(true);
+                out.in_normal.push(!laplace);
                 if at.jacobian {
-                    out.jacobian.extend(grad.iter().map(|g| w * slope * g));
+                    out.jacobian.extend(grad.iter().map(|g| dr * slope * g));
+                    if laplace {
+                        out.fisher.extend(grad.iter().map(|g| w * slope * g));
+                    }
                 }
                 continue;
             };

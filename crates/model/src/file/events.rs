@@ -36,12 +36,10 @@ pub(super) fn read_events(
         }
         slot => slot,
     };
-    let no_inputs = |e: ModelError| match input.take() {
+    // The error of `label`'s expression, where it named an input.
+    let no_inputs = |label: &str, e: ModelError| match input.take() {
         Some(name) => ModelError {
-            message: format!(
-                "{}: `{name}` is an input, which events may not use",
-                e.message.split(": unknown name").next().unwrap_or_default()
-            ),
+            message: format!("{label}: `{name}` is an input, which events may not use"),
             ..e
         },
         None => e,
@@ -54,9 +52,10 @@ pub(super) fn read_events(
         let trigger = table.get("trigger").ok_or_else(|| {
             r.err(at, format!("[[events]] {what}: `trigger` is missing: the comparison that fires it, like \"lt(x, 1e-8)\""))
         })?;
+        let label = format!("{what}: trigger");
         let condition = r
-            .trigger(trigger, &format!("{what}: trigger"), &resolve, &scope.listed)
-            .map_err(no_inputs)?;
+            .trigger(trigger, &label, &resolve, &scope.listed)
+            .map_err(|e| no_inputs(&label, e))?;
         let set = table.get("set").ok_or_else(|| {
             r.err(at, format!("[[events]] {what}: `set` is missing: the states it resets, like {{ x = \"0\" }}"))
         })?;
@@ -72,10 +71,11 @@ pub(super) fn read_events(
                     ),
                 ));
             };
+            let label = format!("{what}: {name}");
             let reset = match value.get_ref() {
                 DeValue::String(_) => r
-                    .expression(value, &format!("{what}: {name}"), &resolve, &scope.listed)
-                    .map_err(no_inputs)?,
+                    .expression(value, &label, &resolve, &scope.listed)
+                    .map_err(|e| no_inputs(&label, e))?,
                 _ => {
                     let v = r.number(value, &format!("[[events]] {what}: {name}"))?;
                     crate::expr::Program::compile(&crate::expr::Expr::Num(v), &resolve)
@@ -94,10 +94,9 @@ pub(super) fn read_events(
         }
         out.push(EventSpec { condition, resets, at });
     }
-    if let (Some(e), Some(first)) =
-        (experiments.iter().find(|e| e.steady || e.preequilibrate.is_some()), out.first())
+    if !out.is_empty()
+        && let Some(e) = experiments.iter().find(|e| e.steady || e.preequilibrate.is_some())
     {
-        let _ = first;
         return Err(r.err(
             e.at,
             format!(
