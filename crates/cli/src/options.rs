@@ -178,6 +178,10 @@ pub struct MethodArgs {
     /// counts as known (degrees of freedom, certificate). Repeatable.
     #[arg(long = "fix", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
     pub fix: Vec<(String, f64)>,
+    /// Start the fit from this value of an unknown instead of its guess (within its bounds;
+    /// with --starts, the first start). Repeatable.
+    #[arg(long = "start", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
+    pub start: Vec<(String, f64)>,
 }
 
 impl MethodArgs {
@@ -204,11 +208,21 @@ impl MethodArgs {
                 anyhow::bail!("--fix {name}=… is given twice: fix each unknown once");
             }
         }
+        for (i, (name, _)) in self.start.iter().enumerate() {
+            if self.start[..i].iter().any(|(n, _)| n == name) {
+                anyhow::bail!("--start {name}=… is given twice: start each unknown once");
+            }
+            if self.fix.iter().any(|(n, _)| n == name) {
+                anyhow::bail!(
+                    "{name} is given both --fix and --start: a fixed unknown does not move"
+                );
+            }
+        }
         self.settings().validate().map_err(|e| refused(e.name(), e.problem()))
     }
 }
 
-/// `NAME=VALUE` of `--fix`.
+/// `NAME=VALUE` of `--fix` and `--start`.
 fn parse_fix(s: &str) -> Result<(String, f64), String> {
     let (name, value) =
         s.split_once('=').ok_or_else(|| format!("`{s}`: expected NAME=VALUE, as in k1=0.5"))?;

@@ -87,8 +87,8 @@ impl SourceArgs {
     }
 }
 
-/// The problem of `source` with the command line's integrator settings and `--fix`ed
-/// unknowns.
+/// The problem of `source` with the command line's integrator settings, `--fix`ed unknowns
+/// and `--start` values.
 pub fn problem(
     source: &SourceArgs,
     integrator: &IntegratorArgs,
@@ -98,18 +98,21 @@ pub fn problem(
     Ok((prepare(problem, integrator, options)?, context))
 }
 
-/// `problem` with the command line's integrator settings and `--fix`ed unknowns.
+/// `problem` with the command line's integrator settings, `--fix`ed unknowns and `--start`
+/// values.
 pub fn prepare(
     problem: AnyProblem,
     integrator: &IntegratorArgs,
     options: &MethodArgs,
 ) -> anyhow::Result<AnyProblem> {
-    with_integrator(problem, integrator)?.with_fixed(&options.fix).map_err(|e| match e {
-        ProblemError::AllFixed(_) | ProblemError::NotAnUnknown { .. } => {
-            anyhow::anyhow!("--fix: {e}")
-        }
-        e => e.into(),
-    })
+    let problem =
+        with_integrator(problem, integrator)?.with_fixed(&options.fix).map_err(|e| match e {
+            ProblemError::AllFixed(_) | ProblemError::NotAnUnknown { .. } => {
+                anyhow::anyhow!("--fix: {e}")
+            }
+            e => e.into(),
+        })?;
+    problem.with_start(&options.start).map_err(|e| anyhow::anyhow!("--start: {e}"))
 }
 
 /// `problem` with the command line's integrator settings, where any are given.

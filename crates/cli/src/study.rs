@@ -105,6 +105,11 @@ pub struct MergeArgs {
 pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
     args.integrator.validate()?;
+    if let Some((name, _)) = args.options.start.first() {
+        bail!(
+            "--start {name}=… is for one fit (fit, compare, profile, predict): a study draws each trial's start itself (--perturb)"
+        );
+    }
     if !(args.log_every >= 0.0 && args.log_every.is_finite()) {
         bail!(
             "--log-every must be a non-negative number of seconds (0: never), got {}",

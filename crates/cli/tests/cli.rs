@@ -171,6 +171,7 @@ fn a_negative_number_reaches_the_options_own_check() {
         "--gtol",
         "--max-integrations",
         "--fix",
+        "--start",
         "--rtol",
         "--atol",
         "--fixed-step",
@@ -610,6 +611,61 @@ fn fix_holds_an_unknown_for_one_run() {
         assert_eq!(out.status.code(), Some(2), "{args:?}");
         assert!(text(&out.stderr).contains(needle), "{args:?}: {}", text(&out.stderr));
     }
+}
+
+#[test]
+fn start_begins_a_fit_elsewhere_and_refits_any_start_of_a_multistart() {
+    // Every start of a multistart lists where it began; --start there fits it again alone,
+    // to the same end, bit for bit.
+    let args =
+        ["fit", "--system", "lotka-volterra", "--method", "gauss-newton-ls", "--format", "json"];
+    let out = sysid(&[&args[..], &["--starts", "4", "--starts-without-guess"]].concat());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let waterfall = json["starts"]["waterfall"].as_array().unwrap();
+    assert_eq!(waterfall.len(), 4);
+    for row in waterfall {
+        let from = row["start_values"].as_object().unwrap();
+        let names: Vec<&String> = from.keys().collect();
+        assert_eq!(names, json["estimates"].as_object().unwrap().keys().collect::<Vec<_>>());
+        let start: Vec<String> = from.iter().map(|(k, v)| format!("--start={k}={v}")).collect();
+        let start: Vec<&str> = start.iter().map(String::as_str).collect();
+        let alone = sysid(&[&args[..], &start].concat());
+        let fit: serde_json::Value = serde_json::from_slice(&alone.stdout).unwrap();
+        assert_eq!(fit["cost"], row["cost"], "start {}", row["start"]);
+        assert_eq!(fit["estimates"], row["estimates"], "start {}", row["start"]);
+        assert_eq!(fit["termination_code"], row["termination_code"], "start {}", row["start"]);
+    }
+    // A start must be an unknown's, within its bounds, and not fixed as well.
+    let petab = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml");
+    let petab = petab.to_str().unwrap();
+    for (args, needle) in [
+        (&["--system", "falling-body", "--start", "k=1"][..], "--start: `k` is not an unknown"),
+        (
+            &["--system", "falling-body", "--start", "g=1", "--fix", "g=1"],
+            "g is given both --fix and --start",
+        ),
+        (
+            &["--system", "falling-body", "--start", "g=1", "--start", "g=2"],
+            "--start g=… is given twice",
+        ),
+        (
+            &["--petab", petab, "--start", "k_phos=1e9"],
+            "--start: unknown `k_phos`: start 1000000000: above its max 100000",
+        ),
+        (
+            &["--petab", petab, "--start", "k_phos=-1"],
+            "unknown `k_phos`: start -1: it is on a log scale, so it must be positive",
+        ),
+    ] {
+        let out = sysid(&[&["fit"][..], args].concat());
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(text(&out.stderr).contains(needle), "{args:?}: {}", text(&out.stderr));
+    }
+    let study = sysid(&["study", "--system", "falling-body", "--start", "g=30", "--out", "x"]);
+    assert_eq!(study.status.code(), Some(2));
+    assert!(text(&study.stderr).contains("a study draws each trial's start itself"));
 }
 
 #[test]

@@ -310,6 +310,46 @@ impl<S: System> Problem<S> {
         self.replan()
     }
 
+    /// The same problem started elsewhere: each unknown named in `start` (a free unknown or a
+    /// noise scale) gets that value as its guess, the point a fit begins from. The value must
+    /// be finite, within the unknown's bounds, and positive on a log scale.
+    pub fn with_start(mut self, start: &[(String, f64)]) -> Result<Self, ProblemError> {
+        for (i, (name, value)) in start.iter().enumerate() {
+            if start[..i].iter().any(|(n, _)| n == name) {
+                return Err(ProblemError::InvalidValue {
+                    what: format!("`{name}`, started twice: start"),
+                    value: *value,
+                });
+            }
+            let movable: Vec<usize> = self.free.iter().chain(&self.scales).copied().collect();
+            let Some(j) = movable.iter().copied().find(|&j| &self.declared[j].name == name) else {
+                let names: Vec<&str> =
+                    movable.iter().map(|&j| self.declared[j].name.as_str()).collect();
+                return Err(ProblemError::NotAnUnknown {
+                    name: name.clone(),
+                    unknowns: names.join(", "),
+                });
+            };
+            let u = &mut self.declared[j];
+            let below = u.min.filter(|lo| value < lo).map(|lo| format!("below its min {lo}"));
+            let above = u.max.filter(|hi| value > hi).map(|hi| format!("above its max {hi}"));
+            let wrong = match (value.is_finite(), u.log && *value <= 0.0) {
+                (false, _) => Some("it must be finite".to_string()),
+                (_, true) => Some("it is on a log scale, so it must be positive".to_string()),
+                _ => below.or(above),
+            };
+            if let Some(wrong) = wrong {
+                return Err(ProblemError::InvalidUnknown {
+                    name: name.clone(),
+                    message: format!("start {value}: {wrong}"),
+                });
+            }
+            u.guess = *value;
+            self.held[j] = *value;
+        }
+        self.replan()
+    }
+
     /// Makes the settings that keep results of earlier points (a preequilibration's steady
     /// state, solved once per point) forget them, so that the next evaluation at a point
     /// already met costs what it did the first time: `sysid evaluate --repeat` and the

@@ -179,6 +179,12 @@ pub struct Outcome {
     pub iterations: usize,
     /// Wall-clock time of the fit (redraws included), in milliseconds.
     pub elapsed_ms: f64,
+    /// Where the fit began, by name (the last draw where the start was redrawn), the noise
+    /// scales set in closed form last: `--start` NAME=VALUE for each of them fits this start
+    /// again.
+    pub start_values: serde_json::Map<String, serde_json::Value>,
+    /// Where it ended, by name.
+    pub estimates: serde_json::Map<String, serde_json::Value>,
 }
 
 impl std::fmt::Display for Starts {
@@ -317,53 +323,67 @@ where
     // A queue in start order, served by one task per thread: once the budget is spent no
     // task takes another start, so the starts fitted are the first ones, whatever the timing.
     let next = AtomicUsize::new(0);
-    let fit_start = |j: usize| -> Result<(Estimate, usize, f64), FitError> {
+    let fit_start = |j: usize| -> Result<(Estimate, usize, f64, Vec<f64>), FitError> {
         let began = std::time::Instant::now();
-        let mut fit = method.fit_from(problem, &starts[j])?;
+        let mut from = starts[j].clone();
+        let mut fit = method.fit_from(problem, &from)?;
         let mut redrawn = 0;
         // The guess (start 0) is the user's: it is kept whatever happens there.
         if j > 0 || !options.guess {
             let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
             rng.set_stream(j as u64);
             while redrawn < MAX_REDRAWS && matches!(fit.termination, Termination::StartFailed(_)) {
-                let again: Vec<f64> = problem
+                from = problem
                     .unknowns()
                     .list()
                     .iter()
                     .map(|u| draw(u, rng.random::<f64>(), options.spread))
                     .collect();
-                fit = method.fit_from(problem, &again)?;
+                fit = method.fit_from(problem, &from)?;
                 redrawn += 1;
             }
         }
-        Ok((fit, redrawn, began.elapsed().as_secs_f64() * 1e3))
+        Ok((fit, redrawn, began.elapsed().as_secs_f64() * 1e3, from))
     };
     let spent = || options.budget.is_some_and(|b| started.elapsed() >= b);
-    let mut runs: Vec<(usize, (Estimate, usize, f64))> = (0..rayon::current_num_threads())
-        .into_par_iter()
-        .map(|_| {
-            let mut mine = Vec::new();
-            loop {
-                if spent() && next.load(Ordering::SeqCst) > 0 {
-                    break;
+    let mut runs: Vec<(usize, (Estimate, usize, f64, Vec<f64>))> =
+        (0..rayon::current_num_threads())
+            .into_par_iter()
+            .map(|_| {
+                let mut mine = Vec::new();
+                loop {
+                    if spent() && next.load(Ordering::SeqCst) > 0 {
+                        break;
+                    }
+                    let j = next.fetch_add(1, Ordering::SeqCst);
+                    if j >= starts.len() {
+                        break;
+                    }
+                    mine.push((j, fit_start(j)?));
                 }
-                let j = next.fetch_add(1, Ordering::SeqCst);
-                if j >= starts.len() {
-                    break;
-                }
-                mine.push((j, fit_start(j)?));
-            }
-            Ok(mine)
-        })
-        .collect::<Result<Vec<_>, FitError>>()?
-        .into_iter()
-        .flatten()
-        .collect();
+                Ok(mine)
+            })
+            .collect::<Result<Vec<_>, FitError>>()?
+            .into_iter()
+            .flatten()
+            .collect();
     runs.sort_by_key(|r| r.0);
-    let runs: Vec<(Estimate, usize, f64)> = runs.into_iter().map(|r| r.1).collect();
+    let runs: Vec<(Estimate, usize, f64, Vec<f64>)> = runs.into_iter().map(|r| r.1).collect();
     let not_started = starts.len() - runs.len();
     let redrawn = runs.iter().map(|r| r.1).sum();
     let times: Vec<f64> = runs.iter().map(|r| r.2).collect();
+    // The free unknowns where each fit began, then the noise scales, which every fit starts
+    // from the problem's values.
+    let mut names = problem.names();
+    names.extend(problem.scales().iter().map(|&j| problem.declared()[j].name.clone()));
+    let scales = problem.scale_values();
+    let from: Vec<serde_json::Map<String, serde_json::Value>> = runs
+        .iter()
+        .map(|r| {
+            let values = r.3.iter().chain(&scales).map(|&v| serde_json::json!(v));
+            names.iter().cloned().zip(values).collect()
+        })
+        .collect();
     let fits: Vec<Estimate> = runs.into_iter().map(|r| r.0).collect();
     let mut summary = summarise(&fits, options);
     summary.redrawn = redrawn;
@@ -372,6 +392,7 @@ where
     summary.converged_per_minute = summary.converged as f64 / (summary.elapsed_ms / 6e4);
     for row in &mut summary.waterfall {
         row.elapsed_ms = times[row.start];
+        row.start_values = from[row.start].clone();
     }
     let best = fits.into_iter().nth(summary.best_start).expect("the best start's fit");
     Ok(Multistart { best, starts: summary })
@@ -460,6 +481,8 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
             termination_code: f.termination.code(),
             iterations: f.iterations,
             elapsed_ms: 0.0,
+            start_values: serde_json::Map::new(),
+            estimates: named(f),
         })
         .collect();
     waterfall.sort_by(|a, b| {
@@ -484,8 +507,10 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
     }
 }
 
+/// The fit's estimates by name, the noise scales set in closed form last (as in its JSON).
 fn named(fit: &Estimate) -> serde_json::Map<String, serde_json::Value> {
-    fit.names.iter().cloned().zip(fit.values.iter().map(|&v| serde_json::json!(v))).collect()
+    let values = fit.values.iter().chain(fit.scales.iter().map(|s| &s.value));
+    fit.all_names().into_iter().zip(values.map(|&v| serde_json::json!(v))).collect()
 }
 
 #[cfg(test)]

@@ -514,7 +514,7 @@ impl PyProblem {
     }
 
     /// Fits the problem: a `sysid.FitResult` over the fit's JSON object (docs/json.md).
-    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, fix=None))]
+    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, fix=None, start=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
         &self,
@@ -528,16 +528,25 @@ impl PyProblem {
         gtol: Option<f64>,
         max_integrations: Option<u64>,
         fix: Option<std::collections::BTreeMap<String, f64>>,
+        start: Option<std::collections::BTreeMap<String, f64>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         let settings = settings(max_iterations, gtol, max_integrations)?;
         let method = build(method, &settings)?;
         let fix: Vec<(String, f64)> = fix.unwrap_or_default().into_iter().collect();
-        let problem = match fix.is_empty() {
+        let start: Vec<(String, f64)> = start.unwrap_or_default().into_iter().collect();
+        if let Some((name, _)) = start.iter().find(|(n, _)| fix.iter().any(|(f, _)| f == n)) {
+            return Err(PyValueError::new_err(format!(
+                "{name} is in both fix and start: a fixed unknown does not move"
+            )));
+        }
+        let problem = match fix.is_empty() && start.is_empty() {
             false => Arc::new(
                 (*self.problem)
                     .clone()
                     .with_fixed(&fix)
-                    .map_err(|e| PyValueError::new_err(format!("fix: {e}")))?,
+                    .map_err(|e| PyValueError::new_err(format!("fix: {e}")))?
+                    .with_start(&start)
+                    .map_err(|e| PyValueError::new_err(format!("start: {e}")))?,
             ),
             true => Arc::clone(&self.problem),
         };

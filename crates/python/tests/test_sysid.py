@@ -137,6 +137,15 @@ class Boehm(unittest.TestCase):
         self.assertEqual(fit.starts["count"], 4)
         self.assertEqual(fit.starts["converged"], int(w["converged"].sum()))
         self.assertEqual(fit.nll + fit.prior, w["objective"][0])
+        # Where each start began and ended, and any one of them fitted again alone ends
+        # where it ended among the others.
+        self.assertEqual(w["x0"].shape, (4, len(fit.parameter_names)))
+        self.assertEqual(w["x"].shape, (4, len(fit.parameter_names)))
+        np.testing.assert_array_equal(w["x"][0], fit.x)
+        row = int(np.flatnonzero(w["start"] == 2)[0])
+        again = self.p.fit(start=dict(zip(fit.parameter_names, w["x0"][row])), max_iterations=200)
+        self.assertEqual(again.objective, w["objective"][row])
+        np.testing.assert_array_equal(again.x, w["x"][row])
 
     def test_scipy_minimises_it(self):
         from scipy.optimize import minimize

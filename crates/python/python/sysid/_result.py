@@ -57,9 +57,16 @@ class FitResult:
     def waterfall(self) -> Dict[str, np.ndarray]:
         """Every start's outcome, least objective first, as arrays: ``start``,
         ``objective`` (nan where the fit could not begin), ``converged``,
-        ``termination_code``, ``iterations`` and ``elapsed`` (seconds). Empty arrays
-        without starts."""
+        ``termination_code``, ``iterations`` and ``elapsed`` (seconds); ``x0`` and ``x``,
+        where each start began and ended (a row per start, columns in
+        :attr:`parameter_names`' order). Empty arrays without starts."""
         rows = self.starts["waterfall"] if self.starts else []
+        names = self.parameter_names
+
+        def points(key: str) -> np.ndarray:
+            table = [[w[key].get(n, np.nan) for n in names] for w in rows]
+            return np.array(table, dtype=float).reshape(len(rows), len(names))
+
         return {
             "start": np.array([w["start"] for w in rows], dtype=int),
             "objective": np.array(
@@ -69,6 +76,8 @@ class FitResult:
             "termination_code": np.array([w["termination_code"] for w in rows], dtype=object),
             "iterations": np.array([w["iterations"] for w in rows], dtype=int),
             "elapsed": np.array([w["elapsed_ms"] / 1e3 for w in rows], dtype=float),
+            "x0": points("start_values"),
+            "x": points("estimates"),
         }
 
     def __repr__(self) -> str:

@@ -74,6 +74,7 @@ class Problem:
         gtol: Optional[float] = None,
         max_integrations: Optional[int] = None,
         fix: Optional[Dict[str, float]] = None,
+        start: Optional[Dict[str, float]] = None,
     ) -> FitResult: ...
     def profile(
         self,
