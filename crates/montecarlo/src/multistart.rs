@@ -307,6 +307,15 @@ fn draw(u: &Unknown, fraction: f64, spread: f64) -> f64 {
     clamp(value)
 }
 
+/// One start's fit: the fit, how often its start was redrawn, its wall time in milliseconds
+/// (redraws included) and the start it began from (values).
+struct Run {
+    fit: Estimate,
+    redrawn: usize,
+    ms: f64,
+    from: Vec<f64>,
+}
+
 /// Fits `problem` with `method` from the starts of `options`, on rayon.
 pub fn multistart<S, M>(
     method: &M,
@@ -323,7 +332,7 @@ where
     // A queue in start order, served by one task per thread: once the budget is spent no
     // task takes another start, so the starts fitted are the first ones, whatever the timing.
     let next = AtomicUsize::new(0);
-    let fit_start = |j: usize| -> Result<(Estimate, usize, f64, Vec<f64>), FitError> {
+    let fit_start = |j: usize| -> Result<Run, FitError> {
         let began = std::time::Instant::now();
         let mut from = starts[j].clone();
         let mut fit = method.fit_from(problem, &from)?;
@@ -343,35 +352,34 @@ where
                 redrawn += 1;
             }
         }
-        Ok((fit, redrawn, began.elapsed().as_secs_f64() * 1e3, from))
+        Ok(Run { fit, redrawn, ms: began.elapsed().as_secs_f64() * 1e3, from })
     };
     let spent = || options.budget.is_some_and(|b| started.elapsed() >= b);
-    let mut runs: Vec<(usize, (Estimate, usize, f64, Vec<f64>))> =
-        (0..rayon::current_num_threads())
-            .into_par_iter()
-            .map(|_| {
-                let mut mine = Vec::new();
-                loop {
-                    if spent() && next.load(Ordering::SeqCst) > 0 {
-                        break;
-                    }
-                    let j = next.fetch_add(1, Ordering::SeqCst);
-                    if j >= starts.len() {
-                        break;
-                    }
-                    mine.push((j, fit_start(j)?));
+    let mut runs: Vec<(usize, Run)> = (0..rayon::current_num_threads())
+        .into_par_iter()
+        .map(|_| {
+            let mut mine = Vec::new();
+            loop {
+                if spent() && next.load(Ordering::SeqCst) > 0 {
+                    break;
                 }
-                Ok(mine)
-            })
-            .collect::<Result<Vec<_>, FitError>>()?
-            .into_iter()
-            .flatten()
-            .collect();
+                let j = next.fetch_add(1, Ordering::SeqCst);
+                if j >= starts.len() {
+                    break;
+                }
+                mine.push((j, fit_start(j)?));
+            }
+            Ok(mine)
+        })
+        .collect::<Result<Vec<_>, FitError>>()?
+        .into_iter()
+        .flatten()
+        .collect();
     runs.sort_by_key(|r| r.0);
-    let runs: Vec<(Estimate, usize, f64, Vec<f64>)> = runs.into_iter().map(|r| r.1).collect();
+    let runs: Vec<Run> = runs.into_iter().map(|r| r.1).collect();
     let not_started = starts.len() - runs.len();
-    let redrawn = runs.iter().map(|r| r.1).sum();
-    let times: Vec<f64> = runs.iter().map(|r| r.2).collect();
+    let redrawn = runs.iter().map(|r| r.redrawn).sum();
+    let times: Vec<f64> = runs.iter().map(|r| r.ms).collect();
     // The free unknowns where each fit began, then the noise scales, which every fit starts
     // from the problem's values.
     let mut names = problem.names();
@@ -380,11 +388,11 @@ where
     let from: Vec<serde_json::Map<String, serde_json::Value>> = runs
         .iter()
         .map(|r| {
-            let values = r.3.iter().chain(&scales).map(|&v| serde_json::json!(v));
+            let values = r.from.iter().chain(&scales).map(|&v| serde_json::json!(v));
             names.iter().cloned().zip(values).collect()
         })
         .collect();
-    let fits: Vec<Estimate> = runs.into_iter().map(|r| r.0).collect();
+    let fits: Vec<Estimate> = runs.into_iter().map(|r| r.fit).collect();
     let mut summary = summarise(&fits, options);
     summary.redrawn = redrawn;
     summary.not_started = not_started;
