@@ -267,6 +267,29 @@ impl<S: System> Problem<S> {
         format!("row {row}")
     }
 
+    /// The declared index of the unknown (free, or a noise scale) that entry `i` of `given`
+    /// names, refusing a name given twice (`done`: "fixed", "started") or that is no unknown.
+    fn movable(
+        &self,
+        given: &[(String, f64)],
+        i: usize,
+        done: &str,
+    ) -> Result<usize, ProblemError> {
+        let (name, value) = &given[i];
+        if given[..i].iter().any(|(n, _)| n == name) {
+            return Err(ProblemError::InvalidValue {
+                what: format!("`{name}`, {done} twice: {done}"),
+                value: *value,
+            });
+        }
+        let movable: Vec<usize> = self.free.iter().chain(&self.scales).copied().collect();
+        movable.iter().copied().find(|&j| &self.declared[j].name == name).ok_or_else(|| {
+            let names: Vec<&str> =
+                movable.iter().map(|&j| self.declared[j].name.as_str()).collect();
+            ProblemError::NotAnUnknown { name: name.clone(), unknowns: names.join(", ") }
+        })
+    }
+
     /// The same problem with the unknowns named in `fixed` held at the given values: they
     /// become known, and the degrees of freedom and every method count them so.
     pub fn with_fixed(mut self, fixed: &[(String, f64)]) -> Result<Self, ProblemError> {
@@ -274,21 +297,7 @@ impl<S: System> Problem<S> {
             return Ok(self);
         }
         for (i, (name, value)) in fixed.iter().enumerate() {
-            if fixed[..i].iter().any(|(n, _)| n == name) {
-                return Err(ProblemError::InvalidValue {
-                    what: format!("`{name}`, fixed twice: fixed"),
-                    value: *value,
-                });
-            }
-            let movable: Vec<usize> = self.free.iter().chain(&self.scales).copied().collect();
-            let Some(j) = movable.iter().copied().find(|&j| &self.declared[j].name == name) else {
-                let names: Vec<&str> =
-                    movable.iter().map(|&j| self.declared[j].name.as_str()).collect();
-                return Err(ProblemError::NotAnUnknown {
-                    name: name.clone(),
-                    unknowns: names.join(", "),
-                });
-            };
+            let j = self.movable(fixed, i, "fixed")?;
             let u = &self.declared[j];
             if !value.is_finite() || (u.log && *value <= 0.0) {
                 return Err(ProblemError::InvalidValue {
@@ -315,21 +324,7 @@ impl<S: System> Problem<S> {
     /// be finite, within the unknown's bounds, and positive on a log scale.
     pub fn with_start(mut self, start: &[(String, f64)]) -> Result<Self, ProblemError> {
         for (i, (name, value)) in start.iter().enumerate() {
-            if start[..i].iter().any(|(n, _)| n == name) {
-                return Err(ProblemError::InvalidValue {
-                    what: format!("`{name}`, started twice: start"),
-                    value: *value,
-                });
-            }
-            let movable: Vec<usize> = self.free.iter().chain(&self.scales).copied().collect();
-            let Some(j) = movable.iter().copied().find(|&j| &self.declared[j].name == name) else {
-                let names: Vec<&str> =
-                    movable.iter().map(|&j| self.declared[j].name.as_str()).collect();
-                return Err(ProblemError::NotAnUnknown {
-                    name: name.clone(),
-                    unknowns: names.join(", "),
-                });
-            };
+            let j = self.movable(start, i, "started")?;
             let u = &mut self.declared[j];
             let below = u.min.filter(|lo| value < lo).map(|lo| format!("below its min {lo}"));
             let above = u.max.filter(|hi| value > hi).map(|hi| format!("above its max {hi}"));
