@@ -385,13 +385,8 @@ where
     let mut names = problem.names();
     names.extend(problem.scales().iter().map(|&j| problem.declared()[j].name.clone()));
     let scales = problem.scale_values();
-    let from: Vec<serde_json::Map<String, serde_json::Value>> = runs
-        .iter()
-        .map(|r| {
-            let values = r.from.iter().chain(&scales).map(|&v| serde_json::json!(v));
-            names.iter().cloned().zip(values).collect()
-        })
-        .collect();
+    let mut from: Vec<serde_json::Map<String, serde_json::Value>> =
+        runs.iter().map(|r| by_name(names.iter().cloned(), r.from.iter().chain(&scales))).collect();
     let fits: Vec<Estimate> = runs.into_iter().map(|r| r.fit).collect();
     let mut summary = summarise(&fits, options);
     summary.redrawn = redrawn;
@@ -400,7 +395,7 @@ where
     summary.converged_per_minute = summary.converged as f64 / (summary.elapsed_ms / 6e4);
     for row in &mut summary.waterfall {
         row.elapsed_ms = times[row.start];
-        row.start_values = from[row.start].clone();
+        row.start_values = std::mem::take(&mut from[row.start]);
     }
     let best = fits.into_iter().nth(summary.best_start).expect("the best start's fit");
     Ok(Multistart { best, starts: summary })
@@ -517,8 +512,18 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
 
 /// The fit's estimates by name, the noise scales set in closed form last (as in its JSON).
 fn named(fit: &Estimate) -> serde_json::Map<String, serde_json::Value> {
-    let values = fit.values.iter().chain(fit.scales.iter().map(|s| &s.value));
-    fit.all_names().into_iter().zip(values.map(|&v| serde_json::json!(v))).collect()
+    by_name(
+        fit.all_names().into_iter(),
+        fit.values.iter().chain(fit.scales.iter().map(|s| &s.value)),
+    )
+}
+
+/// Values paired with their names, as a JSON object.
+fn by_name<'a>(
+    names: impl Iterator<Item = String>,
+    values: impl Iterator<Item = &'a f64>,
+) -> serde_json::Map<String, serde_json::Value> {
+    names.zip(values.map(|&v| serde_json::json!(v))).collect()
 }
 
 #[cfg(test)]
