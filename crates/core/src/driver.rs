@@ -53,7 +53,7 @@ pub fn drive<S: System>(
 ) -> Result<Estimate, FitError> {
     options.validate()?;
     if problem.scales().is_empty() {
-        return drive_once(problem, method, options, step, start);
+        return drive_once(problem, method, options, step, start, false).map(|(e, ..)| e);
     }
     let gtol = options.gtol_for(problem.integrator().rtol);
     let mut sigma = problem.scale_values();
@@ -69,8 +69,18 @@ pub fn drive<S: System>(
             ),
             ..*options
         };
+        // The first round holds the scales where they start; the rounds after it, where the
+        // method profiles, are one run at the closed form of every iterate.
+        let profiles = step.profiles() && !rounds.is_empty();
+        let (estimate, ended, profiled) =
+            drive_once(&problem.with_scales(&sigma), method, &round_options, step, &z, profiles)?;
+        if let Some(moved) = profiled {
+            // Hierarchical optimisation: one run, at the closed form of the point it returns.
+            let held = problem.with_scales(&ended);
+            rounds.push(estimate);
+            return Ok(crate::assemble::with_scales(problem, &held, rounds, moved));
+        }
         let held = problem.with_scales(&sigma);
-        let estimate = drive_once(&held, method, &round_options, step, &z)?;
         let next = held.optimal_scales(&estimate.values);
         let moved = next.as_ref().map_or(f64::INFINITY, |next| {
             next.iter().zip(&sigma).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max)
@@ -92,22 +102,38 @@ pub fn drive<S: System>(
 /// The most rounds of fits between closed-form updates of the noise scales.
 const MAX_ROUNDS: usize = 50;
 
+/// One run of `step` at the problem's noise scales, or, where the method
+/// [profiles](Step::profiles), with the scales set to their closed form at every iterate.
+/// Returns the estimate, the scales of the point it returns, and when it profiled, the
+/// scales' part of the certificate there: the largest relative change, |ln(σ̂/σ)|, that
+/// their closed form from the point's own linearization would make.
 fn drive_once<S: System>(
     problem: &Problem<S>,
     method: &str,
     options: &DriverOptions,
     step: &mut impl Step<S>,
     start: &[f64],
-) -> Result<Estimate, FitError> {
+    profiles: bool,
+) -> Result<(Estimate, Vec<f64>, Option<f64>), FitError> {
     let started = Instant::now();
     let z0 = start_coordinates(problem, start)?;
     let mut ev = Evaluations::new(problem, options.integration_budget(problem.unknowns().len()));
     let gtol = options.gtol_for(problem.integrator().rtol);
     let record = Record { method, options, gtol, started };
+    let profile = Profile::new(problem, profiles);
+    if profile.on() {
+        ev.profile_scales();
+    }
     let mut current = match step.start(&ev, z0.clone()) {
-        Ok(start) => start,
-        Err(failure) => return Ok(record.start_failed(&ev, z0, failure)),
+        Ok(start) => profile.apply(&mut ev, start),
+        Err(failure) => {
+            let moved = profile.on().then_some(f64::INFINITY);
+            return Ok((record.start_failed(&ev, z0, failure), problem.scale_values(), moved));
+        }
     };
+    // The scales of the current iterate and of the best so far.
+    let mut scales = ev.problem().scale_values();
+    let mut best_scales = scales.clone();
     let step_tolerance = problem.resolvable_step(options.step_tolerance);
     let mut history: Vec<Iteration> = Vec::new();
     let mut best: Option<(usize, Iterate)> = None;
@@ -128,9 +154,10 @@ fn drive_once<S: System>(
         {
             ev.refine(finer);
             current = match step.restart(&ev, &current) {
-                Ok(again) => again,
+                Ok(again) => profile.apply(&mut ev, again),
                 Err(failure) => break Ending::Failed { iteration, failure },
             };
+            scales = ev.problem().scale_values();
             measure =
                 current.linearization.as_ref().map(|l| optimality(ev.problem(), l, gtol).value);
         }
@@ -145,7 +172,11 @@ fn drive_once<S: System>(
             values: problem.unknowns().values(&current.z),
             diagnostics: current.diagnostics.clone(),
         });
-        if current.cost == 0.0 {
+        // ε at the iterate (under hierarchical optimisation the iterate's cost is the
+        // profile's, which compares between iterates; ε is what an exact fit and the crawl's
+        // scale are judged by).
+        let epsilon = current.linearization.as_ref().map_or(current.cost, |l| l.cost);
+        if epsilon == 0.0 {
             break Ending::Rule(Rule::ExactFit);
         }
         let gradient = measure.is_some_and(|m| m <= options.gradient_tolerance.min(gtol));
@@ -155,7 +186,7 @@ fn drive_once<S: System>(
             let then = history[history.len() - 1 - PROGRESS_WINDOW].cost;
             then.is_finite()
                 && current.cost.is_finite()
-                && then - current.cost <= PROGRESS * current.cost.abs()
+                && then - current.cost <= PROGRESS * epsilon.abs()
         };
         let mut fired = pending
             .take()
@@ -190,22 +221,33 @@ fn drive_once<S: System>(
                 && let Some(z) = onto_bounds(ev.problem(), lin, gtol)
             {
                 onto_bound = true;
-                match step.restart(&ev, &Iterate::new(z, f64::NAN)) {
-                    Ok(moved) if moved.cost <= current.cost * (1.0 + 2.0 * gtol) => {
+                let moved = step
+                    .restart(&ev, &Iterate::new(z, f64::NAN))
+                    .map(|moved| profile.apply(&mut ev, moved));
+                match moved {
+                    Ok(moved) if moved.cost - current.cost <= 2.0 * gtol * epsilon.abs() => {
                         step_norm = Some(distance(&moved.z, &current.z));
                         let previous = std::mem::replace(&mut current, moved);
+                        let previous_scales =
+                            std::mem::replace(&mut scales, ev.problem().scale_values());
                         if is_better(&previous, best.as_ref().map(|b| &b.1)) {
                             best = Some((iteration, previous));
+                            best_scales = previous_scales;
                         }
                         iteration += 1;
                         continue 'run;
                     }
                     // Where the move is felt after all, the method goes on from where it
-                    // was, its state evaluated there again.
-                    _ => match step.restart(&ev, &current) {
-                        Ok(again) => current = again,
-                        Err(failure) => break Ending::Failed { iteration, failure },
-                    },
+                    // was, its state evaluated there again (at its own scales).
+                    _ => {
+                        if profile.on() {
+                            ev.set_scales(&scales);
+                        }
+                        match step.restart(&ev, &current) {
+                            Ok(again) => current = profile.apply(&mut ev, again),
+                            Err(failure) => break Ending::Failed { iteration, failure },
+                        }
+                    }
                 }
             }
             if judged.1.holds() || extra >= EXTRA_STEPS {
@@ -217,9 +259,10 @@ fn drive_once<S: System>(
             {
                 ev.refine(finer);
                 current = match step.restart(&ev, &current) {
-                    Ok(again) => again,
+                    Ok(again) => profile.apply(&mut ev, again),
                     Err(failure) => break Ending::Failed { iteration, failure },
                 };
+                scales = ev.problem().scale_values();
                 history.pop();
                 continue 'run;
             }
@@ -244,14 +287,92 @@ fn drive_once<S: System>(
             Ok(Advance::Stop(rule)) => break Ending::Rule(rule),
             Err(failure) => break Ending::Failed { iteration, failure },
         };
+        let next = profile.apply(&mut ev, next);
         step_norm = Some(distance(&next.z, &current.z));
         let previous = std::mem::replace(&mut current, next);
+        let previous_scales = std::mem::replace(&mut scales, ev.problem().scale_values());
         if is_better(&previous, best.as_ref().map(|b| &b.1)) {
             best = Some((iteration, previous));
+            best_scales = previous_scales;
         }
         iteration += 1;
     };
-    Ok(record.finish(&ev, (iteration, current, verdict), best, ending, history))
+    // The estimate is assembled at the scales of the point it returns.
+    let returned = match &best {
+        Some((_, b)) if is_better(b, Some(&current)) => {
+            scales = best_scales;
+            ev.set_scales(&scales);
+            b
+        }
+        _ => &current,
+    };
+    let moved = profile.on().then(|| {
+        let closed = returned.linearization.as_ref().and_then(|l| ev.problem().scales_at(l));
+        closed.map_or(f64::INFINITY, |c| {
+            c.iter().zip(&scales).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max)
+        })
+    });
+    let estimate = record.finish(&ev, (iteration, current, verdict), best, ending, history);
+    Ok((estimate, scales, moved))
+}
+
+/// Hierarchical optimisation (Loos et al., Bioinformatics 2018) for a method that
+/// [profiles](Step::profiles): at every iterate the noise scales are set to their closed form
+/// given the rest, ŝ_g² = mean of its rows' ((T(h) − T(b))/f)², from the iterate's own
+/// residuals, and its linearization is re-weighted to them without an integration. The
+/// method then minimises the profile NLL(z, ŝ(z)): each trial is judged at the current
+/// iterate's scales, where ε falls only if the NLL does, and moving the scales to the trial's
+/// closed form lowers the NLL further. The gradient of the profile is U at ŝ(z) (the scales'
+/// own gradient vanishes there), so the certificate reads it as it is. An iterate's cost is
+/// then ε + 2 Σ_g n_g ln(ŝ_g/s_g), s the scales the run started at, n_g the rows of scale g:
+/// twice the NLL up to a constant, so that iterates at different scales compare.
+struct Profile {
+    /// The scales at the start and the rows of each; empty where the driver does not profile.
+    start: Vec<(f64, f64)>,
+}
+
+impl Profile {
+    fn new<S: System>(problem: &Problem<S>, profiles: bool) -> Self {
+        let start = match profiles {
+            true => problem
+                .scale_values()
+                .into_iter()
+                .zip(problem.scale_samples())
+                .map(|(s, n)| (s, n as f64))
+                .collect(),
+            false => Vec::new(),
+        };
+        Self { start }
+    }
+
+    /// Whether the driver profiles the scales.
+    fn on(&self) -> bool {
+        !self.start.is_empty()
+    }
+
+    /// `it` at the closed-form scales of its residuals (which `ev` evaluates at from now on).
+    fn apply<S: System>(&self, ev: &mut Evaluations<'_, S>, it: Iterate) -> Iterate {
+        if !self.on() {
+            return it;
+        }
+        let Some(lin) = &it.linearization else { return it };
+        let Some(sigma) = ev.problem().scales_at(lin) else { return it };
+        if sigma == ev.problem().scale_values() {
+            let shift = self.shift(&sigma);
+            return Iterate { cost: it.cost + shift, ..it };
+        }
+        let lin = ev.problem().reweighed(lin, &sigma);
+        ev.set_scales(&sigma);
+        let mut out = Iterate::linearized(lin);
+        out.cost += self.shift(&sigma);
+        out.diagnostics = it.diagnostics;
+        out
+    }
+
+    /// 2 Σ_g n_g ln(σ_g/s_g): what the scales at `sigma` add to twice the NLL beyond ε.
+    fn shift(&self, sigma: &[f64]) -> f64 {
+        sigma.iter().zip(&self.start).map(|(s, &(s0, n))| 2.0 * n * (s / s0).ln()).sum()
+    }
 }
 
 /// The measure's integration error counts as well below gtol under this share of it.

@@ -506,6 +506,18 @@ impl<S: System> Problem<S> {
     pub fn optimal_scales(&self, values: &[f64]) -> Option<Vec<f64>> {
         let z = self.unknowns.coordinates(values);
         let (r, _) = self.residuals(&z).ok()?;
+        self.closed_form(&r)
+    }
+
+    /// [`optimal_scales`](Self::optimal_scales) at a linearization's point, from its
+    /// residuals (weighted at this problem's scales), without an integration. None without
+    /// residual rows.
+    pub fn scales_at(&self, lin: &Linearization) -> Option<Vec<f64>> {
+        self.closed_form(&lin.residuals.as_ref()?.r)
+    }
+
+    /// The scales' closed form from the residual rows `r`, weighted at the held scales.
+    fn closed_form(&self, r: &DVector<f64>) -> Option<Vec<f64>> {
         let mut sums = vec![(0.0, 0usize); self.scales.len()];
         for (r, g) in r.iter().zip(self.scale_rows()) {
             if let Some(g) = g {
@@ -524,6 +536,98 @@ impl<S: System> Problem<S> {
             })
             .collect();
         out.iter().all(|v| v.is_finite() && *v > 0.0).then_some(out)
+    }
+
+    /// `lin`, made at this problem's scales, as it is at the scales `sigma` (one per
+    /// [`scales`](Self::scales)), without an integration: each row of scale g is
+    /// (T(h) − T(b))/(s_g f), so it and its Jacobian row are multiplied by c = s_g/σ_g; ε, U
+    /// and the experiments' ε are summed again from the rows, and A and ‖r‖ change by
+    /// (c² − 1) times each such row's terms (A may hold Fisher rows of other samples, which
+    /// the scales do not touch). `lin` unchanged where it has no residual rows.
+    pub fn reweighed(&self, lin: &Linearization, sigma: &[f64]) -> Linearization {
+        let mut out = lin.clone();
+        let Some(res) = out.residuals.as_mut() else { return out };
+        let factor: Vec<f64> =
+            self.scales.iter().zip(sigma).map(|(&j, s)| self.held[j] / s).collect();
+        let mut norm2 = lin.norm * lin.norm;
+        for (i, g) in self.scale_rows().into_iter().enumerate() {
+            let Some(c) = g.map(|g| factor[g]) else { continue };
+            let r = res.r[i];
+            let row = res.jacobian.row(i).transpose();
+            norm2 += (c * c - 1.0) * r * r;
+            out.normal.ger(c * c - 1.0, &row, &row, 1.0);
+            res.r[i] *= c;
+            res.jacobian.row_mut(i).scale_mut(c);
+        }
+        // The experiment of each row: its samples and noise rows, then the priors' (last).
+        let mut rows = self.experiments.iter().map(|e| e.n_rows()).chain([usize::MAX]);
+        let (mut e, mut left) = (0, rows.next().unwrap_or(usize::MAX));
+        out.experiment_costs.iter_mut().for_each(|c| *c = 0.0);
+        for r in res.r.iter() {
+            while left == 0 {
+                (e, left) = (e + 1, rows.next().unwrap_or(usize::MAX));
+            }
+            out.experiment_costs[e] += r * r;
+            left -= 1;
+        }
+        out.cost = res.r.norm_squared();
+        out.gradient = res.jacobian.tr_mul(&res.r);
+        out.norm = norm2.max(0.0).sqrt();
+        out
+    }
+
+    /// Under hierarchical optimisation (the scales at their closed form ŝ(z) at every
+    /// point), what the scales take from A in the profile's Gauss–Newton model: with ε_g the
+    /// ε of scale g's rows and U_g their part of U, ε_g = n_g at ŝ, and
+    /// n_g ln(ε_g(z + δ)/n_g) = 2U_gᵀδ + δᵀ(A_g − 2U_gU_gᵀ/n_g)δ + O(δ³), so the profile's
+    /// model is A − Σ_g 2U_gU_gᵀ/n_g (indefinite along the rows' own residuals: scaling them
+    /// all costs the profile nothing). Returns that sum over the scales whose closed form at
+    /// `lin` is inside their bounds (a scale held on a bound is not profiled); None when
+    /// there is none, or no residual rows.
+    pub fn profile_curvature(&self, lin: &Linearization) -> Option<DMatrix<f64>> {
+        let res = lin.residuals.as_ref()?;
+        let k = res.jacobian.ncols();
+        let groups = self.scales.len();
+        let (mut u, mut cost, mut n) =
+            (vec![DVector::zeros(k); groups], vec![0.0; groups], vec![0.0; groups]);
+        for (i, g) in self.scale_rows().into_iter().enumerate() {
+            let Some(g) = g else { continue };
+            u[g].axpy(res.r[i], &res.jacobian.row(i).transpose(), 1.0);
+            cost[g] += res.r[i] * res.r[i];
+            n[g] += 1.0;
+        }
+        let mut out: Option<DMatrix<f64>> = None;
+        for g in 0..groups {
+            if n[g] == 0.0 || (cost[g] - n[g]).abs() > 1e-6 * n[g] {
+                continue;
+            }
+            out.get_or_insert_with(|| DMatrix::zeros(k, k)).ger(2.0 / n[g], &u[g], &u[g], 1.0);
+        }
+        out
+    }
+
+    /// What moving the scales from this problem's s to their closed form σ at the trial
+    /// point `lin` (evaluated at s) lowers ε by, in ε's units (twice the NLL): with ε_g the
+    /// ε of scale g's rows there, Σ_g ε_g (1 − (s_g/σ_g)²) − 2 n_g ln(σ_g/s_g) ≥ 0 (σ_g
+    /// minimises it; clamped to its bounds it still lowers it). 0 without scales.
+    pub fn profile_gain(&self, lin: &Linearization) -> f64 {
+        let (Some(res), Some(sigma)) = (lin.residuals.as_ref(), self.scales_at(lin)) else {
+            return 0.0;
+        };
+        let groups = self.scales.len();
+        let (mut cost, mut n) = (vec![0.0; groups], vec![0.0; groups]);
+        for (i, g) in self.scale_rows().into_iter().enumerate() {
+            let Some(g) = g else { continue };
+            cost[g] += res.r[i] * res.r[i];
+            n[g] += 1.0;
+        }
+        (0..groups)
+            .map(|g| {
+                let ratio = self.held[self.scales[g]] / sigma[g];
+                cost[g] * (1.0 - ratio * ratio) + 2.0 * n[g] * ratio.ln()
+            })
+            .sum::<f64>()
+            .max(0.0)
     }
 
     /// The weighted residual vector at z, without sensitivities: the rows of

@@ -20,10 +20,13 @@ use crate::termination::Failure;
 /// threads.
 pub struct Evaluations<'p, S> {
     base: &'p Problem<S>,
-    /// The problem at refined integrator tolerances, once the driver refined them.
+    /// The problem as evaluated now, once the driver refined its integrator tolerances or
+    /// set its noise scales.
     refined: Option<Problem<S>>,
     budget: u64,
     counts: Cell<Counts>,
+    /// Whether the driver sets the noise scales to their closed form at every iterate.
+    profiling: bool,
 }
 
 /// The tightest relative tolerance [`Evaluations::finer`] refines to.
@@ -36,7 +39,13 @@ pub const REFERENCE_RTOL: f64 = 1e-10;
 impl<'p, S: System> Evaluations<'p, S> {
     /// Evaluations of `problem` with a budget of `budget` integrations.
     pub fn new(problem: &'p Problem<S>, budget: u64) -> Self {
-        Self { base: problem, refined: None, budget, counts: Cell::new(Counts::default()) }
+        Self {
+            base: problem,
+            refined: None,
+            budget,
+            counts: Cell::new(Counts::default()),
+            profiling: false,
+        }
     }
 
     /// The problem, at the integrator tolerances of the run so far.
@@ -88,6 +97,24 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// Evaluates from now on with `problem` (one of [`finer`](Self::finer)'s).
     pub fn refine(&mut self, problem: Problem<S>) {
         self.refined = Some(problem);
+    }
+
+    /// Whether the driver sets the noise scales to their closed form at every iterate
+    /// (hierarchical optimisation: a [profiling](crate::method::Step::profiles) method's
+    /// model is then the profile's).
+    pub fn profiling(&self) -> bool {
+        self.profiling
+    }
+
+    /// Marks the run as one that sets the scales at every iterate.
+    pub(crate) fn profile_scales(&mut self) {
+        self.profiling = true;
+    }
+
+    /// Evaluates from now on with the noise scales at `sigma` (one per
+    /// [`Problem::scales`]), at the integration of the run so far.
+    pub fn set_scales(&mut self, sigma: &[f64]) {
+        self.refined = Some(self.problem().with_scales(sigma));
     }
 
     /// The work so far.

@@ -122,6 +122,15 @@ pub trait Step<S: System> {
         self.start(ev, current.z.clone())
     }
 
+    /// Whether the driver may set the noise scales to their closed form at every iterate
+    /// (hierarchical optimisation), re-weighting the iterate's linearization: true for a
+    /// method that judges each trial against the current linearization's ε (both evaluated
+    /// at the same scales) and reads no other ε of an iterate. Otherwise the driver fits in
+    /// rounds between closed-form updates.
+    fn profiles(&self) -> bool {
+        false
+    }
+
     /// Proposes the next point from `current`.
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure>;
 

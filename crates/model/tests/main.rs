@@ -9,4 +9,5 @@ mod experiments;
 mod expressions;
 mod laplace;
 mod model_file;
+mod profile;
 mod symbolic;

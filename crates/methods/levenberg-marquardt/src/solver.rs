@@ -25,6 +25,14 @@
 //! accurately as the certificate needs. (Accepting any step whose cost stays within the noise
 //! floor let the iteration cycle between two points on Boehm's problem, forever 3e-6 from
 //! certified.)
+//!
+//! With noise scales that the driver sets to their closed form at every iterate
+//! ([`Evaluations::profiling`](sysid_core::method::Evaluations::profiling), hierarchical
+//! optimisation after the first round), the objective is the profile NLL(z, ŝ(z)): the model's
+//! matrix is A less what the scales take (`Problem::profile_curvature`), and a trial's
+//! decrease is ε's at the iterate's scales plus what moving them to the trial's closed form
+//! gains (`Problem::profile_gain`). A model kept for an iterate (the hybrid's Hessian) is
+//! matched by z and ε, since the driver may re-weight the iterate in place.
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
@@ -124,6 +132,7 @@ impl<S: System> Method<S> for LevenbergMarquardt {
             fall: None,
             secant: Secant::default(),
             geodesic: Geodesic::default(),
+            profile: None,
         };
         let name = Method::<S>::name(self);
         drive(problem, name, &self.options.driver, &mut step, start)
@@ -145,6 +154,9 @@ struct TrustRegion<'o> {
     secant: Secant,
     /// The plain residuals at the iterate, for the steps' geodesic acceleration.
     geodesic: Geodesic,
+    /// Under hierarchical optimisation, what the noise scales take from the model's matrix
+    /// at the iterate (`Problem::profile_curvature`), with the iterate's z and ε.
+    profile: Option<(Vec<f64>, f64, DMatrix<f64>)>,
 }
 
 /// NL2SOL's S ≈ Σ rᵢ∇²rᵢ (half of it, in the units of A = JᵀWJ: the model is
@@ -204,6 +216,23 @@ impl Secant {
 }
 
 impl TrustRegion<'_> {
+    /// `model` (at the iterate) as the profile sees it: its matrix less what the noise
+    /// scales take (`Problem::profile_curvature`); None where the driver does not profile
+    /// the scales.
+    fn profiled(&self, model: &Linearization) -> Option<Linearization> {
+        let (z, cost, c) = self.profile.as_ref()?;
+        (*z == model.z && cost.to_bits() == model.cost.to_bits()).then(|| Linearization {
+            z: model.z.clone(),
+            cost: model.cost,
+            gradient: model.gradient.clone(),
+            normal: &model.normal - c,
+            residuals: None,
+            norm: model.norm,
+            experiment_costs: Vec::new(),
+            counts: model.counts,
+        })
+    }
+
     /// The trial step for the current radius from the iterate `lin`: on Newton's model when
     /// there is one at this iterate, else on Gauss–Newton's; with geodesic acceleration, bent
     /// by its second-order term, the radius halved (without a linearization) while the path
@@ -217,7 +246,13 @@ impl TrustRegion<'_> {
         let max_condition = self.options.driver.max_condition;
         let negligible = negligible_step(problem, &lin.z, self.options.driver.step_tolerance);
         loop {
-            let model = self.newton.as_ref().filter(|n| n.z == lin.z).unwrap_or(lin);
+            let model = self
+                .newton
+                .as_ref()
+                .filter(|n| n.z == lin.z && n.cost.to_bits() == lin.cost.to_bits())
+                .unwrap_or(lin);
+            let profiled = self.profiled(model);
+            let model = profiled.as_ref().unwrap_or(model);
             let v = self.curve.within(problem, model, self.radius, max_condition)?;
             if !self.options.geodesic {
                 return Ok(v);
@@ -249,7 +284,11 @@ impl TrustRegion<'_> {
         let fast = self.fall.is_none_or(|f| f >= FAST_FALL || f.is_nan());
         if self.options.hessian == Hessian::GaussNewton || fast {
             self.newton = None;
-        } else if !self.newton.as_ref().is_some_and(|n| n.z == lin.z) {
+        } else if !self
+            .newton
+            .as_ref()
+            .is_some_and(|n| n.z == lin.z && n.cost.to_bits() == lin.cost.to_bits())
+        {
             self.newton =
                 differenced_hessian(ev, lin)?.map(|normal| Linearization { normal, ..lin.clone() });
         }
@@ -258,6 +297,11 @@ impl TrustRegion<'_> {
 }
 
 impl<S: System> Step<S> for TrustRegion<'_> {
+    /// Each trial is judged against the current linearization's ε at the same scales.
+    fn profiles(&self) -> bool {
+        true
+    }
+
     /// Linearizes at the start; D from its A, Δ = factor·‖D z₀‖ (factor when that is 0).
     ///
     /// A start begins the hybrid afresh: each round of the noise scales' closed form starts
@@ -283,6 +327,10 @@ impl<S: System> Step<S> for TrustRegion<'_> {
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
         let lin = current.linearization.as_ref().expect("the iterates are linearized");
         self.curve.rescale(lin);
+        self.profile = match ev.profiling() {
+            true => ev.problem().profile_curvature(lin).map(|c| (lin.z.clone(), lin.cost, c)),
+            false => None,
+        };
         self.model(ev, lin)?;
         let trial = self.step(ev, lin)?;
         let z = ev.problem().unknowns().moved(&current.z, trial.delta.as_slice(), 1.0);
@@ -313,8 +361,14 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 // An integration that fails at the trial point: a step too long.
                 Err(_) => None,
             };
+            // Under hierarchical optimisation the profile's decrease: the scales then move
+            // to the trial's closed form, which lowers ε further.
+            let gain = match &evaluated {
+                Some(l) if ev.profiling() => problem.profile_gain(l),
+                _ => 0.0,
+            };
             let decrease = match &evaluated {
-                Some(l) => actual_decrease(lin, l, trial.predicted, resolution),
+                Some(l) => actual_decrease(lin, l, trial.predicted, resolution) + gain,
                 None => f64::NEG_INFINITY,
             };
             let rho =
@@ -325,7 +379,8 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 self.radius = 2.0 * trial.scaled_norm;
             }
             if self.options.hessian == Hessian::Adaptive && evaluated.is_some() {
-                self.secant.choose(lin, &trial.delta, decrease);
+                let profiled = self.profiled(lin);
+                self.secant.choose(profiled.as_ref().unwrap_or(lin), &trial.delta, decrease);
             }
             if let Some(l) = evaluated.filter(|_| rho >= ACCEPT) {
                 self.fall = Some((lin.cost - l.cost) / lin.cost);
