@@ -518,14 +518,25 @@ impl<S: System> Problem<S> {
 
     /// The scales' closed form from the residual rows `r`, weighted at the held scales.
     fn closed_form(&self, r: &DVector<f64>) -> Option<Vec<f64>> {
+        self.closed_form_of(&self.scale_sums(r))
+    }
+
+    /// Per noise scale, over its rows of `r` (weighted at the held scale s): Σ (r s)², the
+    /// squared scaled residuals (r = (T(h) − T(b))/(s f)), and the number of rows.
+    fn scale_sums(&self, r: &DVector<f64>) -> Vec<(f64, usize)> {
         let mut sums = vec![(0.0, 0usize); self.scales.len()];
         for (r, g) in r.iter().zip(self.scale_rows()) {
             if let Some(g) = g {
-                // r = (T(h) − T(b))/(s f): (r s)² is the squared scaled residual.
                 sums[g].0 += (r * self.held[self.scales[g]]).powi(2);
                 sums[g].1 += 1;
             }
         }
+        sums
+    }
+
+    /// The closed form from [`scale_sums`](Self::scale_sums): ŝ² = Σ (r s)²/n, clamped to
+    /// the scale's bounds.
+    fn closed_form_of(&self, sums: &[(f64, usize)]) -> Option<Vec<f64>> {
         let out: Vec<f64> = sums
             .iter()
             .zip(&self.scales)
@@ -559,16 +570,13 @@ impl<S: System> Problem<S> {
             res.r[i] *= c;
             res.jacobian.row_mut(i).scale_mut(c);
         }
-        // The experiment of each row: its samples and noise rows, then the priors' (last).
-        let mut rows = self.experiments.iter().map(|e| e.n_rows()).chain([usize::MAX]);
-        let (mut e, mut left) = (0, rows.next().unwrap_or(usize::MAX));
-        out.experiment_costs.iter_mut().for_each(|c| *c = 0.0);
-        for r in res.r.iter() {
-            while left == 0 {
-                (e, left) = (e + 1, rows.next().unwrap_or(usize::MAX));
-            }
-            out.experiment_costs[e] += r * r;
-            left -= 1;
+        // Each experiment's rows (its samples and noise rows), then the priors' (last).
+        let mut from = 0;
+        let rows = self.experiments.iter().map(|e| e.n_rows()).chain([res.r.len()]);
+        for (cost, n) in out.experiment_costs.iter_mut().zip(rows) {
+            let to = (from + n).min(res.r.len());
+            *cost = res.r.as_slice()[from..to].iter().map(|x| x * x).sum();
+            from = to;
         }
         out.cost = res.r.norm_squared();
         out.gradient = res.jacobian.tr_mul(&res.r);
@@ -587,21 +595,20 @@ impl<S: System> Problem<S> {
     pub fn profile_curvature(&self, lin: &Linearization) -> Option<DMatrix<f64>> {
         let res = lin.residuals.as_ref()?;
         let k = res.jacobian.ncols();
-        let groups = self.scales.len();
-        let (mut u, mut cost, mut n) =
-            (vec![DVector::zeros(k); groups], vec![0.0; groups], vec![0.0; groups]);
+        let mut u = vec![DVector::zeros(k); self.scales.len()];
         for (i, g) in self.scale_rows().into_iter().enumerate() {
-            let Some(g) = g else { continue };
-            u[g].axpy(res.r[i], &res.jacobian.row(i).transpose(), 1.0);
-            cost[g] += res.r[i] * res.r[i];
-            n[g] += 1.0;
+            if let Some(g) = g {
+                u[g].axpy(res.r[i], &res.jacobian.row(i).transpose(), 1.0);
+            }
         }
         let mut out: Option<DMatrix<f64>> = None;
-        for g in 0..groups {
-            if n[g] == 0.0 || (cost[g] - n[g]).abs() > 1e-6 * n[g] {
+        for ((&(sum, n), u), &j) in self.scale_sums(&res.r).iter().zip(&u).zip(&self.scales) {
+            // ε_g = Σ (r s)²/s²: n at the closed form, unless the scale is held on a bound.
+            let (cost, n) = (sum / self.held[j].powi(2), n as f64);
+            if n == 0.0 || (cost - n).abs() > 1e-6 * n {
                 continue;
             }
-            out.get_or_insert_with(|| DMatrix::zeros(k, k)).ger(2.0 / n[g], &u[g], &u[g], 1.0);
+            out.get_or_insert_with(|| DMatrix::zeros(k, k)).ger(2.0 / n, u, u, 1.0);
         }
         out
     }
@@ -611,20 +618,15 @@ impl<S: System> Problem<S> {
     /// ε of scale g's rows there, Σ_g ε_g (1 − (s_g/σ_g)²) − 2 n_g ln(σ_g/s_g) ≥ 0 (σ_g
     /// minimises it; clamped to its bounds it still lowers it). 0 without scales.
     pub fn profile_gain(&self, lin: &Linearization) -> f64 {
-        let (Some(res), Some(sigma)) = (lin.residuals.as_ref(), self.scales_at(lin)) else {
-            return 0.0;
-        };
-        let groups = self.scales.len();
-        let (mut cost, mut n) = (vec![0.0; groups], vec![0.0; groups]);
-        for (i, g) in self.scale_rows().into_iter().enumerate() {
-            let Some(g) = g else { continue };
-            cost[g] += res.r[i] * res.r[i];
-            n[g] += 1.0;
-        }
-        (0..groups)
-            .map(|g| {
-                let ratio = self.held[self.scales[g]] / sigma[g];
-                cost[g] * (1.0 - ratio * ratio) + 2.0 * n[g] * ratio.ln()
+        let Some(res) = lin.residuals.as_ref() else { return 0.0 };
+        let sums = self.scale_sums(&res.r);
+        let Some(sigma) = self.closed_form_of(&sums) else { return 0.0 };
+        sums.iter()
+            .zip(&sigma)
+            .zip(&self.scales)
+            .map(|((&(sum, n), sigma), &j)| {
+                let (s, ratio) = (self.held[j], self.held[j] / sigma);
+                sum / (s * s) * (1.0 - ratio * ratio) + 2.0 * n as f64 * ratio.ln()
             })
             .sum::<f64>()
             .max(0.0)
