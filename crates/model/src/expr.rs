@@ -16,6 +16,11 @@
 //! model's states, parameters and inputs, and `t`. An expression nests at most
 //! [`MAX_DEPTH`] levels deep.
 //!
+//! PEtab's formulas are read by the same lexer and parser ([`parse_in`] with
+//! [`Syntax::Petab`]), which also take `**` for `^`, `ln`, `log(x, base)`, `log10`, `log2`,
+//! `pow(a, b)`, `pi` and `time`, and write them in the model file's terms. [`Expr::text`]
+//! prints an expression back with no more parentheses than it needs, as the parser reads it.
+//!
 //! Expressions are parsed once and compiled into a [`Program`]: a tree in one vector, names
 //! resolved to slots, constant subexpressions folded, integer powers specialised. It is
 //! evaluated for any [`Scalar`], so derivatives are exact dual numbers, never differences.
@@ -62,6 +67,18 @@ pub enum Op {
     Div,
     /// ^
     Pow,
+}
+
+/// The syntax a text is written in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Syntax {
+    /// A model file's expressions: the grammar above.
+    Model,
+    /// A PEtab formula (an observable's or a noise formula): the model file's grammar and
+    /// functions, and also `**` for `^`; `ln(x)`; `log(x, base)`; `log10(x)`; `log2(x)`;
+    /// `pow(a, b)`; `pi`, the number; and `time`, the time (`t`). They are read as the model
+    /// file's expressions: `log10(x)` is `log(x) / 2.302585092994046`.
+    Petab,
 }
 
 /// A function of the language.
@@ -193,7 +210,7 @@ enum Token {
     Comma,
 }
 
-fn lex(text: &str) -> Result<Vec<(Token, usize)>, ExprError> {
+fn lex(text: &str, syntax: Syntax) -> Result<Vec<(Token, usize)>, ExprError> {
     let chars: Vec<char> = text.chars().collect();
     let mut out = Vec::new();
     let mut i = 0;
@@ -244,6 +261,10 @@ fn lex(text: &str) -> Result<Vec<(Token, usize)>, ExprError> {
             continue;
         }
         let token = match c {
+            '*' if syntax == Syntax::Petab && chars.get(i + 1) == Some(&'*') => {
+                i += 1;
+                Token::Op('^')
+            }
             '+' | '-' | '*' | '/' | '^' => Token::Op(c),
             '(' => Token::Open,
             ')' => Token::Close,
@@ -268,6 +289,7 @@ struct Parser {
     /// How many `unary` calls are open: every recursion of the grammar passes through one,
     /// and the outermost is open around any expression, so up to `MAX_DEPTH + 1`.
     open: usize,
+    syntax: Syntax,
 }
 
 /// A parsed subexpression and the depth of its tree (a name or number is 0 deep).
@@ -385,7 +407,7 @@ impl Parser {
                 let name = name.clone();
                 self.at += 1;
                 if self.peek() != Some(&Token::Open) {
-                    return Ok((Expr::Name(name, position), 0));
+                    return Ok((self.name(name, position), 0));
                 }
                 self.call(name, position)
             }
@@ -402,11 +424,21 @@ impl Parser {
         }
     }
 
+    /// A name that is not called: in a PEtab formula `pi` is the number and `time` the time.
+    fn name(&self, name: String, position: usize) -> Expr {
+        match (self.syntax, name.as_str()) {
+            (Syntax::Petab, "pi") => Expr::Num(std::f64::consts::PI),
+            (Syntax::Petab, "time") => Expr::Name("t".into(), position),
+            _ => Expr::Name(name, position),
+        }
+    }
+
     /// The call of function `name` (at `position`), from its `(`.
     fn call(&mut self, name: String, position: usize) -> Result<Parsed, ExprError> {
-        let Some(func) = Func::from_name(&name) else {
-            return Err(unknown_function(&name, position));
-        };
+        let func = Func::from_name(&name);
+        if func.is_none() && !(self.syntax == Syntax::Petab && PETAB_FUNCTIONS.contains(&&*name)) {
+            return Err(unknown_function(&name, position, self.syntax));
+        }
         self.at += 1;
         let (first, mut depth) = self.expr()?;
         let mut args = vec![first];
@@ -420,8 +452,14 @@ impl Parser {
             return Err(self.expected(&format!("`,` or `)` in the call of {name}")));
         }
         self.at += 1;
+        let petab_log = self.syntax == Syntax::Petab && name == "log" && args.len() == 2;
+        let Some(func) = func.filter(|_| !petab_log) else {
+            // One of PEtab's functions, written as the model file's: two levels at most.
+            let depth = self.nest(self.nest(depth, position)?, position)?;
+            return Ok((checked(petab_call(&name, args, position)?, position)?, depth));
+        };
         if args.len() != func.arity() {
-            return Err(wrong_arity(&name, func, args.len(), position));
+            return Err(wrong_arity(&name, func.arity(), args.len(), position));
         }
         let depth = self.nest(depth, position)?;
         Ok((checked(Expr::Call(func, args, position), position)?, depth))
@@ -438,21 +476,51 @@ impl Parser {
     }
 }
 
+/// The functions of PEtab's formulas that are not the model file's, under their names.
+const PETAB_FUNCTIONS: &[&str] = &["ln", "log", "log10", "log2", "pow"];
+
+/// PEtab's function `name` of `args` (at `position`), as the model file's expression.
 #[cold]
 #[inline(never)]
-fn unknown_function(name: &str, position: usize) -> ExprError {
+fn petab_call(name: &str, mut args: Vec<Expr>, position: usize) -> Result<Expr, ExprError> {
+    let arity = match name {
+        "log" | "pow" => 2,
+        _ => 1,
+    };
+    if args.len() != arity {
+        return Err(wrong_arity(name, arity, args.len(), position));
+    }
+    let log = |x: Expr| Expr::Call(Func::Log, vec![x], position);
+    let divided = |a: Expr, b: Expr| Expr::Bin(Op::Div, Box::new(a), Box::new(b));
+    let second = args.pop().expect("checked above");
+    Ok(match name {
+        "ln" => log(second),
+        "log10" => divided(log(second), Expr::Num(std::f64::consts::LN_10)),
+        "log2" => divided(log(second), Expr::Num(std::f64::consts::LN_2)),
+        "log" => divided(log(args.pop().expect("two")), log(second)),
+        _ => Expr::Bin(Op::Pow, Box::new(args.pop().expect("two")), Box::new(second)),
+    })
+}
+
+#[cold]
+#[inline(never)]
+fn unknown_function(name: &str, position: usize, syntax: Syntax) -> ExprError {
+    let petab = match syntax {
+        Syntax::Model => "",
+        Syntax::Petab => ", ln, log10, log2, pow; log(x, base)",
+    };
     ExprError {
         position,
         message: format!(
-            "unknown function `{name}` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max, if, lt, le, gt, ge, eq, ne, and, or, not)"
+            "unknown function `{name}` (functions: exp, log, sqrt, sin, cos, tan, tanh, abs, min, max, if, lt, le, gt, ge, eq, ne, and, or, not{petab})"
         ),
     }
 }
 
 #[cold]
 #[inline(never)]
-fn wrong_arity(name: &str, func: Func, got: usize, position: usize) -> ExprError {
-    ExprError { position, message: format!("{name} takes {} argument(s), got {got}", func.arity()) }
+fn wrong_arity(name: &str, arity: usize, got: usize, position: usize) -> ExprError {
+    ExprError { position, message: format!("{name} takes {arity} argument(s), got {got}") }
 }
 
 /// `e` (an operation or call at `position`), unless it divides by a constant zero or its
@@ -517,11 +585,16 @@ fn too_deep(position: usize) -> ExprError {
     }
 }
 
-/// Parses an expression (at most [`MAX_DEPTH`] levels deep).
+/// Parses an expression of a model file (at most [`MAX_DEPTH`] levels deep).
 pub fn parse(text: &str) -> Result<Expr, ExprError> {
-    let tokens = lex(text)?;
+    parse_in(text, Syntax::Model)
+}
+
+/// Parses an expression written in `syntax` (at most [`MAX_DEPTH`] levels deep).
+pub fn parse_in(text: &str, syntax: Syntax) -> Result<Expr, ExprError> {
+    let tokens = lex(text, syntax)?;
     let end = text.chars().count();
-    let mut parser = Parser { tokens, at: 0, end, open: 0 };
+    let mut parser = Parser { tokens, at: 0, end, open: 0, syntax };
     if parser.peek().is_none() {
         return parser.error("empty expression");
     }
@@ -554,6 +627,77 @@ impl Expr {
         let mut out = Vec::new();
         walk(self, &mut out);
         out
+    }
+
+    /// The expression as a model file writes it, with the parentheses the parser needs to
+    /// read it back as this tree and no others (`a - (b + c)`, `-x^2`, `(a^b)^c`). A number
+    /// is written with the fewest digits that read back as the same f64; a negative number
+    /// reads back as the negation of its magnitude.
+    pub fn text(&self) -> String {
+        let mut out = String::new();
+        self.write(&mut out, 0);
+        out
+    }
+
+    /// How tightly it binds: 1 for a sum or difference, 2 a product or quotient, 3 a negation
+    /// (or a negative number), 4 a power, 5 anything else.
+    fn binding(&self) -> u8 {
+        match self {
+            Expr::Bin(Op::Add | Op::Sub, ..) => 1,
+            Expr::Bin(Op::Mul | Op::Div, ..) => 2,
+            Expr::Neg(_) => 3,
+            Expr::Num(v) if v.is_sign_negative() => 3,
+            Expr::Bin(Op::Pow, ..) => 4,
+            _ => 5,
+        }
+    }
+
+    /// Writes it where an operand must bind at least as tightly as `min`.
+    fn write(&self, out: &mut String, min: u8) {
+        use std::fmt::Write as _;
+        let open = self.binding() < min;
+        if open {
+            out.push('(');
+        }
+        match self {
+            Expr::Num(v) => {
+                let digits = format!("{v:?}");
+                out.push_str(digits.strip_suffix(".0").unwrap_or(&digits));
+            }
+            Expr::Name(n, _) => out.push_str(n),
+            Expr::Neg(a) => {
+                out.push('-');
+                a.write(out, 3);
+            }
+            Expr::Bin(op, a, b) => {
+                // Sums and products are read left to right, so a right operand of the same
+                // binding is enclosed; a power is read right to left, and its exponent may be
+                // signed (2^-x).
+                let (left, sign, right) = match op {
+                    Op::Add => (1, " + ", 2),
+                    Op::Sub => (1, " - ", 2),
+                    Op::Mul => (2, " * ", 3),
+                    Op::Div => (2, " / ", 3),
+                    Op::Pow => (5, "^", 3),
+                };
+                a.write(out, left);
+                out.push_str(sign);
+                b.write(out, right);
+            }
+            Expr::Call(func, args, _) => {
+                let _ = write!(out, "{}(", format!("{func:?}").to_lowercase());
+                for (i, a) in args.iter().enumerate() {
+                    if i > 0 {
+                        out.push_str(", ");
+                    }
+                    a.write(out, 0);
+                }
+                out.push(')');
+            }
+        }
+        if open {
+            out.push(')');
+        }
     }
 }
 

@@ -1,8 +1,9 @@
 //! The mathematics of an imported problem: one tree for SBML's MathML and PEtab's formulas,
-//! substituted (assignment rules, function definitions, observable parameters) and written
-//! out in the model file's expression language.
+//! substituted (assignment rules, function definitions, observable parameters) and made into
+//! the model file's expressions ([`Math::expr`]). PEtab's formulas are read by the model
+//! file's own parser ([`parse_formula`]).
 
-use std::fmt::Write as _;
+use sysid_model::expr::{Expr, ExprError, Func, Op, Syntax, parse_in};
 
 /// A relational operator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -23,14 +24,14 @@ pub enum Rel {
 
 impl Rel {
     /// The model file's function of this comparison (1 when it holds, else 0).
-    fn function(self) -> &'static str {
+    fn function(self) -> Func {
         match self {
-            Rel::Lt => "lt",
-            Rel::Le => "le",
-            Rel::Gt => "gt",
-            Rel::Ge => "ge",
-            Rel::Eq => "eq",
-            Rel::Ne => "ne",
+            Rel::Lt => Func::Lt,
+            Rel::Le => Func::Le,
+            Rel::Gt => Func::Gt,
+            Rel::Ge => Func::Ge,
+            Rel::Eq => Func::Eq,
+            Rel::Ne => Func::Ne,
         }
     }
 }
@@ -74,7 +75,8 @@ pub enum Math {
 
 /// The deepest expression the importer composes (function definitions inlined, rules put
 /// into each other): every tree it walks stays within the stack at this depth. (What it
-/// writes must also pass the model file's own limit, [`MAX_DEPTH`] levels of its syntax.)
+/// writes must also pass the model file's own limit, [`sysid_model::expr::MAX_DEPTH`] levels
+/// of its syntax.)
 pub const MAX_COMPOSED_DEPTH: usize = 2_000;
 
 /// The most nodes an expression the importer composes may have: rules that each use the
@@ -207,434 +209,195 @@ impl Math {
     /// The expression in the model file's language, each identifier written as `name`
     /// gives it.
     pub fn render(&self, name: &dyn Fn(&str) -> String) -> String {
-        let mut out = String::new();
-        self.write(&mut out, 0, name);
-        out
+        self.expr(name).text()
     }
 
-    fn precedence(&self) -> u8 {
-        match self {
-            Math::Add(v) | Math::Mul(v) if v.len() == 1 => v[0].precedence(),
-            Math::Add(_) | Math::Sub(..) => 1,
-            Math::Mul(_) | Math::Div(..) => 2,
-            Math::Neg(_) => 3,
-            Math::Num(v) if *v < 0.0 || v.is_sign_negative() => 3,
-            Math::Pow(..) => 4,
-            _ => 5,
-        }
-    }
-
-    fn write(&self, out: &mut String, min: u8, name: &dyn Fn(&str) -> String) {
-        let open = self.precedence() < min;
-        if open {
-            out.push('(');
-        }
-        let list = |out: &mut String, v: &[Math], sep: &str, level: u8| {
-            for (i, a) in v.iter().enumerate() {
-                if i > 0 {
-                    out.push_str(sep);
-                }
-                a.write(out, level, name);
-            }
-        };
-        let call = |out: &mut String, f: &str, v: &[Math]| {
-            out.push_str(f);
-            out.push('(');
-            list(out, v, ", ", 0);
-            out.push(')');
+    /// The model file's expression of it, each identifier named as `name` gives it.
+    pub fn expr(&self, name: &dyn Fn(&str) -> String) -> Expr {
+        let e = |a: &Math| a.expr(name);
+        let boxed = |a: &Math| Box::new(a.expr(name));
+        let bin = |op, a: &Math, b: &Math| Expr::Bin(op, boxed(a), boxed(b));
+        let call = |f, args: Vec<Expr>| Expr::Call(f, args, 0);
+        // A sum or a product is one chain read left to right, its operands' own sums
+        // (products) spliced in, as the model file reads it written out: a + (b − c) is
+        // (a + b) − c, a · (b / c) is (a · b) / c.
+        let chain = |level| {
+            let mut operands = Vec::new();
+            self.operands(level, Op::Add, &mut operands);
+            let ((_, first), rest) = operands.split_first().expect("one operand at least");
+            rest.iter().fold(e(first), |acc, (op, b)| Expr::Bin(*op, Box::new(acc), Box::new(e(b))))
         };
         match self {
-            Math::Num(v) => {
-                let _ = write!(out, "{v:e}");
-            }
-            Math::Name(n) => out.push_str(&name(n)),
-            Math::Time => out.push('t'),
-            Math::Neg(a) => {
-                out.push('-');
-                a.write(out, 3, name);
-            }
-            Math::Add(v) if v.is_empty() => out.push('0'),
-            Math::Mul(v) if v.is_empty() => out.push('1'),
-            Math::Add(v) => list(out, v, " + ", 1),
-            Math::Mul(v) => list(out, v, " * ", 2),
-            Math::Sub(a, b) => {
-                a.write(out, 1, name);
-                out.push_str(" - ");
-                b.write(out, 2, name);
-            }
-            Math::Div(a, b) => {
-                a.write(out, 2, name);
-                out.push_str(" / ");
-                b.write(out, 3, name);
-            }
-            Math::Pow(a, b) => {
-                a.write(out, 5, name);
-                out.push('^');
-                b.write(out, 3, name);
-            }
-            Math::Call(f, v) => call(out, f, v),
-            Math::Compare(r, a, b) => call(out, r.function(), &[(**a).clone(), (**b).clone()]),
-            Math::And(v) => fold(out, "and", v, name),
-            Math::Or(v) => fold(out, "or", v, name),
-            Math::Not(a) => call(out, "not", std::slice::from_ref(a)),
+            Math::Num(v) => Expr::Num(*v),
+            Math::Name(n) => Expr::Name(name(n), 0),
+            Math::Time => Expr::Name("t".into(), 0),
+            Math::Neg(a) => Expr::Neg(boxed(a)),
+            Math::Add(v) if v.is_empty() => Expr::Num(0.0),
+            Math::Mul(v) if v.is_empty() => Expr::Num(1.0),
+            Math::Add(_) | Math::Sub(..) => chain(1),
+            Math::Mul(_) | Math::Div(..) => chain(2),
+            Math::Pow(a, b) => bin(Op::Pow, a, b),
+            Math::Call(f, v) => call(function(f), v.iter().map(e).collect()),
+            Math::Compare(r, a, b) => call(r.function(), vec![e(a), e(b)]),
+            Math::And(v) => logical(Func::And, v, name),
+            Math::Or(v) => logical(Func::Or, v, name),
+            Math::Not(a) => call(Func::Not, vec![e(a)]),
             Math::Piecewise(pieces, otherwise) => {
                 // if(c1, v1, if(c2, v2, otherwise)). SBML leaves a piecewise without
                 // `otherwise` undefined where no condition holds; there it takes the last
                 // piece's value (the same wherever the pieces cover every case, as the
                 // tools that write them do: Alkan's `gt` and `leq` of one level).
                 let (pieces, last) = match (otherwise, pieces.split_last()) {
-                    (Some(o), _) => (&pieces[..], (**o).clone()),
-                    (None, Some(((value, _), before))) => (before, value.clone()),
-                    (None, None) => (&pieces[..], Math::Num(f64::NAN)),
+                    (Some(o), _) => (&pieces[..], e(o)),
+                    (None, Some(((value, _), before))) => (before, e(value)),
+                    (None, None) => (&pieces[..], Expr::Num(f64::NAN)),
                 };
-                let nested = pieces.iter().rev().fold(last, |rest, (value, condition)| {
-                    Math::Call("if", vec![condition.clone(), value.clone(), rest])
-                });
-                nested.write(out, 0, name);
+                pieces.iter().rev().fold(last, |rest, (value, condition)| {
+                    call(Func::If, vec![e(condition), e(value), rest])
+                })
             }
         }
-        if open {
-            out.push(')');
+    }
+
+    /// The operands of a chain of sums (`level` 1) or products (2) this is part of, each
+    /// with the operation that joins it to those before (`op` for the first).
+    fn operands<'a>(&'a self, level: u8, op: Op, out: &mut Vec<(Op, &'a Math)>) {
+        let (join, inverse) = if level == 1 { (Op::Add, Op::Sub) } else { (Op::Mul, Op::Div) };
+        match self {
+            Math::Add(v) | Math::Mul(v) if v.len() == 1 => v[0].operands(level, op, out),
+            Math::Add(v) | Math::Mul(v) if !v.is_empty() && self.level() == Some(level) => {
+                for (i, a) in v.iter().enumerate() {
+                    a.operands(level, if i == 0 { op } else { join }, out);
+                }
+            }
+            Math::Sub(a, b) | Math::Div(a, b) if self.level() == Some(level) => {
+                a.operands(level, op, out);
+                out.push((inverse, b));
+            }
+            _ => out.push((op, self)),
         }
     }
+
+    /// 1 for a sum or difference, 2 for a product or quotient.
+    fn level(&self) -> Option<u8> {
+        match self {
+            Math::Add(_) | Math::Sub(..) => Some(1),
+            Math::Mul(_) | Math::Div(..) => Some(2),
+            _ => None,
+        }
+    }
+
+    /// The importer's tree of a model file's expression: sums and products flattened, `t`
+    /// the time.
+    pub fn from_expr(e: &Expr) -> Math {
+        let boxed = |a: &Expr| Box::new(Math::from_expr(a));
+        // The operands of a chain of `op`, flattened: (a + b) + c is a + b + c.
+        fn operands(e: &Expr, op: Op, out: &mut Vec<Math>) {
+            match e {
+                Expr::Bin(o, a, b) if *o == op => {
+                    operands(a, op, out);
+                    out.push(Math::from_expr(b));
+                }
+                _ => out.push(Math::from_expr(e)),
+            }
+        }
+        match e {
+            Expr::Num(v) => Math::Num(*v),
+            Expr::Name(n, _) if n == "t" => Math::Time,
+            Expr::Name(n, _) => Math::Name(n.clone()),
+            Expr::Neg(a) => Math::Neg(boxed(a)),
+            Expr::Bin(op @ (Op::Add | Op::Mul), ..) => {
+                let mut v = Vec::new();
+                operands(e, *op, &mut v);
+                if *op == Op::Add { Math::Add(v) } else { Math::Mul(v) }
+            }
+            Expr::Bin(Op::Sub, a, b) => Math::Sub(boxed(a), boxed(b)),
+            Expr::Bin(Op::Div, a, b) => Math::Div(boxed(a), boxed(b)),
+            Expr::Bin(Op::Pow, a, b) => Math::Pow(boxed(a), boxed(b)),
+            Expr::Call(f, args, _) => {
+                let mut v: Vec<Math> = args.iter().map(Math::from_expr).collect();
+                let compare = |r, mut v: Vec<Math>| {
+                    let b = Box::new(v.pop().expect("two"));
+                    Math::Compare(r, Box::new(v.pop().expect("two")), b)
+                };
+                match f {
+                    Func::Lt => compare(Rel::Lt, v),
+                    Func::Le => compare(Rel::Le, v),
+                    Func::Gt => compare(Rel::Gt, v),
+                    Func::Ge => compare(Rel::Ge, v),
+                    Func::Eq => compare(Rel::Eq, v),
+                    Func::Ne => compare(Rel::Ne, v),
+                    Func::And => Math::And(v),
+                    Func::Or => Math::Or(v),
+                    Func::Not => Math::Not(Box::new(v.remove(0))),
+                    Func::If => {
+                        let otherwise = v.pop().expect("three");
+                        let value = v.pop().expect("three");
+                        let condition = v.pop().expect("three");
+                        Math::Piecewise(vec![(value, condition)], Some(Box::new(otherwise)))
+                    }
+                    f => Math::Call(function_name(*f), v),
+                }
+            }
+        }
+    }
+}
+
+/// The model file's function of a name of [`UNARY`], `min` or `max`.
+fn function(name: &str) -> Func {
+    match name {
+        "exp" => Func::Exp,
+        "log" => Func::Log,
+        "sqrt" => Func::Sqrt,
+        "sin" => Func::Sin,
+        "cos" => Func::Cos,
+        "tan" => Func::Tan,
+        "tanh" => Func::Tanh,
+        "abs" => Func::Abs,
+        "min" => Func::Min,
+        "max" => Func::Max,
+        other => unreachable!("the importer makes no call of `{other}`"),
+    }
+}
+
+/// The name of a function of the model file's that is not logical or a comparison.
+fn function_name(f: Func) -> &'static str {
+    ["exp", "log", "sqrt", "sin", "cos", "tan", "tanh", "abs", "min", "max"]
+        .into_iter()
+        .find(|n| function(n) == f)
+        .expect("a logical function or comparison is read as such")
 }
 
 /// and(a, and(b, c)) for a logical operator of several arguments (1 for none: `and`; 0:
-/// `or`).
-fn fold(out: &mut String, f: &'static str, v: &[Math], name: &dyn Fn(&str) -> String) {
+/// `or`; a ≠ 0 for one).
+fn logical(f: Func, v: &[Math], name: &dyn Fn(&str) -> String) -> Expr {
     match v {
-        [] => out.push_str(if f == "and" { "1" } else { "0" }),
-        [one] => Math::Call("ne", vec![one.clone(), Math::Num(0.0)]).write(out, 0, name),
-        [first, rest @ ..] => {
-            let tail = if rest.len() == 1 { rest[0].clone() } else { fold_math(f, rest) };
-            Math::Call(f, vec![first.clone(), tail]).write(out, 0, name);
-        }
+        [] => Expr::Num(if f == Func::And { 1.0 } else { 0.0 }),
+        [one] => Expr::Call(Func::Ne, vec![one.expr(name), Expr::Num(0.0)], 0),
+        [first, rest @ ..] => Expr::Call(f, vec![first.expr(name), logical_tail(f, rest, name)], 0),
     }
 }
 
-fn fold_math(f: &'static str, v: &[Math]) -> Math {
-    match f {
-        "and" => Math::And(v.to_vec()),
-        _ => Math::Or(v.to_vec()),
+fn logical_tail(f: Func, rest: &[Math], name: &dyn Fn(&str) -> String) -> Expr {
+    match rest {
+        [one] => one.expr(name),
+        _ => logical(f, rest, name),
     }
 }
 
-/// A formula that cannot be read: what, at which character (0-based).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct FormulaError {
-    /// 0-based character position in the formula.
-    pub position: usize,
-    /// What is wrong.
-    pub message: String,
-}
-
-/// Reads a PEtab formula (observable, noise): numbers, identifiers, `+ - * / ^ **`,
-/// parentheses and the functions `exp`, `log` (natural, or `log(x, base)`), `ln`,
-/// `log10`, `log2`, `sqrt`, `abs`, `pow`, `sin`, `cos`, `tan`, `tanh`, `min`, `max`; `t` and
-/// `time` are the time.
-pub fn parse_formula(text: &str) -> Result<Math, FormulaError> {
-    let tokens = lex(text)?;
-    let mut p = Parser { tokens, at: 0, end: text.chars().count(), depth: 0 };
-    let e = p.sum()?;
-    match p.peek() {
-        None => Ok(e),
-        Some((_, at)) => Err(FormulaError { position: at, message: "unexpected text".into() }),
-    }
-}
-
-#[derive(Clone, Debug, PartialEq)]
-enum Token {
-    Num(f64),
-    Name(String),
-    Op(char),
-    Pow,
-    Open,
-    Close,
-    Comma,
-}
-
-fn lex(text: &str) -> Result<Vec<(Token, usize)>, FormulaError> {
-    let chars: Vec<char> = text.chars().collect();
-    let mut out = Vec::new();
-    let mut i = 0;
-    while i < chars.len() {
-        let c = chars[i];
-        let start = i;
-        if c.is_whitespace() {
-            i += 1;
-            continue;
-        }
-        if c.is_ascii_digit() || (c == '.' && chars.get(i + 1).is_some_and(char::is_ascii_digit)) {
-            while i < chars.len() && (chars[i].is_ascii_digit() || chars[i] == '.') {
-                i += 1;
-            }
-            if i < chars.len() && (chars[i] == 'e' || chars[i] == 'E') {
-                let mut j = i + 1;
-                if j < chars.len() && (chars[j] == '+' || chars[j] == '-') {
-                    j += 1;
-                }
-                if j < chars.len() && chars[j].is_ascii_digit() {
-                    i = j;
-                    while i < chars.len() && chars[i].is_ascii_digit() {
-                        i += 1;
-                    }
-                }
-            }
-            let s: String = chars[start..i].iter().collect();
-            let v: f64 = s.parse().map_err(|_| FormulaError {
-                position: start,
-                message: format!("`{s}` is not a number"),
-            })?;
-            out.push((Token::Num(v), start));
-            continue;
-        }
-        if c.is_alphabetic() || c == '_' {
-            while i < chars.len() && (chars[i].is_alphanumeric() || chars[i] == '_') {
-                i += 1;
-            }
-            out.push((Token::Name(chars[start..i].iter().collect()), start));
-            continue;
-        }
-        let token = match c {
-            '*' if chars.get(i + 1) == Some(&'*') => {
-                i += 1;
-                Token::Pow
-            }
-            '^' => Token::Pow,
-            '+' | '-' | '*' | '/' => Token::Op(c),
-            '(' => Token::Open,
-            ')' => Token::Close,
-            ',' => Token::Comma,
-            _ => {
-                return Err(FormulaError {
-                    position: start,
-                    message: format!("unexpected character `{c}`"),
-                });
-            }
-        };
-        i += 1;
-        out.push((token, start));
-    }
-    Ok(out)
-}
-
-struct Parser {
-    tokens: Vec<(Token, usize)>,
-    at: usize,
-    end: usize,
-    /// How deeply the expression being read nests (parentheses, signs, exponents, calls).
-    depth: usize,
-}
-
-/// How deeply a formula may nest: as deep as a model file's expressions
-/// ([`sysid_model::expr::MAX_DEPTH`]), which a deeper one could not be written as.
-pub const MAX_DEPTH: usize = sysid_model::expr::MAX_DEPTH;
-
-impl Parser {
-    fn peek(&self) -> Option<(Token, usize)> {
-        self.tokens.get(self.at).cloned()
-    }
-
-    fn here(&self) -> usize {
-        self.tokens.get(self.at).map_or(self.end, |t| t.1)
-    }
-
-    fn error(&self, message: &str) -> FormulaError {
-        let what = match self.peek() {
-            None => "the end".to_string(),
-            Some((Token::Num(v), _)) => format!("`{v}`"),
-            Some((Token::Name(n), _)) => format!("`{n}`"),
-            Some((Token::Op(c), _)) => format!("`{c}`"),
-            Some((Token::Pow, _)) => "`^`".into(),
-            Some((Token::Open, _)) => "`(`".into(),
-            Some((Token::Close, _)) => "`)`".into(),
-            Some((Token::Comma, _)) => "`,`".into(),
-        };
-        FormulaError { position: self.here(), message: format!("{message}, found {what}") }
-    }
-
-    fn sum(&mut self) -> Result<Math, FormulaError> {
-        let mut e = self.product()?;
-        while let Some((Token::Op(c @ ('+' | '-')), _)) = self.peek() {
-            self.at += 1;
-            let b = self.product()?;
-            e = if c == '+' {
-                match e {
-                    Math::Add(mut v) => {
-                        v.push(b);
-                        Math::Add(v)
-                    }
-                    a => Math::Add(vec![a, b]),
-                }
-            } else {
-                Math::Sub(Box::new(e), Box::new(b))
-            };
-        }
-        Ok(e)
-    }
-
-    fn product(&mut self) -> Result<Math, FormulaError> {
-        let mut e = self.unary()?;
-        while let Some((Token::Op(c @ ('*' | '/')), _)) = self.peek() {
-            self.at += 1;
-            let b = self.unary()?;
-            e = if c == '*' {
-                match e {
-                    Math::Mul(mut v) => {
-                        v.push(b);
-                        Math::Mul(v)
-                    }
-                    a => Math::Mul(vec![a, b]),
-                }
-            } else {
-                Math::Div(Box::new(e), Box::new(b))
-            };
-        }
-        Ok(e)
-    }
-
-    /// Every nesting passes through here: a parenthesis or a call's argument (via
-    /// [`sum`](Self::sum)), a sign, an exponent. Refused beyond [`MAX_DEPTH`], where the
-    /// recursion would otherwise run out of stack.
-    fn unary(&mut self) -> Result<Math, FormulaError> {
-        if self.depth >= MAX_DEPTH {
-            return Err(FormulaError {
-                position: self.here(),
-                message: format!(
-                    "the formula nests more than {MAX_DEPTH} levels deep (parentheses, signs, powers and function calls)"
-                ),
-            });
-        }
-        self.depth += 1;
-        let e = self.signed();
-        self.depth -= 1;
-        e
-    }
-
-    fn signed(&mut self) -> Result<Math, FormulaError> {
-        match self.peek() {
-            Some((Token::Op('-'), _)) => {
-                self.at += 1;
-                Ok(Math::Neg(Box::new(self.unary()?)))
-            }
-            Some((Token::Op('+'), _)) => {
-                self.at += 1;
-                self.unary()
-            }
-            _ => self.power(),
-        }
-    }
-
-    fn power(&mut self) -> Result<Math, FormulaError> {
-        let base = self.primary()?;
-        if let Some((Token::Pow, _)) = self.peek() {
-            self.at += 1;
-            let exponent = self.unary()?;
-            return Ok(Math::Pow(Box::new(base), Box::new(exponent)));
-        }
-        Ok(base)
-    }
-
-    fn primary(&mut self) -> Result<Math, FormulaError> {
-        match self.peek() {
-            Some((Token::Num(v), _)) => {
-                self.at += 1;
-                Ok(Math::Num(v))
-            }
-            Some((Token::Open, _)) => {
-                self.at += 1;
-                let e = self.sum()?;
-                self.expect_close()?;
-                Ok(e)
-            }
-            Some((Token::Name(n), at)) => {
-                self.at += 1;
-                if let Some((Token::Open, _)) = self.peek() {
-                    self.at += 1;
-                    let mut args = vec![self.sum()?];
-                    while let Some((Token::Comma, _)) = self.peek() {
-                        self.at += 1;
-                        args.push(self.sum()?);
-                    }
-                    self.expect_close()?;
-                    return function(&n, args)
-                        .map_err(|message| FormulaError { position: at, message });
-                }
-                Ok(match n.as_str() {
-                    "t" | "time" => Math::Time,
-                    "pi" => Math::Num(std::f64::consts::PI),
-                    _ => Math::Name(n),
-                })
-            }
-            _ => Err(self.error("expected a number, a name or `(`")),
-        }
-    }
-
-    fn expect_close(&mut self) -> Result<(), FormulaError> {
-        match self.peek() {
-            Some((Token::Close, _)) => {
-                self.at += 1;
-                Ok(())
-            }
-            _ => Err(self.error("expected `)`")),
-        }
-    }
-}
-
-/// A PEtab function applied to `args`, as the model file's language has it.
-fn function(name: &str, mut args: Vec<Math>) -> Result<Math, String> {
-    let arity = |n: usize| -> Result<(), String> {
-        match args.len() == n {
-            true => Ok(()),
-            false => Err(format!("`{name}` takes {n} argument(s), got {}", args.len())),
-        }
-    };
-    let log_of = |x: Math, base: f64| {
-        Math::Div(Box::new(Math::Call("log", vec![x])), Box::new(Math::Num(base.ln())))
-    };
-    Ok(match name {
-        "ln" => {
-            arity(1)?;
-            Math::Call("log", args)
-        }
-        "log" if args.len() == 2 => {
-            let base = args.pop().expect("two");
-            let x = args.pop().expect("two");
-            Math::Div(Box::new(Math::Call("log", vec![x])), Box::new(Math::Call("log", vec![base])))
-        }
-        "log10" => {
-            arity(1)?;
-            log_of(args.remove(0), 10.0)
-        }
-        "log2" => {
-            arity(1)?;
-            log_of(args.remove(0), 2.0)
-        }
-        "pow" => {
-            arity(2)?;
-            let b = args.pop().expect("two");
-            Math::Pow(Box::new(args.pop().expect("two")), Box::new(b))
-        }
-        "min" | "max" => {
-            arity(2)?;
-            Math::Call(if name == "min" { "min" } else { "max" }, args)
-        }
-        _ => match UNARY.iter().find(|f| **f == name) {
-            Some(f) => {
-                arity(1)?;
-                Math::Call(f, args)
-            }
-            None => {
-                return Err(format!(
-                    "unknown function `{name}` (functions: exp, log, ln, log10, log2, sqrt, abs, pow, sin, cos, tan, tanh, min, max)"
-                ));
-            }
-        },
-    })
+/// Reads a PEtab formula (observable, noise) with the model file's parser in PEtab's
+/// syntax ([`Syntax::Petab`]): numbers, identifiers, `+ - * / ^ **`, parentheses and the
+/// functions `exp`, `log` (natural, or `log(x, base)`), `ln`, `log10`, `log2`, `sqrt`,
+/// `abs`, `pow`, `sin`, `cos`, `tan`, `tanh`, `min`, `max` (and the model file's own); `t`
+/// and `time` are the time, `pi` the number.
+pub fn parse_formula(text: &str) -> Result<Math, ExprError> {
+    parse_in(text, Syntax::Petab).map(|e| Math::from_expr(&e))
 }
 
 #[cfg(test)]
 mod tests {
+    use sysid_model::expr::{MAX_DEPTH, parse};
+
     use super::*;
 
     fn show(text: &str) -> String {
@@ -646,13 +409,69 @@ mod tests {
         assert_eq!(show("a - (b + c)"), "a - (b + c)");
         assert_eq!(show("a / (b * c)"), "a / (b * c)");
         assert_eq!(show("(a / b) * c"), "a / b * c");
-        assert_eq!(show("-x**2"), "-x^2e0");
-        assert_eq!(show("(-x)^2"), "(-x)^2e0");
+        assert_eq!(show("-x**2"), "-x^2");
+        assert_eq!(show("(-x)^2"), "(-x)^2");
         assert_eq!(show("a^b^c"), "a^b^c");
         assert_eq!(show("(a^b)^c"), "(a^b)^c");
-        assert_eq!(show("2 * -b"), "2e0 * -b");
-        assert_eq!(show("log10(x)"), format!("log(x) / {:e}", 10f64.ln()));
-        assert_eq!(show("1e-3 * time"), "1e-3 * t");
+        assert_eq!(show("2 * -b"), "2 * -b");
+        assert_eq!(show("-(a * b) + -(c + d)"), "-(a * b) + -(c + d)");
+        assert_eq!(show("log10(x)"), format!("log(x) / {:?}", 10f64.ln()));
+        assert_eq!(
+            show("log(x, 3) + ln(y) + pow(y, 2) + log2(z)"),
+            format!("log(x) / log(3) + log(y) + y^2 + log(z) / {:?}", 2f64.ln())
+        );
+        assert_eq!(show("1e-3 * time + pi"), format!("0.001 * t + {:?}", std::f64::consts::PI));
+        assert_eq!(show("2.5e-300 * k + 1e300"), "2.5e-300 * k + 1e300");
+    }
+
+    /// What the importer writes, the model file's parser reads back as the same tree: every
+    /// kind of node, under every kind of parent, on either side.
+    #[test]
+    fn written_expressions_read_back_as_the_same_tree() {
+        let x = || Math::Name("x".into());
+        let y = || Math::Name("y".into());
+        let b = Box::new;
+        let leaves = vec![
+            Math::Num(0.25),
+            x(),
+            Math::Time,
+            Math::Neg(b(x())),
+            Math::Add(vec![x(), y(), Math::Num(3.0)]),
+            Math::Sub(b(x()), b(y())),
+            Math::Mul(vec![x(), y()]),
+            Math::Div(b(x()), b(y())),
+            Math::Pow(b(x()), b(y())),
+            Math::Call("exp", vec![x()]),
+            Math::Compare(Rel::Le, b(x()), b(y())),
+            Math::And(vec![x(), y(), x()]),
+            Math::Or(vec![x()]),
+            Math::Not(b(x())),
+            Math::Piecewise(vec![(x(), y()), (y(), x())], Some(b(Math::Num(1.0)))),
+            Math::Piecewise(vec![(x(), y())], None),
+        ];
+        let parents: Vec<Box<dyn Fn(Math, Math) -> Math>> = vec![
+            Box::new(|a, c| Math::Add(vec![a, c])),
+            Box::new(|a, c| Math::Sub(b(a), b(c))),
+            Box::new(|a, c| Math::Mul(vec![a, c])),
+            Box::new(|a, c| Math::Div(b(a), b(c))),
+            Box::new(|a, c| Math::Pow(b(a), b(c))),
+            Box::new(|a, c| Math::Neg(b(Math::Add(vec![a, c])))),
+            Box::new(|a, c| Math::Call("min", vec![a, c])),
+        ];
+        let mut checked = 0;
+        for a in &leaves {
+            for c in &leaves {
+                for parent in &parents {
+                    let tree = parent(a.clone(), c.clone()).expr(&|n| n.to_string());
+                    let text = tree.text();
+                    let read = parse(&text).unwrap_or_else(|e| panic!("{text}: {e}"));
+                    // Display is fully parenthesised and carries no positions.
+                    assert_eq!(read.to_string(), tree.to_string(), "{text}");
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 16 * 16 * 7);
     }
 
     #[test]
@@ -673,7 +492,14 @@ mod tests {
         assert_eq!(e.message, "expected a number, a name or `(`, found `*`");
         let e = parse_formula("foo(a)").unwrap_err();
         assert!(e.message.contains("unknown function `foo`"), "{}", e.message);
+        assert!(e.message.contains("log10"), "{}", e.message);
         assert_eq!(parse_formula("a $ b").unwrap_err().position, 2);
         assert!(parse_formula("(a + b").is_err());
+        let e = parse_formula("log10(a, b)").unwrap_err();
+        assert_eq!(e.message, "log10 takes 1 argument(s), got 2");
+        // The model file's syntax has none of PEtab's additions.
+        assert!(parse("a ** 2").is_err());
+        assert!(parse("ln(a)").unwrap_err().message.contains("unknown function `ln`"));
+        assert!(parse("log(a, 2)").is_err());
     }
 }

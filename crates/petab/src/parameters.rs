@@ -224,8 +224,8 @@ impl Builder<'_> {
 
 /// The value of an expression of numbers alone.
 fn constant_value(m: &Math) -> Option<f64> {
-    let parsed = sysid_model::expr::parse(&m.render(&|n| n.to_string())).ok()?;
-    let program = sysid_model::expr::Program::compile(&parsed, &|_| None).ok()?;
+    let program =
+        sysid_model::expr::Program::compile(&m.expr(&|n| n.to_string()), &|_| None).ok()?;
     program.is_constant().then(|| program.eval::<f64>(0.0, &[], &[], &[]))
 }
 

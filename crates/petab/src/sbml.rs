@@ -743,7 +743,7 @@ mod tests {
     fn function_definitions_are_inlined_and_local_parameters_substituted() {
         let m = Sbml::parse(MODEL, "m.xml").expect("reads");
         let rate = m.reactions[0].rate.render(&|n| n.to_string());
-        assert_eq!(rate, "4e0 * 2e-3 / (1e0 + 2e-3)");
+        assert_eq!(rate, "4 * 0.002 / (1 + 0.002)");
         assert_eq!(m.compartments, vec![("c".to_string(), 2.0)]);
     }
 
@@ -763,18 +763,18 @@ mod tests {
             m.reactions[0].rate.render(&|n| n.to_string())
         };
         let wrapped = "<apply><apply><times/><ci>k</ci><ci>A</ci></apply></apply>";
-        assert_eq!(rate(wrapped), "4e0 * A");
+        assert_eq!(rate(wrapped), "4 * A");
         let piece = |value: &str, rel: &str| {
             format!("<piece><cn>{value}</cn><apply><{rel}/><ci>A</ci><cn>0</cn></apply></piece>")
         };
         let pieces = format!("<piecewise>{}{}</piecewise>", piece("1", "gt"), piece("2", "leq"));
-        assert_eq!(rate(&pieces), "if(gt(A, 0e0), 1e0, 2e0)");
+        assert_eq!(rate(&pieces), "if(gt(A, 0), 1, 2)");
         let otherwise = format!(
             "<piecewise>{}{}<otherwise><cn>3</cn></otherwise></piecewise>",
             piece("1", "gt"),
             piece("2", "leq")
         );
-        assert_eq!(rate(&otherwise), "if(gt(A, 0e0), 1e0, if(le(A, 0e0), 2e0, 3e0))");
+        assert_eq!(rate(&otherwise), "if(gt(A, 0), 1, if(le(A, 0), 2, 3))");
         let e = Sbml::parse(&with_rate("<piecewise></piecewise>"), "m.xml").unwrap_err();
         assert!(e.message.contains("a <piecewise> with neither a piece nor otherwise"), "{e}");
         assert_eq!(e.line, Some(21));
@@ -812,7 +812,7 @@ mod tests {
         .expect("reads");
         let e = &m.events[0];
         assert_eq!((e.id.as_str(), e.initially_true), ("pulse", true));
-        assert_eq!(e.trigger.render(&|n| n.to_string()), "ge(t, 2e0)");
+        assert_eq!(e.trigger.render(&|n| n.to_string()), "ge(t, 2)");
         assert_eq!(e.assignments[0].0, "A");
         let m = Sbml::parse(
             &with(&format!(
