@@ -10,4 +10,5 @@ mod expressions;
 mod laplace;
 mod model_file;
 mod profile;
+mod sparse;
 mod symbolic;

@@ -14,8 +14,9 @@
 //! * integrators ([`Integrator`]): adaptive Dormand–Prince 5(4) with error control over all
 //!   components (sensitivities included) and dense output; classical RK4 with a fixed step;
 //!   for stiff systems Rodas4 and Rodas5P, Rosenbrock methods of order 4 and 5 with the
-//!   exact Jacobian and dense LU (faer), integrating the sensitivities with the same
-//!   factorisation; an
+//!   exact Jacobian and dense LU (faer), or, for a system of [`SPARSE_FROM`] states or more
+//!   that gives its sparse Jacobian, a sparse LU in a fill-reducing order (its pattern
+//!   analysed once), integrating the sensitivities with the same factorisation; an
 //!   automatic choice that starts with DOPRI5 and switches to Rodas4 when Hairer's
 //!   stiffness test fires; forward and backward from t0; steps that stop exactly on
 //!   declared input discontinuities; errors ([`OdeError`]) instead of panics;
@@ -87,6 +88,7 @@ mod rodas5p;
 mod rosenbrock_conditions;
 mod signal;
 mod sparse;
+mod sparse_lu;
 mod stepper;
 mod stiffness;
 mod system;
@@ -97,7 +99,7 @@ mod wrt;
 pub use counts::Counts;
 pub use driver::integrate;
 pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError};
-pub use implicit::IterationMatrix;
+pub use implicit::{IterationMatrix, SPARSE_FROM};
 pub use interpolant::{DenseSolution, Interpolant};
 pub use ivp::{
     Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory,

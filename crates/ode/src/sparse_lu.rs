@@ -1,0 +1,388 @@
+//! Sparse LU of an implicit step's matrix E = I/(γh) − ∂g/∂y, for large systems whose
+//! Jacobian has few entries per row (a reaction network: Chen's 500 species).
+//!
+//! E's pattern is the Jacobian's and the diagonal, the same at every step, so the work that
+//! depends on the pattern alone is done once per system: a fill-reducing symmetric order
+//! (approximate minimum degree on E + Eᵀ, faer's AMD) and the pattern of the factors in that
+//! order. Each step then refills the values and eliminates along the pattern with the
+//! diagonal as pivots, and the solves (k right-hand sides stored row by row, the
+//! sensitivities' layout) cost one multiply-add per entry of the factors and column, the
+//! columns contiguous in the inner loop.
+//!
+//! Diagonal pivots are safe where E is diagonally dominant, as it is for short steps; they
+//! are checked as threshold partial pivoting would (KLU's threshold, 10⁻³): a multiplier
+//! larger than 10³ in magnitude, or a zero or non-finite pivot, and the step's matrix is
+//! factorised dense with partial pivoting instead ([`Lu`]).
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::SymbolicSparseColMatRef;
+use faer::sparse::linalg::amd;
+
+use crate::lu::{FactorError, Lu};
+
+/// The largest multiplier accepted from diagonal pivots: 1/τ for threshold partial pivoting
+/// with τ = 10⁻³.
+const MAX_MULTIPLIER: f64 = 1e3;
+
+/// E's pattern in a fill-reducing order, its factors, and the dense fallback.
+pub struct SparseLu {
+    n: usize,
+    /// The order: row and column `order[i]` of E is row and column i of the factored matrix.
+    order: Vec<usize>,
+    /// Row i of the factors (in the order) is `columns[starts[i]..starts[i + 1]]`, ascending:
+    /// L's entries left of the diagonal, then U's from the diagonal on.
+    starts: Vec<usize>,
+    columns: Vec<usize>,
+    /// Where each row's diagonal entry is.
+    diagonal: Vec<usize>,
+    /// The factors: L's multipliers, U's entries, and the reciprocal of U's diagonal.
+    values: Vec<f64>,
+    /// E's own entries: (where in `values`, index i·n + j of the dense Jacobian, on the
+    /// diagonal).
+    entries: Vec<(usize, usize, bool)>,
+    /// A row of the matrix being eliminated, dense.
+    row: Vec<f64>,
+    /// The right-hand sides in the order, row by row.
+    work: Vec<f64>,
+    /// The dense factorisation of the steps where the diagonal pivots are refused.
+    dense: Lu,
+    use_dense: bool,
+}
+
+impl SparseLu {
+    /// For n × n matrices whose entries off the diagonal are among `pattern` (row, column;
+    /// columns n and beyond are ignored: the Jacobian's parameter columns), with solves of
+    /// up to `columns` right-hand sides at once; `None` where the order cannot be computed.
+    pub fn new(n: usize, pattern: &[(u32, u32)], columns: usize) -> Option<Self> {
+        let mut entries: Vec<(usize, usize)> = pattern
+            .iter()
+            .map(|&(i, j)| (i as usize, j as usize))
+            .filter(|&(i, j)| i < n && j < n)
+            .chain((0..n).map(|i| (i, i)))
+            .collect();
+        entries.sort_unstable_by_key(|&(i, j)| (j, i));
+        entries.dedup();
+        let order = minimum_degree(n, &entries)?;
+        let mut position = vec![0; n];
+        for (new, &old) in order.iter().enumerate() {
+            position[old] = new;
+        }
+        let rows = fill(n, entries.iter().map(|&(i, j)| (position[i], position[j])));
+        let mut starts = vec![0];
+        let mut all = Vec::new();
+        let mut diagonal = Vec::with_capacity(n);
+        for (i, row) in rows.iter().enumerate() {
+            diagonal.push(all.len() + row.iter().position(|&j| j == i).expect("the diagonal"));
+            all.extend_from_slice(row);
+            starts.push(all.len());
+        }
+        let slot = |i: usize, j: usize| {
+            let row = &all[starts[i]..starts[i + 1]];
+            starts[i] + row.binary_search(&j).expect("E's entries are in the fill")
+        };
+        let entries = entries
+            .iter()
+            .map(|&(i, j)| (slot(position[i], position[j]), i * n + j, i == j))
+            .collect();
+        Some(Self {
+            n,
+            order,
+            values: vec![0.0; all.len()],
+            columns: all,
+            starts,
+            diagonal,
+            entries,
+            row: vec![0.0; n],
+            work: vec![0.0; n * columns.max(1)],
+            dense: Lu::new(n, columns),
+            use_dense: false,
+        })
+    }
+
+    /// The entries of the factors L and U (the diagonal once).
+    pub fn entries_of_factors(&self) -> usize {
+        self.columns.len()
+    }
+
+    /// Whether the last factorisation fell back to the dense LU.
+    #[cfg(test)]
+    pub fn fell_back(&self) -> bool {
+        self.use_dense
+    }
+
+    /// Factorises E = I·`inv_gamma_h` − J, J the dense Jacobian row by row (only its entries
+    /// in the pattern are read).
+    pub fn factor(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<(), FactorError> {
+        self.use_dense = false;
+        self.values.fill(0.0);
+        for &(slot, at, diagonal) in &self.entries {
+            self.values[slot] = if diagonal { inv_gamma_h } else { 0.0 } - jac[at];
+        }
+        if self.values.iter().any(|v| !v.is_finite()) {
+            return Err(FactorError::Singular);
+        }
+        if self.eliminate() {
+            return Ok(());
+        }
+        self.use_dense = true;
+        let n = self.n;
+        self.dense.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
+    }
+
+    /// Gaussian elimination along the pattern, row by row, with the diagonal as pivots;
+    /// false where a pivot is zero or not finite or a multiplier exceeds [`MAX_MULTIPLIER`].
+    fn eliminate(&mut self) -> bool {
+        let Self { starts, columns, diagonal, values, row, .. } = self;
+        for i in 0..self.n {
+            let own = starts[i]..starts[i + 1];
+            for p in own.clone() {
+                row[columns[p]] = values[p];
+            }
+            for p in starts[i]..diagonal[i] {
+                let k = columns[p];
+                let multiplier = row[k] * values[diagonal[k]];
+                if multiplier.is_nan() || multiplier.abs() > MAX_MULTIPLIER {
+                    return false;
+                }
+                row[k] = multiplier;
+                if multiplier != 0.0 {
+                    for q in diagonal[k] + 1..starts[k + 1] {
+                        row[columns[q]] -= multiplier * values[q];
+                    }
+                }
+            }
+            for p in own {
+                values[p] = row[columns[p]];
+            }
+            let pivot = values[diagonal[i]];
+            if !(pivot != 0.0 && pivot.is_finite()) {
+                return false;
+            }
+            values[diagonal[i]] = 1.0 / pivot;
+        }
+        true
+    }
+
+    /// Overwrites r (length n) with E⁻¹ r.
+    pub fn solve(&mut self, r: &mut [f64]) {
+        self.solve_rows(r, 1);
+    }
+
+    /// Overwrites the n × k matrix R, stored row by row in r, with E⁻¹ R (k at most the
+    /// `columns` given to [`new`](Self::new)).
+    pub fn solve_rows(&mut self, r: &mut [f64], k: usize) {
+        if self.use_dense {
+            return match k {
+                1 => self.dense.solve(r),
+                _ => self.dense.solve_rows(r, k),
+            };
+        }
+        let n = self.n;
+        let x = &mut self.work[..n * k];
+        for (i, &from) in self.order.iter().enumerate() {
+            x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
+        }
+        let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
+        // L Y = R: row i less its multipliers times the rows before it.
+        for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
+            let (done, rest) = x.split_at_mut(i * k);
+            let target = &mut rest[..k];
+            for p in start..diagonal {
+                let (j, l) = (columns[p], values[p]);
+                if l != 0.0 {
+                    for (v, y) in target.iter_mut().zip(&done[j * k..(j + 1) * k]) {
+                        *v -= l * y;
+                    }
+                }
+            }
+        }
+        // U X = Y: row i less U's entries times the rows after it, over the pivot.
+        for i in (0..n).rev() {
+            let (head, done) = x.split_at_mut((i + 1) * k);
+            let target = &mut head[i * k..];
+            let d = self.diagonal[i];
+            for p in d + 1..starts[i + 1] {
+                let (j, u) = (columns[p] - i - 1, values[p]);
+                if u != 0.0 {
+                    for (v, y) in target.iter_mut().zip(&done[j * k..(j + 1) * k]) {
+                        *v -= u * y;
+                    }
+                }
+            }
+            let inverse_pivot = values[d];
+            target.iter_mut().for_each(|v| *v *= inverse_pivot);
+        }
+        for (i, &to) in self.order.iter().enumerate() {
+            r[to * k..(to + 1) * k].copy_from_slice(&x[i * k..(i + 1) * k]);
+        }
+    }
+}
+
+/// The approximate minimum degree order of the pattern of E + Eᵀ (faer's AMD), as
+/// `order[new] = old`; `entries` is E's pattern column by column, rows ascending.
+fn minimum_degree(n: usize, entries: &[(usize, usize)]) -> Option<Vec<usize>> {
+    let mut starts = vec![0usize; n + 1];
+    for &(_, j) in entries {
+        starts[j + 1] += 1;
+    }
+    for j in 0..n {
+        starts[j + 1] += starts[j];
+    }
+    let rows: Vec<usize> = entries.iter().map(|e| e.0).collect();
+    let structure = SymbolicSparseColMatRef::new_checked(n, n, &starts, None, &rows);
+    let mut mem = MemBuffer::try_new(amd::order_scratch::<usize>(n, entries.len())).ok()?;
+    let (mut order, mut inverse) = (vec![0usize; n], vec![0usize; n]);
+    amd::order(&mut order, &mut inverse, structure, Default::default(), MemStack::new(&mut mem))
+        .ok()?;
+    Some(order)
+}
+
+/// The pattern of the LU factors without pivoting of a matrix with the pattern `entries`
+/// (row, column; the diagonal among them): row by row, each row's columns ascending. Row i
+/// gains the entries right of the diagonal of every row k < i that its own entries left of
+/// the diagonal reach, taken in ascending k, as elimination produces them.
+fn fill(n: usize, entries: impl Iterator<Item = (usize, usize)>) -> Vec<Vec<usize>> {
+    let mut rows: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (i, j) in entries {
+        rows[i].push(j);
+    }
+    let mut marked = vec![usize::MAX; n];
+    for i in 0..n {
+        let mut row = std::mem::take(&mut rows[i]);
+        for &j in &row {
+            marked[j] = i;
+        }
+        // Ascending k below i: a min-heap of the columns left of the diagonal still to visit.
+        let mut pending: std::collections::BinaryHeap<std::cmp::Reverse<usize>> =
+            row.iter().copied().filter(|&j| j < i).map(std::cmp::Reverse).collect();
+        while let Some(std::cmp::Reverse(k)) = pending.pop() {
+            for &j in rows[k].iter().filter(|&&j| j > k) {
+                if marked[j] != i {
+                    marked[j] = i;
+                    row.push(j);
+                    if j < i {
+                        pending.push(std::cmp::Reverse(j));
+                    }
+                }
+            }
+        }
+        row.sort_unstable();
+        rows[i] = row;
+    }
+    rows
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::assert_close_abs;
+
+    /// A chain with a coupling back from the last state to the first (so elimination fills
+    /// in) and an entry of the Jacobian outside the pattern, which is never read.
+    fn chain(n: usize) -> (Vec<(u32, u32)>, Vec<f64>) {
+        let mut pattern = Vec::new();
+        let mut jac = vec![0.0; n * n];
+        for i in 1..n {
+            pattern.push((i as u32, (i - 1) as u32));
+            jac[i * n + i - 1] = 1.0 + 0.1 * i as f64;
+            pattern.push((i as u32, i as u32));
+            jac[i * n + i] = -2.0 - (i % 3) as f64;
+        }
+        pattern.push((0, (n - 1) as u32));
+        jac[n - 1] = 3.0;
+        jac[5 * n + 30] = f64::NAN;
+        (pattern, jac)
+    }
+
+    fn dense_of(n: usize, jac: &[f64], inv_gamma_h: f64) -> Lu {
+        let mut dense = Lu::new(n, 3);
+        dense
+            .factor(|i, j| {
+                let jij = if (i, j) == (5, 30) { 0.0 } else { jac[i * n + j] };
+                (if i == j { inv_gamma_h } else { 0.0 }) - jij
+            })
+            .expect("regular");
+        dense
+    }
+
+    fn agree(sparse: &mut SparseLu, dense: &mut Lu, n: usize) {
+        let r: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let (mut a, mut b) = (r.clone(), r.clone());
+        sparse.solve(&mut a);
+        dense.solve(&mut b);
+        for (x, y) in a.iter().zip(&b) {
+            assert_close_abs(*x, *y, 1e-12);
+        }
+        let block: Vec<f64> = (0..n * 3).map(|i| (i as f64 * 0.11).cos()).collect();
+        let (mut a, mut b) = (block.clone(), block.clone());
+        sparse.solve_rows(&mut a, 3);
+        dense.solve_rows(&mut b, 3);
+        for (x, y) in a.iter().zip(&b) {
+            assert_close_abs(*x, *y, 1e-12);
+        }
+    }
+
+    /// The sparse solves agree with the dense LU's, for one right-hand side and for a block
+    /// stored row by row, with E dominated by its diagonal (a short step), where the
+    /// diagonal pivots hold.
+    #[test]
+    fn sparse_solves_agree_with_the_dense_lu() {
+        let n = 40;
+        let (pattern, jac) = chain(n);
+        let mut sparse = SparseLu::new(n, &pattern, 3).expect("ordered");
+        // The cycle fills in: more than E's 2n entries, far fewer than n².
+        assert!(sparse.entries_of_factors() > 2 * n, "{}", sparse.entries_of_factors());
+        assert!(sparse.entries_of_factors() < 4 * n, "{}", sparse.entries_of_factors());
+        sparse.factor(10.0, &jac).expect("regular");
+        assert!(!sparse.fell_back());
+        agree(&mut sparse, &mut dense_of(n, &jac, 10.0), n);
+    }
+
+    /// Where a diagonal pivot is 0, or its multiplier beyond 10³, the step's matrix is
+    /// factorised dense with partial pivoting, and the solves are still E's.
+    #[test]
+    fn refused_pivots_fall_back_to_the_dense_lu() {
+        let n = 2;
+        let pattern = [(0, 1), (1, 0)];
+        for (diagonal, falls_back) in [(0.0, true), (1e-6, true), (1e-2, false)] {
+            // E = [[d, 1], [1, d]]: J = −E off the diagonal, and d on it with 1/(γh) = 2d.
+            let jac = [-diagonal, -1.0, -1.0, -diagonal];
+            let mut sparse = SparseLu::new(n, &pattern, 3).expect("ordered");
+            sparse.factor(0.0, &jac).expect("regular");
+            assert_eq!(sparse.fell_back(), falls_back, "d = {diagonal}");
+            let mut dense = Lu::new(n, 3);
+            dense.factor(|i, j| -jac[i * n + j]).expect("regular");
+            agree(&mut sparse, &mut dense, n);
+        }
+    }
+
+    /// A non-finite entry of the pattern is refused as a singular matrix, as the dense LU
+    /// refuses it.
+    #[test]
+    fn a_non_finite_entry_is_singular() {
+        let n = 40;
+        let (pattern, mut jac) = chain(n);
+        let mut sparse = SparseLu::new(n, &pattern, 3).expect("ordered");
+        jac[n - 1] = f64::INFINITY;
+        assert_eq!(sparse.factor(1.0, &jac), Err(FactorError::Singular));
+    }
+
+    /// The fill of an arrow matrix: eliminating the hub first fills everything, last fills
+    /// nothing; the pattern computed for the natural order is the dense one, and the
+    /// minimum degree order puts the hub last.
+    #[test]
+    fn the_fill_of_an_arrow_depends_on_the_order() {
+        let n = 6;
+        let arrow: Vec<(usize, usize)> = (0..n)
+            .flat_map(|i| [(i, i), (0, i), (i, 0)])
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        let rows = fill(n, arrow.iter().copied());
+        assert!(rows.iter().all(|r| r.len() == n), "{rows:?}");
+        let mut by_column = arrow.clone();
+        by_column.sort_unstable_by_key(|&(i, j)| (j, i));
+        let order = minimum_degree(n, &by_column).expect("ordered");
+        assert_eq!(order[n - 1], 0, "{order:?}");
+    }
+}
