@@ -2,7 +2,8 @@
 //! Jacobian has few entries per row (a reaction network: Chen's 500 species).
 //!
 //! E's pattern is the Jacobian's and the diagonal, the same at every step, so the work that
-//! depends on the pattern alone is done once per system: a fill-reducing symmetric order
+//! depends on the pattern alone is done once per integration, not per step: a fill-reducing
+//! symmetric order
 //! (approximate minimum degree on E + Eᵀ, faer's AMD) and the pattern of the factors in that
 //! order. Each step then refills the values and eliminates along the pattern with the
 //! diagonal as pivots, and the solves (k right-hand sides stored row by row, the
