@@ -127,7 +127,8 @@ pub enum Func {
 }
 
 impl Func {
-    fn from_name(name: &str) -> Option<Self> {
+    /// The function of that name in the model file's language.
+    pub fn from_name(name: &str) -> Option<Self> {
         Some(match name {
             "exp" => Func::Exp,
             "log" => Func::Log,
@@ -152,6 +153,32 @@ impl Func {
             _ => return None,
         })
     }
+    /// Its name in the model file's language.
+    pub fn name(self) -> &'static str {
+        match self {
+            Func::Exp => "exp",
+            Func::Log => "log",
+            Func::Sqrt => "sqrt",
+            Func::Sin => "sin",
+            Func::Cos => "cos",
+            Func::Tan => "tan",
+            Func::Tanh => "tanh",
+            Func::Abs => "abs",
+            Func::Min => "min",
+            Func::Max => "max",
+            Func::If => "if",
+            Func::Lt => "lt",
+            Func::Le => "le",
+            Func::Gt => "gt",
+            Func::Ge => "ge",
+            Func::Eq => "eq",
+            Func::Ne => "ne",
+            Func::And => "and",
+            Func::Or => "or",
+            Func::Not => "not",
+        }
+    }
+
     fn arity(self) -> usize {
         match self {
             Func::If => 3,
@@ -685,7 +712,7 @@ impl Expr {
                 b.write(out, right);
             }
             Expr::Call(func, args, _) => {
-                let _ = write!(out, "{}(", format!("{func:?}").to_lowercase());
+                let _ = write!(out, "{}(", func.name());
                 for (i, a) in args.iter().enumerate() {
                     if i > 0 {
                         out.push_str(", ");
@@ -1177,9 +1204,8 @@ impl fmt::Display for Expr {
                 write!(f, "({a} {c} {b})")
             }
             Expr::Call(func, args, _) => {
-                let name = format!("{func:?}").to_lowercase();
                 let args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
-                write!(f, "{name}({})", args.join(", "))
+                write!(f, "{}({})", func.name(), args.join(", "))
             }
         }
     }

@@ -336,7 +336,7 @@ impl Math {
                         let condition = v.pop().expect("three");
                         Math::Piecewise(vec![(value, condition)], Some(Box::new(otherwise)))
                     }
-                    f => Math::Call(function_name(*f), v),
+                    f => Math::Call(f.name(), v),
                 }
             }
         }
@@ -345,27 +345,7 @@ impl Math {
 
 /// The model file's function of a name of [`UNARY`], `min` or `max`.
 fn function(name: &str) -> Func {
-    match name {
-        "exp" => Func::Exp,
-        "log" => Func::Log,
-        "sqrt" => Func::Sqrt,
-        "sin" => Func::Sin,
-        "cos" => Func::Cos,
-        "tan" => Func::Tan,
-        "tanh" => Func::Tanh,
-        "abs" => Func::Abs,
-        "min" => Func::Min,
-        "max" => Func::Max,
-        other => unreachable!("the importer makes no call of `{other}`"),
-    }
-}
-
-/// The name of a function of the model file's that is not logical or a comparison.
-fn function_name(f: Func) -> &'static str {
-    ["exp", "log", "sqrt", "sin", "cos", "tan", "tanh", "abs", "min", "max"]
-        .into_iter()
-        .find(|n| function(n) == f)
-        .expect("a logical function or comparison is read as such")
+    Func::from_name(name).unwrap_or_else(|| unreachable!("the importer makes no call of `{name}`"))
 }
 
 /// and(a, and(b, c)) for a logical operator of several arguments (1 for none: `and`; 0:
