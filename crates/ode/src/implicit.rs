@@ -34,10 +34,6 @@ impl IterationMatrix {
     pub fn new<S: System>(sys: &S, p: &[f64], columns: usize) -> Self {
         let sig = sys.signature();
         let (n, np) = (sig.n_states(), sig.n_parameters());
-        let mut identity = vec![0.0; n * n];
-        for i in 0..n {
-            identity[i * n + i] = 1.0;
-        }
         let analytic = sys.analytic_jacobians();
         let (sparse, entries) = match sys.sparse_jacobian(Function::Rhs) {
             Some(jacobian) if !analytic && n >= SPARSE_FROM => {
@@ -47,6 +43,13 @@ impl IterationMatrix {
             }
             _ => (None, Vec::new()),
         };
+        // Products with the identity give the Jacobian where neither the system's own
+        // Jacobians nor the sparse factors' entries do.
+        let directions = if analytic || sparse.is_some() { 0 } else { n };
+        let mut identity = vec![0.0; n * directions];
+        for i in 0..directions {
+            identity[i * n + i] = 1.0;
+        }
         Self {
             n,
             lu: match sparse {
@@ -54,13 +57,7 @@ impl IterationMatrix {
                 None => Factors::Dense(Lu::new(n, columns)),
             },
             jac: vec![0.0; n * n],
-            products: JacobianProducts::new(
-                n,
-                p,
-                &vec![0.0; np * n],
-                n,
-                if analytic { 0 } else { n },
-            ),
+            products: JacobianProducts::new(n, p, &vec![0.0; np * n], n, directions),
             identity,
             value: vec![0.0; n],
             analytic: analytic.then(|| (DMatrix::zeros(n, n), DMatrix::zeros(n, np))),

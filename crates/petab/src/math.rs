@@ -354,14 +354,10 @@ fn logical(f: Func, v: &[Math], name: &dyn Fn(&str) -> String) -> Expr {
     match v {
         [] => Expr::Num(if f == Func::And { 1.0 } else { 0.0 }),
         [one] => Expr::Call(Func::Ne, vec![one.expr(name), Expr::Num(0.0)], 0),
-        [first, rest @ ..] => Expr::Call(f, vec![first.expr(name), logical_tail(f, rest, name)], 0),
-    }
-}
-
-fn logical_tail(f: Func, rest: &[Math], name: &dyn Fn(&str) -> String) -> Expr {
-    match rest {
-        [one] => one.expr(name),
-        _ => logical(f, rest, name),
+        [first, rest @ ..] => {
+            let rest = if let [one] = rest { one.expr(name) } else { logical(f, rest, name) };
+            Expr::Call(f, vec![first.expr(name), rest], 0)
+        }
     }
 }
 
