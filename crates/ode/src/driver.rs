@@ -94,7 +94,7 @@ fn check_inputs<R: Rhs>(
 }
 
 /// How close to t a stop is merged with it: no step fits in between.
-fn resolution(t: f64) -> f64 {
+pub(crate) fn resolution(t: f64) -> f64 {
     64.0 * f64::EPSILON * t.abs().max(1.0)
 }
 

@@ -35,27 +35,22 @@ impl IterationMatrix {
         let sig = sys.signature();
         let (n, np) = (sig.n_states(), sig.n_parameters());
         let analytic = sys.analytic_jacobians();
-        let (sparse, entries) = match sys.sparse_jacobian(Function::Rhs) {
-            Some(jacobian) if !analytic && n >= SPARSE_FROM => {
-                let lu = SparseLu::new(n, jacobian.pattern(), columns)
-                    .filter(|lu| lu.entries_of_factors() <= n * n / 2);
-                (lu, jacobian.workspace())
-            }
-            _ => (None, Vec::new()),
+        let sparse = sys.sparse_jacobian(Function::Rhs).filter(|_| !analytic);
+        let lu = Factors::new(n, sparse.map(|j| j.pattern()), columns);
+        let entries = match &lu {
+            Factors::Sparse(_) => sparse.map(|j| j.workspace()).unwrap_or_default(),
+            Factors::Dense(_) => Vec::new(),
         };
         // Products with the identity give the Jacobian where neither the system's own
         // Jacobians nor the sparse factors' entries do.
-        let directions = if analytic || sparse.is_some() { 0 } else { n };
+        let directions = if analytic || lu.is_sparse() { 0 } else { n };
         let mut identity = vec![0.0; n * directions];
         for i in 0..directions {
             identity[i * n + i] = 1.0;
         }
         Self {
             n,
-            lu: match sparse {
-                Some(sparse) => Factors::Sparse(Box::new(sparse)),
-                None => Factors::Dense(Lu::new(n, columns)),
-            },
+            lu,
             jac: vec![0.0; n * n],
             products: JacobianProducts::new(n, p, &vec![0.0; np * n], n, directions),
             identity,
@@ -114,13 +109,7 @@ impl IterationMatrix {
                 );
             }
         }
-        let jac = &self.jac;
-        match &mut self.lu {
-            Factors::Dense(lu) => {
-                lu.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
-            }
-            Factors::Sparse(lu) => lu.factor(inv_gamma_h, jac),
-        }
+        self.lu.factor(inv_gamma_h, &self.jac)
     }
 
     /// The Jacobian ∂g/∂y of the last factorisation, row by row.
@@ -130,31 +119,74 @@ impl IterationMatrix {
 
     /// Overwrites r with E⁻¹ r.
     pub fn solve(&mut self, r: &mut [f64]) {
-        match &mut self.lu {
-            Factors::Dense(lu) => lu.solve(r),
-            Factors::Sparse(lu) => lu.solve(r),
-        }
+        self.lu.solve(r);
     }
 
     /// Overwrites the n × k matrix R (row by row) with E⁻¹ R.
     pub fn solve_rows(&mut self, r: &mut [f64], k: usize) {
-        match &mut self.lu {
-            Factors::Dense(lu) => lu.solve_rows(r, k),
-            Factors::Sparse(lu) => lu.solve_rows(r, k),
-        }
+        self.lu.solve_rows(r, k);
     }
 
     /// Whether E is factorised sparse.
     pub fn is_sparse(&self) -> bool {
-        matches!(self.lu, Factors::Sparse(_))
+        self.lu.is_sparse()
     }
 }
 
-/// E's factors: dense, or sparse for a large system with a sparse Jacobian
-/// ([`SPARSE_FROM`]).
-enum Factors {
+/// The factors of E = I·c − J (n × n): dense, or sparse for a large system with a sparse
+/// Jacobian ([`SPARSE_FROM`]).
+pub(crate) enum Factors {
     Dense(Lu),
     Sparse(Box<SparseLu>),
+}
+
+impl Factors {
+    /// For n states, J's nonzero entries (row, column) in `pattern` where they are known
+    /// (columns from n on, the parameters', are left out), solving up to `columns`
+    /// right-hand sides at once: sparse from [`SPARSE_FROM`] states where the factors keep at
+    /// most half of n², else dense.
+    pub(crate) fn new(n: usize, pattern: Option<&[(u32, u32)]>, columns: usize) -> Self {
+        match pattern.filter(|_| n >= SPARSE_FROM) {
+            Some(pattern) => match SparseLu::new(n, pattern, columns) {
+                Some(lu) if lu.entries_of_factors() <= n * n / 2 => Self::Sparse(Box::new(lu)),
+                _ => Self::Dense(Lu::new(n, columns)),
+            },
+            None => Self::Dense(Lu::new(n, columns)),
+        }
+    }
+
+    /// Factorises E = I·`inv_gamma_h` − J, J dense row by row (the sparse factors read only
+    /// its entries in their pattern).
+    pub(crate) fn factor(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<(), FactorError> {
+        match self {
+            Self::Dense(lu) => {
+                let n = lu.dim();
+                lu.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
+            }
+            Self::Sparse(lu) => lu.factor(inv_gamma_h, jac),
+        }
+    }
+
+    /// Overwrites r with E⁻¹ r.
+    pub(crate) fn solve(&mut self, r: &mut [f64]) {
+        match self {
+            Self::Dense(lu) => lu.solve(r),
+            Self::Sparse(lu) => lu.solve(r),
+        }
+    }
+
+    /// Overwrites the n × k matrix R (row by row) with E⁻¹ R.
+    pub(crate) fn solve_rows(&mut self, r: &mut [f64], k: usize) {
+        match self {
+            Self::Dense(lu) => lu.solve_rows(r, k),
+            Self::Sparse(lu) => lu.solve_rows(r, k),
+        }
+    }
+
+    /// Whether the factors are sparse.
+    pub(crate) fn is_sparse(&self) -> bool {
+        matches!(self, Self::Sparse(_))
+    }
 }
 
 /// The fewest states from which E is factorised sparse ([`SparseLu`]), where the system

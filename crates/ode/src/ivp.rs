@@ -37,10 +37,10 @@ pub struct Ivp<'a, S> {
 /// The state at a list of times.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Trajectory {
-    times: Vec<f64>,
-    n: usize,
-    values: Vec<f64>,
-    counts: Counts,
+    pub(crate) times: Vec<f64>,
+    pub(crate) n: usize,
+    pub(crate) values: Vec<f64>,
+    pub(crate) counts: Counts,
 }
 
 impl Trajectory {
@@ -394,7 +394,7 @@ impl<'a, S: System> Ivp<'a, S> {
         Self { weights: Some(weights), ..self }
     }
 
-    fn check(&self) -> Result<(), OdeError> {
+    pub(crate) fn check(&self) -> Result<(), OdeError> {
         let sig = self.system.signature();
         if self.y0.len() != sig.n_states() {
             return Err(OdeError::Dimension {
@@ -562,7 +562,7 @@ pub fn stops<S: System>(system: &S, p: &[f64]) -> Vec<f64> {
     stops
 }
 
-fn check_wrt<S: System>(sys: &S, wrt: &[Wrt]) -> Result<(), OdeError> {
+pub(crate) fn check_wrt<S: System>(sys: &S, wrt: &[Wrt]) -> Result<(), OdeError> {
     let sig = sys.signature();
     for w in wrt {
         let (ok, what) = match *w {

@@ -67,6 +67,7 @@
 //! ```
 #![warn(missing_docs)]
 
+mod adjoint;
 mod control;
 mod counts;
 mod dopri5;

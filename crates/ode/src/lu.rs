@@ -53,6 +53,11 @@ impl Lu {
         }
     }
 
+    /// n, for n × n.
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+
     /// Fills the matrix with `entry(i, j)` and factorises it.
     pub fn factor(&mut self, entry: impl Fn(usize, usize) -> f64) -> Result<(), FactorError> {
         let n = self.n;

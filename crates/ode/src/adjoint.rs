@@ -1,0 +1,410 @@
+//! Adjoint gradients: G_j = Σ_m c_mᵀ S_j(t_m) for every sensitivity column j at once, by one
+//! backward integration of n + k values instead of the forward integration of n·(1 + k).
+//!
+//! A weighted sum of the sensitivities at the sample times is what the gradient of a
+//! likelihood needs (c_m = ∂NLL/∂y(t_m)). With λ the adjoint state, the solution of
+//!
+//! dλ/dt = −J_yᵀ λ   backward from λ = 0 after the last sample, λ jumping by c_m at t_m,
+//!
+//! d(λᵀS_j)/dt = λᵀ(J_y S_j + ∂g/∂α_j) − λᵀJ_y S_j = λᵀ ∂g/∂α_j between the samples, so that
+//!
+//! G_j = λ(t0)ᵀ S_j(t0) + ∫_{t0}^{T} λᵀ ∂g/∂α_j dt + Σ_τ λ(τ)ᵀ(g₋ − g₊) ∂τ/∂α_j,
+//!
+//! the last sum over the switches τ(α) that move with a parameter, where S_j jumps by
+//! (g₋ − g₊) ∂τ/∂α_j (see [`System::moving_switches`]). The integral is carried as k more
+//! components μ, dμ/dt = −(∂g/∂α)ᵀλ, integrated backward with λ under the same error
+//! control. J_y and ∂g/∂α are read at the forward solution y(t), interpolated from its
+//! accepted steps (a [`DenseSolution`]).
+//!
+//! The implicit steps factorise E = I/(γh) + J_yᵀ (h < 0: the transpose of the forward
+//! problem's matrix), sparse in the same way for a large system with a sparse Jacobian; the
+//! μ block is solved by substitution. Systems with state events are not handled: their
+//! resets would need the adjoint's own jump conditions.
+
+use nalgebra::DMatrix;
+
+use crate::counts::Counts;
+use crate::driver::{integrate, resolution};
+use crate::error::OdeError;
+use crate::implicit::Factors;
+use crate::interpolant::DenseSolution;
+use crate::ivp::{Ivp, Trajectory, check_times, check_wrt, rhs_jump, stops};
+use crate::jacobian::JacobianProducts;
+use crate::lu::FactorError;
+use crate::options::Integrator;
+use crate::rhs::Rhs;
+use crate::signal::Side;
+use crate::system::{Function, System};
+use crate::wrt::Wrt;
+
+impl<S: System> Ivp<'_, S> {
+    /// The state on [t0, the last of `times`] as a function of time (no sensitivities), and
+    /// its values at `times` (non-decreasing, none before t0): the forward half of
+    /// [`adjoint`](Self::adjoint).
+    pub fn solve_dense(
+        &self,
+        integrator: &Integrator,
+        times: &[f64],
+    ) -> Result<(Trajectory, DenseSolution), OdeError> {
+        check_times(times)?;
+        let n = self.y0.len();
+        if let Some(&t) = times.first().filter(|&&t| t < self.t0) {
+            return Err(OdeError::InvalidSetup(format!(
+                "an adjoint integration starts at t0 = {}; a sample at t = {t} is before it",
+                self.t0
+            )));
+        }
+        let t_last = times.last().copied().unwrap_or(self.t0);
+        let (dense, counts) = self.dense(integrator, &[], (self.t0, t_last))?;
+        let mut values = vec![0.0; times.len() * n];
+        let mut hint = 0;
+        for (m, &t) in times.iter().enumerate() {
+            let out = &mut values[m * n..(m + 1) * n];
+            if !dense.eval_hinted(t, &mut hint, out) {
+                // Only t0 itself is outside an empty solution.
+                out.copy_from_slice(self.y0);
+            }
+        }
+        Ok((Trajectory { times: times.to_vec(), n, values, counts }, dense))
+    }
+
+    /// G_j = Σ_m c_mᵀ S_j(t_m) for the sensitivity columns `wrt`, by a backward (adjoint)
+    /// integration along `forward` (from [`solve_dense`](Self::solve_dense) at the same
+    /// times). `seeds` holds c_m, n values per time of `times` (non-decreasing, none before
+    /// t0); `s0` is S(t0) (n × k, row by row), by default the unit columns of the initial
+    /// values and zero for the parameters. Equal to the forward sensitivities' sum to the
+    /// integration's tolerance; the work done is returned with it.
+    pub fn adjoint(
+        &self,
+        integrator: &Integrator,
+        wrt: &[Wrt],
+        s0: Option<&[f64]>,
+        (forward, times, seeds): (&DenseSolution, &[f64], &[f64]),
+    ) -> Result<(Vec<f64>, Counts), OdeError> {
+        self.check()?;
+        check_wrt(self.system, wrt)?;
+        check_times(times)?;
+        let (n, k) = (self.y0.len(), wrt.len());
+        let setup = |what: String| Err(OdeError::InvalidSetup(what));
+        if self.system.n_events() > 0 {
+            return setup("adjoint gradients of a model with state events".into());
+        }
+        if seeds.len() != times.len() * n {
+            return setup(format!(
+                "{} adjoint seeds for {} times × {n} states",
+                seeds.len(),
+                times.len()
+            ));
+        }
+        if s0.is_some_and(|s| s.len() != n * k) || forward.dim() != n {
+            return setup(
+                "an adjoint's initial sensitivities or forward solution of the wrong size".into(),
+            );
+        }
+        if let Some(&t) = times.first().filter(|&&t| t < self.t0) {
+            return setup(format!("an adjoint sample at t = {t}, before t0 = {}", self.t0));
+        }
+        if let Some(i) = seeds.iter().position(|c| !c.is_finite()) {
+            let t = times[i / n];
+            return Err(OdeError::NonFinite {
+                t,
+                what: format!("the adjoint seed of state {}", i % n),
+            });
+        }
+        let scale = seeds.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+        let mut counts = Counts::default();
+        if scale == 0.0 {
+            return Ok((vec![0.0; k], counts));
+        }
+        let t_end = times[times.len() - 1];
+        let mut rhs = AdjointRhs::new(self, wrt, forward, (times, seeds, 1.0 / scale));
+        let mut x = vec![0.0; n + k];
+        rhs.add_seeds(t_end, &mut x);
+        if t_end - self.t0 > resolution(t_end) {
+            // Stop at every sample time (λ jumps there) and where the forward solution did.
+            let mut stops: Vec<f64> = stops(self.system, self.p);
+            stops.extend(times.iter().copied().filter(|&t| t > self.t0 && t < t_end));
+            stops.sort_by(f64::total_cmp);
+            stops.dedup();
+            let (c, x_end) = integrate(integrator, &mut rhs, (t_end, &x), self.t0, &stops, |_| {})?;
+            counts += c;
+            x = x_end;
+        }
+        rhs.add_seeds(self.t0, &mut x);
+        let (lambda, mu) = x.split_at(n);
+        let gradient = (0..k)
+            .map(|j| {
+                let initial: f64 = match s0 {
+                    Some(s0) => (0..n).map(|i| lambda[i] * s0[i * k + j]).sum(),
+                    None => match wrt[j] {
+                        Wrt::InitialValue(i) => lambda[i],
+                        Wrt::Parameter(_) => 0.0,
+                    },
+                };
+                scale * (mu[j] + initial)
+            })
+            .collect();
+        Ok((gradient, counts))
+    }
+}
+
+/// [∂g/∂y | ∂g/∂α] at a point, entry by entry.
+struct Entries {
+    /// (row i, column c): c < n is state c, n + q parameter q.
+    pattern: Vec<(u32, u32)>,
+    values: Vec<f64>,
+    source: Source,
+}
+
+/// Where the entries come from.
+enum Source {
+    /// The system's own sparse Jacobian (a model file's compiled one), with its work space.
+    Sparse(Vec<f64>),
+    /// Hand-written Jacobians ([`System::jacobians`]).
+    Analytic(DMatrix<f64>, DMatrix<f64>),
+    /// Dual numbers seeded with the identity over the states and the parameters.
+    Dual { products: JacobianProducts, seeds: Vec<f64>, value: Vec<f64> },
+}
+
+impl Entries {
+    fn new<S: System>(sys: &S, p: &[f64]) -> Self {
+        let sig = sys.signature();
+        let (n, np) = (sig.n_states(), sig.n_parameters());
+        let width = n + np;
+        let every: Vec<(u32, u32)> =
+            (0..n as u32).flat_map(|i| (0..width as u32).map(move |c| (i, c))).collect();
+        let source = if sys.analytic_jacobians() {
+            Source::Analytic(DMatrix::zeros(n, n), DMatrix::zeros(n, np))
+        } else if let Some(jacobian) = sys.sparse_jacobian(Function::Rhs) {
+            let pattern = jacobian.pattern().to_vec();
+            let values = vec![0.0; pattern.len()];
+            return Self { pattern, values, source: Source::Sparse(jacobian.workspace()) };
+        } else {
+            let mut vp = vec![0.0; np * width];
+            for q in 0..np {
+                vp[q * width + n + q] = 1.0;
+            }
+            let mut seeds = vec![0.0; n * width];
+            for i in 0..n {
+                seeds[i * width + i] = 1.0;
+            }
+            let products = JacobianProducts::new(n, p, &vp, n, width);
+            Source::Dual { products, seeds, value: vec![0.0; n] }
+        };
+        Self { values: vec![0.0; every.len()], pattern: every, source }
+    }
+
+    /// The entries at (t, y) with parameters `p` and inputs `u`.
+    fn eval<S: System>(&mut self, sys: &S, (t, y, p, u): (f64, &[f64], &[f64], &[f64])) {
+        match &mut self.source {
+            Source::Sparse(work) => {
+                if let Some(jacobian) = sys.sparse_jacobian(Function::Rhs) {
+                    jacobian.eval(t, y, p, u, work);
+                    for (v, &at) in self.values.iter_mut().zip(jacobian.entries()) {
+                        *v = work[at as usize];
+                    }
+                }
+            }
+            Source::Analytic(jy, jp) => {
+                sys.jacobians(t, y, p, u, jy, jp);
+                let n = y.len();
+                for (v, &(i, c)) in self.values.iter_mut().zip(&self.pattern) {
+                    let (i, c) = (i as usize, c as usize);
+                    *v = if c < n { jy[(i, c)] } else { jp[(i, c - n)] };
+                }
+            }
+            Source::Dual { products, seeds, value } => {
+                products.eval(sys, Function::Rhs, (t, y, u), seeds, value, &mut self.values);
+            }
+        }
+    }
+}
+
+/// The implicit steps' matrix: E_λ = I/(γh) + J_yᵀ factorised, and J's entries at that
+/// point for the μ block.
+struct Implicit {
+    factors: Factors,
+    /// −J_yᵀ, n × n row by row (only the pattern's places are ever written).
+    jac: Vec<f64>,
+    values: Vec<f64>,
+    inv_gamma_h: f64,
+}
+
+/// x = [λ; μ] and its backward right-hand side [−J_yᵀλ; −(∂g/∂α)ᵀλ] along the forward
+/// solution.
+struct AdjointRhs<'a, S> {
+    sys: &'a S,
+    p: &'a [f64],
+    forward: &'a DenseSolution,
+    hint: usize,
+    n: usize,
+    k: usize,
+    /// The column of each parameter among the k, where it has one.
+    column_of: Vec<Option<usize>>,
+    y: Vec<f64>,
+    u: Vec<f64>,
+    entries: Entries,
+    implicit: Option<Box<Implicit>>,
+    /// The sample times, their seeds and the factor they are scaled by.
+    times: &'a [f64],
+    seeds: &'a [f64],
+    scale: f64,
+    /// The samples not yet added to λ: the first `pending` (added from the last one down).
+    pending: usize,
+    moving: Vec<(f64, usize, f64)>,
+}
+
+impl<'a, S: System> AdjointRhs<'a, S> {
+    fn new(
+        ivp: &Ivp<'a, S>,
+        wrt: &[Wrt],
+        forward: &'a DenseSolution,
+        (times, seeds, scale): (&'a [f64], &'a [f64], f64),
+    ) -> Self {
+        let sig = ivp.system.signature();
+        let mut column_of = vec![None; sig.n_parameters()];
+        for (j, w) in wrt.iter().enumerate() {
+            if let Wrt::Parameter(q) = *w {
+                column_of[q] = Some(j);
+            }
+        }
+        Self {
+            sys: ivp.system,
+            p: ivp.p,
+            forward,
+            hint: forward.len().saturating_sub(1),
+            n: sig.n_states(),
+            k: wrt.len(),
+            column_of,
+            y: ivp.y0.to_vec(),
+            u: vec![0.0; sig.n_inputs()],
+            entries: Entries::new(ivp.system, ivp.p),
+            implicit: None,
+            times,
+            seeds,
+            scale,
+            pending: times.len(),
+            moving: ivp.system.moving_switches(ivp.p),
+        }
+    }
+
+    /// λ += c_m (scaled) for the samples not yet added at t or after it (within the
+    /// resolution of t): where the backward integration reaches them.
+    fn add_seeds(&mut self, t: f64, x: &mut [f64]) {
+        let n = self.n;
+        while self.pending > 0 && self.times[self.pending - 1] >= t - resolution(t) {
+            self.pending -= 1;
+            let seed = &self.seeds[self.pending * n..(self.pending + 1) * n];
+            for (l, c) in x[..n].iter_mut().zip(seed) {
+                *l += c * self.scale;
+            }
+        }
+    }
+
+    /// y(t) from the forward solution (NaN outside it, which the integration reports).
+    fn state_at(&mut self, t: f64) {
+        if self.forward.is_empty() || !self.forward.eval_hinted(t, &mut self.hint, &mut self.y) {
+            self.y.fill(f64::NAN);
+        }
+    }
+
+    fn jacobian_at(&mut self, t: f64, side: Side) {
+        self.state_at(t);
+        self.sys.input_values(t, side, &mut self.u);
+        self.entries.eval(self.sys, (t, &self.y, self.p, &self.u));
+    }
+}
+
+impl<S: System> Rhs for AdjointRhs<'_, S> {
+    fn dim(&self) -> usize {
+        self.n + self.k
+    }
+
+    fn describe(&self, i: usize) -> String {
+        let sig = self.sys.signature();
+        match i.checked_sub(self.n) {
+            None => format!("the adjoint of state {}", sig.states()[i]),
+            Some(j) => format!("the adjoint quadrature of column {j}"),
+        }
+    }
+
+    fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {
+        self.jacobian_at(t, side);
+        let n = self.n;
+        let (lambda, (dl, dm)) = (&x[..n], dx.split_at_mut(n));
+        dl.fill(0.0);
+        dm.fill(0.0);
+        for (&(i, c), &v) in self.entries.pattern.iter().zip(&self.entries.values) {
+            let (i, c) = (i as usize, c as usize);
+            if c < n {
+                dl[c] -= v * lambda[i];
+            } else if let Some(j) = self.column_of[c - n] {
+                dm[j] -= v * lambda[i];
+            }
+        }
+    }
+
+    fn factor(
+        &mut self,
+        t: f64,
+        side: Side,
+        _x: &[f64],
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        self.jacobian_at(t, side);
+        let n = self.n;
+        let implicit = self.implicit.get_or_insert_with(|| {
+            let transposed: Vec<(u32, u32)> =
+                self.entries.pattern.iter().map(|&(i, c)| (c, i)).collect();
+            Box::new(Implicit {
+                factors: Factors::new(n, Some(&transposed), 1),
+                jac: vec![0.0; n * n],
+                values: vec![0.0; self.entries.values.len()],
+                inv_gamma_h,
+            })
+        });
+        for (&(i, c), &v) in self.entries.pattern.iter().zip(&self.entries.values) {
+            if (c as usize) < n {
+                implicit.jac[c as usize * n + i as usize] = -v;
+            }
+        }
+        implicit.values.copy_from_slice(&self.entries.values);
+        implicit.inv_gamma_h = inv_gamma_h;
+        implicit.factors.factor(inv_gamma_h, &implicit.jac)
+    }
+
+    /// E = [[I/(γh) + J_yᵀ, 0], [(∂g/∂α)ᵀ, I/(γh)]]: λ's block by the factors, then μ's by
+    /// substitution.
+    fn solve(&mut self, r: &mut [f64]) {
+        let Some(implicit) = &mut self.implicit else { return };
+        let n = self.n;
+        let (ra, rb) = r.split_at_mut(n);
+        implicit.factors.solve(ra);
+        for (&(i, c), &v) in self.entries.pattern.iter().zip(&implicit.values) {
+            if let Some(j) = (c as usize).checked_sub(n).and_then(|q| self.column_of[q]) {
+                rb[j] -= v * ra[i as usize];
+            }
+        }
+        for b in rb {
+            *b /= implicit.inv_gamma_h;
+        }
+    }
+
+    /// At a switch that moves with a parameter, μ_j gains λᵀ(g₋ − g₊) ∂τ/∂α_j (λ from the
+    /// side after τ: a sample at τ sees the state before the jump); then the samples at t
+    /// join λ.
+    fn cross(&mut self, t: f64, x: &mut [f64], _dir: f64) {
+        let n = self.n;
+        if self.moving.iter().any(|m| m.0.to_bits() == t.to_bits()) {
+            self.state_at(t);
+            let jump = rhs_jump(self.sys, t, &self.y, self.p, &mut self.u);
+            let along: f64 = x[..n].iter().zip(&jump).map(|(l, g)| l * g).sum();
+            for &(_, q, slope) in self.moving.iter().filter(|m| m.0.to_bits() == t.to_bits()) {
+                if let Some(j) = self.column_of[q] {
+                    x[n + j] += along * slope;
+                }
+            }
+        }
+        self.add_seeds(t, x);
+    }
+}
