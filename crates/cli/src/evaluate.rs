@@ -5,7 +5,8 @@ use std::borrow::Cow;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail};
-use clap::Args;
+use clap::{Args, ValueEnum};
+use sysid_core::Sensitivities;
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, SourceArgs, count};
@@ -17,10 +18,14 @@ use crate::problem::{AnyProblem, with_integrator};
 pub struct EvaluateArgs {
     #[command(flatten)]
     source: SourceArgs,
-    /// Also the gradient of the NLL with respect to each parameter's value (forward
-    /// sensitivities).
+    /// Also the gradient of the NLL with respect to each parameter's value.
     #[arg(long)]
     gradient: bool,
+    /// How the gradient is computed: forward sensitivities of every parameter integrated
+    /// with the states, or one backward adjoint integration per condition (docs/methods.md).
+    /// Experiments with state events or samples before t0 are integrated forward either way.
+    #[arg(long, value_enum, default_value_t = How::Forward, requires = "gradient")]
+    sensitivities: How,
     /// Evaluate N times and report the median time of one evaluation.
     #[arg(long, default_value_t = 1, value_name = "N", value_parser = count)]
     repeat: usize,
@@ -35,6 +40,13 @@ pub struct EvaluateArgs {
     format: Format,
     #[command(flatten)]
     integrator: IntegratorArgs,
+}
+
+/// `--sensitivities`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum How {
+    Forward,
+    Adjoint,
 }
 
 /// One evaluation: the NLL, the priors' term, and the NLL's gradient.
@@ -71,7 +83,11 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
         // Each evaluation solves what it needs (a steady state) afresh, not from the last.
         held.forget_cached();
         let t = Instant::now();
-        let e = evaluate(&held, &z, &parameters, &values, args.gradient)?;
+        let how = match args.sensitivities {
+            How::Forward => Sensitivities::Forward,
+            How::Adjoint => Sensitivities::Adjoint,
+        };
+        let e = evaluate(&held, &z, &parameters, &values, args.gradient.then_some(how))?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
         result = Some(e);
     }
@@ -141,32 +157,32 @@ fn point(
 }
 
 /// The NLL at z (and the priors' term), with its gradient with respect to the values when
-/// `gradient`.
+/// `gradient` says how to compute it.
 fn evaluate(
     problem: &AnyProblem,
     z: &[f64],
     parameters: &[&sysid_core::Unknown],
     values: &[f64],
-    gradient: bool,
+    gradient: Option<Sensitivities>,
 ) -> anyhow::Result<Evaluation> {
     let no_likelihood =
         || anyhow!("the problem's data are a continuous record: it has no likelihood");
     let cannot =
         |e: sysid_ode::OdeError| anyhow!("the model cannot be integrated at this point: {e}");
-    if !gradient {
+    let prior = problem.prior_nll_at(z);
+    let Some(how) = gradient else {
         let nll = problem.nll_at(z).map_err(cannot)?.ok_or_else(no_likelihood)?;
-        return Ok(Evaluation { nll, prior: problem.prior_nll_at(z), gradient: None });
-    }
-    let lin = problem.residuals_and_jacobian(z).map_err(cannot)?;
-    let nll = problem.nll(&lin).ok_or_else(no_likelihood)?;
+        return Ok(Evaluation { nll, prior, gradient: None });
+    };
+    let e = problem.nll_gradient(z, how).map_err(cannot)?.ok_or_else(no_likelihood)?;
     // ∂/∂value = ∂/∂z / (∂value/∂z).
-    let g = problem
-        .objective_gradient(&lin, false)
+    let g = e
+        .gradient
         .into_iter()
         .zip(parameters.iter().zip(values))
         .map(|(g, (u, &v))| g / u.scale(u.coordinate(v)))
         .collect();
-    Ok(Evaluation { nll, prior: problem.prior_nll(&lin), gradient: Some(g) })
+    Ok(Evaluation { nll: e.nll, prior, gradient: Some(g) })
 }
 
 /// The readable report.

@@ -31,7 +31,8 @@ fn fit_at_nominal_prints_the_nll() {
 /// e-fold of each value, ∂NLL/∂ln v = v·∂NLL/∂v, with steps of 1e-4 in ln v, to 1e-4 relative
 /// and 1e-4 absolute (the differences' own error at this tolerance, about 1e-9 / 1e-4). The
 /// NLL alone (integrated without sensitivities, so with other steps) is the NLL with the
-/// gradient to 1e-9 (6e-11 measured). A value off its scale is refused with exit 2.
+/// gradient to 1e-9 (6e-11 measured); the adjoint's gradient agrees with the forward
+/// sensitivities'. A value off its scale is refused with exit 2.
 #[test]
 fn evaluate_gives_the_nll_and_its_gradient() {
     let boehm = problem("Boehm_JProteomeRes2014");
@@ -64,6 +65,19 @@ fn evaluate_gives_the_nll_and_its_gradient() {
             "{name}: ∂NLL/∂ln v {analytic} vs differences {numeric}"
         );
     }
+    // The adjoint's gradient is the forward sensitivities' (measured: 2e-9 of the largest
+    // component apart), and its NLL the same to the integration's tolerance.
+    let adjoint = evaluate(&["--gradient", "--sensitivities", "adjoint"]);
+    let size = gradient.values().fold(0.0f64, |m, g| m.max(g.as_f64().unwrap().abs()));
+    for (name, g) in gradient {
+        let a = adjoint["gradient"][name].as_f64().expect("a number");
+        let f = g.as_f64().unwrap();
+        assert!((a - f).abs() <= 1e-7 * size, "{name}: adjoint {a}, forward {f}");
+    }
+    assert!((adjoint["nll"].as_f64().unwrap() - nll).abs() <= 1e-8, "{adjoint}");
+    let out = sysid(&["evaluate", "--petab", &boehm, "--sensitivities", "adjoint"]);
+    assert_eq!(out.status.code(), Some(2), "--sensitivities without --gradient");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--gradient"));
     let out = sysid(&["evaluate", "--petab", &boehm, "--set", "k_phos=-1"]);
     assert_eq!(out.status.code(), Some(2));
     let e = String::from_utf8_lossy(&out.stderr);

@@ -76,10 +76,10 @@ impl Linearization {
 }
 
 /// One experiment's rows at a point.
-struct Rows {
-    r: Vec<f64>,
+pub(crate) struct Rows {
+    pub(crate) r: Vec<f64>,
     /// k entries per row of `r`, when asked for.
-    jacobian: Vec<f64>,
+    pub(crate) jacobian: Vec<f64>,
     /// Fisher rows (k entries each) that replace the function-σ rows in A.
     fisher: Vec<f64>,
     /// Whether each row of `r` enters A directly.
@@ -87,7 +87,9 @@ struct Rows {
     /// Σ over data rows of R², and the number of noise rows.
     data_cost: f64,
     noise_rows: usize,
-    counts: Counts,
+    /// The sample (index into the experiment's times) of each row of `r`.
+    pub(crate) samples: Vec<usize>,
+    pub(crate) counts: Counts,
 }
 
 impl<S: System> Planned<S> {
@@ -126,14 +128,14 @@ impl<S: System> Planned<S> {
 }
 
 /// What one experiment's evaluation needs from the problem at a point.
-struct At<'a> {
+pub(crate) struct At<'a> {
     /// The declared unknowns' values.
-    v: &'a [f64],
-    free_index: &'a [Option<usize>],
+    pub(crate) v: &'a [f64],
+    pub(crate) free_index: &'a [Option<usize>],
     /// d value / d z of the free unknowns.
-    chain: &'a [f64],
-    integrator: &'a Integrator,
-    jacobian: bool,
+    pub(crate) chain: &'a [f64],
+    pub(crate) integrator: &'a Integrator,
+    pub(crate) jacobian: bool,
 }
 
 impl<S: System> Problem<S> {
@@ -263,6 +265,7 @@ impl<S: System> Problem<S> {
             jacobian,
             fisher: Vec::new(),
             noise_rows: 0,
+            samples: Vec::new(),
             counts: Counts::default(),
         })
     }
@@ -312,21 +315,34 @@ impl<S: System> Problem<S> {
                 rows.jacobian.rows(0, n).tr_mul(&rows.r.rows(0, n)).iter().copied().collect()
             }
         };
+        g.extend(self.scale_gradient(rows.r.iter().copied()));
+        g
+    }
+
+    /// The NLL's gradient with respect to the noise scales' coordinates (ln s for a scale on
+    /// a log scale), from the residual rows `r` in their order: a scale s of σ = s·f enters
+    /// each of its rows as ln σ + ½ r², r ∝ 1/s, so ∂/∂s = Σ (1 − r²)/s. Empty without
+    /// scales.
+    pub(crate) fn scale_gradient(&self, r: impl Iterator<Item = f64>) -> Vec<f64> {
         if self.scales.is_empty() {
-            return g;
+            return Vec::new();
         }
         let sigma = self.scale_values();
         let mut dscale = vec![0.0; sigma.len()];
-        for (r, s) in rows.r.iter().zip(self.scale_rows()) {
+        for (r, s) in r.zip(self.scale_rows()) {
             if let Some(s) = s {
                 dscale[s] += (1.0 - r * r) / sigma[s];
             }
         }
-        for ((d, &j), s) in dscale.iter().zip(&self.scales).zip(&sigma) {
-            let u = &self.declared[j];
-            g.push(d * u.scale(u.coordinate(*s)));
-        }
-        g
+        dscale
+            .iter()
+            .zip(&self.scales)
+            .zip(&sigma)
+            .map(|((d, &j), s)| {
+                let u = &self.declared[j];
+                d * u.scale(u.coordinate(*s))
+            })
+            .collect()
     }
 
     fn linearize_sampled(&self, z: &[f64]) -> Result<Linearization, OdeError> {
@@ -446,7 +462,7 @@ impl<S: System> Problem<S> {
 
     /// Each experiment's NLL from its ε (the experiments' costs in order; what follows them,
     /// the priors' rows, is left out).
-    fn nlls(&self, costs: impl Iterator<Item = f64>) -> Option<Vec<f64>> {
+    pub(crate) fn nlls(&self, costs: impl Iterator<Item = f64>) -> Option<Vec<f64>> {
         self.experiments
             .iter()
             .zip(costs)
@@ -811,7 +827,7 @@ fn coordinate_weights(dz: &DMatrix<f64>) -> Vec<f64> {
     dz.row_iter().map(|row| row.iter().fold(0.0_f64, |m, x| m.max(x.abs()))).collect()
 }
 
-fn slot_matrix<S: System>(
+pub(crate) fn slot_matrix<S: System>(
     e: &Planned<S>,
     v: &[f64],
     free_index: &[Option<usize>],
@@ -868,14 +884,15 @@ enum Solved {
 /// The rows of one experiment at a point: a row per sample (data rows, series after series)
 /// and then a noise row per function-σ sample; with their Jacobian in the free unknowns'
 /// coordinates when asked for.
-fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<Rows, OdeError> {
+pub(crate) fn experiment_rows<S: System>(
+    e: &Planned<S>,
+    at: &At<'_>,
+    k: usize,
+) -> Result<Rows, OdeError> {
     let (y0, p) = e.point(at.v);
-    let sampled = e.sampled();
-    let times = &sampled.times;
+    let times = &e.sampled().times;
     let ivp = Ivp::new(e.system(), e.t0, &y0, &p);
-    let n = y0.len();
     let slots: &[sysid_ode::Wrt] = if at.jacobian { &e.slots } else { &[] };
-    let ns = slots.len();
     // ∂slot/∂z; the identity (slot j is free unknown j) leaves the gradients as they are.
     let dz = at.jacobian.then(|| slot_matrix(e, at.v, at.free_index, at.chain, k));
     // The states and (when asked) their sensitivities to the slots at every sample time,
@@ -892,36 +909,61 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
         Solved::Sensitivities(sol) => sol.counts(),
         Solved::States(sol) => sol.counts(),
     };
-    let identity = dz.as_ref().is_some_and(|d| {
+    let point = |m: usize| match &solved {
+        Solved::Sensitivities(sol) => (sol.state(m), sol.sensitivity_slice(m)),
+        Solved::States(sol) => (sol.state(m), &[][..]),
+    };
+    let mut rows = sample_rows(e, at, (&p, slots, dz.as_ref()), point)?;
+    rows.counts = counts;
+    Ok(rows)
+}
+
+/// The rows of experiment `e` from its states and sensitivities at the sample times
+/// (`point(m)`: y(t_m) and S(t_m), n × `slots.len()` row by row, or empty without a
+/// Jacobian), with parameters `p` and the slots' Jacobian `dz` (slots × columns): a row's
+/// Jacobian entry j is ∂R/∂(column j), through the slots and directly through the unknowns'
+/// values (the noise functions' ∂σ/∂v, in the first `at.chain.len()` columns).
+pub(crate) fn sample_rows<'s, S: System>(
+    e: &Planned<S>,
+    at: &At<'_>,
+    (p, slots, dz): (&[f64], &[sysid_ode::Wrt], Option<&DMatrix<f64>>),
+    point: impl Fn(usize) -> (&'s [f64], &'s [f64]),
+) -> Result<Rows, OdeError> {
+    let sampled = e.sampled();
+    let times = &sampled.times;
+    let n = e.system().signature().n_states();
+    let ns = slots.len();
+    let k = dz.map_or(0, |d| d.ncols());
+    let jacobian = dz.is_some();
+    let identity = dz.is_some_and(|d| {
         d.nrows() == k
             && (0..k).all(|i| (0..k).all(|j| if i == j { true } else { d[(i, j)] == 0.0 }))
     });
-    let mut og = ObservableGradient::new(e.system(), &p, slots);
+    let mut og = ObservableGradient::new(e.system(), p, slots);
     let mut grad_slots = vec![0.0; ns];
     let mut grad = vec![0.0; k];
     let total: usize = sampled.series.iter().map(|s| s.samples.len()).sum();
     let mut out = Rows {
         r: Vec::with_capacity(total),
-        jacobian: Vec::with_capacity(if at.jacobian { total * k } else { 0 }),
+        jacobian: Vec::with_capacity(if jacobian { total * k } else { 0 }),
         fisher: Vec::new(),
         in_normal: Vec::with_capacity(total),
         data_cost: 0.0,
         noise_rows: 0,
-        counts,
+        samples: Vec::with_capacity(total),
+        counts: Counts::default(),
     };
-    let mut noise: Vec<(f64, Vec<f64>)> = Vec::new();
+    let mut noise: Vec<(usize, f64, Vec<f64>)> = Vec::new();
     let np = p.len();
     let (mut dy, mut dp, mut dv) = (vec![0.0; n], vec![0.0; np], vec![0.0; at.v.len()]);
+    let mut ds_slot = vec![0.0; ns];
     for s in &sampled.series {
         for sample in &s.samples {
             let m = sample.index;
-            let (y, sm) = match &solved {
-                Solved::Sensitivities(sol) => (sol.state(m), sol.sensitivity_slice(m)),
-                Solved::States(sol) => (sol.state(m), &[][..]),
-            };
+            let (y, sm) = point(m);
             let h = og.eval(times[m], y, sm, s.observable, &mut grad_slots);
             // ∂h/∂z.
-            if let Some(d) = &dz {
+            if let Some(d) = dz {
                 if identity {
                     for j in 0..k {
                         grad[j] = grad_slots[j] * d[(j, j)];
@@ -941,9 +983,10 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
                 let w = sample.sqrt_weight;
                 let (r, dr) = s.distribution.residual(th - sample.value, w);
                 out.r.push(r);
+                out.samples.push(m);
                 out.data_cost += r * r;
                 out.in_normal.push(!laplace);
-                if at.jacobian {
+                if jacobian {
                     out.jacobian.extend(grad.iter().map(|g| dr * slope * g));
                     if laplace {
                         out.fisher.extend(grad.iter().map(|g| w * slope * g));
@@ -955,7 +998,7 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
             dp.iter_mut().for_each(|x| *x = 0.0);
             dv.iter_mut().for_each(|x| *x = 0.0);
             let mut gradient = NoiseGradient { y: &mut dy, h: 0.0, p: &mut dp, v: &mut dv };
-            let args = NoiseArgs { t: times[m], y, h, p: &p, v: at.v };
+            let args = NoiseArgs { t: times[m], y, h, p, v: at.v };
             let sigma = f.eval(args, &mut gradient);
             let dh = gradient.h;
             if !(sigma > 0.0 && sigma.is_finite()) {
@@ -976,6 +1019,7 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
                 false => (diff / sigma, 1.0 / sigma),
             };
             out.r.push(r);
+            out.samples.push(m);
             out.data_cost += r * r;
             out.in_normal.push(false);
             let b2 = 2.0 * sigma.ln() + NOISE_ROW_SHIFT;
@@ -990,18 +1034,18 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
             }
             let b = b2.sqrt();
             let mut dsigma = vec![0.0; k];
-            if let Some(d) = &dz {
-                // ∂σ/∂z through the states, the value, the parameters and the unknowns.
+            if let Some(d) = dz {
+                // ∂σ/∂z through the states, the value, the parameters and the unknowns: first
+                // ∂σ/∂slot directly and through the states, then through the slots to z.
+                for (q, w) in slots.iter().enumerate() {
+                    ds_slot[q] = match *w {
+                        sysid_ode::Wrt::InitialValue(_) => 0.0,
+                        sysid_ode::Wrt::Parameter(kp) => dp[kp],
+                    } + (0..n).map(|i| dy[i] * sm[i * ns + q]).sum::<f64>();
+                }
                 for (j, ds) in dsigma.iter_mut().enumerate() {
-                    let mut x = dh * grad[j];
-                    for (q, w) in slots.iter().enumerate() {
-                        let ds_slot = match *w {
-                            sysid_ode::Wrt::InitialValue(_) => 0.0,
-                            sysid_ode::Wrt::Parameter(kp) => dp[kp],
-                        } + (0..n).map(|i| dy[i] * sm[i * ns + q]).sum::<f64>();
-                        x += ds_slot * d[(q, j)];
-                    }
-                    *ds = x;
+                    *ds = dh * grad[j]
+                        + ds_slot.iter().enumerate().map(|(q, s)| s * d[(q, j)]).sum::<f64>();
                 }
                 let free: Vec<(usize, usize)> = at
                     .free_index
@@ -1023,14 +1067,15 @@ fn experiment_rows<S: System>(e: &Planned<S>, at: &At<'_>, k: usize) -> Result<R
                 out.fisher.extend((0..k).map(|j| slope * grad[j] / sigma));
                 out.fisher.extend((0..k).map(|j| ln_scale * dsigma[j] / sigma));
             }
-            noise.push((b, dsigma.iter().map(|d| d / (sigma * b)).collect()));
+            noise.push((m, b, dsigma.iter().map(|d| d / (sigma * b)).collect()));
         }
     }
     out.noise_rows = noise.len();
-    for (b, row) in noise {
+    for (m, b, row) in noise {
         out.r.push(b);
+        out.samples.push(m);
         out.in_normal.push(false);
-        if at.jacobian {
+        if jacobian {
             out.jacobian.extend(row);
         }
     }

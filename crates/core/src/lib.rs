@@ -60,6 +60,7 @@
 //! ```
 #![warn(missing_docs)]
 
+mod adjoint;
 mod assemble;
 mod bounded;
 mod certificate;
@@ -86,6 +87,7 @@ mod trust;
 mod unknowns;
 
 // The user's vocabulary: a problem, its unknowns and data, the options, the estimate.
+pub use adjoint::{NllGradient, Sensitivities};
 pub use certificate::{Bound, Certificate, NullSpace};
 pub use data::{Data, Record, Samples, Series};
 pub use error::{FitError, ProblemError};

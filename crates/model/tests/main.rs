@@ -3,6 +3,7 @@
 
 mod common;
 
+mod adjoint;
 mod allocations;
 mod events;
 mod experiments;

@@ -121,9 +121,11 @@ impl<S: System> Ivp<'_, S> {
         let mut x = vec![0.0; n + k];
         rhs.add_seeds(t_end, &mut x);
         if t_end - self.t0 > resolution(t_end) {
-            // Stop at every sample time (λ jumps there) and where the forward solution did.
+            // Stop at every sample time (λ jumps there), where the forward solution did, and
+            // where its steps end: J(y(t)) is smooth within a forward step only.
             let mut stops: Vec<f64> = stops(self.system, self.p);
             stops.extend(times.iter().copied().filter(|&t| t > self.t0 && t < t_end));
+            stops.extend(forward.step_ends().filter(|&t| t > self.t0 && t < t_end));
             stops.sort_by(f64::total_cmp);
             stops.dedup();
             let (c, x_end) = integrate(integrator, &mut rhs, (t_end, &x), self.t0, &stops, |_| {})?;
@@ -163,7 +165,7 @@ enum Source {
     /// Hand-written Jacobians ([`System::jacobians`]).
     Analytic(DMatrix<f64>, DMatrix<f64>),
     /// Dual numbers seeded with the identity over the states and the parameters.
-    Dual { products: JacobianProducts, seeds: Vec<f64>, value: Vec<f64> },
+    Dual { products: Box<JacobianProducts>, seeds: Vec<f64>, value: Vec<f64> },
 }
 
 impl Entries {
@@ -188,7 +190,7 @@ impl Entries {
             for i in 0..n {
                 seeds[i * width + i] = 1.0;
             }
-            let products = JacobianProducts::new(n, p, &vp, n, width);
+            let products = Box::new(JacobianProducts::new(n, p, &vp, n, width));
             Source::Dual { products, seeds, value: vec![0.0; n] }
         };
         Self { values: vec![0.0; every.len()], pattern: every, source }
@@ -245,6 +247,9 @@ struct AdjointRhs<'a, S> {
     u: Vec<f64>,
     entries: Entries,
     implicit: Option<Box<Implicit>>,
+    /// Where `entries` were last evaluated: the Rosenbrock stages ask again at the same t
+    /// (the factorisation's point, stages at t + h).
+    evaluated_at: Option<(u64, Side)>,
     /// The sample times, their seeds and the factor they are scaled by.
     times: &'a [f64],
     seeds: &'a [f64],
@@ -280,6 +285,7 @@ impl<'a, S: System> AdjointRhs<'a, S> {
             u: vec![0.0; sig.n_inputs()],
             entries: Entries::new(ivp.system, ivp.p),
             implicit: None,
+            evaluated_at: None,
             times,
             seeds,
             scale,
@@ -309,6 +315,10 @@ impl<'a, S: System> AdjointRhs<'a, S> {
     }
 
     fn jacobian_at(&mut self, t: f64, side: Side) {
+        if self.evaluated_at == Some((t.to_bits(), side)) {
+            return;
+        }
+        self.evaluated_at = Some((t.to_bits(), side));
         self.state_at(t);
         self.sys.input_values(t, side, &mut self.u);
         self.entries.eval(self.sys, (t, &self.y, self.p, &self.u));
@@ -396,6 +406,7 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
     fn cross(&mut self, t: f64, x: &mut [f64], _dir: f64) {
         let n = self.n;
         if self.moving.iter().any(|m| m.0.to_bits() == t.to_bits()) {
+            self.evaluated_at = None;
             self.state_at(t);
             let jump = rhs_jump(self.sys, t, &self.y, self.p, &mut self.u);
             let along: f64 = x[..n].iter().zip(&jump).map(|(l, g)| l * g).sum();

@@ -2,7 +2,8 @@
 //! reading the YAML, the SBML and the tables and compiling the model file and its problem
 //! (target ≤ 100 ms each; AMICI's code generation and compile take 10–13 s);
 //! `petab/nll-gradient/<problem>`, the NLL and its gradient (forward sensitivities) at the
-//! nominal parameters (targets: Boehm ≤ 1 ms, AMICI 6.8 ms; Bachmann ≤ 200 ms, AMICI 2.03 s).
+//! nominal parameters (targets: Boehm ≤ 1 ms, AMICI 6.8 ms; Bachmann ≤ 200 ms, AMICI 2.03 s);
+//! `petab/nll-gradient-adjoint/<problem>`, the same by adjoints (`Sensitivities::Adjoint`).
 //! `cargo bench -p sysid-petab -- Boehm` runs one problem's. `SYSID_PETAB_DIR=DIR` benches the
 //! problems of another folder instead (a clone of the whole collection:
 //! `SYSID_PETAB_DIR=…/Benchmark-Models cargo bench -p sysid-petab -- petab/import/Laske`);
@@ -13,6 +14,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use sysid_core::Sensitivities;
 
 /// The folder of the problems: `SYSID_PETAB_DIR`, else tests/data/petab.
 fn folder() -> PathBuf {
@@ -81,6 +83,22 @@ fn bench(c: &mut Criterion) {
                 p.forget_cached();
                 let lin = p.linearize(black_box(&z)).expect("integrates");
                 black_box((p.nll(&lin), lin.gradient.norm()))
+            })
+        });
+    }
+    group.finish();
+    let mut group = c.benchmark_group("petab/nll-gradient-adjoint");
+    group.sample_size(10).warm_up_time(Duration::from_millis(500));
+    for problem in &problems() {
+        let imported = sysid_petab::import(&yaml(problem)).expect("imports");
+        let p = imported.model.problem(None).expect("a problem");
+        let z = p.unknowns().coordinates(&p.guesses());
+        group.bench_function(problem, |b| {
+            b.iter(|| {
+                p.forget_cached();
+                black_box(
+                    p.nll_gradient(black_box(&z), Sensitivities::Adjoint).expect("integrates"),
+                )
             })
         });
     }
