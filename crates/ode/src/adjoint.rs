@@ -16,9 +16,9 @@
 //! control. J_y and ∂g/∂α are read at the forward solution y(t), interpolated from its
 //! accepted steps (a [`DenseSolution`]).
 //!
-//! The implicit steps factorise E = I/(γh) + J_yᵀ (h < 0: the transpose of the forward
-//! problem's matrix), sparse in the same way for a large system with a sparse Jacobian; the
-//! μ block is solved by substitution. Systems with state events are not handled: their
+//! The implicit steps solve with E = I/(γh) + J_yᵀ (h < 0: the transpose of the forward
+//! problem's matrix) through the factors of its transpose, sparse in the same way for a
+//! large system with a sparse Jacobian; the μ block is solved by substitution. Systems with state events are not handled: their
 //! resets would need the adjoint's own jump conditions.
 
 use nalgebra::DMatrix;
@@ -127,7 +127,9 @@ impl<S: System> Ivp<'_, S> {
             stops.extend(times.iter().copied().filter(|&t| t > self.t0 && t < t_end));
             stops.extend(forward.step_ends().filter(|&t| t > self.t0 && t < t_end));
             stops.sort_by(f64::total_cmp);
-            stops.dedup();
+            // A forward step that ended a few ulps from a stop leaves no room for a step in
+            // between: one of the two is enough.
+            stops.dedup_by(|later, kept| *later - *kept <= resolution(*later));
             let (c, x_end) = integrate(integrator, &mut rhs, (t_end, &x), self.t0, &stops, |_| {})?;
             counts += c;
             x = x_end;
@@ -222,11 +224,12 @@ impl Entries {
     }
 }
 
-/// The implicit steps' matrix: E_λ = I/(γh) + J_yᵀ factorised, and J's entries at that
-/// point for the μ block.
+/// The implicit steps' matrix E_λ = I/(γh) + J_yᵀ, as the factors of its transpose
+/// I/(γh) + J_y (J_y's own pattern, whose diagonal pivots hold where the transpose's need
+/// not), and J's entries at that point for the μ block.
 struct Implicit {
     factors: Factors,
-    /// −J_yᵀ, n × n row by row (only the pattern's places are ever written).
+    /// −J_y, n × n row by row (only the pattern's places are ever written).
     jac: Vec<f64>,
     values: Vec<f64>,
     inv_gamma_h: f64,
@@ -364,10 +367,8 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         self.jacobian_at(t, side);
         let n = self.n;
         let implicit = self.implicit.get_or_insert_with(|| {
-            let transposed: Vec<(u32, u32)> =
-                self.entries.pattern.iter().map(|&(i, c)| (c, i)).collect();
             Box::new(Implicit {
-                factors: Factors::new(n, Some(&transposed), 1),
+                factors: Factors::new(n, Some(&self.entries.pattern), 1),
                 jac: vec![0.0; n * n],
                 values: vec![0.0; self.entries.values.len()],
                 inv_gamma_h,
@@ -375,7 +376,7 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         });
         for (&(i, c), &v) in self.entries.pattern.iter().zip(&self.entries.values) {
             if (c as usize) < n {
-                implicit.jac[c as usize * n + i as usize] = -v;
+                implicit.jac[i as usize * n + c as usize] = -v;
             }
         }
         implicit.values.copy_from_slice(&self.entries.values);
@@ -389,7 +390,7 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         let Some(implicit) = &mut self.implicit else { return };
         let n = self.n;
         let (ra, rb) = r.split_at_mut(n);
-        implicit.factors.solve(ra);
+        implicit.factors.solve_transposed(ra);
         for (&(i, c), &v) in self.entries.pattern.iter().zip(&implicit.values) {
             if let Some(j) = (c as usize).checked_sub(n).and_then(|q| self.column_of[q]) {
                 rb[j] -= v * ra[i as usize];

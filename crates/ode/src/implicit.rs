@@ -175,6 +175,14 @@ impl Factors {
         }
     }
 
+    /// Overwrites r with E⁻ᵀ r.
+    pub(crate) fn solve_transposed(&mut self, r: &mut [f64]) {
+        match self {
+            Self::Dense(lu) => lu.solve_transposed(r),
+            Self::Sparse(lu) => lu.solve_transposed(r),
+        }
+    }
+
     /// Overwrites the n × k matrix R (row by row) with E⁻¹ R.
     pub(crate) fn solve_rows(&mut self, r: &mut [f64], k: usize) {
         match self {

@@ -159,12 +159,54 @@ impl Lu {
         }
         r.copy_from_slice(x);
     }
+
+    /// Overwrites r (length n) with A⁻ᵀ r: from P A = L U, Uᵀ z = r, Lᵀ v = z and x = Pᵀ v, each
+    /// row of Uᵀ and Lᵀ a column of the factors, contiguous.
+    pub fn solve_transposed(&mut self, r: &mut [f64]) {
+        let n = self.n;
+        let (lu, x) = (&self.factors[..n * n], &mut self.work[..n]);
+        // Uᵀ z = r: z_i = (r_i − Σ_{j<i} U_ji z_j) / U_ii.
+        for i in 0..n {
+            let column = &lu[i * n..i * n + i];
+            let dot: f64 = column.iter().zip(&x[..i]).map(|(u, z)| u * z).sum();
+            x[i] = (r[i] - dot) * lu[i * n + i];
+        }
+        // Lᵀ v = z, unit diagonal: v_i = z_i − Σ_{j>i} L_ji v_j.
+        for i in (0..n).rev() {
+            let column = &lu[i * n + i + 1..(i + 1) * n];
+            let dot: f64 = column.iter().zip(&x[i + 1..]).map(|(l, v)| l * v).sum();
+            x[i] -= dot;
+        }
+        for (&to, v) in self.fwd.iter().zip(x.iter()) {
+            r[to] = *v;
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::testing::assert_close_abs;
+
+    /// Aᵀ x = r against A's entries, with the pivoting the factorisation chose.
+    #[test]
+    fn transposed_solves_invert_the_transpose() {
+        let mut lu = Lu::new(4, 1);
+        let a = [
+            [0.0, 2.0, 1.0, 0.5],
+            [1.0, 1.0, 0.0, -2.0],
+            [3.0, 0.0, 4.0, 1.0],
+            [0.2, -1.0, 0.0, 2.0],
+        ];
+        lu.factor(|i, j| a[i][j]).unwrap();
+        let r = [1.0, -2.0, 0.5, 3.0];
+        let mut x = r;
+        lu.solve_transposed(&mut x);
+        for (j, rj) in r.iter().enumerate() {
+            let back: f64 = (0..4).map(|i| a[i][j] * x[i]).sum();
+            assert_close_abs(back, *rj, 1e-13);
+        }
+    }
 
     #[test]
     fn solves_with_pivoting_and_reports_singular() {

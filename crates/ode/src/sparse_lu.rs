@@ -217,6 +217,46 @@ impl SparseLu {
             r[to * k..(to + 1) * k].copy_from_slice(&x[i * k..(i + 1) * k]);
         }
     }
+
+    /// Overwrites r (length n) with E⁻ᵀ r: with the order P, P E Pᵀ = L U, so Eᵀ x = r is
+    /// Uᵀ z = P r, Lᵀ w = z, x = Pᵀ w; U's and L's rows are scattered as the columns of Uᵀ
+    /// and Lᵀ.
+    pub fn solve_transposed(&mut self, r: &mut [f64]) {
+        if self.use_dense {
+            return self.dense.solve_transposed(r);
+        }
+        let n = self.n;
+        let x = &mut self.work[..n];
+        for (i, &from) in self.order.iter().enumerate() {
+            x[i] = r[from];
+        }
+        let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
+        // Uᵀ z = P r: z_i is final once the rows before it are scattered; then row i of U
+        // leaves it from the equations after it.
+        for i in 0..n {
+            let d = self.diagonal[i];
+            let zi = x[i] * values[d];
+            x[i] = zi;
+            if zi != 0.0 {
+                for p in d + 1..starts[i + 1] {
+                    x[columns[p]] -= values[p] * zi;
+                }
+            }
+        }
+        // Lᵀ w = z, unit diagonal, from the last row back: row i of L leaves w_i from the
+        // equations before it.
+        for i in (0..n).rev() {
+            let wi = x[i];
+            if wi != 0.0 {
+                for p in starts[i]..self.diagonal[i] {
+                    x[columns[p]] -= values[p] * wi;
+                }
+            }
+        }
+        for (i, &to) in self.order.iter().enumerate() {
+            r[to] = x[i];
+        }
+    }
 }
 
 /// The approximate minimum degree order of the pattern of E + Eᵀ (faer's AMD), as
@@ -311,6 +351,12 @@ mod tests {
         let (mut a, mut b) = (r.clone(), r.clone());
         sparse.solve(&mut a);
         dense.solve(&mut b);
+        for (x, y) in a.iter().zip(&b) {
+            assert_close_abs(*x, *y, 1e-12);
+        }
+        let (mut a, mut b) = (r.clone(), r.clone());
+        sparse.solve_transposed(&mut a);
+        dense.solve_transposed(&mut b);
         for (x, y) in a.iter().zip(&b) {
             assert_close_abs(*x, *y, 1e-12);
         }
