@@ -31,7 +31,8 @@ pub enum Sensitivities {
     /// Jacobian, of which the gradient is Jᵀr.
     Forward,
     /// One backward adjoint integration per experiment along its states. An experiment the
-    /// adjoint does not handle (state events, samples before t0) is integrated forward.
+    /// adjoint does not handle (state events, samples before t0), or whose backward
+    /// integration fails, is integrated forward.
     Adjoint,
 }
 
@@ -111,12 +112,7 @@ fn experiment_gradient<S: System>(
     k: usize,
 ) -> Result<(Rows, Vec<f64>), OdeError> {
     if !adjoint_applies(e) {
-        let rows = experiment_rows(e, at, k)?;
-        let mut u = vec![0.0; k];
-        for (r, row) in rows.r.iter().zip(rows.jacobian.chunks(k)) {
-            u.iter_mut().zip(row).for_each(|(u, j)| *u += r * j);
-        }
-        return Ok((rows, u));
+        return forward_gradient(e, at, k);
     }
     let (y0, p) = e.point(at.v);
     let times = &e.sampled().times;
@@ -151,11 +147,31 @@ fn experiment_gradient<S: System>(
         seeds[m * n..(m + 1) * n].iter_mut().zip(row).for_each(|(c, j)| *c += r * j);
     }
     let mut rows = direct;
-    let (g, counts) = ivp.adjoint(at.integrator, &e.slots, None, (&forward, times, &seeds))?;
+    // A backward integration that fails where the forward one did not (Rahman's, at its
+    // last sample: the step size underflows) leaves the experiment to the forward
+    // sensitivities, whose gradient is the same quantity.
+    let Ok((g, counts)) = ivp.adjoint(at.integrator, &e.slots, None, (&forward, times, &seeds))
+    else {
+        return forward_gradient(e, at, k);
+    };
     for (j, u) in u.iter_mut().enumerate() {
         *u += (0..ns).map(|q| g[q] * dz[(q, j)]).sum::<f64>();
     }
     rows.counts = trajectory.counts();
     rows.counts += counts;
+    Ok((rows, u))
+}
+
+/// One experiment's rows and U = Jᵀr from its forward sensitivities.
+fn forward_gradient<S: System>(
+    e: &Planned<S>,
+    at: &At<'_>,
+    k: usize,
+) -> Result<(Rows, Vec<f64>), OdeError> {
+    let rows = experiment_rows(e, at, k)?;
+    let mut u = vec![0.0; k];
+    for (r, row) in rows.r.iter().zip(rows.jacobian.chunks(k)) {
+        u.iter_mut().zip(row).for_each(|(u, j)| *u += r * j);
+    }
     Ok((rows, u))
 }
