@@ -17,7 +17,6 @@
 //! and nothing direct (c_m).
 
 use nalgebra::DMatrix;
-use rayon::prelude::*;
 use sysid_ode::{Counts, Ivp, OdeError, System, Wrt};
 
 use crate::evaluate::{At, Rows, experiment_rows, sample_rows, slot_matrix};
@@ -73,14 +72,7 @@ impl<S: System> Problem<S> {
             integrator: &self.integrator,
             jacobian: true,
         };
-        let all = match self.experiments.len() {
-            1 => vec![experiment_gradient(&self.experiments[0], &at, k)?],
-            _ => self
-                .experiments
-                .par_iter()
-                .map(|e| experiment_gradient(e, &at, k))
-                .collect::<Result<Vec<_>, _>>()?,
-        };
+        let all = self.each_experiment(|e| experiment_gradient(e, &at, k))?;
         let (mut gradient, mut counts) = (vec![0.0; k], Counts::default());
         for (rows, u) in &all {
             gradient.iter_mut().zip(u).for_each(|(g, u)| *g += u);

@@ -229,16 +229,20 @@ impl<S: System> Problem<S> {
         let k = self.unknowns.len();
         let (v, free_index, chain) = (self.values_at(z), self.free_index(), self.chain(z));
         let at = At { v: &v, free_index: &free_index, chain: &chain, integrator, jacobian };
-        let mut rows = match self.experiments.len() {
-            1 => vec![experiment_rows(&self.experiments[0], &at, k)?],
-            _ => self
-                .experiments
-                .par_iter()
-                .map(|e| experiment_rows(e, &at, k))
-                .collect::<Result<Vec<_>, _>>()?,
-        };
+        let mut rows = self.each_experiment(|e| experiment_rows(e, &at, k))?;
         rows.extend(self.prior_rows(&at, k));
         Ok(rows)
+    }
+
+    /// `f` of every experiment, in order; in parallel where there are several.
+    pub(crate) fn each_experiment<T: Send>(
+        &self,
+        f: impl Fn(&Planned<S>) -> Result<T, OdeError> + Sync,
+    ) -> Result<Vec<T>, OdeError> {
+        match self.experiments.len() {
+            1 => Ok(vec![f(&self.experiments[0])?]),
+            _ => self.experiments.par_iter().map(&f).collect(),
+        }
     }
 
     /// The priors' rows (T(θ) − mean)/sd at the point `at`, after the experiments' rows;
