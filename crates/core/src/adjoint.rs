@@ -139,9 +139,8 @@ fn experiment_gradient<S: System>(
         seeds[m * n..(m + 1) * n].iter_mut().zip(row).for_each(|(c, j)| *c += r * j);
     }
     let mut rows = direct;
-    // A backward integration that fails where the forward one did not (Rahman's, at its
-    // last sample: the step size underflows) leaves the experiment to the forward
-    // sensitivities, whose gradient is the same quantity.
+    // A backward integration that fails where the forward one did not leaves the
+    // experiment to the forward sensitivities, whose gradient is the same quantity.
     let Ok((g, counts)) = ivp.adjoint(at.integrator, &e.slots, None, (&forward, times, &seeds))
     else {
         return forward_gradient(e, at, k);

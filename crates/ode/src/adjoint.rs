@@ -130,7 +130,15 @@ impl<S: System> Ivp<'_, S> {
             // A forward step that ended a few ulps from a stop leaves no room for a step in
             // between: one of the two is enough.
             stops.dedup_by(|later, kept| *later - *kept <= resolution(*later));
-            let (c, x_end) = integrate(integrator, &mut rhs, (t_end, &x), self.t0, &stops, |_| {})?;
+            // The first step: the forward integration's last, unless one is given. Hairer's
+            // estimate from ‖f‖ fails here: μ starts at 0 with derivatives as large as
+            // ∂g/∂α makes them (Rahman's 1e11), which held its first step below 1e-15.
+            let mut cfg = *integrator;
+            if cfg.initial_step.is_none() {
+                let last_start = forward.step_ends().last().unwrap_or(self.t0);
+                cfg.initial_step = Some(t_end - last_start).filter(|h| *h > 0.0);
+            }
+            let (c, x_end) = integrate(&cfg, &mut rhs, (t_end, &x), self.t0, &stops, |_| {})?;
             counts += c;
             x = x_end;
         }

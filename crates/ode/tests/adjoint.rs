@@ -223,3 +223,19 @@ fn the_adjoint_refuses_what_it_cannot_do() {
     let zero = ivp.adjoint(&integrator, &wrt, None, (&forward, &times, &[0.0, 0.0])).unwrap();
     assert_eq!(zero.0, vec![0.0]);
 }
+
+/// A parameter whose term is large where its quadrature starts at 0 (x0 = 1e12, so ∂g/∂k =
+/// −1e12): Hairer's first-step estimate from ‖f‖ would put the first backward step below the
+/// resolution of t (it did on Rahman's problem). The backward integration starts with the
+/// forward one's last step and meets the closed form.
+#[test]
+fn a_large_quadrature_derivative_does_not_stall_the_first_step() {
+    let sys = Decay::new();
+    let ivp = Ivp::new(&sys, 0.0, &[1e12], &[1e-3]);
+    let times = [10.0, 20.0];
+    let c = [1.0, 1.0];
+    let integrator = Integrator::rodas5p(1e-8, 1e-12);
+    let g = adjoint_sum(&ivp, &integrator, &[Wrt::Parameter(0)], None, (&times, &c));
+    let expected: f64 = times.iter().map(|&t| Decay::exact(1e12, 1e-3, t).2).sum();
+    assert_close(g[0], expected, 1e-6);
+}
