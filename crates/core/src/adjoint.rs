@@ -118,21 +118,16 @@ fn experiment_gradient<S: System>(
     let direct =
         sample_rows(e, at, (&p, &e.slots, Some(&dz)), |m| (trajectory.state(m), &zeros[..]))?;
     // ∂R/∂y(t_m): the states as columns, their sensitivities the identity, nothing direct.
+    // The identity's storage is the same row by row as column by column: it serves as the
+    // states' sensitivities too.
     let states: Vec<Wrt> = (0..n).map(Wrt::InitialValue).collect();
-    let mut unit = vec![0.0; n * n];
-    for i in 0..n {
-        unit[i * n + i] = 1.0;
-    }
     let none = vec![None; at.free_index.len()];
     let through = At { free_index: &none, ..*at };
     let identity = DMatrix::identity(n, n);
     let by_state = sample_rows(e, &through, (&p, &states, Some(&identity)), |m| {
-        (trajectory.state(m), &unit[..])
+        (trajectory.state(m), identity.as_slice())
     })?;
-    let mut u = vec![0.0; k];
-    for (r, row) in direct.r.iter().zip(direct.jacobian.chunks(k)) {
-        u.iter_mut().zip(row).for_each(|(u, j)| *u += r * j);
-    }
+    let mut u = direct.gradient(k);
     let mut seeds = vec![0.0; times.len() * n];
     for ((r, row), &m) in by_state.r.iter().zip(by_state.jacobian.chunks(n)).zip(&by_state.samples)
     {
@@ -160,9 +155,6 @@ fn forward_gradient<S: System>(
     k: usize,
 ) -> Result<(Rows, Vec<f64>), OdeError> {
     let rows = experiment_rows(e, at, k)?;
-    let mut u = vec![0.0; k];
-    for (r, row) in rows.r.iter().zip(rows.jacobian.chunks(k)) {
-        u.iter_mut().zip(row).for_each(|(u, j)| *u += r * j);
-    }
+    let u = rows.gradient(k);
     Ok((rows, u))
 }

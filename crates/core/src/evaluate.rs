@@ -850,8 +850,17 @@ pub(crate) fn slot_matrix<S: System>(
 
 impl Rows {
     /// U = Jᵀr and A: JᵀJ over the rows that enter it directly, plus the Fisher rows.
+    /// U = Jᵀr over these rows (k columns).
+    pub(crate) fn gradient(&self, k: usize) -> Vec<f64> {
+        let mut u = vec![0.0; k];
+        for (r, row) in self.r.iter().zip(self.jacobian.chunks(k)) {
+            u.iter_mut().zip(row).for_each(|(u, j)| *u += r * j);
+        }
+        u
+    }
+
     fn normal_equations(&self, k: usize) -> (DVector<f64>, DMatrix<f64>) {
-        let mut u = DVector::zeros(k);
+        let u = DVector::from_vec(self.gradient(k));
         let mut a = DMatrix::zeros(k, k);
         let add = |row: &[f64], a: &mut DMatrix<f64>| {
             for i in 0..k {
@@ -863,14 +872,9 @@ impl Rows {
                 }
             }
         };
-        for (i, &ri) in self.r.iter().enumerate() {
-            let row = &self.jacobian[i * k..(i + 1) * k];
-            for j in 0..k {
-                u[j] += ri * row[j];
-            }
-            if self.in_normal[i] {
-                add(row, &mut a);
-            }
+        for (row, _) in self.jacobian.chunks(k).zip(&self.in_normal).filter(|(_, direct)| **direct)
+        {
+            add(row, &mut a);
         }
         for row in self.fisher.chunks(k) {
             add(row, &mut a);

@@ -415,7 +415,6 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
     fn cross(&mut self, t: f64, x: &mut [f64], _dir: f64) {
         let n = self.n;
         if self.moving.iter().any(|m| m.0.to_bits() == t.to_bits()) {
-            self.evaluated_at = None;
             self.state_at(t);
             let jump = rhs_jump(self.sys, t, &self.y, self.p, &mut self.u);
             let along: f64 = x[..n].iter().zip(&jump).map(|(l, g)| l * g).sum();
