@@ -849,7 +849,6 @@ pub(crate) fn slot_matrix<S: System>(
 }
 
 impl Rows {
-    /// U = Jᵀr and A: JᵀJ over the rows that enter it directly, plus the Fisher rows.
     /// U = Jᵀr over these rows (k columns).
     pub(crate) fn gradient(&self, k: usize) -> Vec<f64> {
         let mut u = vec![0.0; k];
@@ -859,6 +858,7 @@ impl Rows {
         u
     }
 
+    /// U = Jᵀr and A: JᵀJ over the rows that enter it directly, plus the Fisher rows.
     fn normal_equations(&self, k: usize) -> (DVector<f64>, DMatrix<f64>) {
         let u = DVector::from_vec(self.gradient(k));
         let mut a = DMatrix::zeros(k, k);

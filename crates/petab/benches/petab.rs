@@ -59,7 +59,6 @@ fn yaml(problem: &str) -> PathBuf {
 }
 
 fn bench(c: &mut Criterion) {
-    // Every problem is imported once to see whether it imports at all.
     let problems = problems();
     let mut group = c.benchmark_group("petab/import");
     group.sample_size(10).warm_up_time(Duration::from_millis(500));
@@ -73,23 +72,30 @@ fn bench(c: &mut Criterion) {
         });
     }
     group.finish();
+    // Each posed once for both gradient groups.
+    let posed: Vec<_> = problems
+        .iter()
+        .map(|problem| {
+            let imported = sysid_petab::import(&yaml(problem)).expect("imports");
+            let p = imported.model.problem(None).expect("a problem");
+            let z = p.unknowns().coordinates(&p.guesses());
+            (problem, p, z)
+        })
+        .collect();
     // Forward sensitivities (the linearization the fits use) and adjoints.
     for (name, adjoint) in [("petab/nll-gradient", false), ("petab/nll-gradient-adjoint", true)] {
         let mut group = c.benchmark_group(name);
         group.sample_size(10).warm_up_time(Duration::from_millis(500));
-        for problem in &problems {
-            let imported = sysid_petab::import(&yaml(problem)).expect("imports");
-            let p = imported.model.problem(None).expect("a problem");
-            let z = p.unknowns().coordinates(&p.guesses());
-            group.bench_function(problem, |b| {
+        for (problem, p, z) in &posed {
+            group.bench_function(*problem, |b| {
                 b.iter(|| {
                     // A preequilibration's steady state is solved afresh, as at a new point.
                     p.forget_cached();
                     if adjoint {
-                        let e = p.nll_gradient(black_box(&z), Sensitivities::Adjoint);
+                        let e = p.nll_gradient(black_box(z.as_slice()), Sensitivities::Adjoint);
                         black_box(e.expect("integrates"));
                     } else {
-                        let lin = p.linearize(black_box(&z)).expect("integrates");
+                        let lin = p.linearize(black_box(z.as_slice())).expect("integrates");
                         black_box((p.nll(&lin), lin.gradient.norm()));
                     }
                 })
