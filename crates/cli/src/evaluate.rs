@@ -54,6 +54,9 @@ struct Evaluation {
     nll: f64,
     prior: Option<f64>,
     gradient: Option<Vec<f64>>,
+    /// With `--sensitivities adjoint`: the experiments whose gradient came from forward
+    /// sensitivities instead, by name.
+    fell_back: Option<Vec<String>>,
 }
 
 /// Runs `sysid evaluate`.
@@ -105,6 +108,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
                 "prior": e.prior,
                 "objective": e.nll + e.prior.unwrap_or(0.0),
                 "gradient": e.gradient.as_deref().map(object),
+                "adjoint_fallbacks": e.fell_back,
                 "parameters": object(&values),
                 "evaluations": args.repeat,
                 "ms_per_evaluation": ms,
@@ -172,7 +176,7 @@ fn evaluate(
     let prior = problem.prior_nll_at(z);
     let Some(how) = gradient else {
         let nll = problem.nll_at(z).map_err(cannot)?.ok_or_else(no_likelihood)?;
-        return Ok(Evaluation { nll, prior, gradient: None });
+        return Ok(Evaluation { nll, prior, gradient: None, fell_back: None });
     };
     let e = problem.nll_gradient(z, how).map_err(cannot)?.ok_or_else(no_likelihood)?;
     // ∂/∂value = ∂/∂z / (∂value/∂z).
@@ -182,7 +186,10 @@ fn evaluate(
         .zip(parameters.iter().zip(values))
         .map(|(g, (u, &v))| g / u.scale(u.coordinate(v)))
         .collect();
-    Ok(Evaluation { nll: e.nll, prior, gradient: Some(g) })
+    let names = problem.experiments();
+    let fell_back = (how == Sensitivities::Adjoint)
+        .then(|| e.fell_back.iter().map(|&i| names[i].name().to_string()).collect());
+    Ok(Evaluation { nll: e.nll, prior, gradient: Some(g), fell_back })
 }
 
 /// The readable report.
@@ -203,6 +210,16 @@ fn table(
         "  time         {ms:.3} ms per evaluation (median of {repeat}){}; import {import_ms:.1} ms\n",
         if e.gradient.is_some() { " with the gradient" } else { "" }
     );
+    if let Some(names) = e.fell_back.as_ref().filter(|n| !n.is_empty()) {
+        let shown: Vec<&str> = names.iter().take(5).map(String::as_str).collect();
+        let more = names.len().saturating_sub(shown.len());
+        out += &format!(
+            "  adjoint      {} experiment(s) by forward sensitivities instead: {}{}\n",
+            names.len(),
+            shown.join(", "),
+            if more > 0 { format!(" and {more} more") } else { String::new() }
+        );
+    }
     let width = names.iter().map(|n| n.chars().count()).max().unwrap_or(0).max(9);
     out += &format!("\n  {:<width$}  {:>16}", "parameter", "value");
     if e.gradient.is_some() {

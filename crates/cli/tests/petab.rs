@@ -75,6 +75,9 @@ fn evaluate_gives_the_nll_and_its_gradient() {
         assert!((a - f).abs() <= 1e-7 * size, "{name}: adjoint {a}, forward {f}");
     }
     assert!((adjoint["nll"].as_f64().unwrap() - nll).abs() <= 1e-8, "{adjoint}");
+    // Boehm's one experiment ran by adjoint; the key is null when no adjoint was asked for.
+    assert_eq!(adjoint["adjoint_fallbacks"], serde_json::json!([]), "{adjoint}");
+    assert!(at["adjoint_fallbacks"].is_null());
     let out = sysid(&["evaluate", "--petab", &boehm, "--sensitivities", "adjoint"]);
     assert_eq!(out.status.code(), Some(2), "--sensitivities without --gradient");
     assert!(String::from_utf8_lossy(&out.stderr).contains("--gradient"));

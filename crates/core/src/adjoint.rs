@@ -45,6 +45,11 @@ pub struct NllGradient {
     pub gradient: Vec<f64>,
     /// The work done.
     pub counts: Counts,
+    /// The experiments (indices into [`Problem::experiments`]) whose part of the gradient
+    /// came from forward sensitivities although adjoints were asked for: those the adjoint
+    /// does not handle (state events, samples before t0) and those whose backward
+    /// integration failed. Empty for [`Sensitivities::Forward`].
+    pub fell_back: Vec<usize>,
 }
 
 impl<S: System> Problem<S> {
@@ -61,7 +66,13 @@ impl<S: System> Problem<S> {
         if how == Sensitivities::Forward {
             let lin = self.residuals_and_jacobian(z)?;
             let gradient = self.objective_gradient(&lin, false);
-            return Ok(self.nll(&lin).map(|nll| NllGradient { nll, gradient, counts: lin.counts }));
+            let counts = lin.counts;
+            return Ok(self.nll(&lin).map(|nll| NllGradient {
+                nll,
+                gradient,
+                counts,
+                fell_back: Vec::new(),
+            }));
         }
         let k = self.unknowns.len();
         let (v, free_index, chain) = (self.values_at(z), self.free_index(), self.chain(z));
@@ -74,21 +85,22 @@ impl<S: System> Problem<S> {
         };
         let all = self.each_experiment(|e| experiment_gradient(e, &at, k))?;
         let (mut gradient, mut counts) = (vec![0.0; k], Counts::default());
-        for (rows, u) in &all {
+        for (rows, u, _) in &all {
             gradient.iter_mut().zip(u).for_each(|(g, u)| *g += u);
             counts += rows.counts;
         }
-        let costs = all.iter().map(|(rows, _)| rows.r.iter().map(|r| r * r).sum::<f64>());
+        let fell_back = (0..all.len()).filter(|&i| !all[i].2).collect();
+        let costs = all.iter().map(|(rows, ..)| rows.r.iter().map(|r| r * r).sum::<f64>());
         let Some(nlls) = self.nlls(costs) else { return Ok(None) };
         gradient
-            .extend(self.scale_gradient(all.iter().flat_map(|(rows, _)| rows.r.iter().copied())));
+            .extend(self.scale_gradient(all.iter().flat_map(|(rows, ..)| rows.r.iter().copied())));
         if let Some(i) = gradient.iter().position(|g| !g.is_finite()) {
             return Err(OdeError::NonFinite {
                 t: self.span().0,
                 what: format!("component {i} of the NLL's gradient"),
             });
         }
-        Ok(Some(NllGradient { nll: nlls.iter().sum(), gradient, counts }))
+        Ok(Some(NllGradient { nll: nlls.iter().sum(), gradient, counts, fell_back }))
     }
 }
 
@@ -97,12 +109,13 @@ fn adjoint_applies<S: System>(e: &Planned<S>) -> bool {
     e.system().n_events() == 0 && e.sampled().times.first().is_none_or(|&t| t >= e.t0)
 }
 
-/// One experiment's rows at the point `at` and its part of U = Jᵀr (k values).
+/// One experiment's rows at the point `at`, its part of U = Jᵀr (k values), and whether it
+/// came from the adjoint (false: from forward sensitivities).
 fn experiment_gradient<S: System>(
     e: &Planned<S>,
     at: &At<'_>,
     k: usize,
-) -> Result<(Rows, Vec<f64>), OdeError> {
+) -> Result<(Rows, Vec<f64>, bool), OdeError> {
     if !adjoint_applies(e) {
         return forward_gradient(e, at, k);
     }
@@ -145,7 +158,7 @@ fn experiment_gradient<S: System>(
     }
     rows.counts = trajectory.counts();
     rows.counts += counts;
-    Ok((rows, u))
+    Ok((rows, u, true))
 }
 
 /// One experiment's rows and U = Jᵀr from its forward sensitivities.
@@ -153,8 +166,8 @@ fn forward_gradient<S: System>(
     e: &Planned<S>,
     at: &At<'_>,
     k: usize,
-) -> Result<(Rows, Vec<f64>), OdeError> {
+) -> Result<(Rows, Vec<f64>, bool), OdeError> {
     let rows = experiment_rows(e, at, k)?;
     let u = rows.gradient(k);
-    Ok((rows, u))
+    Ok((rows, u, false))
 }

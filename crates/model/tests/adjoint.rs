@@ -70,8 +70,9 @@ fn scratch(name: &str, model: &str) -> PathBuf {
 
 /// Forward and adjoint at the guess and at a second point: the NLL to 1e-9 relative (two
 /// integrations of the states at rtol 1e-10), every gradient component to 1e-7 of the
-/// largest.
-fn compare(dir: &Path) {
+/// largest. `fell_back`: whether every experiment is expected to have run forward (events)
+/// or none.
+fn compare(dir: &Path, fell_back: bool) {
     let problem = Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap();
     assert!(!problem.scales().is_empty(), "the test needs a noise scale in closed form");
     let guess = problem.unknowns().coordinates(&problem.guesses());
@@ -87,6 +88,10 @@ fn compare(dir: &Path) {
             forward.nll
         );
         assert_eq!(forward.gradient.len(), problem.parameters().len());
+        assert!(forward.fell_back.is_empty(), "forward sensitivities never fall back");
+        let all: Vec<usize> = (0..problem.experiments().len()).collect();
+        let expected = if fell_back { all } else { Vec::new() };
+        assert_eq!(adjoint.fell_back, expected, "experiments run forward");
         let size = forward.gradient.iter().fold(0.0f64, |m, g| m.max(g.abs()));
         for (i, (a, f)) in adjoint.gradient.iter().zip(&forward.gradient).enumerate() {
             assert!(
@@ -100,7 +105,7 @@ fn compare(dir: &Path) {
 
 #[test]
 fn adjoint_gradient_agrees_with_forward_sensitivities() {
-    compare(&scratch("plain", MODEL));
+    compare(&scratch("plain", MODEL), false);
 }
 
 /// The same model with an event (B reset when A falls below 0.2): experiments with events are
@@ -111,5 +116,5 @@ fn experiments_with_events_fall_back_to_forward_sensitivities() {
         "[integrator]",
         "[[events]]\ntrigger = \"lt(A, 0.2)\"\nset = { B = \"0.5 * B\" }\n[integrator]",
     );
-    compare(&scratch("events", &model));
+    compare(&scratch("events", &model), true);
 }

@@ -16,6 +16,10 @@
 //! control. J_y and ∂g/∂α are read at the forward solution y(t), interpolated from its
 //! accepted steps (a [`DenseSolution`]).
 //!
+//! The backward integration runs from each sample time to the one before in time local to
+//! the sample (see [`Local`]): a jump of λ sets off the system's fast modes, which only steps
+//! shorter than the resolution of t far from 0 may resolve.
+//!
 //! The implicit steps solve with E = I/(γh) + J_yᵀ (h < 0: the transpose of the forward
 //! problem's matrix) through the factors of its transpose, sparse in the same way for a
 //! large system with a sparse Jacobian; the μ block is solved by substitution. Systems with state events are not handled: their
@@ -121,26 +125,33 @@ impl<S: System> Ivp<'_, S> {
         let mut x = vec![0.0; n + k];
         rhs.add_seeds(t_end, &mut x);
         if t_end - self.t0 > resolution(t_end) {
-            // Stop at every sample time (λ jumps there), where the forward solution did, and
-            // where its steps end: J(y(t)) is smooth within a forward step only.
-            let mut stops: Vec<f64> = stops(self.system, self.p);
-            stops.extend(times.iter().copied().filter(|&t| t > self.t0 && t < t_end));
-            stops.extend(forward.step_ends().filter(|&t| t > self.t0 && t < t_end));
-            stops.sort_by(f64::total_cmp);
-            // A forward step that ended a few ulps from a stop leaves no room for a step in
-            // between: one of the two is enough.
-            stops.dedup_by(|later, kept| *later - *kept <= resolution(*later));
-            // The first step: the forward integration's last, unless one is given. Hairer's
-            // estimate from ‖f‖ fails here: μ starts at 0 with derivatives as large as
-            // ∂g/∂α makes them (Rahman's 1e11), which held its first step below 1e-15.
-            let mut cfg = *integrator;
-            if cfg.initial_step.is_none() {
-                let last_start = forward.step_ends().last().unwrap_or(self.t0);
-                cfg.initial_step = Some(t_end - last_start).filter(|h| *h > 0.0);
+            // Stop where the forward solution did and where its steps end (J(y(t)) is
+            // smooth within a forward step only), and at every sample time, where λ jumps.
+            let mut inner: Vec<f64> = stops(self.system, self.p);
+            inner.extend(forward.step_ends().filter(|&t| t > self.t0 && t < t_end));
+            let mut samples: Vec<f64> =
+                times.iter().copied().filter(|&t| t > self.t0 && t < t_end).collect();
+            samples.dedup_by(|later, kept| *later - *kept <= resolution(*later));
+            // From each sample back to the one before it (t0 last), in time local to the
+            // sample (see [`Local`]), each part from Hairer's first step: λ has just jumped,
+            // and a step carried over from before the jump can cross the fast modes it sets
+            // off with an error its estimate does not see (on `Tied` in the tests, 4e-6 of
+            // the gradient at rtol 1e-8). In local time a first step of 1e-15 (Rahman's, from
+            // quadratures that start at 0 with derivatives of 1e11) costs a few steps more.
+            let mut from = t_end;
+            for to in samples.into_iter().rev().chain([self.t0]) {
+                let mut local = Local::new(&mut rhs, from, to, &inner);
+                let local_stops = local.stops();
+                let (c, x_end) =
+                    integrate(integrator, &mut local, (0.0, &x), to - from, &local_stops, |_| {})?;
+                counts += c;
+                x = x_end;
+                if to > self.t0 {
+                    rhs.cross(to, &mut x, -1.0);
+                }
+                from = to;
             }
-            let (c, x_end) = integrate(&cfg, &mut rhs, (t_end, &x), self.t0, &stops, |_| {})?;
-            counts += c;
-            x = x_end;
+            counts.integrations = 1;
         }
         rhs.add_seeds(self.t0, &mut x);
         let (lambda, mu) = x.split_at(n);
@@ -425,5 +436,87 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
             }
         }
         self.add_seeds(t, x);
+    }
+}
+
+/// The backward right-hand side seen in time τ local to a sample `origin`: t = origin + τ,
+/// from τ = 0 back to the previous sample's τ.
+///
+/// A jump of λ at a sample sets off the system's fast modes, which the steps must resolve
+/// (the forward integration meets them once, at t0, where t resolves any step). In absolute
+/// time no step can be shorter than 16 ulps of t: 3e-10 at Lang's last sample, t = 136 471.6,
+/// where its modes need steps of 1e-20, so its backward integration failed there. In local
+/// time the first steps can be as short as the modes need. The right-hand side is read at
+/// origin + τ rounded to the nearest time there is, which moves it by less than an ulp of t.
+struct Local<'r, R> {
+    rhs: &'r mut R,
+    origin: f64,
+    /// The stops between the two samples: (local, absolute), so that a stop crossed is
+    /// handed on at its own absolute time, not at origin + τ rounded.
+    stops: Vec<(f64, f64)>,
+}
+
+impl<'r, R: Rhs> Local<'r, R> {
+    /// The part from `origin` back to `to` (< origin), with the `stops` inside it.
+    fn new(rhs: &'r mut R, origin: f64, to: f64, stops: &[f64]) -> Self {
+        let mut inside: Vec<(f64, f64)> =
+            stops.iter().filter(|&&s| s > to && s < origin).map(|&s| (s - origin, s)).collect();
+        inside.sort_by(|a, b| a.0.total_cmp(&b.0));
+        inside.dedup_by(|later, kept| later.1 - kept.1 <= resolution(later.1));
+        Self { rhs, origin, stops: inside }
+    }
+
+    fn stops(&self) -> Vec<f64> {
+        self.stops.iter().map(|s| s.0).collect()
+    }
+
+    fn absolute(&self, tau: f64) -> f64 {
+        match self.stops.iter().find(|s| s.0.to_bits() == tau.to_bits()) {
+            Some(s) => s.1,
+            None => self.origin + tau,
+        }
+    }
+}
+
+impl<R: Rhs> Rhs for Local<'_, R> {
+    fn dim(&self) -> usize {
+        self.rhs.dim()
+    }
+
+    fn describe(&self, i: usize) -> String {
+        self.rhs.describe(i)
+    }
+
+    fn states(&self) -> usize {
+        self.rhs.states()
+    }
+
+    fn autonomous(&self) -> bool {
+        self.rhs.autonomous()
+    }
+
+    fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {
+        let t = self.absolute(t);
+        self.rhs.eval(t, side, x, dx);
+    }
+
+    fn factor(
+        &mut self,
+        t: f64,
+        side: Side,
+        x: &[f64],
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        let t = self.absolute(t);
+        self.rhs.factor(t, side, x, inv_gamma_h)
+    }
+
+    fn solve(&mut self, r: &mut [f64]) {
+        self.rhs.solve(r);
+    }
+
+    fn cross(&mut self, t: f64, x: &mut [f64], dir: f64) {
+        let t = self.absolute(t);
+        self.rhs.cross(t, x, dir);
     }
 }
