@@ -17,6 +17,7 @@ fn driver() -> sysid::core::DriverOptions {
         gtol: Some(1e-5),
         max_condition: 1e6,
         max_integrations: Some(99),
+        max_seconds: Some(60.0),
     }
 }
 
@@ -29,6 +30,7 @@ fn driven<O: Driven>(options: O) -> O {
         .with_gtol(1e-5)
         .with_max_condition(1e6)
         .with_max_integrations(99)
+        .with_max_seconds(60.0)
 }
 
 #[test]

@@ -168,6 +168,11 @@ pub struct MethodArgs {
     /// (default 10·(k + 1)·(max iterations + 1) for k unknowns).
     #[arg(long, value_name = "N", value_parser = seed, allow_hyphen_values = true)]
     pub max_integrations: Option<u64>,
+    /// Wall-clock limit of one fit in seconds (each start's, with --starts), read between
+    /// iterations: the fit then stops with its best point (termination `time_limit`).
+    /// Default: none.
+    #[arg(long, value_name = "SECONDS", value_parser = number, allow_hyphen_values = true)]
+    pub max_seconds: Option<f64>,
     /// First trajectory of quasilinearization: the model from the guess, or the data.
     #[arg(long, value_enum, default_value_t = QlStart::Guess)]
     pub ql_start: QlStart,
@@ -193,6 +198,7 @@ impl MethodArgs {
         }
         driver.gtol = self.gtol;
         driver.max_integrations = self.max_integrations.or(driver.max_integrations);
+        driver.max_seconds = self.max_seconds;
         let ql_start = match self.ql_start {
             QlStart::Guess => Start::Guess,
             QlStart::Data => Start::Data,

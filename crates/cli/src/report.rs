@@ -58,6 +58,11 @@ pub struct ReportArgs {
     /// (the first starts are the ones fitted; the report gives how many).
     #[arg(long, default_value_t = 120.0, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
     petab_budget: f64,
+    /// Wall-clock seconds after which one start of a PEtab problem's multistart stops with
+    /// its best point (termination `time_limit`, not converged). Default: no limit (a start
+    /// begun runs to its end).
+    #[arg(long, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
+    petab_start_seconds: Option<f64>,
     /// Most iterations of every fit in the catalogue's sections (studies, basin maps,
     /// multistarts, profiles) and of every PEtab profile point; the PEtab section's fits and
     /// multistarts keep the methods' own budget.
@@ -115,6 +120,7 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
         petab: args.petab.is_dir().then(|| args.petab.clone()),
         petab_starts: args.petab_starts,
         petab_budget: args.petab_budget,
+        petab_start_seconds: args.petab_start_seconds,
         max_iterations: args.max_iterations,
     };
     write_report(&options, &Bars::default())?;

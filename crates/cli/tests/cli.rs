@@ -170,6 +170,7 @@ fn a_negative_number_reaches_the_options_own_check() {
         "--max-iterations",
         "--gtol",
         "--max-integrations",
+        "--max-seconds",
         "--fix",
         "--start",
         "--rtol",
@@ -213,6 +214,7 @@ fn a_negative_number_reaches_the_options_own_check() {
                 "--seed",
                 "--starts",
                 "--petab-starts",
+                "--petab-start-seconds",
                 "--petab-budget",
                 "--max-iterations",
             ],
@@ -582,6 +584,32 @@ fn the_certificate_decides_converged() {
         assert_eq!(out.status.code(), Some(2), "--gtol {bad}");
         assert!(text(&out.stderr).contains("--gtol must lie in (0, 1)"), "{}", text(&out.stderr));
     }
+}
+
+/// `--max-seconds`: a fit out of time stops between iterations with its best point, says so
+/// and is not called converged unless its certificate holds there; a generous limit changes
+/// nothing.
+#[test]
+fn a_time_limit_stops_a_fit_with_its_best_point() {
+    let fit = |extra: &[&str]| {
+        let mut args = vec!["fit", "--system", "van-der-pol", "--format", "json"];
+        args.extend_from_slice(extra);
+        let out = sysid(&args);
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        (out.status.code(), json)
+    };
+    let (code, json) = fit(&["--max-seconds", "0"]);
+    assert_eq!(code, Some(1), "{json}");
+    assert_eq!(json["termination_code"], "time_limit");
+    assert_eq!(json["termination"], "the time limit of 0 s ran out");
+    assert_eq!(json["iterations"], 0);
+    assert_eq!(json["converged"], false);
+    let (code, json) = fit(&["--max-seconds", "3600"]);
+    assert_eq!(code, Some(0), "{json}");
+    assert_eq!(json["termination_code"], "converged_step");
+    let out = sysid(&["fit", "--system", "van-der-pol", "--max-seconds", "nan"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("--max-seconds"), "{}", text(&out.stderr));
 }
 
 #[test]

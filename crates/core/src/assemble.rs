@@ -22,7 +22,12 @@ use crate::termination::{Failure, PROGRESS_WINDOW, Rule, Termination};
 pub(crate) enum Ending {
     Rule(Rule),
     MaxIterations,
-    Failed { iteration: usize, failure: Failure },
+    /// The wall-clock limit of this many seconds ran out.
+    TimeLimit(f64),
+    Failed {
+        iteration: usize,
+        failure: Failure,
+    },
 }
 /// The names of the unknowns the certificate finds undetermined.
 pub(crate) fn undetermined_names<S: System>(problem: &Problem<S>, c: &Certificate) -> Vec<String> {
@@ -110,6 +115,7 @@ impl Record<'_> {
                 },
             },
             Ending::MaxIterations => Termination::MaxIterations,
+            Ending::TimeLimit(seconds) => Termination::TimeLimit { seconds },
             Ending::Failed { failure: Failure::Budget { integrations }, .. } => {
                 Termination::IntegrationBudget { integrations }
             }

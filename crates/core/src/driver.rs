@@ -59,6 +59,7 @@ pub fn drive<S: System>(
     let mut sigma = problem.scale_values();
     let mut z = start.to_vec();
     let mut rounds: Vec<Estimate> = Vec::new();
+    let started = Instant::now();
     loop {
         let used: usize = rounds.iter().map(|e| e.iterations).sum();
         let spent: u64 = rounds.iter().map(|e| e.counts.integrations).sum();
@@ -67,6 +68,9 @@ pub fn drive<S: System>(
             max_integrations: Some(
                 options.integration_budget(problem.unknowns().len()).saturating_sub(spent).max(1),
             ),
+            max_seconds: options
+                .max_seconds
+                .map(|s| (s - started.elapsed().as_secs_f64()).max(0.0)),
             ..*options
         };
         // The first round holds the scales where they start; the rounds after it, where the
@@ -89,6 +93,7 @@ pub fn drive<S: System>(
             || !estimate.converged()
             || moved <= 1e-3 * gtol
             || estimate.iterations >= round_options.max_iterations
+            || matches!(estimate.termination, crate::Termination::TimeLimit { .. })
             || rounds.len() + 1 >= MAX_ROUNDS;
         rounds.push(estimate);
         if last {
@@ -270,6 +275,9 @@ fn drive_once<S: System>(
         }
         if iteration >= options.max_iterations {
             break Ending::MaxIterations;
+        }
+        if let Some(limit) = options.max_seconds.filter(|&s| started.elapsed().as_secs_f64() >= s) {
+            break Ending::TimeLimit(limit);
         }
         let proposal = match proposal {
             Some(p) => p,

@@ -124,6 +124,10 @@ pub struct DriverOptions {
     /// The hard budget of model integrations (trial points of line searches and halvings
     /// included); `None`: 10·(k + 1)·(max_iterations + 1).
     pub max_integrations: Option<u64>,
+    /// The wall-clock limit of one fit in seconds, read between iterations (an iteration
+    /// begun runs to its end): the fit then stops with its best point, `time_limit`.
+    /// `None` (the default): no limit.
+    pub max_seconds: Option<f64>,
 }
 
 impl Default for DriverOptions {
@@ -135,6 +139,7 @@ impl Default for DriverOptions {
             gtol: None,
             max_condition: 1e12,
             max_integrations: None,
+            max_seconds: None,
         }
     }
 }
@@ -193,6 +198,12 @@ pub trait Driven: Sized {
         self.driver_mut().max_integrations = Some(max_integrations);
         self
     }
+
+    /// With a wall-clock limit of `max_seconds` per fit ([`DriverOptions::max_seconds`]).
+    fn with_max_seconds(mut self, max_seconds: f64) -> Self {
+        self.driver_mut().max_seconds = Some(max_seconds);
+        self
+    }
 }
 
 impl Driven for DriverOptions {
@@ -219,6 +230,9 @@ impl DriverOptions {
         }
         if self.max_integrations == Some(0) {
             return Err(OptionsError::Zero { name: "max_integrations" });
+        }
+        if let Some(s) = self.max_seconds {
+            OptionsError::non_negative("max_seconds", s)?;
         }
         Ok(())
     }

@@ -194,6 +194,12 @@ pub enum Termination {
         /// Integrations made.
         integrations: u64,
     },
+    /// The wall-clock limit ([`DriverOptions::max_seconds`](crate::DriverOptions::max_seconds))
+    /// ran out; it is read between iterations, so the last one may end after it.
+    TimeLimit {
+        /// The limit, in seconds.
+        seconds: f64,
+    },
     /// Stepping from iterate `iteration` failed; the best iterate so far is reported.
     Failed {
         /// The iterate the step started from.
@@ -215,6 +221,7 @@ impl Termination {
             Termination::Stalled { rule, .. } => format!("stalled_{}", rule.code()),
             Termination::MaxIterations => "max_iterations".into(),
             Termination::IntegrationBudget { .. } => "integration_budget".into(),
+            Termination::TimeLimit { .. } => "time_limit".into(),
             Termination::Failed { failure, .. } => failure.code().into(),
             Termination::StartFailed(_) => "start_failed".into(),
         }
@@ -269,6 +276,9 @@ impl fmt::Display for Termination {
             Termination::IntegrationBudget { integrations } => {
                 write!(f, "the budget of {integrations} model integrations is used up")
             }
+            Termination::TimeLimit { seconds } => {
+                write!(f, "the time limit of {seconds} s ran out")
+            }
             Termination::Failed {
                 iteration,
                 failure: Failure::Singular { unknowns, condition },
@@ -283,6 +293,66 @@ impl fmt::Display for Termination {
                 write!(f, "failed stepping from iteration {iteration}: {failure}")
             }
             Termination::StartFailed(failure) => write!(f, "the start cannot be used: {failure}"),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// docs/terminations.md is the contract: every code the driver can form has its row
+    /// there (a code in backticks at the start of a table row, alone or in a list).
+    #[test]
+    fn every_termination_code_is_documented() {
+        let doc = include_str!("../../../docs/terminations.md");
+        let rows: Vec<&str> = doc.lines().filter(|l| l.starts_with("| `")).collect();
+        let documented = |code: &str| {
+            rows.iter().any(|r| {
+                let first = r.split(" | ").next().unwrap_or("");
+                first.contains(&format!("`{code}`"))
+            })
+        };
+        let failure = |f: Failure| Termination::Failed { iteration: 1, failure: f };
+        let mut terminations = vec![
+            Termination::MaxIterations,
+            Termination::IntegrationBudget { integrations: 3 },
+            Termination::TimeLimit { seconds: 1.0 },
+            failure(Failure::NonFinite { what: "ε".into(), at: vec![] }),
+            failure(Failure::Singular { unknowns: vec![], condition: 1e13 }),
+            failure(Failure::Solver("argmin".into())),
+            failure(Failure::Integration {
+                error: OdeError::StepSizeTooSmall { t: 1.0, h: 1e-20 },
+                at: vec![],
+            }),
+            failure(Failure::Integration {
+                error: OdeError::BlowUp { t: 1.0, what: "x".into(), value: 1e7, start: 1.0 },
+                at: vec![],
+            }),
+            Termination::StartFailed(Failure::Solver("start".into())),
+        ];
+        let rules = [
+            Rule::Step,
+            Rule::Gradient,
+            Rule::PredictedDecrease,
+            Rule::CostChange,
+            Rule::NoDescent,
+            Rule::Progress,
+        ];
+        for rule in rules {
+            terminations.push(Termination::Converged(rule));
+            terminations.push(Termination::Stalled {
+                rule,
+                iteration: 1,
+                optimality: 1.0,
+                plateau: false,
+                undetermined: vec![],
+                moving: vec![],
+            });
+        }
+        terminations.push(Termination::Converged(Rule::ExactFit));
+        for t in terminations {
+            assert!(documented(&t.code()), "{} is not in docs/terminations.md", t.code());
         }
     }
 }

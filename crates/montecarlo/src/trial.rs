@@ -346,6 +346,7 @@ fn failure(e: &Estimate) -> String {
             Failure::Solver(_) => "solver_failed",
         },
         Termination::IntegrationBudget { .. } => "integration_budget",
+        Termination::TimeLimit { .. } => "time_limit",
         Termination::MaxIterations => match (first, last) {
             (Some(a), Some(b)) if b > a || b.is_nan() => "diverged",
             _ => "max_iterations",

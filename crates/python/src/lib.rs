@@ -230,6 +230,7 @@ fn settings(
     max_iterations: Option<usize>,
     gtol: Option<f64>,
     max_integrations: Option<u64>,
+    max_seconds: Option<f64>,
 ) -> PyResult<Settings> {
     let mut settings = Settings::default();
     if let Some(n) = max_iterations {
@@ -237,6 +238,7 @@ fn settings(
     }
     settings.driver.gtol = gtol;
     settings.driver.max_integrations = max_integrations;
+    settings.driver.max_seconds = max_seconds;
     settings.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(settings)
 }
@@ -514,7 +516,7 @@ impl PyProblem {
     }
 
     /// Fits the problem: a `sysid.FitResult` over the fit's JSON object (docs/json.md).
-    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, fix=None, start=None))]
+    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
         &self,
@@ -527,10 +529,11 @@ impl PyProblem {
         max_iterations: Option<usize>,
         gtol: Option<f64>,
         max_integrations: Option<u64>,
+        max_seconds: Option<f64>,
         fix: Option<std::collections::BTreeMap<String, f64>>,
         start: Option<std::collections::BTreeMap<String, f64>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let settings = settings(max_iterations, gtol, max_integrations)?;
+        let settings = settings(max_iterations, gtol, max_integrations, max_seconds)?;
         let method = build(method, &settings)?;
         let fix: Vec<(String, f64)> = fix.unwrap_or_default().into_iter().collect();
         let start: Vec<(String, f64)> = start.unwrap_or_default().into_iter().collect();
@@ -605,7 +608,7 @@ impl PyProblem {
         max_points: usize,
         max_iterations: Option<usize>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let settings = settings(max_iterations, None, None)?;
+        let settings = settings(max_iterations, None, None, None)?;
         if max_points == 0 || settings.driver.max_iterations == 0 {
             return Err(PyValueError::new_err(
                 "max_points and max_iterations must be at least 1: a profile re-optimises the others at every point",

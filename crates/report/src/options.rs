@@ -37,6 +37,9 @@ pub struct ReportOptions {
     /// Wall-clock seconds after which a PEtab problem's multistart begins no further start
     /// (the starts fitted are the first ones; the report says how many).
     pub petab_budget: f64,
+    /// Wall-clock seconds after which one start of a PEtab multistart stops with its best
+    /// point (termination `time_limit`, not converged); none: no limit.
+    pub petab_start_seconds: Option<f64>,
     /// Most iterations of every fit of the catalogue's sections and of every profile point
     /// (default [`CATALOGUE_ITERATIONS`]); the PEtab section's fits and multistarts keep the
     /// methods' own budget.
@@ -67,6 +70,7 @@ impl Default for ReportOptions {
             petab: None,
             petab_starts: 20,
             petab_budget: 120.0,
+            petab_start_seconds: None,
             max_iterations: CATALOGUE_ITERATIONS,
         }
     }
@@ -94,6 +98,9 @@ impl ReportOptions {
                 "--petab-budget must be a positive number of seconds, got {}",
                 self.petab_budget
             );
+        }
+        if let Some(s) = self.petab_start_seconds.filter(|s| !(*s > 0.0 && *s <= 1e9)) {
+            anyhow::bail!("--petab-start-seconds must be a positive number of seconds, got {s}");
         }
         if self.grid < 2 {
             anyhow::bail!("--grid must be at least 2, got {}", self.grid);

@@ -93,6 +93,12 @@ struct Starts {
     converged_per_minute: f64,
 }
 
+/// How the section's multistarts run: the options, and the wall-clock limit of one start.
+pub(crate) struct Starting<'a> {
+    pub(crate) options: &'a MultistartOptions,
+    pub(crate) seconds: Option<f64>,
+}
+
 /// The field's tolerance for a start that found the optimum (pyPESTO, Fröhlich & Sorger
 /// 2022): within 0.1 of the best objective.
 const REACHED: f64 = sysid_montecarlo::REACHED;
@@ -137,7 +143,7 @@ pub(crate) fn problems(dir: &Path) -> Vec<String> {
 fn numbers(
     yaml: &Path,
     out: &Path,
-    multistart: &MultistartOptions,
+    multistart: &Starting<'_>,
     profile_settings: &Settings,
     best_known: Option<f64>,
     observer: &dyn Observer,
@@ -190,7 +196,7 @@ fn numbers(
             ));
         }
     }
-    let starts = match multistart.starts {
+    let starts = match multistart.options.starts {
         0 => None,
         _ => Some(starts(&problem, yaml, out, multistart, best_known, observer)?),
     };
@@ -224,13 +230,15 @@ fn starts<S: sysid_ode::System + Sync>(
     problem: &sysid_core::Problem<S>,
     yaml: &Path,
     out: &Path,
-    options: &MultistartOptions,
+    starting: &Starting<'_>,
     best_known: Option<f64>,
     observer: &dyn Observer,
 ) -> Result<Starts, String> {
     let name = Role::Default.method();
-    let method =
-        Registry::standard().build(name, &Settings::default()).map_err(|e| e.to_string())?;
+    let options = starting.options;
+    let mut settings = Settings::default();
+    settings.driver.max_seconds = starting.seconds;
+    let method = Registry::standard().build(name, &settings).map_err(|e| e.to_string())?;
     let run = sysid_montecarlo::multistart(method.as_ref(), problem, options)
         .map_err(|e| e.to_string())?;
     let s = &run.starts;
@@ -272,7 +280,7 @@ fn starts<S: sysid_ode::System + Sync>(
 pub(crate) fn section(
     dir: &Path,
     out: &Path,
-    multistart: &MultistartOptions,
+    multistart: &Starting<'_>,
     profile_settings: &Settings,
     observer: &dyn Observer,
 ) -> anyhow::Result<String> {
@@ -347,7 +355,7 @@ fn number(v: Option<f64>) -> String {
 fn markdown(
     dir: &Path,
     rows: &[Row],
-    multistart: &MultistartOptions,
+    multistart: &Starting<'_>,
     profile_settings: &Settings,
 ) -> String {
     let [default, lm] = methods();
@@ -470,7 +478,8 @@ fn kept_best(rows: &[Row]) -> String {
 }
 
 /// The multistart table and the waterfall figures.
-fn starts_markdown(rows: &[Row], options: &MultistartOptions) -> String {
+fn starts_markdown(rows: &[Row], starting: &Starting<'_>) -> String {
+    let options = starting.options;
     let with: Vec<(&Row, &Starts)> = rows
         .iter()
         .filter_map(|r| match &r.outcome {
@@ -488,6 +497,9 @@ fn starts_markdown(rows: &[Row], options: &MultistartOptions) -> String {
             b.as_secs_f64()
         )
     });
+    let limit = starting.seconds.map_or(String::new(), |s| {
+        format!(" A start stops after {s} s with its best point, not converged (`time_limit`).")
+    });
     let default = Role::Default.method();
     let mut md = String::new();
     let _ = writeln!(
@@ -499,8 +511,8 @@ fn starts_markdown(rows: &[Row], options: &MultistartOptions) -> String {
          (what pyPESTO minimises). Best known: the least objective known for the problem, with \
          its source, in `best_known.tsv` beside the problems. Reached: converged starts within \
          {REACHED} of the best known value (or of the best found, where that is lower). Time \
-         per start: the median wall time of one fit.{budget}\n",
-        n = options.starts
+         per start: the median wall time of one fit.{limit}{budget}\n",
+        n = options.starts,
     );
     let _ = writeln!(
         md,

@@ -87,8 +87,9 @@ fn write_sections(
                 budget: Some(std::time::Duration::from_secs_f64(args.petab_budget)),
                 ..Default::default()
             };
-            let md =
-                crate::petab::section(dir, &args.out, &multistart, &args.settings(), observer)?;
+            let starts =
+                crate::petab::Starting { options: &multistart, seconds: args.petab_start_seconds };
+            let md = crate::petab::section(dir, &args.out, &starts, &args.settings(), observer)?;
             observer.note(&format!("PEtab problems: done in {:.1} s", t.elapsed().as_secs_f64()));
             md
         }
