@@ -129,6 +129,10 @@ impl<S: System> Ivp<'_, S> {
             // smooth within a forward step only), and at every sample time, where λ jumps.
             let mut inner: Vec<f64> = stops(self.system, self.p);
             inner.extend(forward.step_ends().filter(|&t| t > self.t0 && t < t_end));
+            inner.sort_by(f64::total_cmp);
+            // A forward step that ended a few ulps from a stop leaves no room for a step in
+            // between: one of the two is enough.
+            inner.dedup_by(|later, kept| *later - *kept <= resolution(*later));
             let mut samples: Vec<f64> =
                 times.iter().copied().filter(|&t| t > self.t0 && t < t_end).collect();
             samples.dedup_by(|later, kept| *later - *kept <= resolution(*later));
@@ -141,7 +145,7 @@ impl<S: System> Ivp<'_, S> {
             let mut from = t_end;
             for to in samples.into_iter().rev().chain([self.t0]) {
                 let mut local = Local::new(&mut rhs, from, to, &inner);
-                let local_stops = local.stops();
+                let local_stops = local.local.clone();
                 let (c, x_end) =
                     integrate(integrator, &mut local, (0.0, &x), to - from, &local_stops, |_| {})?;
                 counts += c;
@@ -451,29 +455,28 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
 struct Local<'r, R> {
     rhs: &'r mut R,
     origin: f64,
-    /// The stops between the two samples: (local, absolute), so that a stop crossed is
-    /// handed on at its own absolute time, not at origin + τ rounded.
-    stops: Vec<(f64, f64)>,
+    /// The stops between the two samples in local time, ascending, and the same stops in
+    /// absolute time: a stop is handed on at its own absolute time, not at origin + τ
+    /// rounded.
+    local: Vec<f64>,
+    absolute: Vec<f64>,
 }
 
 impl<'r, R: Rhs> Local<'r, R> {
-    /// The part from `origin` back to `to` (< origin), with the `stops` inside it.
+    /// The part from `origin` back to `to` (< origin), with the stops of `stops` (sorted,
+    /// none within the resolution of another) strictly between the two.
     fn new(rhs: &'r mut R, origin: f64, to: f64, stops: &[f64]) -> Self {
-        let mut inside: Vec<(f64, f64)> =
-            stops.iter().filter(|&&s| s > to && s < origin).map(|&s| (s - origin, s)).collect();
-        inside.sort_by(|a, b| a.0.total_cmp(&b.0));
-        inside.dedup_by(|later, kept| later.1 - kept.1 <= resolution(later.1));
-        Self { rhs, origin, stops: inside }
-    }
-
-    fn stops(&self) -> Vec<f64> {
-        self.stops.iter().map(|s| s.0).collect()
+        let (first, end) =
+            (stops.partition_point(|&s| s <= to), stops.partition_point(|&s| s < origin));
+        let absolute = stops[first..end.max(first)].to_vec();
+        let local = absolute.iter().map(|&s| s - origin).collect();
+        Self { rhs, origin, local, absolute }
     }
 
     fn absolute(&self, tau: f64) -> f64 {
-        match self.stops.iter().find(|s| s.0.to_bits() == tau.to_bits()) {
-            Some(s) => s.1,
-            None => self.origin + tau,
+        match self.local.binary_search_by(|l| l.total_cmp(&tau)) {
+            Ok(i) => self.absolute[i],
+            Err(_) => self.origin + tau,
         }
     }
 }
