@@ -39,6 +39,20 @@ pub(crate) fn undetermined_names<S: System>(problem: &Problem<S>, c: &Certificat
 pub(crate) fn is_better(a: &Iterate, b: Option<&Iterate>) -> bool {
     a.cost.is_finite() && b.is_none_or(|b| b.cost.is_nan() || a.cost < b.cost)
 }
+
+/// Whether a run that ended by `ending` returns its best iterate rather than the last one:
+/// the iterate a rule stopped at is returned where its certificate (`verdict`) holds, else
+/// whichever of the two is better. The driver sets the scales of the returned point by it,
+/// and [`Record::finish`] assembles that point: the two must agree.
+pub(crate) fn returns_best(
+    ending: &Ending,
+    verdict: Option<&Judged>,
+    current: &Iterate,
+    best: Option<&Iterate>,
+) -> bool {
+    let certified = matches!(ending, Ending::Rule(_)) && verdict.is_some_and(|(_, c)| c.holds());
+    !certified && best.is_some_and(|b| is_better(b, Some(current)))
+}
 /// The model's linearization at a point (if it could be evaluated) and the certificate there.
 type Judged = (Option<Linearization>, Certificate);
 
@@ -99,6 +113,9 @@ impl Record<'_> {
             }
             stalled = Some((rule, certificate.optimality, lin, certificate));
         }
+        // A rule's certified iterate was returned above.
+        let to_best =
+            best.as_ref().is_some_and(|(_, b)| returns_best(&ending, None, &current, Some(b)));
         let termination = match ending {
             Ending::Rule(rule) => Termination::Stalled {
                 rule,
@@ -122,7 +139,7 @@ impl Record<'_> {
             Ending::Failed { iteration, failure } => Termination::Failed { iteration, failure },
         };
         let (at, point, lin, certificate) = match best {
-            Some((i, b)) if is_better(&b, Some(&current)) => {
+            Some((i, b)) if to_best => {
                 let (lin, certificate) = self.judge(ev, &b);
                 (i, b, lin, certificate)
             }

@@ -31,7 +31,7 @@ use std::time::Instant;
 
 use sysid_ode::System;
 
-use crate::assemble::{Ending, Record, is_better};
+use crate::assemble::{Ending, Record, is_better, returns_best};
 use crate::certificate::{onto_bounds, optimality};
 use crate::error::FitError;
 use crate::estimate::{Estimate, Iteration};
@@ -305,9 +305,14 @@ fn drive_once<S: System>(
         }
         iteration += 1;
     };
-    // The estimate is assembled at the scales of the point it returns.
+    // The estimate is assembled at the scales of the point it returns, which is chosen here
+    // as `finish` chooses it: a rule's iterate is judged at its own scales (those `ev` holds
+    // now) before any switch to the best iterate's.
+    if matches!(ending, Ending::Rule(_)) && verdict.is_none() {
+        verdict = Some(record.judge(&ev, &current));
+    }
     let returned = match &best {
-        Some((_, b)) if is_better(b, Some(&current)) => {
+        Some((_, b)) if returns_best(&ending, verdict.as_ref(), &current, Some(b)) => {
             scales = best_scales;
             ev.set_scales(&scales);
             b
