@@ -53,7 +53,7 @@ def compare(yaml, name, value, step, base, at):
 
 
 def check(yaml):
-    at = evaluate(yaml, "--gradient")
+    at = evaluate(yaml, "--gradient", "--sensitivities", "forward")
     base = evaluate(yaml)["nll"]
     failures = []
     worst = 0.0

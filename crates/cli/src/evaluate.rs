@@ -22,9 +22,12 @@ pub struct EvaluateArgs {
     #[arg(long)]
     gradient: bool,
     /// How the gradient is computed: forward sensitivities of every parameter integrated
-    /// with the states, or one backward adjoint integration per condition (docs/methods.md).
-    /// Experiments with state events or samples before t0 are integrated forward either way.
-    #[arg(long, value_enum, default_value_t = How::Forward, requires = "gradient")]
+    /// with the states, one backward adjoint integration per condition, or per condition
+    /// whichever of the two was faster at its first gradient (auto: the adjoint where it took
+    /// under 0.9 of forward's time; that first evaluation computes both and is not timed;
+    /// docs/methods.md). Experiments with state events or
+    /// samples before t0 are integrated forward whatever is asked.
+    #[arg(long, value_enum, default_value_t = How::Auto, requires = "gradient")]
     sensitivities: How,
     /// Evaluate N times and report the median time of one evaluation.
     #[arg(long, default_value_t = 1, value_name = "N", value_parser = count)]
@@ -45,8 +48,30 @@ pub struct EvaluateArgs {
 /// `--sensitivities`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum How {
+    /// Forward sensitivities of every parameter, integrated with the states.
     Forward,
+    /// One backward adjoint integration per condition.
     Adjoint,
+    /// Per condition, whichever of the two was faster at its first gradient.
+    Auto,
+}
+
+impl How {
+    fn sensitivities(self) -> Sensitivities {
+        match self {
+            How::Forward => Sensitivities::Forward,
+            How::Adjoint => Sensitivities::Adjoint,
+            How::Auto => Sensitivities::Auto,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            How::Forward => "forward",
+            How::Adjoint => "adjoint",
+            How::Auto => "auto",
+        }
+    }
 }
 
 /// One evaluation: the NLL, the priors' term, and the NLL's gradient.
@@ -54,8 +79,14 @@ struct Evaluation {
     nll: f64,
     prior: Option<f64>,
     gradient: Option<Vec<f64>>,
-    /// With `--sensitivities adjoint`: the experiments whose gradient came from forward
-    /// sensitivities instead, by name.
+    /// How the gradient was asked for; None without it.
+    how: Option<How>,
+    /// The number of experiments.
+    experiments: usize,
+    /// With the gradient: the experiments whose gradient came from the adjoint, by name.
+    by_adjoint: Option<Vec<String>>,
+    /// With `--sensitivities adjoint` or `auto`: the experiments whose gradient came from
+    /// forward sensitivities because the adjoint does not handle them or failed, by name.
     fell_back: Option<Vec<String>>,
 }
 
@@ -80,17 +111,18 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
         false => Cow::Owned(problem.with_scales(&values[k..])),
     };
     let z = problem.unknowns().coordinates(&values[..k]);
+    let how = args.gradient.then_some(args.sensitivities);
+    // `auto` measures both ways at its first gradient: that evaluation is not timed.
+    if how == Some(How::Auto) {
+        evaluate(&held, &z, &parameters, &values, Some(How::Auto))?;
+    }
     let mut times = Vec::with_capacity(args.repeat);
     let mut result = None;
     for _ in 0..args.repeat {
         // Each evaluation solves what it needs (a steady state) afresh, not from the last.
         held.forget_cached();
         let t = Instant::now();
-        let how = match args.sensitivities {
-            How::Forward => Sensitivities::Forward,
-            How::Adjoint => Sensitivities::Adjoint,
-        };
-        let e = evaluate(&held, &z, &parameters, &values, args.gradient.then_some(how))?;
+        let e = evaluate(&held, &z, &parameters, &values, how)?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
         result = Some(e);
     }
@@ -108,6 +140,8 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
                 "prior": e.prior,
                 "objective": e.nll + e.prior.unwrap_or(0.0),
                 "gradient": e.gradient.as_deref().map(object),
+                "sensitivities": e.how.map(How::name),
+                "adjoint_experiments": e.by_adjoint,
                 "adjoint_fallbacks": e.fell_back,
                 "parameters": object(&values),
                 "evaluations": args.repeat,
@@ -167,7 +201,7 @@ fn evaluate(
     z: &[f64],
     parameters: &[&sysid_core::Unknown],
     values: &[f64],
-    gradient: Option<Sensitivities>,
+    gradient: Option<How>,
 ) -> anyhow::Result<Evaluation> {
     let no_likelihood =
         || anyhow!("the problem's data are a continuous record: it has no likelihood");
@@ -176,9 +210,18 @@ fn evaluate(
     let prior = problem.prior_nll_at(z);
     let Some(how) = gradient else {
         let nll = problem.nll_at(z).map_err(cannot)?.ok_or_else(no_likelihood)?;
-        return Ok(Evaluation { nll, prior, gradient: None, fell_back: None });
+        return Ok(Evaluation {
+            nll,
+            prior,
+            gradient: None,
+            how: None,
+            experiments: problem.experiments().len(),
+            by_adjoint: None,
+            fell_back: None,
+        });
     };
-    let e = problem.nll_gradient(z, how).map_err(cannot)?.ok_or_else(no_likelihood)?;
+    let e =
+        problem.nll_gradient(z, how.sensitivities()).map_err(cannot)?.ok_or_else(no_likelihood)?;
     // ∂/∂value = ∂/∂z / (∂value/∂z).
     let g = e
         .gradient
@@ -186,10 +229,20 @@ fn evaluate(
         .zip(parameters.iter().zip(values))
         .map(|(g, (u, &v))| g / u.scale(u.coordinate(v)))
         .collect();
-    let names = problem.experiments();
-    let fell_back = (how == Sensitivities::Adjoint)
-        .then(|| e.fell_back.iter().map(|&i| names[i].name().to_string()).collect());
-    Ok(Evaluation { nll: e.nll, prior, gradient: Some(g), fell_back })
+    let experiments = problem.experiments();
+    let named = |list: &[usize]| -> Vec<String> {
+        list.iter().map(|&i| experiments[i].name().to_string()).collect()
+    };
+    let fell_back = (how != How::Forward).then(|| named(&e.fell_back));
+    Ok(Evaluation {
+        nll: e.nll,
+        prior,
+        gradient: Some(g),
+        how: Some(how),
+        experiments: experiments.len(),
+        by_adjoint: Some(named(&e.by_adjoint)),
+        fell_back,
+    })
 }
 
 /// The readable report.
@@ -210,14 +263,29 @@ fn table(
         "  time         {ms:.3} ms per evaluation (median of {repeat}){}; import {import_ms:.1} ms\n",
         if e.gradient.is_some() { " with the gradient" } else { "" }
     );
-    if let Some(names) = e.fell_back.as_ref().filter(|n| !n.is_empty()) {
+    let list = |names: &[String]| {
         let shown: Vec<&str> = names.iter().take(5).map(String::as_str).collect();
         let more = names.len().saturating_sub(shown.len());
-        out += &format!(
-            "  adjoint      {} experiment(s) by forward sensitivities instead: {}{}\n",
-            names.len(),
+        format!(
+            "{}{}",
             shown.join(", "),
             if more > 0 { format!(" and {more} more") } else { String::new() }
+        )
+    };
+    if let (Some(how), Some(by)) = (e.how, &e.by_adjoint) {
+        out += &format!(
+            "  gradient     {} ({} of {} experiment(s) by adjoint){}\n",
+            how.name(),
+            by.len(),
+            e.experiments,
+            if by.is_empty() { String::new() } else { format!(": {}", list(by)) }
+        );
+    }
+    if let Some(names) = e.fell_back.as_ref().filter(|n| !n.is_empty()) {
+        out += &format!(
+            "  adjoint      {} experiment(s) by forward sensitivities instead: {}\n",
+            names.len(),
+            list(names)
         );
     }
     let width = names.iter().map(|n| n.chars().count()).max().unwrap_or(0).max(9);

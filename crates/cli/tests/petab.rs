@@ -44,7 +44,7 @@ fn evaluate_gives_the_nll_and_its_gradient() {
         assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
         serde_json::from_slice(&out.stdout).expect("JSON")
     };
-    let at = evaluate(&["--gradient"]);
+    let at = evaluate(&["--gradient", "--sensitivities", "forward"]);
     let nll = at["nll"].as_f64().expect("nll");
     let alone = evaluate(&[])["nll"].as_f64().expect("nll");
     assert!((alone - nll).abs() <= 1e-9, "{alone} vs {nll}");
@@ -77,7 +77,23 @@ fn evaluate_gives_the_nll_and_its_gradient() {
     assert!((adjoint["nll"].as_f64().unwrap() - nll).abs() <= 1e-8, "{adjoint}");
     // Boehm's one experiment ran by adjoint; the key is null when no adjoint was asked for.
     assert_eq!(adjoint["adjoint_fallbacks"], serde_json::json!([]), "{adjoint}");
+    assert_eq!(adjoint["adjoint_experiments"], serde_json::json!(["model1_data1"]), "{adjoint}");
     assert!(at["adjoint_fallbacks"].is_null());
+    assert_eq!(at["adjoint_experiments"], serde_json::json!([]));
+    assert_eq!(at["sensitivities"], "forward");
+    // The default, `auto`: the experiment by whichever way it measured faster, the same
+    // gradient either way; it says which.
+    let auto = evaluate(&["--gradient"]);
+    assert_eq!(auto["sensitivities"], "auto");
+    assert_eq!(auto["adjoint_fallbacks"], serde_json::json!([]), "{auto}");
+    let chosen = auto["adjoint_experiments"].as_array().expect("a list");
+    assert!(chosen.len() <= 1, "{auto}");
+    for (name, g) in gradient {
+        let a = auto["gradient"][name].as_f64().expect("a number");
+        let f = g.as_f64().unwrap();
+        assert!((a - f).abs() <= 1e-7 * size, "{name}: auto {a}, forward {f}");
+    }
+    assert!(evaluate(&[])["sensitivities"].is_null());
     let out = sysid(&["evaluate", "--petab", &boehm, "--sensitivities", "adjoint"]);
     assert_eq!(out.status.code(), Some(2), "--sensitivities without --gradient");
     assert!(String::from_utf8_lossy(&out.stderr).contains("--gradient"));
@@ -106,7 +122,8 @@ fn a_fit_reports_the_nll_at_its_own_estimates() {
         .iter()
         .map(|(name, v)| format!("{name}={:?}", v.as_f64().expect("a number")))
         .collect();
-    let mut args = vec!["evaluate", "--petab", &boehm, "--gradient", "--format", "json"];
+    let mut args = vec!["evaluate", "--petab", &boehm, "--gradient", "--sensitivities", "forward"];
+    args.extend(["--format", "json"]);
     for set in &sets {
         args.extend(["--set", set]);
     }

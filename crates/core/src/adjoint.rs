@@ -33,6 +33,17 @@ pub enum Sensitivities {
     /// adjoint does not handle (state events, samples before t0), or whose backward
     /// integration fails, is integrated forward.
     Adjoint,
+    /// Each experiment by whichever of the two was faster the first time its gradient was
+    /// asked for: that first time it is computed forward once untimed (what is cold at a first
+    /// integration is not charged to either way), then by adjoint and forward again, each
+    /// timed with its cached steady state forgotten before it (so that both solve it). The
+    /// adjoint is chosen where it took less than [`ADJOINT_MARGIN`] (0.9) of forward's time,
+    /// and the chosen way's gradient is returned; later gradients take that way only. An experiment the adjoint does not
+    /// handle, or whose backward integration failed, goes forward. The choice belongs to the
+    /// problem (and its clones) and is made again when the free unknowns change. No feature
+    /// of a problem predicted the faster way over the collection (docs/petab.md), so the
+    /// rule measures it.
+    Auto,
 }
 
 /// The NLL at a point and its gradient.
@@ -50,6 +61,8 @@ pub struct NllGradient {
     /// does not handle (state events, samples before t0) and those whose backward
     /// integration failed. Empty for [`Sensitivities::Forward`].
     pub fell_back: Vec<usize>,
+    /// The experiments whose part of the gradient came from the adjoint.
+    pub by_adjoint: Vec<usize>,
 }
 
 impl<S: System> Problem<S> {
@@ -63,17 +76,6 @@ impl<S: System> Problem<S> {
         if self.is_continuous() {
             return Ok(None);
         }
-        if how == Sensitivities::Forward {
-            let lin = self.residuals_and_jacobian(z)?;
-            let gradient = self.objective_gradient(&lin, false);
-            let counts = lin.counts;
-            return Ok(self.nll(&lin).map(|nll| NllGradient {
-                nll,
-                gradient,
-                counts,
-                fell_back: Vec::new(),
-            }));
-        }
         let k = self.unknowns.len();
         let (v, free_index, chain) = (self.values_at(z), self.free_index(), self.chain(z));
         let at = At {
@@ -83,13 +85,24 @@ impl<S: System> Problem<S> {
             integrator: &self.integrator,
             jacobian: true,
         };
-        let all = self.each_experiment(|e| experiment_gradient(e, &at, k))?;
+        // Each experiment's U = Jᵀr on its own: the problem's whole linearization would also
+        // form the normal matrix JᵀJ, which the gradient does not need (Beer, 72 unknowns:
+        // 78 → 33 ms by forward sensitivities).
+        let all = self.each_experiment(|e| match how {
+            Sensitivities::Forward => {
+                forward_gradient(e, &at, k).map(|(rows, u, _)| (rows, u, false, false))
+            }
+            Sensitivities::Adjoint => experiment_gradient(e, &at, k)
+                .map(|(rows, u, adjoint)| (rows, u, adjoint, !adjoint)),
+            Sensitivities::Auto => auto_gradient(e, &at, k),
+        })?;
         let (mut gradient, mut counts) = (vec![0.0; k], Counts::default());
-        for (rows, u, _) in &all {
+        for (rows, u, ..) in &all {
             gradient.iter_mut().zip(u).for_each(|(g, u)| *g += u);
             counts += rows.counts;
         }
-        let fell_back = (0..all.len()).filter(|&i| !all[i].2).collect();
+        let by_adjoint = (0..all.len()).filter(|&i| all[i].2).collect();
+        let fell_back = (0..all.len()).filter(|&i| all[i].3).collect();
         let costs = all.iter().map(|(rows, ..)| rows.r.iter().map(|r| r * r).sum::<f64>());
         let Some(nlls) = self.nlls(costs) else { return Ok(None) };
         gradient
@@ -100,7 +113,74 @@ impl<S: System> Problem<S> {
                 what: format!("component {i} of the NLL's gradient"),
             });
         }
-        Ok(Some(NllGradient { nll: nlls.iter().sum(), gradient, counts, fell_back }))
+        Ok(Some(NllGradient { nll: nlls.iter().sum(), gradient, counts, fell_back, by_adjoint }))
+    }
+}
+
+/// [`Sensitivities::Auto`] takes the adjoint for an experiment only where it took less than
+/// this share of forward's time.
+pub const ADJOINT_MARGIN: f64 = 0.9;
+
+/// One experiment's rows, its part of U and whether it came from the adjoint, by the way
+/// [`Sensitivities::Auto`] chose for it (measuring both the first time), and whether the
+/// adjoint fell back to forward sensitivities (it does not apply, or its backward integration
+/// failed).
+fn auto_gradient<S: System>(
+    e: &Planned<S>,
+    at: &At<'_>,
+    k: usize,
+) -> Result<(Rows, Vec<f64>, bool, bool), OdeError> {
+    if !adjoint_applies(e) {
+        return forward_gradient(e, at, k).map(|(rows, u, _)| (rows, u, false, true));
+    }
+    if let Some(&adjoint) = e.adjoint_faster.get() {
+        return match adjoint {
+            true => experiment_gradient(e, at, k).map(|(rows, u, a)| (rows, u, a, !a)),
+            false => forward_gradient(e, at, k).map(|(rows, u, _)| (rows, u, false, false)),
+        };
+    }
+    let timed = |f: &dyn Fn() -> Result<(Rows, Vec<f64>, bool), OdeError>| {
+        e.forget_cached();
+        let started = std::time::Instant::now();
+        let out = f();
+        (out, started.elapsed())
+    };
+    // Forward once untimed first: the first integration of an experiment pays for what is
+    // cold (memory, caches), which would count against whichever way went first. Then the
+    // adjoint, then forward again, each timed.
+    let (warm, _) = timed(&|| forward_gradient(e, at, k));
+    let (adjoint, adjoint_time) = timed(&|| experiment_gradient(e, at, k));
+    let (forward, forward_time) = timed(&|| forward_gradient(e, at, k));
+    let warm = warm.as_ref().map(|(rows, ..)| rows.counts).unwrap_or_default();
+    // An adjoint that fell back (its backward integration failed) is not chosen.
+    let adjoint_ran = matches!(&adjoint, Ok((_, _, true)));
+    // Forward unless the adjoint was clearly faster: one timing each carries the machine's
+    // noise, and forward's gradient is the one the fits' linearization has.
+    let faster = adjoint_ran
+        && (forward.is_err()
+            || adjoint_time.as_secs_f64() < ADJOINT_MARGIN * forward_time.as_secs_f64());
+    let _ = e.adjoint_faster.set(faster);
+    // The returned way's work counts the rest too: all of it was done.
+    let other = |r: &Result<(Rows, Vec<f64>, bool), OdeError>| {
+        let mut counts = r.as_ref().map(|(rows, ..)| rows.counts).unwrap_or_default();
+        counts += warm;
+        counts
+    };
+    match faster {
+        true => {
+            let extra = other(&forward);
+            adjoint.map(|(mut rows, u, _)| {
+                rows.counts += extra;
+                (rows, u, true, false)
+            })
+        }
+        false => {
+            let extra = other(&adjoint);
+            forward.map(|(mut rows, u, _)| {
+                rows.counts += extra;
+                (rows, u, false, !adjoint_ran)
+            })
+        }
     }
 }
 

@@ -301,6 +301,21 @@ impl<S: System> Problem<S> {
         (self.n_priors() > 0).then(|| terms.sum())
     }
 
+    /// The gradient of the priors' term at the free unknowns' coordinates z, with respect to
+    /// them: what [`objective_gradient`](Self::objective_gradient) adds to the NLL's. Zeros
+    /// without priors.
+    pub fn prior_gradient_at(&self, z: &[f64]) -> Vec<f64> {
+        let (values, chain) = (self.values_at(z), self.chain(z));
+        let mut g = vec![0.0; z.len()];
+        for (f, &j) in self.free.iter().enumerate() {
+            if let Some(p) = &self.declared[j].prior {
+                let (residual, slope) = p.residual(values[j]);
+                g[f] += residual * slope * chain[f];
+            }
+        }
+        g
+    }
+
     /// The gradient of the NLL (`priors` false) or of the objective, the NLL plus the
     /// priors' term, at a linearization's point: with respect to the coordinates z of the
     /// free unknowns, then to those of the noise scales (ln s for a scale on a log scale;

@@ -135,6 +135,10 @@ pub struct Planned<S> {
     pub(crate) plan: Plan,
     /// The initial values and parameters that depend on a free unknown.
     pub(crate) slots: Vec<Wrt>,
+    /// Whether its gradient came faster by the adjoint than by forward sensitivities, as
+    /// [`Sensitivities::Auto`](crate::Sensitivities::Auto) measured it at its first gradient;
+    /// shared by the clones (a problem at other noise scales is a clone).
+    pub(crate) adjoint_faster: Arc<std::sync::OnceLock<bool>>,
 }
 
 impl<S> Planned<S> {
@@ -171,6 +175,8 @@ impl<S> Planned<S> {
             data: self.data,
             plan: self.plan,
             slots: self.slots,
+            // Another system: measured again.
+            adjoint_faster: Default::default(),
         }
     }
 }
@@ -187,6 +193,7 @@ impl<S> Clone for Planned<S> {
             data: self.data.clone(),
             plan: self.plan.clone(),
             slots: self.slots.clone(),
+            adjoint_faster: self.adjoint_faster.clone(),
         }
     }
 }

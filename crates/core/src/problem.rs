@@ -446,6 +446,8 @@ impl<S: System> Problem<S> {
             e.plan = plan(e.system.as_ref(), &e.data, &find)
                 .map_err(|err| in_experiment(&e.name, err))?;
             e.slots = slots(&e.initial, &e.parameters, &is_free);
+            // Other columns: the choice between forward and adjoint is measured again.
+            e.adjoint_faster = Default::default();
         }
         self.unknowns = Unknowns::new(self.free.iter().map(|&j| declared[j].clone()).collect());
         self.weigh_scales();
@@ -751,6 +753,7 @@ fn resolve_experiments<S: System>(
             data: e.data,
             plan,
             slots: Vec::new(),
+            adjoint_faster: Default::default(),
         });
     }
     Ok(out)

@@ -68,9 +68,9 @@ fn scratch(name: &str, model: &str) -> PathBuf {
     dir
 }
 
-/// Forward and adjoint at the guess and at a second point: the NLL to 1e-9 relative (two
-/// integrations of the states at rtol 1e-10), every gradient component to 1e-7 of the
-/// largest. `fell_back`: whether every experiment is expected to have run forward (events)
+/// Forward, adjoint and the automatic choice between them at the guess and at a second
+/// point: the NLL to 1e-9 relative (two integrations of the states at rtol 1e-10), every
+/// gradient component to 1e-7 of the largest. `fell_back`: whether every experiment is expected to have run forward (events)
 /// or none.
 fn compare(dir: &Path, fell_back: bool) {
     let problem = Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap();
@@ -78,9 +78,26 @@ fn compare(dir: &Path, fell_back: bool) {
     let guess = problem.unknowns().coordinates(&problem.guesses());
     let moved: Vec<f64> =
         guess.iter().enumerate().map(|(i, z)| z + 0.05 * (i as f64 - 3.0)).collect();
+    // The experiments `auto` chose the adjoint for, at its first gradient.
+    let mut chosen: Option<Vec<usize>> = None;
     for z in [guess, moved] {
         let forward = problem.nll_gradient(&z, Sensitivities::Forward).unwrap().unwrap();
         let adjoint = problem.nll_gradient(&z, Sensitivities::Adjoint).unwrap().unwrap();
+        // `auto`: each experiment's part by one of the two ways, so the same gradient; its
+        // choice made at the first point holds at the second, and in a clone at other noise
+        // scales; an experiment with events is never by adjoint.
+        let auto = problem.nll_gradient(&z, Sensitivities::Auto).unwrap().unwrap();
+        let chose = chosen.get_or_insert_with(|| auto.by_adjoint.clone()).clone();
+        assert_eq!(auto.by_adjoint, chose, "auto's choice is kept");
+        assert_eq!(auto.fell_back, adjoint.fell_back, "auto falls back where the adjoint does");
+        if fell_back {
+            assert!(auto.by_adjoint.is_empty());
+        }
+        let again = problem.nll_gradient(&z, Sensitivities::Auto).unwrap().unwrap();
+        assert_eq!(again.by_adjoint, chose);
+        let other = problem
+            .with_scales(&problem.scale_values().iter().map(|s| 1.5 * s).collect::<Vec<_>>());
+        assert_eq!(other.nll_gradient(&z, Sensitivities::Auto).unwrap().unwrap().by_adjoint, chose);
         assert!(
             (forward.nll - adjoint.nll).abs() <= 1e-9 * forward.nll.abs().max(1.0),
             "NLL {} against {}",
@@ -93,12 +110,15 @@ fn compare(dir: &Path, fell_back: bool) {
         let expected = if fell_back { all } else { Vec::new() };
         assert_eq!(adjoint.fell_back, expected, "experiments run forward");
         let size = forward.gradient.iter().fold(0.0f64, |m, g| m.max(g.abs()));
-        for (i, (a, f)) in adjoint.gradient.iter().zip(&forward.gradient).enumerate() {
-            assert!(
-                (a - f).abs() <= 1e-7 * size,
-                "∂NLL/∂{}: adjoint {a:e}, forward {f:e} (largest {size:e})",
-                problem.parameters()[i].name
-            );
+        for (way, e) in [("adjoint", &adjoint), ("auto", &auto), ("auto again", &again)] {
+            assert!((e.nll - forward.nll).abs() <= 1e-9 * forward.nll.abs().max(1.0), "{way}");
+            for (i, (a, f)) in e.gradient.iter().zip(&forward.gradient).enumerate() {
+                assert!(
+                    (a - f).abs() <= 1e-7 * size,
+                    "∂NLL/∂{}: {way} {a:e}, forward {f:e} (largest {size:e})",
+                    problem.parameters()[i].name
+                );
+            }
         }
     }
 }

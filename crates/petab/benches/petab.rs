@@ -3,7 +3,10 @@
 //! (target ≤ 100 ms each; AMICI's code generation and compile take 10–13 s);
 //! `petab/nll-gradient/<problem>`, the NLL and its gradient (forward sensitivities) at the
 //! nominal parameters (targets: Boehm ≤ 1 ms, AMICI 6.8 ms; Bachmann ≤ 200 ms, AMICI 2.03 s);
-//! `petab/nll-gradient-adjoint/<problem>`, the same by adjoints (`Sensitivities::Adjoint`).
+//! `petab/nll-gradient-adjoint/<problem>`, the same by adjoints (`Sensitivities::Adjoint`);
+//! `petab/nll-gradient-auto/<problem>`, the same by each experiment's faster way
+//! (`Sensitivities::Auto`, what `sysid evaluate --gradient` and Python's gradients do: its
+//! measuring first gradient falls in the warm-up).
 //! `cargo bench -p sysid-petab -- Boehm` runs one problem's. `SYSID_PETAB_DIR=DIR` benches the
 //! problems of another folder instead (a clone of the whole collection:
 //! `SYSID_PETAB_DIR=…/Benchmark-Models cargo bench -p sysid-petab -- petab/import/Laske`);
@@ -82,8 +85,13 @@ fn bench(c: &mut Criterion) {
             (problem, p, z)
         })
         .collect();
-    // Forward sensitivities (the linearization the fits use) and adjoints.
-    for (name, adjoint) in [("petab/nll-gradient", false), ("petab/nll-gradient-adjoint", true)] {
+    // Forward sensitivities (the linearization the fits use), adjoints, and the faster of the
+    // two per experiment.
+    for (name, how) in [
+        ("petab/nll-gradient", None),
+        ("petab/nll-gradient-adjoint", Some(Sensitivities::Adjoint)),
+        ("petab/nll-gradient-auto", Some(Sensitivities::Auto)),
+    ] {
         let mut group = c.benchmark_group(name);
         group.sample_size(10).warm_up_time(Duration::from_millis(500));
         for (problem, p, z) in &posed {
@@ -91,8 +99,8 @@ fn bench(c: &mut Criterion) {
                 b.iter(|| {
                     // A preequilibration's steady state is solved afresh, as at a new point.
                     p.forget_cached();
-                    if adjoint {
-                        let e = p.nll_gradient(black_box(z.as_slice()), Sensitivities::Adjoint);
+                    if let Some(how) = how {
+                        let e = p.nll_gradient(black_box(z.as_slice()), how);
                         black_box(e.expect("integrates"));
                     } else {
                         let lin = p.linearize(black_box(z.as_slice())).expect("integrates");

@@ -22,7 +22,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use sysid_core::{Linearization, Problem, Unknown};
+use sysid_core::{Linearization, Problem, Sensitivities, Unknown};
 use sysid_montecarlo::{MultistartOptions, Sampling};
 use sysid_registry::any::{self, AnySystem};
 use sysid_registry::{Boxed, Registry, Role, Settings};
@@ -139,18 +139,53 @@ impl PyProblem {
         Ok(Evaluated { problem, lin, chain })
     }
 
-    /// The NLL (`priors` false) or the objective at x, and its gradient on `scale`.
+    /// The NLL (`priors` false) or the objective at x, and its gradient on `scale`, by the
+    /// `sensitivities` asked for (forward, adjoint or auto; docs/methods.md).
     fn value_and_gradient<'py>(
         &self,
         py: Python<'py>,
         x: PyReadonlyArray1<'py, f64>,
-        scale: &str,
+        (scale, sensitivities): (&str, &str),
         priors: bool,
     ) -> PyResult<(f64, Array1<'py>)> {
         let scale = Scale::parse(scale)?;
-        let e = self.evaluate(py, x.as_slice()?, scale)?;
-        let value = if priors { e.objective()? } else { e.nll()? };
-        Ok((value, e.gradient(priors, scale).into_pyarray(py)))
+        let how = match sensitivities {
+            "forward" => {
+                let e = self.evaluate(py, x.as_slice()?, scale)?;
+                let value = if priors { e.objective()? } else { e.nll()? };
+                return Ok((value, e.gradient(priors, scale).into_pyarray(py)));
+            }
+            "adjoint" => Sensitivities::Adjoint,
+            "auto" => Sensitivities::Auto,
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "sensitivities must be \"forward\", \"adjoint\" or \"auto\", not {sensitivities:?}"
+                )));
+            }
+        };
+        let z = self.coordinates(x.as_slice()?, scale)?;
+        let k = self.problem.unknowns().len();
+        let problem = match self.problem.scales().is_empty() {
+            true => Cow::Borrowed(&*self.problem),
+            false => Cow::Owned(self.problem.with_scales(&self.values(&z)[k..])),
+        };
+        let e = py
+            .allow_threads(|| problem.nll_gradient(&z[..k], how))
+            .map_err(|e| sysid_error(format!("the model cannot be integrated at x: {e}")))?
+            .ok_or_else(|| {
+                sysid_error("the problem's data are a continuous record: it has no likelihood")
+            })?;
+        let (mut value, mut g) = (e.nll, e.gradient);
+        if priors {
+            value += problem.prior_nll_at(&z[..k]).unwrap_or(0.0);
+            g.iter_mut().zip(problem.prior_gradient_at(&z[..k])).for_each(|(g, p)| *g += p);
+        }
+        if scale == Scale::Linear {
+            let parameters = self.parameters();
+            let chain = parameters.iter().zip(&z).map(|(u, &z)| u.scale(z));
+            g.iter_mut().zip(chain).for_each(|(g, c)| *g /= c);
+        }
+        Ok((value, g.into_pyarray(py)))
     }
 }
 
@@ -391,15 +426,18 @@ impl PyProblem {
         self.evaluate(py, x.as_slice()?, Scale::parse(scale)?)?.nll()
     }
 
-    /// The negative log-likelihood at x and its gradient on `scale`.
-    #[pyo3(signature = (x, scale="linear"))]
+    /// The negative log-likelihood at x and its gradient on `scale`. `sensitivities`: "auto" (each experiment by whichever of forward
+    /// sensitivities and the adjoint was faster at its first gradient, which computes both),
+    /// "forward" or "adjoint" (docs/methods.md#adjoint-gradients).
+    #[pyo3(signature = (x, scale="linear", sensitivities="auto"))]
     fn nll_and_gradient<'py>(
         &self,
         py: Python<'py>,
         x: PyReadonlyArray1<'py, f64>,
         scale: &str,
+        sensitivities: &str,
     ) -> PyResult<(f64, Array1<'py>)> {
-        self.value_and_gradient(py, x, scale, false)
+        self.value_and_gradient(py, x, (scale, sensitivities), false)
     }
 
     /// The objective the fits minimise at x: the NLL plus the priors' negative log-density
@@ -414,15 +452,18 @@ impl PyProblem {
         self.evaluate(py, x.as_slice()?, Scale::parse(scale)?)?.objective()
     }
 
-    /// The objective and its gradient on `scale`.
-    #[pyo3(signature = (x, scale="linear"))]
+    /// The objective and its gradient on `scale`. `sensitivities`: "auto" (each experiment by whichever of forward
+    /// sensitivities and the adjoint was faster at its first gradient, which computes both),
+    /// "forward" or "adjoint" (docs/methods.md#adjoint-gradients).
+    #[pyo3(signature = (x, scale="linear", sensitivities="auto"))]
     fn objective_and_gradient<'py>(
         &self,
         py: Python<'py>,
         x: PyReadonlyArray1<'py, f64>,
         scale: &str,
+        sensitivities: &str,
     ) -> PyResult<(f64, Array1<'py>)> {
-        self.value_and_gradient(py, x, scale, true)
+        self.value_and_gradient(py, x, (scale, sensitivities), true)
     }
 
     /// The Fisher information of the objective at x on `scale`: the Gauss–Newton

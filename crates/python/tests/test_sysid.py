@@ -71,7 +71,7 @@ class Boehm(unittest.TestCase):
         self.assertEqual(self.p.objective(self.p.nominal), nll)
 
     def test_the_gradient_is_the_central_differences(self):
-        value, gradient = self.tight.objective_and_gradient(self.z, scale="parameter")
+        value, gradient = self.tight.objective_and_gradient(self.z, scale="parameter", sensitivities="forward")
         h = 1e-4
         fd = np.array(
             [
@@ -83,7 +83,19 @@ class Boehm(unittest.TestCase):
         np.testing.assert_allclose(gradient, fd, rtol=2e-6, atol=1e-6 * np.abs(gradient).max())
         self.assertEqual(value, self.tight.objective(self.z, scale="parameter"))
         # Without priors the NLL's gradient is the objective's.
-        np.testing.assert_array_equal(self.tight.nll_and_gradient(self.z, scale="parameter")[1], gradient)
+        np.testing.assert_array_equal(
+            self.tight.nll_and_gradient(self.z, scale="parameter", sensitivities="forward")[1], gradient
+        )
+        # By adjoint, and by whichever of the two `auto` finds faster (the default): the same
+        # gradient to 1e-7 of its largest component (two integrations at rtol 1e-12), the same
+        # value to 1e-9; `auto` keeps its choice, so a second call is the first.
+        for how in ["adjoint", "auto"]:
+            other_value, other = self.tight.objective_and_gradient(self.z, scale="parameter", sensitivities=how)
+            np.testing.assert_allclose(other, gradient, rtol=0, atol=1e-7 * np.abs(gradient).max())
+            self.assertAlmostEqual(other_value, value, delta=1e-9 * abs(value))
+        np.testing.assert_array_equal(self.tight.objective_and_gradient(self.z, scale="parameter")[1], other)
+        with self.assertRaisesRegex(ValueError, "sensitivities must be"):
+            self.tight.nll_and_gradient(self.z, sensitivities="backward")
 
     def test_the_linear_scale_is_the_chain_rule(self):
         x = self.p.to_linear_scale(self.z)
