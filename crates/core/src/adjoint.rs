@@ -38,8 +38,9 @@ pub enum Sensitivities {
     /// integration is not charged to either way), then by adjoint and forward again, each
     /// timed with its cached steady state forgotten before it (so that both solve it). The
     /// adjoint is chosen where it took less than [`ADJOINT_MARGIN`] (0.9) of forward's time,
-    /// and the chosen way's gradient is returned; later gradients take that way only. An experiment the adjoint does not
-    /// handle, or whose backward integration failed, goes forward. The choice belongs to the
+    /// and the chosen way's gradient is returned; later gradients take that way only. An
+    /// experiment the adjoint does not handle, or whose backward integration failed, goes
+    /// forward. The choice belongs to the
     /// problem (and its clones) and is made again when the free unknowns change. No feature
     /// of a problem predicted the faster way over the collection (docs/petab.md), so the
     /// rule measures it.
@@ -87,7 +88,7 @@ impl<S: System> Problem<S> {
         };
         // Each experiment's U = Jᵀr on its own: the problem's whole linearization would also
         // form the normal matrix JᵀJ, which the gradient does not need (Beer, 72 unknowns:
-        // 78 → 33 ms by forward sensitivities).
+        // 68 → 37 ms by forward sensitivities on one thread).
         let all = self.each_experiment(|e| match how {
             Sensitivities::Forward => {
                 forward_gradient(e, &at, k).map(|(rows, u, _)| (rows, u, false, false))
