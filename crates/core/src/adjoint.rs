@@ -200,7 +200,7 @@ fn experiment_gradient<S: System>(
     if !adjoint_applies(e) {
         return forward_gradient(e, at, k);
     }
-    let (y0, p) = e.point(at.v);
+    let (y0, p) = e.start(at.v)?;
     let times = &e.sampled().times;
     let ivp = Ivp::new(e.system(), e.t0, &y0, &p);
     let (n, ns) = (y0.len(), e.slots.len());

@@ -161,7 +161,7 @@ impl<S: System> Problem<S> {
         for e in &self.experiments {
             let (cost, gradient, normal, counts) = match &e.plan {
                 Plan::Continuous { span, outputs, .. } => {
-                    let (y0, p) = e.point(&v);
+                    let (y0, p) = e.start(&v)?;
                     let q = Ivp::new(e.system(), e.t0, &y0, &p).least_squares_integrals(
                         &self.integrator,
                         &e.slots,
@@ -423,7 +423,7 @@ impl<S: System> Problem<S> {
         for e in &self.experiments {
             match &e.plan {
                 Plan::Continuous { span, outputs, .. } => {
-                    let (y0, p) = e.point(&v);
+                    let (y0, p) = e.start(&v)?;
                     let q = Ivp::new(e.system(), e.t0, &y0, &p).least_squares_integrals(
                         &self.cost_integrator(),
                         &[],
@@ -707,7 +707,7 @@ impl<S: System> Problem<S> {
         let v = self.values_at(z);
         let (mut h, mut sigma) = (Vec::new(), Vec::new());
         for e in &self.experiments {
-            let (y0, p) = e.point(&v);
+            let (y0, p) = e.start(&v)?;
             let sampled = e.sampled();
             let sol = Ivp::new(e.system(), e.t0, &y0, &p)
                 .solve(&self.cost_integrator(), &sampled.times)?;
@@ -805,7 +805,7 @@ impl<S: System> Problem<S> {
         let z = self.unknowns.coordinates(values);
         let v = self.values_at(&z);
         let k = self.unknowns.len();
-        let (y0, p) = e.point(&v);
+        let (y0, p) = e.start(&v)?;
         let sol = Ivp::new(e.system(), e.t0, &y0, &p).solve_sensitivities(
             &self.integrator,
             &e.slots,
@@ -912,7 +912,7 @@ pub(crate) fn experiment_rows<S: System>(
     at: &At<'_>,
     k: usize,
 ) -> Result<Rows, OdeError> {
-    let (y0, p) = e.point(at.v);
+    let (y0, p) = e.start(at.v)?;
     let times = &e.sampled().times;
     let ivp = Ivp::new(e.system(), e.t0, &y0, &p);
     let slots: &[sysid_ode::Wrt] = if at.jacobian { &e.slots } else { &[] };

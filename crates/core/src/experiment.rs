@@ -249,6 +249,33 @@ impl<S: System> Planned<S> {
         )
     }
 
+    /// [`point`](Self::point), or the error that names the first setting that is not finite
+    /// there and what it is: a preequilibration's steady state that was not found, say, which
+    /// the integrator alone could only call a non-finite initial state.
+    pub(crate) fn start(&self, v: &[f64]) -> Result<(Vec<f64>, Vec<f64>), sysid_ode::OdeError>
+    where
+        S: System,
+    {
+        let (y0, p) = self.point(v);
+        let sig = self.system.signature();
+        let bad = |values: &[f64], settings: &[Resolved], names: &[&str], kind: &str| {
+            let i = values.iter().position(|x| !x.is_finite())?;
+            let what = match &settings[i] {
+                Resolved::Function(g) => format!("{kind} `{}`, {},", names[i], g.describe()),
+                _ => format!("{kind} `{}`", names[i]),
+            };
+            Some(sysid_ode::OdeError::NonFinite { t: self.t0, what })
+        };
+        let states: Vec<&str> = sig.states().iter().map(|s| s.as_ref()).collect();
+        let parameters: Vec<&str> = sig.parameters().iter().map(|s| s.as_ref()).collect();
+        if let Some(e) = bad(&y0, &self.initial, &states, "the initial value of")
+            .or_else(|| bad(&p, &self.parameters, &parameters, "the parameter"))
+        {
+            return Err(e);
+        }
+        Ok((y0, p))
+    }
+
     /// The parameters at the unknowns' values `v` (declared order), without the initial
     /// values (which may need a steady state solved).
     pub fn parameters_at(&self, v: &[f64]) -> Vec<f64> {

@@ -127,6 +127,34 @@ fn crauste_matches_the_collections_simulated_data() {
     assert!((nll - 190.96521897435176).abs() > 1e-3);
 }
 
+/// Weber's preequilibration at tight tolerances. Its fluxes cancel at the steady state, so
+/// from t = 1e4 on rounding kept its derivatives at 2–4 times rtol 1e-11 (in quanta of 2⁻³¹)
+/// and the steady state, judged by its derivatives alone, was never found: the NLL at rtol
+/// 1e-11 to 1e-13 was an error ("initial state PKD became non-finite"). It is found once a
+/// decade's mean rate is within the tolerance (its moves are the integration's noise): the NLL
+/// at rtol 1e-11, 1e-12 and 1e-13 is the NLL at 1e-10 to 1e-8 (3.5e-10 to 3.9e-10 measured),
+/// and AMICI's stored reference to its 1e-3.
+#[test]
+fn webers_steady_state_is_found_at_tight_tolerances() {
+    let imported = import(&yaml("Weber_BMC2015")).expect("imports");
+    let problem = imported.model.problem(None).expect("a problem");
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let at = |rtol: f64| {
+        let integrator = sysid_ode::Integrator { rtol, ..*problem.integrator() };
+        let tight = problem.clone().with_integrator(integrator).expect("an integrator");
+        tight.nll_at(&z).unwrap_or_else(|e| panic!("rtol {rtol:e}: {e}")).expect("a likelihood")
+    };
+    let reference = at(1e-10);
+    assert!((reference - 296.2017922646865).abs() <= 1e-3, "{reference}");
+    for rtol in [1e-11, 1e-12, 1e-13] {
+        let nll = at(rtol);
+        assert!(
+            (nll - reference).abs() <= 1e-8,
+            "rtol {rtol:e}: NLL {nll} vs {reference} at 1e-10"
+        );
+    }
+}
+
 /// Smith (133 species, 367 reactions, insulin switched off at t_ins and on again at 2880 by
 /// SBML events, written as switches in time): the NLL at nominal of the model alone (a plain
 /// integration at rtol 1e-10) against AMICI 1.0.1's at rtol 1e-14, 888198.438954
