@@ -6,9 +6,10 @@
 //! integrated together from the initial values under the preequilibration's parameters, to
 //! t = 1, 10, 100, … until both have settled: every |dyᵢ/dt| ≤ atol + rtol·|yᵢ| and every
 //! |dSᵢⱼ/dt| = |(J·S + ∂f/∂α)ᵢⱼ| ≤ atol + rtol·|Sᵢⱼ| (the problem's integrator's tolerances), or
-//! the same of every component's mean rate over the last decade, from t ≥ 10, where its moves
-//! grew less than tenfold from the decade before (rounding can keep the derivatives above the
-//! tolerance at a steady state, where large fluxes cancel), at most to t = 1e12. A state can settle before its derivatives do, where a slow mode hardly
+//! no component moved by more than 100 tolerances (nor at a mean rate above the tolerance)
+//! over the last decade, from t ≥ 10, and the moves grew less than tenfold from the decade
+//! before (rounding can keep the derivatives above the tolerance at a steady state, where
+//! large fluxes cancel), at most to t = 1e12. A state can settle before its derivatives do, where a slow mode hardly
 //! moves it: Weber's nominal point settles by t = 1, its sensitivities only by t = 1000. S is
 //! chained with the derivatives of the preequilibration's parameters and initial values: a
 //! conserved quantity (a singular Jacobian) keeps its dependence on the initial values, which
@@ -24,6 +25,10 @@ use crate::ModelSystem;
 
 /// The last time a steady state is looked for.
 const LAST: f64 = 1e12;
+
+/// The most tolerances a component may move over a decade that counts as settled where its
+/// derivatives stay above the tolerance (see [`SteadyState::solve`]).
+const STILL: f64 = 100.0;
 
 /// The steady state of one experiment's preequilibration, shared by its states' settings
 /// and computed once per point of the unknowns.
@@ -201,21 +206,22 @@ impl SteadyState {
             let before = x.clone();
             x[..n].copy_from_slice(trajectory.state(0));
             x[n..].copy_from_slice(trajectory.sensitivity_slice(0));
-            // Settled too: a decade from t ≥ 10 whose mean rate of every component is within
-            // what `settled` asks of its derivative, and whose moves did not grow more than
-            // tenfold from the decade before (no departure from an unstable point). Where
-            // large fluxes cancel, rounding keeps the derivatives above the tolerance however
-            // long the integration runs: Weber's at rtol 1e-11 stayed at 2–4 times it, in
-            // quanta of 2⁻³¹, from t = 1e4 to 1e12, and it had no steady state; its decades
-            // moved 1.5–4.5 tolerances at rtol 1e-11 and 10–30 at 1e-12, the integration's
-            // own noise, a mean rate of 1e-3 of the tolerance or less.
+            // Settled too: a decade from t ≥ 10 over which no component moved by more than
+            // STILL of its tolerances (nor at a mean rate above what `settled` asks of its
+            // derivative), and whose moves did not grow more than tenfold from the decade
+            // before (no departure from an unstable point). Where large fluxes cancel,
+            // rounding keeps the derivatives above the tolerance however long the
+            // integration runs: Weber's at rtol 1e-11 stayed at 2–4 times it, in quanta of
+            // 2⁻³¹, from t = 1e4 to 1e12, and it had no steady state; its decades moved
+            // 1.5–4.5 tolerances at rtol 1e-11 and 10–30 at 1e-12, the integration's own
+            // noise. The bound keeps a slow oscillation from passing on its mean alone.
             let span = next - t;
             let moved = x
                 .iter()
                 .zip(&before)
                 .map(|(a, b)| (a - b).abs() / (integrator.atol + integrator.rtol * a.abs()))
                 .fold(0.0, f64::max);
-            let slow = moved <= span;
+            let slow = moved <= STILL.min(span);
             let steady_pace = last_moved.is_some_and(|last: f64| moved <= 10.0 * last);
             last_moved = Some(moved);
             let from = t;
