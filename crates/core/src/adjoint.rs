@@ -39,9 +39,12 @@ pub enum Sensitivities {
     /// timed with its cached steady state forgotten before it (so that both solve it). The
     /// adjoint is chosen where it took less than [`ADJOINT_MARGIN`] (0.9) of forward's time,
     /// and the chosen way's gradient is returned; later gradients take that way only. An
-    /// experiment the adjoint does not handle, or whose backward integration failed, goes
-    /// forward. The choice belongs to the
-    /// problem (and its clones) and is made again when the free unknowns change. No feature
+    /// experiment the adjoint does not handle, or whose backward integration failed at that
+    /// first gradient, goes forward (reported in [`NllGradient::fell_back`]); a first point
+    /// where either way cannot be integrated is not measured from, and the next gradient
+    /// measures again. The choice belongs to the
+    /// problem and its copies at other noise scales, and is made again when the free
+    /// unknowns or the integrator change. No feature
     /// of a problem predicted the faster way over the collection (docs/petab.md), so the
     /// rule measures it.
     Auto,
@@ -134,11 +137,17 @@ fn auto_gradient<S: System>(
     if !adjoint_applies(e) {
         return forward_gradient(e, at, k).map(|(rows, u, _)| (rows, u, false, true));
     }
-    if let Some(&adjoint) = e.adjoint_faster.get() {
-        return match adjoint {
-            true => experiment_gradient(e, at, k).map(|(rows, u, a)| (rows, u, a, !a)),
-            false => forward_gradient(e, at, k).map(|(rows, u, _)| (rows, u, false, false)),
-        };
+    match e.adjoint_faster.get() {
+        Some(Choice::Adjoint) => {
+            return experiment_gradient(e, at, k).map(|(rows, u, a)| (rows, u, a, !a));
+        }
+        Some(Choice::Forward) => {
+            return forward_gradient(e, at, k).map(|(rows, u, _)| (rows, u, false, false));
+        }
+        Some(Choice::AdjointFailed) => {
+            return forward_gradient(e, at, k).map(|(rows, u, _)| (rows, u, false, true));
+        }
+        None => {}
     }
     let timed = |f: &dyn Fn() -> Result<(Rows, Vec<f64>, bool), OdeError>| {
         e.forget_cached();
@@ -153,21 +162,33 @@ fn auto_gradient<S: System>(
     let (adjoint, adjoint_time) = timed(&|| experiment_gradient(e, at, k));
     let (forward, forward_time) = timed(&|| forward_gradient(e, at, k));
     let warm = warm.as_ref().map(|(rows, ..)| rows.counts).unwrap_or_default();
-    // An adjoint that fell back (its backward integration failed) is not chosen.
+    // Whether the backward integration ran (false: it failed, and forward took its place).
     let adjoint_ran = matches!(&adjoint, Ok((_, _, true)));
-    // Forward unless the adjoint was clearly faster: one timing each carries the machine's
-    // noise, and forward's gradient is the one the fits' linearization has.
-    let faster = adjoint_ran
-        && (forward.is_err()
-            || adjoint_time.as_secs_f64() < ADJOINT_MARGIN * forward_time.as_secs_f64());
-    let _ = e.adjoint_faster.set(faster);
+    // The choice is kept only where both ways could be integrated here: a point where one
+    // cannot says nothing of their speed, and the next gradient measures again.
+    let choice = match (&adjoint, &forward) {
+        (Ok(_), Ok(_)) if !adjoint_ran => Some(Choice::AdjointFailed),
+        // Forward unless the adjoint was clearly faster: one timing each carries the
+        // machine's noise, and forward's gradient is the one the fits' linearization has.
+        (Ok(_), Ok(_)) => {
+            Some(match adjoint_time.as_secs_f64() < ADJOINT_MARGIN * forward_time.as_secs_f64() {
+                true => Choice::Adjoint,
+                false => Choice::Forward,
+            })
+        }
+        _ => None,
+    };
+    if let Some(choice) = choice {
+        let _ = e.adjoint_faster.set(choice);
+    }
     // The returned way's work counts the rest too: all of it was done.
     let other = |r: &Result<(Rows, Vec<f64>, bool), OdeError>| {
         let mut counts = r.as_ref().map(|(rows, ..)| rows.counts).unwrap_or_default();
         counts += warm;
         counts
     };
-    match faster {
+    let by_adjoint = choice == Some(Choice::Adjoint) || (forward.is_err() && adjoint_ran);
+    match by_adjoint {
         true => {
             let extra = other(&forward);
             adjoint.map(|(mut rows, u, _)| {
@@ -183,6 +204,18 @@ fn auto_gradient<S: System>(
             })
         }
     }
+}
+
+/// What [`Sensitivities::Auto`] found for an experiment at its first gradient where both ways
+/// could be integrated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Choice {
+    /// The adjoint took less than [`ADJOINT_MARGIN`] of forward's time.
+    Adjoint,
+    /// It did not.
+    Forward,
+    /// Its backward integration failed (forward is used, and reported as a fallback).
+    AdjointFailed,
 }
 
 /// Whether the adjoint handles experiment `e`: no state events, no sample before t0.

@@ -135,16 +135,19 @@ pub struct Planned<S> {
     pub(crate) plan: Plan,
     /// The initial values and parameters that depend on a free unknown.
     pub(crate) slots: Vec<Wrt>,
-    /// Whether its gradient came faster by the adjoint than by forward sensitivities, as
+    /// Which way its gradient came faster, by the adjoint or by forward sensitivities, as
     /// [`Sensitivities::Auto`](crate::Sensitivities::Auto) measured it at its first gradient;
-    /// shared by the clones (a problem at other noise scales is a clone).
-    pub(crate) adjoint_faster: Arc<std::sync::OnceLock<bool>>,
+    /// shared by the clones (a problem at other noise scales is a clone), made afresh for
+    /// another integrator or other free unknowns.
+    pub(crate) adjoint_faster: Arc<std::sync::OnceLock<crate::adjoint::Choice>>,
 }
 
 impl<S> Planned<S> {
     /// Its settings' functions for a problem integrated by `integrator`
     /// ([`SettingFunction::with_integrator`]).
     pub(crate) fn integrate_with(&mut self, integrator: &Integrator) {
+        // Which gradient is faster depends on the scheme and the tolerances: measured again.
+        self.adjoint_faster = Default::default();
         for s in self.initial.iter_mut().chain(&mut self.parameters) {
             if let Resolved::Function(g) = s
                 && let Some(h) = g.with_integrator(integrator)

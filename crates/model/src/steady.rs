@@ -5,14 +5,15 @@
 //! The steady state and its forward sensitivities S (for the columns the unknowns move) are
 //! integrated together from the initial values under the preequilibration's parameters, to
 //! t = 1, 10, 100, … until both have settled: every |dyᵢ/dt| ≤ atol + rtol·|yᵢ| and every
-//! |dSᵢⱼ/dt| = |(J·S + ∂f/∂α)ᵢⱼ| ≤ atol + rtol·|Sᵢⱼ| (the problem's integrator's tolerances), or
-//! no component moved by more than 100 tolerances (nor at a mean rate above the tolerance)
-//! over the last decade, from t ≥ 10, and the moves grew less than tenfold from the decade
-//! before (rounding can keep the derivatives above the tolerance at a steady state, where
-//! large fluxes cancel), at most to t = 1e12. A state can settle before its derivatives do, where a slow mode hardly
-//! moves it: Weber's nominal point settles by t = 1, its sensitivities only by t = 1000. S is
-//! chained with the derivatives of the preequilibration's parameters and initial values: a
-//! conserved quantity (a singular Jacobian) keeps its dependence on the initial values, which
+//! |dSᵢⱼ/dt| = |(J·S + ∂f/∂α)ᵢⱼ| ≤ atol + rtol·|Sᵢⱼ| (the problem's integrator's
+//! tolerances), or, over the last decade from t ≥ 10, no component moved by more than 100
+//! tolerances (90 over the decade from 10 to 100, a mean rate within the tolerance) and the
+//! largest move was at most ten times the decade before's (rounding can keep the derivatives
+//! above the tolerance at a steady state, where large fluxes cancel), at most to t = 1e12. A
+//! state can settle before its derivatives do, where a slow mode hardly moves it: Weber's
+//! nominal point settles by t = 1, its sensitivities only by t = 1000. S is chained with the
+//! derivatives of the preequilibration's parameters and initial values: a conserved quantity
+//! (a singular Jacobian) keeps its dependence on the initial values, which
 //! the implicit-function formula −J⁻¹ ∂f/∂α would lose.
 
 use std::collections::VecDeque;
@@ -207,8 +208,8 @@ impl SteadyState {
             x[..n].copy_from_slice(trajectory.state(0));
             x[n..].copy_from_slice(trajectory.sensitivity_slice(0));
             // Settled too: a decade from t ≥ 10 over which no component moved by more than
-            // STILL of its tolerances (nor at a mean rate above what `settled` asks of its
-            // derivative), and whose moves did not grow more than tenfold from the decade
+            // STILL of its tolerances (from 10 to 100, 90: a mean rate within what `settled`
+            // asks of its derivative), and whose moves grew at most tenfold from the decade
             // before (no departure from an unstable point). Where large fluxes cancel,
             // rounding keeps the derivatives above the tolerance however long the
             // integration runs: Weber's at rtol 1e-11 stayed at 2–4 times it, in quanta of
