@@ -20,7 +20,7 @@ use nalgebra::DMatrix;
 use sysid_ode::{Counts, Ivp, OdeError, System, Wrt};
 
 use crate::evaluate::{At, Rows, experiment_rows, sample_rows, slot_matrix};
-use crate::experiment::Planned;
+use crate::experiment::{Choice, Planned};
 use crate::problem::Problem;
 
 /// How the gradient of the NLL is had.
@@ -204,18 +204,6 @@ fn auto_gradient<S: System>(
             })
         }
     }
-}
-
-/// What [`Sensitivities::Auto`] found for an experiment at its first gradient where both ways
-/// could be integrated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Choice {
-    /// The adjoint took less than [`ADJOINT_MARGIN`] of forward's time.
-    Adjoint,
-    /// It did not.
-    Forward,
-    /// Its backward integration failed (forward is used, and reported as a fallback).
-    AdjointFailed,
 }
 
 /// Whether the adjoint handles experiment `e`: no state events, no sample before t0.

@@ -121,6 +121,18 @@ impl Resolved {
     }
 }
 
+/// What [`Sensitivities::Auto`](crate::Sensitivities::Auto) found for an experiment at its first gradient where both ways
+/// could be integrated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Choice {
+    /// The adjoint took less than [`ADJOINT_MARGIN`](crate::ADJOINT_MARGIN) of forward's time.
+    Adjoint,
+    /// It did not.
+    Forward,
+    /// Its backward integration failed (forward is used, and reported as a fallback).
+    AdjointFailed,
+}
+
 /// An experiment of a [`Problem`](crate::Problem), checked and planned: what the methods
 /// integrate, one experiment at a time. Cheap to clone: the system is shared.
 #[derive(Debug)]
@@ -139,7 +151,7 @@ pub struct Planned<S> {
     /// [`Sensitivities::Auto`](crate::Sensitivities::Auto) measured it at its first gradient;
     /// shared by the clones (a problem at other noise scales is a clone), made afresh for
     /// another integrator or other free unknowns.
-    pub(crate) adjoint_faster: Arc<std::sync::OnceLock<crate::adjoint::Choice>>,
+    pub(crate) adjoint_faster: Arc<std::sync::OnceLock<Choice>>,
 }
 
 impl<S> Planned<S> {
