@@ -138,3 +138,28 @@ fn experiments_with_events_fall_back_to_forward_sensitivities() {
     );
     compare(&scratch("events", &model), true);
 }
+
+/// The automatic choice is measured once per problem and integrator, which the work of a
+/// gradient shows: the measuring one integrates each experiment forward twice and by adjoint
+/// once, a later one each experiment one way. A copy at other noise scales keeps the choice;
+/// a copy with another integrator (its scheme and tolerances decide which way is faster)
+/// measures again.
+#[test]
+fn auto_measures_once_per_integrator() {
+    let dir = scratch("auto", MODEL);
+    let problem = Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap();
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let work = |p: &sysid_core::Problem<_>| {
+        p.nll_gradient(&z, Sensitivities::Auto).unwrap().unwrap().counts.integrations
+    };
+    let (measuring, chosen) = (work(&problem), work(&problem));
+    assert!(measuring > chosen, "the measuring gradient {measuring}, a later one {chosen}");
+    assert_eq!(work(&problem), chosen, "the choice is kept");
+    let scales: Vec<f64> = problem.scale_values().iter().map(|s| 1.5 * s).collect();
+    assert_eq!(work(&problem.with_scales(&scales)), chosen, "a copy at other scales keeps it");
+    let tighter = sysid_ode::Integrator { rtol: 1e-11, ..*problem.integrator() };
+    let other = problem.clone().with_integrator(tighter).unwrap();
+    let (again, then) = (work(&other), work(&other));
+    assert!(again > then, "another integrator measures again: {again}, then {then}");
+    assert_eq!(work(&problem), chosen, "and leaves the original's choice");
+}
