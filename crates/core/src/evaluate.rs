@@ -305,15 +305,16 @@ impl<S: System> Problem<S> {
     /// them: what [`objective_gradient`](Self::objective_gradient) adds to the NLL's. Zeros
     /// without priors.
     pub fn prior_gradient_at(&self, z: &[f64]) -> Vec<f64> {
-        let (values, chain) = (self.values_at(z), self.chain(z));
-        let mut g = vec![0.0; z.len()];
-        for (f, &j) in self.free.iter().enumerate() {
-            if let Some(p) = &self.declared[j].prior {
-                let (residual, slope) = p.residual(values[j]);
-                g[f] += residual * slope * chain[f];
-            }
-        }
-        g
+        let (v, free_index, chain) = (self.values_at(z), self.free_index(), self.chain(z));
+        let at = At {
+            v: &v,
+            free_index: &free_index,
+            chain: &chain,
+            integrator: &self.integrator,
+            jacobian: true,
+        };
+        // U = Jᵀr of the priors' own rows, as the linearization forms them.
+        self.prior_rows(&at, z.len()).map_or_else(|| vec![0.0; z.len()], |r| r.gradient(z.len()))
     }
 
     /// The gradient of the NLL (`priors` false) or of the objective, the NLL plus the

@@ -110,6 +110,21 @@ fn compare(dir: &Path, fell_back: bool) {
         let expected = if fell_back { all } else { Vec::new() };
         assert_eq!(adjoint.fell_back, expected, "experiments run forward");
         let size = forward.gradient.iter().fold(0.0f64, |m, g| m.max(g.abs()));
+        // The priors' gradient on its own (what Python's adjoint and auto add for the
+        // objective) is the linearization's objective gradient less the NLL's.
+        let lin = problem.linearize(&z).unwrap();
+        let (with, without) =
+            (problem.objective_gradient(&lin, true), problem.objective_gradient(&lin, false));
+        let prior = problem.prior_gradient_at(&z);
+        assert!(prior.iter().any(|p| *p != 0.0), "the model has a prior");
+        for (i, (w, wo)) in with.iter().zip(&without).enumerate() {
+            let p = prior.get(i).copied().unwrap_or(0.0);
+            assert!(
+                (w - wo - p).abs() <= 1e-12 * size.max(1.0),
+                "prior's ∂/∂z{i}: {p} vs {}",
+                w - wo
+            );
+        }
         for (way, e) in [("adjoint", &adjoint), ("auto", &auto), ("auto again", &again)] {
             assert!((e.nll - forward.nll).abs() <= 1e-9 * forward.nll.abs().max(1.0), "{way}");
             for (i, (a, f)) in e.gradient.iter().zip(&forward.gradient).enumerate() {

@@ -123,20 +123,30 @@ impl PyProblem {
         self.parameters().iter().zip(z).map(|(u, &z)| u.value(z)).collect()
     }
 
+    /// The problem at the noise scales of the point z (itself where it has none).
+    fn at_scales(&self, z: &[f64]) -> Cow<'_, Problem<AnySystem>> {
+        let k = self.problem.unknowns().len();
+        match self.problem.scales().is_empty() {
+            true => Cow::Borrowed(&*self.problem),
+            false => Cow::Owned(self.problem.with_scales(&self.values(z)[k..])),
+        }
+    }
+
+    /// ∂value/∂coordinate of every parameter at z.
+    fn chain(&self, z: &[f64]) -> Vec<f64> {
+        self.parameters().iter().zip(z).map(|(u, &z)| u.scale(z)).collect()
+    }
+
     /// The evaluation at x (given on `scale`), the model integrated with its sensitivities
     /// with the GIL released.
     fn evaluate(&self, py: Python<'_>, x: &[f64], scale: Scale) -> PyResult<Evaluated<'_>> {
         let z = self.coordinates(x, scale)?;
         let k = self.problem.unknowns().len();
-        let problem = match self.problem.scales().is_empty() {
-            true => Cow::Borrowed(&*self.problem),
-            false => Cow::Owned(self.problem.with_scales(&self.values(&z)[k..])),
-        };
+        let problem = self.at_scales(&z);
         let lin = py
             .allow_threads(|| problem.residuals_and_jacobian(&z[..k]))
             .map_err(|e| sysid_error(format!("the model cannot be integrated at x: {e}")))?;
-        let chain = self.parameters().iter().zip(&z).map(|(u, &z)| u.scale(z)).collect();
-        Ok(Evaluated { problem, lin, chain })
+        Ok(Evaluated { problem, lin, chain: self.chain(&z) })
     }
 
     /// The NLL (`priors` false) or the objective at x, and its gradient on `scale`, by the
@@ -165,10 +175,7 @@ impl PyProblem {
         };
         let z = self.coordinates(x.as_slice()?, scale)?;
         let k = self.problem.unknowns().len();
-        let problem = match self.problem.scales().is_empty() {
-            true => Cow::Borrowed(&*self.problem),
-            false => Cow::Owned(self.problem.with_scales(&self.values(&z)[k..])),
-        };
+        let problem = self.at_scales(&z);
         let e = py
             .allow_threads(|| problem.nll_gradient(&z[..k], how))
             .map_err(|e| sysid_error(format!("the model cannot be integrated at x: {e}")))?
@@ -181,9 +188,7 @@ impl PyProblem {
             g.iter_mut().zip(problem.prior_gradient_at(&z[..k])).for_each(|(g, p)| *g += p);
         }
         if scale == Scale::Linear {
-            let parameters = self.parameters();
-            let chain = parameters.iter().zip(&z).map(|(u, &z)| u.scale(z));
-            g.iter_mut().zip(chain).for_each(|(g, c)| *g /= c);
+            g.iter_mut().zip(self.chain(&z)).for_each(|(g, c)| *g /= c);
         }
         Ok((value, g.into_pyarray(py)))
     }
