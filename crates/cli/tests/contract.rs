@@ -106,8 +106,11 @@ fn conforms(v: &Value, ty: &str) -> Result<(), String> {
         });
     }
     if ty.starts_with("`\"") {
-        let choices: Vec<&str> =
-            ty.split(" or ").map(|c| c.trim_matches('`').trim_matches('"')).collect();
+        let choices: Vec<&str> = ty
+            .split(" or ")
+            .flat_map(|c| c.split(", "))
+            .map(|c| c.trim_matches('`').trim_matches('"'))
+            .collect();
         return match v.as_str() {
             Some(s) if choices.contains(&s) => Ok(()),
             _ => fail(),
@@ -306,6 +309,7 @@ fn table_agrees(args: &[&str], fit: &Value) {
     for (name, estimate) in fit["estimates"].as_object().expect("estimates") {
         let bound = bounds.get(name).and_then(Value::as_str);
         let se = match (bound, fit["std_errors"][name].as_f64()) {
+            (Some("prior_location"), _) => "at prior".to_string(),
             (Some(_), _) if !scales.iter().any(|l| l.trim_start().starts_with(name.as_str())) => {
                 "on bound".to_string()
             }
@@ -329,7 +333,10 @@ fn table_agrees(args: &[&str], fit: &Value) {
             "{args:?}: the table has no row\n{row}\nfor the JSON's `{name}`:\n{table}"
         );
         if let Some(b) = bound {
-            let words = format!("on its {b} bound");
+            let words = match b {
+                "prior_location" => "at its Laplace prior's location".to_string(),
+                _ => format!("on its {b} bound"),
+            };
             assert!(
                 table.lines().any(|l| l.starts_with(&row) && l.contains(&words)),
                 "{args:?}: `{name}` is `{b}` in active_bounds, the table does not say so"
@@ -398,6 +405,16 @@ fn every_documented_key_holds_in_every_kind_of_run() {
             )
             .replace("file = \"data.csv\"", &format!("file = \"{data}\"")),
     );
+    let with_laplace = case_file(
+        &dir,
+        "laplace.toml",
+        &model
+            .replace(
+                "k2 = { guess = 0.5, log = true }",
+                "k2 = { guess = 0.5, log = true, prior = { mean = -0.7, sd = 1e-4, on = \"log\", distribution = \"laplace\" } }",
+            )
+            .replace("file = \"data.csv\"", &format!("file = \"{data}\"")),
+    );
     let product = case_file(
         &dir,
         "product.toml",
@@ -434,6 +451,8 @@ fn every_documented_key_holds_in_every_kind_of_run() {
         vec!["fit", "--system", "lotka-volterra", "--method", "goodman"],
         // A prior.
         vec!["fit", "--model", &with_prior],
+        // A Laplace prior that holds its unknown at its location.
+        vec!["fit", "--model", &with_laplace],
         // A direction the data do not see.
         vec!["fit", "--model", &product, "--method", "levenberg-marquardt"],
         // A PEtab problem (noise scales, log10 scales, bounds).

@@ -750,6 +750,83 @@ fn a_laplace_scale_is_fitted_to_the_mean_absolute_residual() {
     assert!((nll - expected).abs() <= 1e-9 * expected.abs().max(1.0), "{nll} vs {expected}");
 }
 
+/// A Laplace prior of location 0 and scale b on an offset c (y = x + c, x = x0·e^(−0.6t),
+/// normal noise σ = 0.05): the objective ½Σ((x0·e_i + c − m_i)/σ)² + |c|/b is an L1-penalised
+/// linear least squares, whose minimiser is in closed form. With b = 1 the data pull c off
+/// the kink: the 2×2 normal equations with the prior's slope sign(c)·σ²/b on c's row. With
+/// b = 0.001 the data's pull at c = 0 (33 in units of 1/σ²) is below the prior's 1/b = 1000:
+/// c = 0 exactly, held there (`"prior_location"`, no standard error), x0 the fit without c.
+/// Every method that takes priors is certified there, to 1e-7 relative, from c = 0.3 and
+/// from c = 0 (on the kink, which it must leave when b = 1). Before the kink was a bound of
+/// the step, the Gauss–Newton row of |c|/b stepped to −c and back.
+#[test]
+fn a_laplace_prior_holds_an_unknown_at_its_location_by_its_subgradient() {
+    let times = [0.5, 1.0, 2.0, 3.0, 4.0];
+    let measured = [1.541636, 1.127623, 0.667388, 0.375598, 0.241436];
+    let mut data = String::from("t,y\n");
+    for (t, m) in times.iter().zip(measured) {
+        data += &format!("{t},{m}\n");
+    }
+    let e: Vec<f64> = times.iter().map(|t: &f64| (-0.6 * t).exp()).collect();
+    let sigma: f64 = 0.05;
+    let (see, se, n) = (e.iter().map(|v| v * v).sum::<f64>(), e.iter().sum::<f64>(), 5.0);
+    let (sme, sm) =
+        (e.iter().zip(measured).map(|(v, m)| v * m).sum::<f64>(), measured.iter().sum::<f64>());
+    // Off the kink (c > 0): [Σe² Σe; Σe n][x0; c] = [Σme; Σm − σ²/b].
+    let off = |b: f64| {
+        let rhs = sm - sigma * sigma / b;
+        let det = see * n - se * se;
+        ((sme * n - se * rhs) / det, (see * rhs - se * sme) / det)
+    };
+    let (x0_off, c_off) = off(1.0);
+    assert!(c_off > 0.0, "the premise: c > 0 at b = 1");
+    // On the kink: x0 = Σme/Σe², and the data's pull on c is below the prior's slope.
+    let x0_on = sme / see;
+    let pull = e.iter().zip(measured).map(|(v, m)| x0_on * v - m).sum::<f64>() / (sigma * sigma);
+    assert!(pull.abs() < 0.1 / 0.001 && pull.abs() > 1.0, "the premise: {pull}");
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-7 * b.abs().max(1e-2);
+    for (b, guess, x0, c) in
+        [(1.0, 0.3, x0_off, c_off), (1.0, 0.0, x0_off, c_off), (0.001, 0.3, x0_on, 0.0)]
+    {
+        let model = format!(
+            "states = [\"x\"]\nparameters = [\"c\"]\n[equations]\nx = \"-0.6 * x\"\n[outputs]\n\
+             y = {{ value = \"x + c\", sigma = 0.05 }}\n[unknowns]\nx = 1.5\n\
+             c = {{ guess = {guess}, prior = {{ mean = 0, sd = {b}, distribution = \"laplace\" }} }}\n\
+             [data]\nfile = \"data.csv\"\n[integrator]\nrtol = 1e-12\natol = 1e-14\n"
+        );
+        let case = Case::new("laplace-prior", &model, &data);
+        for method in [
+            "nl2sol",
+            "levenberg-marquardt",
+            "hybrid-newton",
+            "geodesic-lm",
+            "goodman",
+            "goodman-halving",
+            "gauss-newton",
+            "gauss-newton-ls",
+        ] {
+            let out =
+                sysid(&["fit", "--model", &case.model(), "--method", method, "--format", "json"]);
+            let what = format!("{method}, b = {b}, from c = {guess}");
+            assert_eq!(out.status.code(), Some(0), "{what}: {}", text(&out.stderr));
+            let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+            assert_eq!(json["converged"], true, "{what}: {json}");
+            let (fx, fc) = (
+                json["estimates"]["x"].as_f64().unwrap(),
+                json["estimates"]["c"].as_f64().unwrap(),
+            );
+            assert!(close(fx, x0) && close(fc, c), "{what}: x0 = {fx} vs {x0}, c = {fc} vs {c}");
+            if c == 0.0 {
+                assert_eq!(fc.abs().to_bits(), 0, "{what}: on the kink exactly, not {fc}");
+                assert_eq!(json["active_bounds"]["c"], "prior_location", "{what}");
+                assert!(json["std_errors"]["c"].is_null(), "{what}");
+            } else {
+                assert!(json["active_bounds"].as_object().unwrap().is_empty(), "{what}");
+            }
+        }
+    }
+}
+
 /// Two noise scales set in closed form, by the two ways the driver has: the trust-region
 /// methods profile them at every iterate after the first round, goodman and gauss-newton fit
 /// in rounds between closed-form updates. Both are certified at the same maximum-likelihood

@@ -145,9 +145,11 @@ pub fn minimise_in_box(
     let mut x: Vec<f64> =
         x0.iter().zip(lo.iter().zip(hi)).map(|(v, (l, h))| v.clamp(*l, *h)).collect();
     let g = q.gradient(&x);
+    // A variable whose box is one point is held from the start and never released.
+    let pinned = |i: usize| lo[i] >= hi[i];
     let mut held: Vec<Option<Bound>> = (0..k)
         .map(|i| {
-            if x[i] <= lo[i] && g[i] > 0.0 {
+            if pinned(i) || (x[i] <= lo[i] && g[i] > 0.0) {
                 Some(Bound::Lower)
             } else if x[i] >= hi[i] && g[i] < 0.0 {
                 Some(Bound::Upper)
@@ -206,9 +208,10 @@ pub fn minimise_in_box(
         // Release the held variable whose multiplier most wants it inside, if any.
         let g = q.gradient(&x);
         let inward = |i: usize| match held[i] {
+            _ if pinned(i) => 0.0,
             Some(Bound::Lower) => -g[i],
             Some(Bound::Upper) => g[i],
-            None => 0.0,
+            _ => 0.0,
         };
         let scale = g.amax().max(f64::MIN_POSITIVE);
         match (0..k)

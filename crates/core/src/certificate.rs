@@ -29,6 +29,15 @@
 //! underflowing to 0, every rate at a bound of a saturated model) has found a plateau, not a
 //! minimum.
 //!
+//! An unknown on the location of its Laplace prior, where the prior |T(θ) − μ|/b has a kink
+//! and no gradient, is tested by its subgradient: with w_i the prior's slope there
+//! ([`Unknown::kink_slope`](crate::Unknown::kink_slope)) and g_i the rest of the half gradient
+//! (the prior's row has slope 0 on its kink), it is held there, m_i = 0, when |g_i| ≤ w_i (no
+//! side descends: the L1 penalty's sparse solution); otherwise leaving the kink lowers the
+//! cost at the rate |g_i| − w_i, and m_i is that in place of |g_i| in the cosine (with the
+//! distance to the bound −g_i points at as above). The prior determines such an unknown: it
+//! is never flat.
+//!
 //! The measure is computed from an integration, and carries its error: the driver measures
 //! it again at a tenth of the integrator's tolerance and reports the difference as
 //! `error`. The point is certified when no unknown is undetermined, not every unknown is
@@ -74,6 +83,9 @@ pub enum Bound {
     Lower,
     /// Its maximum.
     Upper,
+    /// The location of its Laplace prior, the kink of |T(θ) − μ|/b: the rest of the
+    /// objective pulls it by no more than the prior's slope (module docs).
+    PriorLocation,
 }
 
 /// A direction the data cannot see: the normal matrix is singular at the point.
@@ -148,7 +160,8 @@ impl Certificate {
     /// Whether every unknown is held on a bound: a corner of the box, a stationary point of
     /// the bounded problem that is seldom the minimum sought (multistart reports it as such).
     pub fn corner(&self) -> bool {
-        !self.active.is_empty() && self.active.iter().all(Option::is_some)
+        !self.active.is_empty()
+            && self.active.iter().all(|b| matches!(b, Some(Bound::Lower | Bound::Upper)))
     }
 
     /// The certificate of a point that could not be evaluated.
@@ -182,6 +195,19 @@ pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f6
     }
     for (i, u) in problem.unknowns().list().iter().enumerate() {
         let (g, a) = (lin.gradient[i], lin.normal[(i, i)]);
+        if u.at_kink(lin.z[i]) {
+            // Its prior's subgradient (module docs).
+            let excess = g.abs() - u.kink_slope(lin.z[i]);
+            if excess <= 0.0 {
+                measure.active[i] = Some(Bound::PriorLocation);
+                continue;
+            }
+            let (lo, hi) = u.coordinate_bounds();
+            let distance = if g > 0.0 { lin.z[i] - lo } else { hi - lin.z[i] };
+            let m = (excess / (a.sqrt() * norm_r)).min(a.sqrt() * distance.max(0.0) / norm_r);
+            measure.value = if m.is_nan() { f64::INFINITY } else { measure.value.max(m) };
+            continue;
+        }
         // (A NaN response counts as flat.)
         let responds = a.sqrt() * u.coordinate_scale(lin.z[i]) > gtol * norm_r;
         if !responds {
@@ -360,6 +386,10 @@ mod tests {
         assert!(!c.holds());
         c.scales = Some(5e-7);
         assert!(c.holds());
+        // Held on a Laplace prior's location: not undetermined, and not a corner of the box.
+        let c = certificate(vec![false, false], vec![Some(Bound::PriorLocation); 2]);
+        assert!(c.holds() && !c.corner());
+        assert!(certificate(vec![false], vec![Some(Bound::Upper)]).corner());
         // An exact fit does not excuse an unknown the data do not see.
         let mut c = certificate(vec![false, true], vec![None, None]);
         c.exact_fit = true;

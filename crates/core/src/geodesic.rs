@@ -95,7 +95,7 @@ impl Geodesic {
         }
         let second = bend * (2.0 / (GEODESIC_H * GEODESIC_H));
         let force = rows.jacobian.tr_mul(&second);
-        let (lo, hi) = unknowns.step_box(&lin.z);
+        let (lo, hi) = unknowns.step_box(&lin.z, lin.gradient.as_slice());
         let k = v.delta.len();
         let free: Vec<usize> =
             (0..k).filter(|&i| v.delta[i] > lo[i] && v.delta[i] < hi[i]).collect();

@@ -46,6 +46,9 @@ impl Estimate {
         for (i, name) in self.names.iter().enumerate() {
             let on_bound = self.certificate.active[i].is_some();
             let se = match &self.std_errors {
+                _ if self.certificate.active[i] == Some(Bound::PriorLocation) => {
+                    "at prior".to_string()
+                }
                 _ if on_bound => "on bound".to_string(),
                 Some(s) => significant(s[i], 5),
                 None => "—".to_string(),
@@ -61,6 +64,7 @@ impl Estimate {
             let bound = match self.certificate.active[i] {
                 Some(Bound::Lower) => "   on its lower bound",
                 Some(Bound::Upper) => "   on its upper bound",
+                Some(Bound::PriorLocation) => "   at its Laplace prior's location",
                 None => "",
             };
             out += &format!(
@@ -78,7 +82,7 @@ impl Estimate {
             let bound = match scale.bound {
                 Some(Bound::Lower) => "   on its lower bound",
                 Some(Bound::Upper) => "   on its upper bound",
-                None => "",
+                _ => "",
             };
             out += &format!(
                 "  {:<10} {:>24} {se:>14} {interval:>34}{}{bound}   (noise scale, closed form)\n",

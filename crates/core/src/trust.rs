@@ -39,7 +39,7 @@ pub fn differenced_hessian<S: System>(
 ) -> Result<Option<DMatrix<f64>>, Failure> {
     let problem = ev.problem();
     let k = lin.gradient.len();
-    let (lo, hi) = problem.unknowns().step_box(&lin.z);
+    let (lo, hi) = problem.unknowns().step_box(&lin.z, lin.gradient.as_slice());
     let relative = problem.integrator().rtol.sqrt();
     let mut h = DMatrix::zeros(k, k);
     for j in 0..k {
@@ -199,7 +199,7 @@ impl Curve {
         radius: f64,
         max_condition: f64,
     ) -> Result<CurveStep, Failure> {
-        let (lo, hi) = problem.unknowns().step_box(&lin.z);
+        let (lo, hi) = problem.unknowns().step_box(&lin.z, lin.gradient.as_slice());
         let bounds = (lo.as_slice(), hi.as_slice());
         let mut singular = match self.solve(lin, bounds, 0.0, max_condition) {
             Ok(step) if step.scaled_norm <= 1.1 * radius => {

@@ -121,6 +121,15 @@ impl Initialization {
     }
 }
 
+/// How near (units in the last place of max(|μ|, 1)) T(θ) must be to a Laplace prior's
+/// location μ to be at it; the coordinate's test ([`KINK_ULPS`]) is tighter, so that a
+/// coordinate at the kink always gives a value at the location.
+const AT_LOCATION_ULPS: f64 = 16.0;
+
+/// How near (units in the last place of max(|z_k|, 1)) a coordinate must be to the kink z_k
+/// of its Laplace prior to be on it: the rounding of z + (z_k − z).
+const KINK_ULPS: f64 = 4.0;
+
 /// A prior on an unknown θ, normal or Laplace on the scale `on` (T the identity, ln or
 /// log10), as a residual row r of its own whose ½ r² is the negative log-prior less a
 /// constant:
@@ -129,9 +138,12 @@ impl Initialization {
 ///   ½ r² + ln(σ√(2π));
 /// * Laplace (location μ, scale b): ½ r² = |T(θ) − μ|/b, r = sign(d)·√(2|d|/b) with
 ///   d = T(θ) − μ, the negative log-prior ½ r² + ln(2b). Its gradient r·∂r/∂θ = sign(d)·T′(θ)/b
-///   is exact away from μ; at μ, where it jumps, the row's slope is taken as 0 (and its
-///   Gauss–Newton curvature T′²/(2b|d|) grows without bound as θ nears μ, which holds an
-///   unknown at μ while the data's pull is below 1/b, as the L1 penalty should).
+///   is exact away from μ; at μ, where it jumps, the row's slope is taken as 0. The kink
+///   is handled like a bound: every bounded step stays on the side of μ it starts from
+///   ([`Unknowns::step_box`]), a step that reaches μ stops on it, and from μ an unknown
+///   leaves only where the rest of the objective pulls harder than the prior's slope
+///   T′(θ)/b (the subgradient condition, which the certificate tests:
+///   [`Bound::PriorLocation`](crate::Bound::PriorLocation)).
 ///
 /// The negative log-prior is reported apart from the likelihood.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -167,6 +179,7 @@ impl Prior {
         let d = self.on.apply(value) - self.mean;
         let slope = self.on.derivative(value);
         match self.distribution {
+            Distribution::Laplace if self.at_location(d) => (0.0, 0.0),
             Distribution::Laplace => {
                 let r = d.signum() * (2.0 * d.abs() / self.sd).sqrt();
                 let dr = slope / (self.sd * r.abs());
@@ -175,6 +188,13 @@ impl Prior {
             }
             _ => (d / self.sd, slope / self.sd),
         }
+    }
+
+    /// Whether d = T(θ) − μ is 0 to the rounding of the maps between θ, its coordinate and
+    /// T(θ) ([`AT_LOCATION_ULPS`] units in the last place of max(|μ|, 1)): a coordinate put on
+    /// a Laplace prior's kink ([`Unknown::kink`]) gives a value there, r = 0.
+    fn at_location(&self, d: f64) -> bool {
+        d.abs() <= AT_LOCATION_ULPS * f64::EPSILON * self.mean.abs().max(1.0)
     }
 
     /// The negative log-prior less ½ r²: ln(sd·√(2π)) (normal), ln(2b) (Laplace).
@@ -253,6 +273,39 @@ impl Unknown {
     /// a linear unknown of small magnitude is not called flat).
     pub fn coordinate_scale(&self, z: f64) -> f64 {
         if self.log { 1.0 } else { z.abs().max(self.guess.abs()).max(1.0) }
+    }
+
+    /// The coordinate z_k of its Laplace prior's location μ, where the prior |T(θ) − μ|/b
+    /// has its kink, when the location is a value the unknown can take within its bounds
+    /// (`None` without a Laplace prior).
+    pub fn kink(&self) -> Option<f64> {
+        let prior = self.prior.filter(|p| p.distribution == Distribution::Laplace)?;
+        let theta = prior.on.invert(prior.mean);
+        if !theta.is_finite() || (self.log && theta <= 0.0) {
+            return None;
+        }
+        let z = self.coordinate(theta);
+        let (lo, hi) = self.coordinate_bounds();
+        (z.is_finite() && lo <= z && z <= hi).then_some(z)
+    }
+
+    /// Whether z is on the kink of its Laplace prior ([`kink`](Self::kink)), to rounding.
+    pub fn at_kink(&self, z: f64) -> bool {
+        self.kink().is_some_and(|k| (z - k).abs() <= KINK_ULPS * f64::EPSILON * k.abs().max(1.0))
+    }
+
+    /// The slope of its Laplace prior's ½ r² = |T(θ) − μ|/b along the coordinate on either
+    /// side of the kink, |T′(θ)·dθ/dz|/b at z: the least pull of the rest of the objective's
+    /// half gradient that moves the unknown off its prior's location (0 without a Laplace
+    /// prior).
+    pub fn kink_slope(&self, z: f64) -> f64 {
+        match self.prior {
+            Some(p) if p.distribution == Distribution::Laplace => {
+                let theta = self.value(z);
+                (p.on.derivative(theta) * self.scale(z) / p.sd).abs()
+            }
+            _ => 0.0,
+        }
     }
 
     /// The bounds in coordinates.
@@ -365,12 +418,35 @@ impl Unknowns {
     }
     /// The box of corrections δ that keep z + δ within the bounds: (lo − z, hi − z), infinite
     /// where an unknown has no bound. Every bounded step minimises its model over it.
-    pub fn step_box(&self, z: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    ///
+    /// The kink z_k of a Laplace prior ([`Unknown::kink`]) is a bound of the side the
+    /// unknown is on: a step from z > z_k goes no lower than z_k, and one from below no
+    /// higher (the prior's Gauss–Newton row, r ∝ √|d|, would otherwise step to the mirror
+    /// point −d and back). On the kink, with `gradient` the half gradient g there (the
+    /// prior's row has slope 0 on it, so g is the rest of the objective's), the unknown is
+    /// held while |g_i| is at most the prior's slope ([`Unknown::kink_slope`]: no side
+    /// descends), and otherwise may move only to the side −g_i points at.
+    pub fn step_box(&self, z: &[f64], gradient: &[f64]) -> (Vec<f64>, Vec<f64>) {
         self.list
             .iter()
-            .zip(z)
-            .map(|(u, z)| {
-                let (lo, hi) = u.coordinate_bounds();
+            .zip(z.iter().zip(gradient))
+            .map(|(u, (&z, &g))| {
+                let (mut lo, mut hi) = u.coordinate_bounds();
+                if let Some(kink) = u.kink() {
+                    if u.at_kink(z) {
+                        if g.abs() <= u.kink_slope(z) {
+                            (lo, hi) = (z, z);
+                        } else if g > 0.0 {
+                            hi = z;
+                        } else {
+                            lo = z;
+                        }
+                    } else if z > kink {
+                        lo = lo.max(kink);
+                    } else {
+                        hi = hi.min(kink);
+                    }
+                }
                 (lo - z, hi - z)
             })
             .unzip()
@@ -385,14 +461,18 @@ impl Unknowns {
         out
     }
     /// Moves coordinates onto the bounds they are outside of (rounding, or a start given
-    /// outside); returns whether any moved.
+    /// outside); returns whether any moved. A coordinate on the kink of its Laplace prior to
+    /// rounding ([`Unknown::at_kink`]: a step that stopped there) is put on it exactly.
     pub fn project(&self, z: &mut [f64]) -> bool {
         let mut clipped = false;
         for (u, zi) in self.list.iter().zip(z.iter_mut()) {
             let (lo, hi) = u.coordinate_bounds();
             let c = zi.clamp(lo, hi);
             clipped |= *zi < lo || *zi > hi;
-            *zi = c;
+            *zi = match u.kink() {
+                Some(kink) if u.at_kink(c) => kink,
+                _ => c,
+            };
         }
         clipped
     }
@@ -458,5 +538,51 @@ mod tests {
         assert!(r == 0.0 && dr == 0.0, "{r} {dr}");
         let (r, dr) = Prior::normal(1.0, 3.0, crate::Transform::Lin).residual(2.5);
         assert!((r - 0.5).abs() <= 1e-15 && (dr - 1.0 / 3.0).abs() <= 1e-15);
+    }
+
+    /// A Laplace prior's kink is a bound of the side an unknown is on, and on the kink the
+    /// unknown is held while the rest of the gradient is within the prior's slope, else let
+    /// go towards −g only. On a log coordinate with a log10 prior the kink is ln 10^μ, whose
+    /// value rounds, yet gives r = 0; a coordinate a rounding away is put on it.
+    #[test]
+    fn a_laplace_kink_bounds_the_step_on_the_side_it_starts() {
+        let u = Unknown::new("c", 0.5).min(-3.0).max(3.0).prior(Prior::laplace(
+            0.0,
+            2.0,
+            crate::Transform::Lin,
+        ));
+        let list = Unknowns::new(vec![u.clone()]);
+        assert_eq!(u.kink(), Some(0.0));
+        assert_eq!(u.kink_slope(0.7).to_bits(), 0.5f64.to_bits());
+        assert_eq!(list.step_box(&[0.7], &[1.0]), (vec![-0.7], vec![2.3]));
+        assert_eq!(list.step_box(&[-0.7], &[1.0]), (vec![-2.3], vec![0.7]));
+        // On it: |g| ≤ 1/b holds it; beyond, only the descending side is open.
+        assert_eq!(list.step_box(&[0.0], &[0.4]), (vec![0.0], vec![0.0]));
+        assert_eq!(list.step_box(&[0.0], &[0.6]), (vec![-3.0], vec![0.0]));
+        assert_eq!(list.step_box(&[0.0], &[-0.6]), (vec![0.0], vec![3.0]));
+        // Without a Laplace prior, or with its location outside the bounds: the bounds alone.
+        let plain = Unknowns::new(vec![Unknown::new("c", 0.5).min(-3.0).max(3.0)]);
+        assert_eq!(plain.step_box(&[0.7], &[1.0]), (vec![-3.7], vec![2.3]));
+        let outside = Unknown::new("c", 0.5).min(1.0).max(3.0).prior(Prior::laplace(
+            0.0,
+            2.0,
+            crate::Transform::Lin,
+        ));
+        assert_eq!(outside.kink(), None);
+
+        let k =
+            Unknown::new("k", 1.0).log().prior(Prior::laplace(-1.3, 0.5, crate::Transform::Log10));
+        let zk = k.kink().expect("a kink");
+        assert_eq!(zk.to_bits(), (10f64.powf(-1.3)).ln().to_bits());
+        let prior = k.prior.expect("a prior");
+        assert_eq!(prior.residual(k.value(zk)), (0.0, 0.0));
+        let list = Unknowns::new(vec![k.clone()]);
+        let mut z = [zk + 2.0 * f64::EPSILON * zk.abs()];
+        assert!(z[0].to_bits() != zk.to_bits() && k.at_kink(z[0]));
+        list.project(&mut z);
+        assert_eq!(z[0].to_bits(), zk.to_bits());
+        let mut far = [zk + 1e-9];
+        list.project(&mut far);
+        assert_eq!(far[0].to_bits(), (zk + 1e-9).to_bits(), "only rounding is put on the kink");
     }
 }

@@ -126,13 +126,13 @@ impl Adapter<'_> {
     /// Chooses the unknowns to hold on their bounds for this step, from the Gauss–Newton
     /// model at `here` (∂r/∂z and r): those its bounded minimiser holds
     /// ([`minimise_in_box`], the projected Gauss–Newton step's active set), each snapped onto
-    /// its bound; a held unknown the model lets go is released where the model moves it. argmin then
+    /// its bound (or its Laplace prior's kink, which [`step_box`](sysid_core::Unknowns::step_box) makes one); a held unknown the model lets go is released where the model moves it. argmin then
     /// moves the others. (The change of variables alone only approaches a bound: the step
     /// in w would have to be infinite.)
     fn hold<S: System>(&mut self, problem: &Problem<S>, here: &Evaluation) {
         let Some(jacobian) = &here.jacobian else { return };
         let (normal, gradient) = (jacobian.tr_mul(jacobian), jacobian.tr_mul(&here.r));
-        let (lo, hi) = problem.unknowns().step_box(&here.z);
+        let (lo, hi) = problem.unknowns().step_box(&here.z, gradient.as_slice());
         let model = Quadratic { h: &normal, c: &gradient };
         let k = here.z.len();
         let Ok(step) =
@@ -141,10 +141,19 @@ impl Adapter<'_> {
             return;
         };
         for (i, u) in problem.unknowns().list().iter().enumerate() {
-            let (lo, hi) = u.coordinate_bounds();
+            let (zlo, zhi) = u.coordinate_bounds();
             match (self.space.held[i], step.active[i]) {
-                (_, Some(Bound::Lower)) => self.space.held[i] = Some(lo),
-                (_, Some(Bound::Upper)) => self.space.held[i] = Some(hi),
+                (_, Some(bound)) => {
+                    // The box's bound: one of the unknown's, or its Laplace prior's kink.
+                    let (target, own) = match bound {
+                        Bound::Upper => (here.z[i] + hi[i], zhi),
+                        _ => (here.z[i] + lo[i], zlo),
+                    };
+                    self.space.held[i] = Some(match u.kink() {
+                        Some(kink) if u.at_kink(target) => kink,
+                        _ => own,
+                    });
+                }
                 (Some(_), None) => {
                     // Released where the model moves it, not a hair inside the bound, from
                     // where the curved map would let it crawl out by a factor e⁴ a step.

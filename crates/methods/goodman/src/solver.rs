@@ -60,7 +60,7 @@ impl<S: System> Step<S> for Newton<'_> {
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {
         let problem = ev.problem();
         let lin = current.linearization.as_ref().expect("Goodman's iterates are linearized");
-        let (lo, hi) = problem.unknowns().step_box(&current.z);
+        let (lo, hi) = problem.unknowns().step_box(&current.z, lin.gradient.as_slice());
         let step = newton_step(lin, (&lo, &hi), self.options.driver.max_condition)
             .map_err(|s| Failure::singular(&s, &problem.names()))?;
         // The decrease the quadratic model predicts, ε − ε_lin(z + δ) = −(2Uᵀδ + δᵀAδ)

@@ -432,7 +432,7 @@ impl Shooting {
         jacobian: &DMatrix<f64>,
         r: &DVector<f64>,
     ) -> Result<(BoxSolution, DVector<f64>), Failure> {
-        let (lo, hi) = problem.unknowns().step_box(z);
+        let (lo, hi) = problem.unknowns().step_box(z, jacobian.tr_mul(r).as_slice());
         let subproblem = LinearLeastSquares { b: jacobian, a: r };
         let solution =
             minimise_in_box(&subproblem, (&lo, &hi), &vec![0.0; z.len()], self.max_condition)
