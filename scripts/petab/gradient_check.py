@@ -1,11 +1,13 @@
 """The gradient of `sysid evaluate --gradient` against central differences of its NLL.
 
     cargo build --release -p sysid-cli
-    python3 scripts/petab/gradient_check.py tests/data/petab [NAME ...] [--sample N]
+    python3 scripts/petab/gradient_check.py tests/data/petab [NAME ...] [--sample N] [--part K/M]
 
 With `--sample N`, only 2N parameters of each problem are checked: the N whose gradient moves
 the NLL most per relative step (|∂NLL/∂v·v|), and N others drawn at random (seed 0), for
-problems whose evaluations take seconds (Lang: 294 parameters).
+problems whose evaluations take seconds (Lang: 294 parameters). With `--part K/M`, the K-th
+of M parts of the parameters in the order `evaluate` lists them (parameter i is in part
+i mod M + 1): the M parts together are every parameter, each run in a sitting of its own.
 
 For every problem (each folder's NAME.yaml), at the nominal values and rtol 1e-10,
 atol 1e-14: each parameter is moved by ±1e-4 of its value (±1e-6 where it is 0) with
@@ -68,12 +70,15 @@ def sample(at, n):
     return largest + random.Random(0).sample(rest, n)
 
 
-def check(yaml, n=None):
+def check(yaml, n=None, part=None):
     at = evaluate(yaml, "--gradient", "--sensitivities", "forward")
     base = evaluate(yaml)["nll"]
     failures = []
     worst = 0.0
     chosen = sample(at, n)
+    if part is not None:
+        k, m = part
+        chosen = [name for i, name in enumerate(chosen) if i % m == k - 1]
     for name in chosen:
         value = at["parameters"][name]
         # A model whose NLL bends within 1e-4 of a value (Borghans' oscillations) is checked
@@ -96,13 +101,13 @@ def check(yaml, n=None):
     return len(chosen), worst, failures
 
 
-def main(root, names, n=None):
+def main(root, names, n=None, part=None):
     names = names or sorted(d for d in os.listdir(root) if os.path.isdir(os.path.join(root, d)))
     bad = 0
     for name in names:
         yaml = os.path.join(root, name, f"{name}.yaml")
         try:
-            count, worst, failures = check(yaml, n)
+            count, worst, failures = check(yaml, n, part)
         except (RuntimeError, ValueError) as e:
             print(f"{name}: cannot be evaluated: {e}", flush=True)
             bad += 1
@@ -122,4 +127,12 @@ if __name__ == "__main__":
         i = args.index("--sample")
         n = int(args[i + 1])
         args = args[:i] + args[i + 2:]
-    main(sys.argv[1], args, n)
+    part = None
+    if "--part" in args:
+        i = args.index("--part")
+        k, m = (int(v) for v in args[i + 1].split("/"))
+        if not 1 <= k <= m:
+            sys.exit(f"--part {args[i + 1]}: K/M with 1 ≤ K ≤ M")
+        part = (k, m)
+        args = args[:i] + args[i + 2:]
+    main(sys.argv[1], args, n, part)

@@ -6,7 +6,7 @@ use std::sync::Mutex;
 
 use clap::Args;
 use indicatif::ProgressBar;
-use sysid_report::{Observer, ReportOptions, write_report};
+use sysid_report::{Observer, ReportOptions, ScalingOptions, write_report, write_scaling};
 
 use crate::Outcome;
 use crate::output::progress_bar;
@@ -68,6 +68,21 @@ pub struct ReportArgs {
     /// multistarts keep the methods' own budget.
     #[arg(long, default_value_t = sysid_report::CATALOGUE_ITERATIONS, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     max_iterations: usize,
+    /// Instead of the report: time one NLL + gradient at nominal of every PEtab problem in
+    /// DIR (a folder each: `<name>/<name>.yaml`, `problem.yaml` or its only YAML file) on one thread, the gradient by the measured
+    /// choice between forward and adjoint sensitivities, and draw the times against states ×
+    /// parameters on log–log axes with the least-squares power law, into OUT/scaling
+    /// (README.md with the table, scaling.png and .svg, scaling.csv).
+    #[arg(long, value_name = "DIR")]
+    scaling: Option<PathBuf>,
+    /// With --scaling: timed evaluations per problem, at most (the median is reported).
+    #[arg(long, default_value_t = 5, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
+    scaling_repeat: usize,
+    /// With --scaling: seconds of timed evaluations after which a problem is evaluated no
+    /// more (it is always evaluated once, after the untimed evaluation that measures the
+    /// choice).
+    #[arg(long, default_value_t = 10.0, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
+    scaling_seconds: f64,
 }
 
 /// The help of `--methods`: the registry's report methods.
@@ -78,6 +93,35 @@ fn methods_help() -> String {
 
 /// Runs `sysid report`.
 pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
+    if let Some(dir) = &args.scaling {
+        if args.scaling_repeat == 0 {
+            anyhow::bail!("--scaling-repeat 0: at least one timed evaluation");
+        }
+        if !(args.scaling_seconds >= 0.0 && args.scaling_seconds.is_finite()) {
+            anyhow::bail!("--scaling-seconds {}: a number of seconds ≥ 0", args.scaling_seconds);
+        }
+        if !dir.is_dir() {
+            anyhow::bail!("--scaling {}: not a directory of PEtab problems", dir.display());
+        }
+        let out = args.out.join("scaling");
+        if out.canonicalize().ok() == dir.canonicalize().ok() {
+            anyhow::bail!(
+                "--out {}: the figure would be written into {}, where it reads the problems (--scaling): choose another --out",
+                args.out.display(),
+                dir.display()
+            );
+        }
+        let options = ScalingOptions {
+            dir: dir.clone(),
+            out,
+            repeat: args.scaling_repeat,
+            seconds: args.scaling_seconds,
+            force: args.force,
+        };
+        let path = write_scaling(&options, &Bars::default())?;
+        eprintln!("written to {}", path.display());
+        return Ok(Outcome::Success);
+    }
     let systems = match &args.systems {
         Some(list) => {
             list.split(',').map(|s| s.trim().to_string()).filter(|s| !s.is_empty()).collect()

@@ -165,6 +165,8 @@ fn a_negative_number_reaches_the_options_own_check() {
     let model =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/falling-body/model.toml");
     let model = model.to_str().unwrap();
+    let petab_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
+    let petab_dir = petab_dir.display().to_string();
     let fitting = [
         "--seed",
         "--max-iterations",
@@ -218,6 +220,11 @@ fn a_negative_number_reaches_the_options_own_check() {
                 "--petab-budget",
                 "--max-iterations",
             ],
+        ),
+        (
+            "report",
+            vec!["--out", &out, "--scaling", &petab_dir],
+            vec!["--scaling-repeat", "--scaling-seconds"],
         ),
         ("merge", vec![&out, "--out", &out], vec![]),
     ];

@@ -379,6 +379,73 @@ fn bad_study_input_exits_2_with_one_line() {
     assert!(!Path::new(&out).exists(), "a failed study leaves no directory");
 }
 
+/// `report --scaling`: one NLL + gradient per problem folder, `<name>.yaml` or
+/// `problem.yaml`, into OUT/scaling; the gradient's length is `evaluate`'s, the size n·p its
+/// product with the states (Boehm: 8); a folder that does not import is listed with the
+/// reason, and a directory that is not one exits 2.
+#[test]
+fn report_scaling_times_every_problem_and_names_the_ones_it_cannot() {
+    let scratch = Scratch::new("scaling");
+    let problems = Path::new(&scratch.path("problems")).to_path_buf();
+    let boehm =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab/Boehm_JProteomeRes2014");
+    for (folder, yaml) in
+        [("Boehm_JProteomeRes2014", "Boehm_JProteomeRes2014.yaml"), ("Boehm_copy", "problem.yaml")]
+    {
+        let into = problems.join(folder);
+        std::fs::create_dir_all(&into).unwrap();
+        for entry in std::fs::read_dir(&boehm).unwrap() {
+            let from = entry.unwrap().path();
+            let name = from.file_name().unwrap().to_string_lossy().to_string();
+            let name = if name.ends_with(".yaml") { yaml.to_string() } else { name };
+            std::fs::copy(&from, into.join(name)).unwrap();
+        }
+    }
+    std::fs::create_dir_all(problems.join("Broken_one")).unwrap();
+    std::fs::write(problems.join("Broken_one/Broken_one.yaml"), "format_version: 1\n").unwrap();
+    let out = scratch.path("reports");
+    let dir = problems.display().to_string();
+    let run = sysid(&[
+        "report",
+        "--scaling",
+        &dir,
+        "--out",
+        &out,
+        "--scaling-repeat",
+        "2",
+        "--scaling-seconds",
+        "1",
+    ]);
+    assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    let written = Path::new(&out).join("scaling");
+    for file in ["README.md", "scaling.png", "scaling.svg", "scaling.csv"] {
+        assert!(written.join(file).is_file(), "{file} missing");
+    }
+    let yaml = boehm.join("Boehm_JProteomeRes2014.yaml").display().to_string();
+    let evaluated = sysid(&["evaluate", "--petab", &yaml, "--gradient", "--format", "json"]);
+    let evaluated: serde_json::Value = serde_json::from_slice(&evaluated.stdout).unwrap();
+    let p = evaluated["gradient"].as_object().expect("a gradient").len();
+    let csv = std::fs::read_to_string(written.join("scaling.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 2, "{csv}");
+    for row in &rows {
+        assert!(row[0].starts_with("Boehm"), "{csv}");
+        assert_eq!((row[1], row[2]), ("8", p.to_string().as_str()), "{csv}");
+        assert_eq!(row[3], (8 * p).to_string(), "{csv}");
+        let ms: f64 = row[7].parse().unwrap();
+        assert!(ms > 0.0 && ms.is_finite(), "{csv}");
+    }
+    let readme = std::fs::read_to_string(written.join("README.md")).unwrap();
+    assert!(readme.contains("| Broken_one | not measured: "), "{readme}");
+    assert!(readme.contains("![ms per NLL + gradient"), "{readme}");
+    let svg = std::fs::read_to_string(written.join("scaling.svg")).unwrap();
+    assert!(svg.contains("states × parameters"), "axis label missing");
+    let bad = sysid(&["report", "--scaling", &scratch.path("nowhere"), "--out", &out]);
+    assert_eq!(bad.status.code(), Some(2));
+    let err = text(&bad.stderr);
+    assert!(err.lines().count() == 1 && err.contains("--scaling"), "{err}");
+}
+
 #[test]
 fn report_writes_figures_data_and_readme() {
     let scratch = Scratch::new("report");

@@ -20,7 +20,9 @@
 //! `basin`, `convergence`, `cost`, `minima`, `prediction`, with `look` for their colours and
 //! markers); `run` runs the catalogue and hands each system's numbers to `markdown`, which
 //! writes the README (with `bench` for the benchmark section); `manifest` keeps the files a
-//! report owns in its directory; `options` says what a report covers.
+//! report owns in its directory; `options` says what a report covers; `scaling` measures and
+//! draws how the cost of one NLL + gradient grows over a collection of PEtab problems
+//! ([`write_scaling`], its own directory).
 
 mod accuracy;
 mod basin;
@@ -37,6 +39,7 @@ mod petab;
 mod prediction;
 mod profiles;
 mod run;
+mod scaling;
 mod waterfall;
 
 pub use accuracy::{Accuracy, Spread};
@@ -50,4 +53,5 @@ pub use options::{CATALOGUE_ITERATIONS, Observer, Quiet, ReportOptions};
 pub use prediction::{Prediction, PredictionPanel};
 pub use profiles::{ProfilePanel, Profiles};
 pub use run::write_report;
+pub use scaling::{Measured, Scaling, ScalingOptions, power_law, write_scaling};
 pub use waterfall::Waterfall;

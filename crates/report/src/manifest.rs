@@ -49,12 +49,6 @@ impl Manifest {
         petab: &[String],
         force: bool,
     ) -> anyhow::Result<Self> {
-        let path = out.join(MANIFEST);
-        let earlier: std::collections::BTreeSet<String> = match std::fs::read_to_string(&path) {
-            Ok(text) => text.lines().map(str::to_string).collect(),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Default::default(),
-            Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
-        };
         let mut planned = vec![README.to_string()];
         planned.extend(systems.iter().flat_map(|s| system_files(s)));
         if !petab.is_empty() {
@@ -67,6 +61,21 @@ impl Manifest {
                 planned.push(format!("petab/{problem}/{f}"));
             }
         }
+        Self::prepare_files(out, planned, force)
+    }
+
+    /// [`prepare`](Self::prepare) for the files `planned` (relative to `out`).
+    pub(crate) fn prepare_files(
+        out: &Path,
+        planned: Vec<String>,
+        force: bool,
+    ) -> anyhow::Result<Self> {
+        let path = out.join(MANIFEST);
+        let earlier: std::collections::BTreeSet<String> = match std::fs::read_to_string(&path) {
+            Ok(text) => text.lines().map(str::to_string).collect(),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Default::default(),
+            Err(e) => return Err(e).with_context(|| format!("cannot read {}", path.display())),
+        };
         let foreign: Vec<&String> =
             planned.iter().filter(|f| out.join(f).exists() && !earlier.contains(*f)).collect();
         if !foreign.is_empty() && !force {

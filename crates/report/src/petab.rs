@@ -138,6 +138,32 @@ pub(crate) fn problems(dir: &Path) -> Vec<String> {
     names
 }
 
+/// A problem folder's PEtab YAML: `<name>.yaml`, else `problem.yaml` (as some problems of
+/// the collection name it), else the folder's only `.yaml` file; `<name>.yaml` when none is
+/// found, so that the import names the file it looked for.
+pub(crate) fn problem_yaml(dir: &Path, name: &str) -> std::path::PathBuf {
+    let folder = dir.join(name);
+    let own = folder.join(format!("{name}.yaml"));
+    if own.is_file() {
+        return own;
+    }
+    if folder.join("problem.yaml").is_file() {
+        return folder.join("problem.yaml");
+    }
+    let yamls: Vec<std::path::PathBuf> = std::fs::read_dir(&folder)
+        .map(|entries| {
+            entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|e| e == "yaml" || e == "yml"))
+                .collect()
+        })
+        .unwrap_or_default();
+    match yamls.as_slice() {
+        [only] => only.clone(),
+        _ => own,
+    }
+}
+
 /// Imports, evaluates and fits one problem; traces its profiles (into `out`) where the
 /// Levenberg–Marquardt fit certifies and it has at most [`PROFILED_UNKNOWNS`] free unknowns.
 fn numbers(
@@ -288,7 +314,7 @@ pub(crate) fn section(
     let known = table(dir, "best_known.tsv");
     let mut rows = Vec::new();
     for name in problems(dir) {
-        let yaml = dir.join(&name).join(format!("{name}.yaml"));
+        let yaml = problem_yaml(dir, &name);
         let best_known = known.iter().find(|r| r.0 == name).map(|r| r.1);
         let outcome = numbers(
             &yaml,
