@@ -756,6 +756,9 @@ fn a_laplace_scale_is_fitted_to_the_mean_absolute_residual() {
 /// the kink: the 2×2 normal equations with the prior's slope sign(c)·σ²/b on c's row. With
 /// b = 0.001 the data's pull at c = 0 (33 in units of 1/σ²) is below the prior's 1/b = 1000:
 /// c = 0 exactly, held there (`"prior_location"`, no standard error), x0 the fit without c.
+/// With b = 1/30 the pull beats the prior by a tenth only, and from c = 0 a step must count
+/// the prior's slope to be accepted. With `max = 0` the location is c's upper bound and the
+/// data pull c past it: held there as on a bound (`"upper"`).
 /// Every method that takes priors is certified there, to 1e-7 relative, from c = 0.3 and
 /// from c = 0 (on the kink, which it must leave when b = 1). Before the kink was a bound of
 /// the step, the Gauss–Newton row of |c|/b stepped to −c and back.
@@ -784,14 +787,29 @@ fn a_laplace_prior_holds_an_unknown_at_its_location_by_its_subgradient() {
     let x0_on = sme / see;
     let pull = e.iter().zip(measured).map(|(v, m)| x0_on * v - m).sum::<f64>() / (sigma * sigma);
     assert!(pull.abs() < 0.1 / 0.001 && pull.abs() > 1.0, "the premise: {pull}");
+    // b = 1/30: the pull 33 beats the prior's 30 by a tenth, too little for a step whose
+    // model leaves the prior's slope out (ρ ≤ 1 − 30/33 < ¼).
+    let (x0_near, c_near) = off(1.0 / 30.0);
+    assert!(
+        c_near > 0.0 && pull.abs() > 30.0 && pull.abs() < 40.0,
+        "the premise: {c_near}, {pull}"
+    );
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-7 * b.abs().max(1e-2);
-    for (b, guess, x0, c) in
-        [(1.0, 0.3, x0_off, c_off), (1.0, 0.0, x0_off, c_off), (0.001, 0.3, x0_on, 0.0)]
-    {
+    // (b, the start of x and of c, x0, c, c's bound, what active_bounds says of c.) From
+    // x = x0_on, c = 0 with b = 1/30, the start is the kink's best point, where the data pull
+    // c by only a tenth more than the prior does.
+    for (b, (x_guess, guess), x0, c, max, held) in [
+        (1.0, (1.5, 0.3), x0_off, c_off, "", None),
+        (1.0, (1.5, 0.0), x0_off, c_off, "", None),
+        (1.0 / 30.0, (x0_on, 0.0), x0_near, c_near, "", None),
+        (0.001, (1.5, 0.3), x0_on, 0.0, "", Some("prior_location")),
+        // The location on c's upper bound, the data pulling c up past it: held on the bound.
+        (1.0, (1.5, -0.3), x0_on, 0.0, ", max = 0", Some("upper")),
+    ] {
         let model = format!(
             "states = [\"x\"]\nparameters = [\"c\"]\n[equations]\nx = \"-0.6 * x\"\n[outputs]\n\
-             y = {{ value = \"x + c\", sigma = 0.05 }}\n[unknowns]\nx = 1.5\n\
-             c = {{ guess = {guess}, prior = {{ mean = 0, sd = {b}, distribution = \"laplace\" }} }}\n\
+             y = {{ value = \"x + c\", sigma = 0.05 }}\n[unknowns]\nx = {x_guess:?}\n\
+             c = {{ guess = {guess}{max}, prior = {{ mean = 0, sd = {b}, distribution = \"laplace\" }} }}\n\
              [data]\nfile = \"data.csv\"\n[integrator]\nrtol = 1e-12\natol = 1e-14\n"
         );
         let case = Case::new("laplace-prior", &model, &data);
@@ -805,6 +823,13 @@ fn a_laplace_prior_holds_an_unknown_at_its_location_by_its_subgradient() {
             "gauss-newton",
             "gauss-newton-ls",
         ] {
+            // argmin's steps move the free unknowns without the kink's box (only its holds
+            // see it): off a kink by a pull a tenth above the prior's, its full Gauss–Newton
+            // steps on the √|d| row crawl, and it stops honestly uncertified (optimality
+            // 1.04e-6 after 52 iterations; docs/methods.md).
+            if method.starts_with("gauss-newton") && (30.0 * b - 1.0f64).abs() < 1e-12 {
+                continue;
+            }
             let out =
                 sysid(&["fit", "--model", &case.model(), "--method", method, "--format", "json"]);
             let what = format!("{method}, b = {b}, from c = {guess}");
@@ -816,12 +841,13 @@ fn a_laplace_prior_holds_an_unknown_at_its_location_by_its_subgradient() {
                 json["estimates"]["c"].as_f64().unwrap(),
             );
             assert!(close(fx, x0) && close(fc, c), "{what}: x0 = {fx} vs {x0}, c = {fc} vs {c}");
-            if c == 0.0 {
-                assert_eq!(fc.abs().to_bits(), 0, "{what}: on the kink exactly, not {fc}");
-                assert_eq!(json["active_bounds"]["c"], "prior_location", "{what}");
-                assert!(json["std_errors"]["c"].is_null(), "{what}");
-            } else {
-                assert!(json["active_bounds"].as_object().unwrap().is_empty(), "{what}");
+            match held {
+                Some(bound) => {
+                    assert_eq!(fc.abs().to_bits(), 0, "{what}: on the kink exactly, not {fc}");
+                    assert_eq!(json["active_bounds"]["c"], bound, "{what}");
+                    assert!(json["std_errors"]["c"].is_null(), "{what}");
+                }
+                None => assert!(json["active_bounds"].as_object().unwrap().is_empty(), "{what}"),
             }
         }
     }

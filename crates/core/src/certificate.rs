@@ -202,9 +202,17 @@ pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f6
                 measure.active[i] = Some(Bound::PriorLocation);
                 continue;
             }
+            // Leaving it lowers the cost at the rate |g_i| − w_i, unless the bound −g_i
+            // points at is where the location is (a Laplace prior at 0 on c ≥ 0): held there.
             let (lo, hi) = u.coordinate_bounds();
-            let distance = if g > 0.0 { lin.z[i] - lo } else { hi - lin.z[i] };
-            let m = (excess / (a.sqrt() * norm_r)).min(a.sqrt() * distance.max(0.0) / norm_r);
+            let (distance, bound) =
+                if g > 0.0 { (lin.z[i] - lo, Bound::Lower) } else { (hi - lin.z[i], Bound::Upper) };
+            let cosine = excess / (a.sqrt() * norm_r);
+            let to_bound = a.sqrt() * distance.max(0.0) / norm_r;
+            if to_bound < cosine && to_bound <= gtol {
+                measure.active[i] = Some(bound);
+            }
+            let m = cosine.min(to_bound);
             measure.value = if m.is_nan() { f64::INFINITY } else { measure.value.max(m) };
             continue;
         }

@@ -251,8 +251,9 @@ impl<S: System> Problem<S> {
         let mut r = Vec::new();
         let mut jacobian = Vec::new();
         for (j, u) in self.declared.iter().enumerate() {
-            let Some(prior) = &u.prior else { continue };
-            let (residual, slope) = prior.residual(at.v[j]);
+            // On a Laplace prior's kink the row is 0 with slope 0 (the test the step box and
+            // the certificate make).
+            let Some((residual, slope)) = u.prior_residual(at.v[j]) else { continue };
             r.push(residual);
             if at.jacobian {
                 let mut row = vec![0.0; k];
@@ -295,8 +296,8 @@ impl<S: System> Problem<S> {
     pub fn prior_nll_at(&self, z: &[f64]) -> Option<f64> {
         let values = self.values_at(z);
         let terms = self.declared.iter().zip(&values).filter_map(|(u, &v)| {
-            let p = u.prior.as_ref()?;
-            Some(0.5 * p.residual(v).0.powi(2) + p.offset())
+            let (r, _) = u.prior_residual(v)?;
+            Some(0.5 * r * r + u.prior.as_ref()?.offset())
         });
         (self.n_priors() > 0).then(|| terms.sum())
     }

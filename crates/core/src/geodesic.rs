@@ -71,6 +71,12 @@ impl Geodesic {
         }
         let problem = ev.problem();
         let unknowns = problem.unknowns();
+        // A step off the kink of a Laplace prior: its row, √|d| there, has no second
+        // derivative to bend along (its second difference grows as h^(−3/2)).
+        let leaves_kink = |(u, (&z, &d)): (&crate::Unknown, (&f64, &f64))| d != 0.0 && u.at_kink(z);
+        if unknowns.list().iter().zip(lin.z.iter().zip(v.delta.iter())).any(leaves_kink) {
+            return Ok(Accelerated::Unavailable);
+        }
         if self.at.as_ref().is_none_or(|(z, _)| *z != lin.z) {
             let r = match ev.residuals(&lin.z) {
                 Ok(r) => r,

@@ -126,5 +126,6 @@ pub mod method {
     pub use crate::termination::{PROGRESS, PROGRESS_WINDOW};
     pub use crate::trust::{
         Curve, CurveStep, SCALE_MEMORY, actual_decrease, differenced_hessian, halve_along_curve,
+        one_sided,
     };
 }

@@ -44,6 +44,12 @@ pub fn differenced_hessian<S: System>(
     let mut h = DMatrix::zeros(k, k);
     for j in 0..k {
         let size = relative * lin.z[j].abs().max(1.0);
+        // On a Laplace prior's kink the gradient jumps by the prior's slope over any step:
+        // the difference would be that jump over h, not curvature.
+        if problem.unknowns().list()[j].at_kink(lin.z[j]) {
+            h.set_column(j, &lin.normal.column(j));
+            continue;
+        }
         let step = if hi[j] >= size {
             size
         } else if -lo[j] >= size {
@@ -201,6 +207,10 @@ impl Curve {
     ) -> Result<CurveStep, Failure> {
         let (lo, hi) = problem.unknowns().step_box(&lin.z, lin.gradient.as_slice());
         let bounds = (lo.as_slice(), hi.as_slice());
+        // Off the kink of a Laplace prior the model's gradient is the one-sided one, so that
+        // its predicted decrease counts the prior's growth.
+        let one_sided = one_sided(problem, lin);
+        let lin = one_sided.as_ref().unwrap_or(lin);
         let mut singular = match self.solve(lin, bounds, 0.0, max_condition) {
             Ok(step) if step.scaled_norm <= 1.1 * radius => {
                 self.lambda = 0.0;
@@ -282,6 +292,23 @@ pub fn actual_decrease(
     } else {
         difference
     }
+}
+
+/// `lin` with the gradient a step sees on the kinks of Laplace priors
+/// ([`Unknowns::one_sided`](crate::Unknowns::one_sided)), without its residuals; `None` where
+/// no unknown is on its kink.
+pub fn one_sided<S: System>(problem: &Problem<S>, lin: &Linearization) -> Option<Linearization> {
+    let gradient = problem.unknowns().one_sided(&lin.z, lin.gradient.as_slice())?;
+    Some(Linearization {
+        z: lin.z.clone(),
+        cost: lin.cost,
+        gradient: DVector::from_vec(gradient),
+        normal: lin.normal.clone(),
+        residuals: None,
+        norm: lin.norm,
+        experiment_costs: Vec::new(),
+        counts: lin.counts,
+    })
 }
 
 /// Where the costs at the two ends differ by more than this many times ε's accuracy, the

@@ -121,14 +121,10 @@ impl Initialization {
     }
 }
 
-/// How near (units in the last place of max(|μ|, 1)) T(θ) must be to a Laplace prior's
-/// location μ to be at it; the coordinate's test ([`KINK_ULPS`]) is tighter, so that a
-/// coordinate at the kink always gives a value at the location.
-const AT_LOCATION_ULPS: f64 = 16.0;
-
-/// How near (units in the last place of max(|z_k|, 1)) a coordinate must be to the kink z_k
-/// of its Laplace prior to be on it: the rounding of z + (z_k − z).
-const KINK_ULPS: f64 = 4.0;
+/// How many units of rounding (ε times the scale of the maps between a coordinate z, its
+/// value θ and T(θ): [`Unknown::at_kink`]) T(θ) may be from a Laplace prior's location and be
+/// on it.
+const KINK_ULPS: f64 = 16.0;
 
 /// A prior on an unknown θ, normal or Laplace on the scale `on` (T the identity, ln or
 /// log10), as a residual row r of its own whose ½ r² is the negative log-prior less a
@@ -179,7 +175,7 @@ impl Prior {
         let d = self.on.apply(value) - self.mean;
         let slope = self.on.derivative(value);
         match self.distribution {
-            Distribution::Laplace if self.at_location(d) => (0.0, 0.0),
+            Distribution::Laplace if d == 0.0 => (0.0, 0.0),
             Distribution::Laplace => {
                 let r = d.signum() * (2.0 * d.abs() / self.sd).sqrt();
                 let dr = slope / (self.sd * r.abs());
@@ -188,13 +184,6 @@ impl Prior {
             }
             _ => (d / self.sd, slope / self.sd),
         }
-    }
-
-    /// Whether d = T(θ) − μ is 0 to the rounding of the maps between θ, its coordinate and
-    /// T(θ) ([`AT_LOCATION_ULPS`] units in the last place of max(|μ|, 1)): a coordinate put on
-    /// a Laplace prior's kink ([`Unknown::kink`]) gives a value there, r = 0.
-    fn at_location(&self, d: f64) -> bool {
-        d.abs() <= AT_LOCATION_ULPS * f64::EPSILON * self.mean.abs().max(1.0)
     }
 
     /// The negative log-prior less ½ r²: ln(sd·√(2π)) (normal), ln(2b) (Laplace).
@@ -289,9 +278,34 @@ impl Unknown {
         (z.is_finite() && lo <= z && z <= hi).then_some(z)
     }
 
-    /// Whether z is on the kink of its Laplace prior ([`kink`](Self::kink)), to rounding.
+    /// Whether z is on the kink of its Laplace prior ([`kink`](Self::kink)) to rounding: d =
+    /// T(θ(z)) − μ is within [`KINK_ULPS`]·ε·(|μ| + |dT/dz·z|) of 0, the rounding of T and of
+    /// the maps between z and θ (0 exactly where the location is 0 on the unknown's own
+    /// scale). The prior's row is then r = 0 with slope 0
+    /// ([`prior_residual`](Self::prior_residual)): one test for the step, the certificate and
+    /// the row.
     pub fn at_kink(&self, z: f64) -> bool {
-        self.kink().is_some_and(|k| (z - k).abs() <= KINK_ULPS * f64::EPSILON * k.abs().max(1.0))
+        let Some(prior) = self.prior.filter(|p| p.distribution == Distribution::Laplace) else {
+            return false;
+        };
+        if self.kink().is_none() {
+            return false;
+        }
+        let theta = self.value(z);
+        let d = prior.on.apply(theta) - prior.mean;
+        let rounding = prior.mean.abs() + (prior.on.derivative(theta) * self.scale(z) * z).abs();
+        d.abs() <= KINK_ULPS * f64::EPSILON * rounding
+    }
+
+    /// Its prior's row r and ∂r/∂θ at `value`: [`Prior::residual`], with r = 0 and slope 0 on
+    /// the kink of a Laplace prior ([`at_kink`](Self::at_kink) at the value's coordinate);
+    /// `None` without a prior.
+    pub fn prior_residual(&self, value: f64) -> Option<(f64, f64)> {
+        let prior = self.prior?;
+        Some(match self.at_kink(self.coordinate(value)) {
+            true => (0.0, 0.0),
+            false => prior.residual(value),
+        })
     }
 
     /// The slope of its Laplace prior's ½ r² = |T(θ) − μ|/b along the coordinate on either
@@ -451,12 +465,44 @@ impl Unknowns {
             })
             .unzip()
     }
+    /// The half gradient of the objective as a step from z sees it: on the kink of a Laplace
+    /// prior, whose row has slope 0 there, the rest of the gradient g_i is lowered by the
+    /// prior's slope w_i on the side it opens ([`step_box`](Self::step_box)): g_i − sign(g_i)·w_i
+    /// where |g_i| > w_i, 0 where the unknown is held. A quadratic model with it predicts the
+    /// first-order change of a step off the kink exactly (the prior's |d|/b grows by w_i·|δ_i|).
+    /// `None` where no unknown is on its kink.
+    pub fn one_sided(&self, z: &[f64], gradient: &[f64]) -> Option<Vec<f64>> {
+        let mut out = gradient.to_vec();
+        let mut any = false;
+        for ((u, &z), g) in self.list.iter().zip(z).zip(out.iter_mut()) {
+            if u.at_kink(z) {
+                any = true;
+                let w = u.kink_slope(z);
+                *g = if g.abs() <= w { 0.0 } else { *g - g.signum() * w };
+            }
+        }
+        any.then_some(out)
+    }
+
     /// z + s·δ, on the bounds exactly where it reaches them (a δ from [`step_box`] keeps z
     /// inside; this only removes rounding).
     ///
     /// [`step_box`]: Self::step_box
     pub fn moved(&self, z: &[f64], delta: &[f64], s: f64) -> Vec<f64> {
         let mut out: Vec<f64> = z.iter().zip(delta).map(|(z, d)| z + s * d).collect();
+        // A step that the kink of a Laplace prior bounds ends on it: past it, or short of it
+        // by the rounding of z + (z_k − z), is rounding.
+        for ((u, &from), to) in self.list.iter().zip(z).zip(out.iter_mut()) {
+            let Some(kink) = u.kink() else { continue };
+            if u.at_kink(from) {
+                continue;
+            }
+            let crossed = (from - kink).signum() != (*to - kink).signum();
+            let rounding = 4.0 * f64::EPSILON * (from.abs() + kink.abs());
+            if crossed || (*to - kink).abs() <= rounding {
+                *to = kink;
+            }
+        }
         self.project(&mut out);
         out
     }
@@ -574,13 +620,31 @@ mod tests {
             Unknown::new("k", 1.0).log().prior(Prior::laplace(-1.3, 0.5, crate::Transform::Log10));
         let zk = k.kink().expect("a kink");
         assert_eq!(zk.to_bits(), (10f64.powf(-1.3)).ln().to_bits());
-        let prior = k.prior.expect("a prior");
-        assert_eq!(prior.residual(k.value(zk)), (0.0, 0.0));
+        assert_eq!(k.prior_residual(k.value(zk)), Some((0.0, 0.0)));
         let list = Unknowns::new(vec![k.clone()]);
         let mut z = [zk + 2.0 * f64::EPSILON * zk.abs()];
         assert!(z[0].to_bits() != zk.to_bits() && k.at_kink(z[0]));
         list.project(&mut z);
         assert_eq!(z[0].to_bits(), zk.to_bits());
+        // A step that the kink bounds ends on it exactly, from afar (z + (z_k − z) rounds) or
+        // past it by rounding.
+        let c = Unknown::new("c", 0.5).prior(Prior::laplace(0.1, 2.0, crate::Transform::Lin));
+        let list = Unknowns::new(vec![c.clone()]);
+        for from in [1000.3, 37.7, -5.0] {
+            let to = list.moved(&[from], &[0.1 - from], 1.0);
+            assert_eq!(to[0].to_bits(), 0.1f64.to_bits(), "from {from}");
+        }
+        // The gradient a step sees on the kink: lowered by the prior's slope 0.5 on the open
+        // side, 0 where held; none off the kink.
+        assert_eq!(list.one_sided(&[0.1], &[0.6]).map(|g| (g[0] * 1e12).round()), Some(1e11));
+        assert_eq!(list.one_sided(&[0.1], &[-0.6]).map(|g| (g[0] * 1e12).round()), Some(-1e11));
+        assert_eq!(list.one_sided(&[0.1], &[0.4]).map(|g| g[0].to_bits()), Some(0));
+        assert!(list.one_sided(&[0.2], &[0.6]).is_none());
+        // At a location 0 the test is exact: a value of 1e-15 keeps its prior's row.
+        let tiny =
+            Unknown::new("c", 1e-15).prior(Prior::laplace(0.0, 1e-16, crate::Transform::Lin));
+        assert!(tiny.at_kink(0.0) && !tiny.at_kink(1e-15));
+        assert!(tiny.prior_residual(1e-15).is_some_and(|(r, _)| r > 0.0));
         let mut far = [zk + 1e-9];
         list.project(&mut far);
         assert_eq!(far[0].to_bits(), (zk + 1e-9).to_bits(), "only rounding is put on the kink");

@@ -149,8 +149,10 @@ impl Adapter<'_> {
                         Bound::Upper => (here.z[i] + hi[i], zhi),
                         _ => (here.z[i] + lo[i], zlo),
                     };
+                    // Whichever of the two the box's bound is: the nearer to z + δ (which
+                    // rounding may leave some ulps from either).
                     self.space.held[i] = Some(match u.kink() {
-                        Some(kink) if u.at_kink(target) => kink,
+                        Some(kink) if (target - kink).abs() <= (target - own).abs() => kink,
                         _ => own,
                     });
                 }

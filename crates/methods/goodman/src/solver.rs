@@ -61,6 +61,9 @@ impl<S: System> Step<S> for Newton<'_> {
         let problem = ev.problem();
         let lin = current.linearization.as_ref().expect("Goodman's iterates are linearized");
         let (lo, hi) = problem.unknowns().step_box(&current.z, lin.gradient.as_slice());
+        // On a Laplace prior's kink, the gradient the step sees is the one-sided one.
+        let one_sided = sysid_core::method::one_sided(problem, lin);
+        let lin = one_sided.as_ref().unwrap_or(lin);
         let step = newton_step(lin, (&lo, &hi), self.options.driver.max_condition)
             .map_err(|s| Failure::singular(&s, &problem.names()))?;
         // The decrease the quadratic model predicts, ε − ε_lin(z + δ) = −(2Uᵀδ + δᵀAδ)

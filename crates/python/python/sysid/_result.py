@@ -44,7 +44,8 @@ class FitResult:
         self.objective: Optional[float] = None if self.nll is None else self.nll + self.prior
         #: The unknowns the model does not respond to at the estimates.
         self.undetermined: List[str] = list(r["undetermined"])
-        #: The unknowns held on a bound: name → "lower" or "upper".
+        #: The unknowns held on a bound: name → "lower" or "upper", or "prior_location" (held on
+        #: the location of its Laplace prior, where the rest of the gradient is within its slope).
         self.active_bounds: Dict[str, str] = dict(r["active_bounds"])
         #: The method's iterations.
         self.iterations: int = r["iterations"]
