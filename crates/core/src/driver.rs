@@ -9,7 +9,10 @@
 //! the first-order optimality there is below the gradient tolerance ([`Rule::Gradient`],
 //! where the method computed the model's sensitivities at the iterate), or if ε fell by less
 //! than 1e-6 of itself over the last 100 iterations ([`Rule::Progress`]: a crawl, whose
-//! termination names the unknowns still moving); ask the method for a
+//! termination names the unknowns still moving), or if the measure is within gtol and ε fell
+//! by less than 1e-8 of itself over the last 10 ([`Rule::Settled`]: a minimum to the promised
+//! accuracy that further steps no longer lower; it stops the run only where the certificate
+//! holds); ask the method for a
 //! proposal (a failure, such as a singular matrix, ends the run); stop on the method's own
 //! rule or when the proposed step is below the step tolerance ([`Rule::Step`]); stop at the
 //! iteration budget; let the method move (a failure ends the run; halving or a line search
@@ -40,7 +43,7 @@ use crate::method::start_coordinates;
 use crate::options::DriverOptions;
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate, Step};
-use crate::termination::{PROGRESS, PROGRESS_WINDOW, Rule};
+use crate::termination::{PROGRESS, PROGRESS_WINDOW, Rule, SETTLE, SETTLE_WINDOW};
 
 /// Runs `step` from `start` (values of the free unknowns) on `problem` and returns the
 /// estimate of method `method`. `Err` only for misuse: invalid options or start.
@@ -146,6 +149,8 @@ fn drive_once<S: System>(
     // Steps taken past a stopping rule that fired where the certificate fails, and the
     // certificate of the iterate the last rule stopped at.
     let (mut extra, mut verdict) = (0, None);
+    // The first iteration at which the settled rule may be judged (again).
+    let mut settle_from = SETTLE_WINDOW;
     // Whether the undetermined unknowns near a bound were moved onto it (once a run).
     let mut onto_bound = false;
     let mut precision = Precision::default();
@@ -193,10 +198,23 @@ fn drive_once<S: System>(
                 && current.cost.is_finite()
                 && then - current.cost <= PROGRESS * epsilon.abs()
         };
+        // Settled: the measure is within gtol and ε fell by less than SETTLE of itself over
+        // the last SETTLE_WINDOW iterations (the run no longer gains; judged like any rule,
+        // but where the certificate fails it does not count against the extra steps).
+        let settled = iteration >= settle_from
+            && measure.is_some_and(|m| m <= gtol)
+            && history.len() > SETTLE_WINDOW
+            && {
+                let then = history[history.len() - 1 - SETTLE_WINDOW].cost;
+                then.is_finite()
+                    && current.cost.is_finite()
+                    && then - current.cost <= SETTLE * epsilon.abs()
+            };
         let mut fired = pending
             .take()
             .or(gradient.then_some(Rule::Gradient))
-            .or(crawled.then_some(Rule::Progress));
+            .or(crawled.then_some(Rule::Progress))
+            .or(settled.then_some(Rule::Settled));
         let mut proposal = None;
         if fired.is_none() {
             let p = match step.propose(&ev, &current) {
@@ -271,7 +289,11 @@ fn drive_once<S: System>(
                 history.pop();
                 continue 'run;
             }
-            extra += 1;
+            if rule == Rule::Settled {
+                settle_from = iteration + SETTLE_WINDOW;
+            } else {
+                extra += 1;
+            }
         }
         if iteration >= options.max_iterations {
             break Ending::MaxIterations;

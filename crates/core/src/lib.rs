@@ -123,7 +123,7 @@ pub mod method {
     pub use crate::linalg::{NormalFactor, Singular, as_faer};
     pub use crate::options::MAX_DERIVED_GTOL;
     pub use crate::step::{Advance, Iterate, Proposal, Step};
-    pub use crate::termination::{PROGRESS, PROGRESS_WINDOW};
+    pub use crate::termination::{PROGRESS, PROGRESS_WINDOW, SETTLE, SETTLE_WINDOW};
     pub use crate::trust::{
         Curve, CurveStep, SCALE_MEMORY, actual_decrease, differenced_hessian, halve_along_curve,
         one_sided,

@@ -31,6 +31,11 @@ pub enum Rule {
     /// ε fell by less than [`PROGRESS`] of itself over the last [`PROGRESS_WINDOW`]
     /// iterations (the driver's rule, for every method): a crawl along a sloppy direction.
     Progress,
+    /// The certificate's measure is within gtol and ε fell by less than [`SETTLE`] of itself
+    /// over the last [`SETTLE_WINDOW`] iterations (the driver's rule, for every method): the
+    /// point is a minimum to the promised accuracy and further steps no longer lower the
+    /// cost. It stops the run only where the certificate then holds.
+    Settled,
 }
 
 /// The iterations over which [`Rule::Progress`] measures the fall of ε.
@@ -38,6 +43,13 @@ pub const PROGRESS_WINDOW: usize = 100;
 
 /// The fall of ε, relative to ε, below which [`PROGRESS_WINDOW`] iterations made no progress.
 pub const PROGRESS: f64 = 1e-6;
+
+/// The iterations over which [`Rule::Settled`] measures the fall of ε.
+pub const SETTLE_WINDOW: usize = 10;
+
+/// The fall of ε, relative to ε, below which a certified run has settled over
+/// [`SETTLE_WINDOW`] iterations (fides' default `frtol` is this per iteration).
+pub const SETTLE: f64 = 1e-8;
 
 impl Rule {
     /// The rule's snake_case name.
@@ -50,6 +62,7 @@ impl Rule {
             Rule::NoDescent => "no_descent",
             Rule::ExactFit => "exact_fit",
             Rule::Progress => "progress",
+            Rule::Settled => "settled",
         }
     }
 }
@@ -64,6 +77,9 @@ impl fmt::Display for Rule {
             Rule::NoDescent => "no step along the search direction reduced the cost",
             Rule::ExactFit => "the model passes through the data (ε = 0)",
             Rule::Progress => "the cost fell by less than 1e-6 of itself over 100 iterations",
+            Rule::Settled => {
+                "optimality within gtol, and the cost fell by less than 1e-8 of itself over 10 iterations"
+            }
         })
     }
 }
@@ -338,6 +354,7 @@ mod tests {
             Rule::CostChange,
             Rule::NoDescent,
             Rule::Progress,
+            Rule::Settled,
         ];
         for rule in rules {
             terminations.push(Termination::Converged(rule));

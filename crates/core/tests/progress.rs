@@ -1,11 +1,15 @@
 //! The driver's progress rule: a method that crawls (here a step of 1e-6 in g's coordinate
 //! along the descent, whatever the gradient) is stopped once ε fell by less than 1e-6 of
 //! itself over 100 iterations, not at the iteration limit, and the termination names the
-//! unknown still moving; a method that makes progress is not stopped by it.
+//! unknown still moving; a method that makes progress is not stopped by it. The settled rule:
+//! a method that dithers about the minimum, its measure within gtol, is stopped as converged
+//! after 10 iterations; dithering further out, it is not.
 
 use sysid_core::{
     Data, DriverOptions, Failure, Problem, Rule, Termination,
-    method::{Advance, Evaluations, Iterate, PROGRESS_WINDOW, Proposal, Step, drive},
+    method::{
+        Advance, Evaluations, Iterate, PROGRESS_WINDOW, Proposal, SETTLE_WINDOW, Step, drive,
+    },
 };
 use sysid_systems::FallingBody;
 
@@ -79,4 +83,65 @@ fn a_crawl_is_stopped_and_names_what_moves() {
     assert!((e.values[0] - 787.0 / 24.5).abs() <= 0.02, "g = {}", e.values[0]);
     // The module docs and the termination text speak of 100 iterations and 1e-6.
     assert_eq!((PROGRESS_WINDOW, sysid_core::method::PROGRESS), (100, 1e-6));
+}
+
+/// Reflects g's coordinate about `centre` at every iteration: ε stays where it is.
+struct Dither {
+    centre: f64,
+}
+
+impl Step<FallingBody> for Dither {
+    fn start(
+        &mut self,
+        ev: &Evaluations<'_, FallingBody>,
+        z: Vec<f64>,
+    ) -> Result<Iterate, Failure> {
+        ev.linearize(&z).map(Iterate::linearized)
+    }
+
+    fn propose(
+        &mut self,
+        _: &Evaluations<'_, FallingBody>,
+        current: &Iterate,
+    ) -> Result<Proposal, Failure> {
+        let z = vec![2.0 * self.centre - current.z[0]];
+        Ok(Proposal { z, condition: None, gradient_norm: None, stop: None })
+    }
+
+    fn advance(
+        &mut self,
+        ev: &Evaluations<'_, FallingBody>,
+        _: &Iterate,
+        proposal: Proposal,
+    ) -> Result<Advance, Failure> {
+        ev.linearize(&proposal.z).map(|l| Advance::Moved(Iterate::linearized(l)))
+    }
+}
+
+#[test]
+fn a_certified_run_that_no_longer_gains_is_settled() {
+    let problem = problem();
+    let options = DriverOptions { max_iterations: 1000, ..Default::default() };
+    // The minimum g* = 787/24.5; the measure at g* ± δ is √a·δ/‖r‖ with a = Σ(t²/2)² = 24.5
+    // and ‖r‖ ≈ 1000: 1e-8 at δ = 2e-6 (within gtol = 1e-6, above the gradient rule's 1e-10).
+    let centre = 787.0 / 24.5;
+    let measure = |delta: f64| 24.5_f64.sqrt() * delta / 1000.0;
+    let delta = 2e-6;
+    assert!(measure(delta) > 1e-10 && measure(delta) < 1e-6, "{}", measure(delta));
+    let e = drive(&problem, "dither", &options, &mut Dither { centre }, &[centre + delta]).unwrap();
+    assert!(e.converged(), "{}", e.termination);
+    assert_eq!(e.termination, Termination::Converged(Rule::Settled));
+    assert_eq!(e.termination.code(), "converged_settled");
+    // The first iteration whose window of 10 is complete.
+    assert_eq!(e.iterations, SETTLE_WINDOW);
+    assert!(e.certificate.optimality <= 1e-6, "{}", e.certificate.optimality);
+    // Dithering at a measure of 1e-4, above gtol, ε does not move either, but the point is
+    // not a minimum: only the progress rule stops it, uncertified.
+    let delta = 0.02;
+    assert!(measure(delta) > 1e-5, "{}", measure(delta));
+    let e = drive(&problem, "dither", &options, &mut Dither { centre }, &[centre + delta]).unwrap();
+    assert!(!e.converged());
+    assert_eq!(e.termination.code(), "stalled_progress");
+    // The module docs and the termination text speak of 10 iterations and 1e-8.
+    assert_eq!((SETTLE_WINDOW, sysid_core::method::SETTLE), (10, 1e-8));
 }
