@@ -655,8 +655,13 @@ impl<S: System> Problem<S> {
     /// ε of scale g's rows there, Σ_g ε_g (1 − (s_g/σ_g)²) − 2 n_g ln(σ_g/s_g) ≥ 0 (σ_g
     /// minimises it; clamped to its bounds it still lowers it). 0 without scales.
     pub fn profile_gain(&self, lin: &Linearization) -> f64 {
-        let Some(res) = lin.residuals.as_ref() else { return 0.0 };
-        let sums = self.scale_sums(&res.r);
+        lin.residuals.as_ref().map_or(0.0, |res| self.profile_gain_of(&res.r))
+    }
+
+    /// [`profile_gain`](Self::profile_gain) from the weighted residuals `r` at the trial
+    /// point (evaluated at s), as [`residuals`](Self::residuals) gives them.
+    pub fn profile_gain_of(&self, r: &DVector<f64>) -> f64 {
+        let sums = self.scale_sums(r);
         let Some(sigma) = self.closed_form_of(&sums) else { return 0.0 };
         sums.iter()
             .zip(&sigma)

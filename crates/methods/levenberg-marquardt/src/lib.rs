@@ -32,4 +32,4 @@ mod options;
 mod solver;
 
 pub use options::{Hessian, LevenbergMarquardtOptions};
-pub use solver::{FAST_FALL, LevenbergMarquardt};
+pub use solver::{FAST_FALL, LevenbergMarquardt, SCREEN_FROM};

@@ -43,6 +43,15 @@ pub struct LevenbergMarquardtOptions {
     /// share of starts reaching the best value (docs/methods.md).
     #[serde(default)]
     pub geodesic: bool,
+    /// While many trials are rejected ([`SCREEN_FROM`](crate::SCREEN_FROM) of the recent
+    /// ones), integrate each trial plain first and with sensitivities only where that does not
+    /// reject it (default on). It changes what a fit costs, not the points it visits.
+    #[serde(default = "on")]
+    pub screen: bool,
+}
+
+fn on() -> bool {
+    true
 }
 
 impl Default for LevenbergMarquardtOptions {
@@ -53,6 +62,7 @@ impl Default for LevenbergMarquardtOptions {
             max_rejections: 30,
             hessian: Hessian::GaussNewton,
             geodesic: false,
+            screen: true,
         }
     }
 }
@@ -76,6 +86,11 @@ impl LevenbergMarquardtOptions {
     /// The same options with geodesic acceleration on or off.
     pub fn with_geodesic(self, geodesic: bool) -> Self {
         Self { geodesic, ..self }
+    }
+
+    /// The same options with the screening of trials on or off.
+    pub fn with_screen(self, screen: bool) -> Self {
+        Self { screen, ..self }
     }
 
     /// Checks the method's own options (the driver's are checked by

@@ -66,3 +66,49 @@ fn goodmans_falling_body_table_one() {
     assert_close(estimate.value("g").unwrap(), 32.5, 1e-10);
     assert_close(estimate.cost, 1.25, 1e-10);
 }
+
+struct Screening;
+
+impl Visit for Screening {
+    /// The screened fits' integrations less the unscreened fits', over the two methods.
+    type Output = i64;
+    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
+        use sysid_levenberg_marquardt::LevenbergMarquardtOptions;
+        let problem = case.problem(1).unwrap();
+        let mut extra = 0;
+        for adaptive in [false, true] {
+            let fit = |screen: bool| {
+                let options = LevenbergMarquardtOptions::default().with_screen(screen);
+                let method = match adaptive {
+                    true => LevenbergMarquardt::adaptive(options),
+                    false => LevenbergMarquardt::new(options),
+                };
+                method.fit(&problem).unwrap()
+            };
+            let (on, off) = (fit(true), fit(false));
+            // The same points visited: the same iterations, and the same history of ε to
+            // the integration's accuracy.
+            assert_eq!(on.iterations, off.iterations, "{}", case.name);
+            assert_eq!(on.converged(), off.converged(), "{}", case.name);
+            for (a, b) in on.history.iter().zip(&off.history) {
+                assert_close(a.cost, b.cost, 1e-12);
+            }
+            extra += on.counts.integrations as i64 - off.counts.integrations as i64;
+        }
+        extra
+    }
+}
+
+#[test]
+fn screening_trials_changes_the_cost_of_a_fit_not_its_path() {
+    let mut screened = 0;
+    for name in sysid_systems::NAMES {
+        let extra = sysid_systems::visit(name, Screening).unwrap();
+        // Screening adds plain integrations (the sensitivities' it saves are counted as one
+        // integration each as well).
+        assert!(extra >= 0, "{name}: {extra}");
+        screened += extra;
+    }
+    // Some fit was screened (lotka-volterra's rejects most of its first trials).
+    assert!(screened > 0);
+}
