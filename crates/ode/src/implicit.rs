@@ -329,10 +329,24 @@ struct Curvature {
 
 impl Curvature {
     /// rs += (M_j k_y)_j for every column j, with S (row by row) and k_y.
+    ///
+    /// The second derivatives come grouped by the entry of J they belong to (the pattern is
+    /// sorted so): each group is summed in a register and stored once, where adding every
+    /// term into `along` would chain each addition to the store before it (SalazarCavazos' 75
+    /// states: 5 988 second derivatives over 2 421 entries of J, up to 49 to an entry; this
+    /// loop took 30 % of its NLL + gradient).
     fn couple(&mut self, second: &dyn SparseJacobian, (s, ky): (&[f64], &[f64]), rs: &mut [f64]) {
         self.along.fill(0.0);
-        for (&(e, l), &r) in second.pattern().iter().zip(second.entries()) {
-            self.along[e as usize] += self.work[r as usize] * ky[l as usize];
+        let (pattern, entries) = (second.pattern(), second.entries());
+        let mut i = 0;
+        while i < pattern.len() {
+            let e = pattern[i].0;
+            let mut sum = 0.0;
+            while i < pattern.len() && pattern[i].0 == e {
+                sum += self.work[entries[i] as usize] * ky[pattern[i].1 as usize];
+                i += 1;
+            }
+            self.along[e as usize] += sum;
         }
         self.plan.apply::<true>(&self.along, s, rs);
     }
