@@ -25,8 +25,8 @@ pub struct EvaluateArgs {
     /// with the states, one backward adjoint integration per condition, or per condition
     /// whichever of the two was faster at its first gradient (auto: the adjoint where it took
     /// under 0.9 of forward's time; that first evaluation computes both and is not timed;
-    /// docs/methods.md). Experiments with state events or
-    /// samples before t0 are integrated forward whatever is asked.
+    /// docs/methods.md). Experiments with samples before t0, or a state event at t0 or at
+    /// their last sample, are integrated forward whatever is asked.
     #[arg(long, value_enum, default_value_t = How::Auto, requires = "gradient")]
     sensitivities: How,
     /// Evaluate N times and report the median time of one evaluation.

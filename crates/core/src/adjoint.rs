@@ -29,9 +29,10 @@ pub enum Sensitivities {
     /// Forward sensitivities of every slot, integrated with the states: the residuals'
     /// Jacobian, of which the gradient is Jᵀr.
     Forward,
-    /// One backward adjoint integration per experiment along its states. An experiment the
-    /// adjoint does not handle (state events, samples before t0), or whose backward
-    /// integration fails, is integrated forward.
+    /// One backward adjoint integration per experiment along its states (through its state
+    /// events by their jump conditions). An experiment the adjoint does not handle (samples
+    /// before t0, a state event at t0 or at its last sample), or whose backward integration
+    /// fails, is integrated forward.
     Adjoint,
     /// Each experiment by whichever of the two was faster the first time its gradient was
     /// asked for: that first time it is computed forward once untimed (what is cold at a first
@@ -62,8 +63,8 @@ pub struct NllGradient {
     pub counts: Counts,
     /// The experiments (indices into [`Problem::experiments`]) whose part of the gradient
     /// came from forward sensitivities although adjoints were asked for: those the adjoint
-    /// does not handle (state events, samples before t0) and those whose backward
-    /// integration failed. Empty for [`Sensitivities::Forward`].
+    /// does not handle (samples before t0, a state event at t0 or at the last sample) and
+    /// those whose backward integration failed. Empty for [`Sensitivities::Forward`].
     pub fell_back: Vec<usize>,
     /// The experiments whose part of the gradient came from the adjoint.
     pub by_adjoint: Vec<usize>,
@@ -206,9 +207,11 @@ fn auto_gradient<S: System>(
     }
 }
 
-/// Whether the adjoint handles experiment `e`: no state events, no sample before t0.
+/// Whether the adjoint handles experiment `e`: no sample before t0. (A state event at t0
+/// or at the last sample makes the backward integration refuse, and the experiment goes
+/// forward.)
 fn adjoint_applies<S: System>(e: &Planned<S>) -> bool {
-    e.system().n_events() == 0 && e.sampled().times.first().is_none_or(|&t| t >= e.t0)
+    e.sampled().times.first().is_none_or(|&t| t >= e.t0)
 }
 
 /// One experiment's rows at the point `at`, its part of U = Jᵀr (k values), and whether it

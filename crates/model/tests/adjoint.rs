@@ -3,8 +3,8 @@
 //! initial value, a setting that is an expression of unknowns, a noise function of the state
 //! and of an unknown, a noise scale set in closed form, log10 and Laplace residuals, a prior,
 //! a switch that moves with an unknown, three experiments (one preequilibrated, one with
-//! samples at t0, rows of several outputs at each time), and a model with an event, which the adjoint leaves to
-//! the forward sensitivities.
+//! samples at t0, rows of several outputs at each time), and a model with a state event,
+//! which the adjoint goes back through by its jump conditions.
 
 use std::path::{Path, PathBuf};
 
@@ -70,8 +70,8 @@ fn scratch(name: &str, model: &str) -> PathBuf {
 
 /// Forward, adjoint and the automatic choice between them at the guess and at a second
 /// point: the NLL to 1e-9 relative (two integrations of the states at rtol 1e-10), every
-/// gradient component to 1e-7 of the largest. `fell_back`: whether every experiment is expected to have run forward (events)
-/// or none.
+/// gradient component to 1e-7 of the largest. `fell_back`: whether every experiment is
+/// expected to have run forward, or none.
 fn compare(dir: &Path, fell_back: bool) {
     let problem = Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap();
     assert!(!problem.scales().is_empty(), "the test needs a noise scale in closed form");
@@ -143,15 +143,39 @@ fn adjoint_gradient_agrees_with_forward_sensitivities() {
     compare(&scratch("plain", MODEL), false);
 }
 
-/// The same model with an event (B reset when A falls below 0.2): experiments with events are
-/// integrated forward by either choice, so the two still agree.
-#[test]
-fn experiments_with_events_fall_back_to_forward_sensitivities() {
-    let model = MODEL.replace("preequilibrate = { feed = 0.5, dose = 0.0 }\n", "").replace(
+/// The model with an event (B reset when A falls below 0.2).
+fn with_event() -> String {
+    MODEL.replace("preequilibrate = { feed = 0.5, dose = 0.0 }\n", "").replace(
         "[integrator]",
         "[[events]]\ntrigger = \"lt(A, 0.2)\"\nset = { B = \"0.5 * B\" }\n[integrator]",
-    );
-    compare(&scratch("events", &model), true);
+    )
+}
+
+/// The same model with an event: the adjoint goes back through it by its jump conditions,
+/// none falls back, and the two agree. Integrated by DOPRI5: with Rosenbrock steps the
+/// forward sensitivities of this model are wrong after the event (see the ignored test
+/// below), and the adjoint agrees with the plain integration there instead.
+#[test]
+fn experiments_with_events_go_by_adjoint_through_their_jumps() {
+    let model = with_event().replace("method = \"rodas5p\"", "method = \"dopri5\"");
+    compare(&scratch("events", &model), false);
+}
+
+/// A known defect, left open: with Rosenbrock steps, a switch that moves with an unknown
+/// (`ton`, at t = 1.7) and a later state event (t ≈ 4.8) in the experiment "high", the
+/// forward-sensitivity integration's states leave the plain integration's after the event:
+/// the NLL is 880.03 against 963.30 (DOPRI5 gives 963.30 both ways, and so does the
+/// adjoint's forward pass). Without the switch, or with a reset that changes nothing, the
+/// two agree.
+#[test]
+#[ignore = "known defect: Rosenbrock forward sensitivities through a moving switch and a state event"]
+fn rosenbrock_sensitivities_through_a_switch_and_an_event_keep_the_states() {
+    let dir = scratch("rosenbrock-events", &with_event());
+    let problem = Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap();
+    let z = problem.unknowns().coordinates(&problem.guesses());
+    let plain = problem.nll_at(&z).unwrap().unwrap();
+    let forward = problem.nll_gradient(&z, Sensitivities::Forward).unwrap().unwrap().nll;
+    assert!((plain - forward).abs() <= 1e-8 * plain.abs(), "plain {plain}, forward {forward}");
 }
 
 /// The automatic choice is measured once per problem and integrator, which the work of a

@@ -22,14 +22,20 @@
 //!
 //! The implicit steps solve with E = I/(γh) + J_yᵀ (h < 0: the transpose of the forward
 //! problem's matrix) through the factors of its transpose, sparse in the same way for a
-//! large system with a sparse Jacobian; the μ block is solved by substitution. Systems with state events are not handled: their
-//! resets would need the adjoint's own jump conditions.
+//! large system with a sparse Jacobian; the μ block is solved by substitution.
+//!
+//! A state event fired at τ (the forward solution records each one with the state y⁻
+//! before it) maps the sensitivities as S⁺ = M S⁻ + N ([`events::fire`](crate::events)):
+//! going back through τ, λ becomes Mᵀλ⁺ and μ gains Nᵀλ⁺, J_y read at y(τ⁻) below τ and at
+//! y(τ⁺) above it. An event within the time's resolution of t0 or of the last sample is
+//! refused (the caller integrates forward).
 
 use nalgebra::DMatrix;
 
 use crate::counts::Counts;
 use crate::driver::{integrate, resolution};
 use crate::error::OdeError;
+use crate::events::Reset;
 use crate::implicit::Factors;
 use crate::interpolant::DenseSolution;
 use crate::ivp::{Ivp, Trajectory, check_times, check_wrt, rhs_jump, stops};
@@ -90,9 +96,6 @@ impl<S: System> Ivp<'_, S> {
         check_times(times)?;
         let (n, k) = (self.y0.len(), wrt.len());
         let setup = |what: String| Err(OdeError::InvalidSetup(what));
-        if self.system.n_events() > 0 {
-            return setup("adjoint gradients of a model with state events".into());
-        }
         if seeds.len() != times.len() * n {
             return setup(format!(
                 "{} adjoint seeds for {} times × {n} states",
@@ -121,6 +124,13 @@ impl<S: System> Ivp<'_, S> {
             return Ok((vec![0.0; k], counts));
         }
         let t_end = times[times.len() - 1];
+        if let Some(&(_, tau, _)) = forward.fired.iter().find(|e| {
+            e.1 - self.t0 <= resolution(e.1) || t_end - e.1 <= resolution(t_end) || e.1 > t_end
+        }) {
+            return setup(format!(
+                "adjoint gradients through a state event at the first or last time ({tau})"
+            ));
+        }
         let mut rhs = AdjointRhs::new(self, wrt, forward, (times, seeds, 1.0 / scale));
         let mut x = vec![0.0; n + k];
         rhs.add_seeds(t_end, &mut x);
@@ -129,6 +139,7 @@ impl<S: System> Ivp<'_, S> {
             // smooth within a forward step only), and at every sample time, where λ jumps.
             let mut inner: Vec<f64> = stops(self.system, self.p);
             inner.extend(forward.step_ends().filter(|&t| t > self.t0 && t < t_end));
+            inner.extend(forward.fired.iter().map(|e| e.1));
             inner.sort_by(f64::total_cmp);
             // A forward step that ended a few ulps from a stop leaves no room for a step in
             // between: one of the two is enough.
@@ -283,6 +294,8 @@ struct AdjointRhs<'a, S> {
     /// The samples not yet added to λ: the first `pending` (added from the last one down).
     pending: usize,
     moving: Vec<(f64, usize, f64)>,
+    /// The state events not yet crossed: the first `events` of the forward solution's.
+    events: usize,
 }
 
 impl<'a, S: System> AdjointRhs<'a, S> {
@@ -317,6 +330,7 @@ impl<'a, S: System> AdjointRhs<'a, S> {
             scale,
             pending: times.len(),
             moving: ivp.system.moving_switches(ivp.p),
+            events: forward.fired.len(),
         }
     }
 
@@ -334,8 +348,10 @@ impl<'a, S: System> AdjointRhs<'a, S> {
     }
 
     /// y(t) from the forward solution (NaN outside it, which the integration reports).
-    fn state_at(&mut self, t: f64) {
-        if self.forward.is_empty() || !self.forward.eval_hinted(t, &mut self.hint, &mut self.y) {
+    /// y(t) from the forward solution, the limit from `side` where a state event reset it.
+    fn state_at(&mut self, t: f64, side: Side) {
+        if self.forward.is_empty() || !self.forward.eval_side(t, side, &mut self.hint, &mut self.y)
+        {
             self.y.fill(f64::NAN);
         }
     }
@@ -345,7 +361,7 @@ impl<'a, S: System> AdjointRhs<'a, S> {
             return;
         }
         self.evaluated_at = Some((t.to_bits(), side));
-        self.state_at(t);
+        self.state_at(t, side);
         self.sys.input_values(t, side, &mut self.u);
         self.entries.eval(self.sys, (t, &self.y, self.p, &self.u));
     }
@@ -429,8 +445,13 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
     /// join λ.
     fn cross(&mut self, t: f64, x: &mut [f64], _dir: f64) {
         let n = self.n;
+        while self.events > 0 && (self.forward.fired[self.events - 1].1 - t).abs() <= resolution(t)
+        {
+            self.events -= 1;
+            self.cross_event(x);
+        }
         if self.moving.iter().any(|m| m.0.to_bits() == t.to_bits()) {
-            self.state_at(t);
+            self.state_at(t, Side::Before);
             let jump = rhs_jump(self.sys, t, &self.y, self.p, &mut self.u);
             let along: f64 = x[..n].iter().zip(&jump).map(|(l, g)| l * g).sum();
             for &(_, q, slope) in self.moving.iter().filter(|m| m.0.to_bits() == t.to_bits()) {
@@ -440,6 +461,31 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
             }
         }
         self.add_seeds(t, x);
+    }
+}
+
+impl<S: System> AdjointRhs<'_, S> {
+    /// Back through the state event `self.events` of the forward solution, fired at τ from
+    /// y⁻: forward, S⁺ = M S⁻ + N with M = R_y − d c_yᵀ/ρ and N_j = R_αj − d c_αj/ρ (d the
+    /// drift R_y g⁻ − g⁺, ρ the rate c_y g⁻ + c_t; [`Reset`](crate::events::Reset)), so
+    /// λ⁺ᵀS⁺ = (Mᵀλ⁺)ᵀS⁻ + λ⁺ᵀN: λ becomes Mᵀλ⁺ and μ_j gains λ⁺ᵀN_j.
+    fn cross_event(&mut self, x: &mut [f64]) {
+        let n = self.n;
+        let (i, tau, before) = &self.forward.fired[self.events];
+        let mut reset = Reset::new(self.sys, *i, *tau, (before, self.p, &mut self.u));
+        let after = x[..n].to_vec();
+        let along = reset.drift.iter().zip(&after).map(|(d, l)| d * l).sum::<f64>() / reset.rate;
+        for (b, lambda) in x[..n].iter_mut().enumerate() {
+            let carried: f64 = (0..n).map(|a| reset.r_y[a * n + b] * after[a]).sum();
+            *lambda = carried - reset.c_y[b] * along;
+        }
+        for q in 0..self.column_of.len() {
+            if let Some(j) = self.column_of[q] {
+                let (c_q, r_q) = reset.parameter(self.sys, q);
+                let gained: f64 = r_q.iter().zip(&after).map(|(r, l)| r * l).sum();
+                x[n + j] += gained - c_q * along;
+            }
+        }
     }
 }
 

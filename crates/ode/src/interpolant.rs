@@ -1,5 +1,7 @@
 //! Dense output: the solution between the ends of a step, and a whole stored trajectory.
 
+use crate::signal::Side;
+
 /// The solution on one accepted step from `t` to `t + h` (h may be negative), as the
 /// polynomial in θ = (s − t)/h
 ///
@@ -107,12 +109,15 @@ pub struct DenseSolution {
     spans: Vec<(f64, f64)>,
     /// 5·dim coefficients per step (r₁..r₅ of [`Interpolant`]).
     coefficients: Vec<f64>,
+    /// The state events fired along the solution, in order: (event, τ, the state before
+    /// it). A step ends at each τ and the next begins there, after the reset.
+    pub(crate) fired: Vec<(usize, f64, Vec<f64>)>,
 }
 
 impl DenseSolution {
     /// An empty solution of vectors of length `dim`.
     pub fn new(dim: usize) -> Self {
-        Self { dim, spans: Vec::new(), coefficients: Vec::new() }
+        Self { dim, spans: Vec::new(), coefficients: Vec::new(), fired: Vec::new() }
     }
 
     /// Length of the vectors.
@@ -172,6 +177,37 @@ impl DenseSolution {
         self.eval_hinted(t, &mut hint, out)
     }
 
+    /// The times of the state events fired along the solution, in order.
+    pub fn event_times(&self) -> impl Iterator<Item = f64> + '_ {
+        self.fired.iter().map(|e| e.1)
+    }
+
+    /// Like [`eval_hinted`](Self::eval_hinted), with the one-sided limit `side` where a step
+    /// ends at t and the next begins there (the solution jumps at a state event).
+    pub fn eval_side(&self, t: f64, side: Side, hint: &mut usize, out: &mut [f64]) -> bool {
+        if !self.eval_hinted(t, hint, out) {
+            return false;
+        }
+        let (i, n) = (*hint, self.spans.len());
+        let at = |end: f64| end.to_bits() == t.to_bits();
+        let other = match side {
+            Side::Before if at(lower(self.spans[i])) && i > 0 => i - 1,
+            Side::After if at(upper(self.spans[i])) && i + 1 < n => i + 1,
+            _ => return true,
+        };
+        let ends_there = match side {
+            Side::Before => at(upper(self.spans[other])),
+            Side::After => at(lower(self.spans[other])),
+        };
+        if ends_there {
+            *hint = other;
+            let (a, b) = self.spans[other];
+            let w = 5 * self.dim;
+            evaluate(a, b, self.dim, &self.coefficients[other * w..(other + 1) * w], t, 0, out);
+        }
+        true
+    }
+
     /// Like [`eval`](Self::eval), starting the search at the step `hint` (updated): O(1)
     /// for the nearby, mostly monotone times an integrator asks for.
     pub fn eval_hinted(&self, t: f64, hint: &mut usize, out: &mut [f64]) -> bool {
@@ -207,7 +243,7 @@ impl DenseSolution {
         for (r, o) in self.coefficients.chunks(self.dim).zip(coefficients.chunks_mut(dim)) {
             map(r, o);
         }
-        DenseSolution { dim, spans: self.spans.clone(), coefficients }
+        DenseSolution { dim, spans: self.spans.clone(), coefficients, fired: Vec::new() }
     }
 }
 

@@ -209,6 +209,8 @@ pub struct SensitivityRhs<'a, S> {
     /// Without columns: the work space of the system's own sparse Jacobian, from whose
     /// (compiled) evaluation f is read, as [`ModelRhs`] does.
     work: Vec<f64>,
+    /// The state events fired so far, in order: (event, τ, the state before it).
+    fired: Vec<(usize, f64, Vec<f64>)>,
 }
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
@@ -235,6 +237,7 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
             jp: DMatrix::zeros(jn, jnp),
             implicit: None,
             moving: sys.moving_switches(p),
+            fired: Vec::new(),
             atol: vec![1.0; wrt.len()],
             work: sys
                 .sparse_jacobian(Function::Rhs)
@@ -356,6 +359,8 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
     }
 
     fn fire(&mut self, i: usize, t: f64, x: &mut [f64]) {
+        let n = self.sys.signature().n_states();
+        self.fired.push((i, t, x[..n].to_vec()));
         events::fire(self.sys, i, t, (self.p, self.wrt, &mut self.u), x);
     }
 
@@ -490,9 +495,22 @@ impl<'a, S: System> Ivp<'a, S> {
         &self,
         integrator: &Integrator,
         wrt: &[Wrt],
+        span: (f64, f64),
+        on_step: impl FnMut(&Interpolant),
+    ) -> Result<Counts, OdeError> {
+        self.integrate_logged(integrator, wrt, span, on_step).map(|(counts, _)| counts)
+    }
+
+    /// [`integrate_steps`](Self::integrate_steps), with the state events fired: (event, τ,
+    /// the state before it), in the order they fired.
+    #[allow(clippy::type_complexity)]
+    fn integrate_logged(
+        &self,
+        integrator: &Integrator,
+        wrt: &[Wrt],
         (t_lo, t_hi): (f64, f64),
         mut on_step: impl FnMut(&Interpolant),
-    ) -> Result<Counts, OdeError> {
+    ) -> Result<(Counts, Vec<(usize, f64, Vec<f64>)>), OdeError> {
         self.check()?;
         check_wrt(self.system, wrt)?;
         let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
@@ -507,7 +525,7 @@ impl<'a, S: System> Ivp<'a, S> {
             counts +=
                 integrate(integrator, &mut rhs, (self.t0, &x0), t_lo, &stops, &mut on_step)?.0;
         }
-        Ok(counts)
+        Ok((counts, rhs.fired))
     }
 
     /// The whole solution (with the sensitivities `wrt`, possibly none) on [t_lo, t_hi] as a
@@ -519,8 +537,9 @@ impl<'a, S: System> Ivp<'a, S> {
         span: (f64, f64),
     ) -> Result<(DenseSolution, Counts), OdeError> {
         let mut solution = DenseSolution::new(self.y0.len() * (1 + wrt.len()));
-        let counts = self.integrate_steps(integrator, wrt, span, |s| solution.push(s))?;
+        let (counts, fired) = self.integrate_logged(integrator, wrt, span, |s| solution.push(s))?;
         solution.finish();
+        solution.fired = fired;
         Ok((solution, counts))
     }
 

@@ -7,7 +7,7 @@ use crate::common;
 
 use common::Oscillator;
 use sysid_ode::testing::{Decay, assert_close};
-use sysid_ode::{Integrator, Ivp, OdeError, Scalar, Signature, System, Wrt};
+use sysid_ode::{Integrator, Ivp, OdeError, Scalar, Side, Signature, System, Wrt};
 use sysid_systems::{LotkaVolterra, Robertson};
 
 /// Σ_m c_mᵀ S_j(t_m) from the forward sensitivities.
@@ -272,4 +272,69 @@ fn a_fast_mode_set_off_at_a_late_sample_is_resolved() {
     let fwd = forward_sum(&ivp, &integrator, &wrt, None, (&times, &c));
     let adj = adjoint_sum(&ivp, &integrator, &wrt, None, (&times, &c));
     agree(&adj, &fwd, 1e-7);
+}
+
+/// Two coupled states with a state event: where y0 falls to a·(1 + t/20) (a condition that
+/// moves in time too), y0 gains d·y1 and y1 is scaled by r. Every derivative of the reset
+/// and the condition is non-trivial: in y (both states), in t and in the parameters.
+struct Kicked(Signature);
+impl System for Kicked {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = -p[0] * y[0] + p[1] * y[1];
+        dy[1] = p[0] * y[0] - p[2] * y[1] * y[1];
+    }
+    fn n_events(&self) -> usize {
+        1
+    }
+    fn event_condition<T: Scalar>(&self, _i: usize, t: f64, y: &[T], p: &[T]) -> T {
+        y[0] - p[3] * (1.0 + t / 20.0)
+    }
+    fn event_reset<T: Scalar>(&self, _i: usize, _t: f64, y: &[T], p: &[T], y_new: &mut [T]) {
+        y_new[0] = y[0] + p[4] * y[1];
+        y_new[1] = y[1] * p[5];
+    }
+}
+
+/// Back through state events: the adjoint's jump (λ⁻ = Mᵀλ⁺, μ += Nᵀλ⁺) gives the forward
+/// sensitivities' sum, whose own jumps tests/events.rs checks against closed forms, for
+/// every kind of column, explicit and implicit, with the events firing several times
+/// between the samples.
+#[test]
+fn state_events_enter_the_adjoint() {
+    let sys = Kicked(Signature::new(&["y0", "y1"], &["k", "c", "m", "a", "d", "r"]));
+    let p = [0.8, 0.1, 0.3, 0.6, 2.0, 0.7];
+    let ivp = Ivp::new(&sys, 0.0, &[2.0, 0.5], &p);
+    let wrt: Vec<Wrt> =
+        (0..6).map(Wrt::Parameter).chain([Wrt::InitialValue(0), Wrt::InitialValue(1)]).collect();
+    let times = [0.7, 2.3, 4.1, 6.6, 9.2];
+    let c = seeds(2, times.len());
+    for integrator in [Integrator::dopri5(1e-11, 1e-13), Integrator::rodas5p(1e-10, 1e-13)] {
+        let (trajectory, forward) = ivp.solve_dense(&integrator, &times).unwrap();
+        let with = ivp.solve_sensitivities(&integrator, &wrt, &times).unwrap();
+        for m in 0..times.len() {
+            for i in 0..2 {
+                assert_close(trajectory.state(m)[i], with.state(m)[i], 1e-8);
+            }
+        }
+        let events: Vec<f64> = forward.event_times().collect();
+        assert!(events.len() >= 3, "the events fire {} times", events.len());
+        // The backward steps read y just below an event and just above it: the solution's
+        // two one-sided limits there are the state on the condition's root and its reset.
+        for &tau in &events {
+            let (mut before, mut after, mut hint) = ([0.0; 2], [0.0; 2], 0);
+            assert!(forward.eval_side(tau, Side::Before, &mut hint, &mut before));
+            assert!(forward.eval_side(tau, Side::After, &mut hint, &mut after));
+            assert_close(before[0], p[3] * (1.0 + tau / 20.0), 1e-9);
+            assert_close(after[0], before[0] + p[4] * before[1], 1e-12);
+            assert_close(after[1], before[1] * p[5], 1e-12);
+        }
+        let fwd = forward_sum(&ivp, &integrator, &wrt, None, (&times, &c));
+        let adj = ivp.adjoint(&integrator, &wrt, None, (&forward, &times, &c)).unwrap().0;
+        agree(&adj, &fwd, 1e-7);
+        // The jump is felt: without it the reset's parameters d and r would have no gradient.
+        assert!(fwd[4].abs() > 1e-3 && fwd[5].abs() > 1e-3, "{fwd:?}");
+    }
 }
