@@ -548,6 +548,11 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             }
             self.accept(tau)?;
         }
+        // The step lands on τ as located on the trial step's interpolant, to rounding and to
+        // the step's error: the condition there may still be a hair above 0.
+        let states = self.ev.rhs.states();
+        let mut landed = vec![0.0; self.conditions.len()];
+        self.ev.rhs.event_conditions(tau, &self.work.x[..states], &mut landed);
         for &(i, _) in crossed {
             self.ev.rhs.fire(i, tau, &mut self.work.x);
         }
@@ -558,6 +563,12 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         self.t = tau;
         self.ev.f(tau, &self.work.x, &mut self.work.k[0]);
         self.update_conditions();
+        // A fired event's condition counts from 0 after it, less what the reset moved it by:
+        // a reset that leaves it alone must not leave it a hair above 0, or the event would
+        // fire again as soon as the condition falls on (a second halving where one was due).
+        for &(i, _) in crossed {
+            self.conditions[i] -= landed[i].max(0.0);
+        }
         Ok(Some(tau))
     }
 

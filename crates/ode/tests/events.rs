@@ -154,3 +154,53 @@ fn integrating_back_through_state_events_is_refused() {
     assert!(matches!(err, OdeError::InvalidSetup(_)), "{err:?}");
     assert!(err.to_string().contains("forward in time only"), "{err}");
 }
+
+/// x' = −k x and z' = −m z; where x falls to a, z is halved. The reset leaves the
+/// condition's state alone, so the event fires once, at τ = ln(x0/a)/k: z(t) = z0·e^{−mt}/2
+/// after it. Before, the step landed on τ with the condition a hair above 0 (τ is located on
+/// the trial step's interpolant, the retaken step's end differs by its error), so the event
+/// fired again as soon as x fell on: z quartered, on DOPRI5 always and on Rosenbrock for
+/// some parameter values.
+struct Halving(Signature);
+
+impl System for Halving {
+    fn signature(&self) -> &Signature {
+        &self.0
+    }
+    fn rhs<T: Scalar>(&self, _t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        dy[0] = -(p[0] * y[0]);
+        dy[1] = -(p[2] * y[1]);
+    }
+    fn n_events(&self) -> usize {
+        1
+    }
+    fn event_condition<T: Scalar>(&self, _i: usize, _t: f64, y: &[T], p: &[T]) -> T {
+        y[0] - p[1]
+    }
+    fn event_reset<T: Scalar>(&self, _i: usize, _t: f64, y: &[T], _p: &[T], y_new: &mut [T]) {
+        y_new[1] = y[1] * 0.5;
+    }
+}
+
+#[test]
+fn a_reset_that_leaves_its_condition_alone_fires_once() {
+    let sys = Halving(Signature::new(&["x", "z"], &["k", "a", "m"]));
+    let times = [1.0, 2.0, 3.0, 6.0];
+    // τ = ln(3/0.2)/0.8 ≈ 3.39, at several rates and thresholds around it.
+    for (k, a) in [(0.8, 0.2), (0.7, 0.2), (0.8, 0.25), (1.1, 0.3), (0.5, 0.1)] {
+        let p = [k, a, 0.3];
+        let tau = (3.0f64 / a).ln() / k;
+        let wrt = [Wrt::Parameter(0)];
+        for integrator in integrators() {
+            let ivp = Ivp::new(&sys, 0.0, &[3.0, 1.0], &p);
+            let plain = ivp.solve(&integrator, &times).unwrap();
+            let with = ivp.solve_sensitivities(&integrator, &wrt, &times).unwrap();
+            for (m, &t) in times.iter().enumerate() {
+                let z = (-0.3 * t).exp() * if t > tau { 0.5 } else { 1.0 };
+                let tol = if integrator.fixed_step.is_some() { 1e-8 } else { 1e-9 };
+                assert_close(plain.state(m)[1], z, tol);
+                assert_close(with.state(m)[1], z, tol);
+            }
+        }
+    }
+}
