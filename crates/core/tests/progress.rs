@@ -13,12 +13,22 @@ use sysid_core::{
 };
 use sysid_systems::FallingBody;
 
-/// Moves g's coordinate by `size` along the descent direction at every iteration (a crawl).
-struct Crawl {
-    size: f64,
+/// Moves g's coordinate to `next(z, ∂ε/∂z)` at every iteration.
+struct Walk<F: Fn(f64, f64) -> f64> {
+    next: F,
 }
 
-impl Step<FallingBody> for Crawl {
+/// A crawl: g's coordinate moves by `size` along the descent direction, whatever the gradient.
+fn crawl(size: f64) -> Walk<impl Fn(f64, f64) -> f64> {
+    Walk { next: move |z: f64, g: f64| z - size * g.signum() }
+}
+
+/// A dither: g's coordinate is reflected about `centre`, where ε stays as it is.
+fn dither(centre: f64) -> Walk<impl Fn(f64, f64) -> f64> {
+    Walk { next: move |z: f64, _: f64| 2.0 * centre - z }
+}
+
+impl<F: Fn(f64, f64) -> f64> Step<FallingBody> for Walk<F> {
     fn start(
         &mut self,
         ev: &Evaluations<'_, FallingBody>,
@@ -33,7 +43,7 @@ impl Step<FallingBody> for Crawl {
         current: &Iterate,
     ) -> Result<Proposal, Failure> {
         let lin = current.linearization.as_ref().expect("linearized");
-        let z = vec![current.z[0] - self.size * lin.gradient[0].signum()];
+        let z = vec![(self.next)(current.z[0], lin.gradient[0])];
         Ok(Proposal { z, condition: None, gradient_norm: None, stop: None })
     }
 
@@ -63,7 +73,7 @@ fn problem() -> Problem<FallingBody> {
 fn a_crawl_is_stopped_and_names_what_moves() {
     let problem = problem();
     let options = DriverOptions { max_iterations: 1000, ..Default::default() };
-    let e = drive(&problem, "crawl", &options, &mut Crawl { size: 1e-6 }, &[30.0]).unwrap();
+    let e = drive(&problem, "crawl", &options, &mut crawl(1e-6), &[30.0]).unwrap();
     assert!(!e.converged());
     match &e.termination {
         Termination::Stalled { rule: Rule::Progress, moving, iteration, .. } => {
@@ -78,44 +88,11 @@ fn a_crawl_is_stopped_and_names_what_moves() {
     assert_eq!(e.termination.code(), "stalled_progress");
     // Steps of 1e-2 lower ε by more than 1e-6 of itself per 100 iterations: the rule lets
     // them walk the 213 steps to the minimum, g = 787/24.5 (least squares of b on t²/2).
-    let e = drive(&problem, "walk", &options, &mut Crawl { size: 1e-2 }, &[30.0]).unwrap();
+    let e = drive(&problem, "walk", &options, &mut crawl(1e-2), &[30.0]).unwrap();
     assert!(e.iterations > 2 * PROGRESS_WINDOW, "{} iterations", e.iterations);
     assert!((e.values[0] - 787.0 / 24.5).abs() <= 0.02, "g = {}", e.values[0]);
     // The module docs and the termination text speak of 100 iterations and 1e-6.
     assert_eq!((PROGRESS_WINDOW, sysid_core::method::PROGRESS), (100, 1e-6));
-}
-
-/// Reflects g's coordinate about `centre` at every iteration: ε stays where it is.
-struct Dither {
-    centre: f64,
-}
-
-impl Step<FallingBody> for Dither {
-    fn start(
-        &mut self,
-        ev: &Evaluations<'_, FallingBody>,
-        z: Vec<f64>,
-    ) -> Result<Iterate, Failure> {
-        ev.linearize(&z).map(Iterate::linearized)
-    }
-
-    fn propose(
-        &mut self,
-        _: &Evaluations<'_, FallingBody>,
-        current: &Iterate,
-    ) -> Result<Proposal, Failure> {
-        let z = vec![2.0 * self.centre - current.z[0]];
-        Ok(Proposal { z, condition: None, gradient_norm: None, stop: None })
-    }
-
-    fn advance(
-        &mut self,
-        ev: &Evaluations<'_, FallingBody>,
-        _: &Iterate,
-        proposal: Proposal,
-    ) -> Result<Advance, Failure> {
-        ev.linearize(&proposal.z).map(|l| Advance::Moved(Iterate::linearized(l)))
-    }
 }
 
 #[test]
@@ -128,7 +105,7 @@ fn a_certified_run_that_no_longer_gains_is_settled() {
     let measure = |delta: f64| 24.5_f64.sqrt() * delta / 1000.0;
     let delta = 2e-6;
     assert!(measure(delta) > 1e-10 && measure(delta) < 1e-6, "{}", measure(delta));
-    let e = drive(&problem, "dither", &options, &mut Dither { centre }, &[centre + delta]).unwrap();
+    let e = drive(&problem, "dither", &options, &mut dither(centre), &[centre + delta]).unwrap();
     assert!(e.converged(), "{}", e.termination);
     assert_eq!(e.termination, Termination::Converged(Rule::Settled));
     assert_eq!(e.termination.code(), "converged_settled");
@@ -139,7 +116,7 @@ fn a_certified_run_that_no_longer_gains_is_settled() {
     // not a minimum: only the progress rule stops it, uncertified.
     let delta = 0.02;
     assert!(measure(delta) > 1e-5, "{}", measure(delta));
-    let e = drive(&problem, "dither", &options, &mut Dither { centre }, &[centre + delta]).unwrap();
+    let e = drive(&problem, "dither", &options, &mut dither(centre), &[centre + delta]).unwrap();
     assert!(!e.converged());
     assert_eq!(e.termination.code(), "stalled_progress");
     // The module docs and the termination text speak of 10 iterations and 1e-8.
