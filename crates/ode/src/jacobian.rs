@@ -105,6 +105,14 @@ impl ProductPlan {
             6 => self.accumulate::<6, ADD>(entries, vy, out),
             7 => self.accumulate::<7, ADD>(entries, vy, out),
             8 => self.accumulate::<8, ADD>(entries, vy, out),
+            9 => self.accumulate::<9, ADD>(entries, vy, out),
+            10 => self.accumulate::<10, ADD>(entries, vy, out),
+            11 => self.accumulate::<11, ADD>(entries, vy, out),
+            12 => self.accumulate::<12, ADD>(entries, vy, out),
+            13 => self.accumulate::<13, ADD>(entries, vy, out),
+            14 => self.accumulate::<14, ADD>(entries, vy, out),
+            15 => self.accumulate::<15, ADD>(entries, vy, out),
+            16 => self.accumulate::<16, ADD>(entries, vy, out),
             k => self.accumulate_any::<ADD>(k, entries, vy, out),
         }
     }

@@ -134,6 +134,14 @@ impl Lu {
             6 => self.solve_block::<6>(r, k),
             7 => self.solve_block::<7>(r, k),
             8 => self.solve_block::<8>(r, k),
+            9 => self.solve_block::<9>(r, k),
+            10 => self.solve_block::<10>(r, k),
+            11 => self.solve_block::<11>(r, k),
+            12 => self.solve_block::<12>(r, k),
+            13 => self.solve_block::<13>(r, k),
+            14 => self.solve_block::<14>(r, k),
+            15 => self.solve_block::<15>(r, k),
+            16 => self.solve_block::<16>(r, k),
             _ => self.solve_block::<0>(r, k),
         }
     }
@@ -289,7 +297,7 @@ mod tests {
         assert_eq!(lu.factor(|i, j| singular[i][j]), Err(FactorError::Singular));
     }
 
-    /// Every width of block, the fixed ones (1–8) and the general one (9, 12), gives each
+    /// Every width of block, the fixed ones (1–16) and the general one (17, 20), gives each
     /// column what the single solve gives it, to the last bit.
     #[test]
     fn block_solves_of_every_width_are_the_column_solves() {
@@ -297,7 +305,7 @@ mod tests {
         let entry = |i: usize, j: usize| {
             ((i * 5 + j * 7) % 13) as f64 - 6.0 + if i == j { 0.25 } else { 0.0 }
         };
-        for k in [1, 2, 3, 4, 5, 6, 7, 8, 9, 12] {
+        for k in [1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 16, 17, 20] {
             let mut lu = Lu::new(n, k);
             lu.factor(entry).unwrap();
             let b = |i: usize, j: usize| (i as f64 * 0.7 - j as f64 * 1.3).cos();
