@@ -124,8 +124,8 @@ impl<S: System> Ivp<'_, S> {
             return Ok((vec![0.0; k], counts));
         }
         let t_end = times[times.len() - 1];
-        if let Some(&(_, tau, _)) = forward.fired.iter().find(|e| {
-            e.1 - self.t0 <= resolution(e.1) || t_end - e.1 <= resolution(t_end) || e.1 > t_end
+        if let Some(tau) = forward.event_times().find(|&tau| {
+            tau - self.t0 <= resolution(tau) || t_end - tau <= resolution(t_end) || tau > t_end
         }) {
             return setup(format!(
                 "adjoint gradients through a state event at the first or last time ({tau})"
@@ -139,7 +139,7 @@ impl<S: System> Ivp<'_, S> {
             // smooth within a forward step only), and at every sample time, where λ jumps.
             let mut inner: Vec<f64> = stops(self.system, self.p);
             inner.extend(forward.step_ends().filter(|&t| t > self.t0 && t < t_end));
-            inner.extend(forward.fired.iter().map(|e| e.1));
+            inner.extend(forward.event_times());
             inner.sort_by(f64::total_cmp);
             // A forward step that ended a few ulps from a stop leaves no room for a step in
             // between: one of the two is enough.
@@ -445,7 +445,8 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
     /// join λ.
     fn cross(&mut self, t: f64, x: &mut [f64], _dir: f64) {
         let n = self.n;
-        while self.events > 0 && (self.forward.fired[self.events - 1].1 - t).abs() <= resolution(t)
+        while self.events > 0
+            && (self.forward.fired[self.events - 1].tau - t).abs() <= resolution(t)
         {
             self.events -= 1;
             self.cross_event(x);
@@ -471,8 +472,9 @@ impl<S: System> AdjointRhs<'_, S> {
     /// λ⁺ᵀS⁺ = (Mᵀλ⁺)ᵀS⁻ + λ⁺ᵀN: λ becomes Mᵀλ⁺ and μ_j gains λ⁺ᵀN_j.
     fn cross_event(&mut self, x: &mut [f64]) {
         let n = self.n;
-        let (i, tau, before) = &self.forward.fired[self.events];
-        let mut reset = Reset::new(self.sys, *i, *tau, (before, self.p, &mut self.u));
+        let fired = &self.forward.fired[self.events];
+        let mut reset =
+            Reset::new(self.sys, fired.event, fired.tau, (&fired.before, self.p, &mut self.u));
         let after = x[..n].to_vec();
         let along = reset.drift.iter().zip(&after).map(|(d, l)| d * l).sum::<f64>() / reset.rate;
         for (b, lambda) in x[..n].iter_mut().enumerate() {

@@ -56,6 +56,14 @@ pub(crate) fn fire<S: System>(
     y.copy_from_slice(&reset.y_new);
 }
 
+/// A state event as it fired: which, at τ, from the state before it.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Fired {
+    pub(crate) event: usize,
+    pub(crate) tau: f64,
+    pub(crate) before: Vec<f64>,
+}
+
 /// The derivatives of event `i`'s firing at τ from the state y⁻ before it: the condition's
 /// c_y, the reset's R_y, the rate c_y g⁻ + c_t at which the condition falls and the drift
 /// R_y g⁻ − g⁺ (how the state after the event moves as the event moves). The derivatives in

@@ -1,5 +1,6 @@
 //! Dense output: the solution between the ends of a step, and a whole stored trajectory.
 
+use crate::events::Fired;
 use crate::signal::Side;
 
 /// The solution on one accepted step from `t` to `t + h` (h may be negative), as the
@@ -111,7 +112,7 @@ pub struct DenseSolution {
     coefficients: Vec<f64>,
     /// The state events fired along the solution, in order: (event, τ, the state before
     /// it). A step ends at each τ and the next begins there, after the reset.
-    pub(crate) fired: Vec<(usize, f64, Vec<f64>)>,
+    pub(crate) fired: Vec<Fired>,
 }
 
 impl DenseSolution {
@@ -179,7 +180,7 @@ impl DenseSolution {
 
     /// The times of the state events fired along the solution, in order.
     pub fn event_times(&self) -> impl Iterator<Item = f64> + '_ {
-        self.fired.iter().map(|e| e.1)
+        self.fired.iter().map(|e| e.tau)
     }
 
     /// Like [`eval_hinted`](Self::eval_hinted), with the one-sided limit `side` where a step

@@ -6,7 +6,7 @@ use nalgebra::{DMatrix, DMatrixView, Dyn};
 use crate::counts::Counts;
 use crate::driver::{integrate, integrate_selected};
 use crate::error::OdeError;
-use crate::events;
+use crate::events::{self, Fired};
 use crate::implicit::{AugmentedMatrix, IterationMatrix};
 use crate::interpolant::{DenseSolution, Interpolant};
 use crate::jacobian::JacobianProducts;
@@ -210,7 +210,7 @@ pub struct SensitivityRhs<'a, S> {
     /// (compiled) evaluation f is read, as [`ModelRhs`] does.
     work: Vec<f64>,
     /// The state events fired so far, in order: (event, τ, the state before it).
-    fired: Vec<(usize, f64, Vec<f64>)>,
+    fired: Vec<Fired>,
 }
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
@@ -360,7 +360,7 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
 
     fn fire(&mut self, i: usize, t: f64, x: &mut [f64]) {
         let n = self.sys.signature().n_states();
-        self.fired.push((i, t, x[..n].to_vec()));
+        self.fired.push(Fired { event: i, tau: t, before: x[..n].to_vec() });
         events::fire(self.sys, i, t, (self.p, self.wrt, &mut self.u), x);
     }
 
@@ -503,14 +503,13 @@ impl<'a, S: System> Ivp<'a, S> {
 
     /// [`integrate_steps`](Self::integrate_steps), with the state events fired: (event, τ,
     /// the state before it), in the order they fired.
-    #[allow(clippy::type_complexity)]
     fn integrate_logged(
         &self,
         integrator: &Integrator,
         wrt: &[Wrt],
         (t_lo, t_hi): (f64, f64),
         mut on_step: impl FnMut(&Interpolant),
-    ) -> Result<(Counts, Vec<(usize, f64, Vec<f64>)>), OdeError> {
+    ) -> Result<(Counts, Vec<Fired>), OdeError> {
         self.check()?;
         check_wrt(self.system, wrt)?;
         let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
