@@ -310,6 +310,7 @@ fn table_agrees(args: &[&str], fit: &Value) {
         let bound = bounds.get(name).and_then(Value::as_str);
         let se = match (bound, fit["std_errors"][name].as_f64()) {
             (Some("prior_location"), _) => "at prior".to_string(),
+            (Some("switch_on_sample"), _) => "at sample".to_string(),
             (Some(_), _) if !scales.iter().any(|l| l.trim_start().starts_with(name.as_str())) => {
                 "on bound".to_string()
             }
@@ -335,6 +336,7 @@ fn table_agrees(args: &[&str], fit: &Value) {
         if let Some(b) = bound {
             let words = match b {
                 "prior_location" => "at its Laplace prior's location".to_string(),
+                "switch_on_sample" => "its switch on a sample time".to_string(),
                 _ => format!("on its {b} bound"),
             };
             assert!(

@@ -678,6 +678,44 @@ file = "data.csv"
     }
 }
 
+/// A switch time whose best value is a sample time, where the objective has a kink:
+/// x' = if(lt(t, tau), 0, 1) from x(0) = 0 gives x(t) = max(0, t − τ), sampled at t = 0…4
+/// with data 0, 0, −1.5, 1.5, 2.5. On 1 ≤ τ ≤ 2 the cost (2 − τ + 1.5)² + 2(1.5 − τ)² + …
+/// falls towards τ = 2 (its own minimum is at 13/6); on 2 ≤ τ ≤ 3 it is (1.5 − τ)² … rising
+/// from τ = 2 (minimum at 1.5): the minimum is the kink at τ = 2, cost 1.5² + 0.5² + 0.5² =
+/// 2.75 (σ = 1). Each trust-region method reaches it, certified with τ held on the sample
+/// time (`switch_on_sample`), from 3.7 (over a kink at 3 first). Before kinks bounded the
+/// retries, a trial over the kink failed again and again, the radius shrank on every
+/// unknown, and the run stalled beside it.
+#[test]
+fn a_switch_time_on_a_sample_time_is_a_certified_kink() {
+    let model = r#"states = ["x"]
+parameters = ["tau"]
+[equations]
+x = "if(lt(t, tau), 0, 1)"
+[initial]
+x = 0.0
+[unknowns]
+tau = 3.7
+[data]
+file = "data.csv"
+"#;
+    let data = "t,x\n0,0\n1,0\n2,-1.5\n3,1.5\n4,2.5\n";
+    let case = Case::new("switch-kink", model, data);
+    for method in ["nl2sol", "levenberg-marquardt", "hybrid-newton", "geodesic-lm"] {
+        let out = sysid(&["fit", "--model", &case.model(), "--method", method, "--format", "json"]);
+        assert_eq!(out.status.code(), Some(0), "{method}: {}", text(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        assert_eq!(json["converged"], true, "{method}: {json}");
+        let tau = json["estimates"]["tau"].as_f64().unwrap();
+        // Within the sliver of the kink (1e-9 of the time, either side).
+        assert!((tau - 2.0).abs() <= 2.0 * 1e-9 * 1.5, "{method}: tau = {tau}");
+        assert_eq!(json["active_bounds"]["tau"], "switch_on_sample", "{method}: {json}");
+        let cost = json["cost"].as_f64().unwrap();
+        assert!((cost - 2.75).abs() <= 1e-8, "{method}: cost {cost}");
+    }
+}
+
 /// `also`: an experiment answers to other names too (the PEtab conditions merged into it):
 /// `simulate` and `predict` find it by either; a name taken twice is refused where written.
 #[test]

@@ -7,7 +7,7 @@ use std::time::Instant;
 use nalgebra::DMatrix;
 use sysid_ode::System;
 
-use crate::certificate::{Certificate, certify, exact_fit_tolerance, optimality};
+use crate::certificate::{Certificate, certify, exact_fit_tolerance, optimality, other_side};
 use crate::confidence::interval;
 use crate::estimate::{Estimate, ExperimentFit, Iteration, ScaleEstimate};
 use crate::evaluate::Linearization;
@@ -174,6 +174,10 @@ impl Record<'_> {
         let certificate = match &lin {
             Some(lin) => {
                 let mut certificate = certify(problem, lin, self.gtol, self.options.max_condition);
+                if !certificate.exact_fit {
+                    let linearize = |z: &[f64]| problem.linearize(z).ok();
+                    ev.add(other_side(problem, lin, &mut certificate, &linearize));
+                }
                 let fixed = problem.integrator().fixed_step.is_some();
                 // A fixed step's cost is the model's only as far as the step resolves it:
                 // its error is always measured, an exact fit included, and a reference that

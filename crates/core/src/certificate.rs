@@ -38,6 +38,13 @@
 //! distance to the bound −g_i points at as above). The prior determines such an unknown: it
 //! is never flat.
 //!
+//! An unknown whose descent direction −g_i points over a kink of the objective within reach
+//! of the sliver, where a switch time it moves passes a sample time ([`Problem::kinks`]), is
+//! held there like a bound ([`Bound::SwitchOnSample`]), m_i the bound's second term at the
+//! distance a step may go over it; the verdict on a returned point keeps it held only where
+//! the slope on the other side, from one more integration there, points back at the kink
+//! ([`other_side`]).
+//!
 //! The measure is computed from an integration, and carries its error: the driver measures
 //! it again at a tenth of the integrator's tolerance and reports the difference as
 //! `error`. The point is certified when no unknown is undetermined, not every unknown is
@@ -86,6 +93,9 @@ pub enum Bound {
     /// The location of its Laplace prior, the kink of |T(θ) − μ|/b: the rest of the
     /// objective pulls it by no more than the prior's slope (module docs).
     PriorLocation,
+    /// A kink where a switch time it moves passes a sample time: the slopes on both sides
+    /// point at it (module docs).
+    SwitchOnSample,
 }
 
 /// A direction the data cannot see: the normal matrix is singular at the point.
@@ -193,6 +203,7 @@ pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f6
         measure.value = f64::INFINITY;
         return measure;
     }
+    let kinks = problem.kinks(&lin.z);
     for (i, u) in problem.unknowns().list().iter().enumerate() {
         let (g, a) = (lin.gradient[i], lin.normal[(i, i)]);
         if u.at_kink(lin.z[i]) {
@@ -241,10 +252,69 @@ pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f6
         if to_bound < cosine && to_bound <= gtol {
             measure.active[i] = Some(bound);
         }
-        let m = cosine.min(to_bound);
+        let mut m = cosine.min(to_bound);
+        // A kink where a switch time passes a sample time, met at once along −g_i: held
+        // there like a bound, at the distance a step may go over it (the verdict checks the
+        // slope on the other side, [`other_side`]).
+        if let Some(around) = kinks[i]
+            && let Some(kink) = around.at(lin.z[i], -g)
+        {
+            let limit = if g > 0.0 { around.lo } else { around.hi };
+            let to_kink = a.sqrt() * (limit - lin.z[i]).abs() / norm_r;
+            if to_kink < m && to_kink <= gtol && kink.is_finite() {
+                measure.active[i] = Some(Bound::SwitchOnSample);
+                m = to_kink;
+            }
+        }
         measure.value = if m.is_nan() { f64::INFINITY } else { measure.value.max(m) };
     }
     measure
+}
+
+/// The verdict on the unknowns `certificate` holds on a kink where a switch time passes a
+/// sample time ([`Bound::SwitchOnSample`]): the slope on the other side of the kink, from a
+/// linearization there (`linearize`, the point mirrored over the kink, at least the sliver
+/// from it), must point back at it. Where it does not, crossing the kink lowers the cost: the
+/// unknown is not held, and its measure is the cosine of that slope. Returns the work of the
+/// linearizations made; a mirrored point that cannot be integrated leaves the claim unproven
+/// (∞).
+pub fn other_side<S: System>(
+    problem: &Problem<S>,
+    lin: &Linearization,
+    certificate: &mut Certificate,
+    linearize: &dyn Fn(&[f64]) -> Option<Linearization>,
+) -> sysid_ode::Counts {
+    let mut counts = sysid_ode::Counts::default();
+    let held: Vec<usize> = (0..certificate.active.len())
+        .filter(|&i| certificate.active[i] == Some(Bound::SwitchOnSample))
+        .collect();
+    if held.is_empty() {
+        return counts;
+    }
+    let kinks = problem.kinks(&lin.z);
+    for i in held {
+        let (z, g) = (lin.z[i], lin.gradient[i]);
+        let Some(around) = kinks[i] else { continue };
+        let (Some(kink), Some(over)) = (around.at(z, -g), around.mirror(z, -g)) else { continue };
+        let mut mirrored = lin.z.clone();
+        mirrored[i] = over;
+        let Some(there) = linearize(&mirrored) else {
+            certificate.active[i] = None;
+            certificate.optimality = f64::INFINITY;
+            continue;
+        };
+        counts += there.counts;
+        let (g, a) = (there.gradient[i], there.normal[(i, i)]);
+        // Descent there, −g, points back at the kink: held.
+        if g * (mirrored[i] - kink) >= 0.0 {
+            continue;
+        }
+        certificate.active[i] = None;
+        let cosine = g.abs() / (a.sqrt() * there.norm);
+        certificate.optimality =
+            if cosine.is_nan() { f64::INFINITY } else { certificate.optimality.max(cosine) };
+    }
+    counts
 }
 
 /// The point `lin.z` with every undetermined unknown (flat, off its bounds) moved onto the

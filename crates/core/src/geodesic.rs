@@ -101,7 +101,8 @@ impl Geodesic {
         }
         let second = bend * (2.0 / (GEODESIC_H * GEODESIC_H));
         let force = rows.jacobian.tr_mul(&second);
-        let (lo, hi) = unknowns.step_box(&lin.z, lin.gradient.as_slice());
+        let guarded = |i: usize| curve.guarded.get(i).copied().unwrap_or(false);
+        let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &guarded);
         let k = v.delta.len();
         let free: Vec<usize> =
             (0..k).filter(|&i| v.delta[i] > lo[i] && v.delta[i] < hi[i]).collect();

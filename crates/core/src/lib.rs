@@ -75,6 +75,7 @@ mod experiment;
 mod fit;
 pub mod format;
 mod geodesic;
+mod kinks;
 mod linalg;
 mod noise;
 mod options;
@@ -95,6 +96,7 @@ pub use estimate::{Estimate, ExperimentFit, FitRecord, Iteration, ScaleEstimate}
 pub use evaluate::{Linearization, Observed, WeightedResiduals};
 pub use experiment::{Experiment, Setting};
 pub use fit::Method;
+pub use kinks::{Around, SLIVER};
 pub use noise::{Noise, NoiseDistribution, Transform};
 pub use options::{DEFAULT_GTOL, Driven, DriverOptions, OptionsError};
 pub use problem::{Problem, ProblemBuilder};
@@ -115,6 +117,7 @@ pub mod method {
     };
     pub use crate::certificate::{
         EXACT_FIT, MAX_EXACT_FIT, Measure, certify, exact_fit_tolerance, onto_bounds, optimality,
+        other_side,
     };
     pub use crate::driver::drive;
     pub use crate::evaluations::{Evaluations, FINEST_RTOL, REFERENCE_RTOL};

@@ -49,6 +49,9 @@ impl Estimate {
                 _ if self.certificate.active[i] == Some(Bound::PriorLocation) => {
                     "at prior".to_string()
                 }
+                _ if self.certificate.active[i] == Some(Bound::SwitchOnSample) => {
+                    "at sample".to_string()
+                }
                 _ if on_bound => "on bound".to_string(),
                 Some(s) => significant(s[i], 5),
                 None => "—".to_string(),
@@ -65,6 +68,7 @@ impl Estimate {
                 Some(Bound::Lower) => "   on its lower bound",
                 Some(Bound::Upper) => "   on its upper bound",
                 Some(Bound::PriorLocation) => "   at its Laplace prior's location",
+                Some(Bound::SwitchOnSample) => "   its switch on a sample time",
                 None => "",
             };
             out += &format!(

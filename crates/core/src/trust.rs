@@ -39,7 +39,9 @@ pub fn differenced_hessian<S: System>(
 ) -> Result<Option<DMatrix<f64>>, Failure> {
     let problem = ev.problem();
     let k = lin.gradient.len();
-    let (lo, hi) = problem.unknowns().step_box(&lin.z, lin.gradient.as_slice());
+    // Differences keep to the kinks of switch times passing sample times: across one the
+    // gradient jumps.
+    let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &|_| true);
     let relative = problem.integrator().rtol.sqrt();
     let mut h = DMatrix::zeros(k, k);
     for j in 0..k {
@@ -130,6 +132,9 @@ pub struct Curve {
     pub scale: Vec<f64>,
     /// The λ of the last step found with λ > 0 (a start for the next search).
     pub lambda: f64,
+    /// Per unknown, whether its steps keep to the kinks next to it where a switch time
+    /// passes a sample time ([`Problem::kinks`](crate::Problem::kinks)); none when empty.
+    pub guarded: Vec<bool>,
 }
 
 impl Curve {
@@ -205,7 +210,8 @@ impl Curve {
         radius: f64,
         max_condition: f64,
     ) -> Result<CurveStep, Failure> {
-        let (lo, hi) = problem.unknowns().step_box(&lin.z, lin.gradient.as_slice());
+        let guarded = |i: usize| self.guarded.get(i).copied().unwrap_or(false);
+        let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &guarded);
         let bounds = (lo.as_slice(), hi.as_slice());
         // Off the kink of a Laplace prior the model's gradient is the one-sided one, so that
         // its predicted decrease counts the prior's growth.

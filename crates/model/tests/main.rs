@@ -8,6 +8,7 @@ mod allocations;
 mod events;
 mod experiments;
 mod expressions;
+mod kinks;
 mod laplace;
 mod model_file;
 mod profile;

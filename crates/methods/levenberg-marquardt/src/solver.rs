@@ -340,6 +340,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
     fn start(&mut self, ev: &Evaluations<'_, S>, z: Vec<f64>) -> Result<Iterate, Failure> {
         (self.newton, self.fall, self.secant) = (None, None, Secant::default());
         (self.rejections, self.unscreened) = (0.0, false);
+        self.curve.guarded.clear();
         let lin = ev.linearize(&z)?;
         self.curve.rescale(&lin);
         let scaled = self.curve.scaled_norm(&z);
@@ -430,9 +431,13 @@ impl<S: System> Step<S> for TrustRegion<'_> {
             let rejected = !(evaluated.is_some() && rho >= ACCEPT);
             self.rejections = (1.0 - SCREEN_MEMORY) * self.rejections
                 + SCREEN_MEMORY * f64::from(u8::from(rejected));
-            if rho < 0.25 {
+            // A rejected trial that went over a kink where a switch time passes a sample
+            // time is blamed on the kink: the unknowns it took over one keep to their kinks
+            // from now on, and the radius stays for the retry.
+            let crossed = rejected && self.guard_crossed(problem, &current.z, &z);
+            if rho < 0.25 && !crossed {
                 self.radius = 0.5 * self.radius.min(10.0 * trial.scaled_norm);
-            } else if rho >= 0.75 || trial.lambda == 0.0 {
+            } else if !crossed && (rho >= 0.75 || trial.lambda == 0.0) {
                 self.radius = 2.0 * trial.scaled_norm;
             }
             if self.options.hessian == Hessian::Adaptive && decrease.is_finite() {
@@ -440,6 +445,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 self.secant.choose(profiled.as_ref().unwrap_or(lin), &trial.delta, decrease);
             }
             if let Some(l) = evaluated.filter(|_| rho >= ACCEPT) {
+                self.release_kinks(problem, &l);
                 self.fall = Some((lin.cost - l.cost) / lin.cost);
                 if self.options.hessian == Hessian::Adaptive {
                     let step = DVector::from_iterator(
@@ -476,6 +482,38 @@ impl<S: System> Step<S> for TrustRegion<'_> {
 }
 
 impl TrustRegion<'_> {
+    /// Guards the unknowns a trial from `from` to `to` took over a kink where a switch time
+    /// passes a sample time ([`Curve::guarded`](sysid_core::method::Curve)): their steps keep
+    /// to the kinks next to them, overstepped by a sliver. Whether any was newly guarded.
+    fn guard_crossed<S: System>(&mut self, problem: &Problem<S>, from: &[f64], to: &[f64]) -> bool {
+        let mut any = false;
+        let guarded = &mut self.curve.guarded;
+        guarded.resize(from.len(), false);
+        for (i, around) in problem.kinks(from).into_iter().enumerate() {
+            if let Some(a) = around
+                && !guarded[i]
+                && (to[i] < a.lo || to[i] > a.hi)
+            {
+                guarded[i] = true;
+                any = true;
+            }
+        }
+        any
+    }
+
+    /// Releases the guarded unknowns of the new iterate `lin` that are no longer held by a
+    /// kink: not at one, or at one their descent direction leads away from.
+    fn release_kinks<S: System>(&mut self, problem: &Problem<S>, lin: &Linearization) {
+        if !self.curve.guarded.contains(&true) {
+            return;
+        }
+        let kinks = problem.kinks(&lin.z);
+        for (i, guarded) in self.curve.guarded.iter_mut().enumerate() {
+            let held = kinks[i].is_some_and(|a| a.at(lin.z[i], -lin.gradient[i]).is_some());
+            *guarded &= held;
+        }
+    }
+
     /// The trial point z linearized, with its decrease from `lin`: under hierarchical
     /// optimisation the profile's (the scales then move to the trial's closed form, which
     /// lowers ε further). `None` and −∞ where the model cannot be integrated there (a step
