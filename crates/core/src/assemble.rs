@@ -173,12 +173,14 @@ impl Record<'_> {
         };
         let certificate = match &lin {
             Some(lin) => {
-                let mut certificate = certify(problem, lin, self.gtol, self.options.max_condition);
-                if !certificate.exact_fit {
-                    let linearize = |z: &[f64]| problem.linearize(z).ok();
-                    ev.add(other_side(problem, lin, &mut certificate, &linearize));
-                }
+                let max_condition = self.options.max_condition;
+                let mut certificate = certify(problem, lin, self.gtol, max_condition);
+                let linearize = |z: &[f64]| problem.linearize(z).ok();
                 let fixed = problem.integrator().fixed_step.is_some();
+                // The verdict on the unknowns held at kinks of switch times passing sample
+                // times ([`other_side`]), once the exact fit is settled: made here with the
+                // error measurement, or below.
+                let mut kinks_judged = false;
                 // A fixed step's cost is the model's only as far as the step resolves it:
                 // its error is always measured, an exact fit included, and a reference that
                 // cannot be integrated leaves the claim unproven (∞).
@@ -197,15 +199,26 @@ impl Record<'_> {
                                         optimality(problem, lin, self.gtol).value;
                                 }
                             }
-                            let value = optimality(&finer, &fine, self.gtol).value;
                             if !certificate.exact_fit {
-                                certificate.error = (certificate.optimality - value).abs();
+                                ev.add(other_side(problem, lin, &mut certificate, &linearize));
+                                kinks_judged = true;
+                                // The same measure at the finer integration, with the same
+                                // verdict on kinks: their difference is the integration's.
+                                let mut finely = certify(&finer, &fine, self.gtol, max_condition);
+                                finely.optimality = optimality(&finer, &fine, self.gtol).value;
+                                let linearize_finely = |z: &[f64]| finer.linearize(z).ok();
+                                ev.add(other_side(&finer, &fine, &mut finely, &linearize_finely));
+                                certificate.error =
+                                    (certificate.optimality - finely.optimality).abs();
                                 certificate.cost_error = (lin.cost - fine.cost).abs();
                             }
                         }
                         Err(_) if fixed => certificate.error = f64::INFINITY,
                         Err(_) => {}
                     }
+                }
+                if !kinks_judged && !certificate.exact_fit {
+                    ev.add(other_side(problem, lin, &mut certificate, &linearize));
                 }
                 certificate
             }

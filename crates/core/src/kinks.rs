@@ -4,7 +4,8 @@
 //! A right-hand side that switches from g₋ to g₊ at τ(α) (`if(le(t, tau), a, b)` with τ
 //! estimated) leaves the states continuous, but a sample at t_k depends on τ only while
 //! τ < t_k: as τ passes t_k, ∂r_k/∂τ jumps between the switch's term and 0, and the
-//! objective has a kink there along the unknown that moves τ. Its other partial derivatives
+//! objective has a kink there along the unknown that moves τ (and at t0, before which the
+//! switch has happened for every sample). Its other partial derivatives
 //! do not jump (at τ = t_k both sides are the same function of them). A Gauss–Newton model
 //! taken on one side predicts a step across it wrongly; a trust region whose trials cross a
 //! kink again and again shrinks on every unknown, and the run stalls beside it (Beer's
@@ -66,7 +67,8 @@ impl Around {
     pub fn mirror(&self, z: f64, direction: f64) -> Option<f64> {
         let kink = self.at(z, direction)?;
         let sliver = if direction < 0.0 { self.below - self.lo } else { self.hi - self.above };
-        Some(kink + direction.signum() * (z - kink).abs().max(sliver))
+        let side = if direction < 0.0 { -1.0 } else { 1.0 };
+        Some(kink + side * (z - kink).abs().max(sliver))
     }
 }
 
@@ -89,7 +91,11 @@ impl<S: System> Problem<S> {
             }
             let free_index = index.get_or_insert_with(|| self.free_index());
             let jacobian = e.slot_jacobian(&values, free_index);
-            let times = &e.sampled().times;
+            // The sample times, and t0: with τ before it every sample is past the switch.
+            let mut times = e.sampled().times.clone();
+            if times.first().is_none_or(|&t| t > e.t0) {
+                times.insert(0, e.t0);
+            }
             for (which, &(tau, q, slope)) in moving.iter().enumerate() {
                 let Some(slot) = e.slots.iter().position(|w| *w == Wrt::Parameter(q)) else {
                     continue;

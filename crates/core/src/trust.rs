@@ -39,9 +39,15 @@ pub fn differenced_hessian<S: System>(
 ) -> Result<Option<DMatrix<f64>>, Failure> {
     let problem = ev.problem();
     let k = lin.gradient.len();
-    // Differences keep to the kinks of switch times passing sample times: across one the
-    // gradient jumps.
-    let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &|_| true);
+    // Differences keep to the kinks of switch times passing sample times, not even the sliver
+    // over them a step may take: across one the gradient jumps.
+    let (mut lo, mut hi) = problem.unknowns().step_box(&lin.z, lin.gradient.as_slice());
+    for (j, around) in problem.kinks(&lin.z).into_iter().enumerate() {
+        if let Some(a) = around {
+            lo[j] = lo[j].max(a.below - lin.z[j]).min(0.0);
+            hi[j] = hi[j].min(a.above - lin.z[j]).max(0.0);
+        }
+    }
     let relative = problem.integrator().rtol.sqrt();
     let mut h = DMatrix::zeros(k, k);
     for j in 0..k {

@@ -87,3 +87,24 @@ fn a_kink_is_held_only_where_both_sides_point_at_it() {
     // 2.25 + 2(0.5 + 2e-9)²: 2.75 to 1e-8.
     assert!((lin.cost - 2.75).abs() <= 1e-8, "{}", lin.cost);
 }
+
+/// A switch time that falls as the unknown grows, τ = 10 − u (set by the experiment): at
+/// u = 7.5 (τ = 2.5) the kink below is u = 7 (τ = 3) and the one above u = 8 (τ = 2), each
+/// overstepped by 1e-9 of its time (dτ/du = −1).
+#[test]
+fn a_switch_time_that_falls_as_its_unknown_grows_has_its_kinks_swapped() {
+    let dir = std::env::temp_dir().join(format!("sysid-kinks-falls-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("data.csv"), "t,x\n0,0\n1,0\n2,-1.5\n3,1.5\n4,2.5\n").unwrap();
+    let text = "states = [\"x\"]\nparameters = [\"tau\"]\n[equations]\nx = \"if(lt(t, tau), 0, 1)\"\n\
+         [initial]\nx = 0.0\n[unknowns]\nu = 7.5\n[[experiments]]\nname = \"e\"\nfile = \"data.csv\"\n\
+         set = { tau = \"10 - u\" }\n";
+    std::fs::write(dir.join("m.toml"), text).unwrap();
+    let problem = Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap();
+    let around = problem.kinks(&[7.5])[0].expect("a kink");
+    let rounding = 4.0 * f64::EPSILON * 8.0;
+    assert!((around.below - 7.0).abs() <= rounding, "{around:?}");
+    assert!((around.above - 8.0).abs() <= rounding, "{around:?}");
+    assert!((around.below - around.lo - 3e-9).abs() <= rounding, "{around:?}");
+    assert!((around.hi - around.above - 2e-9).abs() <= rounding, "{around:?}");
+}

@@ -447,7 +447,11 @@ impl<S: System> Step<S> for TrustRegion<'_> {
             if let Some(l) = evaluated.filter(|_| rho >= ACCEPT) {
                 self.release_kinks(problem, &l);
                 self.fall = Some((lin.cost - l.cost) / lin.cost);
-                if self.options.hessian == Hessian::Adaptive {
+                // Not over a kink of a switch time: the secant's premise, a smooth objective
+                // along the step, fails there (a to-and-fro step of two slivers would teach it
+                // the slope's jump over them as curvature).
+                if self.options.hessian == Hessian::Adaptive && !self.curve.guarded.contains(&true)
+                {
                     let step = DVector::from_iterator(
                         l.z.len(),
                         l.z.iter().zip(&lin.z).map(|(a, b)| a - b),
