@@ -257,11 +257,11 @@ pub fn optimality<S: System>(problem: &Problem<S>, lin: &Linearization, gtol: f6
         // there like a bound, at the distance a step may go over it (the verdict checks the
         // slope on the other side, [`other_side`]).
         if let Some(around) = kinks[i]
-            && let Some(kink) = around.at(lin.z[i], -g)
+            && around.at(lin.z[i], -g).is_some()
         {
             let limit = if g > 0.0 { around.lo } else { around.hi };
             let to_kink = a.sqrt() * (limit - lin.z[i]).abs() / norm_r;
-            if to_kink < m && to_kink <= gtol && kink.is_finite() {
+            if to_kink < m && to_kink <= gtol {
                 measure.active[i] = Some(Bound::SwitchOnSample);
                 m = to_kink;
             }

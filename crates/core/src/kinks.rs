@@ -177,14 +177,28 @@ impl<S: System> Problem<S> {
     ) -> (Vec<f64>, Vec<f64>) {
         let (mut lo, mut hi) = self.unknowns.step_box(z, gradient);
         if (0..z.len()).any(guarded) {
-            for (i, around) in self.kinks(z).into_iter().enumerate() {
-                if let Some(a) = around.filter(|_| guarded(i)) {
-                    lo[i] = lo[i].max(a.lo - z[i]).min(0.0);
-                    hi[i] = hi[i].min(a.hi - z[i]).max(0.0);
-                }
-            }
+            self.keep_to_kinks(z, (&mut lo, &mut hi), guarded, true);
         }
         (lo, hi)
+    }
+
+    /// Narrows the corrections `lo`, `hi` from z to the kinks next to each coordinate that
+    /// `pick` selects: over them by the sliver (`overstep`, the steps' box), or only up to them
+    /// (differences, which must not cross one).
+    pub(crate) fn keep_to_kinks(
+        &self,
+        z: &[f64],
+        (lo, hi): (&mut [f64], &mut [f64]),
+        pick: &dyn Fn(usize) -> bool,
+        overstep: bool,
+    ) {
+        for (i, around) in self.kinks(z).into_iter().enumerate() {
+            if let Some(a) = around.filter(|_| pick(i)) {
+                let (down, up) = if overstep { (a.lo, a.hi) } else { (a.below, a.above) };
+                lo[i] = lo[i].max(down - z[i]).min(0.0);
+                hi[i] = hi[i].min(up - z[i]).max(0.0);
+            }
+        }
     }
 }
 

@@ -42,12 +42,7 @@ pub fn differenced_hessian<S: System>(
     // Differences keep to the kinks of switch times passing sample times, not even the sliver
     // over them a step may take: across one the gradient jumps.
     let (mut lo, mut hi) = problem.unknowns().step_box(&lin.z, lin.gradient.as_slice());
-    for (j, around) in problem.kinks(&lin.z).into_iter().enumerate() {
-        if let Some(a) = around {
-            lo[j] = lo[j].max(a.below - lin.z[j]).min(0.0);
-            hi[j] = hi[j].min(a.above - lin.z[j]).max(0.0);
-        }
-    }
+    problem.keep_to_kinks(&lin.z, (&mut lo, &mut hi), &|_| true, false);
     let relative = problem.integrator().rtol.sqrt();
     let mut h = DMatrix::zeros(k, k);
     for j in 0..k {
