@@ -107,6 +107,22 @@ pub fn drive<S: System>(
     }
 }
 
+/// `f` with the integrations [paced](Evaluations::pace) at the work of `current`'s
+/// linearization, where the method `retreats` from failed trials ([`Step::retreats`]) and
+/// `current` has one.
+fn paced<S: System, T>(
+    ev: &mut Evaluations<'_, S>,
+    retreats: bool,
+    current: &Iterate,
+    f: impl FnOnce(&Evaluations<'_, S>) -> T,
+) -> T {
+    let work = current.linearization.as_ref().filter(|_| retreats).map(|l| l.counts);
+    ev.pace(work.as_ref());
+    let out = f(ev);
+    ev.pace(None);
+    out
+}
+
 /// The most rounds of fits between closed-form updates of the noise scales.
 const MAX_ROUNDS: usize = 50;
 
@@ -126,6 +142,7 @@ fn drive_once<S: System>(
     let started = Instant::now();
     let z0 = start_coordinates(problem, start)?;
     let mut ev = Evaluations::new(problem, options.integration_budget(problem.unknowns().len()));
+    let retreats = step.retreats();
     let gtol = options.gtol_for(problem.integrator().rtol);
     let record = Record { method, options, gtol, started };
     let profile = Profile::new(problem, profiles);
@@ -217,7 +234,7 @@ fn drive_once<S: System>(
             .or(settled.then_some(Rule::Settled));
         let mut proposal = None;
         if fired.is_none() {
-            let p = match step.propose(&ev, &current) {
+            let p = match paced(&mut ev, retreats, &current, |ev| step.propose(ev, &current)) {
                 Ok(p) => p,
                 Err(failure) => break Ending::Failed { iteration, failure },
             };
@@ -303,20 +320,21 @@ fn drive_once<S: System>(
         }
         let proposal = match proposal {
             Some(p) => p,
-            None => match step.propose(&ev, &current) {
+            None => match paced(&mut ev, retreats, &current, |ev| step.propose(ev, &current)) {
                 Ok(p) => p,
                 Err(failure) => break Ending::Failed { iteration, failure },
             },
         };
-        let next = match step.advance(&ev, &current, proposal) {
-            Ok(Advance::Moved(next)) => next,
-            Ok(Advance::MovedThenStop(next, rule)) => {
-                pending = Some(rule);
-                next
-            }
-            Ok(Advance::Stop(rule)) => break Ending::Rule(rule),
-            Err(failure) => break Ending::Failed { iteration, failure },
-        };
+        let next =
+            match paced(&mut ev, retreats, &current, |ev| step.advance(ev, &current, proposal)) {
+                Ok(Advance::Moved(next)) => next,
+                Ok(Advance::MovedThenStop(next, rule)) => {
+                    pending = Some(rule);
+                    next
+                }
+                Ok(Advance::Stop(rule)) => break Ending::Rule(rule),
+                Err(failure) => break Ending::Failed { iteration, failure },
+            };
         let next = profile.apply(&mut ev, next);
         step_norm = Some(distance(&next.z, &current.z));
         let previous = std::mem::replace(&mut current, next);

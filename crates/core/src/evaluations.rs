@@ -6,11 +6,20 @@
 //! The driver may refine the integration during a run ([`refine`](Evaluations::refine)):
 //! from then on every evaluation integrates at a tenth of the tolerances, so that the
 //! certificate is measured more accurately than it is tested.
+//!
+//! While a method that retreats from a failed trial proposes and moves, the driver
+//! [paces](Evaluations::pace) it: each integration may take at most [`PACE`] times the steps
+//! of the iterate's own evaluation (rounded up to a power of two, at least [`PACE_FLOOR`],
+//! never more than the integrator's `max_steps`). A trial step into a region where the model
+//! needs far more work than at the iterate (a stiff blow-up, say) then fails as soon as that
+//! is clear, and the method shortens the step, instead of spending the whole step budget to
+//! learn the same; the iterates' own cost moves the limit with them. The certificate's
+//! evaluations are never paced.
 
 use std::cell::Cell;
 
 use nalgebra::DVector;
-use sysid_ode::{Counts, OdeError, Scheme, System};
+use sysid_ode::{Counts, Integrator, OdeError, Scheme, System};
 
 use crate::evaluate::Linearization;
 use crate::problem::Problem;
@@ -27,7 +36,19 @@ pub struct Evaluations<'p, S> {
     counts: Cell<Counts>,
     /// Whether the driver sets the noise scales to their closed form at every iterate.
     profiling: bool,
+    /// The step limit of the last [`pace`](Self::pace) and the problem integrated under it,
+    /// when it is below the problem's own `max_steps`.
+    paced: Option<(usize, Problem<S>)>,
+    /// Whether the integrations are paced now.
+    pacing: bool,
 }
+
+/// A paced integration may take this many times the steps (accepted and rejected) of the
+/// iterate's evaluation.
+pub const PACE: u64 = 10;
+
+/// The least step limit of a paced integration.
+pub const PACE_FLOOR: usize = 1024;
 
 /// The tightest relative tolerance [`Evaluations::finer`] refines to.
 pub const FINEST_RTOL: f64 = 1e-12;
@@ -45,6 +66,8 @@ impl<'p, S: System> Evaluations<'p, S> {
             budget,
             counts: Cell::new(Counts::default()),
             profiling: false,
+            paced: None,
+            pacing: false,
         }
     }
 
@@ -97,6 +120,7 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// Evaluates from now on with `problem` (one of [`finer`](Self::finer)'s).
     pub fn refine(&mut self, problem: Problem<S>) {
         self.refined = Some(problem);
+        self.paced = None;
     }
 
     /// Whether the driver sets the noise scales to their closed form at every iterate
@@ -115,6 +139,35 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// [`Problem::scales`]), at the integration of the run so far.
     pub fn set_scales(&mut self, sigma: &[f64]) {
         self.refined = Some(self.problem().with_scales(sigma));
+        self.paced = None;
+    }
+
+    /// Paces the integrations from now on at the work of an iterate whose evaluation took
+    /// `iterate` (see the module's documentation), or, with `None`, stops pacing them.
+    pub(crate) fn pace(&mut self, iterate: Option<&Counts>) {
+        self.pacing = false;
+        let Some(iterate) = iterate else { return };
+        let integrator = *self.problem().integrator();
+        let work = (iterate.steps + iterate.rejected_steps).saturating_mul(PACE);
+        let limit = usize::try_from(work).unwrap_or(usize::MAX).max(PACE_FLOOR);
+        let limit = limit.checked_next_power_of_two().unwrap_or(usize::MAX);
+        if limit >= integrator.max_steps {
+            return;
+        }
+        if self.paced.as_ref().is_none_or(|(l, _)| *l != limit) {
+            let capped = Integrator { max_steps: limit, ..integrator };
+            self.paced = self.problem().clone().with_integrator(capped).ok().map(|p| (limit, p));
+        }
+        self.pacing = self.paced.is_some();
+    }
+
+    /// The problem as the next integration runs it: [`problem`](Self::problem), with the
+    /// step limit of the [pace](Self::pace) while there is one.
+    fn integrating(&self) -> &Problem<S> {
+        match (&self.paced, self.pacing) {
+            (Some((_, paced)), true) => paced,
+            _ => self.problem(),
+        }
     }
 
     /// The work so far.
@@ -144,8 +197,16 @@ impl<'p, S: System> Evaluations<'p, S> {
                 Ok(value)
             }
             Err(error) => {
-                // A failed integration counts as one.
-                self.add(Counts { integrations: 1, ..Counts::default() });
+                // A failed integration counts as one; one that ran out of steps, with the
+                // steps of its budget (accepted and rejected together, as the budget counts
+                // them). Other failures' work is not known here.
+                let steps = match error {
+                    OdeError::TooManySteps { steps, .. } | OdeError::Stiff { steps, .. } => {
+                        steps as u64
+                    }
+                    _ => 0,
+                };
+                self.add(Counts { integrations: 1, steps, ..Counts::default() });
                 Err(Failure::Integration { error, at: self.values(z) })
             }
         }
@@ -160,7 +221,7 @@ impl<'p, S: System> Evaluations<'p, S> {
 
     /// ε, U and A at z ([`Problem::linearize`]), all finite.
     pub fn linearize(&self, z: &[f64]) -> Result<Linearization, Failure> {
-        let lin = self.run(z, || self.problem().linearize(z).map(with_counts))?;
+        let lin = self.run(z, || self.integrating().linearize(z).map(with_counts))?;
         self.check(z, &lin)?;
         Ok(lin)
     }
@@ -168,14 +229,14 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// The weighted residuals and their Jacobian at z
     /// ([`Problem::residuals_and_jacobian`]), with ε, U and A, all finite.
     pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, Failure> {
-        let lin = self.run(z, || self.problem().residuals_and_jacobian(z).map(with_counts))?;
+        let lin = self.run(z, || self.integrating().residuals_and_jacobian(z).map(with_counts))?;
         self.check(z, &lin)?;
         Ok(lin)
     }
 
     /// The weighted residuals at z ([`Problem::residuals`]), with a finite sum of squares.
     pub fn residuals(&self, z: &[f64]) -> Result<DVector<f64>, Failure> {
-        let r = self.run(z, || self.problem().residuals(z))?;
+        let r = self.run(z, || self.integrating().residuals(z))?;
         if !r.norm_squared().is_finite() {
             return Err(self.overflow(z, "the cost ε", Some(&r)));
         }
@@ -184,7 +245,7 @@ impl<'p, S: System> Evaluations<'p, S> {
 
     /// ε at z by the accurate plain integration ([`Problem::cost`]), finite.
     pub fn cost(&self, z: &[f64]) -> Result<f64, Failure> {
-        let cost = self.run(z, || self.problem().cost(z))?;
+        let cost = self.run(z, || self.integrating().cost(z))?;
         if !cost.is_finite() {
             return Err(self.overflow(z, "the cost ε", None));
         }
@@ -230,4 +291,80 @@ impl<'p, S: System> Evaluations<'p, S> {
 fn with_counts(lin: Linearization) -> (Linearization, Counts) {
     let counts = lin.counts;
     (lin, counts)
+}
+
+#[cfg(test)]
+mod tests {
+    use sysid_ode::testing::Decay;
+
+    use super::*;
+    use crate::{Data, Experiment, Setting};
+
+    /// x' = −k x from x(0) = 1, sampled at t = 1 and 2, integrated by DOPRI5: a handful of
+    /// steps at k = 0.5; at k = 1e4 stability limits the steps to about 3.3/k, some 6 000.
+    fn decay() -> Problem<Decay> {
+        let t = [1.0, 2.0];
+        let experiment = Experiment {
+            name: "decay".into(),
+            also: Vec::new(),
+            system: Decay::new(),
+            t0: 0.0,
+            initial: vec![Setting::Value(1.0)],
+            parameters: vec![Setting::Unknown("k".into())],
+            data: Data::discrete().series("x", &t, &[0.6, 0.4]),
+        };
+        let integrator = Integrator { scheme: Scheme::Dopri5, ..Integrator::default() };
+        Problem::builder(Decay::new())
+            .unknown("k", 0.5)
+            .experiment(experiment)
+            .integrator(integrator)
+            .build()
+            .expect("a valid problem")
+    }
+
+    #[test]
+    fn a_paced_trial_fails_at_ten_times_the_iterates_steps_and_counts_them() {
+        let problem = decay();
+        let mut ev = Evaluations::new(&problem, 100);
+        let iterate = ev.linearize(&[0.5]).expect("k = 0.5 integrates").counts;
+        let work = iterate.steps + iterate.rejected_steps;
+        assert!(10 * work < PACE_FLOOR as u64, "{work} steps at the iterate");
+        // Unpaced, the stiff point integrates within the 100 000-step budget.
+        let free = ev.residuals(&[1e4]).map(|r| r.len());
+        assert_eq!(free, Ok(2));
+        let unpaced = ev.counts().steps;
+        assert!(unpaced > 4 * PACE_FLOOR as u64, "{unpaced} steps in all");
+        // Paced at the iterate, it fails at the floor's 1 024 steps, and they are counted.
+        ev.pace(Some(&iterate));
+        let before = ev.counts();
+        match ev.residuals(&[1e4]) {
+            Err(Failure::Integration {
+                error: OdeError::Stiff { steps, .. } | OdeError::TooManySteps { steps, .. },
+                ..
+            }) => assert_eq!(steps, PACE_FLOOR),
+            other => panic!("expected the step limit, got {other:?}"),
+        }
+        let after = ev.counts();
+        assert_eq!(after.integrations - before.integrations, 1);
+        assert_eq!(after.steps - before.steps, PACE_FLOOR as u64);
+        // The point the iterate is at still integrates, paced.
+        assert!(ev.residuals(&[0.5]).is_ok());
+        // Unpaced again, the stiff point integrates.
+        ev.pace(None);
+        assert!(ev.residuals(&[1e4]).is_ok());
+        // An iterate whose own work is a tenth of the budget or more leaves it as it is.
+        ev.pace(Some(&Counts { steps: 10_000, ..Counts::default() }));
+        assert!(ev.residuals(&[1e4]).is_ok());
+    }
+
+    #[test]
+    fn the_pace_is_ten_times_the_iterates_work_rounded_up_to_a_power_of_two() {
+        let problem = decay();
+        let mut ev = Evaluations::new(&problem, 100);
+        ev.pace(Some(&Counts { steps: 150, rejected_steps: 20, ..Counts::default() }));
+        let limit = ev.integrating().integrator().max_steps;
+        assert_eq!(limit, 2048, "10 × 170 = 1 700, rounded up");
+        ev.pace(None);
+        assert_eq!(ev.integrating().integrator().max_steps, 100_000);
+    }
 }

@@ -131,6 +131,14 @@ pub trait Step<S: System> {
         false
     }
 
+    /// Whether a trial whose integration fails is, to the method, a rejected trial that it
+    /// retreats from (a shorter step), not the end of the run: the driver then
+    /// [paces](crate::evaluations) its integrations while it proposes and moves, so that a
+    /// trial the model needs far more steps at than at the iterate fails early.
+    fn retreats(&self) -> bool {
+        false
+    }
+
     /// Proposes the next point from `current`.
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure>;
 

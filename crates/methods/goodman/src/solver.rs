@@ -55,6 +55,11 @@ impl<S: System> Step<S> for Newton<'_> {
         ev.linearize(&z).map(Iterate::linearized)
     }
 
+    /// With step halving, a trial whose integration fails is halved.
+    fn retreats(&self) -> bool {
+        self.options.step_halving
+    }
+
     /// Solves A δc = −U* (eq. 14) for the unknowns not held on a bound; the proposal is
     /// c* + δc projected on the bounds.
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure> {

@@ -332,6 +332,11 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         true
     }
 
+    /// A trial whose integration fails is rejected and the radius shrinks.
+    fn retreats(&self) -> bool {
+        true
+    }
+
     /// Linearizes at the start; D from its A, Δ = factor·‖D z₀‖ (factor when that is 0).
     ///
     /// A start begins the hybrid afresh: each round of the noise scales' closed form starts
