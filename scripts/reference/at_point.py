@@ -10,12 +10,14 @@ tests/data/petab/best_known.tsv and in the test that checks the points
 Printed on this machine (amici and pypesto of November 2026, AMICI's default tolerances):
 
     Elowitz_Nature2000 -65.49314849568135
-    Zheng_PNAS2012 -292.9831237115272
+    Zheng_PNAS2012 -293.3099348195668
     Schwen_PONE2014 952.4217262175704
 
-(sysid: −65.493149, −292.982545 and 952.421726. Zheng's gap, 5.8e-4, is within AMICI's
-own 1e-3 check; sysid gives −292.982545 at its tolerances and at 1000 times tighter ones,
-AMICI was not run tighter. At Zheng's nominal point the two agree to 1e-6.)
+(sysid: −65.493149, −293.309462 and 952.421726. Zheng's gap, 4.7e-4, is within AMICI's
+own 1e-3 check; sysid gives the same value at its tolerances and at 1000 times tighter ones
+(crates/cli/tests/petab.rs), AMICI was not run tighter. At Zheng's nominal point the two
+agree to 1e-6. Zheng's point of before, −292.982545, AMICI gave as −292.9831237: the same
+gap, 5.8e-4. Zheng's row printed 2026-12-02, the others in November 2026.)
 """
 
 import argparse

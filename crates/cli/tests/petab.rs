@@ -393,9 +393,11 @@ fn the_default_fit_of_fiedler_from_nominal_plus_a_tenth_reaches_the_peers_optimu
 /// - Elowitz's, in another basin than the nominal's and 2.25 lower (−65.493149 against
 ///   −63.239749), with 9 of its 21 unknowns on bounds, found by nl2sol from nominal + 0.1
 ///   with a first trust radius of ‖D z₀‖; AMICI evaluates it to −65.4931485;
-/// - Zheng's, −292.982545 (nominal −278.333533), and Schwen's, 952.421726 with its prior's
-///   term (nominal 956.518370), each found by a 20-start multistart of nl2sol
-///   (`sysid fit --petab … --starts 20 --starts-without-guess`) and fitted again from its
+/// - Zheng's, −293.309462 with 22 of its 46 unknowns on bounds (nominal −278.333533), found
+///   by start 24 of a 100-start multistart of nl2sol (`sysid fit --petab … --starts 100
+///   --starts-without-guess --starts-budget 900`); AMICI evaluates it to −293.309935;
+/// - Schwen's, 952.421726 with its prior's term (nominal 956.518370), found by a 20-start
+///   multistart of nl2sol (`--starts 20 --starts-without-guess`) and fitted again from its
 ///   start's end (`--start`).
 ///
 /// AMICI's values are from `scripts/reference/at_point.py`. levenberg-marquardt started at
