@@ -131,7 +131,10 @@ impl Record<'_> {
                     _ => Vec::new(),
                 },
             },
-            Ending::MaxIterations => Termination::MaxIterations,
+            Ending::MaxIterations => Termination::MaxIterations {
+                fell: fell(&history),
+                moving: moving(ev.problem(), &history),
+            },
             Ending::TimeLimit(seconds) => Termination::TimeLimit { seconds },
             Ending::Failed { failure: Failure::Budget { integrations }, .. } => {
                 Termination::IntegrationBudget { integrations }
@@ -437,6 +440,15 @@ impl<S: System> Problem<S> {
         }
         Some(cov)
     }
+}
+
+/// How much the cost fell over the last [`PROGRESS_WINDOW`] iterations of `history`; None
+/// for a shorter history or a cost that is not finite at either end.
+fn fell(history: &[Iteration]) -> Option<f64> {
+    let last = history.last()?.cost;
+    let then = history[history.len().checked_sub(PROGRESS_WINDOW + 1)?].cost;
+    let fell = then - last;
+    fell.is_finite().then_some(fell)
 }
 
 /// The unknowns whose coordinates moved most over the last [`PROGRESS_WINDOW`] iterations

@@ -177,7 +177,8 @@ impl fmt::Display for Failure {
 /// let done = Termination::Converged(Rule::Step);
 /// assert_eq!(done.code(), "converged_step");
 /// assert_eq!(Termination::Converged(Rule::ExactFit).code(), "exact_fit");
-/// assert_eq!(Termination::MaxIterations.code(), "max_iterations");
+/// let limit = Termination::MaxIterations { fell: Some(0.25), moving: vec!["k".into()] };
+/// assert_eq!(limit.code(), "max_iterations");
 /// assert!(done.failure().is_none());
 /// println!("{done}"); // converged: step below tolerance
 /// ```
@@ -204,7 +205,14 @@ pub enum Termination {
         moving: Vec<String>,
     },
     /// The iteration budget ran out.
-    MaxIterations,
+    MaxIterations {
+        /// How much the cost fell over the last [`PROGRESS_WINDOW`] iterations (absent for a
+        /// shorter run): what the next iterations may still gain.
+        fell: Option<f64>,
+        /// The unknowns that moved most over that window, most first (those whose coordinate
+        /// moved at least a tenth of the most any did, at most 5), as after [`Rule::Progress`].
+        moving: Vec<String>,
+    },
     /// The hard budget of model integrations ran out.
     IntegrationBudget {
         /// Integrations made.
@@ -235,7 +243,7 @@ impl Termination {
             Termination::Converged(Rule::ExactFit) => "exact_fit".into(),
             Termination::Converged(rule) => format!("converged_{}", rule.code()),
             Termination::Stalled { rule, .. } => format!("stalled_{}", rule.code()),
-            Termination::MaxIterations => "max_iterations".into(),
+            Termination::MaxIterations { .. } => "max_iterations".into(),
             Termination::IntegrationBudget { .. } => "integration_budget".into(),
             Termination::TimeLimit { .. } => "time_limit".into(),
             Termination::Failed { failure, .. } => failure.code().into(),
@@ -288,7 +296,16 @@ impl fmt::Display for Termination {
                 f,
                 "stalled at iteration {iteration}: {rule}, but the point is not a minimum (first-order optimality {optimality:.2e})"
             ),
-            Termination::MaxIterations => write!(f, "iteration limit reached"),
+            Termination::MaxIterations { fell: Some(fell), moving }
+                if *fell > 0.0 && !moving.is_empty() =>
+            {
+                write!(
+                    f,
+                    "iteration limit reached while the cost still falls: by {fell:.3e} over the last {PROGRESS_WINDOW} iterations, most along {} (a larger iteration budget goes on from there)",
+                    moving.join(", ")
+                )
+            }
+            Termination::MaxIterations { .. } => write!(f, "iteration limit reached"),
             Termination::IntegrationBudget { integrations } => {
                 write!(f, "the budget of {integrations} model integrations is used up")
             }
@@ -331,7 +348,7 @@ mod tests {
         };
         let failure = |f: Failure| Termination::Failed { iteration: 1, failure: f };
         let mut terminations = vec![
-            Termination::MaxIterations,
+            Termination::MaxIterations { fell: None, moving: vec![] },
             Termination::IntegrationBudget { integrations: 3 },
             Termination::TimeLimit { seconds: 1.0 },
             failure(Failure::NonFinite { what: "ε".into(), at: vec![] }),

@@ -122,3 +122,35 @@ fn a_certified_run_that_no_longer_gains_is_settled() {
     // The module docs and the termination text speak of 10 iterations and 1e-8.
     assert_eq!((SETTLE_WINDOW, sysid_core::method::SETTLE), (10, 1e-8));
 }
+
+#[test]
+fn the_iteration_limit_says_what_the_cost_still_gained_and_what_moved() {
+    // Steps of 1e-2 from g = 30 need 213 to reach the minimum; a limit of 150 stops them
+    // at g = 31.5 while ε still falls. Over the last 100 iterations (g from 30.5 to 31.5) ε
+    // fell by ε(30.5) − ε(31.5), with ε(g) = Σ (b − g t²/2)² in closed form.
+    let problem = problem();
+    let options = DriverOptions { max_iterations: 150, ..Default::default() };
+    let e = drive(&problem, "walk", &options, &mut crawl(1e-2), &[30.0]).unwrap();
+    let epsilon = |g: f64| {
+        [(0.0, 1000.0), (1.0, 17.0), (2.0, 63.0), (3.0, 145.0)]
+            .iter()
+            .map(|(t, b): &(f64, f64)| (b - g * t * t / 2.0).powi(2))
+            .sum::<f64>()
+    };
+    let expected = epsilon(30.5) - epsilon(31.5);
+    match &e.termination {
+        Termination::MaxIterations { fell: Some(fell), moving } => {
+            assert!((fell - expected).abs() <= 1e-9 * expected, "{fell} against {expected}");
+            assert_eq!(moving, &["g"]);
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(e.termination.code(), "max_iterations");
+    let text = e.termination.to_string();
+    assert!(text.contains(&format!("by {expected:.3e}")) && text.contains("along g"), "{text}");
+    // Ten iterations are too few for the window: the limit says only that.
+    let options = DriverOptions { max_iterations: 10, ..Default::default() };
+    let e = drive(&problem, "walk", &options, &mut crawl(1e-2), &[30.0]).unwrap();
+    assert_eq!(e.termination, Termination::MaxIterations { fell: None, moving: vec![] });
+    assert_eq!(e.termination.to_string(), "iteration limit reached");
+}

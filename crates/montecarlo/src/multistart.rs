@@ -550,7 +550,7 @@ mod tests {
             termination: if converged {
                 Termination::Converged(Rule::Step)
             } else {
-                Termination::MaxIterations
+                Termination::MaxIterations { fell: None, moving: vec![] }
             },
             certificate: Certificate {
                 optimality: if converged { 0.0 } else { 0.5 },

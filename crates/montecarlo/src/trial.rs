@@ -347,7 +347,7 @@ fn failure(e: &Estimate) -> String {
         },
         Termination::IntegrationBudget { .. } => "integration_budget",
         Termination::TimeLimit { .. } => "time_limit",
-        Termination::MaxIterations => match (first, last) {
+        Termination::MaxIterations { .. } => match (first, last) {
             (Some(a), Some(b)) if b > a || b.is_nan() => "diverged",
             _ => "max_iterations",
         },

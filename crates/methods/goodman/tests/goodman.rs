@@ -69,7 +69,8 @@ fn iteration_limit_is_a_result_not_an_error() {
     let problem = vdp_problem([1.5, 1.5, 0.5]);
     let estimate =
         Goodman::new(GoodmanOptions::default().with_max_iterations(1)).fit(&problem).unwrap();
-    assert_eq!(estimate.termination, Termination::MaxIterations);
+    // One iteration: too few for the window over which the fall is measured.
+    assert_eq!(estimate.termination, Termination::MaxIterations { fell: None, moving: vec![] });
     assert_eq!(estimate.iterations, 1);
     assert!(!estimate.converged());
     assert_eq!(estimate.history.len(), 2);
