@@ -16,7 +16,7 @@ use crate::linalg::NormalFactor;
 use crate::options::DriverOptions;
 use crate::problem::Problem;
 use crate::step::Iterate;
-use crate::termination::{Failure, PROGRESS_WINDOW, Rule, Termination};
+use crate::termination::{Failure, PROGRESS, PROGRESS_WINDOW, Rule, Termination};
 
 /// How the loop ended, before the certificate judges it.
 pub(crate) enum Ending {
@@ -443,12 +443,13 @@ impl<S: System> Problem<S> {
 }
 
 /// How much the cost fell over the last [`PROGRESS_WINDOW`] iterations of `history`; None
-/// for a shorter history or a cost that is not finite at either end.
+/// for a shorter history, a cost that is not finite at either end, or a fall the progress
+/// rule counts as none (at most [`PROGRESS`] of the cost).
 fn fell(history: &[Iteration]) -> Option<f64> {
     let last = history.last()?.cost;
     let then = history[history.len().checked_sub(PROGRESS_WINDOW + 1)?].cost;
     let fell = then - last;
-    fell.is_finite().then_some(fell)
+    (fell.is_finite() && fell > PROGRESS * last.abs()).then_some(fell)
 }
 
 /// The unknowns whose coordinates moved most over the last [`PROGRESS_WINDOW`] iterations

@@ -10,7 +10,9 @@
 //! While a method that retreats from a failed trial proposes and moves, the driver
 //! [paces](Evaluations::pace) it: each integration may take at most [`PACE`] times the steps
 //! of the iterate's own evaluation (rounded up to a power of two, at least [`PACE_FLOOR`],
-//! never more than the integrator's `max_steps`). A trial step into a region where the model
+//! never more than the integrator's `max_steps`; a preequilibration's steady-state solve
+//! keeps the integrator's own limit, as its steps are not among those counted). A trial
+//! step into a region where the model
 //! needs far more work than at the iterate (a stiff blow-up, say) then fails as soon as that
 //! is clear, and the method shortens the step, instead of spending the whole step budget to
 //! learn the same; the iterates' own cost moves the limit with them. The certificate's
@@ -19,7 +21,7 @@
 use std::cell::Cell;
 
 use nalgebra::DVector;
-use sysid_ode::{Counts, Integrator, OdeError, Scheme, System};
+use sysid_ode::{Counts, OdeError, Scheme, System};
 
 use crate::evaluate::Linearization;
 use crate::problem::Problem;
@@ -147,18 +149,16 @@ impl<'p, S: System> Evaluations<'p, S> {
     pub(crate) fn pace(&mut self, iterate: Option<&Counts>) {
         self.pacing = false;
         let Some(iterate) = iterate else { return };
-        let integrator = *self.problem().integrator();
         let work = (iterate.steps + iterate.rejected_steps).saturating_mul(PACE);
         let limit = usize::try_from(work).unwrap_or(usize::MAX).max(PACE_FLOOR);
         let limit = limit.checked_next_power_of_two().unwrap_or(usize::MAX);
-        if limit >= integrator.max_steps {
+        if limit >= self.problem().integrator().max_steps {
             return;
         }
         if self.paced.as_ref().is_none_or(|(l, _)| *l != limit) {
-            let capped = Integrator { max_steps: limit, ..integrator };
-            self.paced = self.problem().clone().with_integrator(capped).ok().map(|p| (limit, p));
+            self.paced = Some((limit, self.problem().clone().with_step_limit(limit)));
         }
-        self.pacing = self.paced.is_some();
+        self.pacing = true;
     }
 
     /// The problem as the next integration runs it: [`problem`](Self::problem), with the
@@ -295,7 +295,7 @@ fn with_counts(lin: Linearization) -> (Linearization, Counts) {
 
 #[cfg(test)]
 mod tests {
-    use sysid_ode::testing::Decay;
+    use sysid_ode::{Integrator, testing::Decay};
 
     use super::*;
     use crate::{Data, Experiment, Setting};

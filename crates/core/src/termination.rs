@@ -206,8 +206,10 @@ pub enum Termination {
     },
     /// The iteration budget ran out.
     MaxIterations {
-        /// How much the cost fell over the last [`PROGRESS_WINDOW`] iterations (absent for a
-        /// shorter run): what the next iterations may still gain.
+        /// How much the cost (the history's: under noise-scale profiling, the profile's)
+        /// fell over the last [`PROGRESS_WINDOW`] iterations of the last round: what the next
+        /// iterations may still gain. Absent for a shorter round, or where the fall is at most
+        /// [`PROGRESS`] of the cost (what the progress rule counts as none).
         fell: Option<f64>,
         /// The unknowns that moved most over that window, most first (those whose coordinate
         /// moved at least a tenth of the most any did, at most 5), as after [`Rule::Progress`].
@@ -296,9 +298,7 @@ impl fmt::Display for Termination {
                 f,
                 "stalled at iteration {iteration}: {rule}, but the point is not a minimum (first-order optimality {optimality:.2e})"
             ),
-            Termination::MaxIterations { fell: Some(fell), moving }
-                if *fell > 0.0 && !moving.is_empty() =>
-            {
+            Termination::MaxIterations { fell: Some(fell), moving } if !moving.is_empty() => {
                 write!(
                     f,
                     "iteration limit reached while the cost still falls: by {fell:.3e} over the last {PROGRESS_WINDOW} iterations, most along {} (a larger iteration budget goes on from there)",
