@@ -143,8 +143,18 @@ impl<S: System> Problem<S> {
     /// the samples of discrete data (Goodman's eq. 12, 15), integrals over a continuous record
     /// accumulated during the integration (eq. 22, 24).
     pub fn linearize(&self, z: &[f64]) -> Result<Linearization, OdeError> {
+        self.linearize_with(z, &self.integrator)
+    }
+
+    /// [`linearize`](Self::linearize) with the experiments integrated by `integrator` (a
+    /// [paced](crate::evaluations) step limit); settings computed by integration keep theirs.
+    pub(crate) fn linearize_with(
+        &self,
+        z: &[f64],
+        integrator: &Integrator,
+    ) -> Result<Linearization, OdeError> {
         if !self.is_continuous() {
-            return self.linearize_sampled(z);
+            return self.linearize_sampled(z, integrator);
         }
         let k = self.unknowns.len();
         let (v, free_index, chain) = (self.values_at(z), self.free_index(), self.chain(z));
@@ -163,7 +173,7 @@ impl<S: System> Problem<S> {
                 Plan::Continuous { span, outputs, .. } => {
                     let (y0, p) = e.start(&v)?;
                     let q = Ivp::new(e.system(), e.t0, &y0, &p).least_squares_integrals(
-                        &self.integrator,
+                        integrator,
                         &e.slots,
                         outputs,
                         *span,
@@ -177,7 +187,7 @@ impl<S: System> Problem<S> {
                         v: &v,
                         free_index: &free_index,
                         chain: &chain,
-                        integrator: &self.integrator,
+                        integrator,
                         jacobian: true,
                     };
                     let rows = experiment_rows(e, &at, k)?;
@@ -212,7 +222,17 @@ impl<S: System> Problem<S> {
     /// record, 256 panels over the span for a record
     /// given as a function), so that ‖r‖² is the quadrature of ε.
     pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, OdeError> {
-        self.linearize_sampled(z)
+        self.linearize_sampled(z, &self.integrator)
+    }
+
+    /// [`residuals_and_jacobian`](Self::residuals_and_jacobian) with the experiments
+    /// integrated by `integrator`.
+    pub(crate) fn residuals_and_jacobian_with(
+        &self,
+        z: &[f64],
+        integrator: &Integrator,
+    ) -> Result<Linearization, OdeError> {
+        self.linearize_sampled(z, integrator)
     }
 
     /// The data of the first experiment in residual form.
@@ -366,9 +386,13 @@ impl<S: System> Problem<S> {
             .collect()
     }
 
-    fn linearize_sampled(&self, z: &[f64]) -> Result<Linearization, OdeError> {
+    fn linearize_sampled(
+        &self,
+        z: &[f64],
+        integrator: &Integrator,
+    ) -> Result<Linearization, OdeError> {
         let k = self.unknowns.len();
-        let all = self.evaluate_rows(z, &self.integrator, true)?;
+        let all = self.evaluate_rows(z, integrator, true)?;
         let rows: usize = all.iter().map(|e| e.r.len()).sum();
         let (mut r, mut jacobian) = (Vec::with_capacity(rows), Vec::with_capacity(rows * k));
         let mut counts = Counts::default();
@@ -680,7 +704,8 @@ impl<S: System> Problem<S> {
         self.residuals_with(&self.integrator, z)
     }
 
-    fn residuals_with(
+    /// [`residuals`](Self::residuals) with the experiments integrated by `integrator`.
+    pub(crate) fn residuals_with(
         &self,
         integrator: &Integrator,
         z: &[f64],

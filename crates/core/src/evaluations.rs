@@ -16,12 +16,12 @@
 //! needs far more work than at the iterate (a stiff blow-up, say) then fails as soon as that
 //! is clear, and the method shortens the step, instead of spending the whole step budget to
 //! learn the same; the iterates' own cost moves the limit with them. The certificate's
-//! evaluations are never paced.
+//! evaluations are never paced, nor is the accurate plain cost ([`Evaluations::cost`]).
 
 use std::cell::Cell;
 
 use nalgebra::DVector;
-use sysid_ode::{Counts, OdeError, Scheme, System};
+use sysid_ode::{Counts, Integrator, OdeError, Scheme, System};
 
 use crate::evaluate::Linearization;
 use crate::problem::Problem;
@@ -38,11 +38,9 @@ pub struct Evaluations<'p, S> {
     counts: Cell<Counts>,
     /// Whether the driver sets the noise scales to their closed form at every iterate.
     profiling: bool,
-    /// The step limit of the last [`pace`](Self::pace) and the problem integrated under it,
-    /// when it is below the problem's own `max_steps`.
-    paced: Option<(usize, Problem<S>)>,
-    /// Whether the integrations are paced now.
-    pacing: bool,
+    /// The step limit of each experiment's integration while the integrations are
+    /// [paced](Self::pace) below the problem's own `max_steps`.
+    limit: Option<usize>,
 }
 
 /// A paced integration may take this many times the steps (accepted and rejected) of the
@@ -68,8 +66,7 @@ impl<'p, S: System> Evaluations<'p, S> {
             budget,
             counts: Cell::new(Counts::default()),
             profiling: false,
-            paced: None,
-            pacing: false,
+            limit: None,
         }
     }
 
@@ -122,7 +119,6 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// Evaluates from now on with `problem` (one of [`finer`](Self::finer)'s).
     pub fn refine(&mut self, problem: Problem<S>) {
         self.refined = Some(problem);
-        self.paced = None;
     }
 
     /// Whether the driver sets the noise scales to their closed form at every iterate
@@ -141,32 +137,28 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// [`Problem::scales`]), at the integration of the run so far.
     pub fn set_scales(&mut self, sigma: &[f64]) {
         self.refined = Some(self.problem().with_scales(sigma));
-        self.paced = None;
     }
 
     /// Paces the integrations from now on at the work of an iterate whose evaluation took
     /// `iterate` (see the module's documentation), or, with `None`, stops pacing them.
     pub(crate) fn pace(&mut self, iterate: Option<&Counts>) {
-        self.pacing = false;
-        let Some(iterate) = iterate else { return };
-        let work = (iterate.steps + iterate.rejected_steps).saturating_mul(PACE);
-        let limit = usize::try_from(work).unwrap_or(usize::MAX).max(PACE_FLOOR);
-        let limit = limit.checked_next_power_of_two().unwrap_or(usize::MAX);
-        if limit >= self.problem().integrator().max_steps {
-            return;
-        }
-        if self.paced.as_ref().is_none_or(|(l, _)| *l != limit) {
-            self.paced = Some((limit, self.problem().clone().with_step_limit(limit)));
-        }
-        self.pacing = true;
+        self.limit = iterate.and_then(|iterate| {
+            let work = (iterate.steps + iterate.rejected_steps).saturating_mul(PACE);
+            let limit = usize::try_from(work).unwrap_or(usize::MAX).max(PACE_FLOOR);
+            let limit = limit.checked_next_power_of_two().unwrap_or(usize::MAX);
+            (limit < self.problem().integrator().max_steps).then_some(limit)
+        });
     }
 
-    /// The problem as the next integration runs it: [`problem`](Self::problem), with the
-    /// step limit of the [pace](Self::pace) while there is one.
-    fn integrating(&self) -> &Problem<S> {
-        match (&self.paced, self.pacing) {
-            (Some((_, paced)), true) => paced,
-            _ => self.problem(),
+    /// The integrator of the experiments' next integration: the problem's, with the step
+    /// limit of the [pace](Self::pace) while there is one. (Settings computed by integration,
+    /// a preequilibration's steady state, keep the problem's own: their steps are not among
+    /// those the limit is drawn from.)
+    fn integrator(&self) -> Integrator {
+        let own = *self.problem().integrator();
+        match self.limit {
+            Some(limit) => Integrator { max_steps: limit.min(own.max_steps), ..own },
+            None => own,
         }
     }
 
@@ -221,7 +213,8 @@ impl<'p, S: System> Evaluations<'p, S> {
 
     /// ε, U and A at z ([`Problem::linearize`]), all finite.
     pub fn linearize(&self, z: &[f64]) -> Result<Linearization, Failure> {
-        let lin = self.run(z, || self.integrating().linearize(z).map(with_counts))?;
+        let lin =
+            self.run(z, || self.problem().linearize_with(z, &self.integrator()).map(with_counts))?;
         self.check(z, &lin)?;
         Ok(lin)
     }
@@ -229,14 +222,16 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// The weighted residuals and their Jacobian at z
     /// ([`Problem::residuals_and_jacobian`]), with ε, U and A, all finite.
     pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, Failure> {
-        let lin = self.run(z, || self.integrating().residuals_and_jacobian(z).map(with_counts))?;
+        let lin = self.run(z, || {
+            self.problem().residuals_and_jacobian_with(z, &self.integrator()).map(with_counts)
+        })?;
         self.check(z, &lin)?;
         Ok(lin)
     }
 
     /// The weighted residuals at z ([`Problem::residuals`]), with a finite sum of squares.
     pub fn residuals(&self, z: &[f64]) -> Result<DVector<f64>, Failure> {
-        let r = self.run(z, || self.integrating().residuals(z))?;
+        let r = self.run(z, || self.problem().residuals_with(&self.integrator(), z))?;
         if !r.norm_squared().is_finite() {
             return Err(self.overflow(z, "the cost ε", Some(&r)));
         }
@@ -245,7 +240,7 @@ impl<'p, S: System> Evaluations<'p, S> {
 
     /// ε at z by the accurate plain integration ([`Problem::cost`]), finite.
     pub fn cost(&self, z: &[f64]) -> Result<f64, Failure> {
-        let cost = self.run(z, || self.integrating().cost(z))?;
+        let cost = self.run(z, || self.problem().cost(z))?;
         if !cost.is_finite() {
             return Err(self.overflow(z, "the cost ε", None));
         }
@@ -295,7 +290,7 @@ fn with_counts(lin: Linearization) -> (Linearization, Counts) {
 
 #[cfg(test)]
 mod tests {
-    use sysid_ode::{Integrator, testing::Decay};
+    use sysid_ode::testing::Decay;
 
     use super::*;
     use crate::{Data, Experiment, Setting};
@@ -362,9 +357,8 @@ mod tests {
         let problem = decay();
         let mut ev = Evaluations::new(&problem, 100);
         ev.pace(Some(&Counts { steps: 150, rejected_steps: 20, ..Counts::default() }));
-        let limit = ev.integrating().integrator().max_steps;
-        assert_eq!(limit, 2048, "10 × 170 = 1 700, rounded up");
+        assert_eq!(ev.integrator().max_steps, 2048, "10 × 170 = 1 700, rounded up");
         ev.pace(None);
-        assert_eq!(ev.integrating().integrator().max_steps, 100_000);
+        assert_eq!(ev.integrator().max_steps, 100_000);
     }
 }

@@ -365,16 +365,6 @@ impl<S: System> Problem<S> {
         Ok(self)
     }
 
-    /// The same problem with each of the experiments' own integrations limited to at most
-    /// `max_steps` steps (accepted and rejected together). Settings computed by integration
-    /// (a preequilibration's steady state) keep the integrator's own limit and share what
-    /// they keep of earlier points with this problem: their work is not in the counts that
-    /// a [paced](crate::evaluations) limit is drawn from.
-    pub(crate) fn with_step_limit(mut self, max_steps: usize) -> Self {
-        self.integrator.max_steps = self.integrator.max_steps.min(max_steps.max(1));
-        self
-    }
-
     /// The same problem with other measurements for its one experiment (of the same kind of
     /// quantities).
     pub fn with_data(mut self, data: Data) -> Result<Self, ProblemError> {
