@@ -189,13 +189,13 @@ impl<'p, S: System> Evaluations<'p, S> {
                 Ok(value)
             }
             Err(error) => {
-                // A failed integration counts as one; one that ran out of steps, with the
-                // steps of its budget (accepted and rejected together, as the budget counts
-                // them). Other failures' work is not known here.
+                // A failed integration counts as one; one that ran out of steps or blew up,
+                // with the steps it took (accepted and rejected together, as the budget
+                // counts them). Other failures' work is not known here.
                 let steps = match error {
-                    OdeError::TooManySteps { steps, .. } | OdeError::Stiff { steps, .. } => {
-                        steps as u64
-                    }
+                    OdeError::TooManySteps { steps, .. }
+                    | OdeError::Stiff { steps, .. }
+                    | OdeError::BlowUp { steps, .. } => steps as u64,
                     _ => 0,
                 };
                 self.add(Counts { integrations: 1, steps, ..Counts::default() });

@@ -359,7 +359,13 @@ mod tests {
                 at: vec![],
             }),
             failure(Failure::Integration {
-                error: OdeError::BlowUp { t: 1.0, what: "x".into(), value: 1e7, start: 1.0 },
+                error: OdeError::BlowUp {
+                    t: 1.0,
+                    what: "x".into(),
+                    value: 1e7,
+                    start: 1.0,
+                    steps: 10,
+                },
                 at: vec![],
             }),
             Termination::StartFailed(Failure::Solver("start".into())),

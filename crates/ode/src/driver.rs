@@ -585,7 +585,13 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         // A state that grew is the news; sensitivities grow with it, and faster.
         let states = self.ev.rhs.states();
         match largest(0, states).or_else(|| largest(states, x.len())) {
-            Some(i) => OdeError::BlowUp { t, what: self.ev.rhs.describe(i), value: x[i], start },
+            Some(i) => OdeError::BlowUp {
+                t,
+                what: self.ev.rhs.describe(i),
+                value: x[i],
+                start,
+                steps: (self.ev.counts.steps + self.ev.counts.rejected_steps) as usize,
+            },
             None => e,
         }
     }

@@ -83,6 +83,8 @@ pub enum OdeError {
         value: f64,
         /// The largest magnitude at the start (at least 1).
         start: f64,
+        /// The steps taken until then, accepted and rejected.
+        steps: usize,
     },
     /// The implicit integrator's iteration matrix is singular.
     #[error("the implicit step matrix is singular at t = {t}")]

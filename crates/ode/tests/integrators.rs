@@ -232,8 +232,9 @@ fn finite_time_blow_up_is_reported_as_a_blow_up_at_the_singularity() {
     let sys = BlowUp(Signature::new(&["y"], &[]));
     let err = Ivp::new(&sys, 0.0, &[1.0], &[]).solve(&tight(), &[2.0]).unwrap_err();
     match &err {
-        OdeError::BlowUp { t, what, value, start } => {
+        OdeError::BlowUp { t, what, value, start, steps } => {
             assert!((t - 1.0).abs() < 1e-6, "t = {t}");
+            assert!(*steps > 0, "{steps} steps");
             assert_eq!(what, "state y");
             assert!(*value > sysid_ode::BLOW_UP_GROWTH, "{value}");
             assert_eq!(start.to_bits(), 1.0f64.to_bits());
