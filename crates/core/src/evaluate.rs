@@ -225,16 +225,6 @@ impl<S: System> Problem<S> {
         self.linearize_sampled(z, &self.integrator)
     }
 
-    /// [`residuals_and_jacobian`](Self::residuals_and_jacobian) with the experiments
-    /// integrated by `integrator`.
-    pub(crate) fn residuals_and_jacobian_with(
-        &self,
-        z: &[f64],
-        integrator: &Integrator,
-    ) -> Result<Linearization, OdeError> {
-        self.linearize_sampled(z, integrator)
-    }
-
     /// The data of the first experiment in residual form.
     pub fn sampled(&self) -> &Sampled {
         self.experiments[0].sampled()
@@ -386,7 +376,9 @@ impl<S: System> Problem<S> {
             .collect()
     }
 
-    fn linearize_sampled(
+    /// [`residuals_and_jacobian`](Self::residuals_and_jacobian) with the experiments
+    /// integrated by `integrator`.
+    pub(crate) fn linearize_sampled(
         &self,
         z: &[f64],
         integrator: &Integrator,

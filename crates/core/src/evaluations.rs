@@ -222,9 +222,8 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// The weighted residuals and their Jacobian at z
     /// ([`Problem::residuals_and_jacobian`]), with ε, U and A, all finite.
     pub fn residuals_and_jacobian(&self, z: &[f64]) -> Result<Linearization, Failure> {
-        let lin = self.run(z, || {
-            self.problem().residuals_and_jacobian_with(z, &self.integrator()).map(with_counts)
-        })?;
+        let lin = self
+            .run(z, || self.problem().linearize_sampled(z, &self.integrator()).map(with_counts))?;
         self.check(z, &lin)?;
         Ok(lin)
     }
