@@ -753,6 +753,10 @@ impl SparseJacobian for Linearized {
         self.tape.registers()
     }
 
+    fn operations(&self) -> usize {
+        Linearized::operations(self)
+    }
+
     fn curvature(&self) -> Option<&dyn SparseJacobian> {
         self.curvature.as_deref().map(|c| c as &dyn SparseJacobian)
     }

@@ -32,11 +32,11 @@
 
 use nalgebra::DMatrix;
 
-use crate::counts::Counts;
+use crate::counts::{Costs, Counts, lu_factor, lu_solve};
 use crate::driver::{integrate, resolution};
 use crate::error::OdeError;
 use crate::events::Reset;
-use crate::implicit::Factors;
+use crate::implicit::{Factors, Structure};
 use crate::interpolant::DenseSolution;
 use crate::ivp::{Ivp, Trajectory, check_times, check_wrt, rhs_jump, stops};
 use crate::jacobian::JacobianProducts;
@@ -296,6 +296,7 @@ struct AdjointRhs<'a, S> {
     moving: Vec<(f64, usize, f64)>,
     /// The state events not yet crossed: the first `events` of the forward solution's.
     events: usize,
+    structure: Structure,
 }
 
 impl<'a, S: System> AdjointRhs<'a, S> {
@@ -331,6 +332,7 @@ impl<'a, S: System> AdjointRhs<'a, S> {
             pending: times.len(),
             moving: ivp.system.moving_switches(ivp.p),
             events: forward.fired.len(),
+            structure: Structure::of(ivp.system),
         }
     }
 
@@ -370,6 +372,23 @@ impl<'a, S: System> AdjointRhs<'a, S> {
 impl<S: System> Rhs for AdjointRhs<'_, S> {
     fn dim(&self) -> usize {
         self.n + self.k
+    }
+
+    /// The forward state interpolated, f's program with the Jacobian's entries, and their
+    /// products with λ (−J_yᵀλ and −(∂g/∂α)ᵀλ); an implicit step's factors are of J's
+    /// transpose, and the μ block is one more product at each solve.
+    fn costs(&self) -> Costs {
+        let s = &self.structure;
+        let entries = s.state_entries + s.parameter_entries;
+        let (factor, solve) = match &self.implicit {
+            Some(implicit) => implicit.factors.costs(),
+            None => (lu_factor(s.n), lu_solve(s.n)),
+        };
+        Costs {
+            eval: 5 * s.n + s.linearized + entries,
+            factor: s.n * s.n + factor,
+            solve: solve + s.parameter_entries,
+        }
     }
 
     fn describe(&self, i: usize) -> String {
@@ -564,6 +583,10 @@ impl<R: Rhs> Rhs for Local<'_, R> {
 
     fn solve(&mut self, r: &mut [f64]) {
         self.rhs.solve(r);
+    }
+
+    fn costs(&self) -> Costs {
+        self.rhs.costs()
     }
 
     fn cross(&mut self, t: f64, x: &mut [f64], dir: f64) {

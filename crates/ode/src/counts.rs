@@ -16,6 +16,45 @@ pub struct Counts {
     pub integrations: u64,
     /// Jacobians evaluated and LU-factorised (implicit steps).
     pub jacobians: u64,
+    /// The arithmetic these did, estimated: every evaluation, factorisation and solve
+    /// charged what its right-hand side says one costs ([`Rhs::costs`](crate::Rhs::costs)).
+    /// Not a measurement but a deterministic measure of work, by which
+    /// `--sensitivities auto` compares forward sensitivities with the adjoint; not in the
+    /// JSON.
+    #[serde(skip)]
+    pub operations: u64,
+}
+
+/// What one call of a right-hand side's functions costs, in arithmetic operations (an
+/// operation of a compiled program, a multiply–add of a product, a step of an
+/// elimination), estimated from its structure: the unit of [`Counts::operations`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Costs {
+    /// One evaluation f(t, x).
+    pub eval: u64,
+    /// One factorisation of an implicit step's matrix, the Jacobian's evaluation included.
+    pub factor: u64,
+    /// One solve with that matrix.
+    pub solve: u64,
+}
+
+impl Costs {
+    /// A right-hand side of dimension n that tells nothing of itself: a dense Jacobian, f
+    /// as dear as n² operations, factorised and solved by dense LU.
+    pub fn dense(n: usize) -> Self {
+        let n = n as u64;
+        Self { eval: n * n, factor: n * n + lu_factor(n), solve: lu_solve(n) }
+    }
+}
+
+/// A dense LU factorisation of order n: 2n³/3 operations.
+pub(crate) fn lu_factor(n: u64) -> u64 {
+    2 * n * n * n / 3
+}
+
+/// Forward and back substitution with dense factors of order n: 2n² operations.
+pub(crate) fn lu_solve(n: u64) -> u64 {
+    2 * n * n
 }
 
 impl std::ops::AddAssign for Counts {
@@ -25,5 +64,6 @@ impl std::ops::AddAssign for Counts {
         self.rhs_evaluations += o.rhs_evaluations;
         self.integrations += o.integrations;
         self.jacobians += o.jacobians;
+        self.operations += o.operations;
     }
 }

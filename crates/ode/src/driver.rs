@@ -232,7 +232,14 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             conditions: vec![0.0; events],
             conditions_next: vec![0.0; events],
             inside: vec![0.0; states],
-            ev: Evaluator { rhs, cfg: *cfg, counts, seg: (t0, t_end), stops: (false, false) },
+            ev: Evaluator {
+                costs: rhs.costs(),
+                rhs,
+                cfg: *cfg,
+                counts,
+                seg: (t0, t_end),
+                stops: (false, false),
+            },
             work,
             stepper: Active::first(cfg.scheme),
             t: t0,
@@ -450,9 +457,8 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         }
         let t = self.t;
         let auto = self.ev.cfg.scheme == Scheme::Auto;
-        if auto && self.ev.rhs.factor(self.ev.at(t), self.ev.side(t), &self.work.x, 1.0).is_ok() {
+        if auto && self.ev.factor(t, self.ev.side(t), &self.work.x, 1.0).is_ok() {
             self.stepper = Active::Rodas4;
-            self.ev.counts.jacobians += 1;
         } else {
             self.stiff_since.get_or_insert(t);
         }

@@ -6,6 +6,7 @@
 use nalgebra::DMatrix;
 use num_dual::HyperDual64;
 
+use crate::counts::{lu_factor, lu_solve};
 use crate::jacobian::{JacobianProducts, ProductPlan};
 use crate::lu::{FactorError, Lu};
 use crate::sparse::SparseJacobian;
@@ -131,6 +132,65 @@ impl IterationMatrix {
     pub fn is_sparse(&self) -> bool {
         self.lu.is_sparse()
     }
+
+    /// Estimated operations of one [`factor`](Self::factor) (the Jacobian's evaluation
+    /// included) and of one solve with one right-hand side, for a system of structure `s`.
+    pub(crate) fn costs(&self, s: &Structure) -> (u64, u64) {
+        let n = self.n as u64;
+        let jacobian = match (&self.analytic, &self.lu) {
+            (Some(_), _) => s.linearized,
+            (None, Factors::Sparse(_)) => s.linearized,
+            // Products of the Jacobian with the n unit directions, then read out.
+            (None, Factors::Dense(_)) => s.linearized + s.state_entries * n + n * n,
+        };
+        let (factor, solve) = self.lu.costs();
+        (jacobian + factor, solve)
+    }
+}
+
+/// The structure of a system's functions that sets what its evaluations cost
+/// ([`Costs`](crate::Costs)): from its sparse Jacobian where it has one (its program's
+/// operations, the entries of its pattern), else as if its Jacobian were dense.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Structure {
+    /// States.
+    pub(crate) n: u64,
+    /// One evaluation of f with the Jacobian's entries.
+    pub(crate) linearized: u64,
+    /// Entries of ∂f/∂y and of ∂f/∂α.
+    pub(crate) state_entries: u64,
+    pub(crate) parameter_entries: u64,
+    /// The second derivatives' program and entries, where the system has them.
+    pub(crate) curvature: Option<(u64, u64)>,
+}
+
+impl Structure {
+    pub(crate) fn of<S: System>(sys: &S) -> Self {
+        let sig = sys.signature();
+        let (n, np) = (sig.n_states() as u64, sig.n_parameters() as u64);
+        match sys.sparse_jacobian(Function::Rhs) {
+            Some(jacobian) => {
+                let states = jacobian.pattern().iter().filter(|e| u64::from(e.1) < n).count();
+                let states = states as u64;
+                Self {
+                    n,
+                    linearized: jacobian.operations() as u64,
+                    state_entries: states,
+                    parameter_entries: jacobian.pattern().len() as u64 - states,
+                    curvature: jacobian
+                        .curvature()
+                        .map(|c| (c.operations() as u64, c.pattern().len() as u64)),
+                }
+            }
+            None => Self {
+                n,
+                linearized: 4 * n * (1 + n + np),
+                state_entries: n * n,
+                parameter_entries: n * np,
+                curvature: None,
+            },
+        }
+    }
 }
 
 /// The factors of E = I·c − J (n × n): dense, or sparse for a large system with a sparse
@@ -194,6 +254,23 @@ impl Factors {
     /// Whether the factors are sparse.
     pub(crate) fn is_sparse(&self) -> bool {
         matches!(self, Self::Sparse(_))
+    }
+
+    /// Estimated operations of one factorisation and of one solve with one right-hand side:
+    /// dense, 2n³/3 and 2n²; sparse, with F entries in the factors, F²/n (each of the n
+    /// eliminations updating about (F/n)² entries) and 2F; a sparse LU that has fallen back
+    /// to dense factors costs what those do.
+    pub(crate) fn costs(&self) -> (u64, u64) {
+        match self {
+            Self::Dense(lu) => (lu_factor(lu.dim() as u64), lu_solve(lu.dim() as u64)),
+            Self::Sparse(lu) if lu.fell_back() => {
+                (lu_factor(lu.dim() as u64), lu_solve(lu.dim() as u64))
+            }
+            Self::Sparse(lu) => {
+                let (f, n) = (lu.entries_of_factors() as u64, (lu.dim() as u64).max(1));
+                (f * f / n, 2 * f)
+            }
+        }
     }
 }
 
@@ -282,6 +359,23 @@ impl AugmentedMatrix {
             second.eval(t, &x[..n], &self.p, u, &mut curvature.work);
         }
         self.matrix.factor(sys, (t, &x[..n], &self.p, u), inv_gamma_h)
+    }
+
+    /// Estimated operations of one factorisation and one solve of the augmented system
+    /// with k columns, for a system of structure `s`: one back-substitution with E per
+    /// column and the state, and the coupling M_j k_y, from the second derivatives (their
+    /// program at the factorisation, their entries and the products at each solve) or from
+    /// a hyper-dual evaluation of f per column.
+    pub(crate) fn costs(&self, s: &Structure, k: u64) -> (u64, u64) {
+        let (factor, solve) = self.matrix.costs(s);
+        let products = s.state_entries * k + s.parameter_entries;
+        match (k, s.curvature) {
+            (0, _) => (factor, solve),
+            (_, Some((operations, entries))) => {
+                (factor + operations, (1 + k) * solve + entries + products)
+            }
+            (_, None) => (factor, (1 + k) * solve + k * 4 * s.linearized),
+        }
     }
 
     /// Overwrites r = [r_y; r_S] with E_aug⁻¹ r.

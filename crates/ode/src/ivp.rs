@@ -3,11 +3,11 @@
 
 use nalgebra::{DMatrix, DMatrixView, Dyn};
 
-use crate::counts::Counts;
+use crate::counts::{Costs, Counts, lu_factor, lu_solve};
 use crate::driver::{integrate, integrate_selected};
 use crate::error::OdeError;
 use crate::events::{self, Fired};
-use crate::implicit::{AugmentedMatrix, IterationMatrix};
+use crate::implicit::{AugmentedMatrix, IterationMatrix, Structure};
 use crate::interpolant::{DenseSolution, Interpolant};
 use crate::jacobian::JacobianProducts;
 use crate::lu::FactorError;
@@ -114,13 +114,15 @@ pub struct ModelRhs<'a, S> {
     /// The work space of the system's own sparse Jacobian, where it has one: f is read from
     /// that evaluation (compiled for a model file) rather than from `rhs`.
     work: Vec<f64>,
+    structure: Structure,
 }
 
 impl<'a, S: System> ModelRhs<'a, S> {
     /// The right-hand side of `sys` at parameters `p`.
     pub fn new(sys: &'a S, p: &'a [f64]) -> Self {
         let work = sys.sparse_jacobian(Function::Rhs).map(|j| j.workspace()).unwrap_or_default();
-        Self { sys, p, u: vec![0.0; sys.signature().n_inputs()], implicit: None, work }
+        let u = vec![0.0; sys.signature().n_inputs()];
+        Self { sys, p, u, implicit: None, work, structure: Structure::of(sys) }
     }
 }
 
@@ -157,6 +159,14 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
     }
     fn autonomous(&self) -> bool {
         self.sys.autonomous()
+    }
+    fn costs(&self) -> Costs {
+        let s = &self.structure;
+        let (factor, solve) = match &self.implicit {
+            Some(matrix) => matrix.costs(s),
+            None => (s.linearized + s.state_entries * s.n + lu_factor(s.n), lu_solve(s.n)),
+        };
+        Costs { eval: s.linearized, factor, solve }
     }
     fn factor(
         &mut self,
@@ -211,6 +221,7 @@ pub struct SensitivityRhs<'a, S> {
     work: Vec<f64>,
     /// The state events fired so far, in order: (event, τ, the state before it).
     fired: Vec<Fired>,
+    structure: Structure,
 }
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
@@ -244,6 +255,7 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
                 .filter(|_| wrt.is_empty())
                 .map(|j| j.workspace())
                 .unwrap_or_default(),
+            structure: Structure::of(sys),
         }
     }
 
@@ -285,6 +297,18 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
     // The sensitivities' right-hand side J·S + ∂g/∂α is as free of t as g is.
     fn autonomous(&self) -> bool {
         self.sys.autonomous()
+    }
+
+    /// f with its Jacobian's entries, then their products with the k columns; the implicit
+    /// matrix's own estimate.
+    fn costs(&self) -> Costs {
+        let (s, k) = (&self.structure, self.wrt.len() as u64);
+        let products = if k == 0 { 0 } else { s.state_entries * k + s.parameter_entries };
+        let (factor, solve) = match &self.implicit {
+            Some(matrix) => matrix.costs(s, k),
+            None => (s.linearized + s.state_entries * s.n + lu_factor(s.n), lu_solve(s.n)),
+        };
+        Costs { eval: s.linearized + products, factor, solve }
     }
 
     fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {

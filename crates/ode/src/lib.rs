@@ -97,7 +97,7 @@ pub mod testing;
 mod work;
 mod wrt;
 
-pub use counts::Counts;
+pub use counts::{Costs, Counts};
 pub use driver::integrate;
 pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError};
 pub use implicit::{IterationMatrix, SPARSE_FROM};

@@ -1,6 +1,7 @@
 //! The level the integrators work at: a first-order system dx/dt = f(t, x) on a flat state
 //! vector, with the Jacobian solves an implicit scheme asks of it.
 
+use crate::counts::Costs;
 use crate::lu::FactorError;
 use crate::signal::Side;
 
@@ -59,6 +60,12 @@ pub trait Rhs {
     /// Default: none.
     fn n_events(&self) -> usize {
         0
+    }
+    /// What one evaluation, factorisation and solve cost, estimated from the structure (see
+    /// [`Costs`]); asked again after every factorisation, so it may change once the
+    /// implicit matrix exists. Default: [`Costs::dense`] of [`dim`](Self::dim).
+    fn costs(&self) -> Costs {
+        Costs::dense(self.dim())
     }
     /// The events' conditions at (t, y), y the leading [`states`](Self::states) components
     /// of x (all that is read): event i fires where its condition falls from positive to

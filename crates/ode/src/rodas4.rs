@@ -101,7 +101,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         for i in 0..n {
             k1[i] = f0[i] + h * D1 * ft[i];
         }
-        ev.rhs.solve(k1);
+        ev.solve(k1);
         // Stage 2.
         for i in 0..n {
             y[i] = x[i] + A21 * k1[i];
@@ -110,7 +110,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         for i in 0..n {
             k2[i] += C21 / h * k1[i] + h * D2 * ft[i];
         }
-        ev.rhs.solve(k2);
+        ev.solve(k2);
         // Stage 3.
         for i in 0..n {
             y[i] = x[i] + A31 * k1[i] + A32 * k2[i];
@@ -119,7 +119,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         for i in 0..n {
             k3[i] += (C31 * k1[i] + C32 * k2[i]) / h + h * D3 * ft[i];
         }
-        ev.rhs.solve(k3);
+        ev.solve(k3);
         // Stage 4.
         for i in 0..n {
             y[i] = x[i] + A41 * k1[i] + A42 * k2[i] + A43 * k3[i];
@@ -128,7 +128,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         for i in 0..n {
             k4[i] += (C41 * k1[i] + C42 * k2[i] + C43 * k3[i]) / h + h * D4 * ft[i];
         }
-        ev.rhs.solve(k4);
+        ev.solve(k4);
         // Stage 5, at t + h (d₅ = 0).
         for i in 0..n {
             y[i] = x[i] + A51 * k1[i] + A52 * k2[i] + A53 * k3[i] + A54 * k4[i];
@@ -137,7 +137,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         for i in 0..n {
             k5[i] += (C51 * k1[i] + C52 * k2[i] + C53 * k3[i] + C54 * k4[i]) / h;
         }
-        ev.rhs.solve(k5);
+        ev.solve(k5);
         // Stage 6: its input is the embedded order-3 solution.
         for i in 0..n {
             y[i] += k5[i];
@@ -146,7 +146,7 @@ impl<R: Rhs> Stepper<R> for Rodas4 {
         for i in 0..n {
             k6[i] += (C61 * k1[i] + C62 * k2[i] + C63 * k3[i] + C64 * k4[i] + C65 * k5[i]) / h;
         }
-        ev.rhs.solve(k6);
+        ev.solve(k6);
         for i in 0..n {
             w.x_new[i] = y[i] + k6[i];
         }

@@ -233,7 +233,7 @@ impl<R: Rhs> Stepper<R> for Rodas5p {
                 count += 1;
             }
             accumulate(ki, &terms[..count]);
-            ev.rhs.solve(ki);
+            ev.solve(ki);
         }
         let k8 = &w.k[STAGES - 1][..n];
         for ((v, y), k) in w.x_new[..n].iter_mut().zip(y.iter()).zip(k8) {

@@ -28,6 +28,12 @@ pub trait SparseJacobian: Send + Sync {
     /// A work space for [`eval`](Self::eval), set up for it (allocate once, reuse).
     fn workspace(&self) -> Vec<f64>;
 
+    /// How many arithmetic operations one [`eval`](Self::eval) does, for the estimate of
+    /// work ([`Costs`](crate::Costs)). Default: four per value and entry.
+    fn operations(&self) -> usize {
+        4 * (self.values().len() + self.pattern().len())
+    }
+
     /// Evaluates f(t, y, α, u) and the Jacobian's entries into `work`.
     fn eval(&self, t: f64, y: &[f64], p: &[f64], u: &[f64], work: &mut [f64]);
 

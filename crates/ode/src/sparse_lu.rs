@@ -105,8 +105,12 @@ impl SparseLu {
         self.columns.len()
     }
 
+    /// The order n.
+    pub fn dim(&self) -> usize {
+        self.n
+    }
+
     /// Whether the last factorisation fell back to the dense LU.
-    #[cfg(test)]
     pub fn fell_back(&self) -> bool {
         self.use_dense
     }

@@ -1,7 +1,7 @@
 //! What a step works with: the right-hand side as a scheme calls it (counted, evaluated on
 //! the inside of the current segment) and the stage vectors, allocated once per integration.
 
-use crate::counts::Counts;
+use crate::counts::{Costs, Counts};
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
 use crate::options::Integrator;
@@ -48,6 +48,8 @@ pub(crate) struct Evaluator<'r, R: Rhs> {
     pub(crate) rhs: &'r mut R,
     pub(crate) cfg: Integrator,
     pub(crate) counts: Counts,
+    /// What the right-hand side's calls cost ([`Rhs::costs`]), as of its last factorisation.
+    pub(crate) costs: Costs,
     /// Start and end of the current segment, in the direction of integration.
     pub(crate) seg: (f64, f64),
     /// Whether the segment's start and end are stops inside the integration (a
@@ -59,8 +61,32 @@ impl<R: Rhs> Evaluator<'_, R> {
     #[inline]
     pub(crate) fn f(&mut self, t: f64, x: &[f64], dx: &mut [f64]) {
         self.counts.rhs_evaluations += 1;
+        self.counts.operations += self.costs.eval;
         let side = self.side(t);
         self.rhs.eval(self.at(t), side, x, dx);
+    }
+
+    /// Overwrites r with E⁻¹ r, E from the last [`factor`](Self::factor), counted.
+    #[inline]
+    pub(crate) fn solve(&mut self, r: &mut [f64]) {
+        self.counts.operations += self.costs.solve;
+        self.rhs.solve(r);
+    }
+
+    /// Evaluates the Jacobian at (t, x) from `side` and factorises E = I·`inv_gamma_h` − J,
+    /// counted; the costs are asked again, since the matrix may be new.
+    pub(crate) fn factor(
+        &mut self,
+        t: f64,
+        side: Side,
+        x: &[f64],
+        inv_gamma_h: f64,
+    ) -> Result<(), FactorError> {
+        self.counts.jacobians += 1;
+        let factored = self.rhs.factor(self.at(t), side, x, inv_gamma_h);
+        self.costs = self.rhs.costs();
+        self.counts.operations += self.costs.factor;
+        factored
     }
 
     /// The time a stage at t is evaluated at: t, or one unit in the last place inside the
@@ -96,8 +122,7 @@ impl<R: Rhs> Evaluator<'_, R> {
         gamma: f64,
     ) -> Result<(), FactorError> {
         let side = self.side(t);
-        self.counts.jacobians += 1;
-        self.rhs.factor(self.at(t), side, &w.x, 1.0 / (gamma * h))?;
+        self.factor(t, side, &w.x, 1.0 / (gamma * h))?;
         self.f(t, &w.x, &mut w.f0);
         if self.rhs.autonomous() {
             w.ft.fill(0.0);

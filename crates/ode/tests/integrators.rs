@@ -404,3 +404,80 @@ fn an_rtol_below_double_precision_is_refused() {
     let e = Integrator::dopri5(1e-8, -1.0).validate().unwrap_err();
     assert_eq!(e.name, "atol");
 }
+
+/// A stiff linear system x' = A x that solves its own implicit steps and counts its own
+/// calls, charging made-up costs ([`Rhs::costs`](sysid_ode::Rhs::costs)).
+struct Charged {
+    a: [[f64; 2]; 2],
+    inverse: [[f64; 2]; 2],
+    calls: (u64, u64, u64),
+}
+
+impl Charged {
+    const COSTS: sysid_ode::Costs = sysid_ode::Costs { eval: 7, factor: 1000, solve: 30 };
+}
+
+impl sysid_ode::Rhs for Charged {
+    fn dim(&self) -> usize {
+        2
+    }
+    fn eval(&mut self, _t: f64, _side: Side, x: &[f64], dx: &mut [f64]) {
+        self.calls.0 += 1;
+        for (i, d) in dx.iter_mut().enumerate() {
+            *d = self.a[i][0] * x[0] + self.a[i][1] * x[1];
+        }
+    }
+    fn autonomous(&self) -> bool {
+        true
+    }
+    fn factor(
+        &mut self,
+        _t: f64,
+        _side: Side,
+        _x: &[f64],
+        inv_gamma_h: f64,
+    ) -> Result<(), sysid_ode::FactorError> {
+        self.calls.1 += 1;
+        let a = &self.a;
+        let e = [[inv_gamma_h - a[0][0], -a[0][1]], [-a[1][0], inv_gamma_h - a[1][1]]];
+        let det = e[0][0] * e[1][1] - e[0][1] * e[1][0];
+        self.inverse = [[e[1][1] / det, -e[0][1] / det], [-e[1][0] / det, e[0][0] / det]];
+        Ok(())
+    }
+    fn solve(&mut self, r: &mut [f64]) {
+        self.calls.2 += 1;
+        let m = &self.inverse;
+        let (r0, r1) = (r[0], r[1]);
+        r[0] = m[0][0] * r0 + m[0][1] * r1;
+        r[1] = m[1][0] * r0 + m[1][1] * r1;
+    }
+    fn costs(&self) -> sysid_ode::Costs {
+        Self::COSTS
+    }
+}
+
+/// `Counts::operations` charges every evaluation, factorisation and solve what the right-hand
+/// side says one costs, once each: against the right-hand side's own count of its calls, by
+/// every scheme (the explicit ones never factorise; `auto` switches to Rodas4 on this stiff
+/// system and factorises once more where it does).
+#[test]
+fn operations_charge_every_call_its_cost() {
+    use sysid_ode::Scheme;
+    for scheme in [Scheme::Dopri5, Scheme::Rodas4, Scheme::Rodas5p, Scheme::Auto] {
+        let mut rhs =
+            Charged { a: [[-1.0, 0.5], [0.0, -2000.0]], inverse: [[0.0; 2]; 2], calls: (0, 0, 0) };
+        let cfg = Integrator { scheme, ..Integrator::dopri5(1e-8, 1e-10) };
+        let (counts, _) = integrate(&cfg, &mut rhs, (0.0, &[1.0, 1.0]), 5.0, &[], |_| {}).unwrap();
+        let (evals, factors, solves) = rhs.calls;
+        assert_eq!(counts.rhs_evaluations, evals, "{scheme:?}");
+        assert_eq!(counts.jacobians, factors, "{scheme:?}");
+        let c = Charged::COSTS;
+        assert_eq!(
+            counts.operations,
+            c.eval * evals + c.factor * factors + c.solve * solves,
+            "{scheme:?}: {evals} evaluations, {factors} factorisations, {solves} solves"
+        );
+        let implicit = scheme != Scheme::Dopri5;
+        assert_eq!(factors > 0 && solves > 0, implicit, "{scheme:?}");
+    }
+}
