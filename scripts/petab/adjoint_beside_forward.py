@@ -1,5 +1,5 @@
 """NLL + gradient at nominal by forward sensitivities, by adjoints and by the automatic choice
-between them (each experiment by whichever was faster at its first gradient), one thread each.
+between them (each experiment by whichever did less work at its first gradient), one thread each.
 
     python3 scripts/petab/adjoint_beside_forward.py REPEAT DIR NAME [NAME ...]
 

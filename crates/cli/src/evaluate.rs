@@ -23,9 +23,9 @@ pub struct EvaluateArgs {
     gradient: bool,
     /// How the gradient is computed: forward sensitivities of every parameter integrated
     /// with the states, one backward adjoint integration per condition, or per condition
-    /// whichever of the two was faster at its first gradient (auto: the adjoint where it took
-    /// under 0.9 of forward's time; that first evaluation computes both and is not timed;
-    /// docs/methods.md). Experiments with samples before t0, or a state event at t0 or at
+    /// whichever of the two did less work at its first gradient (auto: that first evaluation
+    /// computes both, counts each one's arithmetic, and is not timed; the same choice on
+    /// every run; docs/methods.md). Experiments with samples before t0, or a state event at t0 or at
     /// their last sample, are integrated forward whatever is asked.
     #[arg(long, value_enum, default_value_t = How::Auto, requires = "gradient")]
     sensitivities: How,
@@ -52,7 +52,7 @@ enum How {
     Forward,
     /// One backward adjoint integration per condition.
     Adjoint,
-    /// Per condition, whichever of the two was faster at its first gradient.
+    /// Per condition, whichever of the two did less work at its first gradient.
     Auto,
 }
 

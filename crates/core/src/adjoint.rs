@@ -34,20 +34,18 @@ pub enum Sensitivities {
     /// before t0, a state event at t0 or at its last sample), or whose backward integration
     /// fails, is integrated forward.
     Adjoint,
-    /// Each experiment by whichever of the two was faster the first time its gradient was
-    /// asked for: that first time it is computed forward once untimed (what is cold at a first
-    /// integration is not charged to either way), then by adjoint and forward again, each
-    /// timed with its cached steady state forgotten before it (so that both solve it). The
-    /// adjoint is chosen where it took less than [`ADJOINT_MARGIN`] (0.9) of forward's time,
-    /// and the chosen way's gradient is returned; later gradients take that way only. An
-    /// experiment the adjoint does not handle, or whose backward integration failed at that
-    /// first gradient, goes forward (reported in [`NllGradient::fell_back`]); a first point
-    /// where either way cannot be integrated is not measured from, and the next gradient
-    /// measures again. The choice belongs to the
-    /// problem and its copies at other noise scales, and is made again when the free
-    /// unknowns or the integrator change. No feature
-    /// of a problem predicted the faster way over the collection (docs/petab.md), so the
-    /// rule measures it.
+    /// Each experiment by whichever of the two did less work the first time its gradient
+    /// was asked for: that first time it is computed both ways, each with its cached steady
+    /// state forgotten before it (so that both solve it), and the work of each is the
+    /// arithmetic its integrations counted ([`Counts::operations`]), the adjoint's weighted
+    /// by [`ADJOINT_OPERATION_COST`]. The adjoint is chosen where its weighted work is the
+    /// smaller, and the chosen way's gradient is returned; later gradients take that way only.
+    /// The choice is the same on every run and every machine. An experiment the adjoint does
+    /// not handle, or whose backward integration failed at that first gradient, goes forward
+    /// (reported in [`NllGradient::fell_back`]); a first point where either way cannot be
+    /// integrated is not counted from, and the next gradient counts again. The choice belongs
+    /// to the problem and its copies at other noise scales, and is made again when the free
+    /// unknowns or the integrator change.
     Auto,
 }
 
@@ -122,9 +120,21 @@ impl<S: System> Problem<S> {
     }
 }
 
-/// [`Sensitivities::Auto`] takes the adjoint for an experiment only where it took less than
-/// this share of forward's time.
-pub const ADJOINT_MARGIN: f64 = 0.9;
+/// What one counted operation of an adjoint gradient costs, in forward sensitivities' counted
+/// operations, for [`Sensitivities::Auto`]'s choice.
+///
+/// [`Counts::operations`] charges each evaluation, factorisation and solve what its
+/// structure says (a compiled program's operations, the products' multiply–adds, the
+/// eliminations), not what the integrator does around them. The backward integration does
+/// more of that per operation: it interpolates the forward solution, stops at every end of
+/// a forward step and at every sample, restarting there. Measured over the collection
+/// (docs/petab.md, one thread, the median of 5 evaluations each way), an adjoint gradient's
+/// time per counted operation was 0.7–5.4 times a forward gradient's, the median 2.2. The
+/// weight is above the median so that the adjoint is taken only where it is clearly ahead:
+/// forward's gradient is the one the fits' linearization has, and a wrong adjoint costs more
+/// (forward up to 26 % faster where the count was 2 times the adjoint's) than a wrong forward
+/// (the adjoint up to 4 % faster where it was 2–3 times).
+pub const ADJOINT_OPERATION_COST: f64 = 3.0;
 
 /// One experiment's rows, its part of U and whether it came from the adjoint, by the way
 /// [`Sensitivities::Auto`] chose for it (measuring both the first time), and whether the
@@ -150,29 +160,22 @@ fn auto_gradient<S: System>(
         }
         None => {}
     }
-    let timed = |f: &dyn Fn() -> Result<(Rows, Vec<f64>, bool), OdeError>| {
+    // Each way with its cached steady state forgotten before it, so that both solve it.
+    let counted = |f: &dyn Fn() -> Result<(Rows, Vec<f64>, bool), OdeError>| {
         e.forget_cached();
-        let started = std::time::Instant::now();
-        let out = f();
-        (out, started.elapsed())
+        f()
     };
-    // Forward once untimed first: the first integration of an experiment pays for what is
-    // cold (memory, caches), which would count against whichever way went first. Then the
-    // adjoint, then forward again, each timed.
-    let (warm, _) = timed(&|| forward_gradient(e, at, k));
-    let (adjoint, adjoint_time) = timed(&|| experiment_gradient(e, at, k));
-    let (forward, forward_time) = timed(&|| forward_gradient(e, at, k));
-    let warm = warm.as_ref().map(|(rows, ..)| rows.counts).unwrap_or_default();
+    let adjoint = counted(&|| experiment_gradient(e, at, k));
+    let forward = counted(&|| forward_gradient(e, at, k));
     // Whether the backward integration ran (false: it failed, and forward took its place).
     let adjoint_ran = matches!(&adjoint, Ok((_, _, true)));
     // The choice is kept only where both ways could be integrated here: a point where one
-    // cannot says nothing of their speed, and the next gradient measures again.
+    // cannot says nothing of their work, and the next gradient counts again.
     let choice = match (&adjoint, &forward) {
         (Ok(_), Ok(_)) if !adjoint_ran => Some(Choice::AdjointFailed),
-        // Forward unless the adjoint was clearly faster: one timing each carries the
-        // machine's noise, and forward's gradient is the one the fits' linearization has.
-        (Ok(_), Ok(_)) => {
-            Some(match adjoint_time.as_secs_f64() < ADJOINT_MARGIN * forward_time.as_secs_f64() {
+        (Ok((by_adjoint, ..)), Ok((by_forward, ..))) => {
+            let adjoint = ADJOINT_OPERATION_COST * by_adjoint.counts.operations as f64;
+            Some(match adjoint < by_forward.counts.operations as f64 {
                 true => Choice::Adjoint,
                 false => Choice::Forward,
             })
@@ -182,11 +185,9 @@ fn auto_gradient<S: System>(
     if let Some(choice) = choice {
         let _ = e.adjoint_faster.set(choice);
     }
-    // The returned way's work counts the rest too: all of it was done.
+    // The returned way's work counts the other's too: all of it was done.
     let other = |r: &Result<(Rows, Vec<f64>, bool), OdeError>| {
-        let mut counts = r.as_ref().map(|(rows, ..)| rows.counts).unwrap_or_default();
-        counts += warm;
-        counts
+        r.as_ref().map(|(rows, ..)| rows.counts).unwrap_or_default()
     };
     let by_adjoint = choice == Some(Choice::Adjoint) || (forward.is_err() && adjoint_ran);
     match by_adjoint {

@@ -125,7 +125,8 @@ impl Resolved {
 /// could be integrated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Choice {
-    /// The adjoint took less than [`ADJOINT_MARGIN`](crate::ADJOINT_MARGIN) of forward's time.
+    /// The adjoint's counted work, weighted by
+    /// [`ADJOINT_OPERATION_COST`](crate::ADJOINT_OPERATION_COST), was less than forward's.
     Adjoint,
     /// It did not.
     Forward,

@@ -88,7 +88,7 @@ mod trust;
 mod unknowns;
 
 // The user's vocabulary: a problem, its unknowns and data, the options, the estimate.
-pub use adjoint::{ADJOINT_MARGIN, NllGradient, Sensitivities};
+pub use adjoint::{ADJOINT_OPERATION_COST, NllGradient, Sensitivities};
 pub use certificate::{Bound, Certificate, NullSpace};
 pub use data::{Data, Record, Samples, Series};
 pub use error::{FitError, ProblemError};

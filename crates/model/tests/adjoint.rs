@@ -181,11 +181,10 @@ fn an_event_fires_once_whichever_way_the_model_is_integrated() {
     }
 }
 
-/// The automatic choice is measured once per problem and integrator, which the work of a
-/// gradient shows: the measuring one integrates each experiment forward twice and by adjoint
-/// once, a later one each experiment one way. A copy at other noise scales keeps the choice;
-/// a copy with another integrator (its scheme and tolerances decide which way is faster)
-/// measures again.
+/// The automatic choice is made once per problem and integrator, which the work of a
+/// gradient shows: the first one integrates each experiment both ways, a later one each
+/// experiment one way. A copy at other noise scales keeps the choice; a copy with another
+/// integrator (its scheme and tolerances decide which way does less) counts again.
 #[test]
 fn auto_measures_once_per_integrator() {
     let dir = scratch("auto", MODEL);
@@ -204,4 +203,82 @@ fn auto_measures_once_per_integrator() {
     let (again, then) = (work(&other), work(&other));
     assert!(again > then, "another integrator measures again: {again}, then {then}");
     assert_eq!(work(&problem), chosen, "and leaves the original's choice");
+}
+
+/// A model of n states coupled through their sum, x_i' = −k_i x_i + c_i Σ x / n, with the 2n
+/// rates unknown and one experiment, one output (the sum) at four times: its Jacobian is
+/// dense, so the forward sensitivities' products grow as n² per column and the adjoint's as
+/// n².
+fn coupled(n: usize) -> (String, String) {
+    let names: Vec<String> = (1..=n).map(|i| format!("x{i}")).collect();
+    let sum = names.join(" + ");
+    let mut text = format!(
+        "states = [{}]\nparameters = [{}]\n[equations]\n",
+        names.iter().map(|x| format!("\"{x}\"")).collect::<Vec<_>>().join(", "),
+        (1..=n)
+            .flat_map(|i| [format!("\"k{i}\""), format!("\"c{i}\"")])
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    for i in 1..=n {
+        text += &format!("x{i} = \"-k{i} * x{i} + c{i} * ({sum}) / {n}\"\n");
+    }
+    text += "[initial]\n";
+    for i in 1..=n {
+        text += &format!("x{i} = {}\n", 1.0 / i as f64);
+    }
+    text += &format!("[outputs]\ny = {{ value = \"{sum}\", sigma = 0.05 }}\n[unknowns]\n");
+    for i in 1..=n {
+        let k = 0.5 + 0.1 * i as f64;
+        text += &format!("k{i} = {{ guess = {k}, min = 1e-3, max = 1e3, log = true }}\n");
+        text += &format!("c{i} = {{ guess = 0.3, min = 1e-3, max = 1e3, log = true }}\n");
+    }
+    text += "[data]\nfile = \"y.csv\"\n";
+    let total: f64 = (1..=n).map(|i| 1.0 / i as f64).sum();
+    let data = (1..=4).fold("t,y\n".to_string(), |d, m| {
+        d + &format!("{},{}\n", m, total * (-0.4 * m as f64).exp())
+    });
+    (text, data)
+}
+
+/// `auto` takes the adjoint exactly where the adjoint's counted operations, weighted by
+/// `ADJOINT_OPERATION_COST`, are fewer than the forward sensitivities' — on a model of 2
+/// states, where forward does less, and of 24, where the adjoint does — and its choice is the
+/// same on every run: its first gradient does both ways' work, to the operation, and returns
+/// the chosen way's gradient to the last bit, as a second, fresh problem does again.
+#[test]
+fn auto_takes_the_way_with_fewer_counted_operations() {
+    let mut ways = Vec::new();
+    for n in [2, 24] {
+        let dir =
+            std::env::temp_dir().join(format!("sysid-adjoint-counted-{n}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (text, data) = coupled(n);
+        std::fs::write(dir.join("m.toml"), text).unwrap();
+        std::fs::write(dir.join("y.csv"), data).unwrap();
+        let load = || Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap();
+        let problem = load();
+        let z = problem.unknowns().coordinates(&problem.guesses());
+        let gradient = |p: &sysid_core::Problem<_>, how| p.nll_gradient(&z, how).unwrap().unwrap();
+        let forward = gradient(&problem, Sensitivities::Forward);
+        let adjoint = gradient(&problem, Sensitivities::Adjoint);
+        assert!(adjoint.fell_back.is_empty() && adjoint.by_adjoint == [0]);
+        let weighted = sysid_core::ADJOINT_OPERATION_COST * adjoint.counts.operations as f64;
+        let by_adjoint = weighted < forward.counts.operations as f64;
+        let chosen = if by_adjoint { &adjoint } else { &forward };
+        for run in 0..2 {
+            let problem = load();
+            let first = gradient(&problem, Sensitivities::Auto);
+            assert_eq!(first.by_adjoint.is_empty(), !by_adjoint, "n = {n}, run {run}");
+            let mut both = forward.counts;
+            both += adjoint.counts;
+            assert_eq!(first.counts, both, "n = {n}: the first gradient does both ways' work");
+            assert_eq!(first.gradient, chosen.gradient, "n = {n}, run {run}");
+            let later = gradient(&problem, Sensitivities::Auto);
+            assert_eq!(later.counts.operations, chosen.counts.operations, "n = {n}");
+            assert_eq!(later.gradient, chosen.gradient, "n = {n}");
+        }
+        ways.push(by_adjoint);
+    }
+    assert_eq!(ways, [false, true], "the test needs a model each way goes");
 }

@@ -432,7 +432,7 @@ impl PyProblem {
     }
 
     /// The negative log-likelihood at x and its gradient on `scale`. `sensitivities`: "auto" (each experiment by whichever of forward
-    /// sensitivities and the adjoint was faster at its first gradient, which computes both),
+    /// sensitivities and the adjoint did less work at its first gradient, which computes both),
     /// "forward" or "adjoint" (docs/methods.md#adjoint-gradients).
     #[pyo3(signature = (x, scale="linear", sensitivities="auto"))]
     fn nll_and_gradient<'py>(
@@ -458,7 +458,7 @@ impl PyProblem {
     }
 
     /// The objective and its gradient on `scale`. `sensitivities`: "auto" (each experiment by whichever of forward
-    /// sensitivities and the adjoint was faster at its first gradient, which computes both),
+    /// sensitivities and the adjoint did less work at its first gradient, which computes both),
     /// "forward" or "adjoint" (docs/methods.md#adjoint-gradients).
     #[pyo3(signature = (x, scale="linear", sensitivities="auto"))]
     fn objective_and_gradient<'py>(
