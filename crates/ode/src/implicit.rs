@@ -165,6 +165,13 @@ pub(crate) struct Structure {
 }
 
 impl Structure {
+    /// An implicit step's factorisation and solve before its matrix exists: the Jacobian by
+    /// its products with the n unit directions, dense LU.
+    pub(crate) fn dense_implicit(&self) -> (u64, u64) {
+        let n = self.n;
+        (self.linearized + self.state_entries * n + n * n + lu_factor(n), lu_solve(n))
+    }
+
     pub(crate) fn of<S: System>(sys: &S) -> Self {
         let sig = sys.signature();
         let (n, np) = (sig.n_states() as u64, sig.n_parameters() as u64);

@@ -3,7 +3,7 @@
 
 use nalgebra::{DMatrix, DMatrixView, Dyn};
 
-use crate::counts::{Costs, Counts, lu_factor, lu_solve};
+use crate::counts::{Costs, Counts};
 use crate::driver::{integrate, integrate_selected};
 use crate::error::OdeError;
 use crate::events::{self, Fired};
@@ -164,7 +164,7 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
         let s = &self.structure;
         let (factor, solve) = match &self.implicit {
             Some(matrix) => matrix.costs(s),
-            None => (s.linearized + s.state_entries * s.n + lu_factor(s.n), lu_solve(s.n)),
+            None => s.dense_implicit(),
         };
         Costs { eval: s.linearized, factor, solve }
     }
@@ -306,7 +306,7 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
         let products = if k == 0 { 0 } else { s.state_entries * k + s.parameter_entries };
         let (factor, solve) = match &self.implicit {
             Some(matrix) => matrix.costs(s, k),
-            None => (s.linearized + s.state_entries * s.n + lu_factor(s.n), lu_solve(s.n)),
+            None => s.dense_implicit(),
         };
         Costs { eval: s.linearized + products, factor, solve }
     }
