@@ -88,6 +88,8 @@ struct Evaluation {
     /// With `--sensitivities adjoint` or `auto`: the experiments whose gradient came from
     /// forward sensitivities because the adjoint does not handle them or failed, by name.
     fell_back: Option<Vec<String>>,
+    /// The work of its integrations.
+    counts: sysid_ode::Counts,
 }
 
 /// Runs `sysid evaluate`.
@@ -147,6 +149,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
                 "evaluations": args.repeat,
                 "ms_per_evaluation": ms,
                 "import_ms": import_ms,
+                "counts": e.counts,
             });
             format!("{}\n", serde_json::to_string_pretty(&record)?)
         }
@@ -209,7 +212,7 @@ fn evaluate(
         |e: sysid_ode::OdeError| anyhow!("the model cannot be integrated at this point: {e}");
     let prior = problem.prior_nll_at(z);
     let Some(how) = gradient else {
-        let nll = problem.nll_at(z).map_err(cannot)?.ok_or_else(no_likelihood)?;
+        let (nll, counts) = problem.nll_and_counts(z).map_err(cannot)?.ok_or_else(no_likelihood)?;
         return Ok(Evaluation {
             nll,
             prior,
@@ -218,6 +221,7 @@ fn evaluate(
             experiments: problem.experiments().len(),
             by_adjoint: None,
             fell_back: None,
+            counts,
         });
     };
     let e =
@@ -242,6 +246,7 @@ fn evaluate(
         experiments: experiments.len(),
         by_adjoint: Some(named(&e.by_adjoint)),
         fell_back,
+        counts: e.counts,
     })
 }
 
@@ -272,6 +277,11 @@ fn table(
             if more > 0 { format!(" and {more} more") } else { String::new() }
         )
     };
+    let c = &e.counts;
+    out += &format!(
+        "  work         {} steps ({} rejected), {} right-hand sides, {} factorisations, {} integration(s)\n",
+        c.steps, c.rejected_steps, c.rhs_evaluations, c.jacobians, c.integrations
+    );
     if let (Some(how), Some(by)) = (e.how, &e.by_adjoint) {
         out += &format!(
             "  gradient     {} ({} of {} experiment(s) by adjoint){}\n",

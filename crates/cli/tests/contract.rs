@@ -530,6 +530,8 @@ fn every_documented_key_holds_in_every_kind_of_run() {
     ] {
         let e = json(&args);
         contract.object(&e, "sysid evaluate --format json", &format!("{args:?}"));
+        contract.object(&e["counts"], "counts", &format!("{args:?}: counts"));
+        assert!(e["counts"]["steps"].as_u64().expect("steps") > 0, "{args:?}: it integrated");
         let names: Vec<&String> = e["parameters"].as_object().expect("parameters").keys().collect();
         if let Some(g) = e["gradient"].as_object() {
             assert_eq!(g.keys().collect::<Vec<_>>(), names, "{args:?}: the gradient's names");

@@ -487,9 +487,18 @@ impl<S: System> Problem<S> {
     /// sensitivities), as [`nll`](Self::nll) gives it from a linearization: for a point
     /// where the sensitivities cannot be integrated but the model can.
     pub fn nll_at(&self, z: &[f64]) -> Result<Option<f64>, OdeError> {
+        Ok(self.nll_and_counts(z)?.map(|(nll, _)| nll))
+    }
+
+    /// [`nll_at`](Self::nll_at) with the work its integrations did.
+    pub fn nll_and_counts(&self, z: &[f64]) -> Result<Option<(f64, Counts)>, OdeError> {
         let rows = self.evaluate_rows(z, &self.integrator, false)?;
         let costs = rows.iter().map(|rows| rows.r.iter().map(|x| x * x).sum::<f64>());
-        Ok(self.nlls(costs).map(|list| list.iter().sum()))
+        let mut counts = Counts::default();
+        for e in &rows {
+            counts += e.counts;
+        }
+        Ok(self.nlls(costs).map(|list| (list.iter().sum(), counts)))
     }
 
     /// The negative log-likelihood of each experiment at a linearization's point.
