@@ -264,6 +264,7 @@ fn experiment_gradient<S: System>(
     }
     rows.counts = trajectory.counts();
     rows.counts += counts;
+    rows.forget_derivatives();
     Ok((rows, u, true))
 }
 
@@ -273,7 +274,10 @@ fn forward_gradient<S: System>(
     at: &At<'_>,
     k: usize,
 ) -> Result<(Rows, Vec<f64>, bool), OdeError> {
-    let rows = experiment_rows(e, at, k)?;
+    let mut rows = experiment_rows(e, at, k)?;
     let u = rows.gradient(k);
+    // The gradient needs U alone: the rows' derivatives go now, so that a problem of many
+    // experiments holds one experiment's at a time on each thread, not all of them.
+    rows.forget_derivatives();
     Ok((rows, u, false))
 }

@@ -897,6 +897,13 @@ pub(crate) fn slot_matrix<S: System>(
 }
 
 impl Rows {
+    /// Drops the rows' derivatives (J's and the Fisher rows), keeping the residuals, their
+    /// samples and the work: what a gradient's caller reads once U is formed.
+    pub(crate) fn forget_derivatives(&mut self) {
+        self.jacobian = Vec::new();
+        self.fisher = Vec::new();
+    }
+
     /// U = Jᵀr over these rows (k columns).
     pub(crate) fn gradient(&self, k: usize) -> Vec<f64> {
         let mut u = vec![0.0; k];
