@@ -6,7 +6,7 @@ between them (each experiment by whichever did less work at its first gradient),
 DIR is a folder of PEtab problems (DIR/NAME/NAME.yaml), e.g. a clone's Benchmark-Models;
 SYSID is the binary (default target/release/sysid). Prints per problem the NLL of each,
 the largest gradient difference relative to the largest component, and the median
-milliseconds of each (`evaluate --repeat REPEAT`; `auto`'s measuring evaluation is not timed),
+milliseconds of each (`evaluate --repeat REPEAT`; `auto`'s first evaluation, which computes both ways, is not timed),
 with how many experiments `auto` took by adjoint.
 """
 import json
