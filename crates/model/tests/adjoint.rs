@@ -207,8 +207,8 @@ fn auto_measures_once_per_integrator() {
 
 /// A model of n states coupled through their sum, x_i' = −k_i x_i + c_i Σ x / n, with the 2n
 /// rates unknown and one experiment, one output (the sum) at four times: its Jacobian is
-/// dense, so the forward sensitivities' products grow as n² per column and the adjoint's as
-/// n².
+/// dense, so the forward sensitivities' products cost n² for each of the 2n columns, and the
+/// adjoint's n² in all.
 fn coupled(n: usize) -> (String, String) {
     let names: Vec<String> = (1..=n).map(|i| format!("x{i}")).collect();
     let sum = names.join(" + ");

@@ -32,7 +32,7 @@
 
 use nalgebra::DMatrix;
 
-use crate::counts::{Costs, Counts, lu_factor, lu_solve};
+use crate::counts::{Costs, Counts, dense_lu};
 use crate::driver::{integrate, resolution};
 use crate::error::OdeError;
 use crate::events::Reset;
@@ -382,7 +382,7 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         let entries = s.state_entries + s.parameter_entries;
         let (factor, solve) = match &self.implicit {
             Some(implicit) => implicit.factors.costs(),
-            None => (lu_factor(s.n), lu_solve(s.n)),
+            None => dense_lu(s.n),
         };
         Costs {
             eval: 5 * s.n + s.linearized + entries,

@@ -43,18 +43,15 @@ impl Costs {
     /// as dear as n² operations, factorised and solved by dense LU.
     pub fn dense(n: usize) -> Self {
         let n = n as u64;
-        Self { eval: n * n, factor: n * n + lu_factor(n), solve: lu_solve(n) }
+        let (factor, solve) = dense_lu(n);
+        Self { eval: n * n, factor: n * n + factor, solve }
     }
 }
 
-/// A dense LU factorisation of order n: 2n³/3 operations.
-pub(crate) fn lu_factor(n: u64) -> u64 {
-    2 * n * n * n / 3
-}
-
-/// Forward and back substitution with dense factors of order n: 2n² operations.
-pub(crate) fn lu_solve(n: u64) -> u64 {
-    2 * n * n
+/// A dense LU of order n: its factorisation (2n³/3 operations) and a forward and back
+/// substitution with it (2n²).
+pub(crate) fn dense_lu(n: u64) -> (u64, u64) {
+    (2 * n * n * n / 3, 2 * n * n)
 }
 
 impl std::ops::AddAssign for Counts {

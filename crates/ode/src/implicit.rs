@@ -6,7 +6,7 @@
 use nalgebra::DMatrix;
 use num_dual::HyperDual64;
 
-use crate::counts::{lu_factor, lu_solve};
+use crate::counts::dense_lu;
 use crate::jacobian::{JacobianProducts, ProductPlan};
 use crate::lu::{FactorError, Lu};
 use crate::sparse::SparseJacobian;
@@ -136,12 +136,9 @@ impl IterationMatrix {
     /// Estimated operations of one [`factor`](Self::factor) (the Jacobian's evaluation
     /// included) and of one solve with one right-hand side, for a system of structure `s`.
     pub(crate) fn costs(&self, s: &Structure) -> (u64, u64) {
-        let n = self.n as u64;
         let jacobian = match (&self.analytic, &self.lu) {
-            (Some(_), _) => s.linearized,
-            (None, Factors::Sparse(_)) => s.linearized,
-            // Products of the Jacobian with the n unit directions, then read out.
-            (None, Factors::Dense(_)) => s.linearized + s.state_entries * n + n * n,
+            (None, Factors::Dense(_)) => s.dense_jacobian(),
+            _ => s.linearized,
         };
         let (factor, solve) = self.lu.costs();
         (jacobian + factor, solve)
@@ -165,11 +162,17 @@ pub(crate) struct Structure {
 }
 
 impl Structure {
-    /// An implicit step's factorisation and solve before its matrix exists: the Jacobian by
-    /// its products with the n unit directions, dense LU.
+    /// The Jacobian as a dense matrix: f's program, its products with the n unit directions,
+    /// read out.
+    pub(crate) fn dense_jacobian(&self) -> u64 {
+        self.linearized + self.state_entries * self.n + self.n * self.n
+    }
+
+    /// An implicit step's factorisation and solve before its matrix exists: the Jacobian
+    /// made dense, dense LU.
     pub(crate) fn dense_implicit(&self) -> (u64, u64) {
-        let n = self.n;
-        (self.linearized + self.state_entries * n + n * n + lu_factor(n), lu_solve(n))
+        let (factor, solve) = dense_lu(self.n);
+        (self.dense_jacobian() + factor, solve)
     }
 
     pub(crate) fn of<S: System>(sys: &S) -> Self {
@@ -268,16 +271,15 @@ impl Factors {
     /// eliminations updating about (F/n)² entries) and 2F; a sparse LU that has fallen back
     /// to dense factors costs what those do.
     pub(crate) fn costs(&self) -> (u64, u64) {
-        match self {
-            Self::Dense(lu) => (lu_factor(lu.dim() as u64), lu_solve(lu.dim() as u64)),
-            Self::Sparse(lu) if lu.fell_back() => {
-                (lu_factor(lu.dim() as u64), lu_solve(lu.dim() as u64))
-            }
-            Self::Sparse(lu) => {
+        let n = match self {
+            Self::Sparse(lu) if !lu.fell_back() => {
                 let (f, n) = (lu.entries_of_factors() as u64, (lu.dim() as u64).max(1));
-                (f * f / n, 2 * f)
+                return (f * f / n, 2 * f);
             }
-        }
+            Self::Sparse(lu) => lu.dim(),
+            Self::Dense(lu) => lu.dim(),
+        };
+        dense_lu(n as u64)
     }
 }
 
