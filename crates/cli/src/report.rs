@@ -69,8 +69,8 @@ pub struct ReportArgs {
     #[arg(long, default_value_t = sysid_report::CATALOGUE_ITERATIONS, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     max_iterations: usize,
     /// Instead of the report: time one NLL + gradient at nominal of every PEtab problem in
-    /// DIR (a folder each: `<name>/<name>.yaml`, `problem.yaml` or its only YAML file) on one thread, the gradient by the measured
-    /// choice between forward and adjoint sensitivities, and draw the times against states ×
+    /// DIR (a folder each: `<name>/<name>.yaml`, `problem.yaml` or its only YAML file) on one thread, the gradient by the counted
+    /// choice between forward and adjoint sensitivities (`--sensitivities auto`), and draw the times against states ×
     /// parameters on log–log axes with the least-squares power law, into OUT/scaling
     /// (README.md with the table, scaling.png and .svg, scaling.csv).
     #[arg(long, value_name = "DIR")]
@@ -79,7 +79,7 @@ pub struct ReportArgs {
     #[arg(long, default_value_t = 5, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     scaling_repeat: usize,
     /// With --scaling: seconds of timed evaluations after which a problem is evaluated no
-    /// more (it is always evaluated once, after the untimed evaluation that measures the
+    /// more (it is always evaluated once, after the untimed evaluation that makes the
     /// choice).
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
     scaling_seconds: f64,
