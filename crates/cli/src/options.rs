@@ -160,8 +160,8 @@ pub struct MethodArgs {
     pub max_iterations: Option<usize>,
     /// The certificate's tolerance: a fit converged when the first-order optimality of the
     /// point it returns (the largest cosine between the residual and a sensitivity of a free
-    /// unknown; 0 at a minimum, at most 1) is at most this (default 1e-6, or 100·rtol for an
-    /// integrator looser than rtol 1e-8).
+    /// unknown; 0 at a minimum, at most 1) is at most this (default 1e-6, or 100·rtol, at
+    /// most 1e-3, for an integrator looser than rtol 1e-8).
     #[arg(long, value_name = "TOL", value_parser = number, allow_hyphen_values = true)]
     pub gtol: Option<f64>,
     /// Hard budget of model integrations per fit, line-search and halving trials included

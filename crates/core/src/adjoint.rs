@@ -148,7 +148,7 @@ fn auto_gradient<S: System>(
     if !adjoint_applies(e) {
         return forward_gradient(e, at, k).map(|(rows, u, _)| (rows, u, false, true));
     }
-    match e.adjoint_faster.get() {
+    match e.adjoint_cheaper.get() {
         Some(Choice::Adjoint) => {
             return experiment_gradient(e, at, k).map(|(rows, u, a)| (rows, u, a, !a));
         }
@@ -183,7 +183,7 @@ fn auto_gradient<S: System>(
         _ => None,
     };
     if let Some(choice) = choice {
-        let _ = e.adjoint_faster.set(choice);
+        let _ = e.adjoint_cheaper.set(choice);
     }
     // The returned way's work counts the other's too: all of it was done.
     let other = |r: &Result<(Rows, Vec<f64>, bool), OdeError>| {

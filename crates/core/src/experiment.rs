@@ -148,19 +148,20 @@ pub struct Planned<S> {
     pub(crate) plan: Plan,
     /// The initial values and parameters that depend on a free unknown.
     pub(crate) slots: Vec<Wrt>,
-    /// Which way its gradient came faster, by the adjoint or by forward sensitivities, as
-    /// [`Sensitivities::Auto`](crate::Sensitivities::Auto) measured it at its first gradient;
+    /// Which way its gradient takes fewer counted operations, by the adjoint or by forward
+    /// sensitivities, as [`Sensitivities::Auto`](crate::Sensitivities::Auto) counted them at
+    /// its first gradient;
     /// shared by the clones (a problem at other noise scales is a clone), made afresh for
     /// another integrator or other free unknowns.
-    pub(crate) adjoint_faster: Arc<std::sync::OnceLock<Choice>>,
+    pub(crate) adjoint_cheaper: Arc<std::sync::OnceLock<Choice>>,
 }
 
 impl<S> Planned<S> {
     /// Its settings' functions for a problem integrated by `integrator`
     /// ([`SettingFunction::with_integrator`]).
     pub(crate) fn integrate_with(&mut self, integrator: &Integrator) {
-        // Which gradient is faster depends on the scheme and the tolerances: measured again.
-        self.adjoint_faster = Default::default();
+        // Which gradient is cheaper depends on the scheme and the tolerances: counted again.
+        self.adjoint_cheaper = Default::default();
         for s in self.initial.iter_mut().chain(&mut self.parameters) {
             if let Resolved::Function(g) = s
                 && let Some(h) = g.with_integrator(integrator)
@@ -192,7 +193,7 @@ impl<S> Planned<S> {
             plan: self.plan,
             slots: self.slots,
             // Another system: measured again.
-            adjoint_faster: Default::default(),
+            adjoint_cheaper: Default::default(),
         }
     }
 }
@@ -209,7 +210,7 @@ impl<S> Clone for Planned<S> {
             data: self.data.clone(),
             plan: self.plan.clone(),
             slots: self.slots.clone(),
-            adjoint_faster: self.adjoint_faster.clone(),
+            adjoint_cheaper: self.adjoint_cheaper.clone(),
         }
     }
 }

@@ -447,7 +447,7 @@ impl<S: System> Problem<S> {
                 .map_err(|err| in_experiment(&e.name, err))?;
             e.slots = slots(&e.initial, &e.parameters, &is_free);
             // Other columns: the choice between forward and adjoint is measured again.
-            e.adjoint_faster = Default::default();
+            e.adjoint_cheaper = Default::default();
         }
         self.unknowns = Unknowns::new(self.free.iter().map(|&j| declared[j].clone()).collect());
         self.weigh_scales();
@@ -753,7 +753,7 @@ fn resolve_experiments<S: System>(
             data: e.data,
             plan,
             slots: Vec::new(),
-            adjoint_faster: Default::default(),
+            adjoint_cheaper: Default::default(),
         });
     }
     Ok(out)

@@ -86,7 +86,7 @@ class Boehm(unittest.TestCase):
         np.testing.assert_array_equal(
             self.tight.nll_and_gradient(self.z, scale="parameter", sensitivities="forward")[1], gradient
         )
-        # By adjoint, and by whichever of the two `auto` finds faster (the default): the same
+        # By adjoint, and by whichever of the two `auto` counts cheaper (the default): the same
         # gradient to 1e-7 of its largest component (two integrations at rtol 1e-12), the same
         # value to 1e-9; `auto` keeps its choice, so a second call is the first.
         for how in ["adjoint", "auto"]:
