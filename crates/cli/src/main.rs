@@ -38,7 +38,8 @@ enum Command {
     /// side: convergence, iterations, cost, time, and each estimate next to the truth.
     Compare(compare::CompareArgs),
     /// The negative log-likelihood at the nominal values (or --set ones), with --gradient
-    /// its gradient, and the median time of one evaluation after the import (--repeat N).
+    /// its gradient, each with its integration error, and the median time of one evaluation
+    /// after the import (--repeat N).
     Evaluate(evaluate::EvaluateArgs),
     /// Write a catalogue system's data, or a model file's trajectory, as CSV (header row,
     /// time first).

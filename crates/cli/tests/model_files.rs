@@ -938,3 +938,51 @@ file = \"data.csv\"
         assert!((a - b).abs() < 1e-9, "{method}: nll {a} against {b}");
     }
 }
+
+/// `evaluate`'s integration errors against the closed form: x = 2e^{−kt} measured with σ = 0.1,
+/// so NLL = Σ ½ln(2πσ²) + ½((x(t) − m)/σ)² and ∂NLL/∂k = Σ (x(t) − m)/σ² · (−t x(t)). At
+/// rtol 1e-5 the integration's error is measurable; `nll_error` and `gradient_error` are
+/// |x − x′| with x′ at a tenth of rtol and atol (checked by evaluating there), and the true
+/// error is within 3 times them (the estimate is of the error at the given tolerance, not a
+/// bound: at a tenth of the tolerance the error of DOPRI5 is about a tenth). A fixed step has
+/// no finer integration: both are null.
+#[test]
+fn evaluate_reports_the_integration_error_of_its_numbers() {
+    let model =
+        DECAY.replace("[unknowns]", "[outputs]\ny = { value = \"x\", sigma = 0.1 }\n[unknowns]");
+    let data = "t,y\n0.5,1.6\n1,1.2\n2,0.75\n3,0.43\n";
+    let case = Case::new("errors", &model, data);
+    let path = case.model();
+    let evaluate = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec!["evaluate", "--model", &path, "--gradient", "--format", "json"];
+        args.extend_from_slice(extra);
+        let out = sysid(&args);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+        serde_json::from_slice(&out.stdout).expect("JSON")
+    };
+    let at = evaluate(&["--rtol", "1e-5", "--atol", "1e-8"]);
+    let finer = evaluate(&["--rtol", "1e-6", "--atol", "1e-9"]);
+    let (k, sigma) = (0.5_f64, 0.1_f64);
+    let (mut nll, mut gradient) = (0.0, 0.0);
+    for (t, m) in [(0.5, 1.6), (1.0, 1.2), (2.0, 0.75), (3.0, 0.43)] {
+        let x = 2.0 * (-k * t).exp();
+        nll += 0.5 * (2.0 * std::f64::consts::PI * sigma * sigma).ln()
+            + 0.5 * ((x - m) / sigma).powi(2);
+        gradient += (x - m) / (sigma * sigma) * (-t * x);
+    }
+    let value = |v: &serde_json::Value, key: &str| v[key].as_f64().expect(key);
+    let (got, error) = (value(&at, "nll"), value(&at, "nll_error"));
+    let measured = (got - value(&finer, "nll")).abs();
+    assert!((error - measured).abs() <= 1e-3 * measured, "nll_error {error} against {measured}");
+    assert!(error > 0.0 && (got - nll).abs() <= 3.0 * error, "{got} vs {nll} ± {error}");
+    let g = at["gradient"]["k"].as_f64().expect("gradient");
+    let g_error = at["gradient_error"]["k"].as_f64().expect("gradient_error");
+    let measured = (g - finer["gradient"]["k"].as_f64().expect("gradient")).abs();
+    assert!((g_error - measured).abs() <= 1e-3 * measured, "{g_error} against {measured}");
+    assert!(
+        g_error > 0.0 && (g - gradient).abs() <= 3.0 * g_error,
+        "{g} vs {gradient} ± {g_error}"
+    );
+    let fixed = evaluate(&["--integrator", "rk4", "--fixed-step", "0.01"]);
+    assert!(fixed["nll_error"].is_null() && fixed["gradient_error"].is_null(), "{fixed}");
+}

@@ -53,6 +53,19 @@ pub const PACE_FLOOR: usize = 1024;
 /// The tightest relative tolerance [`Evaluations::finer`] refines to.
 pub const FINEST_RTOL: f64 = 1e-12;
 
+/// `integrator` at a tenth of its rtol and atol ([`Evaluations::finer`]), or `None` where
+/// that cannot be more accurate: a fixed step, or rtol already at [`FINEST_RTOL`]. An atol
+/// above rtol is taken as rtol first.
+pub fn finer(integrator: &Integrator) -> Option<Integrator> {
+    if integrator.fixed_step.is_some() || integrator.rtol * 0.1 < FINEST_RTOL * 0.99 {
+        return None;
+    }
+    let mut finer = *integrator;
+    finer.rtol *= 0.1;
+    finer.atol = integrator.atol.min(integrator.rtol) * 0.1;
+    Some(finer)
+}
+
 /// The relative tolerance of the error-controlled integration a fixed-step run's
 /// certificate is measured against ([`Evaluations::reference`]).
 pub const REFERENCE_RTOL: f64 = 1e-10;
@@ -82,14 +95,7 @@ impl<'p, S: System> Evaluations<'p, S> {
     /// 1 (`--atol 1e300` would otherwise be "refined" to 1e299).
     pub fn finer(&self) -> Option<Problem<S>> {
         let problem = self.problem();
-        let integrator = problem.integrator();
-        if integrator.fixed_step.is_some() || integrator.rtol * 0.1 < FINEST_RTOL * 0.99 {
-            return None;
-        }
-        let mut finer = *integrator;
-        finer.rtol *= 0.1;
-        finer.atol = integrator.atol.min(integrator.rtol) * 0.1;
-        problem.clone().with_integrator(finer).ok()
+        problem.clone().with_integrator(finer(problem.integrator())?).ok()
     }
 
     /// The problem as the certificate measures its integration error against: [`finer`]
