@@ -35,7 +35,8 @@ TOLERANCES = ["--rtol", "1e-10", "--atol", "1e-14"]
 
 def evaluate(yaml, *extra):
     out = subprocess.run(
-        [SYSID, "evaluate", "--petab", yaml, "--format", "json", *TOLERANCES, *extra],
+        [SYSID, "evaluate", "--petab", yaml, "--format", "json", "--no-integration-error",
+         *TOLERANCES, *extra],
         capture_output=True, text=True,
     )
     if out.returncode != 0:

@@ -29,6 +29,11 @@ pub struct EvaluateArgs {
     /// their last sample, are integrated forward whatever is asked.
     #[arg(long, value_enum, default_value_t = How::Auto, requires = "gradient")]
     sensitivities: How,
+    /// Skip the untimed evaluation at a tenth of rtol and atol that measures the integration
+    /// error of the NLL and of the gradient (`nll_error` and `gradient_error` are then null):
+    /// for scripts that evaluate many points and need only the values.
+    #[arg(long)]
+    no_integration_error: bool,
     /// Evaluate N times and report the median time of one evaluation.
     #[arg(long, default_value_t = 1, value_name = "N", value_parser = count)]
     repeat: usize,
@@ -129,7 +134,10 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
         result = Some(e);
     }
     let e = result.expect("at least one evaluation");
-    let error = integration_error(&held, &z, &parameters, &values, &e);
+    let error = match args.no_integration_error {
+        true => None,
+        false => integration_error(&held, &z, &parameters, &values, &e),
+    };
     times.sort_by(f64::total_cmp);
     let ms = times[times.len() / 2];
     let text = match args.format {

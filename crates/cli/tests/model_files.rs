@@ -945,7 +945,7 @@ file = \"data.csv\"
 /// |x − x′| with x′ at a tenth of rtol and atol (checked by evaluating there), and the true
 /// error is within 3 times them (the estimate is of the error at the given tolerance, not a
 /// bound: at a tenth of the tolerance the error of DOPRI5 is about a tenth). A fixed step has
-/// no finer integration: both are null.
+/// no finer integration, and `--no-integration-error` skips it: both are null then.
 #[test]
 fn evaluate_reports_the_integration_error_of_its_numbers() {
     let model =
@@ -985,4 +985,6 @@ fn evaluate_reports_the_integration_error_of_its_numbers() {
     );
     let fixed = evaluate(&["--integrator", "rk4", "--fixed-step", "0.01"]);
     assert!(fixed["nll_error"].is_null() && fixed["gradient_error"].is_null(), "{fixed}");
+    let skipped = evaluate(&["--no-integration-error"]);
+    assert!(skipped["nll_error"].is_null() && skipped["gradient_error"].is_null(), "{skipped}");
 }
