@@ -50,7 +50,9 @@ proptest! {
         let expected = reference(&e, x, y, k, t);
         prop_assume!(moderate_throughout(&e, x, y, k, t));
         let value = program.eval::<f64>(t, &[x, y], &[k], &[]);
-        prop_assert!((value - expected).abs() <= 1e-12 * expected.abs().max(1.0), "{text}: {value} vs {expected}");
+        // 1e-11, as below: a tangent near its pole multiplies the two paths' rounding of its
+        // argument (tan(tan(−2.75/y)³): 5.4e-12 apart, every subexpression below 6).
+        prop_assert!((value - expected).abs() <= 1e-11 * expected.abs().max(1.0), "{text}: {value} vs {expected}");
 
         // ∂/∂x by dual numbers against central differences, Richardson-extrapolated from
         // steps h and h/2. Where the two differences disagree (a pole or a fast oscillation
