@@ -345,7 +345,7 @@ pub enum SchemeArg {
     /// Rodas5P, a Rosenbrock method of order 5 with exact Jacobians (implicit, for stiff
     /// systems; about half Rodas4's steps at tight tolerances).
     Rodas5p,
-    /// DOPRI5, switching to Rodas4 when the steps become limited by stability.
+    /// DOPRI5, switching to Rodas5P when the steps become limited by stability (the default of PEtab problems).
     Auto,
 }
 

@@ -1,5 +1,5 @@
 //! The integration loop: segments between discontinuities, direction, the step budget,
-//! accepting and rejecting steps by the scheme's controller, the automatic switch to Rodas4,
+//! accepting and rejecting steps by the scheme's controller, the automatic switch to Rodas5P,
 //! and one interpolant per accepted step. Schemes are reached only through [`Stepper`].
 
 use crate::control::{Control, MIN_FACTOR, initial_step};
@@ -14,7 +14,9 @@ use crate::rk4::Rk4;
 use crate::rodas4::Rodas4;
 use crate::rodas5p::Rodas5p;
 use crate::stepper::Stepper;
-use crate::stiffness::Stiffness;
+use crate::stiffness::{
+    SPECTRAL_EVERY, SPECTRAL_STIFF_H_LAMBDA, STIFF_H_LAMBDA, SpectralRadius, Stiffness,
+};
 use crate::work::{Evaluator, Work};
 
 /// Integrates dx/dt = f(t, x) from (t0, x0) to t_end (either direction), stopping exactly on
@@ -189,7 +191,7 @@ impl<R: Rhs> Stepper<R> for Active {
 struct Run<'r, R: Rhs, W, O> {
     ev: Evaluator<'r, R>,
     work: Work,
-    /// The scheme stepping now: `auto` starts explicit and may switch to Rodas4.
+    /// The scheme stepping now: `auto` starts explicit and may switch to Rodas5P.
     stepper: Active,
     t: f64,
     t_end: f64,
@@ -202,6 +204,8 @@ struct Run<'r, R: Rhs, W, O> {
     /// The largest magnitude at the start (at least 1): what a blow-up is measured against.
     start: f64,
     stiffness: Stiffness,
+    /// The automatic choice's estimate of the Jacobian's dominant eigenvalue.
+    spectral: SpectralRadius,
     /// Where DOPRI5's stiffness test fired, if it did and the scheme stays explicit.
     stiff_since: Option<f64>,
     wants: W,
@@ -249,6 +253,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             ln_err_old: 1e-4f64.ln(),
             start: x0.iter().fold(1.0f64, |m, v| m.max(v.abs())),
             stiffness: Stiffness::default(),
+            spectral: SpectralRadius::default(),
             stiff_since: None,
             wants,
             on_step,
@@ -365,7 +370,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             self.next_step_size(hs, ln_err, last_rejected);
             last_rejected = false;
             if let Some(h_lambda) = h_lambda {
-                self.observe_stiffness(h_lambda);
+                self.observe_stiffness(h_lambda, hs);
             }
             if lands {
                 return Ok(());
@@ -449,16 +454,32 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
     }
 
     /// Records an accepted step's h·λ. Once the test fires, the automatic choice switches to
-    /// Rodas4 (if the right-hand side has a Jacobian to factorise); any other choice notes
+    /// Rodas5P (if the right-hand side has a Jacobian to factorise); any other choice notes
     /// where, to explain a step budget that runs out later.
-    fn observe_stiffness(&mut self, h_lambda: f64) {
+    ///
+    /// The automatic choice also counts a step as stiff where h times the Jacobian's spectral
+    /// radius ([`SpectralRadius`], refreshed every [`SPECTRAL_EVERY`] accepted steps) exceeds
+    /// [`SPECTRAL_STIFF_H_LAMBDA`].
+    fn observe_stiffness(&mut self, h_lambda: f64, h: f64) {
+        let auto = self.ev.cfg.scheme == Scheme::Auto;
+        let mut h_lambda = h_lambda;
+        if auto && matches!(self.stepper, Active::Dopri5) {
+            if self.ev.counts.steps.is_multiple_of(SPECTRAL_EVERY) {
+                let (t, states) = (self.t, self.ev.rhs.states());
+                let ev = &mut self.ev;
+                self.spectral.refresh(&self.work.x, states, h, |x, dx| ev.f(t, x, dx));
+            }
+            // On the scale of Hairer's threshold, which the test applies to both.
+            let spectral =
+                h.abs() * self.spectral.radius * STIFF_H_LAMBDA / SPECTRAL_STIFF_H_LAMBDA;
+            h_lambda = h_lambda.max(spectral);
+        }
         if !self.stiffness.observe(h_lambda) {
             return;
         }
         let t = self.t;
-        let auto = self.ev.cfg.scheme == Scheme::Auto;
         if auto && self.ev.factor(t, self.ev.side(t), &self.work.x, 1.0).is_ok() {
-            self.stepper = Active::Rodas4;
+            self.stepper = Active::Rodas5p;
         } else {
             self.stiff_since.get_or_insert(t);
         }

@@ -17,8 +17,9 @@
 //!   exact Jacobian and dense LU (faer), or, for a system of [`SPARSE_FROM`] states or more
 //!   that gives its sparse Jacobian, a sparse LU in a fill-reducing order (its pattern
 //!   analysed once), integrating the sensitivities with the same factorisation; an
-//!   automatic choice that starts with DOPRI5 and switches to Rodas4 when Hairer's
-//!   stiffness test fires; forward and backward from t0; steps that stop exactly on
+//!   automatic choice that starts with DOPRI5 and switches to Rodas5P when its steps are
+//!   limited by stability (Hairer's test, and the Jacobian's spectral radius by power
+//!   iteration); forward and backward from t0; steps that stop exactly on
 //!   declared input discontinuities; errors ([`OdeError`]) instead of panics;
 //! * [`Ivp`]: the state ([`Ivp::solve`]) or the state and its sensitivities
 //!   ([`Ivp::solve_sensitivities`]) at measurement times on both sides of t0, or the whole

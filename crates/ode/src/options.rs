@@ -19,9 +19,11 @@ pub enum Scheme {
     /// error-controlled (order-4 estimate), with dense output of order 4 and an exact
     /// Jacobian; about half Rodas4's steps at tight tolerances.
     Rodas5p,
-    /// DOPRI5 until Hairer's stiffness test fires (fifteen accepted steps in a row whose
-    /// h·λ, λ estimated from the last stages, says the step is limited by stability rather
-    /// than accuracy), then Rodas4 for the rest of the integration.
+    /// DOPRI5 until its steps are limited by stability rather than accuracy (fifteen
+    /// accepted steps in a row with h·λ > 2 by Hairer's estimate from the last stages, or
+    /// h·|λ|max > 3 with the Jacobian's spectral radius by power iteration, which still sees
+    /// the fast modes once they have decayed), then Rodas5P for the rest of the integration.
+    /// What imported PEtab problems use.
     Auto,
 }
 
@@ -93,7 +95,7 @@ impl Integrator {
         Self { scheme: Scheme::Rodas5p, rtol, atol, ..Self::default() }
     }
 
-    /// The automatic choice (DOPRI5, switching to Rodas4 when stiffness is detected).
+    /// The automatic choice (DOPRI5, switching to Rodas5P when stiffness is detected).
     pub fn auto(rtol: f64, atol: f64) -> Self {
         Self { scheme: Scheme::Auto, rtol, atol, ..Self::default() }
     }

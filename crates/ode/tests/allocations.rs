@@ -40,6 +40,9 @@ fn allocations_do_not_grow_with_the_number_of_steps() {
         Integrator::dopri5(1e-8, 1e-10),
         Integrator::rodas4(1e-6, 1e-8),
         Integrator::rodas5p(1e-6, 1e-8),
+        // DOPRI5 with the stiffness tests of the automatic choice, the spectral radius's
+        // power iteration among them.
+        Integrator::auto(1e-8, 1e-10),
     ];
     for integrator in integrators {
         let run = |t_end: f64| {

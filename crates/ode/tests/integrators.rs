@@ -458,7 +458,7 @@ impl sysid_ode::Rhs for Charged {
 
 /// `Counts::operations` charges every evaluation, factorisation and solve what the right-hand
 /// side says one costs, once each: against the right-hand side's own count of its calls, by
-/// every scheme (the explicit ones never factorise; `auto` switches to Rodas4 on this stiff
+/// every scheme (the explicit ones never factorise; `auto` switches to Rodas5P on this stiff
 /// system and factorises once more where it does).
 #[test]
 fn operations_charge_every_call_its_cost() {
