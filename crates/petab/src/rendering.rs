@@ -137,7 +137,7 @@ impl Builder<'_> {
         }
         let _ = writeln!(
             text,
-            "[integrator]\nmethod = \"rodas5p\"\nrtol = 1e-8\natol = 1e-12\nmax_steps = 200000"
+            "[integrator]\nmethod = \"auto\"\nrtol = 1e-8\natol = 1e-12\nmax_steps = 200000"
         );
         for event in &self.state_events {
             let origin = ModelError {
