@@ -18,6 +18,15 @@ own 1e-3 check; sysid gives the same value at its tolerances and at 1000 times t
 (crates/cli/tests/petab.rs), AMICI was not run tighter. At Zheng's nominal point the two
 agree to 1e-6. Zheng's point of before, −292.982545, AMICI gave as −292.9831237: the same
 gap, 5.8e-4. Zheng's row printed 2026-12-02, the others in November 2026.)
+
+`--points uncertified_points.tsv` evaluates the best known points that sysid has not
+certified (an oscillator still falling at the iteration limit), where the NLL needs tight
+integration to be resolved; printed 2026-12-02 with `--rtol 1e-14 --atol 1e-24` and without:
+
+    Borghans_BiophysChem1997 -108.9794713054439    (rtol 1e-14, atol 1e-24)
+    Borghans_BiophysChem1997 -108.91897810835675   (AMICI's defaults)
+
+(sysid at the point: −108.9794711 with Rodas5P and with DOPRI5 at rtol 1e-14, atol 1e-18.)
 """
 
 import argparse
@@ -38,9 +47,13 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("folder", type=Path, help="tests/data/petab")
     parser.add_argument("--amici-dir", type=Path, default=Path("/tmp/amici_models"))
+    parser.add_argument("--points", default="best_points.tsv",
+                        help="the table of points in FOLDER (default best_points.tsv)")
+    parser.add_argument("--rtol", type=float, help="AMICI's relative tolerance (default its own)")
+    parser.add_argument("--atol", type=float, help="AMICI's absolute tolerance (default its own)")
     args = parser.parse_args()
     points = defaultdict(dict)
-    with open(args.folder / "best_points.tsv", newline="") as f:
+    with open(args.folder / args.points, newline="") as f:
         for row in csv.DictReader(f, delimiter="\t"):
             points[row["problem"]][row["parameterId"]] = float(row["value"])
     for name, values in points.items():
@@ -49,6 +62,12 @@ def main():
             problem, output_folder=str(args.amici_dir / name), model_name=name
         )
         objective = importer.create_problem()
+        solver = objective.objective.amici_solver
+        if args.rtol is not None:
+            solver.set_relative_tolerance(args.rtol)
+        if args.atol is not None:
+            solver.set_absolute_tolerance(args.atol)
+        solver.set_max_steps(10**7)
         scales = problem.parameter_df["parameterScale"]
         x = []
         for i in objective.x_free_indices:
