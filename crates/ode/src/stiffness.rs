@@ -142,3 +142,37 @@ fn normalise(v: &mut [f64]) {
         v.iter_mut().for_each(|v| *v /= norm);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// f(x) = A x with A's eigenvalues −1, −30 and −1000 (A = Q diag Qᵀ, Q a rotation): the
+    /// refreshes converge to 1000 as the power iteration does, by (30/1000)ᵏ, whatever the
+    /// point; the components after the states (sensitivities) are carried along untouched.
+    #[test]
+    fn the_refreshes_converge_to_the_largest_eigenvalue() {
+        let (c, s) = (0.6_f64, 0.8_f64);
+        let q = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+        let lambda = [-1.0, -30.0, -1000.0];
+        let a: Vec<[f64; 3]> = (0..3)
+            .map(|i| std::array::from_fn(|j| (0..3).map(|k| q[i][k] * lambda[k] * q[j][k]).sum()))
+            .collect();
+        let f = |x: &[f64], dx: &mut [f64]| {
+            for i in 0..3 {
+                dx[i] = (0..3).map(|j| a[i][j] * x[j]).sum();
+            }
+            dx[3] = 7.0 * x[3];
+        };
+        let mut spectral = SpectralRadius::default();
+        let x = [2.0, -1.0, 0.5, 9.0];
+        let mut estimates = Vec::new();
+        for _ in 0..8 {
+            spectral.refresh(&x, 3, 1e-3, f);
+            estimates.push(spectral.radius);
+        }
+        // Difference quotients of a linear f are exact to rounding of about √ε relative.
+        assert!((estimates[7] - 1000.0).abs() <= 1e-6 * 1000.0, "{estimates:?}");
+        assert!(estimates.windows(2).all(|w| w[1] >= w[0] * (1.0 - 1e-6)), "{estimates:?}");
+    }
+}
