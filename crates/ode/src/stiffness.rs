@@ -104,16 +104,16 @@ impl SpectralRadius {
             self.v = (0..states)
                 .map(|i| if i % 2 == 0 { 1.0 } else { -1.0 } * (1.0 + (i % 7) as f64 / 7.0))
                 .collect();
-            normalise(&mut self.v);
+            let length = norm(&self.v);
+            self.v.iter_mut().for_each(|v| *v /= length);
             self.moved = vec![0.0; n];
             self.at_moved = vec![0.0; n];
             self.at_point = vec![0.0; n];
         }
         f(x, &mut self.at_point);
-        let size = |v: &[f64]| v.iter().map(|v| v * v).sum::<f64>().sqrt();
         // A move small beside the states and beside what one step changes them by, so that
         // the quotient is the Jacobian's, and not so small that f's rounding swamps it.
-        let scale = size(&x[..states]).max(step.abs() * size(&self.at_point[..states]));
+        let scale = norm(&x[..states]).max(step.abs() * norm(&self.at_point[..states]));
         let eta = f64::EPSILON.sqrt() * if scale > 0.0 { scale } else { 1.0 };
         self.moved.copy_from_slice(x);
         for (m, v) in self.moved.iter_mut().zip(&self.v) {
@@ -125,7 +125,7 @@ impl SpectralRadius {
         for (d, f) in jv.iter_mut().zip(&self.at_point) {
             *d = (*d - f) / eta;
         }
-        let radius = size(jv);
+        let radius = norm(jv);
         if !(radius.is_finite() && radius > 0.0) {
             return;
         }
@@ -136,11 +136,9 @@ impl SpectralRadius {
     }
 }
 
-fn normalise(v: &mut [f64]) {
-    let norm = v.iter().map(|v| v * v).sum::<f64>().sqrt();
-    if norm > 0.0 {
-        v.iter_mut().for_each(|v| *v /= norm);
-    }
+/// ‖v‖₂.
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
 #[cfg(test)]
