@@ -44,7 +44,13 @@ fn every_method_fits_the_twins_as_the_dual_path_does() {
         let dual = twins::file_problem(name, 1, true);
         let rhs = symbolic.system().symbolic_rhs().expect("symbolic derivatives");
         assert_eq!(rhs.is_compiled(), cfg!(feature = "jit"), "compiled by the jit feature");
-        for (method_name, method) in registry.build_all(&Settings::default()) {
+        // Without the trust regions' coarse stage: at rtol 1e-6 the two paths' rounding
+        // steers their trials apart a little, and the fits then end within gtol of each other,
+        // not within 1e-12 (van der Pol's nl2sol: v 4.6e-12 apart). The paths' arithmetic is
+        // what this compares.
+        let mut settings = Settings::default();
+        settings.driver.coarse_first = false;
+        for (method_name, method) in registry.build_all(&settings) {
             let what = format!("{name}, {method_name}");
             let (a, b) = match (method.fit(&symbolic), method.fit(&dual)) {
                 (Ok(a), Ok(b)) => (a, b),

@@ -18,6 +18,7 @@ fn driver() -> sysid::core::DriverOptions {
         max_condition: 1e6,
         max_integrations: Some(99),
         max_seconds: Some(60.0),
+        coarse_first: false,
     }
 }
 
@@ -31,6 +32,7 @@ fn driven<O: Driven>(options: O) -> O {
         .with_max_condition(1e6)
         .with_max_integrations(99)
         .with_max_seconds(60.0)
+        .with_coarse_first(false)
 }
 
 #[test]

@@ -173,6 +173,12 @@ pub struct MethodArgs {
     /// Default: none.
     #[arg(long, value_name = "SECONDS", value_parser = number, allow_hyphen_values = true)]
     pub max_seconds: Option<f64>,
+    /// Integrate at the problem's own tolerances from the first iteration. By default the
+    /// trust-region methods (nl2sol, levenberg-marquardt, hybrid-newton, geodesic-lm)
+    /// integrate at rtol 1e-6 (atol scaled alike) until they close in on a minimum, then go
+    /// on at the problem's tolerances, where the certificate judges the point.
+    #[arg(long)]
+    pub no_coarse_first: bool,
     /// First trajectory of quasilinearization: the model from the guess, or the data.
     #[arg(long, value_enum, default_value_t = QlStart::Guess)]
     pub ql_start: QlStart,
@@ -199,6 +205,7 @@ impl MethodArgs {
         driver.gtol = self.gtol;
         driver.max_integrations = self.max_integrations.or(driver.max_integrations);
         driver.max_seconds = self.max_seconds;
+        driver.coarse_first = !self.no_coarse_first;
         let ql_start = match self.ql_start {
             QlStart::Guess => Start::Guess,
             QlStart::Data => Start::Data,

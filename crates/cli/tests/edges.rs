@@ -585,11 +585,13 @@ fn bad_petab_problems_are_refused_where_they_are_wrong() {
 /// A fit whose last round was certified with the noise scales still moving (the iteration
 /// budget ran out between rounds: goodman's rounds) is not converged, and has no standard
 /// errors: they were the last round's, at scales that are not the estimate's. The default
-/// method profiles the scales after its first round and settles them within the same budget.
+/// method profiles the scales after its first round and settles them within 15 iterations
+/// (13 measured; 10 sufficed before its coarse stage, whose restart at the model's rtol 1e-10
+/// takes a few more).
 #[test]
 fn unsettled_noise_scales_leave_no_standard_errors() {
     let model = "examples/two-doses/model.toml";
-    let profiled = json(&["fit", "--model", model, "--max-iterations", "10"]);
+    let profiled = json(&["fit", "--model", model, "--max-iterations", "15"]);
     assert_eq!(profiled["method"], "nl2sol");
     assert_eq!(profiled["converged"], true, "{profiled}");
     assert!(profiled["scale_optimality"].as_f64().unwrap() <= profiled["gtol"].as_f64().unwrap());

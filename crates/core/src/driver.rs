@@ -38,12 +38,12 @@ use crate::assemble::{Ending, Record, is_better, returns_best};
 use crate::certificate::{onto_bounds, optimality};
 use crate::error::FitError;
 use crate::estimate::{Estimate, Iteration};
-use crate::evaluations::Evaluations;
+use crate::evaluations::{COARSE_RTOL, Evaluations, coarser};
 use crate::method::start_coordinates;
-use crate::options::DriverOptions;
+use crate::options::{DriverOptions, MAX_DERIVED_GTOL};
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate, Step};
-use crate::termination::{PROGRESS, PROGRESS_WINDOW, Rule, SETTLE, SETTLE_WINDOW};
+use crate::termination::{Failure, PROGRESS, PROGRESS_WINDOW, Rule, SETTLE, SETTLE_WINDOW};
 
 /// Runs `step` from `start` (values of the free unknowns) on `problem` and returns the
 /// estimate of method `method`. `Err` only for misuse: invalid options or start.
@@ -56,7 +56,7 @@ pub fn drive<S: System>(
 ) -> Result<Estimate, FitError> {
     options.validate()?;
     if problem.scales().is_empty() {
-        return drive_once(problem, method, options, step, start, false).map(|(e, ..)| e);
+        return drive_once(problem, method, options, step, start, (false, true)).map(|(e, ..)| e);
     }
     let gtol = options.gtol_for(problem.integrator().rtol);
     let mut sigma = problem.scale_values();
@@ -79,8 +79,15 @@ pub fn drive<S: System>(
         // The first round holds the scales where they start; the rounds after it, where the
         // method profiles, are one run at the closed form of every iterate.
         let profiles = step.profiles() && !rounds.is_empty();
-        let (estimate, ended, profiled) =
-            drive_once(&problem.with_scales(&sigma), method, &round_options, step, &z, profiles)?;
+        // Only the first round integrates coarsely first: the later ones start near a minimum.
+        let (estimate, ended, profiled) = drive_once(
+            &problem.with_scales(&sigma),
+            method,
+            &round_options,
+            step,
+            &z,
+            (profiles, rounds.is_empty()),
+        )?;
         if let Some(moved) = profiled {
             // Hierarchical optimisation: one run, at the closed form of the point it returns.
             let held = problem.with_scales(&ended);
@@ -127,7 +134,8 @@ fn paced<S: System, T>(
 const MAX_ROUNDS: usize = 50;
 
 /// One run of `step` at the problem's noise scales, or, where the method
-/// [profiles](Step::profiles), with the scales set to their closed form at every iterate.
+/// [profiles](Step::profiles), with the scales set to their closed form at every iterate;
+/// integrated [coarsely first](Step::coarse_first) where the method asks and `coarse`.
 /// Returns the estimate, the scales of the point it returns, and when it profiled, the
 /// scales' part of the certificate there: the largest relative change, |ln(σ̂/σ)|, that
 /// their closed form from the point's own linearization would make.
@@ -137,11 +145,22 @@ fn drive_once<S: System>(
     options: &DriverOptions,
     step: &mut impl Step<S>,
     start: &[f64],
-    profiles: bool,
+    (profiles, coarse): (bool, bool),
 ) -> Result<(Estimate, Vec<f64>, Option<f64>), FitError> {
     let started = Instant::now();
     let z0 = start_coordinates(problem, start)?;
     let mut ev = Evaluations::new(problem, options.integration_budget(problem.unknowns().len()));
+    // Coarse first: `ev` integrates at the coarse tolerances until the stage ends
+    // (`end_coarse`), then at the problem's own.
+    let mut coarse = coarse && options.coarse_first && step.coarse_first() && {
+        match coarser(problem.integrator()).map(|c| problem.clone().with_integrator(c)) {
+            Some(Ok(p)) => {
+                ev.refine(p);
+                true
+            }
+            _ => false,
+        }
+    };
     let retreats = step.retreats();
     let gtol = options.gtol_for(problem.integrator().rtol);
     let record = Record { method, options, gtol, started };
@@ -149,7 +168,14 @@ fn drive_once<S: System>(
     if profile.on() {
         ev.profile_scales();
     }
-    let mut current = match step.start(&ev, z0.clone()) {
+    let mut first = step.start(&ev, z0.clone());
+    if coarse && first.is_err() {
+        // Where the coarse integration fails at the start, the problem's own may not.
+        coarse = false;
+        ev.refine(problem.clone());
+        first = step.start(&ev, z0.clone());
+    }
+    let mut current = match first {
         Ok(start) => profile.apply(&mut ev, start),
         Err(failure) => {
             let moved = profile.on().then_some(f64::INFINITY);
@@ -171,11 +197,50 @@ fn drive_once<S: System>(
     // Whether the undetermined unknowns near a bound were moved onto it (once a run).
     let mut onto_bound = false;
     let mut precision = Precision::default();
+    // The first row of the history that the crawl and settled rules look back to: the
+    // coarse stage's costs do not compare with the problem's own to their accuracy.
+    let mut window_from = 0;
+    // The coarse stage closes in on a minimum once the measure is within the gtol its
+    // tolerances support.
+    let coarse_gtol = gtol.max((100.0 * COARSE_RTOL).min(MAX_DERIVED_GTOL));
+    // Ends the coarse stage: `current` evaluated again at the problem's own tolerances (at
+    // the run's scales), from which the run goes on afresh; where it cannot be integrated
+    // there (a blow-up near the end that the coarse integration did not see), the run
+    // begins again from its start; `Some` failure where that fails too. (`final`: the run
+    // ends there, and only the point and the best are of use.)
+    macro_rules! end_coarse {
+        (final) => {{
+            ev.refine(problem.with_scales(&ev.problem().scale_values()));
+            let again = match step.restart(&ev, &current) {
+                Err(failure) if !matches!(failure, Failure::Budget { .. }) => {
+                    step.start(&ev, z0.clone())
+                }
+                again => again,
+            };
+            match again {
+                Ok(again) => {
+                    current = profile.apply(&mut ev, again);
+                    scales = ev.problem().scale_values();
+                    best = None;
+                    None
+                }
+                Err(failure) => Some(failure),
+            }
+        }};
+        () => {{
+            coarse = false;
+            let failed = end_coarse!(final);
+            window_from = history.len();
+            settle_from = iteration + SETTLE_WINDOW;
+            failed
+        }};
+    }
     let ending = 'run: loop {
         let mut measure =
             current.linearization.as_ref().map(|l| optimality(ev.problem(), l, gtol).value);
         // Closing in and no longer gaining: is the measure accurate enough to be tested?
         if let Some(m) = measure
+            && !coarse
             && precision.due(m, gtol, ev.problem().integrator().rtol)
             && let Some(finer) = precision.check(&ev, &current.z, m, gtol)
         {
@@ -209,7 +274,7 @@ fn drive_once<S: System>(
         let gradient = measure.is_some_and(|m| m <= options.gradient_tolerance.min(gtol));
         // A crawl: ε fell by less than PROGRESS of itself over the last PROGRESS_WINDOW
         // iterations.
-        let crawled = history.len() > PROGRESS_WINDOW && {
+        let crawled = history.len() > window_from + PROGRESS_WINDOW && {
             let then = history[history.len() - 1 - PROGRESS_WINDOW].cost;
             then.is_finite()
                 && current.cost.is_finite()
@@ -220,22 +285,44 @@ fn drive_once<S: System>(
         // but where the certificate fails it does not count against the extra steps).
         let settled = iteration >= settle_from
             && measure.is_some_and(|m| m <= gtol)
-            && history.len() > SETTLE_WINDOW
+            && history.len() > window_from + SETTLE_WINDOW
             && {
                 let then = history[history.len() - 1 - SETTLE_WINDOW].cost;
                 then.is_finite()
                     && current.cost.is_finite()
                     && then - current.cost <= SETTLE * epsilon.abs()
             };
+        // The coarse stage's own settled rule, at the accuracy its tolerances support: the
+        // measure within their gtol and ε falling by less than COARSE_SETTLE of itself over
+        // the last SETTLE_WINDOW iterations. (The measure alone is small on a plateau at a
+        // start, where the trust region has yet to find the descent.)
+        let coarse_settled = coarse
+            && measure.is_some_and(|m| m <= coarse_gtol)
+            && history.len() > window_from + SETTLE_WINDOW
+            && {
+                let then = history[history.len() - 1 - SETTLE_WINDOW].cost;
+                then.is_finite()
+                    && current.cost.is_finite()
+                    && then - current.cost <= COARSE_SETTLE * epsilon.abs()
+            };
+        // (The gradient and settled rules judge at the problem's own accuracy: the coarse
+        // stage has its own settled rule. On a plateau at a start the measure is 0.)
         let mut fired = pending
             .take()
-            .or(gradient.then_some(Rule::Gradient))
+            .or((gradient && !coarse).then_some(Rule::Gradient))
             .or(crawled.then_some(Rule::Progress))
-            .or(settled.then_some(Rule::Settled));
+            .or((settled && !coarse).then_some(Rule::Settled));
         let mut proposal = None;
-        if fired.is_none() {
+        if fired.is_none() && !coarse_settled {
             let p = match paced(&mut ev, retreats, &current, |ev| step.propose(ev, &current)) {
                 Ok(p) => p,
+                Err(failure) if coarse && !matches!(failure, Failure::Budget { .. }) => {
+                    history.pop();
+                    match end_coarse!() {
+                        None => continue 'run,
+                        Some(failure) => break Ending::Failed { iteration, failure },
+                    }
+                }
                 Err(failure) => break Ending::Failed { iteration, failure },
             };
             if let Some(row) = history.last_mut() {
@@ -248,6 +335,14 @@ fn drive_once<S: System>(
                 distance(&p.z, &current.z) <= step_tolerance * (norm(&current.z) + step_tolerance);
             fired = p.stop.or(small.then_some(Rule::Step));
             proposal = Some(p);
+        }
+        if coarse && (fired.is_some() || coarse_settled) {
+            // The coarse stage is over: the rules judge at the problem's own tolerances.
+            history.pop();
+            match end_coarse!() {
+                None => continue 'run,
+                Some(failure) => break Ending::Failed { iteration, failure },
+            }
         }
         if let Some(rule) = fired {
             // A stopping rule: the certificate judges the point. Where it fails because the
@@ -313,9 +408,15 @@ fn drive_once<S: System>(
             }
         }
         if iteration >= options.max_iterations {
+            if coarse && let Some(failure) = end_coarse!(final) {
+                break Ending::Failed { iteration, failure };
+            }
             break Ending::MaxIterations;
         }
         if let Some(limit) = options.max_seconds.filter(|&s| started.elapsed().as_secs_f64() >= s) {
+            if coarse && let Some(failure) = end_coarse!(final) {
+                break Ending::Failed { iteration, failure };
+            }
             break Ending::TimeLimit(limit);
         }
         let proposal = match proposal {
@@ -331,6 +432,20 @@ fn drive_once<S: System>(
                 Ok(Advance::MovedThenStop(next, rule)) => {
                     pending = Some(rule);
                     next
+                }
+                Ok(Advance::Stop(_)) if coarse => {
+                    history.pop();
+                    match end_coarse!() {
+                        None => continue 'run,
+                        Some(failure) => break Ending::Failed { iteration, failure },
+                    }
+                }
+                Err(failure) if coarse && !matches!(failure, Failure::Budget { .. }) => {
+                    history.pop();
+                    match end_coarse!() {
+                        None => continue 'run,
+                        Some(failure) => break Ending::Failed { iteration, failure },
+                    }
                 }
                 Ok(Advance::Stop(rule)) => break Ending::Rule(rule),
                 Err(failure) => break Ending::Failed { iteration, failure },
@@ -427,6 +542,11 @@ impl Profile {
         sigma.iter().zip(&self.start).map(|(s, &(s0, n))| 2.0 * n * (s / s0).ln()).sum()
     }
 }
+
+/// The coarse stage of a [coarse-first](Step::coarse_first) run has settled where ε fell by
+/// less than this share of itself over the last [`SETTLE_WINDOW`] iterations (with the
+/// measure within the coarse tolerances' gtol): 100 times what they resolve.
+const COARSE_SETTLE: f64 = 100.0 * COARSE_RTOL;
 
 /// The measure's integration error counts as well below gtol under this share of it.
 const ACCURATE: f64 = 0.1;

@@ -50,6 +50,21 @@ pub const PACE: u64 = 10;
 /// The least step limit of a paced integration.
 pub const PACE_FLOOR: usize = 1024;
 
+/// The relative tolerance a [coarse first](crate::method::Step::coarse_first) run integrates
+/// at until its iterates close in on a minimum ([`coarser`]).
+pub const COARSE_RTOL: f64 = 1e-6;
+
+/// `integrator` at [`COARSE_RTOL`], its atol scaled by the same factor, for the first stage
+/// of a coarse-first run; `None` where that would not be at least 10 times looser: a fixed
+/// step, or rtol already above a tenth of [`COARSE_RTOL`].
+pub fn coarser(integrator: &Integrator) -> Option<Integrator> {
+    if integrator.fixed_step.is_some() || integrator.rtol > 0.1 * COARSE_RTOL {
+        return None;
+    }
+    let factor = COARSE_RTOL / integrator.rtol;
+    Some(Integrator { rtol: COARSE_RTOL, atol: integrator.atol * factor, ..*integrator })
+}
+
 /// The tightest relative tolerance [`Evaluations::finer`] refines to.
 pub const FINEST_RTOL: f64 = 1e-12;
 

@@ -120,7 +120,9 @@ pub mod method {
         other_side,
     };
     pub use crate::driver::drive;
-    pub use crate::evaluations::{Evaluations, FINEST_RTOL, REFERENCE_RTOL, finer};
+    pub use crate::evaluations::{
+        COARSE_RTOL, Evaluations, FINEST_RTOL, REFERENCE_RTOL, coarser, finer,
+    };
     pub use crate::fit::start_coordinates;
     pub use crate::geodesic::{Accelerated, GEODESIC_H, GEODESIC_RATIO, Geodesic};
     pub use crate::linalg::{NormalFactor, Singular, as_faer};

@@ -128,6 +128,10 @@ pub struct DriverOptions {
     /// begun runs to its end): the fit then stops with its best point, `time_limit`.
     /// `None` (the default): no limit.
     pub max_seconds: Option<f64>,
+    /// Whether a method that [asks for it](crate::method::Step::coarse_first) (the trust
+    /// regions) integrates at rtol [`COARSE_RTOL`](crate::method::COARSE_RTOL) until it
+    /// closes in on a minimum, then at the problem's own tolerances (default true).
+    pub coarse_first: bool,
 }
 
 impl Default for DriverOptions {
@@ -140,6 +144,7 @@ impl Default for DriverOptions {
             max_condition: 1e12,
             max_integrations: None,
             max_seconds: None,
+            coarse_first: true,
         }
     }
 }
@@ -202,6 +207,12 @@ pub trait Driven: Sized {
     /// With a wall-clock limit of `max_seconds` per fit ([`DriverOptions::max_seconds`]).
     fn with_max_seconds(mut self, max_seconds: f64) -> Self {
         self.driver_mut().max_seconds = Some(max_seconds);
+        self
+    }
+
+    /// With the coarse stage on or off ([`DriverOptions::coarse_first`]).
+    fn with_coarse_first(mut self, coarse_first: bool) -> Self {
+        self.driver_mut().coarse_first = coarse_first;
         self
     }
 }

@@ -139,6 +139,16 @@ pub trait Step<S: System> {
         false
     }
 
+    /// Whether the run integrates coarsely first: at [`COARSE_RTOL`](crate::method::COARSE_RTOL)
+    /// ([`coarser`](crate::method::coarser)) until the optimality measure is within the gtol
+    /// that tolerance supports, or a stopping rule fires, then at the problem's own tolerances
+    /// from the point reached ([`restart`](Self::restart)), where the certificate judges it.
+    /// For a method whose steps need only the model's shape, not the last digits, far from a
+    /// minimum (a trust region's).
+    fn coarse_first(&self) -> bool {
+        false
+    }
+
     /// Proposes the next point from `current`.
     fn propose(&mut self, ev: &Evaluations<'_, S>, current: &Iterate) -> Result<Proposal, Failure>;
 

@@ -337,6 +337,11 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         true
     }
 
+    /// Far from a minimum the trust region needs the model's shape, not its last digits.
+    fn coarse_first(&self) -> bool {
+        true
+    }
+
     /// Linearizes at the start; D from its A, Δ = factor·‖D z₀‖ (factor when that is 0).
     ///
     /// A start begins the hybrid afresh: each round of the noise scales' closed form starts
