@@ -23,10 +23,11 @@ gap, 5.8e-4. Zheng's row printed 2026-12-02, the others in November 2026.)
 certified (an oscillator still falling at the iteration limit), where the NLL needs tight
 integration to be resolved; printed 2026-12-02 with `--rtol 1e-14 --atol 1e-24` and without:
 
-    Borghans_BiophysChem1997 -108.9794713054439    (rtol 1e-14, atol 1e-24)
-    Borghans_BiophysChem1997 -108.91897810835675   (AMICI's defaults)
+    Borghans_BiophysChem1997 -109.2891402115272    (rtol 1e-14, atol 1e-24)
+    Borghans_BiophysChem1997 -109.27531575139228   (AMICI's defaults)
 
-(sysid at the point: −108.9794711 with Rodas5P and with DOPRI5 at rtol 1e-14, atol 1e-18.)
+(sysid at the point: −109.2891401 with Rodas5P at rtol 1e-12 and with DOPRI5 at rtol 1e-13.
+The point of the morning of 2026-12-02 gave −108.9794713 and −108.91897810835675.)
 """
 
 import argparse
