@@ -40,7 +40,7 @@ use crate::error::FitError;
 use crate::estimate::{Estimate, Iteration};
 use crate::evaluations::{COARSE_RTOL, Evaluations, coarser};
 use crate::method::start_coordinates;
-use crate::options::{DriverOptions, MAX_DERIVED_GTOL};
+use crate::options::DriverOptions;
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate, Step};
 use crate::termination::{Failure, PROGRESS, PROGRESS_WINDOW, Rule, SETTLE, SETTLE_WINDOW};
@@ -202,9 +202,10 @@ fn drive_once<S: System>(
     let mut window_from = 0;
     // The coarse stage closes in on a minimum once the measure is within the gtol its
     // tolerances support.
-    let coarse_gtol = gtol.max((100.0 * COARSE_RTOL).min(MAX_DERIVED_GTOL));
+    let coarse_gtol = DriverOptions { gtol: None, ..*options }.gtol_for(COARSE_RTOL).max(gtol);
     // Ends the coarse stage: `current` evaluated again at the problem's own tolerances (at
-    // the run's scales), from which the run goes on afresh; where it cannot be integrated
+    // the run's scales), from which the run goes on afresh (its history row, recorded at the
+    // coarse tolerances, is recorded again); where it cannot be integrated
     // there (a blow-up near the end that the coarse integration did not see), the run
     // begins again from its start; `Some` failure where that fails too. (`final`: the run
     // ends there, and only the point and the best are of use.)
@@ -229,6 +230,7 @@ fn drive_once<S: System>(
         }};
         () => {{
             coarse = false;
+            history.pop();
             let failed = end_coarse!(final);
             window_from = history.len();
             settle_from = iteration + SETTLE_WINDOW;
@@ -272,39 +274,32 @@ fn drive_once<S: System>(
             break Ending::Rule(Rule::ExactFit);
         }
         let gradient = measure.is_some_and(|m| m <= options.gradient_tolerance.min(gtol));
+        // Whether ε fell by less than `share` of itself over the last `window` iterations
+        // (of the stage the run is in).
+        let fell_less = |window: usize, share: f64| {
+            history.len() > window_from + window && {
+                let then = history[history.len() - 1 - window].cost;
+                then.is_finite()
+                    && current.cost.is_finite()
+                    && then - current.cost <= share * epsilon.abs()
+            }
+        };
         // A crawl: ε fell by less than PROGRESS of itself over the last PROGRESS_WINDOW
         // iterations.
-        let crawled = history.len() > window_from + PROGRESS_WINDOW && {
-            let then = history[history.len() - 1 - PROGRESS_WINDOW].cost;
-            then.is_finite()
-                && current.cost.is_finite()
-                && then - current.cost <= PROGRESS * epsilon.abs()
-        };
+        let crawled = fell_less(PROGRESS_WINDOW, PROGRESS);
         // Settled: the measure is within gtol and ε fell by less than SETTLE of itself over
         // the last SETTLE_WINDOW iterations (the run no longer gains; judged like any rule,
         // but where the certificate fails it does not count against the extra steps).
         let settled = iteration >= settle_from
             && measure.is_some_and(|m| m <= gtol)
-            && history.len() > window_from + SETTLE_WINDOW
-            && {
-                let then = history[history.len() - 1 - SETTLE_WINDOW].cost;
-                then.is_finite()
-                    && current.cost.is_finite()
-                    && then - current.cost <= SETTLE * epsilon.abs()
-            };
+            && fell_less(SETTLE_WINDOW, SETTLE);
         // The coarse stage's own settled rule, at the accuracy its tolerances support: the
         // measure within their gtol and ε falling by less than COARSE_SETTLE of itself over
         // the last SETTLE_WINDOW iterations. (The measure alone is small on a plateau at a
         // start, where the trust region has yet to find the descent.)
         let coarse_settled = coarse
             && measure.is_some_and(|m| m <= coarse_gtol)
-            && history.len() > window_from + SETTLE_WINDOW
-            && {
-                let then = history[history.len() - 1 - SETTLE_WINDOW].cost;
-                then.is_finite()
-                    && current.cost.is_finite()
-                    && then - current.cost <= COARSE_SETTLE * epsilon.abs()
-            };
+            && fell_less(SETTLE_WINDOW, COARSE_SETTLE);
         // (The gradient and settled rules judge at the problem's own accuracy: the coarse
         // stage has its own settled rule. On a plateau at a start the measure is 0.)
         let mut fired = pending
@@ -317,7 +312,6 @@ fn drive_once<S: System>(
             let p = match paced(&mut ev, retreats, &current, |ev| step.propose(ev, &current)) {
                 Ok(p) => p,
                 Err(failure) if coarse && !matches!(failure, Failure::Budget { .. }) => {
-                    history.pop();
                     match end_coarse!() {
                         None => continue 'run,
                         Some(failure) => break Ending::Failed { iteration, failure },
@@ -338,7 +332,6 @@ fn drive_once<S: System>(
         }
         if coarse && (fired.is_some() || coarse_settled) {
             // The coarse stage is over: the rules judge at the problem's own tolerances.
-            history.pop();
             match end_coarse!() {
                 None => continue 'run,
                 Some(failure) => break Ending::Failed { iteration, failure },
@@ -433,15 +426,11 @@ fn drive_once<S: System>(
                     pending = Some(rule);
                     next
                 }
-                Ok(Advance::Stop(_)) if coarse => {
-                    history.pop();
-                    match end_coarse!() {
-                        None => continue 'run,
-                        Some(failure) => break Ending::Failed { iteration, failure },
-                    }
-                }
+                Ok(Advance::Stop(_)) if coarse => match end_coarse!() {
+                    None => continue 'run,
+                    Some(failure) => break Ending::Failed { iteration, failure },
+                },
                 Err(failure) if coarse && !matches!(failure, Failure::Budget { .. }) => {
-                    history.pop();
                     match end_coarse!() {
                         None => continue 'run,
                         Some(failure) => break Ending::Failed { iteration, failure },
