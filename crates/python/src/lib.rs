@@ -271,6 +271,7 @@ fn settings(
     gtol: Option<f64>,
     max_integrations: Option<u64>,
     max_seconds: Option<f64>,
+    coarse_first: bool,
 ) -> PyResult<Settings> {
     let mut settings = Settings::default();
     if let Some(n) = max_iterations {
@@ -279,6 +280,7 @@ fn settings(
     settings.driver.gtol = gtol;
     settings.driver.max_integrations = max_integrations;
     settings.driver.max_seconds = max_seconds;
+    settings.driver.coarse_first = coarse_first;
     settings.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(settings)
 }
@@ -562,7 +564,7 @@ impl PyProblem {
     }
 
     /// Fits the problem: a `sysid.FitResult` over the fit's JSON object (docs/json.md).
-    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None))]
+    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None, coarse_first=true))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
         &self,
@@ -578,8 +580,9 @@ impl PyProblem {
         max_seconds: Option<f64>,
         fix: Option<std::collections::BTreeMap<String, f64>>,
         start: Option<std::collections::BTreeMap<String, f64>>,
+        coarse_first: bool,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let settings = settings(max_iterations, gtol, max_integrations, max_seconds)?;
+        let settings = settings(max_iterations, gtol, max_integrations, max_seconds, coarse_first)?;
         let method = build(method, &settings)?;
         let fix: Vec<(String, f64)> = fix.unwrap_or_default().into_iter().collect();
         let start: Vec<(String, f64)> = start.unwrap_or_default().into_iter().collect();
@@ -654,7 +657,7 @@ impl PyProblem {
         max_points: usize,
         max_iterations: Option<usize>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        let settings = settings(max_iterations, None, None, None)?;
+        let settings = settings(max_iterations, None, None, None, true)?;
         if max_points == 0 || settings.driver.max_iterations == 0 {
             return Err(PyValueError::new_err(
                 "max_points and max_iterations must be at least 1: a profile re-optimises the others at every point",

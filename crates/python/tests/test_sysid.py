@@ -7,7 +7,9 @@ Every number is checked against an independent reference: AMICI's NLL at nominal
 differences at tight tolerances, the closed form of a falling body, the command line's fit.
 """
 
+import ast
 import csv
+import inspect
 import json
 import logging
 import os
@@ -42,6 +44,36 @@ def reference_nll(problem):
             if row["problem"] == problem:
                 return float(row["nll"])
     raise KeyError(problem)
+
+
+class Stubs(unittest.TestCase):
+    def test_the_stubs_name_every_keyword_of_the_compiled_module(self):
+        # The type stubs are what editors and type checkers show: each function and method
+        # must take the parameters the compiled module takes, in its order.
+        stub = os.path.join(os.path.dirname(sysid.__file__), "_sysid.pyi")
+        tree = ast.parse(open(stub).read())
+        compiled = sysid._sysid
+        checked = 0
+
+        def compare(function, actual):
+            nonlocal checked
+            if any(isinstance(d, ast.Name) and d.id == "property" for d in function.decorator_list):
+                return
+            stubbed = [a.arg for a in function.args.posonlyargs + function.args.args + function.args.kwonlyargs]
+            stubbed = [a for a in stubbed if a != "self"]
+            wanted = [n for n in inspect.signature(actual).parameters if n != "self"]
+            self.assertEqual(stubbed, wanted, f"{function.name}: the stub against the module")
+            checked += 1
+
+        for node in tree.body:
+            if isinstance(node, ast.FunctionDef):
+                compare(node, getattr(compiled, node.name))
+            elif isinstance(node, ast.ClassDef) and hasattr(compiled, node.name):
+                cls = getattr(compiled, node.name)
+                for item in node.body:
+                    if isinstance(item, ast.FunctionDef):
+                        compare(item, getattr(cls, item.name))
+        self.assertGreaterEqual(checked, 15)
 
 
 class Boehm(unittest.TestCase):
@@ -139,6 +171,19 @@ class Boehm(unittest.TestCase):
         self.assertEqual(fit.parameter_names, self.p.parameter_names)
         # The fitted point's objective, evaluated afresh, is the fit's.
         self.assertAlmostEqual(self.p.objective(fit.x), fit.objective, delta=1e-6)
+
+    def test_coarse_first_false_is_the_command_lines_no_coarse_first(self):
+        # Without the coarse stage (docs/methods.md#coarse-first) the trust region integrates
+        # at the problem's rtol 1e-8 throughout: Boehm from nominal takes 7 iterations
+        # instead of 10 to the same minimum.
+        fine = self.p.fit(coarse_first=False)
+        out = subprocess.run([cli(), "fit", "--petab", BOEHM, "--no-coarse-first", "--format", "json"], capture_output=True, text=True, check=True)
+        record = json.loads(out.stdout)
+        self.assertTrue(fine.converged, fine.termination)
+        self.assertEqual(fine.record["iterations"], record["iterations"])
+        self.assertAlmostEqual(fine.nll, record["nll"], delta=1e-9)
+        self.assertNotEqual(fine.record["iterations"], self.p.fit().record["iterations"])
+        self.assertAlmostEqual(fine.nll, 138.221976, delta=1e-6)
 
     def test_a_multistart_reports_its_waterfall(self):
         fit = self.p.fit(starts=4, seed=3, max_iterations=200)

@@ -76,8 +76,10 @@ class Problem:
         max_iterations: Optional[int] = None,
         gtol: Optional[float] = None,
         max_integrations: Optional[int] = None,
+        max_seconds: Optional[float] = None,
         fix: Optional[Dict[str, float]] = None,
         start: Optional[Dict[str, float]] = None,
+        coarse_first: bool = True,
     ) -> FitResult: ...
     def profile(
         self,
