@@ -51,7 +51,8 @@ class Stubs(unittest.TestCase):
         # The type stubs are what editors and type checkers show: each function and method
         # must take the parameters the compiled module takes, in its order.
         stub = os.path.join(os.path.dirname(sysid.__file__), "_sysid.pyi")
-        tree = ast.parse(open(stub).read())
+        with open(stub) as f:
+            tree = ast.parse(f.read())
         compiled = sysid._sysid
         checked = 0
 
