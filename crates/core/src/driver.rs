@@ -99,7 +99,11 @@ pub fn drive<S: System>(
         let moved = next.as_ref().map_or(f64::INFINITY, |next| {
             next.iter().zip(&sigma).map(|(a, b)| (a / b).ln().abs()).fold(0.0, f64::max)
         });
+        // Where the returned point cannot be evaluated again at the held scales (`next` is
+        // None), there is no closed form to move to: the rounds end there, the scales
+        // unsettled (`moved` ∞), rather than at a panic.
         let last = estimate.start_failed()
+            || next.is_none()
             || !estimate.converged()
             || moved <= 1e-3 * gtol
             || estimate.iterations >= round_options.max_iterations
@@ -109,7 +113,7 @@ pub fn drive<S: System>(
         if last {
             return Ok(crate::assemble::with_scales(problem, &held, rounds, moved));
         }
-        sigma = next.expect("a finite move");
+        sigma = next.expect("a round whose scales cannot be formed is the last");
         z = rounds.last().expect("a round").values.clone();
     }
 }
