@@ -317,12 +317,16 @@ pub fn other_side<S: System>(
     counts
 }
 
-/// The point `lin.z` with every undetermined unknown (flat, off its bounds) moved onto the
-/// bound its descent direction −g_i points at (the nearer bound where g_i = 0), where the
-/// move is one the cost cannot feel: √a_i·d_i ≤ gtol‖r‖, the test by which the optimality
-/// holds a responsive unknown on a bound. `None` when no unknown moves. A flat unknown a
-/// hair's breadth from its bound (a rate at 1.00001e-5 against its bound 1e-5) is then on
-/// it and held; one with room to run stays undetermined.
+/// The point `lin.z` with every undetermined unknown (flat, off its bounds) moved onto its
+/// nearer bound, where the move is one the cost cannot feel: √a_i·d_i ≤ gtol‖r‖, the test by
+/// which the optimality holds a responsive unknown on a bound. `None` when no unknown moves.
+/// A flat unknown a hair's breadth from its bound (a rate at 1.00001e-5 against its bound
+/// 1e-5) is then on it and held; one with room to run stays undetermined. The nearer bound,
+/// not the one its descent direction −g_i points at: the model barely responds to a flat
+/// unknown, so the sign of g_i says little, and the first-order test allows moves of an
+/// e-fold or more, which the cost can feel after all (Elowitz: a flat initial value 6.6e-8
+/// above its lower bound, g_i pointing up, was sent 18 e-folds to its upper bound, and the
+/// cost rose by 6e-4 of itself; the driver refused the move and the fit stopped undetermined).
 pub fn onto_bounds<S: System>(
     problem: &Problem<S>,
     lin: &Linearization,
@@ -335,14 +339,9 @@ pub fn onto_bounds<S: System>(
         if !measure.flat[i] || measure.active[i].is_some() {
             continue;
         }
-        let (g, a) = (lin.gradient[i], lin.normal[(i, i)]);
+        let a = lin.normal[(i, i)];
         let (lo, hi) = u.coordinate_bounds();
-        let target = match g {
-            g if g > 0.0 => lo,
-            g if g < 0.0 => hi,
-            _ if z[i] - lo <= hi - z[i] => lo,
-            _ => hi,
-        };
+        let target = if z[i] - lo <= hi - z[i] { lo } else { hi };
         let felt = a.sqrt() * (target - z[i]).abs();
         if target.is_finite() && felt <= gtol * lin.norm {
             z[i] = target;
