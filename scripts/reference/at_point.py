@@ -7,17 +7,19 @@ tests/data/petab/best_known.tsv and in the test that checks the points
     python3 -m venv venv && venv/bin/pip install amici pypesto fides petab scipy
     PATH=venv/bin:$PATH venv/bin/python scripts/reference/at_point.py tests/data/petab
 
-Printed on this machine (amici and pypesto of November 2026, AMICI's default tolerances):
+Printed on this machine (amici 1.0.1 and the pypesto of December 2026, AMICI's default
+tolerances; 2026-12-03):
 
-    Elowitz_Nature2000 -65.49314849568135
-    Zheng_PNAS2012 -293.3099348195668
+    Elowitz_Nature2000 -65.63322893916738
+    Zheng_PNAS2012 -293.3099347984426
     Schwen_PONE2014 952.4217262175704
 
-(sysid: −65.493149, −293.309462 and 952.421726. Zheng's gap, 4.7e-4, is within AMICI's
+(sysid: −65.633227, −293.309462 and 952.421726. Zheng's gap, 4.7e-4, is within AMICI's
 own 1e-3 check; sysid gives the same value at its tolerances and at 1000 times tighter ones
 (crates/cli/tests/petab.rs), AMICI was not run tighter. At Zheng's nominal point the two
 agree to 1e-6. Zheng's point of before, −292.982545, AMICI gave as −292.9831237: the same
-gap, 5.8e-4. Zheng's row printed 2026-12-02, the others in November 2026.)
+gap, 5.8e-4. Elowitz's point of before, −65.493149, AMICI gave as −65.49314849568135. With
+the amici of November 2026, Zheng's row printed −293.3099348195668.)
 
 `--points uncertified_points.tsv` evaluates the best known points that sysid has not
 certified (an oscillator still falling at the iteration limit), where the NLL needs tight
@@ -63,7 +65,10 @@ def main():
             problem, output_folder=str(args.amici_dir / name), model_name=name
         )
         objective = importer.create_problem()
-        solver = objective.objective.amici_solver
+        # With priors (Schwen) the objective is an aggregate of AMICI's and the priors'.
+        inner = objective.objective
+        parts = getattr(inner, "_objectives", [inner])
+        solver = next(p.amici_solver for p in parts if hasattr(p, "amici_solver"))
         if args.rtol is not None:
             solver.set_relative_tolerance(args.rtol)
         if args.atol is not None:

@@ -488,9 +488,11 @@ fn the_default_fit_of_fiedler_from_nominal_plus_a_tenth_reaches_the_peers_optimu
 
 /// The best known points away from the nominal values (`best_points.tsv`) are certified
 /// minima at the values `best_known.tsv` gives:
-/// - Elowitz's, in another basin than the nominal's and 2.25 lower (−65.493149 against
-///   −63.239749), with 9 of its 21 unknowns on bounds, found by nl2sol from nominal + 0.1
-///   with a first trust radius of ‖D z₀‖; AMICI evaluates it to −65.4931485;
+/// - Elowitz's, in another basin than the nominal's and 2.39 lower (−65.633227 against
+///   −63.239749), with 8 of its 21 unknowns on bounds, found by start 7 of a 100-start
+///   multistart of nl2sol (`sysid fit --petab … --starts 100 --starts-without-guess
+///   --starts-budget 600`); AMICI evaluates it to −65.6332289 (the point before it,
+///   −65.493149, came from nl2sol at nominal + 0.1 with a first trust radius of ‖D z₀‖);
 /// - Zheng's, −293.309462 with 22 of its 46 unknowns on bounds (nominal −278.333533), found
 ///   by start 24 of a 100-start multistart of nl2sol (`sysid fit --petab … --starts 100
 ///   --starts-without-guess --starts-budget 900`); AMICI evaluates it to −293.309935;
