@@ -137,6 +137,50 @@ impl Estimate {
         self.certificate.holds()
     }
 
+    /// The estimate of a fit from `start` that panicked with `message` after `elapsed`: the
+    /// start, not converged, with no cost and no history ([`Termination::Panicked`]). For a
+    /// caller that runs many fits (multistart) and keeps the others when one of them hits a
+    /// defect.
+    pub fn panicked<S: sysid_ode::System>(
+        problem: &crate::Problem<S>,
+        method: &str,
+        start: &[f64],
+        message: String,
+        elapsed: Duration,
+    ) -> Estimate {
+        let gtol = crate::DriverOptions::default().gtol_for(problem.integrator().rtol);
+        Estimate {
+            method: method.to_string(),
+            names: problem.names(),
+            values: start.to_vec(),
+            std_errors: None,
+            intervals: None,
+            covariance: None,
+            cost: f64::NAN,
+            dof: None,
+            iterations: 0,
+            best_iteration: 0,
+            termination: Termination::Panicked(message),
+            certificate: Certificate::failed(start.len(), gtol),
+            history: Vec::new(),
+            elapsed,
+            counts: Counts::default(),
+            nll: None,
+            prior: None,
+            experiments: problem
+                .experiments()
+                .iter()
+                .map(|e| ExperimentFit {
+                    name: e.name().to_string(),
+                    points: e.data().n_observations().unwrap_or(0),
+                    nll: None,
+                })
+                .collect(),
+            scales: Vec::new(),
+            noise_model: problem.has_noise_model(),
+        }
+    }
+
     /// Whether the start could not be evaluated (a bad start or bad data, not a result).
     pub fn start_failed(&self) -> bool {
         matches!(self.termination, Termination::StartFailed(_))

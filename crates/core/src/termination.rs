@@ -236,6 +236,11 @@ pub enum Termination {
     /// The starting point itself cannot be evaluated: not a result of the method, but a
     /// start (or data) to change.
     StartFailed(Failure),
+    /// The fit panicked with this message: a defect in sysid, not a result of the method or
+    /// a property of the start. Only a caller that runs many fits forms it
+    /// ([`Estimate::panicked`](crate::Estimate::panicked)): a multistart reports the start so
+    /// and keeps the others.
+    Panicked(String),
 }
 
 impl Termination {
@@ -250,6 +255,7 @@ impl Termination {
             Termination::TimeLimit { .. } => "time_limit".into(),
             Termination::Failed { failure, .. } => failure.code().into(),
             Termination::StartFailed(_) => "start_failed".into(),
+            Termination::Panicked(_) => "panicked".into(),
         }
     }
 
@@ -326,6 +332,10 @@ impl fmt::Display for Termination {
                 write!(f, "failed stepping from iteration {iteration}: {failure}")
             }
             Termination::StartFailed(failure) => write!(f, "the start cannot be used: {failure}"),
+            Termination::Panicked(message) => write!(
+                f,
+                "the fit panicked, a defect in sysid (please report it with the command): {message}"
+            ),
         }
     }
 }
@@ -369,6 +379,7 @@ mod tests {
                 at: vec![],
             }),
             Termination::StartFailed(Failure::Solver("start".into())),
+            Termination::Panicked("a finite move".into()),
         ];
         let rules = [
             Rule::Step,

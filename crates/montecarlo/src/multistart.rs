@@ -14,7 +14,9 @@
 //! quantile, and moved into its bounds. The problem's own guess is the first start unless [`MultistartOptions::guess`] is false, so
 //! that N starts never do worse than one.
 //!
-//! The fits run on rayon. A drawn start whose fit cannot even begin (the model cannot be
+//! The fits run on rayon. A fit that panics (a defect in sysid) does not take the others
+//! down: its start is reported with [`Termination::Panicked`] (not converged, no objective)
+//! and the panic's message, and the multistart goes on. A drawn start whose fit cannot even begin (the model cannot be
 //! integrated there, or its cost overflows) is redrawn, uniformly over the same ranges, up
 //! to [`MAX_REDRAWS`] times; the redraws are counted (`redrawn`). Fits are ranked by what
 //! they minimise: the negative log-likelihood (with the priors' term where there are
@@ -34,6 +36,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
+use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use sysid_core::format::significant;
 use sysid_core::{Estimate, FitError, Method, Problem, Termination, Unknown};
@@ -229,6 +232,23 @@ impl std::fmt::Display for Starts {
         if self.not_started > 0 {
             write!(f, "; {} more drawn, not begun within the time budget", self.not_started)?;
         }
+        let mut panicked: Vec<usize> = self
+            .waterfall
+            .iter()
+            .filter(|o| o.termination_code == "panicked")
+            .map(|o| o.start)
+            .collect();
+        if !panicked.is_empty() {
+            panicked.sort_unstable();
+            let list: Vec<String> = panicked.iter().map(usize::to_string).collect();
+            write!(
+                f,
+                "; {} panicked, a defect in sysid (please report it with the command; the message is on stderr): {} {}",
+                plural(panicked.len(), "fit"),
+                if panicked.len() == 1 { "start" } else { "starts" },
+                list.join(", ")
+            )?;
+        }
         Ok(())
     }
 }
@@ -307,6 +327,27 @@ fn draw(u: &Unknown, fraction: f64, spread: f64) -> f64 {
     clamp(value)
 }
 
+/// `method`'s fit of `problem` from `start`, where a panic (a defect in sysid) becomes the
+/// estimate [`Estimate::panicked`] with the panic's message instead of unwinding further: for
+/// the callers that run many fits (multistart, a study's trials), so that one defect does
+/// not lose the others' results.
+pub fn guarded<S, M>(method: &M, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError>
+where
+    S: System,
+    M: Method<S> + ?Sized,
+{
+    let began = std::time::Instant::now();
+    let fit = std::panic::catch_unwind(AssertUnwindSafe(|| method.fit_from(problem, start)));
+    fit.unwrap_or_else(|payload| {
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|m| m.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".into());
+        Ok(Estimate::panicked(problem, method.name(), start, message, began.elapsed()))
+    })
+}
+
 /// One start's fit: the fit, how often its start was redrawn, its wall time in milliseconds
 /// (redraws included) and the start it began from (values).
 struct Run {
@@ -332,10 +373,12 @@ where
     // A queue in start order, served by one task per thread: once the budget is spent no
     // task takes another start, so the starts fitted are the first ones, whatever the timing.
     let next = AtomicUsize::new(0);
+    // A fit that panics (a defect) is reported as that start's outcome; the others stand.
+    let fit_from = |from: &[f64]| guarded(method, problem, from);
     let fit_start = |j: usize| -> Result<Run, FitError> {
         let began = std::time::Instant::now();
         let mut from = starts[j].clone();
-        let mut fit = method.fit_from(problem, &from)?;
+        let mut fit = fit_from(&from)?;
         let mut redrawn = 0;
         // The guess (start 0) is the user's: it is kept whatever happens there.
         if j > 0 || !options.guess {
@@ -348,7 +391,7 @@ where
                     .iter()
                     .map(|u| draw(u, rng.random::<f64>(), options.spread))
                     .collect();
-                fit = method.fit_from(problem, &from)?;
+                fit = fit_from(&from)?;
                 redrawn += 1;
             }
         }

@@ -10,6 +10,7 @@ use sysid_core::{DriverOptions, Estimate, Failure, Method, Rule, Termination, Un
 use sysid_ode::System;
 
 use crate::error::StudyError;
+use crate::multistart::guarded;
 use crate::scenario::Scenario;
 
 /// A method a study runs on many threads at once.
@@ -120,7 +121,8 @@ pub struct TrialRecord {
     /// `success`, `reference`, or why not: `other_minimum` (converged elsewhere),
     /// `diverged`, `max_iterations`, `singular`, `integration_failed` (at the start),
     /// `no_descent`, `stalled` (a stopping rule where the certificate fails),
-    /// `integration_budget`, `solver_failed`, `no_reference`, `error`.
+    /// `integration_budget`, `solver_failed`, `panicked` (a defect in sysid), `no_reference`,
+    /// `error`.
     pub outcome: String,
     /// The method's termination, as it reports it.
     pub termination: String,
@@ -211,7 +213,7 @@ impl<S: System + Clone + Send + Sync> Study<S> {
         let (start, data) = self.draw(index);
         let problem = self.scenario.with_data(data)?;
         let truth = self.scenario.truth();
-        let reference = self.reference.fit_from(&problem, truth);
+        let reference = guarded(&*self.reference, &problem, truth);
         let mut records = Vec::with_capacity(1 + self.methods.len());
         records.push(record(index, REFERENCE, truth, &reference, None));
         records.extend(self.fit_methods(&problem, index, &start, reference_cost(&reference)));
@@ -220,7 +222,7 @@ impl<S: System + Clone + Send + Sync> Study<S> {
 
     /// The cost of the reference fit from the truth on `problem`'s data, if it converged.
     pub fn reference_fit(&self, problem: &sysid_core::Problem<S>) -> Option<f64> {
-        reference_cost(&self.reference.fit_from(problem, self.scenario.truth()))
+        reference_cost(&guarded(&*self.reference, problem, self.scenario.truth()))
     }
 
     /// Every method from `start` on `problem`, judged against the reference cost.
@@ -236,7 +238,7 @@ impl<S: System + Clone + Send + Sync> Study<S> {
             .iter()
             .zip(&self.methods)
             .map(|(name, method)| {
-                record(index, name, start, &method.fit_from(problem, start), Some(reference))
+                record(index, name, start, &guarded(&**method, problem, start), Some(reference))
             })
             .collect()
     }
@@ -347,6 +349,7 @@ fn failure(e: &Estimate) -> String {
         },
         Termination::IntegrationBudget { .. } => "integration_budget",
         Termination::TimeLimit { .. } => "time_limit",
+        Termination::Panicked(_) => "panicked",
         Termination::MaxIterations { .. } => match (first, last) {
             (Some(a), Some(b)) if b > a || b.is_nan() => "diverged",
             _ => "max_iterations",

@@ -178,3 +178,68 @@ fn a_time_budget_fits_the_first_starts_and_counts_the_rest() {
     }
     assert!(s.to_string().contains("not begun within the time budget") || s.not_started == 0);
 }
+
+/// levenberg-marquardt, except that a fit from a start whose first value is above `above`
+/// panics, as a defect would.
+struct Panics<'a, S: sysid_ode::System> {
+    inner: &'a (dyn sysid_core::Method<S> + Sync),
+    above: f64,
+}
+
+impl<S: sysid_ode::System> sysid_core::Method<S> for Panics<'_, S> {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+
+    fn fit_from(
+        &self,
+        problem: &sysid_core::Problem<S>,
+        start: &[f64],
+    ) -> Result<sysid_core::Estimate, sysid_core::FitError> {
+        if start[0] > self.above {
+            panic!("a finite move");
+        }
+        self.inner.fit_from(problem, start)
+    }
+}
+
+/// A start whose fit panics is reported as such (`panicked`, not converged, no objective, its
+/// start as its values) and the multistart goes on: every other start ends where it ends
+/// without the panicking ones.
+#[test]
+fn a_start_that_panics_is_reported_and_the_others_stand() {
+    let case = sysid_systems::lotka_volterra::lotka_volterra();
+    let problem = case.problem(1).unwrap();
+    let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
+    let options = MultistartOptions { starts: 12, seed: 4, guess: false, ..Default::default() };
+    let all = multistart(&*method, &problem, &options).unwrap();
+    let mut first: Vec<f64> = all
+        .starts
+        .waterfall
+        .iter()
+        .map(|o| o.start_values.values().next().unwrap().as_f64().unwrap())
+        .collect();
+    first.sort_by(f64::total_cmp);
+    let above = first[8];
+    let panics = Panics { inner: &*method, above };
+    let some = multistart(&panics, &problem, &options).expect("the multistart survives");
+    let s = &some.starts;
+    assert_eq!(s.count, 12);
+    let mut n = 0;
+    for o in &s.waterfall {
+        let same = all.starts.waterfall.iter().find(|a| a.start == o.start).unwrap();
+        assert_eq!(o.start_values, same.start_values, "start {}", o.start);
+        if o.start_values.values().next().unwrap().as_f64().unwrap() > above {
+            n += 1;
+            assert_eq!(o.termination_code, "panicked", "start {}", o.start);
+            assert!(!o.converged && o.objective.is_none() && o.iterations == 0);
+            assert_eq!(o.estimates, o.start_values, "its values are its start");
+        } else {
+            assert_eq!((o.objective, o.iterations), (same.objective, same.iterations));
+            assert_eq!(o.termination_code, same.termination_code);
+        }
+    }
+    assert_eq!(n, 3, "the three starts above the 9th of 12 panic");
+    assert!(some.best.converged(), "{}", some.best.termination);
+    assert!(s.to_string().contains("3 fits panicked"), "{s}");
+}
