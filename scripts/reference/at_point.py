@@ -22,14 +22,15 @@ gap, 5.8e-4. Elowitz's point of before, −65.493149, AMICI gave as −65.493148
 the amici of November 2026, Zheng's row printed −293.3099348195668.)
 
 `--points uncertified_points.tsv` evaluates the best known points that sysid has not
-certified (an oscillator still falling at the iteration limit), where the NLL needs tight
-integration to be resolved; printed 2026-12-02 with `--rtol 1e-14 --atol 1e-24` and without:
+certified at the problem's tolerances (an oscillator), where the NLL needs tight integration
+to be resolved; printed 2026-12-03 with `--rtol 1e-14 --atol 1e-24` and without:
 
-    Borghans_BiophysChem1997 -109.2891402115272    (rtol 1e-14, atol 1e-24)
-    Borghans_BiophysChem1997 -109.27531575139228   (AMICI's defaults)
+    Borghans_BiophysChem1997 -123.68535086220659   (rtol 1e-14, atol 1e-24)
+    Borghans_BiophysChem1997 -87.2835229844346     (AMICI's defaults)
 
-(sysid at the point: −109.2891401 with Rodas5P at rtol 1e-12 and with DOPRI5 at rtol 1e-13.
-The point of the morning of 2026-12-02 gave −108.9794713 and −108.91897810835675.)
+(sysid at the point: −123.6853508644 with Rodas5P at rtol 1e-12, −123.6853508647 with DOPRI5
+at rtol 1e-13. The point of 2026-12-02, evening, gave −109.2891402115272 and
+−109.27531575139228; the morning's −108.9794713 and −108.91897810835675.)
 """
 
 import argparse
