@@ -8,6 +8,18 @@ fn sysid(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_sysid")).args(args).output().expect("the binary runs")
 }
 
+/// `sysid` with `args`, `--set` for each of `sets` and `--format json`: its JSON, the exit
+/// code 0 asserted.
+fn evaluate_at<'a>(mut args: Vec<&'a str>, sets: &'a [String]) -> serde_json::Value {
+    args.extend(["--format", "json"]);
+    for set in sets {
+        args.extend(["--set", set.as_str()]);
+    }
+    let out = sysid(&args);
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).expect("JSON")
+}
+
 fn problem(name: &str) -> String {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
     root.join(name).join(format!("{name}.yaml")).display().to_string()
@@ -122,14 +134,8 @@ fn a_fit_reports_the_nll_at_its_own_estimates() {
         .iter()
         .map(|(name, v)| format!("{name}={:?}", v.as_f64().expect("a number")))
         .collect();
-    let mut args = vec!["evaluate", "--petab", &boehm, "--gradient", "--sensitivities", "forward"];
-    args.extend(["--format", "json"]);
-    for set in &sets {
-        args.extend(["--set", set]);
-    }
-    let out = sysid(&args);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-    let at: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let args = vec!["evaluate", "--petab", &boehm, "--gradient", "--sensitivities", "forward"];
+    let at = evaluate_at(args, &sets);
     let (reported, there) = (fit["nll"].as_f64().unwrap(), at["nll"].as_f64().unwrap());
     assert!(
         (reported - there).abs() <= 1e-12 * there.abs(),
@@ -575,15 +581,9 @@ fn the_uncertified_best_points_evaluate_to_their_values_at_tight_tolerances() {
             .collect();
         let yaml = problem(name);
         for (scheme, rtol, atol) in [("rodas5p", "1e-12", "1e-16"), ("dopri5", "1e-13", "1e-18")] {
-            let mut args = vec!["evaluate", "--petab", &yaml, "--format", "json"];
-            args.extend(["--integrator", scheme, "--rtol", rtol, "--atol", atol]);
-            args.extend(["--max-steps", "10000000"]);
-            for set in &sets {
-                args.extend(["--set", set]);
-            }
-            let out = sysid(&args);
-            assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-            let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+            let mut args = vec!["evaluate", "--petab", &yaml, "--integrator", scheme];
+            args.extend(["--rtol", rtol, "--atol", atol, "--max-steps", "10000000"]);
+            let json = evaluate_at(args, &sets);
             let objective = json["objective"].as_f64().expect("an objective");
             assert!((objective - best).abs() <= 1e-6, "{name} with {scheme}: {objective}");
         }
