@@ -11,8 +11,9 @@
 //! than 1e-6 of itself over the last 100 iterations ([`Rule::Progress`]: a crawl, whose
 //! termination names the unknowns still moving), or if the measure is within gtol and ε fell
 //! by less than 1e-8 of itself over the last 10 ([`Rule::Settled`]: a minimum to the promised
-//! accuracy that further steps no longer lower; it stops the run only where the certificate
-//! holds); ask the method for a
+//! accuracy that further steps no longer lower; it stops the run where the certificate
+//! holds, and elsewhere only once the extra steps after an earlier rule are used up); ask the
+//! method for a
 //! proposal (a failure, such as a singular matrix, ends the run); stop on the method's own
 //! rule or when the proposed step is below the step tolerance ([`Rule::Step`]); stop at the
 //! iteration budget; let the method move (a failure ends the run; halving or a line search

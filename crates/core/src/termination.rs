@@ -34,7 +34,8 @@ pub enum Rule {
     /// The certificate's measure is within gtol and ε fell by less than [`SETTLE`] of itself
     /// over the last [`SETTLE_WINDOW`] iterations (the driver's rule, for every method): the
     /// point is a minimum to the promised accuracy and further steps no longer lower the
-    /// cost. It stops the run only where the certificate then holds.
+    /// cost. It stops the run where the certificate then holds, and otherwise only once the
+    /// extra steps after an earlier rule are used up (then the run is stalled).
     Settled,
 }
 
