@@ -590,6 +590,49 @@ fn the_uncertified_best_points_evaluate_to_their_values_at_tight_tolerances() {
     }
 }
 
+/// Where the integration does not resolve the progress left, the fit goes on at a finer one.
+/// `stall_points.tsv` holds the point where Borghans' default fit from nominal stalled with
+/// `--max-iterations 5000` (NLL −123.386990, first-order optimality 1.25e-4 at rtol 1e-8,
+/// where the cost's integration error is larger than the ~m²·ε decrease left). Fitted from
+/// there with the defaults, the run used to stop at iteration 0 (`stalled_step`: every trial
+/// was judged on cost differences the integration does not resolve); now it refines the
+/// integration and certifies, and its NLL is the one a tight integration (Rodas5P, rtol
+/// 1e-12) gives at its point to 1e-6.
+#[test]
+fn a_fit_whose_progress_the_integration_cannot_resolve_goes_on_finer() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
+    let points = std::fs::read_to_string(root.join("stall_points.tsv")).expect("a table");
+    let name = "Borghans_BiophysChem1997";
+    let starts: Vec<String> = points
+        .lines()
+        .filter(|l| l.starts_with(&format!("{name}\t")))
+        .map(|l| {
+            let cells: Vec<&str> = l.split('\t').collect();
+            format!("{}={}", cells[1], cells[2])
+        })
+        .collect();
+    let yaml = problem(name);
+    let mut args = vec!["fit", "--petab", &yaml, "--format", "json"];
+    for start in &starts {
+        args.extend(["--start", start]);
+    }
+    let out = sysid(&args);
+    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(fit["converged"], true, "{}", fit["termination"]);
+    assert_eq!(out.status.code(), Some(0));
+    let sets: Vec<String> = fit["estimates"]
+        .as_object()
+        .expect("estimates")
+        .iter()
+        .map(|(name, v)| format!("{name}={:?}", v.as_f64().expect("a number")))
+        .collect();
+    let args = vec!["evaluate", "--petab", &yaml, "--integrator", "rodas5p", "--rtol", "1e-12"];
+    let tight = evaluate_at([args, vec!["--atol", "1e-16"]].concat(), &sets);
+    let (reported, there) = (fit["nll"].as_f64().unwrap(), tight["nll"].as_f64().unwrap());
+    assert!((reported - there).abs() <= 1e-6, "{reported} against {there}");
+    assert!(reported <= -123.386990, "{reported}: above the stall");
+}
+
 /// Liu's event sets the tumour cells U to exactly 0 where they fall below 1e-8, and they stay
 /// there (dU/dt is proportional to U): with ψ = 2e-8 that happens before t = 3 in the virus
 /// condition, while the infected cells I_1 live on.
