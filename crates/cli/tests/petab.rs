@@ -20,6 +20,19 @@ fn evaluate_at<'a>(mut args: Vec<&'a str>, sets: &'a [String]) -> serde_json::Va
     serde_json::from_slice(&out.stdout).expect("JSON")
 }
 
+/// `NAME=VALUE` for each row of `problem` in a table of points (columns problem,
+/// parameterId, value: `best_points.tsv` and the like).
+fn point_of(table: &str, problem: &str) -> Vec<String> {
+    table
+        .lines()
+        .filter(|l| l.starts_with(&format!("{problem}\t")))
+        .map(|l| {
+            let cells: Vec<&str> = l.split('\t').collect();
+            format!("{}={}", cells[1], cells[2])
+        })
+        .collect()
+}
+
 fn problem(name: &str) -> String {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
     root.join(name).join(format!("{name}.yaml")).display().to_string()
@@ -571,14 +584,7 @@ fn the_uncertified_best_points_evaluate_to_their_values_at_tight_tolerances() {
     for name in names {
         let row = known.lines().find(|l| l.starts_with(&format!("{name}\t"))).expect("a row");
         let best: f64 = row.split('\t').nth(1).unwrap().parse().unwrap();
-        let sets: Vec<String> = points
-            .lines()
-            .filter(|l| l.starts_with(&format!("{name}\t")))
-            .map(|l| {
-                let cells: Vec<&str> = l.split('\t').collect();
-                format!("{}={}", cells[1], cells[2])
-            })
-            .collect();
+        let sets = point_of(&points, name);
         let yaml = problem(name);
         for (scheme, rtol, atol) in [("rodas5p", "1e-12", "1e-16"), ("dopri5", "1e-13", "1e-18")] {
             let mut args = vec!["evaluate", "--petab", &yaml, "--integrator", scheme];
@@ -603,14 +609,7 @@ fn a_fit_whose_progress_the_integration_cannot_resolve_goes_on_finer() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
     let points = std::fs::read_to_string(root.join("stall_points.tsv")).expect("a table");
     let name = "Borghans_BiophysChem1997";
-    let starts: Vec<String> = points
-        .lines()
-        .filter(|l| l.starts_with(&format!("{name}\t")))
-        .map(|l| {
-            let cells: Vec<&str> = l.split('\t').collect();
-            format!("{}={}", cells[1], cells[2])
-        })
-        .collect();
+    let starts = point_of(&points, name);
     let yaml = problem(name);
     let mut args = vec!["fit", "--petab", &yaml, "--format", "json"];
     for start in &starts {

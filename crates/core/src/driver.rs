@@ -242,6 +242,22 @@ fn drive_once<S: System>(
             failed
         }};
     }
+    // Goes on from `current` at the finer integration `finer`: the method restarts there, and
+    // the iterate's history row is recorded again; `Some` failure where the restart fails.
+    macro_rules! go_finer {
+        ($finer:expr) => {{
+            ev.refine($finer);
+            match step.restart(&ev, &current) {
+                Ok(again) => {
+                    current = profile.apply(&mut ev, again);
+                    scales = ev.problem().scale_values();
+                    history.pop();
+                    None
+                }
+                Err(failure) => Some(failure),
+            }
+        }};
+    }
     let ending = 'run: loop {
         let mut measure =
             current.linearization.as_ref().map(|l| optimality(ev.problem(), l, gtol).value);
@@ -390,14 +406,10 @@ fn drive_once<S: System>(
             if (judged.1.error > ACCURATE * gtol || unresolved(&judged.1, gtol, epsilon))
                 && let Some(finer) = ev.finer()
             {
-                ev.refine(finer);
-                current = match step.restart(&ev, &current) {
-                    Ok(again) => profile.apply(&mut ev, again),
-                    Err(failure) => break Ending::Failed { iteration, failure },
-                };
-                scales = ev.problem().scale_values();
-                history.pop();
-                continue 'run;
+                match go_finer!(finer) {
+                    None => continue 'run,
+                    Some(failure) => break Ending::Failed { iteration, failure },
+                }
             }
             if rule == Rule::Settled {
                 settle_from = iteration + SETTLE_WINDOW;
@@ -449,14 +461,10 @@ fn drive_once<S: System>(
                         && unresolved(&judged.1, gtol, epsilon)
                         && let Some(finer) = ev.finer()
                     {
-                        ev.refine(finer);
-                        current = match step.restart(&ev, &current) {
-                            Ok(again) => profile.apply(&mut ev, again),
-                            Err(failure) => break Ending::Failed { iteration, failure },
-                        };
-                        scales = ev.problem().scale_values();
-                        history.pop();
-                        continue 'run;
+                        match go_finer!(finer) {
+                            None => continue 'run,
+                            Some(failure) => break Ending::Failed { iteration, failure },
+                        }
                     }
                     verdict = Some(judged);
                     break Ending::Rule(rule);
