@@ -288,16 +288,10 @@ impl Record<'_> {
             counts: ev.counts(),
             nll: lin.and_then(|l| problem.nll(l)),
             prior: lin.and_then(|l| problem.prior_nll(l)),
-            experiments: problem
-                .experiments()
-                .iter()
-                .enumerate()
-                .map(|(i, e)| ExperimentFit {
-                    name: e.name().to_string(),
-                    points: e.data().n_observations().unwrap_or(0),
-                    nll: lin.and_then(|l| problem.experiment_nlls(l)).map(|list| list[i]),
-                })
-                .collect(),
+            experiments: ExperimentFit::all(
+                problem,
+                lin.and_then(|l| problem.experiment_nlls(l)).as_deref(),
+            ),
             scales: Vec::new(),
             noise_model: problem.has_noise_model(),
         }

@@ -108,6 +108,26 @@ pub struct ExperimentFit {
     pub nll: Option<f64>,
 }
 
+impl ExperimentFit {
+    /// Each experiment of `problem` with its negative log-likelihood from `nlls` (one per
+    /// experiment, in order; none where the point has no likelihood).
+    pub(crate) fn all<S: sysid_ode::System>(
+        problem: &crate::Problem<S>,
+        nlls: Option<&[f64]>,
+    ) -> Vec<ExperimentFit> {
+        problem
+            .experiments()
+            .iter()
+            .enumerate()
+            .map(|(i, e)| ExperimentFit {
+                name: e.name().to_string(),
+                points: e.data().n_observations().unwrap_or(0),
+                nll: nlls.map(|list| list[i]),
+            })
+            .collect()
+    }
+}
+
 /// A noise scale's estimate.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ScaleEstimate {
@@ -167,15 +187,7 @@ impl Estimate {
             counts: Counts::default(),
             nll: None,
             prior: None,
-            experiments: problem
-                .experiments()
-                .iter()
-                .map(|e| ExperimentFit {
-                    name: e.name().to_string(),
-                    points: e.data().n_observations().unwrap_or(0),
-                    nll: None,
-                })
-                .collect(),
+            experiments: ExperimentFit::all(problem, None),
             scales: Vec::new(),
             noise_model: problem.has_noise_model(),
         }
