@@ -158,5 +158,13 @@ fn table(context: &Context, profiled: &Profiled) -> String {
             p.points.len()
         );
     }
+    for p in profiles {
+        if let Some(message) = &p.failed {
+            text += &format!(
+                "  warning: a fit along {}'s profile panicked, a defect in sysid (please report it with the command): {message}; the points before it are kept\n",
+                p.name
+            );
+        }
+    }
     text
 }

@@ -52,3 +52,17 @@ pub fn start_coordinates<S: System>(
     problem.unknowns().project(&mut z);
     Ok(z)
 }
+
+/// Runs `f`, turning a panic in it (a defect in sysid) into `Err` with the panic's message,
+/// for callers that run many fits (multistart, studies, profiles) and keep the others' results
+/// when one of them hits a defect. The message and its location also reach stderr through the
+/// panic hook.
+pub fn caught<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|payload| {
+        payload
+            .downcast_ref::<&str>()
+            .map(|m| m.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".into())
+    })
+}

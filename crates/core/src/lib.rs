@@ -95,7 +95,7 @@ pub use error::{FitError, ProblemError};
 pub use estimate::{Estimate, ExperimentFit, FitRecord, Iteration, ScaleEstimate};
 pub use evaluate::{Linearization, Observed, WeightedResiduals};
 pub use experiment::{Experiment, Setting};
-pub use fit::Method;
+pub use fit::{Method, caught};
 pub use kinks::{Around, SLIVER};
 pub use noise::{Noise, NoiseDistribution, Transform};
 pub use options::{DEFAULT_GTOL, Driven, DriverOptions, OptionsError};

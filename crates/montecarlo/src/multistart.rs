@@ -36,7 +36,6 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
-use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use sysid_core::format::significant;
 use sysid_core::{Estimate, FitError, Method, Problem, Termination, Unknown};
@@ -337,13 +336,7 @@ where
     M: Method<S> + ?Sized,
 {
     let began = std::time::Instant::now();
-    let fit = std::panic::catch_unwind(AssertUnwindSafe(|| method.fit_from(problem, start)));
-    fit.unwrap_or_else(|payload| {
-        let message = payload
-            .downcast_ref::<&str>()
-            .map(|m| m.to_string())
-            .or_else(|| payload.downcast_ref::<String>().cloned())
-            .unwrap_or_else(|| "a panic without a message".into());
+    sysid_core::caught(|| method.fit_from(problem, start)).unwrap_or_else(|message| {
         Ok(Estimate::panicked(problem, method.name(), start, message, began.elapsed()))
     })
 }

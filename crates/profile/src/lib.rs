@@ -23,6 +23,10 @@
 //! `practically_non_identifiable` otherwise (a side reaches a bound or the step budget
 //! without crossing).
 //!
+//! **A fit that panics** (a defect in sysid) ends its side there: the profile keeps the points
+//! walked before it, its other side is still traced, its verdict is `failed` with the panic's
+//! message ([`Profile::failed`]), and the other unknowns' profiles stand.
+//!
 //! The NLL is the fit's `nll` (the likelihood of its noise model; for data with known
 //! weights, ε/2 plus a constant, so that ΔNLL = Δε/2).
 
@@ -51,6 +55,10 @@ pub enum ProfileError {
         /// How it ended.
         termination: String,
     },
+    /// A fit panicked (a defect in sysid) where no profile could keep the others' results:
+    /// the fit again from a better point.
+    #[error("a fit panicked, a defect in sysid (please report it with the command): {0}")]
+    Panicked(String),
 }
 
 /// How many times [`profile_from_optimum`] fits again from a better point a profile found.
@@ -95,7 +103,8 @@ where
             }
             Outcome::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
                 on_better(&point, nll(&optimum));
-                optimum = method.fit_from(problem, &point.estimates)?;
+                optimum = sysid_core::caught(|| method.fit_from(problem, &point.estimates))
+                    .map_err(ProfileError::Panicked)??;
                 better.push(point);
             }
             Outcome::BetterOptimum(_) => {
@@ -169,6 +178,9 @@ pub enum Label {
     /// The profile is flat: it rises by less than 1e-3 of the threshold over the range
     /// walked.
     StructurallyNonIdentifiable,
+    /// A fit along the profile panicked (a defect in sysid): no verdict
+    /// ([`Profile::failed`] holds the message).
+    Failed,
 }
 
 impl Label {
@@ -178,6 +190,7 @@ impl Label {
             Label::Identifiable => "identifiable",
             Label::PracticallyNonIdentifiable => "practically non-identifiable",
             Label::StructurallyNonIdentifiable => "structurally non-identifiable",
+            Label::Failed => "failed (a fit along it panicked)",
         }
     }
 }
@@ -194,13 +207,21 @@ pub struct Profile {
     pub label: Label,
     /// The points, by value, the optimum included.
     pub points: Vec<Point>,
+    /// The message of the panic (a defect in sysid) that ended a side's tracing, where one
+    /// did ([`Label::Failed`]); the points walked before it are kept.
+    pub failed: Option<String>,
 }
 
 impl Profile {
     /// The profile as the JSON of `sysid profile` has it under its name: `interval`,
-    /// `label`, `points`.
+    /// `label`, `points`, `failed`.
     pub fn record(&self) -> Record<'_> {
-        Record { interval: self.interval, label: self.label, points: &self.points }
+        Record {
+            interval: self.interval,
+            label: self.label,
+            points: &self.points,
+            failed: self.failed.as_deref(),
+        }
     }
 }
 
@@ -240,6 +261,7 @@ pub struct Record<'a> {
     interval: [Option<f64>; 2],
     label: Label,
     points: &'a [Point],
+    failed: Option<&'a str>,
 }
 
 /// What profiling found.
@@ -256,6 +278,8 @@ enum End {
     Crossed(f64),
     Open,
     Better(Point),
+    /// A fit panicked, with this message.
+    Failed(String),
 }
 
 /// The NLL of a fit: its likelihood, or ε/2 where it has none.
@@ -312,7 +336,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         };
         let mut points = vec![at.clone()];
         let mut interval = [None, None];
-        let mut open = false;
+        let (mut open, mut failed) = (false, None);
         for (side, direction) in [-1.0, 1.0].into_iter().enumerate() {
             let (walked, end) = self.side(&at, direction)?;
             points.extend(walked);
@@ -320,11 +344,14 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
                 End::Crossed(value) => interval[side] = Some(value),
                 End::Open => open = true,
                 End::Better(point) => return Ok(Err(point)),
+                End::Failed(message) => failed = failed.or(Some(message)),
             }
         }
         points.sort_by(|a, b| a.value.total_cmp(&b.value));
         let rise = points.iter().map(|p| p.nll - base).fold(0.0, f64::max);
-        let label = if rise < 1e-3 * self.options.threshold {
+        let label = if failed.is_some() {
+            Label::Failed
+        } else if rise < 1e-3 * self.options.threshold {
             Label::StructurallyNonIdentifiable
         } else if open {
             Label::PracticallyNonIdentifiable
@@ -332,7 +359,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             Label::Identifiable
         };
         let name = self.problem.names()[self.i].clone();
-        Ok(Ok(Profile { name, interval, label, points }))
+        Ok(Ok(Profile { name, interval, label, points, failed }))
     }
 
     /// Whether `p` lies below the optimum by more than 1e-6 relative: the fit was not at it.
@@ -341,8 +368,13 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         p.nll < base - 1e-6 * base.abs().max(1.0)
     }
 
-    /// The fit with θ_i held at the coordinate `z`, from the point `from`.
+    /// The fit with θ_i held at the coordinate `z`, from the point `from`; a panic in it
+    /// becomes [`ProfileError::Panicked`], which ends the side ([`End::Failed`]).
     fn fit_at(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {
+        sysid_core::caught(|| self.fit_at_unguarded(z, from)).map_err(ProfileError::Panicked)?
+    }
+
+    fn fit_at_unguarded(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {
         let unknown = &self.problem.unknowns().list()[self.i];
         let value = unknown.value(z);
         if self.problem.unknowns().len() == 1 {
@@ -403,7 +435,10 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             if at_bound {
                 next_z = limit;
             }
-            let point = self.fit_at(next_z, &previous)?;
+            let point = match self.fit_at(next_z, &previous) {
+                Err(ProfileError::Panicked(message)) => return Ok((points, End::Failed(message))),
+                other => other?,
+            };
             if self.below_optimum(&point) {
                 return Ok((points, End::Better(point)));
             }
@@ -413,8 +448,14 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
                 continue;
             }
             if point.nll - at.nll > threshold {
-                let crossing = self.locate((z, &previous), (next_z, &point), z0)?;
+                let crossing = self.locate((z, &previous), (next_z, &point), z0);
                 points.push(point);
+                let crossing = match crossing {
+                    Err(ProfileError::Panicked(message)) => {
+                        return Ok((points, End::Failed(message)));
+                    }
+                    other => other?,
+                };
                 return Ok(match crossing {
                     Ok((value, located)) => {
                         points.extend(located);

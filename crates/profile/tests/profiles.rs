@@ -114,3 +114,77 @@ fn thresholds_are_half_the_chi_square_quantiles() {
     assert_eq!(threshold_95(Some(1)).to_bits(), POINTWISE_95.to_bits());
     assert!((threshold_95(Some(3)) - 7.814_727_903_251_178 / 2.0).abs() < 1e-12);
 }
+
+/// Goodman's method, except that the fits along `name`'s profile panic from the `after`-th
+/// on, as a defect would.
+struct Panics<'a, S: System> {
+    inner: &'a (dyn sysid_core::Method<S> + Sync),
+    name: String,
+    after: usize,
+    calls: std::sync::atomic::AtomicUsize,
+}
+
+impl<S: System> sysid_core::Method<S> for Panics<'_, S> {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+
+    fn fit_from(
+        &self,
+        problem: &Problem<S>,
+        start: &[f64],
+    ) -> Result<sysid_core::Estimate, sysid_core::FitError> {
+        let profiling = !problem.unknowns().list().iter().any(|u| u.name == self.name);
+        if profiling
+            && self.calls.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1 >= self.after
+        {
+            panic!("a finite move");
+        }
+        self.inner.fit_from(problem, start)
+    }
+}
+
+/// A fit that panics along one unknown's profile ends that profile's tracing as `failed`, with
+/// the panic's message and the points walked before it; the other unknowns' profiles are the
+/// ones traced without the panics, and the JSON says `failed` (null for the others).
+#[test]
+fn a_fit_that_panics_fails_its_profile_and_the_others_stand() {
+    let case = sysid_systems::falling_body::falling_body();
+    let problem = case.problem(1).unwrap();
+    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
+    let optimum = goodman.fit(&problem).unwrap();
+    let options = ProfileOptions::default();
+    let Outcome::Profiles(plain) = profile(&*goodman, &problem, &optimum, &[], &options).unwrap()
+    else {
+        panic!("a better optimum than Goodman's one-step fit of a linear model");
+    };
+    let name = problem.names()[1].clone();
+    let calls = std::sync::atomic::AtomicUsize::new(0);
+    let panics = Panics { inner: &*goodman, name: name.clone(), after: 4, calls };
+    let Outcome::Profiles(some) = profile(&panics, &problem, &optimum, &[], &options)
+        .expect("the profiles survive the panics")
+    else {
+        panic!("a better optimum");
+    };
+    assert_eq!(some.len(), plain.len());
+    for (p, q) in some.iter().zip(&plain) {
+        if p.name != name {
+            assert_eq!(p, q, "{} is traced as without the panics", p.name);
+            assert_eq!(p.failed, None);
+            continue;
+        }
+        assert_eq!(p.label, Label::Failed);
+        assert_eq!(p.interval, [None, None], "no crossing is claimed");
+        assert_eq!(p.failed.as_deref(), Some("a finite move"));
+        // The optimum and the fits before the 4th (a step retried shorter discards its fit).
+        assert!((2..=4).contains(&p.points.len()), "{:?}", p.points);
+        for point in &p.points {
+            assert!(q.points.contains(point), "{point:?} is a point of the profile without panics");
+        }
+        let record = serde_json::to_value(p.record()).unwrap();
+        assert_eq!(record["label"], "failed");
+        assert_eq!(record["failed"], "a finite move");
+    }
+    let other = plain.iter().find(|p| p.name != name).unwrap();
+    assert!(serde_json::to_value(other.record()).unwrap()["failed"].is_null());
+}

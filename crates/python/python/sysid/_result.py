@@ -95,8 +95,12 @@ class Profile:
         low, high = record["interval"]
         #: The 95 % interval (low, high); None at an end whose side did not cross the threshold.
         self.interval: Tuple[Optional[float], Optional[float]] = (low, high)
-        #: ``identifiable``, ``practically_non_identifiable`` or ``structurally_non_identifiable``.
+        #: ``identifiable``, ``practically_non_identifiable``, ``structurally_non_identifiable``
+        #: or ``failed`` (a fit along the profile panicked, a defect in sysid: no verdict).
         self.label: str = record["label"]
+        #: None, or the message of the panic that ended a side's tracing (the points before it
+        #: are kept).
+        self.failed: Optional[str] = record.get("failed")
         points = record["points"]
         #: The profiled unknown's values, increasing, the optimum's included.
         self.values = np.array([p["value"] for p in points], dtype=float)
