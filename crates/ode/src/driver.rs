@@ -1,6 +1,6 @@
 //! The integration loop: segments between discontinuities, direction, the step budget,
-//! accepting and rejecting steps by the scheme's controller, the automatic switch to Rodas5P,
-//! and one interpolant per accepted step. Schemes are reached only through [`Stepper`].
+//! accepting and rejecting steps by the scheme's controller, the automatic switches between
+//! DOPRI5 and Rodas5P, and one interpolant per accepted step. Schemes are reached only through [`Stepper`].
 
 use crate::control::{Control, MIN_FACTOR, initial_step};
 use crate::counts::Counts;
@@ -15,7 +15,8 @@ use crate::rodas4::Rodas4;
 use crate::rodas5p::Rodas5p;
 use crate::stepper::Stepper;
 use crate::stiffness::{
-    SPECTRAL_EVERY, SPECTRAL_STIFF_H_LAMBDA, STIFF_H_LAMBDA, SpectralRadius, Stiffness,
+    EXPLICIT_H_LAMBDA, EXPLICIT_REFRESHES, SPECTRAL_EVERY, SPECTRAL_STIFF_H_LAMBDA, STIFF_H_LAMBDA,
+    SpectralRadius, Stiffness,
 };
 use crate::work::{Evaluator, Work};
 
@@ -191,7 +192,7 @@ impl<R: Rhs> Stepper<R> for Active {
 struct Run<'r, R: Rhs, W, O> {
     ev: Evaluator<'r, R>,
     work: Work,
-    /// The scheme stepping now: `auto` starts explicit and may switch to Rodas5P.
+    /// The scheme stepping now: `auto` starts explicit, may switch to Rodas5P and back.
     stepper: Active,
     t: f64,
     t_end: f64,
@@ -208,6 +209,9 @@ struct Run<'r, R: Rhs, W, O> {
     spectral: SpectralRadius,
     /// Where DOPRI5's stiffness test fired, if it did and the scheme stays explicit.
     stiff_since: Option<f64>,
+    /// Refreshes of [`SpectralRadius`] in a row, while `auto` steps with Rodas5P, at which
+    /// DOPRI5 would be stable with a margin ([`Run::observe_non_stiffness`]).
+    explicit_again: u32,
     wants: W,
     on_step: O,
     /// The state events' conditions at t ([`Rhs::event_conditions`]; empty without events),
@@ -255,6 +259,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             stiffness: Stiffness::default(),
             spectral: SpectralRadius::default(),
             stiff_since: None,
+            explicit_again: 0,
             wants,
             on_step,
         }
@@ -371,6 +376,9 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             last_rejected = false;
             if let Some(h_lambda) = h_lambda {
                 self.observe_stiffness(h_lambda, hs);
+            } else if matches!(self.stepper, Active::Rodas5p) && self.ev.cfg.scheme == Scheme::Auto
+            {
+                self.observe_non_stiffness(hs);
             }
             if lands {
                 return Ok(());
@@ -482,6 +490,34 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             self.stepper = Active::Rodas5p;
         } else {
             self.stiff_since.get_or_insert(t);
+        }
+    }
+
+    /// While the automatic choice steps with Rodas5P: every [`SPECTRAL_EVERY`] accepted steps
+    /// h·|λ|max by [`SpectralRadius`], and after [`EXPLICIT_REFRESHES`] refreshes in a row
+    /// below [`EXPLICIT_H_LAMBDA`] back to DOPRI5, whose step costs a few right-hand sides
+    /// where Rodas5P's costs eight, a Jacobian and a factorisation: a model stiff only for a
+    /// while (a fast transient at the start, a switch) is not integrated implicitly to its
+    /// end. The margin below DOPRI5's stability boundary (3.3) keeps the two tests from
+    /// switching back and forth at every refresh.
+    fn observe_non_stiffness(&mut self, h: f64) {
+        if !self.ev.counts.steps.is_multiple_of(SPECTRAL_EVERY) {
+            return;
+        }
+        let (t, states) = (self.t, self.ev.rhs.states());
+        let ev = &mut self.ev;
+        self.spectral.refresh(&self.work.x, states, h, |x, dx| ev.f(t, x, dx));
+        if h.abs() * self.spectral.radius < EXPLICIT_H_LAMBDA {
+            self.explicit_again += 1;
+        } else {
+            self.explicit_again = 0;
+        }
+        if self.explicit_again >= EXPLICIT_REFRESHES {
+            self.explicit_again = 0;
+            self.stiffness = Stiffness::default();
+            self.stepper = Active::Dopri5;
+            // DOPRI5's first stage is f(t, x), which a Rodas5P step does not leave behind.
+            self.ev.f(t, &self.work.x, &mut self.work.k[0]);
         }
     }
 

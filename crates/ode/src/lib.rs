@@ -19,7 +19,8 @@
 //!   analysed once), integrating the sensitivities with the same factorisation; an
 //!   automatic choice that starts with DOPRI5 and switches to Rodas5P when its steps are
 //!   limited by stability (Hairer's test, and the Jacobian's spectral radius by power
-//!   iteration); forward and backward from t0; steps that stop exactly on
+//!   iteration), and back where Rodas5P's steps would be well inside DOPRI5's stability
+//!   region; forward and backward from t0; steps that stop exactly on
 //!   declared input discontinuities; errors ([`OdeError`]) instead of panics;
 //! * [`Ivp`]: the state ([`Ivp::solve`]) or the state and its sensitivities
 //!   ([`Ivp::solve_sensitivities`]) at measurement times on both sides of t0, or the whole

@@ -60,6 +60,13 @@ impl Stiffness {
     }
 }
 
+/// h·|λ|max below which a step of Rodas5P's size would be stable for DOPRI5 with a margin
+/// (its boundary is near 3.3; a third of the way to it): the automatic choice then goes back
+/// to DOPRI5.
+pub(crate) const EXPLICIT_H_LAMBDA: f64 = 1.0;
+/// Refreshes of [`SpectralRadius`] in a row below [`EXPLICIT_H_LAMBDA`] that decide it.
+pub(crate) const EXPLICIT_REFRESHES: u32 = 2;
+
 /// Accepted steps between two refreshes of [`SpectralRadius`]: each refresh costs two
 /// evaluations of the right-hand side, against six or seven a DOPRI5 step.
 pub(crate) const SPECTRAL_EVERY: u64 = 16;

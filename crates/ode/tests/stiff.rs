@@ -316,3 +316,42 @@ fn an_autonomous_system_skips_the_time_derivative() {
         );
     }
 }
+
+/// y′ = −λ(t)(y − cos t) − sin t with λ(t) = λ₀e^{−2t} + 1 (Prothero and Robinson's problem
+/// with a fading rate): y = cos t from y(0) = 1 whatever λ, stiff at the start (λ₀ = 10⁴)
+/// and not once λ has fallen to a few units (t ≳ 4.5).
+struct Fading(sysid_ode::Signature);
+
+impl sysid_ode::System for Fading {
+    fn signature(&self) -> &sysid_ode::Signature {
+        &self.0
+    }
+    fn rhs<T: sysid_ode::Scalar>(&self, t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        let lambda = p[0] * (-2.0 * t).exp() + 1.0;
+        dy[0] = -(lambda * (y[0] - t.cos())) - t.sin();
+    }
+}
+
+/// The automatic choice leaves DOPRI5 while the rate is fast and comes back once it is not:
+/// integrated to t = 40 it takes no Jacobian after t = 20 (the same count as integrated to
+/// 20), where Rodas5P would take one at every step to the end; the solution is cos t to the
+/// tolerance either way.
+#[test]
+fn the_automatic_choice_returns_to_dopri5_where_the_stiffness_ends() {
+    let system = Fading(sysid_ode::Signature::new(&["y"], &["lambda0"]));
+    let ivp = Ivp::new(&system, 0.0, &[1.0], &[1e4]);
+    let times: Vec<f64> = (1..=80).map(|i| 0.5 * i as f64).collect();
+    let (rtol, atol) = (1e-8, 1e-10);
+    let auto = ivp.solve(&Integrator::auto(rtol, atol), &times).unwrap();
+    let to_20 = ivp.solve(&Integrator::auto(rtol, atol), &times[..40]).unwrap();
+    let implicit = ivp.solve(&Integrator::rodas5p(rtol, atol), &times).unwrap();
+    let (a, a20, r) = (auto.counts(), to_20.counts(), implicit.counts());
+    assert!(a.jacobians > 0, "it switched to Rodas5P while the rate was fast: {a:?}");
+    assert_eq!(a.jacobians, a20.jacobians, "no implicit step after t = 20: {a:?}, {a20:?}");
+    assert!(a.steps > a20.steps + 100, "{a:?}, {a20:?}");
+    assert!(r.jacobians > r.steps / 2, "Rodas5P takes a Jacobian at every step: {r:?}");
+    for (m, &t) in times.iter().enumerate() {
+        assert_close_abs(auto.state(m)[0], t.cos(), 1e-6);
+        assert_close_abs(implicit.state(m)[0], t.cos(), 1e-6);
+    }
+}
