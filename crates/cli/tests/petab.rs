@@ -266,6 +266,49 @@ fn the_automatic_integrator_switches_on_stiff_models_only() {
     }
 }
 
+/// `auto` goes back to DOPRI5 once Rodas5P's steps would be well inside DOPRI5's stability
+/// region (docs/petab.md#back-to-dopri5): at the point where one of Crauste's random starts
+/// crawled for 1 000 iterations (fast rates, ρ_E = 268 and δ_LM = 839, but no stiffness to
+/// speak of), `auto` switches to Rodas5P and back, a Jacobian at 22 % of its steps measured
+/// (at 89 % before, when it kept Rodas5P to the end), its NLL Rodas5P's within 3 times the sum
+/// of the two `nll_error`s.
+#[test]
+fn the_automatic_integrator_goes_back_to_dopri5_where_the_model_is_fast_but_not_stiff() {
+    let crauste = problem("Crauste_CellSystems2017");
+    let point = [
+        "delta_EL=21.32673812890542",
+        "delta_LM=839.1179852560446",
+        "delta_NE=1.9728436403799503",
+        "mu_EE=0.15593030417357112",
+        "mu_LE=6.653023229590871",
+        "mu_LL=3.7158730570689355e-10",
+        "mu_N=0.7611395671126222",
+        "mu_P=0.041535704975618246",
+        "mu_PE=0.054380173002505416",
+        "mu_PL=12.155125584799887",
+        "rho_E=268.2206034410524",
+        "rho_P=56.796321551775435",
+    ];
+    let evaluate = |scheme: &str| -> serde_json::Value {
+        let mut args = vec!["evaluate", "--petab", &crauste, "--gradient", "--integrator", scheme];
+        for p in &point {
+            args.extend(["--set", p]);
+        }
+        args.extend(["--format", "json"]);
+        let out = sysid(&args);
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).expect("JSON")
+    };
+    let (auto, rodas) = (evaluate("auto"), evaluate("rodas5p"));
+    let get = |json: &serde_json::Value, key: &str| json[key].as_f64().expect(key);
+    let apart = (get(&auto, "nll") - get(&rodas, "nll")).abs();
+    assert!(apart <= 3.0 * (get(&auto, "nll_error") + get(&rodas, "nll_error")), "{apart:.2e}");
+    let count = |key: &str| auto["counts"][key].as_u64().expect(key);
+    let (steps, jacobians) = (count("steps"), count("jacobians"));
+    assert!(jacobians > 0, "auto switched to Rodas5P there: {}", auto["counts"]);
+    assert!(3 * jacobians < steps, "and back to DOPRI5: {}", auto["counts"]);
+}
+
 /// Coarse first (docs/methods.md#coarse-first): Boehm's default fit from a random start (the
 /// median start of a 100-start run, on a plateau where no unknown moves the residuals) ends
 /// at the same certified minimum with and without the coarse stage, its NLL within 3 times the
