@@ -1121,6 +1121,15 @@ fn operand<T: Scalar>(o: Operand, slots: &[T], t: f64, y: &[T], p: &[T], u: &[f6
     }
 }
 
+/// x^c for a constant c that is not an integer. At x = 0 with c > 1 the value and every
+/// first derivative c·x^(c−1)·dx are 0; num-dual's powf computes them as x^(c−3)·x³, which is
+/// ∞·0 = NaN there (a Hill term x^2.75 of a species that starts at 0), so that case is 0 here
+/// as it is in the compiled derivatives.
+#[inline(always)]
+fn power<T: Scalar>(x: T, c: f64) -> T {
+    if c > 1.0 && x.re() == 0.0 { x * 0.0 + 0.0 } else { x.powf(c) }
+}
+
 /// One operation on its operands' values.
 #[inline(always)]
 fn compute<T: Scalar>(node: Node, get: impl Fn(Operand) -> T) -> T {
@@ -1136,7 +1145,7 @@ fn compute<T: Scalar>(node: Node, get: impl Fn(Operand) -> T) -> T {
         Node::DivC(a, c) => get(a) / c,
         Node::CDiv(c, a) => get(a).recip() * c,
         Node::PowI(a, n) => get(a).powi(n),
-        Node::PowF(a, c) => get(a).powf(c),
+        Node::PowF(a, c) => power(get(a), c),
         Node::Pow(a, b) => get(a).powd(get(b)),
         Node::Func(f, a) => {
             let x = get(a);
