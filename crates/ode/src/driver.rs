@@ -1,6 +1,7 @@
 //! The integration loop: segments between discontinuities, direction, the step budget,
 //! accepting and rejecting steps by the scheme's controller, the automatic switches between
-//! DOPRI5 and Rodas5P, and one interpolant per accepted step. Schemes are reached only through [`Stepper`].
+//! DOPRI5 and Rodas5P, and one interpolant per accepted step. Schemes are reached only
+//! through [`Stepper`].
 
 use crate::control::{Control, MIN_FACTOR, initial_step};
 use crate::counts::Counts;
@@ -472,11 +473,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         let auto = self.ev.cfg.scheme == Scheme::Auto;
         let mut h_lambda = h_lambda;
         if auto && matches!(self.stepper, Active::Dopri5) {
-            if self.ev.counts.steps.is_multiple_of(SPECTRAL_EVERY) {
-                let (t, states) = (self.t, self.ev.rhs.states());
-                let ev = &mut self.ev;
-                self.spectral.refresh(&self.work.x, states, h, |x, dx| ev.f(t, x, dx));
-            }
+            self.refresh_spectral(h);
             // On the scale of Hairer's threshold, which the test applies to both.
             let spectral =
                 h.abs() * self.spectral.radius * STIFF_H_LAMBDA / SPECTRAL_STIFF_H_LAMBDA;
@@ -501,12 +498,9 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
     /// end. The margin below DOPRI5's stability boundary (3.3) keeps the two tests from
     /// switching back and forth at every refresh.
     fn observe_non_stiffness(&mut self, h: f64) {
-        if !self.ev.counts.steps.is_multiple_of(SPECTRAL_EVERY) {
+        if !self.refresh_spectral(h) {
             return;
         }
-        let (t, states) = (self.t, self.ev.rhs.states());
-        let ev = &mut self.ev;
-        self.spectral.refresh(&self.work.x, states, h, |x, dx| ev.f(t, x, dx));
         if h.abs() * self.spectral.radius < EXPLICIT_H_LAMBDA {
             self.explicit_again += 1;
         } else {
@@ -517,8 +511,20 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             self.stiffness = Stiffness::default();
             self.stepper = Active::Dopri5;
             // DOPRI5's first stage is f(t, x), which a Rodas5P step does not leave behind.
-            self.ev.f(t, &self.work.x, &mut self.work.k[0]);
+            self.ev.f(self.t, &self.work.x, &mut self.work.k[0]);
         }
+    }
+
+    /// One power iteration of [`SpectralRadius`] at (t, x) after a step of `h`, every
+    /// [`SPECTRAL_EVERY`] accepted steps; whether it was due.
+    fn refresh_spectral(&mut self, h: f64) -> bool {
+        if !self.ev.counts.steps.is_multiple_of(SPECTRAL_EVERY) {
+            return false;
+        }
+        let (t, states) = (self.t, self.ev.rhs.states());
+        let ev = &mut self.ev;
+        self.spectral.refresh(&self.work.x, states, h, |x, dx| ev.f(t, x, dx));
+        true
     }
 
     /// Accepts the step from t to t_next held in `work`: interpolant and callback (if
