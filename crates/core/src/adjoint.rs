@@ -126,14 +126,16 @@ impl<S: System> Problem<S> {
 /// [`Counts::operations`] charges each evaluation, factorisation and solve what its
 /// structure says (a compiled program's operations, the products' multiply–adds, the
 /// eliminations), not what the integrator does around them. The backward integration does
-/// more of that per operation: it interpolates the forward solution, stops at every end of
-/// a forward step and at every sample, restarting there. Measured over the collection
-/// (docs/petab.md, one thread, the median of 5 evaluations each way), an adjoint gradient's
-/// time per counted operation was 0.7–5.4 times a forward gradient's, the median 2.2. The
-/// weight is above the median so that the adjoint is taken only where it is clearly ahead:
-/// forward's gradient is the one the fits' linearization has, and a wrong adjoint costs more
-/// (forward up to 26 % faster where the count was 2 times the adjoint's) than a wrong forward
-/// (the adjoint up to 4 % faster where it was 2–3 times).
+/// more of that per operation: it interpolates the forward solution and stops at every
+/// sample, restarting there. Measured over the collection (docs/petab.md, one thread, the
+/// median of 5 evaluations each way), an adjoint gradient's time per counted operation was
+/// 0.7–5.4 times a forward gradient's, the median 2.2, when the backward steps also stopped
+/// at every end of a forward step; 0.5–6.0, the median 1.4, since they do not (2026-12-03).
+/// The weight is above the median so that the adjoint is taken only where it is clearly
+/// ahead: forward's gradient is the one the fits' linearization has. Any weight from 1.6 to
+/// 3.3 picks the faster way on every problem of the collection measured but Laske, whose
+/// count (forward 1.28 times the adjoint's) lies among those where forward is faster (Weber
+/// 1.34, Elowitz 1.56), and SalazarCavazos, where the two are within 7 %.
 pub const ADJOINT_OPERATION_COST: f64 = 3.0;
 
 /// One experiment's rows, its part of U and whether it came from the adjoint, by the way

@@ -29,6 +29,17 @@ pub trait Rhs {
     fn column_atol(&self) -> Option<&[f64]> {
         None
     }
+    /// Whether the error control measures the leading [`states`](Self::states) components
+    /// as one vector and the others as another: a component is then held to
+    /// max(atol, rtol·m) + rtol·|x_i|, m the largest entry of its vector at either end of the
+    /// step, instead of atol + rtol·|x_i| alone (as [`column_atol`](Self::column_atol) does
+    /// for each sensitivity column). For quantities used only through their sum with other
+    /// components, such as an adjoint λ whose products λᵀS make a gradient: an entry far
+    /// below its vector's largest moves that sum by far less than atol on its own would
+    /// suggest. Default: false.
+    fn errors_as_vectors(&self) -> bool {
+        false
+    }
     /// Whether f does not depend on t: a Rosenbrock step then takes ∂f/∂t = 0 without
     /// evaluating f again. Default: false (∂f/∂t is differenced).
     fn autonomous(&self) -> bool {

@@ -140,6 +140,9 @@ impl<R: Rhs> Evaluator<'_, R> {
 
     /// The error norm sqrt(mean((e_i / sk_i)²)), sk_i = atol + rtol·max(|x_i|, |x̂_i|).
     ///
+    /// Where the right-hand side [measures its errors as vectors](Rhs::errors_as_vectors),
+    /// atol is max(atol, rtol·m), m the largest entry of the component's vector.
+    ///
     /// For an augmented state [y; S] whose right-hand side gives its [columns](Rhs::column_atol),
     /// a sensitivity S_ij is measured as a component of its column, a vector:
     /// sk_ij = max(atol·c_j, rtol·m_j) + rtol·max(|S_ij|, |Ŝ_ij|), m_j the column's largest
@@ -152,6 +155,20 @@ impl<R: Rhs> Evaluator<'_, R> {
         let len = e.len();
         let scale = |i: usize, floor: f64| floor + rtol * x[i].abs().max(xn[i].abs());
         // Without sensitivity columns every component is a state.
+        if self.rhs.errors_as_vectors() {
+            let states = self.rhs.states().min(len);
+            let mut sum = 0.0;
+            for vector in [0..states, states..len] {
+                let largest =
+                    vector.clone().fold(0.0_f64, |m, i| m.max(x[i].abs()).max(xn[i].abs()));
+                let floor = atol.max(rtol * largest);
+                for i in vector {
+                    let q = crate::control::scaled(e[i], scale(i, floor));
+                    sum += q * q;
+                }
+            }
+            return (sum / len as f64).sqrt();
+        }
         let columns = self.rhs.column_atol().unwrap_or(&[]);
         let k = columns.len();
         let n = len / (1 + k);
