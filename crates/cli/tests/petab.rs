@@ -289,15 +289,12 @@ fn the_automatic_integrator_goes_back_to_dopri5_where_the_model_is_fast_but_not_
         "rho_E=268.2206034410524",
         "rho_P=56.796321551775435",
     ];
-    let evaluate = |scheme: &str| -> serde_json::Value {
-        let mut args = vec!["evaluate", "--petab", &crauste, "--gradient", "--integrator", scheme];
-        for p in &point {
-            args.extend(["--set", p]);
-        }
-        args.extend(["--format", "json"]);
-        let out = sysid(&args);
-        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-        serde_json::from_slice(&out.stdout).expect("JSON")
+    let point: Vec<String> = point.iter().map(|p| p.to_string()).collect();
+    let evaluate = |scheme: &str| {
+        evaluate_at(
+            vec!["evaluate", "--petab", &crauste, "--gradient", "--integrator", scheme],
+            &point,
+        )
     };
     let (auto, rodas) = (evaluate("auto"), evaluate("rodas5p"));
     let get = |json: &serde_json::Value, key: &str| json[key].as_f64().expect(key);

@@ -27,8 +27,7 @@
 //! held the backward integration to at least the forward's count of steps (Laske: 21 883
 //! steps then, 11 722 now, against 7 166 forward), for gradients at rtol 1e-8 that were 10
 //! to 50 times closer to a tight reference on Fujita, Zheng and Smith, and within a factor 5
-//! elsewhere
-//! (docs/petab.md, "Adjoint gradients beside forward sensitivities").
+//! elsewhere (docs/petab.md, "Adjoint gradients beside forward sensitivities").
 //!
 //! The backward integration runs from each sample time to the one before in time local to
 //! the sample (see [`Local`]): a jump of λ sets off the system's fast modes, which only steps

@@ -156,12 +156,6 @@ impl DenseSolution {
         Some((lower(*self.spans.first()?), upper(*self.spans.last()?)))
     }
 
-    /// Where one stored step ends and the next begins, increasing: the times across which
-    /// the solution is continuous but its interpolants' derivatives are not.
-    pub fn step_ends(&self) -> impl Iterator<Item = f64> + '_ {
-        self.spans.iter().rev().skip(1).rev().map(|&s| upper(s))
-    }
-
     /// Number of stored steps.
     pub fn len(&self) -> usize {
         self.spans.len()

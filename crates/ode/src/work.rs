@@ -154,42 +154,42 @@ impl<R: Rhs> Evaluator<'_, R> {
         let (rtol, atol) = (self.cfg.rtol, self.cfg.atol);
         let len = e.len();
         let scale = |i: usize, floor: f64| floor + rtol * x[i].abs().max(xn[i].abs());
-        // Without sensitivity columns every component is a state.
+        let mut sum = 0.0;
         if self.rhs.errors_as_vectors() {
             let states = self.rhs.states().min(len);
-            let mut sum = 0.0;
-            for vector in [0..states, states..len] {
-                let largest =
-                    vector.clone().fold(0.0_f64, |m, i| m.max(x[i].abs()).max(xn[i].abs()));
-                let floor = atol.max(rtol * largest);
-                for i in vector {
-                    let q = crate::control::scaled(e[i], scale(i, floor));
-                    sum += q * q;
-                }
-            }
+            add_vector((e, x, xn), rtol, (atol, |i| i, states), &mut sum);
+            add_vector((e, x, xn), rtol, (atol, |i| states + i, len - states), &mut sum);
             return (sum / len as f64).sqrt();
         }
+        // Without sensitivity columns every component is a state.
         let columns = self.rhs.column_atol().unwrap_or(&[]);
         let k = columns.len();
         let n = len / (1 + k);
-        let mut sum = 0.0;
         for (i, &ei) in e[..n].iter().enumerate() {
             let q = crate::control::scaled(ei, scale(i, atol));
             sum += q * q;
         }
         for (j, c) in columns.iter().enumerate() {
-            let mut largest = 0.0_f64;
-            for i in 0..n {
-                let at = n + i * k + j;
-                largest = largest.max(x[at].abs()).max(xn[at].abs());
-            }
-            let floor = (atol * c).max(rtol * largest);
-            for i in 0..n {
-                let at = n + i * k + j;
-                let q = crate::control::scaled(e[at], scale(at, floor));
-                sum += q * q;
-            }
+            add_vector((e, x, xn), rtol, (atol * c, |i| n + i * k + j, n), &mut sum);
         }
         (sum / len as f64).sqrt()
+    }
+}
+
+/// Adds to `sum` the squared scaled errors of the `count` components `at(0)`, `at(1)`, …
+/// measured as one vector: each against max(floor, rtol·m) + rtol·max(|x_i|, |x̂_i|), m the
+/// vector's largest entry at either end of the step ([`Evaluator::error_norm`]).
+fn add_vector(
+    (e, x, xn): (&[f64], &[f64], &[f64]),
+    rtol: f64,
+    (floor, at, count): (f64, impl Fn(usize) -> usize, usize),
+    sum: &mut f64,
+) {
+    let largest = (0..count).fold(0.0_f64, |m, i| m.max(x[at(i)].abs()).max(xn[at(i)].abs()));
+    let floor = floor.max(rtol * largest);
+    for i in 0..count {
+        let i = at(i);
+        let q = crate::control::scaled(e[i], floor + rtol * x[i].abs().max(xn[i].abs()));
+        *sum += q * q;
     }
 }
