@@ -13,7 +13,7 @@ use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArgs, SourceArgs, StartsArgs};
 use crate::output::emit;
 use crate::problem::{
-    AnyProblem, Context, best_of_starts, method, no_source, problem, with_starts,
+    AnyProblem, Context, best_of_starts, method, no_source, problem, watching, with_starts,
 };
 
 /// Arguments of `sysid compare`.
@@ -79,11 +79,14 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         let mut rows = Vec::with_capacity(methods.len());
         for name in &methods {
             let m = method(name, &settings)?;
+            let watch = context.watch(name, args.options.log_every);
             let result = match &starts {
-                Some(options) => best_of_starts(&problem, &*m, options)
+                Some(options) => best_of_starts(&problem, &*m, options, &watch)
                     .map(|(e, s)| (e, Some(s)))
                     .map_err(|e| e.to_string()),
-                None => m.fit(&problem).map(|e| (e, None)).map_err(|e| e.to_string()),
+                None => watching(&watch, || m.fit(&problem))
+                    .map(|e| (e, None))
+                    .map_err(|e| e.to_string()),
             };
             rows.push(Row { method: name.clone(), result });
         }

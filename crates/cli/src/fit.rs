@@ -49,8 +49,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
         }
     }
     let settings = args.options.settings();
+    let watch = context.watch(&args.method.method, args.options.log_every);
     let (estimate, starts) =
-        fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
+        fit_from_starts(&problem, &args.method.method, &settings, &args.starts, &watch)?;
     match args.format {
         Format::Json => {
             let record = with_starts(estimate.record(&context.name), starts.as_ref());

@@ -193,6 +193,11 @@ pub struct MethodArgs {
     /// with --starts, the first start). Repeatable.
     #[arg(long = "start", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
     pub start: Vec<(String, f64)>,
+    /// When stderr is not a terminal (a batch job's log), print a plain progress line every
+    /// this many seconds (0: never): the iterate of a single fit, the starts done of
+    /// --starts, the trials done of a study. On a terminal the line is redrawn in place.
+    #[arg(long, default_value_t = 60.0, value_name = "SECONDS", value_parser = number, allow_hyphen_values = true)]
+    pub log_every: f64,
 }
 
 impl MethodArgs {
@@ -230,6 +235,12 @@ impl MethodArgs {
                     "{name} is given both --fix and --start: a fixed unknown does not move"
                 );
             }
+        }
+        if !(self.log_every >= 0.0 && self.log_every.is_finite()) {
+            anyhow::bail!(
+                "--log-every must be a non-negative number of seconds (0: never), got {}",
+                self.log_every
+            );
         }
         self.settings().validate().map_err(|e| refused(e.name(), e.problem()))
     }

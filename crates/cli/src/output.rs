@@ -1,7 +1,9 @@
 //! What the commands write: standard output that tolerates a closed pipe, files written
-//! whole and announced, progress bars, the times of CSV rows, and the multistart line.
+//! whole and announced, progress bars and lines, the times of CSV rows, and the multistart line.
 
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -85,6 +87,59 @@ pub fn progress_bar(total: u64, unit: &str) -> ProgressBar {
     let template = format!("{{bar:40}} {{pos}}/{{len}} {unit}, {{per_sec}}, {{eta}} left");
     bar.set_style(ProgressStyle::with_template(&template).expect("a valid template"));
     bar
+}
+
+/// What a long run says on stderr while it goes: on a terminal, one line redrawn in place
+/// ([`say`](Self::say)); otherwise (a batch job's log) a plain line every `every` seconds
+/// (never when 0), so that a fit of hours shows where it is either way.
+pub struct Watch {
+    label: String,
+    line: ProgressBar,
+    every: Option<Duration>,
+    started: Instant,
+    last: Mutex<Instant>,
+}
+
+impl Watch {
+    /// A watch whose lines begin with `label`.
+    pub fn new(label: impl Into<String>, every: f64) -> Self {
+        use std::io::IsTerminal;
+        let on = every > 0.0 && !std::io::stderr().is_terminal();
+        let now = Instant::now();
+        let line = ProgressBar::new_spinner();
+        line.set_style(ProgressStyle::with_template("{wide_msg}").expect("a valid template"));
+        Self {
+            label: label.into(),
+            line,
+            every: on.then(|| Duration::from_secs_f64(every)),
+            started: now,
+            last: Mutex::new(now),
+        }
+    }
+
+    /// `text` on the terminal's line, and in the log where `every` seconds have passed since
+    /// its last line; both with the seconds since the watch began.
+    pub fn say(&self, text: &str) {
+        let secs = self.started.elapsed().as_secs_f64();
+        self.line.set_message(format!("{}: {text}, {secs:.0} s", self.label));
+        self.log(text);
+    }
+
+    /// `text` in the log only, where `every` seconds have passed since its last line.
+    pub fn log(&self, text: &str) {
+        let Some(every) = self.every else { return };
+        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
+        if last.elapsed() >= every {
+            *last = Instant::now();
+            let secs = self.started.elapsed().as_secs_f64();
+            eprintln!("{}: {text}, {secs:.0} s", self.label);
+        }
+    }
+
+    /// Clears the terminal's line.
+    pub fn finish(&self) {
+        self.line.finish_and_clear();
+    }
 }
 
 /// The most output times (CSV rows) a command writes. More is a step given in the wrong

@@ -9,7 +9,7 @@ use sysid_core::format::shortest;
 use crate::Outcome;
 use crate::options::{IntegratorArgs, MethodArg, MethodArgs, SourceArgs};
 use crate::output::{not_an_input, spaced, write_output};
-use crate::problem::{fit, problem};
+use crate::problem::{fit, problem, watching};
 
 /// Arguments of `sysid predict`.
 #[derive(Args, Debug)]
@@ -68,7 +68,9 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
             bail!("--until {} must lie after t0 = {t0} (experiment `{name}`)", args.until);
         }
     }
-    let estimate = fit(&problem, &args.method.method, &args.options.settings())?;
+    let watch = context.watch(&args.method.method, args.options.log_every);
+    let estimate =
+        watching(&watch, || fit(&problem, &args.method.method, &args.options.settings()))?;
     if !estimate.converged() {
         eprintln!(
             "{}: {} did not converge ({}; {}): no prediction written",

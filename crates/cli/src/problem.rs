@@ -3,17 +3,23 @@
 //! registry, and one fit or a multistart, with a start that cannot be used refused as bad
 //! input.
 
+use std::rc::Rc;
+use std::sync::Mutex;
+
 use anyhow::Context as _;
+use sysid_core::format::significant;
+use sysid_core::observer::{self, IterateReport};
 use sysid_core::{
     Estimate, Failure, FitRecord, Method, Problem, ProblemError, Termination, format::Expected,
 };
-use sysid_montecarlo::MultistartOptions;
 use sysid_montecarlo::multistart::Starts;
+use sysid_montecarlo::{MultistartOptions, StartDone};
 use sysid_ode::OdeError;
 use sysid_registry::{Boxed, Registry, Settings};
 use sysid_systems::Case;
 
 use crate::options::{IntegratorArgs, MethodArgs, SourceArgs, StartsArgs};
+use crate::output::Watch;
 use sysid_registry::any::{self, AnySystem};
 
 /// What the commands work on: a problem of any system the command line fits.
@@ -147,31 +153,85 @@ pub fn fit(problem: &AnyProblem, name: &str, settings: &Settings) -> anyhow::Res
 }
 
 /// Fits with the named method from the problem's guess, or from the starts of `--starts`
-/// (the best fit, and what the starts found). The start is unusable only when every start is.
+/// (the best fit, and what the starts found), telling `watch` how it goes. The start is
+/// unusable only when every start is.
 pub fn fit_from_starts(
     problem: &AnyProblem,
     name: &str,
     settings: &Settings,
     starts: &StartsArgs,
+    watch: &Rc<Watch>,
 ) -> anyhow::Result<(Estimate, Option<Starts>)> {
     let Some(options) = starts.options()? else {
-        return Ok((fit(problem, name, settings)?, None));
+        return Ok((watching(watch, || fit(problem, name, settings))?, None));
     };
-    let (best, starts) = best_of_starts(problem, &*method(name, settings)?, &options)?;
+    let (best, starts) = best_of_starts(problem, &*method(name, settings)?, &options, watch)?;
     Ok((best, Some(starts)))
 }
 
-/// `m` from the starts of `options`: the best fit and what the starts found. The start is
-/// unusable only when every start is.
+impl Context {
+    /// The progress lines of a fit of this problem with `method`, every `every` seconds in a
+    /// log ([`Watch`]), labelled by the problem's file name (or the system's) and the method.
+    pub fn watch(&self, method: &str, every: f64) -> Rc<Watch> {
+        let name = std::path::Path::new(&self.name)
+            .file_stem()
+            .map_or(self.name.clone(), |n| n.to_string_lossy().into_owned());
+        Rc::new(Watch::new(format!("{name} {method}"), every))
+    }
+}
+
+/// `f`, with the iterates of the fit it runs on this thread told to `watch`.
+pub fn watching<R>(watch: &Rc<Watch>, f: impl FnOnce() -> R) -> R {
+    let w = Rc::clone(watch);
+    let out = observer::observe(move |p| w.say(&iterate_line(p)), f);
+    watch.finish();
+    out
+}
+
+/// "iteration 37, objective 26258.58, optimality 0.02": an iterate for a progress line.
+fn iterate_line(p: &IterateReport<'_>) -> String {
+    let mut line = match p.objective {
+        Some(v) => format!("iteration {}, objective {}", p.iteration, significant(v, 10)),
+        None => format!("iteration {}, ε {}", p.iteration, significant(p.cost, 10)),
+    };
+    if let Some(m) = p.optimality {
+        line += &format!(", optimality {}", significant(m, 2));
+    }
+    if p.coarse {
+        line += " (coarse stage)";
+    }
+    line
+}
+
+/// `m` from the starts of `options`: the best fit and what the starts found, each start told
+/// to `watch` as it ends. The start is unusable only when every start is.
 pub fn best_of_starts<M>(
     problem: &AnyProblem,
     m: &M,
     options: &MultistartOptions,
+    watch: &Watch,
 ) -> anyhow::Result<(Estimate, Starts)>
 where
     M: Method<AnySystem> + Sync + ?Sized,
 {
-    let run = sysid_montecarlo::multistart(m, problem, options)?;
+    // The least objective and the certified count so far.
+    let so_far = Mutex::new((f64::INFINITY, 0usize));
+    let told = |s: StartDone| {
+        let (best, converged) = {
+            let mut so_far = so_far.lock().unwrap_or_else(|e| e.into_inner());
+            so_far.0 = s.objective.map_or(so_far.0, |v| v.min(so_far.0));
+            so_far.1 += usize::from(s.converged);
+            *so_far
+        };
+        let best = if best.is_finite() { significant(best, 10) } else { "none".into() };
+        watch.say(&format!(
+            "{}/{} starts done, {converged} certified, least objective {best}",
+            s.done, s.total
+        ));
+    };
+    let run = sysid_montecarlo::multistart_observed(m, problem, options, &told);
+    watch.finish();
+    let run = run?;
     if let Some(message) = unusable_start(problem, &run.best, m.start_point()) {
         anyhow::bail!("every start fails; the best: {message}");
     }

@@ -92,7 +92,9 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
         bail!("--only: `{}` is named twice", names[*twice.1]);
     }
     let settings = args.options.settings();
-    let (optimum, _) = fit_from_starts(&problem, &args.method.method, &settings, &args.starts)?;
+    let watch = context.watch(&args.method.method, args.options.log_every);
+    let (optimum, _) =
+        fit_from_starts(&problem, &args.method.method, &settings, &args.starts, &watch)?;
     let m = method(&args.method.method, &settings)?;
     let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));
     let options =

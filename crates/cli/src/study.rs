@@ -11,7 +11,7 @@ use sysid_registry::Role;
 
 use crate::Outcome;
 use crate::options::{IntegratorArgs, MethodArgs, SourceArgs};
-use crate::output::{emit, not_an_input, progress_bar};
+use crate::output::{Watch, emit, not_an_input, progress_bar};
 use crate::problem::{case, fit, method, no_source, prepare};
 use sysid_registry::any::{AnySystem, model_problem};
 
@@ -63,10 +63,6 @@ pub struct StudyArgs {
     /// others at the truth), spread by --perturb.
     #[arg(long, value_name = "U1,U2")]
     basin: Option<String>,
-    /// When stderr is not a terminal (a batch job's log), print a plain line with the
-    /// count of trials done every this many seconds (0: never).
-    #[arg(long, default_value_t = 60.0, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
-    log_every: f64,
     /// Points per axis of the basin map.
     #[arg(
         long,
@@ -108,12 +104,6 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     if let Some((name, _)) = args.options.start.first() {
         bail!(
             "--start {name}=… is for one fit (fit, compare, profile, predict): a study draws each trial's start itself (--perturb)"
-        );
-    }
-    if !(args.log_every >= 0.0 && args.log_every.is_finite()) {
-        bail!(
-            "--log-every must be a non-negative number of seconds (0: never), got {}",
-            args.log_every
         );
     }
     let methods = match &args.methods {
@@ -265,46 +255,19 @@ fn run_scenario(
         Some(s) => format!("{system} shard {}/{}", s.index, s.count),
         None => system.to_string(),
     };
-    let log = LogLines::new(label, args.log_every);
+    let log = Watch::new(label, args.options.log_every);
     let options = RunOptions { shard: args.shard, resume: args.resume, force: args.force };
     let summary = files::run(&study, &args.out, options, &|done, todo| {
         bar.set_length(todo as u64);
         bar.set_position(done as u64);
-        log.tick(done, todo);
+        if done > 0 && done < todo {
+            log.log(&format!("{done}/{todo} trials done"));
+        }
     })?;
     bar.finish_and_clear();
     emit(&summary.markdown())?;
     eprintln!("{}: {} trials written to {}", system, summary.trials, args.out.display());
     Ok(Outcome::Success)
-}
-
-/// Plain progress lines on stderr for batch logs, where the progress bar is hidden: one
-/// every `every` seconds while trials run.
-struct LogLines {
-    label: String,
-    every: Option<std::time::Duration>,
-    started: std::time::Instant,
-    last: std::sync::Mutex<std::time::Instant>,
-}
-
-impl LogLines {
-    fn new(label: String, every: f64) -> Self {
-        use std::io::IsTerminal;
-        let on = every > 0.0 && !std::io::stderr().is_terminal();
-        let now = std::time::Instant::now();
-        let every = on.then(|| std::time::Duration::from_secs_f64(every));
-        Self { label, every, started: now, last: std::sync::Mutex::new(now) }
-    }
-
-    fn tick(&self, done: usize, todo: usize) {
-        let Some(every) = self.every else { return };
-        let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
-        if done > 0 && done < todo && last.elapsed() >= every {
-            *last = std::time::Instant::now();
-            let secs = self.started.elapsed().as_secs_f64();
-            eprintln!("{}: {done}/{todo} trials done, {secs:.0} s", self.label);
-        }
-    }
 }
 
 /// Runs `sysid merge`.

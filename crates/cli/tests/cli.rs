@@ -25,6 +25,35 @@ fn fit_prints_the_papers_answer() {
 }
 
 #[test]
+fn a_fit_in_a_batch_log_says_where_it_is_while_it_runs() {
+    // stderr is a pipe here, as in a batch job: plain lines, never a redrawn one.
+    let fit =
+        sysid(&["fit", "--system", "lotka-volterra", "--method", "nl2sol", "--log-every", "1e-9"]);
+    assert_eq!(fit.status.code(), Some(0), "{}", text(&fit.stderr));
+    let lines = text(&fit.stderr);
+    assert!(!lines.contains('\r'), "{lines}");
+    let iterates: Vec<&str> = lines.lines().filter(|l| l.contains(": iteration ")).collect();
+    assert!(
+        iterates.len() > 1 && iterates.iter().all(|l| l.starts_with("lotka-volterra nl2sol: ")),
+        "{lines}"
+    );
+    // Its last line is the point the table reports.
+    let iterations = text(&fit.stdout)
+        .lines()
+        .find_map(|l| l.strip_prefix("  iterations").map(|n| n.trim().to_string()))
+        .expect("the table's iterations");
+    let last = iterates.last().unwrap();
+    assert!(last.contains(&format!("iteration {iterations}, objective ")), "{last}");
+    // With --starts, a line per start done; 0 turns the lines off.
+    let starts =
+        sysid(&["fit", "--system", "lotka-volterra", "--starts", "3", "--log-every", "1e-9"]);
+    let lines = text(&starts.stderr);
+    assert!(lines.contains("lotka-volterra nl2sol: 3/3 starts done, "), "{lines}");
+    let quiet = sysid(&["fit", "--system", "lotka-volterra", "--starts", "3", "--log-every", "0"]);
+    assert!(!text(&quiet.stderr).contains("starts done"), "{}", text(&quiet.stderr));
+}
+
+#[test]
 fn json_follows_the_contract() {
     let out =
         sysid(&["fit", "--system", "falling-body", "--method", "goodman", "--format", "json"]);
@@ -180,10 +209,10 @@ fn a_negative_number_reaches_the_options_own_check() {
         "--fixed-step",
         "--max-steps",
         "--shooting-intervals",
+        "--log-every",
     ];
     let multistart = ["--starts", "--starts-seed", "--start-spread", "--starts-budget"];
-    let study_options =
-        [&fitting[..], &["--trials", "--noise", "--perturb", "--shard", "--log-every"]].concat();
+    let study_options = [&fitting[..], &["--trials", "--noise", "--perturb", "--shard"]].concat();
     // Each subcommand: the arguments that make the rest valid, and the options to try.
     let cases: Vec<(&str, Vec<&str>, Vec<&str>)> = vec![
         ("fit", vec!["--system", "falling-body"], [&fitting[..], &multistart].concat()),

@@ -57,7 +57,8 @@ pub fn drive<S: System>(
 ) -> Result<Estimate, FitError> {
     options.validate()?;
     if problem.scales().is_empty() {
-        return drive_once(problem, method, options, step, start, (false, true)).map(|(e, ..)| e);
+        return drive_once(problem, method, options, step, start, (false, true, 0))
+            .map(|(e, ..)| e);
     }
     let gtol = options.gtol_for(problem.integrator().rtol);
     let mut sigma = problem.scale_values();
@@ -87,7 +88,7 @@ pub fn drive<S: System>(
             &round_options,
             step,
             &z,
-            (profiles, rounds.is_empty()),
+            (profiles, rounds.is_empty(), used),
         )?;
         if let Some(moved) = profiled {
             // Hierarchical optimisation: one run, at the closed form of the point it returns.
@@ -140,7 +141,8 @@ const MAX_ROUNDS: usize = 50;
 
 /// One run of `step` at the problem's noise scales, or, where the method
 /// [profiles](Step::profiles), with the scales set to their closed form at every iterate;
-/// integrated [coarsely first](Step::coarse_first) where the method asks and `coarse`.
+/// integrated [coarsely first](Step::coarse_first) where the method asks and `coarse`;
+/// its iterations are told to the [observer](crate::observer) from `counted` on.
 /// Returns the estimate, the scales of the point it returns, and when it profiled, the
 /// scales' part of the certificate there: the largest relative change, |ln(σ̂/σ)|, that
 /// their closed form from the point's own linearization would make.
@@ -150,7 +152,7 @@ fn drive_once<S: System>(
     options: &DriverOptions,
     step: &mut impl Step<S>,
     start: &[f64],
-    (profiles, coarse): (bool, bool),
+    (profiles, coarse, counted): (bool, bool, usize),
 ) -> Result<(Estimate, Vec<f64>, Option<f64>), FitError> {
     let started = Instant::now();
     let z0 = start_coordinates(problem, start)?;
@@ -287,6 +289,21 @@ fn drive_once<S: System>(
             values: problem.unknowns().values(&current.z),
             diagnostics: current.diagnostics.clone(),
         });
+        if crate::observer::listening() {
+            let p = ev.problem();
+            let objective = current
+                .linearization
+                .as_ref()
+                .and_then(|l| Some(p.nll(l)? + p.prior_nll(l).unwrap_or(0.0)));
+            crate::observer::report(&crate::observer::IterateReport {
+                method,
+                iteration: counted + iteration,
+                objective,
+                cost: current.cost,
+                optimality: measure,
+                coarse,
+            });
+        }
         // ε at the iterate (under hierarchical optimisation the iterate's cost is the
         // profile's, which compares between iterates; ε is what an exact fit and the crawl's
         // scale are judged by).

@@ -29,6 +29,7 @@
 //!   (samples, residual rows, noise layouts), and the traits behind [`Noise::Function`] and
 //!   [`Setting::Function`] (σ or a setting as a function of the unknowns).
 //! * [`confidence`]: Student's t and the intervals it gives.
+//! * [`observer`]: an observer of a running fit's iterates.
 //! * [`format`](mod@format): numbers and tables for people.
 //!
 //! ```
@@ -78,6 +79,7 @@ mod geodesic;
 mod kinks;
 mod linalg;
 mod noise;
+pub mod observer;
 mod options;
 pub mod plan;
 mod problem;

@@ -57,7 +57,10 @@ mod trial;
 
 pub use basin::{Basin, BasinMap, basin};
 pub use error::StudyError;
-pub use multistart::{Multistart, MultistartOptions, Outcome, REACHED, Sampling, multistart};
+pub use multistart::{
+    Multistart, MultistartOptions, Outcome, REACHED, Sampling, StartDone, multistart,
+    multistart_observed,
+};
 pub use scenario::Scenario;
 pub use stats::{
     Accuracy, Count, MethodSummary, Percentiles, Summary, Z95, quantile, summarise, wilson,

@@ -360,7 +360,38 @@ where
     S: System + Sync,
     M: Method<S> + Sync + ?Sized,
 {
+    multistart_observed(method, problem, options, &|_| {})
+}
+
+/// A start's fit that has just ended, as [`multistart_observed`] tells it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StartDone {
+    /// The start's index (0 is the guess where [`MultistartOptions::guess`]).
+    pub start: usize,
+    /// How many starts have ended, this one included.
+    pub done: usize,
+    /// How many starts there are (those the budget leaves out included).
+    pub total: usize,
+    /// Its final objective ([`objective`]), as the waterfall gives it.
+    pub objective: Option<f64>,
+    /// Whether its certificate holds.
+    pub converged: bool,
+}
+
+/// [`multistart`], telling `observer` of each start as its fit ends (from the thread that
+/// fitted it, in the order they end).
+pub fn multistart_observed<S, M>(
+    method: &M,
+    problem: &Problem<S>,
+    options: &MultistartOptions,
+    observer: &(dyn Fn(StartDone) + Sync),
+) -> Result<Multistart, FitError>
+where
+    S: System + Sync,
+    M: Method<S> + Sync + ?Sized,
+{
     options.validate()?;
+    let done = AtomicUsize::new(0);
     let started = std::time::Instant::now();
     let starts = starts(problem, options);
     // A queue in start order, served by one task per thread: once the budget is spent no
@@ -403,7 +434,15 @@ where
                 if j >= starts.len() {
                     break;
                 }
-                mine.push((j, fit_start(j)?));
+                let run = fit_start(j)?;
+                observer(StartDone {
+                    start: j,
+                    done: done.fetch_add(1, Ordering::SeqCst) + 1,
+                    total: starts.len(),
+                    objective: Some(objective(&run.fit)).filter(|v| !v.is_nan()),
+                    converged: run.fit.converged(),
+                });
+                mine.push((j, run));
             }
             Ok(mine)
         })
