@@ -13,7 +13,7 @@
 
 use std::borrow::Cow;
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use nalgebra::DMatrix;
 use numpy::ndarray::Array2;
@@ -22,8 +22,9 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use sysid_core::observer::{IterateReport, observe};
 use sysid_core::{Linearization, Problem, Sensitivities, Unknown};
-use sysid_montecarlo::{MultistartOptions, Sampling};
+use sysid_montecarlo::{MultistartOptions, Sampling, StartDone};
 use sysid_registry::any::{self, AnySystem};
 use sysid_registry::{Boxed, Registry, Role, Settings};
 
@@ -564,7 +565,12 @@ impl PyProblem {
     }
 
     /// Fits the problem: a `sysid.FitResult` over the fit's JSON object (docs/json.md).
-    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None, coarse_first=true))]
+    ///
+    /// `progress`, a callable, is called while the fit runs with a dict: for a single fit
+    /// at each iterate (`iteration`, `objective`, `cost`, `optimality`, `coarse`), with
+    /// `starts` as each start ends (`start`, `done`, `total`, `objective`, `converged`).
+    /// An exception it raises ends its calls, and the fit raises it when it returns.
+    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None, coarse_first=true, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
         &self,
@@ -581,7 +587,13 @@ impl PyProblem {
         fix: Option<std::collections::BTreeMap<String, f64>>,
         start: Option<std::collections::BTreeMap<String, f64>>,
         coarse_first: bool,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        if let Some(p) = &progress
+            && !p.bind(py).is_callable()
+        {
+            return Err(PyValueError::new_err("progress must be a callable (or None)"));
+        }
         let settings = settings(max_iterations, gtol, max_integrations, max_seconds, coarse_first)?;
         let method = build(method, &settings)?;
         let fix: Vec<(String, f64)> = fix.unwrap_or_default().into_iter().collect();
@@ -625,11 +637,47 @@ impl PyProblem {
                 Some(options)
             }
         };
+        let raised = Arc::new(Mutex::new(None));
+        let callback = progress.as_ref().map(|p| p.clone_ref(py));
         let outcome = py.allow_threads(|| match &options {
-            None => method.fit(&problem).map(|e| (e, None)),
-            Some(options) => sysid_montecarlo::multistart(&*method, &problem, options)
-                .map(|run| (run.best, Some(run.starts))),
+            None => match callback {
+                Some(callback) => {
+                    let raised = Arc::clone(&raised);
+                    observe(
+                        move |it: &IterateReport<'_>| {
+                            tell(&callback, &raised, |d| {
+                                d.set_item("iteration", it.iteration)?;
+                                d.set_item("objective", it.objective)?;
+                                d.set_item("cost", it.cost)?;
+                                d.set_item("optimality", it.optimality)?;
+                                d.set_item("coarse", it.coarse)
+                            })
+                        },
+                        || method.fit(&problem),
+                    )
+                }
+                None => method.fit(&problem),
+            }
+            .map(|e| (e, None)),
+            Some(options) => {
+                let told = |s: StartDone| {
+                    if let Some(callback) = &progress {
+                        tell(callback, &raised, |d| {
+                            d.set_item("start", s.start)?;
+                            d.set_item("done", s.done)?;
+                            d.set_item("total", s.total)?;
+                            d.set_item("objective", s.objective)?;
+                            d.set_item("converged", s.converged)
+                        });
+                    }
+                };
+                sysid_montecarlo::multistart_observed(&*method, &problem, options, &told)
+                    .map(|run| (run.best, Some(run.starts)))
+            }
         });
+        if let Some(error) = raised.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            return Err(error);
+        }
         let (estimate, starts) = outcome.map_err(sysid_error)?;
         if estimate.start_failed() {
             return Err(sysid_error(format!("the start cannot be used: {}", estimate.termination)));
@@ -738,6 +786,25 @@ impl PyProblem {
 }
 
 /// The method names `fit` accepts, in the registry's order, the default first.
+/// Calls `callback` with a dict that `fill` fills, unless an earlier call raised; the
+/// first exception is kept in `raised` for the fit to raise when it returns.
+fn tell(
+    callback: &Py<PyAny>,
+    raised: &Mutex<Option<PyErr>>,
+    fill: impl FnOnce(&Bound<'_, PyDict>) -> PyResult<()>,
+) {
+    let mut raised = raised.lock().unwrap_or_else(|e| e.into_inner());
+    if raised.is_some() {
+        return;
+    }
+    Python::with_gil(|py| {
+        let d = PyDict::new(py);
+        if let Err(e) = fill(&d).and_then(|()| callback.call1(py, (d,)).map(drop)) {
+            *raised = Some(e);
+        }
+    });
+}
+
 #[pyfunction]
 fn methods() -> Vec<&'static str> {
     let mut names = Registry::<AnySystem>::standard().names();

@@ -205,6 +205,38 @@ class Boehm(unittest.TestCase):
         self.assertEqual(again.objective, w["objective"][row])
         np.testing.assert_array_equal(again.x, w["x"][row])
 
+    def test_progress_hears_every_iterate_and_every_start(self):
+        heard = []
+        fit = self.p.fit(progress=heard.append)
+        self.assertTrue(fit.converged, fit.termination)
+        iterations = [h["iteration"] for h in heard]
+        self.assertEqual(iterations, sorted(iterations))
+        self.assertEqual(sorted(set(iterations)), list(range(fit.record["iterations"] + 1)))
+        # The last iterate heard of is the point returned.
+        self.assertEqual(heard[-1]["objective"], fit.objective)
+        self.assertFalse(heard[-1]["coarse"])
+        self.assertTrue(heard[0]["coarse"], "the trust region integrates coarsely first")
+        # With starts, one call as each start ends.
+        ends = []
+        fit = self.p.fit(starts=3, seed=3, max_iterations=50, progress=ends.append)
+        self.assertEqual(sorted(e["done"] for e in ends), [1, 2, 3])
+        self.assertEqual(sorted(e["start"] for e in ends), [0, 1, 2])
+        self.assertEqual(min(e["objective"] for e in ends), fit.objective)
+        self.assertEqual(sum(e["converged"] for e in ends), fit.starts["converged"])
+
+        # An exception in it ends its calls and is raised by the fit.
+        calls = []
+
+        def fails(d):
+            calls.append(d)
+            raise KeyError("stop")
+
+        with self.assertRaises(KeyError):
+            self.p.fit(progress=fails)
+        self.assertEqual(len(calls), 1)
+        with self.assertRaises(ValueError):
+            self.p.fit(progress=3)
+
     def test_scipy_minimises_it(self):
         from scipy.optimize import minimize
 

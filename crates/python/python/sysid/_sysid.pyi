@@ -1,6 +1,6 @@
 """Type stubs of the compiled module (crates/python/src/lib.rs)."""
 
-from typing import Dict, List, Literal, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, List, Literal, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -80,6 +80,7 @@ class Problem:
         fix: Optional[Dict[str, float]] = None,
         start: Optional[Dict[str, float]] = None,
         coarse_first: bool = True,
+        progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
     ) -> FitResult: ...
     def profile(
         self,
