@@ -6,7 +6,7 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::{ProgressBar, ProgressFinish, ProgressStyle};
 use sysid_model::simulate::decimal;
 
 /// Writes `text` to standard output. A reader that has gone away (`sysid ... | head`) is not
@@ -90,8 +90,9 @@ pub fn progress_bar(total: u64, unit: &str) -> ProgressBar {
 }
 
 /// What a long run says on stderr while it goes: on a terminal, one line redrawn in place
-/// ([`say`](Self::say)); otherwise (a batch job's log) a plain line every `every` seconds
-/// (never when 0), so that a fit of hours shows where it is either way.
+/// ([`say`](Self::say)); otherwise (a batch job's log) a plain line at the first news once
+/// `every` seconds have passed since the last (never when 0), so that a fit of hours shows
+/// where it is either way.
 pub struct Watch {
     label: String,
     line: ProgressBar,
@@ -106,12 +107,13 @@ impl Watch {
         use std::io::IsTerminal;
         let on = every > 0.0 && !std::io::stderr().is_terminal();
         let now = Instant::now();
-        let line = ProgressBar::new_spinner();
+        let line = ProgressBar::new_spinner().with_finish(ProgressFinish::AndClear);
         line.set_style(ProgressStyle::with_template("{wide_msg}").expect("a valid template"));
         Self {
             label: label.into(),
             line,
-            every: on.then(|| Duration::from_secs_f64(every)),
+            // Longer than a Duration holds: never.
+            every: on.then(|| Duration::try_from_secs_f64(every).ok()).flatten(),
             started: now,
             last: Mutex::new(now),
         }

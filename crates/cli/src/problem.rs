@@ -188,7 +188,8 @@ pub fn watching<R>(watch: &Rc<Watch>, f: impl FnOnce() -> R) -> R {
     out
 }
 
-/// "iteration 37, objective 26258.58, optimality 0.02": an iterate for a progress line.
+/// "iteration 17, objective -58.58392105, optimality 3.3e-7": an iterate for a progress
+/// line (ten significant digits for the objective, two for the measure).
 fn iterate_line(p: &IterateReport<'_>) -> String {
     let mut line = match p.objective {
         Some(v) => format!("iteration {}, objective {}", p.iteration, significant(v, 10)),
@@ -214,19 +215,19 @@ pub fn best_of_starts<M>(
 where
     M: Method<AnySystem> + Sync + ?Sized,
 {
-    // The least objective and the certified count so far.
-    let so_far = Mutex::new((f64::INFINITY, 0usize));
+    // The starts done, the certified ones and the least objective so far, told under the
+    // lock so that the lines come in order.
+    let so_far = Mutex::new((0usize, 0usize, f64::INFINITY));
     let told = |s: StartDone| {
-        let (best, converged) = {
-            let mut so_far = so_far.lock().unwrap_or_else(|e| e.into_inner());
-            so_far.0 = s.objective.map_or(so_far.0, |v| v.min(so_far.0));
-            so_far.1 += usize::from(s.converged);
-            *so_far
-        };
-        let best = if best.is_finite() { significant(best, 10) } else { "none".into() };
+        let mut so_far = so_far.lock().unwrap_or_else(|e| e.into_inner());
+        let (done, converged, best) = &mut *so_far;
+        *done += 1;
+        *converged += usize::from(s.converged);
+        *best = s.objective.map_or(*best, |v| v.min(*best));
+        let least = if best.is_finite() { significant(*best, 10) } else { "none".into() };
         watch.say(&format!(
-            "{}/{} starts done, {converged} certified, least objective {best}",
-            s.done, s.total
+            "{done}/{} starts done, {converged} certified, least objective {least}",
+            s.total
         ));
     };
     let run = sysid_montecarlo::multistart_observed(m, problem, options, &told);

@@ -289,6 +289,10 @@ fn drive_once<S: System>(
             values: problem.unknowns().values(&current.z),
             diagnostics: current.diagnostics.clone(),
         });
+        // ε at the iterate (under hierarchical optimisation the iterate's cost is the
+        // profile's, which compares between iterates; ε is what an exact fit and the crawl's
+        // scale are judged by).
+        let epsilon = current.linearization.as_ref().map_or(current.cost, |l| l.cost);
         if crate::observer::listening() {
             let p = ev.problem();
             let objective = current
@@ -299,15 +303,11 @@ fn drive_once<S: System>(
                 method,
                 iteration: counted + iteration,
                 objective,
-                cost: current.cost,
+                cost: epsilon,
                 optimality: measure,
                 coarse,
             });
         }
-        // ε at the iterate (under hierarchical optimisation the iterate's cost is the
-        // profile's, which compares between iterates; ε is what an exact fit and the crawl's
-        // scale are judged by).
-        let epsilon = current.linearization.as_ref().map_or(current.cost, |l| l.cost);
         if epsilon == 0.0 {
             break Ending::Rule(Rule::ExactFit);
         }

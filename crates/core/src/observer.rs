@@ -27,14 +27,16 @@ pub struct IterateReport<'a> {
     pub method: &'a str,
     /// Updates before this iterate, counted over the noise scales' rounds (a round goes on
     /// from the iterations of the ones before it). The same iteration can be heard of twice:
-    /// where the driver integrates the iterate again at finer tolerances, or at the end of
-    /// the coarse stage.
+    /// where the driver integrates the iterate again at finer tolerances, at the end of
+    /// the coarse stage, and at the start of each round after the first.
     pub iteration: usize,
     /// The objective the fit minimises at the iterate: the negative log-likelihood plus the
     /// priors' term where the problem has a likelihood and the method computed the
     /// sensitivities there, else None.
     pub objective: Option<f64>,
-    /// ε, the weighted sum of squares (the method's cost).
+    /// ε, the weighted sum of squares at the iterate's noise scales (what
+    /// [`Iteration::cost`](crate::Iteration::cost) records is the profile's under
+    /// hierarchical optimisation; this is ε itself).
     pub cost: f64,
     /// The certificate's first-order measure at the iterate, where the method computed the
     /// sensitivities there (converged when it is within `gtol`).

@@ -785,26 +785,28 @@ impl PyProblem {
     }
 }
 
-/// The method names `fit` accepts, in the registry's order, the default first.
 /// Calls `callback` with a dict that `fill` fills, unless an earlier call raised; the
-/// first exception is kept in `raised` for the fit to raise when it returns.
+/// first exception is kept in `raised` for the fit to raise when it returns. The lock is
+/// not held while the callback runs (a callback may itself fit, on these threads).
 fn tell(
     callback: &Py<PyAny>,
     raised: &Mutex<Option<PyErr>>,
     fill: impl FnOnce(&Bound<'_, PyDict>) -> PyResult<()>,
 ) {
-    let mut raised = raised.lock().unwrap_or_else(|e| e.into_inner());
-    if raised.is_some() {
+    let lock = || raised.lock().unwrap_or_else(|e| e.into_inner());
+    if lock().is_some() {
         return;
     }
-    Python::with_gil(|py| {
+    let outcome = Python::with_gil(|py| {
         let d = PyDict::new(py);
-        if let Err(e) = fill(&d).and_then(|()| callback.call1(py, (d,)).map(drop)) {
-            *raised = Some(e);
-        }
+        fill(&d).and_then(|()| callback.call1(py, (d,)).map(drop))
     });
+    if let Err(e) = outcome {
+        lock().get_or_insert(e);
+    }
 }
 
+/// The method names `fit` accepts, in the registry's order, the default first.
 #[pyfunction]
 fn methods() -> Vec<&'static str> {
     let mut names = Registry::<AnySystem>::standard().names();

@@ -221,8 +221,11 @@ class Boehm(unittest.TestCase):
         fit = self.p.fit(starts=3, seed=3, max_iterations=50, progress=ends.append)
         self.assertEqual(sorted(e["done"] for e in ends), [1, 2, 3])
         self.assertEqual(sorted(e["start"] for e in ends), [0, 1, 2])
-        self.assertEqual(min(e["objective"] for e in ends), fit.objective)
-        self.assertEqual(sum(e["converged"] for e in ends), fit.starts["converged"])
+        by_start = {e["start"]: e for e in ends}
+        w = fit.waterfall
+        for start, objective, converged in zip(w["start"], w["objective"], w["converged"]):
+            self.assertEqual(by_start[int(start)]["objective"], objective)
+            self.assertEqual(by_start[int(start)]["converged"], bool(converged))
 
         # An exception in it ends its calls and is raised by the fit.
         calls = []
