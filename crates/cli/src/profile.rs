@@ -2,10 +2,11 @@
 
 use anyhow::bail;
 use clap::Args;
-use sysid_profile::{ProfileOptions, Profiled, nll, profile_from_optimum, threshold_95};
+use sysid_profile::{ProfileOptions, Profiled, Progress, nll, profile_from_optimum, threshold_95};
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
+use crate::output::Watch;
 use crate::output::{emit, not_an_input, writable};
 use crate::problem::{Context, fit_from_starts, method, problem};
 
@@ -99,12 +100,20 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));
     let options =
         ProfileOptions { max_steps: args.max_points, threshold, ..ProfileOptions::default() };
-    let profiled = profile_from_optimum(&*m, &problem, optimum, &only, &options, |point, was| {
-        eprintln!(
+    let traces = context.watch(&format!("{} profiles", args.method.method), args.options.log_every);
+    let line: &Watch = &traces;
+    let told = |progress: Progress<'_>| match progress {
+        Progress::Traced { unknown, done, total } => {
+            line.say(&format!("{done}/{total} traced (the last: {})", names[unknown]))
+        }
+        Progress::Better { point, was } => eprintln!(
             "better optimum found along a profile (NLL {} against {was}): fitting again from there",
             point.nll
-        );
-    })?;
+        ),
+    };
+    let profiled = profile_from_optimum(&*m, &problem, optimum, &only, &options, &told);
+    traces.finish();
+    let profiled = profiled?;
     match args.format {
         Format::Json => {
             let record = profiled.record(&context.name, options.threshold);

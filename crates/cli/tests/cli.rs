@@ -49,6 +49,15 @@ fn a_fit_in_a_batch_log_says_where_it_is_while_it_runs() {
         sysid(&["fit", "--system", "lotka-volterra", "--starts", "3", "--log-every", "1e-9"]);
     let lines = text(&starts.stderr);
     assert!(lines.contains("lotka-volterra nl2sol: 3/3 starts done, "), "{lines}");
+    // A profile's traces after its optimum: a line per profile traced.
+    let profile = sysid(&["profile", "--system", "falling-body", "--log-every", "1e-9"]);
+    let lines = text(&profile.stderr);
+    for done in 1..=3 {
+        assert!(
+            lines.contains(&format!("falling-body nl2sol profiles: {done}/3 traced (the last: ")),
+            "{lines}"
+        );
+    }
     let quiet = sysid(&["fit", "--system", "lotka-volterra", "--starts", "3", "--log-every", "0"]);
     assert!(!text(&quiet.stderr).contains("starts done"), "{}", text(&quiet.stderr));
 }

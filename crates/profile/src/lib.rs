@@ -78,16 +78,39 @@ pub struct Profiled {
     pub profiles: Vec<Profile>,
 }
 
+/// What [`profile_from_optimum`] tells while it runs.
+#[derive(Clone, Copy, Debug)]
+pub enum Progress<'a> {
+    /// A profile is traced (from the thread that traced it): the unknown's index, and how
+    /// many of this round's profiles are done, of how many.
+    Traced {
+        /// The unknown's index.
+        unknown: usize,
+        /// The profiles of this round done, this one included.
+        done: usize,
+        /// The profiles of the round.
+        total: usize,
+    },
+    /// A profile found a point below the optimum, with the NLL it improves on; a fit from
+    /// there follows, and the profiles are traced again from its end.
+    Better {
+        /// The point.
+        point: &'a Point,
+        /// The optimum's NLL.
+        was: f64,
+    },
+}
+
 /// [`profile`], fitting again with `method` from any point a profile finds below the
 /// optimum (at most [`MAX_RESTARTS`] times), until the profiles start from the lowest point
-/// they see. `on_better` hears of each such point with the NLL it improves on.
+/// they see. `on_progress` hears of each profile traced and each better point.
 pub fn profile_from_optimum<S, M>(
     method: &M,
     problem: &Problem<S>,
     optimum: Estimate,
     only: &[usize],
     options: &ProfileOptions,
-    mut on_better: impl FnMut(&Point, f64),
+    on_progress: &(dyn Fn(Progress<'_>) + Sync),
 ) -> Result<Profiled, ProfileError>
 where
     S: System + Sync,
@@ -97,12 +120,13 @@ where
     let mut optimum = optimum;
     let mut better = Vec::new();
     loop {
-        match profile(method, problem, &optimum, only, options)? {
+        let traced = |unknown, done, total| on_progress(Progress::Traced { unknown, done, total });
+        match profile_observed(method, problem, &optimum, only, options, &traced)? {
             Outcome::Profiles(profiles) => {
                 return Ok(Profiled { certified, optimum, better, profiles });
             }
             Outcome::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
-                on_better(&point, nll(&optimum));
+                on_progress(Progress::Better { point: &point, was: nll(&optimum) });
                 optimum = sysid_core::caught(|| method.fit_from(problem, &point.estimates))
                     .map_err(ProfileError::Panicked)??;
                 better.push(point);
@@ -300,11 +324,34 @@ where
     S: System + Sync,
     M: Method<S> + Sync + ?Sized,
 {
+    profile_observed(method, problem, optimum, only, options, &|_, _, _| {})
+}
+
+/// [`profile`], telling `traced` of each profile as it ends: the unknown's index, the
+/// profiles done (this one included) and their number.
+pub fn profile_observed<S, M>(
+    method: &M,
+    problem: &Problem<S>,
+    optimum: &Estimate,
+    only: &[usize],
+    options: &ProfileOptions,
+    traced: &(dyn Fn(usize, usize, usize) + Sync),
+) -> Result<Outcome, ProfileError>
+where
+    S: System + Sync,
+    M: Method<S> + Sync + ?Sized,
+{
     let k = problem.unknowns().len();
     let which: Vec<usize> = if only.is_empty() { (0..k).collect() } else { only.to_vec() };
+    let done = std::sync::atomic::AtomicUsize::new(0);
     let results: Vec<Result<Result<Profile, Point>, ProfileError>> = which
         .par_iter()
-        .map(|&i| Tracer { method, problem, optimum, i, options }.profile())
+        .map(|&i| {
+            let profile = Tracer { method, problem, optimum, i, options }.profile();
+            let count = done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
+            traced(i, count, which.len());
+            profile
+        })
         .collect();
     let mut profiles = Vec::with_capacity(results.len());
     for result in results {

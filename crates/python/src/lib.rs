@@ -742,7 +742,7 @@ impl PyProblem {
                     optimum,
                     &which,
                     &options,
-                    |_, _| {},
+                    &|_| {},
                 )
             })
             .map_err(sysid_error)?;
