@@ -122,8 +122,7 @@ impl Watch {
     /// `text` on the terminal's line, and in the log where `every` seconds have passed since
     /// its last line; both with the seconds since the watch began.
     pub fn say(&self, text: &str) {
-        let secs = self.started.elapsed().as_secs_f64();
-        self.line.set_message(format!("{}: {text}, {secs:.0} s", self.label));
+        self.line.set_message(self.stamped(text));
         self.log(text);
     }
 
@@ -133,9 +132,13 @@ impl Watch {
         let mut last = self.last.lock().unwrap_or_else(|e| e.into_inner());
         if last.elapsed() >= every {
             *last = Instant::now();
-            let secs = self.started.elapsed().as_secs_f64();
-            eprintln!("{}: {text}, {secs:.0} s", self.label);
+            eprintln!("{}", self.stamped(text));
         }
+    }
+
+    /// "label: text, 12 s": with the seconds since the watch began.
+    fn stamped(&self, text: &str) -> String {
+        format!("{}: {text}, {:.0} s", self.label, self.started.elapsed().as_secs_f64())
     }
 
     /// Clears the terminal's line.

@@ -439,7 +439,7 @@ where
                     start: j,
                     done: done.fetch_add(1, Ordering::SeqCst) + 1,
                     total: starts.len(),
-                    objective: Some(objective(&run.fit)).filter(|v| !v.is_nan()),
+                    objective: reported_objective(&run.fit),
                     converged: run.fit.converged(),
                 });
                 mine.push((j, run));
@@ -482,6 +482,12 @@ where
 /// about the number of data), else ε/2.
 pub fn objective(f: &Estimate) -> f64 {
     f.nll.map_or(f.cost / 2.0, |nll| nll + f.prior.unwrap_or(0.0))
+}
+
+/// [`objective`] as the waterfall and [`StartDone`] report it: None where it is NaN (a fit
+/// that never evaluated a cost).
+fn reported_objective(f: &Estimate) -> Option<f64> {
+    Some(objective(f)).filter(|v| !v.is_nan())
 }
 
 /// [`SAME_MINIMUM_RTOL`] of ε, in the objective's units: ½·rtol·ε (for known σ exactly the
@@ -553,7 +559,7 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
         .enumerate()
         .map(|(start, f)| Outcome {
             start,
-            objective: Some(objective(f)).filter(|v| !v.is_nan()),
+            objective: reported_objective(f),
             cost: Some(f.cost).filter(|c| c.is_finite()),
             converged: f.converged(),
             termination_code: f.termination.code(),

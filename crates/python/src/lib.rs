@@ -638,9 +638,8 @@ impl PyProblem {
             }
         };
         let raised = Arc::new(Mutex::new(None));
-        let callback = progress.as_ref().map(|p| p.clone_ref(py));
         let outcome = py.allow_threads(|| match &options {
-            None => match callback {
+            None => match progress {
                 Some(callback) => {
                     let raised = Arc::clone(&raised);
                     observe(
