@@ -42,20 +42,6 @@ impl Control {
     }
 }
 
-/// The scaled error e/sk of one component, sk = atol + rtol·|x|: 0 for a component that is
-/// 0 and has no error (its scale is 0 only under a purely relative tolerance, atol = 0, and
-/// 0/0 would poison the norm), ∞ for an error where there is no scale.
-#[inline]
-pub(crate) fn scaled(e: f64, sk: f64) -> f64 {
-    if sk > 0.0 {
-        e / sk
-    } else if e == 0.0 {
-        0.0
-    } else {
-        f64::INFINITY
-    }
-}
-
 /// Hairer's starting step size for a given direction (Solving ODE I, Section II.4), from
 /// (t, w.x) with `w.k[0]` = f(t, x); one evaluation of f, into `w.k[1]`.
 pub(crate) fn initial_step<R: Rhs>(

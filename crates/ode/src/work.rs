@@ -166,7 +166,7 @@ impl<R: Rhs> Evaluator<'_, R> {
         let k = columns.len();
         let n = len / (1 + k);
         for (i, &ei) in e[..n].iter().enumerate() {
-            let q = crate::control::scaled(ei, scale(i, atol));
+            let q = scaled(ei, scale(i, atol));
             sum += q * q;
         }
         for (j, c) in columns.iter().enumerate() {
@@ -189,7 +189,21 @@ fn add_vector(
     let floor = floor.max(rtol * largest);
     for i in 0..count {
         let i = at(i);
-        let q = crate::control::scaled(e[i], floor + rtol * x[i].abs().max(xn[i].abs()));
+        let q = scaled(e[i], floor + rtol * x[i].abs().max(xn[i].abs()));
         *sum += q * q;
+    }
+}
+
+/// The scaled error e/sk of one component, sk = atol + rtol·|x|: 0 for a component that is
+/// 0 and has no error (its scale is 0 only under a purely relative tolerance, atol = 0, and
+/// 0/0 would poison the norm), ∞ for an error where there is no scale.
+#[inline]
+fn scaled(e: f64, sk: f64) -> f64 {
+    if sk > 0.0 {
+        e / sk
+    } else if e == 0.0 {
+        0.0
+    } else {
+        f64::INFINITY
     }
 }
