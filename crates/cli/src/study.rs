@@ -2,6 +2,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 
 use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
@@ -12,7 +13,7 @@ use sysid_registry::Role;
 use crate::Outcome;
 use crate::options::{IntegratorArgs, MethodArgs, SourceArgs};
 use crate::output::{Watch, emit, not_an_input, progress_bar};
-use crate::problem::{case, fit, method, no_source, prepare};
+use crate::problem::{case, fit, method, no_source, prepare, watching};
 use sysid_registry::any::{AnySystem, model_problem};
 
 /// The help of `--methods`: the registry's study methods.
@@ -163,8 +164,14 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
                 &args.integrator,
                 &args.options,
             )?;
-            // The truth of a model file: its fit to its own data.
-            let fitted = fit(&problem, &args.reference, &args.options.settings())?;
+            // The truth of a model file: its fit to its own data, which on a real problem
+            // can take as long as the trials.
+            let watch = Rc::new(Watch::new(
+                format!("{} {} (the reference fit)", path.display(), args.reference),
+                args.options.log_every,
+            ));
+            let fitted =
+                watching(&watch, || fit(&problem, &args.reference, &args.options.settings()))?;
             if !fitted.converged() {
                 bail!(
                     "{}: the fit to the data that gives the study its truth did not converge ({})",
@@ -240,9 +247,14 @@ fn run_scenario(
         };
         let (a, b) =
             axes.split_once(',').ok_or_else(|| anyhow!("--basin takes two unknowns, U1,U2"))?;
-        let bar = progress_bar((args.grid as u64).saturating_mul(args.grid as u64), "starts");
+        let total = args.grid.saturating_mul(args.grid);
+        let bar = progress_bar(total as u64, "starts");
+        let log = Watch::new(format!("{system} basin"), args.options.log_every);
         let map = basin(&study, (index(a)?, index(b)?), args.grid, &|done, _| {
-            bar.set_position(done as u64)
+            bar.set_position(done as u64);
+            if done > 0 && done < total {
+                log.log(&format!("{done}/{total} starts done"));
+            }
         })?;
         bar.finish_and_clear();
         map.write(&args.out, args.force)?;

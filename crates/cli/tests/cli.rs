@@ -58,6 +58,48 @@ fn a_fit_in_a_batch_log_says_where_it_is_while_it_runs() {
             "{lines}"
         );
     }
+    // A study of a model file: its reference fit, then its trials; a basin map: its starts.
+    let model =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/falling-body/model.toml");
+    let dir = std::env::temp_dir().join(format!("sysid-study-log-{}", std::process::id()));
+    let out = dir.to_str().unwrap();
+    let study = sysid(&[
+        "study",
+        "--model",
+        model.to_str().unwrap(),
+        "--trials",
+        "3",
+        "--methods",
+        "nl2sol",
+        "--out",
+        out,
+        "--log-every",
+        "1e-9",
+    ]);
+    assert_eq!(study.status.code(), Some(0), "{}", text(&study.stderr));
+    let lines = text(&study.stderr);
+    let label = model.display().to_string();
+    let reference = format!("{label} goodman-halving (the reference fit): iteration 1, objective ");
+    assert!(lines.contains(&reference), "{lines}");
+    assert!(lines.contains(&format!("{label}: 2/3 trials done, ")), "{lines}");
+    let basin = sysid(&[
+        "study",
+        "--system",
+        "falling-body",
+        "--basin",
+        "y,g",
+        "--grid",
+        "2",
+        "--out",
+        out,
+        "--force",
+        "--log-every",
+        "1e-9",
+    ]);
+    assert_eq!(basin.status.code(), Some(0), "{}", text(&basin.stderr));
+    let lines = text(&basin.stderr);
+    assert!(lines.contains("falling-body basin: 3/4 starts done, "), "{lines}");
+    let _ = std::fs::remove_dir_all(&dir);
     let quiet = sysid(&["fit", "--system", "lotka-volterra", "--starts", "3", "--log-every", "0"]);
     assert!(!text(&quiet.stderr).contains("starts done"), "{}", text(&quiet.stderr));
 }
