@@ -694,7 +694,14 @@ impl PyProblem {
     /// others are fitted again, to where ΔNLL crosses the 95 % threshold (χ²₁/2, or χ²ₖ/2
     /// with `simultaneous`). A `sysid.ProfileResult` over the JSON object of `sysid profile
     /// --format json` (docs/json.md).
-    #[pyo3(signature = (method=None, only=None, simultaneous=false, max_points=60, max_iterations=None))]
+    ///
+    /// `progress`, a callable, is called while it runs with a dict: `stage` "optimum" with
+    /// the fit's iterates (as `fit` tells them), then `stage` "traced" as each profile is
+    /// traced (`unknown`, `done`, `total`), and `stage` "better" where a profile found a
+    /// lower point (`objective`, the NLL there, and `was`). Traced profiles are told from
+    /// the threads that traced them.
+    #[pyo3(signature = (method=None, only=None, simultaneous=false, max_points=60, max_iterations=None, progress=None))]
+    #[allow(clippy::too_many_arguments)]
     fn profile<'py>(
         &self,
         py: Python<'py>,
@@ -703,7 +710,13 @@ impl PyProblem {
         simultaneous: bool,
         max_points: usize,
         max_iterations: Option<usize>,
+        progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        if let Some(p) = &progress
+            && !p.bind(py).is_callable()
+        {
+            return Err(PyValueError::new_err("progress must be a callable (or None)"));
+        }
         let settings = settings(max_iterations, None, None, None, true)?;
         if max_points == 0 || settings.driver.max_iterations == 0 {
             return Err(PyValueError::new_err(
@@ -732,19 +745,50 @@ impl PyProblem {
             ..Default::default()
         };
         let problem = &self.problem;
-        let profiled = py
-            .allow_threads(|| {
-                let optimum = method.fit(problem)?;
-                sysid_profile::profile_from_optimum(
-                    &*method,
-                    problem,
-                    optimum,
-                    &which,
-                    &options,
-                    &|_| {},
-                )
-            })
-            .map_err(sysid_error)?;
+        let raised = Arc::new(Mutex::new(None));
+        let hears_optimum = progress.as_ref().map(|p| p.clone_ref(py));
+        let profiled = py.allow_threads(|| {
+            let optimum = match hears_optimum {
+                Some(callback) => {
+                    let raised = Arc::clone(&raised);
+                    observe(
+                        move |it: &IterateReport<'_>| {
+                            tell(&callback, &raised, |d| {
+                                d.set_item("stage", "optimum")?;
+                                d.set_item("iteration", it.iteration)?;
+                                d.set_item("objective", it.objective)?;
+                                d.set_item("cost", it.cost)?;
+                                d.set_item("optimality", it.optimality)?;
+                                d.set_item("coarse", it.coarse)
+                            })
+                        },
+                        || method.fit(problem),
+                    )
+                }
+                None => method.fit(problem),
+            }?;
+            let told = |p: sysid_profile::Progress<'_>| {
+                let Some(callback) = &progress else { return };
+                tell(callback, &raised, |d| match p {
+                    sysid_profile::Progress::Traced { unknown, done, total } => {
+                        d.set_item("stage", "traced")?;
+                        d.set_item("unknown", &names[unknown])?;
+                        d.set_item("done", done)?;
+                        d.set_item("total", total)
+                    }
+                    sysid_profile::Progress::Better { point, was } => {
+                        d.set_item("stage", "better")?;
+                        d.set_item("objective", point.nll)?;
+                        d.set_item("was", was)
+                    }
+                });
+            };
+            sysid_profile::profile_from_optimum(&*method, problem, optimum, &which, &options, &told)
+        });
+        if let Some(error) = raised.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            return Err(error);
+        }
+        let profiled = profiled.map_err(sysid_error)?;
         let json = serde_json::to_string(&profiled.record(&self.name, threshold))
             .expect("a profile record serialises");
         py.import("sysid._result")?.getattr("ProfileResult")?.call1((json,))

@@ -351,8 +351,30 @@ class FallingBody(unittest.TestCase):
             self.assertEqual(profile.label, "identifiable")
             self.assertTrue(np.all(np.diff(profile.values) > 0))
             self.assertEqual(profile.estimates.shape, (len(profile.values), 3))
-        only = p.profile(only=["g"])
+        # The progress: the optimum's iterates, then each profile as it is traced.
+        heard = []
+        only = p.profile(only=["g"], progress=heard.append)
         self.assertEqual(list(only.profiles), ["g"])
+        stages = [h["stage"] for h in heard]
+        self.assertEqual(stages, ["optimum"] * (len(stages) - 1) + ["traced"])
+        # (the iterate where the coarse stage ends is told again at the fine tolerances)
+        iterations = [h["iteration"] for h in heard[:-1]]
+        self.assertEqual(iterations, sorted(iterations))
+        self.assertEqual(set(iterations), set(range(only.optimum.record["iterations"] + 1)))
+        self.assertEqual(heard[-2]["objective"], only.optimum.objective)
+        self.assertEqual(heard[-1], {"stage": "traced", "unknown": "g", "done": 1, "total": 1})
+        traced = []
+        p.profile(progress=lambda d: traced.append(d) if d["stage"] == "traced" else None)
+        self.assertEqual(sorted(d["done"] for d in traced), [1, 2, 3])
+        self.assertEqual(sorted(d["unknown"] for d in traced), sorted(p.parameter_names))
+
+        def fails(d):
+            raise KeyError("stop")
+
+        with self.assertRaises(KeyError):
+            p.profile(progress=fails)
+        with self.assertRaises(ValueError):
+            p.profile(progress=3)
         with self.assertRaisesRegex(ValueError, 'only: "h" is not a profiled unknown'):
             p.profile(only=["h"])
 

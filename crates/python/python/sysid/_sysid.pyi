@@ -89,4 +89,5 @@ class Problem:
         simultaneous: bool = False,
         max_points: int = 60,
         max_iterations: Optional[int] = None,
+        progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
     ) -> ProfileResult: ...
