@@ -644,13 +644,7 @@ impl PyProblem {
                     let raised = Arc::clone(&raised);
                     observe(
                         move |it: &IterateReport<'_>| {
-                            tell(&callback, &raised, |d| {
-                                d.set_item("iteration", it.iteration)?;
-                                d.set_item("objective", it.objective)?;
-                                d.set_item("cost", it.cost)?;
-                                d.set_item("optimality", it.optimality)?;
-                                d.set_item("coarse", it.coarse)
-                            })
+                            tell(&callback, &raised, |d| iterate_items(d, it))
                         },
                         || method.fit(&problem),
                     )
@@ -755,11 +749,7 @@ impl PyProblem {
                         move |it: &IterateReport<'_>| {
                             tell(&callback, &raised, |d| {
                                 d.set_item("stage", "optimum")?;
-                                d.set_item("iteration", it.iteration)?;
-                                d.set_item("objective", it.objective)?;
-                                d.set_item("cost", it.cost)?;
-                                d.set_item("optimality", it.optimality)?;
-                                d.set_item("coarse", it.coarse)
+                                iterate_items(d, it)
                             })
                         },
                         || method.fit(problem),
@@ -847,6 +837,16 @@ fn tell(
     if let Err(e) = outcome {
         lock().get_or_insert(e);
     }
+}
+
+/// An iterate's entries in a progress dict: `iteration`, `objective`, `cost`,
+/// `optimality`, `coarse`.
+fn iterate_items(d: &Bound<'_, PyDict>, it: &IterateReport<'_>) -> PyResult<()> {
+    d.set_item("iteration", it.iteration)?;
+    d.set_item("objective", it.objective)?;
+    d.set_item("cost", it.cost)?;
+    d.set_item("optimality", it.optimality)?;
+    d.set_item("coarse", it.coarse)
 }
 
 /// The method names `fit` accepts, in the registry's order, the default first.
