@@ -252,7 +252,7 @@ fn run_scenario(
         let log = Watch::new(format!("{system} basin"), args.options.log_every);
         let map = basin(&study, (index(a)?, index(b)?), args.grid, &|done, _| {
             bar.set_position(done as u64);
-            if done > 0 && done < total {
+            if done < total {
                 log.log(&format!("{done}/{total} starts done"));
             }
         })?;

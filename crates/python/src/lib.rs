@@ -639,19 +639,7 @@ impl PyProblem {
         };
         let raised = Arc::new(Mutex::new(None));
         let outcome = py.allow_threads(|| match &options {
-            None => match progress {
-                Some(callback) => {
-                    let raised = Arc::clone(&raised);
-                    observe(
-                        move |it: &IterateReport<'_>| {
-                            tell(&callback, &raised, |d| iterate_items(d, it))
-                        },
-                        || method.fit(&problem),
-                    )
-                }
-                None => method.fit(&problem),
-            }
-            .map(|e| (e, None)),
+            None => heard(progress, &raised, None, || method.fit(&problem)).map(|e| (e, None)),
             Some(options) => {
                 let told = |s: StartDone| {
                     if let Some(callback) = &progress {
@@ -742,21 +730,7 @@ impl PyProblem {
         let raised = Arc::new(Mutex::new(None));
         let hears_optimum = progress.as_ref().map(|p| p.clone_ref(py));
         let profiled = py.allow_threads(|| {
-            let optimum = match hears_optimum {
-                Some(callback) => {
-                    let raised = Arc::clone(&raised);
-                    observe(
-                        move |it: &IterateReport<'_>| {
-                            tell(&callback, &raised, |d| {
-                                d.set_item("stage", "optimum")?;
-                                iterate_items(d, it)
-                            })
-                        },
-                        || method.fit(problem),
-                    )
-                }
-                None => method.fit(problem),
-            }?;
+            let optimum = heard(hears_optimum, &raised, Some("optimum"), || method.fit(problem))?;
             let told = |p: sysid_profile::Progress<'_>| {
                 let Some(callback) = &progress else { return };
                 tell(callback, &raised, |d| match p {
@@ -839,14 +813,30 @@ fn tell(
     }
 }
 
-/// An iterate's entries in a progress dict: `iteration`, `objective`, `cost`,
-/// `optimality`, `coarse`.
-fn iterate_items(d: &Bound<'_, PyDict>, it: &IterateReport<'_>) -> PyResult<()> {
-    d.set_item("iteration", it.iteration)?;
-    d.set_item("objective", it.objective)?;
-    d.set_item("cost", it.cost)?;
-    d.set_item("optimality", it.optimality)?;
-    d.set_item("coarse", it.coarse)
+/// `fit`, run on this thread with each iterate it records told to `callback` (where there
+/// is one) as a dict: `stage` where given, `iteration`, `objective`, `cost`, `optimality`,
+/// `coarse`.
+fn heard<R>(
+    callback: Option<Py<PyAny>>,
+    raised: &Arc<Mutex<Option<PyErr>>>,
+    stage: Option<&'static str>,
+    fit: impl FnOnce() -> R,
+) -> R {
+    let Some(callback) = callback else { return fit() };
+    let raised = Arc::clone(raised);
+    let told = move |it: &IterateReport<'_>| {
+        tell(&callback, &raised, |d| {
+            if let Some(stage) = stage {
+                d.set_item("stage", stage)?;
+            }
+            d.set_item("iteration", it.iteration)?;
+            d.set_item("objective", it.objective)?;
+            d.set_item("cost", it.cost)?;
+            d.set_item("optimality", it.optimality)?;
+            d.set_item("coarse", it.coarse)
+        })
+    };
+    observe(told, fit)
 }
 
 /// The method names `fit` accepts, in the registry's order, the default first.
