@@ -194,6 +194,17 @@ impl NoiseFunction for ExpressionNoise {
 /// A name and the value an experiment gives it (`set`, `preequilibrate`, `initial`).
 type Assignment<'a> = (String, &'a SetValue);
 
+/// Whether two lists of assignments set the same names to the same values, in the same order
+/// (a number to the same bits, an expression to the same text).
+fn same_settings(a: &[Assignment<'_>], b: &[Assignment<'_>]) -> bool {
+    let same = |x: &SetValue, y: &SetValue| match (x, y) {
+        (SetValue::Number(x), SetValue::Number(y)) => x.to_bits() == y.to_bits(),
+        (SetValue::Expression(x), SetValue::Expression(y)) => x.text == y.text,
+        _ => false,
+    };
+    a.len() == b.len() && a.iter().zip(b).all(|((m, x), (n, y))| m == n && same(x, y))
+}
+
 /// An experiment to build: its name, data file, t0 and where t0 is written, and what it sets.
 struct Plan<'a> {
     name: String,
@@ -275,6 +286,7 @@ impl Model {
         for u in declared {
             builder = builder.unknown_with(u.clone());
         }
+        let mut preequilibrations: Vec<(&Vec<Assignment<'_>>, Arc<SteadyState>)> = Vec::new();
         for plan in &plans {
             let read = data::read_from(f, plan.file, plan.start)
                 .map_err(|e| self.in_experiment(&plan.name, e))?;
@@ -282,17 +294,28 @@ impl Model {
                 self.settings((&plan.set, &plan.initial), &base, &extras, &plan.name)?;
             let own = initial.clone();
             if let Some(pre) = &plan.preequilibrate {
-                let (pre_parameters, pre_initial) =
-                    self.settings((pre, &[]), &base, &extras, &plan.name)?;
-                let steady = Arc::new(SteadyState::new(
-                    system.clone(),
-                    f.integrator,
-                    (pre_parameters, pre_initial),
-                    declared,
-                    &plan.name,
-                ));
+                // Experiments whose preequilibrations set the same values share one steady
+                // state, solved once per point: Isensee's 109 conditions have one.
+                let steady = match preequilibrations.iter().find(|(p, _)| same_settings(p, pre)) {
+                    Some((_, steady)) => Arc::clone(steady),
+                    None => {
+                        let (pre_parameters, pre_initial) =
+                            self.settings((pre, &[]), &base, &extras, &plan.name)?;
+                        let steady = Arc::new(SteadyState::new(
+                            system.clone(),
+                            f.integrator,
+                            (pre_parameters, pre_initial),
+                            declared,
+                        ));
+                        preequilibrations.push((pre, Arc::clone(&steady)));
+                        steady
+                    }
+                };
                 initial = (0..f.states.len())
-                    .map(|i| Setting::Function(Arc::new(steady.component(i, &f.states[i]))))
+                    .map(|i| {
+                        let state = &f.states[i];
+                        Setting::Function(Arc::new(steady.component(i, state, &plan.name)))
+                    })
                     .collect();
             }
             // The experiment's own initial values replace the preequilibration's steady state
@@ -308,10 +331,12 @@ impl Model {
                     f.integrator,
                     (parameters.clone(), initial),
                     declared,
-                    &plan.name,
                 ));
                 initial = (0..f.states.len())
-                    .map(|i| Setting::Function(Arc::new(steady.component(i, &f.states[i]))))
+                    .map(|i| {
+                        let state = &f.states[i];
+                        Setting::Function(Arc::new(steady.component(i, state, &plan.name)))
+                    })
                     .collect();
             }
             let mut data = read.data;

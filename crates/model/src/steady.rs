@@ -31,8 +31,8 @@ const LAST: f64 = 1e12;
 /// derivatives stay above the tolerance (see [`SteadyState::solve`]).
 const STILL: f64 = 100.0;
 
-/// The steady state of one experiment's preequilibration, shared by its states' settings
-/// and computed once per point of the unknowns.
+/// The steady state of a preequilibration, shared by its states' settings and by every
+/// experiment preequilibrated the same way, and computed once per point of the unknowns.
 pub(crate) struct SteadyState {
     system: ModelSystem,
     /// The integrator of the components [`component`](Self::component) makes.
@@ -42,7 +42,6 @@ pub(crate) struct SteadyState {
     /// The declared unknowns' names.
     names: Vec<String>,
     uses: Vec<usize>,
-    experiment: String,
     /// The last points met (with the integrator that solved there) and their steady states
     /// (None: not found there), the newest first: see [`CACHED`].
     cache: Mutex<VecDeque<Cached>>,
@@ -67,14 +66,12 @@ struct Solved {
 }
 
 impl SteadyState {
-    /// The steady state of `system` under `settings` (parameters, initial values) before
-    /// `experiment`.
+    /// The steady state of `system` under `settings` (parameters, initial values).
     pub(crate) fn new(
         system: ModelSystem,
         integrator: Integrator,
         settings: (Vec<Setting>, Vec<Setting>),
         declared: &[Unknown],
-        experiment: &str,
     ) -> Self {
         let names: Vec<String> = declared.iter().map(|u| u.name.clone()).collect();
         let mut uses = Vec::new();
@@ -100,20 +97,23 @@ impl SteadyState {
             initial: settings.1,
             names,
             uses,
-            experiment: experiment.to_string(),
             cache: Mutex::new(VecDeque::with_capacity(CACHED)),
         }
     }
 
-    /// The setting of state `i`'s initial value.
-    pub(crate) fn component(self: &Arc<Self>, i: usize, state: &str) -> Component {
+    /// The setting of state `i`'s initial value in `experiment`.
+    pub(crate) fn component(
+        self: &Arc<Self>,
+        i: usize,
+        state: &str,
+        experiment: &str,
+    ) -> Component {
         Component {
             steady: self.clone(),
             integrator: self.integrator,
             state: i,
             text: format!(
-                "the steady state of `{state}` before experiment `{}` (preequilibration)",
-                self.experiment
+                "the steady state of `{state}` before experiment `{experiment}` (preequilibration)"
             ),
         }
     }

@@ -272,6 +272,76 @@ atol = 1e-12
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Experiments whose preequilibrations set the same values share one steady state; one that
+/// sets another value has its own. x' = a − b·x settles at a_pre/b and then goes to a/b:
+/// x(t) = a/b + (a_pre − a)/b·e^{−bt}. "one" and "two" preequilibrate at a = 1, "three" at
+/// a = 2 (were it given the others' steady state, its start would be 1/b instead of 2/b); the
+/// cost against the closed form, each experiment's own, at two points (the second met after
+/// the first is cached).
+#[test]
+fn experiments_preequilibrated_alike_share_a_steady_state_and_no_other() {
+    let model = "states = [\"x\"]
+parameters = [\"a\", \"b\"]
+[equations]
+x = \"a - b * x\"
+[initial]
+x = 0.0
+[known]
+a = 1.0
+[unknowns]
+b = 2.0
+[[experiments]]
+name = \"one\"
+file = \"low.csv\"
+set = { a = 4.0 }
+preequilibrate = { a = 1.0 }
+[[experiments]]
+name = \"two\"
+file = \"high.csv\"
+set = { a = 3.0 }
+preequilibrate = { a = 1.0 }
+[[experiments]]
+name = \"three\"
+file = \"low.csv\"
+set = { a = 4.0 }
+preequilibrate = { a = 2.0 }
+[integrator]
+method = \"rodas4\"
+rtol = 1e-10
+atol = 1e-12
+";
+    let (low, high) = ("t,x\n0.5,1.2\n1,1.6\n2,1.9\n", "t,x\n0.5,1.1\n1,1.3\n2,1.45\n");
+    let dir = scratch("preequilibrated-alike", low, high);
+    let path = dir.join("m.toml");
+    std::fs::write(&path, model).unwrap();
+    let problem = Model::load(&path).unwrap().problem(None).unwrap();
+    let data = |csv: &str| -> Vec<(f64, f64)> {
+        csv.lines()
+            .skip(1)
+            .map(|l| {
+                let (t, x) = l.split_once(',').unwrap();
+                (t.parse().unwrap(), x.parse().unwrap())
+            })
+            .collect()
+    };
+    let cost = |b: f64| {
+        let mut eps = 0.0;
+        for (a_pre, a, csv) in [(1.0, 4.0, low), (1.0, 3.0, high), (2.0, 4.0, low)] {
+            for (t, x) in data(csv) {
+                let xm: f64 = a / b + (a_pre - a) / b * (-b * t).exp();
+                eps += (x - xm) * (x - xm);
+            }
+        }
+        eps
+    };
+    for b in [2.0, 1.5, 2.0] {
+        let z = problem.unknowns().coordinates(&[b]);
+        let got = problem.linearize(&z).unwrap().cost;
+        assert!((got - cost(b)).abs() <= 1e-8, "b = {b}: {got} vs {}", cost(b));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// A steady state's derivatives settle after the state does. x' = e·(a − x) from x₀ = 2
 /// settles at x = a, so ∂x/∂a = 1 there; at a = 2 the state is steady from the start while
 /// its sensitivity s' = e·(1 − s), s(0) = 0, takes t ≈ ln(e/rtol)/e to settle. The experiment
