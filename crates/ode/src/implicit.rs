@@ -1,5 +1,5 @@
 //! The linear algebra of implicit steps for a [`System`]: the exact Jacobian ∂g/∂y by dual
-//! numbers (or the system's analytic one), E = I/(γh) − ∂g/∂y factorised by LU (faer), and,
+//! numbers (or the system's analytic one), E = I/(γh) − ∂g/∂y factorised by LU, and,
 //! for the variational equations, the second-derivative coupling that makes the augmented
 //! system's iteration matrix block lower triangular with E on the diagonal.
 

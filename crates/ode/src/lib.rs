@@ -14,7 +14,7 @@
 //! * integrators ([`Integrator`]): adaptive Dormand–Prince 5(4) with error control over all
 //!   components (sensitivities included) and dense output; classical RK4 with a fixed step;
 //!   for stiff systems Rodas4 and Rodas5P, Rosenbrock methods of order 4 and 5 with the
-//!   exact Jacobian and dense LU (faer), or, for a system of [`SPARSE_FROM`] states or more
+//!   exact Jacobian and dense LU, or, for a system of [`SPARSE_FROM`] states or more
 //!   that gives its sparse Jacobian, a sparse LU in a fill-reducing order (its pattern
 //!   analysed once), integrating the sensitivities with the same factorisation; an
 //!   automatic choice that starts with DOPRI5 and switches to Rodas5P when its steps are

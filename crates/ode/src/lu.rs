@@ -1,9 +1,5 @@
-//! Dense LU with partial pivoting (faer), factorised in place into preallocated storage:
-//! the implicit integrator factorises once per step without allocating.
-
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::lu::partial_pivoting::factor;
-use faer::{Mat, Par};
+//! Dense LU with partial pivoting, factorised in place into preallocated storage: the
+//! implicit integrator factorises once per step without allocating.
 
 /// Why an implicit step cannot proceed with a right-hand side.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -16,20 +12,19 @@ pub enum FactorError {
 
 /// An n × n matrix and its LU factors.
 ///
-/// The factorisation is faer's (partial pivoting, in place); the solves are plain forward and
-/// back substitution on a copy of the factors. For the small systems of implicit steps (n of
-/// a few to a few dozen) faer's general solve spends more time in permutation and copying
-/// than in arithmetic. The substitution is column-oriented: once x_j is known it is
+/// The factorisation is a plain right-looking elimination with partial pivoting, and the
+/// solves plain forward and back substitution. For the small systems of implicit steps (n of
+/// a few to a few dozen) faer's general factorisation and solve spent more time in
+/// recursion, permutation and copying than in arithmetic (Isensee, n = 25: a fifth of an
+/// adjoint gradient in faer's factorisation). The substitution is column-oriented: once x_j is known it is
 /// eliminated from every later (earlier, going back) equation at once, so the chain of
 /// dependent operations is one multiply-add per unknown rather than a dot product per
 /// unknown; an n × k block is solved the same way with its rows as the unknowns, the k
 /// columns in the inner loop.
 pub struct Lu {
     n: usize,
-    a: Mat<f64>,
+    /// P A = L U: row i of P A is row fwd[i] of A.
     fwd: Vec<usize>,
-    inv: Vec<usize>,
-    mem: MemBuffer,
     /// L (unit diagonal, strictly below) and U (above the diagonal), column by column, with
     /// the reciprocals of U's diagonal on the diagonal: back substitution multiplies instead
     /// of dividing.
@@ -41,16 +36,7 @@ pub struct Lu {
 impl Lu {
     /// Storage for n × n, and for solves with up to `columns` right-hand sides at once.
     pub fn new(n: usize, columns: usize) -> Self {
-        let scratch = factor::lu_in_place_scratch::<usize, f64>(n, n, Par::Seq, Default::default());
-        Self {
-            n,
-            a: Mat::zeros(n, n),
-            fwd: vec![0; n],
-            inv: vec![0; n],
-            mem: MemBuffer::new(scratch),
-            factors: vec![0.0; n * n],
-            work: vec![0.0; n * columns.max(1)],
-        }
+        Self { n, fwd: vec![0; n], factors: vec![0.0; n * n], work: vec![0.0; n * columns.max(1)] }
     }
 
     /// n, for n × n.
@@ -61,29 +47,55 @@ impl Lu {
     /// Fills the matrix with `entry(i, j)` and factorises it.
     pub fn factor(&mut self, entry: impl Fn(usize, usize) -> f64) -> Result<(), FactorError> {
         let n = self.n;
+        let a = &mut self.factors[..n * n];
         for j in 0..n {
-            for i in 0..n {
-                self.a[(i, j)] = entry(i, j);
+            for (i, v) in a[j * n..(j + 1) * n].iter_mut().enumerate() {
+                *v = entry(i, j);
             }
         }
-        if (0..n).any(|j| (0..n).any(|i| !self.a[(i, j)].is_finite())) {
+        if a.iter().any(|v| !v.is_finite()) {
             return Err(FactorError::Singular);
         }
-        factor::lu_in_place(
-            self.a.as_mut(),
-            &mut self.fwd,
-            &mut self.inv,
-            Par::Seq,
-            MemStack::new(&mut self.mem),
-            Default::default(),
-        );
-        // A zero or non-finite pivot: singular (to working precision).
-        if (0..n).any(|i| !(self.a[(i, i)].abs() > 0.0 && self.a[(i, i)].is_finite())) {
-            return Err(FactorError::Singular);
+        for (i, p) in self.fwd.iter_mut().enumerate() {
+            *p = i;
         }
-        for j in 0..n {
-            self.factors[j * n..(j + 1) * n].copy_from_slice(self.a.col_as_slice(j));
-            self.factors[j * n + j] = 1.0 / self.a[(j, j)];
+        // Right-looking elimination, column by column: the pivot is the column's largest
+        // entry on or below the diagonal; its row is swapped up across the whole matrix, the
+        // column below it becomes L's, and the rest of the matrix takes the rank-one update
+        // one column at a time (contiguous, so the inner loop vectorises).
+        for k in 0..n {
+            let column = &a[k * n..(k + 1) * n];
+            let (mut p, mut largest) = (k, column[k].abs());
+            for (i, v) in column.iter().enumerate().skip(k + 1) {
+                if v.abs() > largest {
+                    (p, largest) = (i, v.abs());
+                }
+            }
+            // A zero or non-finite pivot: singular (to working precision).
+            if !(largest > 0.0 && largest.is_finite()) {
+                return Err(FactorError::Singular);
+            }
+            if p != k {
+                self.fwd.swap(k, p);
+                for j in 0..n {
+                    a.swap(j * n + k, j * n + p);
+                }
+            }
+            let inverse_pivot = 1.0 / a[k * n + k];
+            let (left, right) = a.split_at_mut((k + 1) * n);
+            let multipliers = &mut left[k * n + k + 1..];
+            for l in multipliers.iter_mut() {
+                *l *= inverse_pivot;
+            }
+            for column in right.chunks_exact_mut(n) {
+                let akj = column[k];
+                if akj != 0.0 {
+                    for (v, &l) in column[k + 1..].iter_mut().zip(multipliers.iter()) {
+                        *v -= l * akj;
+                    }
+                }
+            }
+            a[k * n + k] = inverse_pivot;
         }
         Ok(())
     }
