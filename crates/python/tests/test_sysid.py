@@ -397,6 +397,30 @@ class Catalogue(unittest.TestCase):
         # Goodman (1966): y0 = −0.25, v0 = −0.25, g = 32.5, exact in the model's quadratic.
         np.testing.assert_allclose(fit.x, [-0.25, -0.25, 32.5], rtol=1e-10)
 
+    def test_a_profile_that_finds_a_lower_point_says_so(self):
+        # With two iterations a fit stops short of Lotka–Volterra's minimum, so the profile
+        # of `a` finds lower points: each is told as stage "better" (its objective below
+        # the optimum's it replaced) and kept in `better_optimum_found`, in order, and the
+        # optimum returned is the fit from the last of them.
+        p = sysid.Problem.from_catalogue("lotka-volterra", seed=3)
+        heard = []
+        result = p.profile(max_iterations=2, only=["a"], progress=heard.append)
+        better = [h for h in heard if h["stage"] == "better"]
+        found = result.record["better_optimum_found"]
+        self.assertGreater(len(better), 0)
+        self.assertEqual([b["objective"] for b in better], [f["nll"] for f in found])
+        for b in better:
+            self.assertEqual(set(b), {"stage", "objective", "was"})
+            self.assertLess(b["objective"], b["was"])
+        self.assertFalse(result.from_certified_optimum)
+        self.assertLessEqual(result.optimum.record["nll"], better[-1]["objective"])
+        # With one iteration they keep finding lower points, and the profile gives up with
+        # the reason after telling each.
+        heard = []
+        with self.assertRaisesRegex(sysid.SysidError, "found a better optimum 5 times over"):
+            p.profile(max_iterations=1, only=["a"], progress=heard.append)
+        self.assertEqual(sum(h["stage"] == "better" for h in heard), 5)
+
     def test_synthetic_data_are_the_command_lines(self):
         # Lotka–Volterra with data drawn with seed 3: the command line's `--seed 3` draws the
         # same data, so the two fits agree.
