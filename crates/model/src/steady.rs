@@ -2,8 +2,11 @@
 //! under other settings (`preequilibrate` in `[[experiments]]`; PEtab's
 //! `preequilibrationConditionId`).
 //!
-//! The steady state and its forward sensitivities S (for the columns the unknowns move) are
-//! integrated together from the initial values under the preequilibration's parameters, to
+//! Where the Jacobian is nonsingular at the start and the equilibrium reached is isolated
+//! and attracting, the state is integrated alone until it settles, refined by a Newton step,
+//! and its sensitivities are −J⁻¹ ∂f/∂α ([`by_newton`]). Otherwise the steady state and its
+//! forward sensitivities S (for the columns the unknowns move) are integrated together from
+//! the initial values under the preequilibration's parameters, to
 //! t = 1, 10, 100, … until both have settled: every |dyᵢ/dt| ≤ atol + rtol·|yᵢ| and every
 //! |dSᵢⱼ/dt| = |(J·S + ∂f/∂α)ᵢⱼ| ≤ atol + rtol·|Sᵢⱼ| (the problem's integrator's
 //! tolerances), or, over the last decade from t ≥ 10, no component moved by more than 100
@@ -19,8 +22,9 @@
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
+use nalgebra::{DMatrix, DVector, Schur};
 use sysid_core::{Setting, Unknown, plan::SettingFunction};
-use sysid_ode::{Integrator, Ivp, Rhs, Scheme, SensitivityRhs, Side, Wrt};
+use sysid_ode::{Integrator, Ivp, ModelRhs, Rhs, Scheme, SensitivityRhs, Side, Wrt};
 
 use crate::ModelSystem;
 
@@ -190,57 +194,24 @@ impl SteadyState {
             wrt.push(Wrt::InitialValue(i));
             chain.push(&dy0[i * nv..(i + 1) * nv]);
         }
-        // The state and its sensitivities, integrated on by decades until both settle.
-        let mut augmented = SensitivityRhs::new(sys, &p, &wrt);
-        let mut x = augmented.initial_state(&y0);
-        let mut t = 0.0;
-        // How far the last decade moved, in tolerances of the farthest-moving component.
-        let mut last_moved = None;
-        // The integrator of the next decade.
-        let mut scheme = *integrator;
-        while !settled(&mut augmented, t, &x, integrator) {
-            let next = if t == 0.0 { 1.0 } else { 10.0 * t };
-            if next > LAST {
-                return None;
-            }
-            let (y, s) = x.split_at(n);
-            let ivp = Ivp::new(sys, t, y, &p);
-            let trajectory = ivp.solve_sensitivities_from(&scheme, &wrt, s, &[next]).ok()?;
-            // A decade that went stiff under the automatic scheme (it factorised Jacobians)
-            // hands Rodas5P to the next: the stiffness is not looked for again from a
-            // DOPRI5 start (Zheng's four decades: 193 steps in all, 139 so).
-            if integrator.scheme == Scheme::Auto && trajectory.counts().jacobians > 0 {
-                scheme.scheme = Scheme::Rodas5p;
-            }
-            let before = x.clone();
-            x[..n].copy_from_slice(trajectory.state(0));
-            x[n..].copy_from_slice(trajectory.sensitivity_slice(0));
-            // Settled too: a decade from t ≥ 10 over which no component moved by more than
-            // STILL of its tolerances (from 10 to 100, 90: a mean rate within what `settled`
-            // asks of its derivative), and whose moves grew at most tenfold from the decade
-            // before (no departure from an unstable point). Where large fluxes cancel,
-            // rounding keeps the derivatives above the tolerance however long the
-            // integration runs: Weber's at rtol 1e-11 stayed at 2–4 times it, in quanta of
-            // 2⁻³¹, from t = 1e4 to 1e12, and it had no steady state; its decades moved
-            // 1.5–4.5 tolerances at rtol 1e-11 and 10–30 at 1e-12, the integration's own
-            // noise. The bound keeps a slow oscillation from passing on its mean alone.
-            let span = next - t;
-            let moved = x
-                .iter()
-                .zip(&before)
-                .map(|(a, b)| (a - b).abs() / (integrator.atol + integrator.rtol * a.abs()))
-                .fold(0.0, f64::max);
-            let slow = moved <= STILL.min(span);
-            let steady_pace = last_moved.is_some_and(|last: f64| moved <= 10.0 * last);
-            last_moved = Some(moved);
-            let from = t;
-            t = next;
-            if from >= 10.0 && slow && steady_pace {
-                break;
-            }
-        }
-        let mut dy = vec![0.0; n * nv];
         let k = wrt.len();
+        let x = match by_newton(sys, &p, &y0, &wrt, integrator) {
+            Some(x) => x,
+            // The state and its sensitivities, integrated on by decades until both settle.
+            None => {
+                let mut augmented = SensitivityRhs::new(sys, &p, &wrt);
+                let x = augmented.initial_state(&y0);
+                by_decades(&mut augmented, x, integrator, |t, x, next, scheme| {
+                    let (y, s) = x.split_at(n);
+                    let ivp = Ivp::new(sys, t, y, &p);
+                    let trajectory = ivp.solve_sensitivities_from(scheme, &wrt, s, &[next]).ok()?;
+                    let mut x = trajectory.state(0).to_vec();
+                    x.extend_from_slice(trajectory.sensitivity_slice(0));
+                    Some((x, trajectory.counts().jacobians > 0))
+                })?
+            }
+        };
+        let mut dy = vec![0.0; n * nv];
         for i in 0..n {
             for (c, row) in chain.iter().enumerate() {
                 let sic = x[n + i * k + c];
@@ -254,6 +225,142 @@ impl SteadyState {
         let y = x[..n].to_vec();
         y.iter().chain(&dy).all(|x| x.is_finite()).then_some(Solved { y, dy })
     }
+}
+
+/// Integrates `x` (a state, or a state and its sensitivities) on by decades, t = 1, 10, 100,
+/// …, each by `decade(t, x, next, integrator)` (the new x, and whether the decade went stiff),
+/// until `rhs` says it has [settled] or a decade from t ≥ 10 moved it by at most [`STILL`]
+/// tolerances, at a steady pace; None where it has not by [`LAST`] or a decade fails.
+fn by_decades(
+    rhs: &mut impl Rhs,
+    mut x: Vec<f64>,
+    integrator: &Integrator,
+    mut decade: impl FnMut(f64, &[f64], f64, &Integrator) -> Option<(Vec<f64>, bool)>,
+) -> Option<Vec<f64>> {
+    let mut t = 0.0;
+    // How far the last decade moved, in tolerances of the farthest-moving component.
+    let mut last_moved = None;
+    // The integrator of the next decade.
+    let mut scheme = *integrator;
+    while !settled(rhs, t, &x, integrator) {
+        let next = if t == 0.0 { 1.0 } else { 10.0 * t };
+        if next > LAST {
+            return None;
+        }
+        let (after, stiff) = decade(t, &x, next, &scheme)?;
+        // A decade that went stiff under the automatic scheme (it factorised Jacobians)
+        // hands Rodas5P to the next: the stiffness is not looked for again from a DOPRI5
+        // start (Zheng's four decades: 193 steps in all, 139 so).
+        if integrator.scheme == Scheme::Auto && stiff {
+            scheme.scheme = Scheme::Rodas5p;
+        }
+        // Settled too: a decade from t ≥ 10 over which no component moved by more than
+        // STILL of its tolerances (from 10 to 100, 90: a mean rate within what `settled`
+        // asks of its derivative), and whose moves grew at most tenfold from the decade
+        // before (no departure from an unstable point). Where large fluxes cancel, rounding
+        // keeps the derivatives above the tolerance however long the integration runs:
+        // Weber's at rtol 1e-11 stayed at 2–4 times it, in quanta of 2⁻³¹, from t = 1e4 to
+        // 1e12, and it had no steady state; its decades moved 1.5–4.5 tolerances at rtol
+        // 1e-11 and 10–30 at 1e-12, the integration's own noise. The bound keeps a slow
+        // oscillation from passing on its mean alone.
+        let span = next - t;
+        let moved = after
+            .iter()
+            .zip(&x)
+            .map(|(a, b)| (a - b).abs() / (integrator.atol + integrator.rtol * a.abs()))
+            .fold(0.0, f64::max);
+        x = after;
+        let slow = moved <= STILL.min(span);
+        let steady_pace = last_moved.is_some_and(|last: f64| moved <= 10.0 * last);
+        last_moved = Some(moved);
+        let from = t;
+        t = next;
+        if from >= 10.0 && slow && steady_pace {
+            break;
+        }
+    }
+    Some(x)
+}
+
+/// The smallest modulus an eigenvalue of the Jacobian at the steady state may have, relative
+/// to the largest, for [`by_newton`]: below it the Jacobian counts as singular (a conserved
+/// quantity, whose eigenvalue 0 is computed as rounding).
+const SINGULAR: f64 = 1e-9;
+
+/// The steady state [y*; S] (S n × k, row by row) without integrating the sensitivities,
+/// where the Jacobian J there is nonsingular and every eigenvalue has a negative real part:
+/// the equilibrium is then isolated and attracting, so the sensitivities' own equations
+/// S' = J S + ∂f/∂α settle, whatever their start, at S = −J⁻¹ ∂f/∂α (the initial values'
+/// columns 0). The state is integrated alone by decades until it settles, then refined by
+/// one Newton step, y* = y − J⁻¹ f(y), which may move it by at most [`STILL`] tolerances.
+/// None where any of this does not hold: a conserved quantity (A ⇌ B keeps A + B) makes J
+/// singular and keeps the steady state's dependence on the initial values, which only the
+/// integration of S follows.
+fn by_newton(
+    sys: &ModelSystem,
+    p: &[f64],
+    y0: &[f64],
+    wrt: &[Wrt],
+    integrator: &Integrator,
+) -> Option<Vec<f64>> {
+    let n = y0.len();
+    // f(y) and J(y) from the augmented right-hand side at [y; I] for every initial value.
+    let all: Vec<Wrt> = (0..n).map(Wrt::InitialValue).collect();
+    let jacobian = |y: &[f64]| {
+        let mut rhs = SensitivityRhs::new(sys, p, &all);
+        let x = rhs.initial_state(y);
+        let mut dx = vec![0.0; x.len()];
+        rhs.eval(LAST, Side::After, &x, &mut dx);
+        let f = DVector::from_column_slice(&dx[..n]);
+        let j = DMatrix::from_row_slice(n, n, &dx[n..]);
+        (j.iter().chain(f.iter()).all(|v| v.is_finite())).then_some((j, f))
+    };
+    // A conserved quantity makes J singular everywhere: such a problem goes to the
+    // integration of S at once, without settling the state alone first.
+    let eigenvalues = |j: &DMatrix<f64>| {
+        let schur = Schur::try_new(j.clone(), f64::EPSILON, 100 * n.max(10))?;
+        let eigenvalues = schur.complex_eigenvalues();
+        let largest = eigenvalues.iter().map(|l| l.norm()).fold(0.0, f64::max);
+        Some((eigenvalues, largest))
+    };
+    let (at_start, largest) = eigenvalues(&jacobian(y0)?.0)?;
+    if at_start.iter().any(|l| !(l.norm() >= SINGULAR * largest)) {
+        return None;
+    }
+    let mut model = ModelRhs::new(sys, p);
+    let y = by_decades(&mut model, y0.to_vec(), integrator, |t, y, next, scheme| {
+        let trajectory = Ivp::new(sys, t, y, p).solve(scheme, &[next]).ok()?;
+        Some((trajectory.state(0).to_vec(), trajectory.counts().jacobians > 0))
+    })?;
+    let (j, f) = jacobian(&y)?;
+    let step = j.lu().solve(&f)?;
+    let tolerances = y
+        .iter()
+        .zip(step.iter())
+        .map(|(y, d)| d.abs() / (integrator.atol + integrator.rtol * y.abs()))
+        .fold(0.0, f64::max);
+    if !(tolerances <= STILL) {
+        return None;
+    }
+    let y: Vec<f64> = y.iter().zip(step.iter()).map(|(y, d)| y - d).collect();
+    let (j, _) = jacobian(&y)?;
+    let (at_steady, largest) = eigenvalues(&j)?;
+    if !at_steady.iter().all(|l| l.re < -SINGULAR * largest) {
+        return None;
+    }
+    // ∂f/∂α for the columns: S' at S = 0.
+    let k = wrt.len();
+    let mut rhs = SensitivityRhs::new(sys, p, wrt);
+    let mut x = y.clone();
+    x.resize(n * (1 + k), 0.0);
+    let mut dx = vec![0.0; x.len()];
+    rhs.eval(LAST, Side::After, &x, &mut dx);
+    let s = j.lu().solve(&-DMatrix::from_row_slice(n, k, &dx[n..]))?;
+    if !s.iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    x[n..].iter_mut().enumerate().for_each(|(e, v)| *v = s[(e / k, e % k)]);
+    Some(x)
 }
 
 /// Whether every component of `x` (a state, or a state and its sensitivities) changes at t

@@ -345,12 +345,17 @@ atol = 1e-12
 /// A steady state's derivatives settle after the state does. x' = e·(a − x) from x₀ = 2
 /// settles at x = a, so ∂x/∂a = 1 there; at a = 2 the state is steady from the start while
 /// its sensitivity s' = e·(1 − s), s(0) = 0, takes t ≈ ln(e/rtol)/e to settle. The experiment
-/// holds x (e = 0), so ε = Σ(a − dᵢ)² and its half-gradient U = Σ(a − dᵢ). The steady state
-/// also follows the problem's tolerances: at the model file's rtol 1e-3 it stops at t = 10
-/// with x 2e-5 short of a; `with_integrator` at rtol 1e-10 gives the closed form to 1e-9.
+/// holds x (e = 0), so ε = Σ(a − dᵢ)² and its half-gradient U = Σ(a − dᵢ).
+///
+/// Alone, x's Jacobian −e is nonsingular and stable: the state settles, one Newton step
+/// lands on a, and ∂x/∂a = −J⁻¹·∂f/∂a = 1 without integrating it, at any tolerance. With a
+/// conserved pair beside it (A ⇌ B, not measured) the Jacobian is singular and the
+/// sensitivities are integrated until they settle; that steady state follows the problem's
+/// tolerances: at the model file's rtol 1e-3 it stops at t = 10 with x 2e-5 short of a, and
+/// `with_integrator` at rtol 1e-10 gives the closed form to 1e-9.
 #[test]
 fn a_steady_states_derivatives_settle_after_it_does() {
-    let model = "states = [\"x\"]
+    let alone = "states = [\"x\"]
 parameters = [\"a\", \"e\"]
 [equations]
 x = \"e * (a - x)\"
@@ -368,6 +373,10 @@ method = \"rodas5p\"
 rtol = RTOL
 atol = 1e-12
 ";
+    let conserved = alone
+        .replace("states = [\"x\"]", "states = [\"x\", \"A\", \"B\"]")
+        .replace("x = \"e * (a - x)\"", "x = \"e * (a - x)\"\nA = \"B - A\"\nB = \"A - B\"")
+        .replace("x = 2.0", "x = 2.0\nA = 1.0\nB = 0.0");
     let data = "t,x\n1,2.1\n2,2.3\n3,2.2\n";
     let dir = scratch("steady-derivatives", data, data);
     let path = dir.join("m.toml");
@@ -375,31 +384,43 @@ atol = 1e-12
         let d = [2.1, 2.3, 2.2];
         (d.iter().map(|d| (a - d) * (a - d)).sum::<f64>(), d.iter().map(|d| a - d).sum::<f64>())
     };
-    for eps in ["0.01", "1.0"] {
-        std::fs::write(&path, model.replace("EPS", eps).replace("RTOL", "1e-10")).unwrap();
-        let problem = Model::load(&path).unwrap().problem(None).unwrap();
-        for a in [2.0, 2.5] {
-            let lin = problem.linearize(&problem.unknowns().coordinates(&[a])).unwrap();
-            let (cost, gradient) = closed(a);
-            // The state settles to rtol/e (1e-8 at e = 0.01), its derivative to e^{-e·t}.
-            assert!((lin.cost - cost).abs() <= 1e-7, "e {eps}, a {a}: ε {} vs {cost}", lin.cost);
-            assert!(
-                (lin.gradient[0] - gradient).abs() <= 1e-7,
-                "e {eps}, a {a}: U {} vs {gradient}",
-                lin.gradient[0]
-            );
+    for model in [alone, conserved.as_str()] {
+        for eps in ["0.01", "1.0"] {
+            std::fs::write(&path, model.replace("EPS", eps).replace("RTOL", "1e-10")).unwrap();
+            let problem = Model::load(&path).unwrap().problem(None).unwrap();
+            for a in [2.0, 2.5] {
+                let lin = problem.linearize(&problem.unknowns().coordinates(&[a])).unwrap();
+                let (cost, gradient) = closed(a);
+                // The state settles to rtol/e (1e-8 at e = 0.01), its derivative to e^{-e·t}.
+                assert!(
+                    (lin.cost - cost).abs() <= 1e-7,
+                    "e {eps}, a {a}: ε {} vs {cost}",
+                    lin.cost
+                );
+                assert!(
+                    (lin.gradient[0] - gradient).abs() <= 1e-7,
+                    "e {eps}, a {a}: U {} vs {gradient}",
+                    lin.gradient[0]
+                );
+            }
         }
     }
-    std::fs::write(&path, model.replace("EPS", "1.0").replace("RTOL", "1e-3")).unwrap();
-    let loose = Model::load(&path).unwrap().problem(None).unwrap();
-    let z = loose.unknowns().coordinates(&[2.5]);
-    let mut tight = *loose.integrator();
-    (tight.rtol, tight.atol) = (1e-10, 1e-12);
-    let tight = loose.clone().with_integrator(tight).unwrap();
     let (cost, _) = closed(2.5);
-    let gap = |p: &sysid_core::Problem<_>| (p.linearize(&z).unwrap().cost - cost).abs();
-    assert!(gap(&loose) > 1e-5, "the loose steady state is {} from the closed form", gap(&loose));
-    assert!(gap(&tight) <= 1e-9, "the tight steady state is {} from the closed form", gap(&tight));
+    let gaps = |model: &str| {
+        std::fs::write(&path, model.replace("EPS", "1.0").replace("RTOL", "1e-3")).unwrap();
+        let loose = Model::load(&path).unwrap().problem(None).unwrap();
+        let z = loose.unknowns().coordinates(&[2.5]);
+        let mut tight = *loose.integrator();
+        (tight.rtol, tight.atol) = (1e-10, 1e-12);
+        let tight = loose.clone().with_integrator(tight).unwrap();
+        let gap = |p: &sysid_core::Problem<_>| (p.linearize(&z).unwrap().cost - cost).abs();
+        (gap(&loose), gap(&tight))
+    };
+    let (loose, tight) = gaps(alone);
+    assert!(loose <= 1e-9 && tight <= 1e-9, "alone: {loose} and {tight} from the closed form");
+    let (loose, tight) = gaps(&conserved);
+    assert!(loose > 1e-5, "the loose steady state is {loose} from the closed form");
+    assert!(tight <= 1e-9, "the tight steady state is {tight} from the closed form");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
