@@ -324,7 +324,7 @@ fn by_newton(
         Some((eigenvalues, largest))
     };
     let (at_start, largest) = eigenvalues(&jacobian(y0)?.0)?;
-    if at_start.iter().any(|l| !(l.norm() >= SINGULAR * largest)) {
+    if at_start.iter().any(|l| l.norm().is_nan() || l.norm() < SINGULAR * largest) {
         return None;
     }
     let mut model = ModelRhs::new(sys, p);
@@ -339,7 +339,7 @@ fn by_newton(
         .zip(step.iter())
         .map(|(y, d)| d.abs() / (integrator.atol + integrator.rtol * y.abs()))
         .fold(0.0, f64::max);
-    if !(tolerances <= STILL) {
+    if tolerances.is_nan() || tolerances > STILL {
         return None;
     }
     let y: Vec<f64> = y.iter().zip(step.iter()).map(|(y, d)| y - d).collect();
