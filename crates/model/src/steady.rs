@@ -209,6 +209,7 @@ impl SteadyState {
                     x.extend_from_slice(trajectory.sensitivity_slice(0));
                     Some((x, trajectory.counts().jacobians > 0))
                 })?
+                .1
             }
         };
         let mut dy = vec![0.0; n * nv];
@@ -230,13 +231,14 @@ impl SteadyState {
 /// Integrates `x` (a state, or a state and its sensitivities) on by decades, t = 1, 10, 100,
 /// …, each by `decade(t, x, next, integrator)` (the new x, and whether the decade went stiff),
 /// until `rhs` says it has [settled] or a decade from t ≥ 10 moved it by at most [`STILL`]
-/// tolerances, at a steady pace; None where it has not by [`LAST`] or a decade fails.
+/// tolerances, at a steady pace: the time it settled by and x there. None where it has not by
+/// [`LAST`] or a decade fails.
 fn by_decades(
     rhs: &mut impl Rhs,
     mut x: Vec<f64>,
     integrator: &Integrator,
     mut decade: impl FnMut(f64, &[f64], f64, &Integrator) -> Option<(Vec<f64>, bool)>,
-) -> Option<Vec<f64>> {
+) -> Option<(f64, Vec<f64>)> {
     let mut t = 0.0;
     // How far the last decade moved, in tolerances of the farthest-moving component.
     let mut last_moved = None;
@@ -279,7 +281,7 @@ fn by_decades(
             break;
         }
     }
-    Some(x)
+    Some((t, x))
 }
 
 /// The smallest modulus an eigenvalue of the Jacobian at the steady state may have, relative
@@ -304,13 +306,14 @@ fn by_newton(
     integrator: &Integrator,
 ) -> Option<Vec<f64>> {
     let n = y0.len();
-    // f(y) and J(y) from the augmented right-hand side at [y; I] for every initial value.
+    // f(t, y) and J(t, y) from the augmented right-hand side at [y; I] for every initial
+    // value.
     let all: Vec<Wrt> = (0..n).map(Wrt::InitialValue).collect();
-    let jacobian = |y: &[f64]| {
+    let jacobian = |t: f64, y: &[f64]| {
         let mut rhs = SensitivityRhs::new(sys, p, &all);
         let x = rhs.initial_state(y);
         let mut dx = vec![0.0; x.len()];
-        rhs.eval(LAST, Side::After, &x, &mut dx);
+        rhs.eval(t, Side::After, &x, &mut dx);
         let f = DVector::from_column_slice(&dx[..n]);
         let j = DMatrix::from_row_slice(n, n, &dx[n..]);
         (j.iter().chain(f.iter()).all(|v| v.is_finite())).then_some((j, f))
@@ -323,16 +326,16 @@ fn by_newton(
         let largest = eigenvalues.iter().map(|l| l.norm()).fold(0.0, f64::max);
         Some((eigenvalues, largest))
     };
-    let (at_start, largest) = eigenvalues(&jacobian(y0)?.0)?;
+    let (at_start, largest) = eigenvalues(&jacobian(0.0, y0)?.0)?;
     if at_start.iter().any(|l| l.norm().is_nan() || l.norm() < SINGULAR * largest) {
         return None;
     }
     let mut model = ModelRhs::new(sys, p);
-    let y = by_decades(&mut model, y0.to_vec(), integrator, |t, y, next, scheme| {
+    let (t, y) = by_decades(&mut model, y0.to_vec(), integrator, |t, y, next, scheme| {
         let trajectory = Ivp::new(sys, t, y, p).solve(scheme, &[next]).ok()?;
         Some((trajectory.state(0).to_vec(), trajectory.counts().jacobians > 0))
     })?;
-    let (j, f) = jacobian(&y)?;
+    let (j, f) = jacobian(t, &y)?;
     let step = j.lu().solve(&f)?;
     let tolerances = y
         .iter()
@@ -343,7 +346,7 @@ fn by_newton(
         return None;
     }
     let y: Vec<f64> = y.iter().zip(step.iter()).map(|(y, d)| y - d).collect();
-    let (j, _) = jacobian(&y)?;
+    let (j, _) = jacobian(t, &y)?;
     let (at_steady, largest) = eigenvalues(&j)?;
     if !at_steady.iter().all(|l| l.re < -SINGULAR * largest) {
         return None;
@@ -354,7 +357,7 @@ fn by_newton(
     let mut x = y.clone();
     x.resize(n * (1 + k), 0.0);
     let mut dx = vec![0.0; x.len()];
-    rhs.eval(LAST, Side::After, &x, &mut dx);
+    rhs.eval(t, Side::After, &x, &mut dx);
     let s = j.lu().solve(&-DMatrix::from_row_slice(n, k, &dx[n..]))?;
     if !s.iter().all(|v| v.is_finite()) {
         return None;
