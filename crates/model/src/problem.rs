@@ -311,12 +311,7 @@ impl Model {
                         steady
                     }
                 };
-                initial = (0..f.states.len())
-                    .map(|i| {
-                        let state = &f.states[i];
-                        Setting::Function(Arc::new(steady.component(i, state, &plan.name)))
-                    })
-                    .collect();
+                initial = steady.initial_values(&f.states, &plan.name);
             }
             // The experiment's own initial values replace the preequilibration's steady state
             // (PEtab's re-initialisation after a preequilibration).
@@ -332,12 +327,7 @@ impl Model {
                     (parameters.clone(), initial),
                     declared,
                 ));
-                initial = (0..f.states.len())
-                    .map(|i| {
-                        let state = &f.states[i];
-                        Setting::Function(Arc::new(steady.component(i, state, &plan.name)))
-                    })
-                    .collect();
+                initial = steady.initial_values(&f.states, &plan.name);
             }
             let mut data = read.data;
             for &(series, output) in &read.modelled {

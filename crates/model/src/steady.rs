@@ -105,21 +105,22 @@ impl SteadyState {
         }
     }
 
-    /// The setting of state `i`'s initial value in `experiment`.
-    pub(crate) fn component(
+    /// Every state's initial value in `experiment` (`states` by name, in state order): its
+    /// component of this steady state.
+    pub(crate) fn initial_values(
         self: &Arc<Self>,
-        i: usize,
-        state: &str,
+        states: &[String],
         experiment: &str,
-    ) -> Component {
-        Component {
+    ) -> Vec<Setting> {
+        let component = |(i, state): (usize, &String)| Component {
             steady: self.clone(),
             integrator: self.integrator,
             state: i,
             text: format!(
                 "the steady state of `{state}` before experiment `{experiment}` (preequilibration)"
             ),
-        }
+        };
+        states.iter().enumerate().map(|s| Setting::Function(Arc::new(component(s)))).collect()
     }
 
     fn solved(&self, v: &[f64], integrator: &Integrator) -> Option<Solved> {
