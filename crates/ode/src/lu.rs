@@ -137,25 +137,7 @@ impl Lu {
         // The k columns are the inner loop: known at compile time for the common small k, it
         // is a few vector operations per row instead of a loop (SalazarCavazos' 75 states and
         // 6 columns: 31 % of an NLL + gradient in this solve before).
-        match k {
-            1 => self.solve_block::<1>(r, k),
-            2 => self.solve_block::<2>(r, k),
-            3 => self.solve_block::<3>(r, k),
-            4 => self.solve_block::<4>(r, k),
-            5 => self.solve_block::<5>(r, k),
-            6 => self.solve_block::<6>(r, k),
-            7 => self.solve_block::<7>(r, k),
-            8 => self.solve_block::<8>(r, k),
-            9 => self.solve_block::<9>(r, k),
-            10 => self.solve_block::<10>(r, k),
-            11 => self.solve_block::<11>(r, k),
-            12 => self.solve_block::<12>(r, k),
-            13 => self.solve_block::<13>(r, k),
-            14 => self.solve_block::<14>(r, k),
-            15 => self.solve_block::<15>(r, k),
-            16 => self.solve_block::<16>(r, k),
-            _ => self.solve_block::<0>(r, k),
-        }
+        by_width!(k, K => self.solve_block::<K>(r, k))
     }
 
     /// [`solve_rows`](Self::solve_rows) with rows of K columns (`k` = K), or of `k` columns
@@ -218,10 +200,88 @@ impl Lu {
     }
 }
 
+/// `$body` with the const `$K` set to `$k` where it is 1 to 16, to 0 otherwise: a block solve's
+/// rows of K columns, known at compile time for the common small k (see [`Lu::solve_rows`]).
+macro_rules! by_width {
+    ($k:expr, $K:ident => $body:expr) => {
+        match $k {
+            1 => {
+                const $K: usize = 1;
+                $body
+            }
+            2 => {
+                const $K: usize = 2;
+                $body
+            }
+            3 => {
+                const $K: usize = 3;
+                $body
+            }
+            4 => {
+                const $K: usize = 4;
+                $body
+            }
+            5 => {
+                const $K: usize = 5;
+                $body
+            }
+            6 => {
+                const $K: usize = 6;
+                $body
+            }
+            7 => {
+                const $K: usize = 7;
+                $body
+            }
+            8 => {
+                const $K: usize = 8;
+                $body
+            }
+            9 => {
+                const $K: usize = 9;
+                $body
+            }
+            10 => {
+                const $K: usize = 10;
+                $body
+            }
+            11 => {
+                const $K: usize = 11;
+                $body
+            }
+            12 => {
+                const $K: usize = 12;
+                $body
+            }
+            13 => {
+                const $K: usize = 13;
+                $body
+            }
+            14 => {
+                const $K: usize = 14;
+                $body
+            }
+            15 => {
+                const $K: usize = 15;
+                $body
+            }
+            16 => {
+                const $K: usize = 16;
+                $body
+            }
+            _ => {
+                const $K: usize = 0;
+                $body
+            }
+        }
+    };
+}
+pub(crate) use by_width;
+
 /// row −= factor · solved, over K columns (K known at compile time), or over every column
 /// of the row for K = 0.
 #[inline(always)]
-fn eliminate<const K: usize>(row: &mut [f64], solved: &[f64], factor: f64) {
+pub(crate) fn eliminate<const K: usize>(row: &mut [f64], solved: &[f64], factor: f64) {
     if K == 0 {
         for (v, y) in row.iter_mut().zip(solved) {
             *v -= factor * y;

@@ -19,7 +19,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
 use faer::sparse::linalg::amd;
 
-use crate::lu::{FactorError, Lu};
+use crate::lu::{FactorError, Lu, by_width, eliminate};
 
 /// The largest multiplier accepted from diagonal pivots: 1/τ for threshold partial pivoting
 /// with τ = 10⁻³.
@@ -168,9 +168,43 @@ impl SparseLu {
         true
     }
 
-    /// Overwrites r (length n) with E⁻¹ r.
+    /// Overwrites r (length n) with E⁻¹ r: [`solve_rows`](Self::solve_rows) with k = 1, the
+    /// same operations in the same order (so the same result to the bit), each row's sum kept
+    /// in a register rather than sliced out of the work vector entry by entry.
     pub fn solve(&mut self, r: &mut [f64]) {
-        self.solve_rows(r, 1);
+        if self.use_dense {
+            return self.dense.solve(r);
+        }
+        let n = self.n;
+        let x = &mut self.work[..n];
+        for (xi, &from) in x.iter_mut().zip(&self.order) {
+            *xi = r[from];
+        }
+        let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
+        // L y = P r: row i less its multipliers times the entries before it.
+        for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
+            let mut v = x[i];
+            for (&j, &l) in columns[start..diagonal].iter().zip(&values[start..diagonal]) {
+                if l != 0.0 {
+                    v -= l * x[j];
+                }
+            }
+            x[i] = v;
+        }
+        // U x = y: row i less U's entries times the entries after it, over the pivot.
+        for i in (0..n).rev() {
+            let (d, end) = (self.diagonal[i], starts[i + 1]);
+            let mut v = x[i];
+            for (&j, &u) in columns[d + 1..end].iter().zip(&values[d + 1..end]) {
+                if u != 0.0 {
+                    v -= u * x[j];
+                }
+            }
+            x[i] = v * values[d];
+        }
+        for (&xi, &to) in x.iter().zip(&self.order) {
+            r[to] = xi;
+        }
     }
 
     /// Overwrites the n × k matrix R, stored row by row in r, with E⁻¹ R (k at most the
@@ -182,6 +216,12 @@ impl SparseLu {
                 _ => self.dense.solve_rows(r, k),
             };
         }
+        by_width!(k, K => self.solve_block::<K>(r, k))
+    }
+
+    /// [`solve_rows`](Self::solve_rows) with rows of K columns (`k` = K), or of `k` columns
+    /// for K = 0.
+    fn solve_block<const K: usize>(&mut self, r: &mut [f64], k: usize) {
         let n = self.n;
         let x = &mut self.work[..n * k];
         for (i, &from) in self.order.iter().enumerate() {
@@ -195,9 +235,7 @@ impl SparseLu {
             for p in start..diagonal {
                 let (j, l) = (columns[p], values[p]);
                 if l != 0.0 {
-                    for (v, y) in target.iter_mut().zip(&done[j * k..(j + 1) * k]) {
-                        *v -= l * y;
-                    }
+                    eliminate::<K>(target, &done[j * k..(j + 1) * k], l);
                 }
             }
         }
@@ -209,9 +247,7 @@ impl SparseLu {
             for p in d + 1..starts[i + 1] {
                 let (j, u) = (columns[p] - i - 1, values[p]);
                 if u != 0.0 {
-                    for (v, y) in target.iter_mut().zip(&done[j * k..(j + 1) * k]) {
-                        *v -= u * y;
-                    }
+                    eliminate::<K>(target, &done[j * k..(j + 1) * k], u);
                 }
             }
             let inverse_pivot = values[d];
@@ -358,6 +394,10 @@ mod tests {
         for (x, y) in a.iter().zip(&b) {
             assert_close_abs(*x, *y, 1e-12);
         }
+        // One right-hand side is the block's k = 1, to the bit.
+        let mut c = r.clone();
+        sparse.solve_rows(&mut c, 1);
+        assert_eq!(a, c);
         let (mut a, mut b) = (r.clone(), r.clone());
         sparse.solve_transposed(&mut a);
         dense.solve_transposed(&mut b);
