@@ -11,15 +11,18 @@ Printed on this machine (amici 1.0.1 and the pypesto of December 2026, AMICI's d
 tolerances; 2026-12-03):
 
     Elowitz_Nature2000 -65.63322893916738
-    Zheng_PNAS2012 -293.3099347984426
-    Schwen_PONE2014 952.4217262175704
+    Zheng_PNAS2012 -293.713858350513
+    Schwen_PONE2014 952.4217258244647
 
-(sysid: −65.633227, −293.309462 and 952.421726. Zheng's gap, 4.7e-4, is within AMICI's
-own 1e-3 check; sysid gives the same value at its tolerances and at 1000 times tighter ones
-(crates/cli/tests/petab.rs), AMICI was not run tighter. At Zheng's nominal point the two
-agree to 1e-6. Zheng's point of before, −292.982545, AMICI gave as −292.9831237: the same
-gap, 5.8e-4. Elowitz's point of before, −65.493149, AMICI gave as −65.49314849568135. With
-the amici of November 2026, Zheng's row printed −293.3099348195668.)
+and with `--rtol 1e-12 --atol 1e-16`, Zheng_PNAS2012 -293.7138963241364.
+
+(sysid: −65.633227, −293.713896 and 952.421726. Zheng's gap at AMICI's defaults, 3.8e-5,
+closes at AMICI's tighter tolerances, to 1e-7; sysid gives the same value at its
+tolerances and at 1000 times tighter ones (crates/cli/tests/petab.rs). At Zheng's nominal
+point the two agree to 1e-6. Zheng's points of before: −293.309462, which AMICI gave as
+−293.3099347984426 at its defaults, and −292.982545, as −292.9831237. Elowitz's point of
+before, −65.493149, AMICI gave as −65.49314849568135. Schwen's row printed
+952.4217262175704 with the pypesto of 2026-12-03, morning.)
 
 `--points uncertified_points.tsv` evaluates the best known points that sysid has not
 certified at the problem's tolerances (an oscillator), where the NLL needs tight integration

@@ -552,9 +552,11 @@ fn the_default_fit_of_fiedler_from_nominal_plus_a_tenth_reaches_the_peers_optimu
 ///   multistart of nl2sol (`sysid fit --petab … --starts 100 --starts-without-guess
 ///   --starts-budget 600`); AMICI evaluates it to −65.6332289 (the point before it,
 ///   −65.493149, came from nl2sol at nominal + 0.1 with a first trust radius of ‖D z₀‖);
-/// - Zheng's, −293.309462 with 22 of its 46 unknowns on bounds (nominal −278.333533), found
-///   by start 24 of a 100-start multistart of nl2sol (`sysid fit --petab … --starts 100
-///   --starts-without-guess --starts-budget 900`); AMICI evaluates it to −293.309935;
+/// - Zheng's, −293.713896 with 22 of its 46 unknowns on bounds (nominal −278.333533), found
+///   by start 78 of a 100-start multistart of nl2sol (`sysid fit --petab … --starts 100
+///   --starts-without-guess`); AMICI evaluates it to −293.713858 at its default tolerances
+///   and to −293.7138963 at rtol 1e-12 (the point before it, −293.309462, came from start 24
+///   of an earlier run of the same command with `--starts-budget 900`);
 /// - Schwen's, 952.421726 with its prior's term (nominal 956.518370), found by a 20-start
 ///   multistart of nl2sol (`--starts 20 --starts-without-guess`) and fitted again from its
 ///   start's end (`--start`).
