@@ -14,6 +14,7 @@
 use nalgebra::{Const, SVector, U1};
 use num_dual::{Derivative, DualSVec64};
 
+use crate::lu::by_width;
 use crate::sparse::SparseJacobian;
 use crate::system::{Function, System};
 
@@ -96,25 +97,11 @@ impl ProductPlan {
     /// out = J_y vy + J_α vp (K columns, row by row), J's entries read from `entries`; with
     /// `ADD`, out += instead.
     pub(crate) fn apply<const ADD: bool>(&self, entries: &[f64], vy: &[f64], out: &mut [f64]) {
-        match self.k {
-            1 => self.accumulate::<1, ADD>(entries, vy, out),
-            2 => self.accumulate::<2, ADD>(entries, vy, out),
-            3 => self.accumulate::<3, ADD>(entries, vy, out),
-            4 => self.accumulate::<4, ADD>(entries, vy, out),
-            5 => self.accumulate::<5, ADD>(entries, vy, out),
-            6 => self.accumulate::<6, ADD>(entries, vy, out),
-            7 => self.accumulate::<7, ADD>(entries, vy, out),
-            8 => self.accumulate::<8, ADD>(entries, vy, out),
-            9 => self.accumulate::<9, ADD>(entries, vy, out),
-            10 => self.accumulate::<10, ADD>(entries, vy, out),
-            11 => self.accumulate::<11, ADD>(entries, vy, out),
-            12 => self.accumulate::<12, ADD>(entries, vy, out),
-            13 => self.accumulate::<13, ADD>(entries, vy, out),
-            14 => self.accumulate::<14, ADD>(entries, vy, out),
-            15 => self.accumulate::<15, ADD>(entries, vy, out),
-            16 => self.accumulate::<16, ADD>(entries, vy, out),
-            k => self.accumulate_any::<ADD>(k, entries, vy, out),
-        }
+        by_width!(self.k, K => if K == 0 {
+            self.accumulate_any::<ADD>(self.k, entries, vy, out)
+        } else {
+            self.accumulate::<K, ADD>(entries, vy, out)
+        })
     }
 
     /// The products row by row for K directions known at compile time: each row's K sums
