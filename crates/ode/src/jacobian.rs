@@ -137,7 +137,10 @@ impl ProductPlan {
         }
     }
 
-    /// The products for any number of directions.
+    /// The products for any number of directions: each row in blocks of [`BLOCK`] columns
+    /// whose sums stay in registers (as [`accumulate`](Self::accumulate) keeps a whole row's),
+    /// the last k mod [`BLOCK`] columns summed in place. Every entry of `out` receives the
+    /// same terms in the same order either way.
     fn accumulate_any<const ADD: bool>(
         &self,
         k: usize,
@@ -145,14 +148,34 @@ impl ProductPlan {
         vy: &[f64],
         out: &mut [f64],
     ) {
+        const BLOCK: usize = 8;
         let (mut s, mut q) = (0, 0);
+        let blocked = k / BLOCK * BLOCK;
         for (row, &(s_end, q_end)) in out.chunks_exact_mut(k).zip(&self.rows) {
-            if !ADD {
-                row.fill(0.0);
+            let terms = &self.states[s..s_end as usize];
+            for (c, block) in row[..blocked].chunks_exact_mut(BLOCK).enumerate() {
+                let first = c * BLOCK;
+                let mut sums = [0.0; BLOCK];
+                if ADD {
+                    sums.copy_from_slice(block);
+                }
+                for &(r, column) in terms {
+                    let (a, at) = (entries[r as usize], column as usize + first);
+                    let direction: &[f64; BLOCK] =
+                        vy[at..at + BLOCK].try_into().expect("a block of values");
+                    for j in 0..BLOCK {
+                        sums[j] += a * direction[j];
+                    }
+                }
+                block.copy_from_slice(&sums);
             }
-            for &(r, column) in &self.states[s..s_end as usize] {
-                let (a, column) = (entries[r as usize], column as usize);
-                for (o, v) in row.iter_mut().zip(&vy[column..column + k]) {
+            let rest = &mut row[blocked..];
+            if !ADD {
+                rest.fill(0.0);
+            }
+            for &(r, column) in terms {
+                let (a, at) = (entries[r as usize], column as usize + blocked);
+                for (o, v) in rest.iter_mut().zip(&vy[at..column as usize + k]) {
                     *o += a * v;
                 }
             }
@@ -382,3 +405,70 @@ macro_rules! duals {
     };
 }
 duals!(1 => W1, 2 => W2, 3 => W3, 4 => W4, 5 => W5, 6 => W6, 7 => W7, 8 => W8);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// J_y V_y + J_α V_α by its definition, entry by entry in the pattern's order (the order
+    /// the plan adds its terms in), onto `start`.
+    fn by_definition(
+        pattern: &[(u32, u32)],
+        values: &[f64],
+        (m, n, k): (usize, usize, usize),
+        (vy, vp): (&[f64], &[f64]),
+        start: &[f64],
+    ) -> Vec<f64> {
+        let mut out = start.to_vec();
+        for row in 0..m {
+            let entries = || pattern.iter().zip(values).filter(|(e, _)| e.0 as usize == row);
+            for j in 0..k {
+                let o = &mut out[row * k + j];
+                for (&(_, c), &a) in entries().filter(|(e, _)| (e.1 as usize) < n) {
+                    *o += a * vy[c as usize * k + j];
+                }
+                for (&(_, c), &a) in entries().filter(|(e, _)| (e.1 as usize) >= n) {
+                    let v = vp[(c as usize - n) * k + j];
+                    if v != 0.0 {
+                        *o += a * v;
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// Every width the plan has a path for gives the products of the definition to the bit:
+    /// compile-time widths (1 to 16) and any other, whose rows go in blocks of eight with a
+    /// remainder (17, 24, 35), written over the output and added to it.
+    #[test]
+    fn the_products_are_the_definitions_at_every_width() {
+        let (m, n) = (3, 4);
+        // Rows in order; columns 4 and 5 are the two parameters.
+        let pattern = [(0, 0), (0, 2), (0, 4), (1, 1), (1, 3), (1, 5), (2, 0), (2, 1), (2, 2)];
+        let values: Vec<f64> = (0..pattern.len()).map(|e| (e as f64 * 0.7).sin() + 0.1).collect();
+        for k in [1, 5, 16, 17, 24, 35] {
+            let vy: Vec<f64> = (0..n * k).map(|i| (i as f64 * 0.31).cos()).collect();
+            // Sparse directions for the parameters, as unit seeds are.
+            let vp: Vec<f64> =
+                (0..2 * k).map(|i| if i % 3 == 0 { 1.0 + i as f64 } else { 0.0 }).collect();
+            let plan = ProductPlan::new(&pattern, 0..pattern.len() as u32, (m, n), &vp, k);
+            let start: Vec<f64> = (0..m * k).map(|i| (i as f64 * 0.13).tan()).collect();
+            let mut written = start.clone();
+            plan.apply::<false>(&values, &vy, &mut written);
+            let zero = vec![0.0; m * k];
+            assert_eq!(
+                written,
+                by_definition(&pattern, &values, (m, n, k), (&vy, &vp), &zero),
+                "k = {k}"
+            );
+            let mut added = start.clone();
+            plan.apply::<true>(&values, &vy, &mut added);
+            assert_eq!(
+                added,
+                by_definition(&pattern, &values, (m, n, k), (&vy, &vp), &start),
+                "k = {k}"
+            );
+        }
+    }
+}
