@@ -139,8 +139,8 @@ impl ProductPlan {
 
     /// The products for any number of directions: each row in blocks of [`BLOCK`] columns
     /// whose sums stay in registers (as [`accumulate`](Self::accumulate) keeps a whole row's),
-    /// the last k mod [`BLOCK`] columns summed in place. Every entry of `out` receives the
-    /// same terms in the same order either way.
+    /// then the last k mod [`BLOCK`] columns one at a time. Every entry of `out` receives
+    /// the same terms in the same order either way.
     fn accumulate_any<const ADD: bool>(
         &self,
         k: usize,
@@ -169,15 +169,14 @@ impl ProductPlan {
                 }
                 block.copy_from_slice(&sums);
             }
-            let rest = &mut row[blocked..];
-            if !ADD {
-                rest.fill(0.0);
-            }
-            for &(r, column) in terms {
-                let (a, at) = (entries[r as usize], column as usize + blocked);
-                for (o, v) in rest.iter_mut().zip(&vy[at..column as usize + k]) {
-                    *o += a * v;
+            // The remaining columns one by one, each sum in a register: summed in place, a
+            // column's every term would wait on the store of the one before.
+            for (j, o) in row.iter_mut().enumerate().skip(blocked) {
+                let mut sum = if ADD { *o } else { 0.0 };
+                for &(r, column) in terms {
+                    sum += entries[r as usize] * vy[column as usize + j];
                 }
+                *o = sum;
             }
             for &(r, j, v) in &self.parameters[q..q_end as usize] {
                 row[j as usize] += entries[r as usize] * v;
