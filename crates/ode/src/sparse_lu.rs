@@ -168,43 +168,9 @@ impl SparseLu {
         true
     }
 
-    /// Overwrites r (length n) with E⁻¹ r: [`solve_rows`](Self::solve_rows) with k = 1, the
-    /// same operations in the same order (so the same result to the bit), each row's sum kept
-    /// in a register rather than sliced out of the work vector entry by entry.
+    /// Overwrites r (length n) with E⁻¹ r.
     pub fn solve(&mut self, r: &mut [f64]) {
-        if self.use_dense {
-            return self.dense.solve(r);
-        }
-        let n = self.n;
-        let x = &mut self.work[..n];
-        for (xi, &from) in x.iter_mut().zip(&self.order) {
-            *xi = r[from];
-        }
-        let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
-        // L y = P r: row i less its multipliers times the entries before it.
-        for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
-            let mut v = x[i];
-            for (&j, &l) in columns[start..diagonal].iter().zip(&values[start..diagonal]) {
-                if l != 0.0 {
-                    v -= l * x[j];
-                }
-            }
-            x[i] = v;
-        }
-        // U x = y: row i less U's entries times the entries after it, over the pivot.
-        for i in (0..n).rev() {
-            let (d, end) = (self.diagonal[i], starts[i + 1]);
-            let mut v = x[i];
-            for (&j, &u) in columns[d + 1..end].iter().zip(&values[d + 1..end]) {
-                if u != 0.0 {
-                    v -= u * x[j];
-                }
-            }
-            x[i] = v * values[d];
-        }
-        for (&xi, &to) in x.iter().zip(&self.order) {
-            r[to] = xi;
-        }
+        self.solve_rows(r, 1);
     }
 
     /// Overwrites the n × k matrix R, stored row by row in r, with E⁻¹ R (k at most the
