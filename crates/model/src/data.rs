@@ -6,7 +6,7 @@ use crate::table::{Table, TableError, cell_position, without_bom};
 use sysid_core::{Data, Noise, Transform};
 use sysid_ode::{Inputs, Signal};
 
-use crate::error::{ModelError, line_column};
+use crate::error::ModelError;
 use crate::file::{ModelFile, NoiseSpec, RecordKind};
 
 /// The measurements and input signals of a data file.
@@ -163,12 +163,8 @@ fn check_columns(model: &ModelFile, table: &Table, file: &str) -> Result<(), Mod
 fn check_weights(model: &ModelFile, table: &Table, file: &str) -> Result<(), ModelError> {
     for (name, _, at) in &model.data.weights {
         if !table.names().iter().any(|n| n == name) || !measurable(model, name) {
-            return Err(ModelError::at(
-                &model.path.display().to_string(),
-                &model.text,
-                *at,
-                format!("[data.weights]: `{name}` is not a measured column of {file}"),
-            ));
+            return Err(model
+                .err(*at, format!("[data.weights]: `{name}` is not a measured column of {file}")));
         }
     }
     Ok(())
@@ -219,8 +215,11 @@ fn check_start(
         let field = table.names().iter().position(|n| n == name).map_or(0, |i| i + 1);
         let t0_in = match start.at {
             Some(at) => {
-                let (line, column) = line_column(&model.text, at);
-                format!("{}:{line}:{column}", model.path.display())
+                let e = model.err(at, "");
+                match (e.line, e.column) {
+                    (Some(line), Some(column)) => format!("{}:{line}:{column}", e.file),
+                    _ => e.file,
+                }
             }
             None => format!("the default: {} has no {} t0", model.path.display(), start.table),
         };

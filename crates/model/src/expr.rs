@@ -555,16 +555,21 @@ fn wrong_arity(name: &str, arity: usize, got: usize, position: usize) -> ExprErr
 /// `1e200 * 1e200`): such an equation can never be integrated, and the reader names it where
 /// it is written rather than the integrator at t0.
 fn checked(e: Expr, position: usize) -> Result<Expr, ExprError> {
-    if let Expr::Bin(Op::Div, _, divisor) = &e
+    check_constant(&e, position).map(|()| e)
+}
+
+/// [`checked`]'s test of `e`.
+fn check_constant(e: &Expr, position: usize) -> Result<(), ExprError> {
+    if let Expr::Bin(Op::Div, _, divisor) = e
         && constant(divisor) == Some(0.0)
     {
         return Err(not_finite(format!("division by a constant zero: `{e}`"), position));
     }
-    match constant(&e) {
+    match constant(e) {
         Some(v) if !v.is_finite() => {
             Err(not_finite(format!("`{e}` is not a finite number (it is {v})"), position))
         }
-        _ => Ok(e),
+        _ => Ok(()),
     }
 }
 
@@ -633,6 +638,39 @@ pub fn parse_in(text: &str, syntax: Syntax) -> Result<Expr, ExprError> {
 }
 
 impl Expr {
+    /// Checks a tree built by a program rather than parsed, as the parser checks what it
+    /// reads: every number finite, every function called with its number of arguments, no
+    /// division by a constant zero nor a constant operation whose result is not a finite
+    /// number, and at most [`MAX_DEPTH`] levels deep. Errors are at the positions the tree
+    /// carries.
+    pub fn check(&self) -> Result<(), ExprError> {
+        self.check_within(MAX_DEPTH)
+    }
+
+    fn check_within(&self, depth: usize) -> Result<(), ExprError> {
+        let (position, operands): (usize, Vec<&Expr>) = match self {
+            Expr::Num(v) if !v.is_finite() => {
+                return Err(not_finite(format!("the number {v} is not finite"), 0));
+            }
+            Expr::Num(_) | Expr::Name(..) => return Ok(()),
+            Expr::Neg(a) => (0, vec![a]),
+            Expr::Bin(_, a, b) => (0, vec![a, b]),
+            Expr::Call(f, args, position) => {
+                if args.len() != f.arity() {
+                    return Err(wrong_arity(f.name(), f.arity(), args.len(), *position));
+                }
+                (*position, args.iter().collect())
+            }
+        };
+        if depth == 0 {
+            return Err(too_deep(position));
+        }
+        for a in operands {
+            a.check_within(depth - 1)?;
+        }
+        check_constant(self, position)
+    }
+
     /// The names the expression uses, each once, in the order they first appear.
     pub fn names(&self) -> Vec<String> {
         fn walk(e: &Expr, out: &mut Vec<String>) {

@@ -56,7 +56,7 @@ use std::path::{Path, PathBuf};
 
 use sysid_ode::{Inputs, Signature};
 
-pub use error::{ModelError, SourceMap, line_column};
+pub use error::{ModelError, line_column};
 pub use file::{
     DataSpec, EventSpec, ExperimentSpec, Expression, ModelFile, NoiseSpec, OutputSpec, RecordKind,
     SetValue,

@@ -219,13 +219,9 @@ struct Plan<'a> {
 
 impl Model {
     /// The identification problem of the model file: its `[data]` (or `data` instead) as one
-    /// experiment, or each of its `[[experiments]]`. An error in an imported problem's text
-    /// is located where the user wrote its subject ([`SourceMap`](crate::SourceMap)).
+    /// experiment, or each of its `[[experiments]]`. An error in an imported problem is
+    /// located where the user wrote its subject ([`ModelFile::origins`](crate::ModelFile)).
     pub fn problem(&self, data: Option<&Path>) -> Result<Problem<ModelSystem>, ModelError> {
-        self.build_problem(data).map_err(|e| self.file.source_map.locate(e))
-    }
-
-    fn build_problem(&self, data: Option<&Path>) -> Result<Problem<ModelSystem>, ModelError> {
         let f = &self.file;
         let plans: Vec<Plan<'_>> = if f.experiments.is_empty() {
             let file = match data {
@@ -511,9 +507,7 @@ impl Model {
             if let Some(q) = f.parameters.iter().position(|p| p == name)
                 && matches!(base[q], Source::Unset)
             {
-                return Err(ModelError::at(
-                    &f.path.display().to_string(),
-                    &f.text,
+                return Err(f.err(
                     e.at,
                     format!(
                         "experiment `{experiment}`: `{}` uses `{name}`, which has no value outside the experiments: use an unknown or a [known] parameter",
@@ -593,9 +587,7 @@ impl Model {
                                     _ => o.at,
                                 }
                             });
-                        return Err(ModelError::at(
-                            &self.file.path.display().to_string(),
-                            &self.file.text,
+                        return Err(self.file.err(
                             at,
                             format!(
                                 "the σ of `{name}`, {}, is {sigma} at t = {t} in experiment `{}` at the start: σ must be positive",

@@ -31,17 +31,6 @@ impl Model {
         times: &[f64],
         experiment: Option<&str>,
     ) -> Result<String, ModelError> {
-        self.trajectory_csv(set, data, times, experiment)
-            .map_err(|e| self.file.source_map.locate(e))
-    }
-
-    fn trajectory_csv(
-        &self,
-        set: &[(String, f64)],
-        data: Option<&Path>,
-        times: &[f64],
-        experiment: Option<&str>,
-    ) -> Result<String, ModelError> {
         let path = self.file.path.display().to_string();
         let f = &self.file;
         // Experiments, inputs, initial values by expressions and unknowns of their own need

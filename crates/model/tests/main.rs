@@ -5,6 +5,7 @@ mod common;
 
 mod adjoint;
 mod allocations;
+mod document;
 mod events;
 mod experiments;
 mod expressions;

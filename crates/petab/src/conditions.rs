@@ -4,8 +4,10 @@
 use std::collections::HashMap;
 
 use sysid_model::ModelError;
+use sysid_model::expr::Expr;
+use sysid_model::file::document::Value;
 
-use crate::parts::{ConditionSettings, condition_row, toml_number};
+use crate::parts::{ConditionSettings, condition_row};
 use crate::tsv::Cell;
 use crate::{Builder, tsv};
 
@@ -79,15 +81,11 @@ impl Builder<'_> {
                         )));
                     }
                     if after.is_some() {
-                        initial.push(format!(
-                            "{} = {}",
-                            self.name(target),
-                            self.setting_value(cell)?
-                        ));
+                        initial.push((self.name(target), self.setting_value(cell)?));
                         continue;
                     }
-                    out.push(format!("{} = 1", o.switch));
-                    out.push(format!("{} = {}", o.value, self.setting_value(cell)?));
+                    out.push((o.switch.clone(), Value::Number(1.0)));
+                    out.push((o.value.clone(), self.setting_value(cell)?));
                     continue;
                 }
                 if !model_parameters.contains(target) {
@@ -100,7 +98,7 @@ impl Builder<'_> {
                         "`{target}` is estimated (parameter table) and set by a condition"
                     )));
                 }
-                out.push(format!("{} = {}", self.name(target), self.setting_value(cell)?));
+                out.push((self.name(target), self.setting_value(cell)?));
             }
         }
         Ok((out, initial))
@@ -109,16 +107,15 @@ impl Builder<'_> {
     /// A condition cell as the value of a `set` entry: a finite number, a parameter the
     /// parameter table fixes (its nominal value), or the name of an estimated or SBML
     /// parameter.
-    pub(crate) fn setting_value(&self, cell: Cell<'_>) -> Result<String, ModelError> {
+    pub(crate) fn setting_value(&self, cell: Cell<'_>) -> Result<Value, ModelError> {
+        let name = || Value::Expr(Expr::Name(self.name(cell.text), 0));
         Ok(match tsv::parse_number(cell.text) {
-            Some(v) if v.is_finite() => toml_number(v),
+            Some(v) if v.is_finite() => Value::Number(v),
             Some(v) => return Err(cell.err(format!("{v} is not a finite number"))),
             None => match self.parameters.get(cell.text) {
-                Some((p, _)) if !p.estimate => toml_number(p.nominal),
-                Some(_) => format!("\"{}\"", self.name(cell.text)),
-                None if self.sbml.parameters.iter().any(|p| p.0 == cell.text) => {
-                    format!("\"{}\"", self.name(cell.text))
-                }
+                Some((p, _)) if !p.estimate => Value::Number(p.nominal),
+                Some(_) => name(),
+                None if self.sbml.parameters.iter().any(|p| p.0 == cell.text) => name(),
                 None => {
                     return Err(cell.err(format!(
                         "`{}` is not a number, nor a parameter of the model or the parameter table",

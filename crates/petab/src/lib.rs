@@ -28,12 +28,14 @@
 //!   t = 0.
 //!
 //! `parts` holds what these stages hand each other (outputs, experiments, states).
-//! `rendering` writes the model file's text with a source map back to the tables and the
-//! SBML, so that every error names the file, the line and the column of what caused it.
+//! `document` builds the model file's document: its expressions as trees, each key and value
+//! with its place in the tables or the SBML, so that every error names the file, the line and
+//! the column of what caused it. The model file's reader checks it as it checks a file.
 //! What is not supported (events with delays, algebraic rules, …) is refused by name.
 #![warn(missing_docs)]
 
 mod conditions;
+mod document;
 mod dynamics;
 mod events;
 pub mod math;
@@ -41,7 +43,6 @@ mod measurements;
 mod observables;
 mod parameters;
 mod parts;
-mod rendering;
 pub mod sbml;
 pub mod tsv;
 
@@ -323,29 +324,17 @@ impl<'a> Builder<'a> {
         let outputs = self.output_names(&measured.outputs, &dynamics.states, &parameters);
         let (measured, experiments) =
             self.merge_same_simulations(measured, &parameters, &dynamics.states)?;
-        let (text, source_map) =
-            self.model_text(&dynamics, &measured, (&parameters, &extras), &outputs, &experiments)?;
-        // An error in the text is the user's where the map knows the line's origin (a
-        // division by 0 in a formula, say); elsewhere it is the importer's.
-        let mut file = ModelFile::parse(&text, self.yaml).map_err(|e| {
-            source_map.find(&e).unwrap_or_else(|| ModelError {
-                message: format!(
-                    "the model file made of this PEtab problem is refused, which is a bug of the importer: {} (line {} of the text it made)",
-                    e.message,
-                    e.line.unwrap_or(0)
-                ),
-                line: None,
-                column: None,
-                ..e
-            })
-        })?;
-        file.source_map = source_map;
+        let document =
+            self.document(&dynamics, &measured, (&parameters, &extras), &outputs, &experiments)?;
+        // An error is the user's where its key or value has a place in the problem's files
+        // (a division by 0 in a formula, say); elsewhere it is the importer's.
+        let mut file = ModelFile::from_document(&document, self.yaml)?;
         for (spec, (_, rows)) in file.experiments.clone().iter().zip(&measured.experiments) {
             file.tables.push((spec.file.clone(), data_table(spec, rows, &outputs)?));
         }
         Ok(Imported {
+            text: file.text.clone(),
             model: Model { file },
-            text,
             warnings: self.warnings.clone(),
             nominal: self.outside.clone(),
         })

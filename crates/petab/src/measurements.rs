@@ -5,7 +5,7 @@ use sysid_model::ModelError;
 use sysid_model::table::Table;
 
 use crate::observables::{Observable, placeholders};
-use crate::parts::{Key, Measured, OWN, Output, Sample, Sigma, Simulation, condition_row};
+use crate::parts::{Key, Measured, Output, Sample, Sigma, Simulation, condition_row};
 use crate::tsv::{Cell, Tsv};
 use crate::{Builder, at};
 
@@ -197,7 +197,7 @@ impl Builder<'_> {
         let noise_math = self.resolve_names(&self.dynamic(&noise), oc, states, Some(oc.text))?;
         Ok(Output {
             observable: oc.text.to_string(),
-            value: value_math.render(&|n| self.name(n)),
+            value: value_math,
             sigma: match noise_math.number() {
                 Some(v) if sysid_model::file::check_sigma(v).is_ok() => Sigma::Number(v),
                 Some(v) => {
@@ -210,9 +210,7 @@ impl Builder<'_> {
                         _ => at(&observable.noise_at, message),
                     });
                 }
-                None => Sigma::Expression(noise_math.render(&|n| {
-                    if n == OWN { OWN.to_string() } else { self.name(n) }
-                })),
+                None => Sigma::Expression(noise_math),
             },
             transform: observable.transform,
             distribution: observable.distribution,

@@ -1,12 +1,11 @@
 //! The parameter table: each parameter's scale, bounds, nominal value, prior and where
 //! multistart draws it; which of them the model file knows and which it estimates.
 
-use std::fmt::Write as _;
-
 use sysid_model::ModelError;
+use sysid_model::file::document::{Table, Value};
 
 use crate::math::Math;
-use crate::parts::{Dynamics, Measured, Sigma, scale_of, toml_number};
+use crate::parts::{Dynamics, Measured, Sigma, scale_of};
 use crate::tsv::Tsv;
 use crate::{Builder, tsv};
 
@@ -160,12 +159,13 @@ impl Builder<'_> {
                 || s.compartments.iter().any(|c| c.0 == id)
                 || s.species.iter().any(|x| x.id == id)
         };
-        let in_outputs: Vec<String> = m.outputs.iter().flat_map(|o| names_in(&o.value)).collect();
+        let named = |m: &Math| m.names().into_iter().map(|n| self.name(&n)).collect::<Vec<_>>();
+        let in_outputs: Vec<String> = m.outputs.iter().flat_map(|o| named(&o.value)).collect();
         let elsewhere: Vec<String> = m
             .outputs
             .iter()
             .filter_map(|o| match &o.sigma {
-                Sigma::Expression(e) => Some(names_in(e)),
+                Sigma::Expression(e) => Some(named(e)),
                 Sigma::Number(_) => None,
             })
             .flatten()
@@ -227,28 +227,6 @@ fn constant_value(m: &Math) -> Option<f64> {
     let program =
         sysid_model::expr::Program::compile(&m.expr(&|n| n.to_string()), &|_| None).ok()?;
     program.is_constant().then(|| program.eval::<f64>(0.0, &[], &[], &[]))
-}
-
-/// The names of a rendered expression.
-pub(crate) fn names_in(text: &str) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut current = String::new();
-    let mut after_digit = false;
-    for ch in text.chars().chain(std::iter::once(' ')) {
-        if ch.is_alphanumeric() || ch == '_' {
-            if current.is_empty() && (ch.is_ascii_digit() || after_digit) {
-                after_digit = true;
-                continue;
-            }
-            current.push(ch);
-        } else {
-            after_digit = false;
-            if !current.is_empty() {
-                out.push(std::mem::take(&mut current));
-            }
-        }
-    }
-    out
 }
 
 /// The objective prior of row `row` of the parameter table, (distribution, mean or
@@ -358,33 +336,36 @@ pub(crate) fn initialization(
     Ok(Some((distribution, a, b, on)))
 }
 
-pub(crate) fn unknown_entry(p: &Parameter) -> String {
-    let mut s = format!("{{ guess = {}", toml_number(p.nominal));
+/// The `[unknowns]` entry of an estimated parameter: its guess, bounds, scale, prior and
+/// where multistart draws it, each at position `at`.
+pub(crate) fn unknown_entry(p: &Parameter, at: usize) -> Value {
+    let mut t = Table::new();
+    t.push("guess", Value::Number(p.nominal), at);
     if p.lower.is_finite() {
-        let _ = write!(s, ", min = {}", toml_number(p.lower));
+        t.push("min", Value::Number(p.lower), at);
     }
     if p.upper.is_finite() {
-        let _ = write!(s, ", max = {}", toml_number(p.upper));
+        t.push("max", Value::Number(p.upper), at);
     }
     if p.log {
-        s.push_str(", log = true");
+        t.push("log", Value::Bool(true), at);
     }
+    let string = |s: &str| Value::String(s.to_string());
     if let Some((distribution, mean, sd, on)) = p.prior {
-        let _ = write!(
-            s,
-            ", prior = {{ mean = {}, sd = {}, on = \"{on}\", distribution = \"{distribution}\" }}",
-            toml_number(mean),
-            toml_number(sd)
-        );
+        let mut prior = Table::new();
+        prior.push("mean", Value::Number(mean), at);
+        prior.push("sd", Value::Number(sd), at);
+        prior.push("on", string(on), at);
+        prior.push("distribution", string(distribution), at);
+        t.push("prior", Value::Table(prior), at);
     }
     if let Some((distribution, a, b, on)) = p.initialization {
-        let _ = write!(
-            s,
-            ", initialization = {{ distribution = \"{distribution}\", a = {}, b = {}, on = \"{on}\" }}",
-            toml_number(a),
-            toml_number(b)
-        );
+        let mut init = Table::new();
+        init.push("distribution", string(distribution), at);
+        init.push("a", Value::Number(a), at);
+        init.push("b", Value::Number(b), at);
+        init.push("on", string(on), at);
+        t.push("initialization", Value::Table(init), at);
     }
-    s.push_str(" }");
-    s
+    Value::Table(t)
 }

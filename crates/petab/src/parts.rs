@@ -1,10 +1,11 @@
 //! The pieces the importer's stages hand each other: the outputs and their σ, the
 //! experiments and their measurements, the states with their equations, and the small
-//! readers and writers of table cells and model-file numbers they share.
+//! readers of table cells they share.
 
 use std::collections::HashMap;
 
 use sysid_model::ModelError;
+use sysid_model::file::document::Value;
 
 use crate::math::Math;
 use crate::tsv::{Cell, Tsv};
@@ -13,7 +14,7 @@ use crate::tsv::{Cell, Tsv};
 #[derive(PartialEq)]
 pub(crate) struct Output {
     pub(crate) observable: String,
-    pub(crate) value: String,
+    pub(crate) value: Math,
     pub(crate) sigma: Sigma,
     pub(crate) transform: &'static str,
     /// "normal" or "laplace".
@@ -23,8 +24,8 @@ pub(crate) struct Output {
 #[derive(Clone, PartialEq)]
 pub(crate) enum Sigma {
     Number(f64),
-    /// An expression in which [`OWN`] stands for the output's own name.
-    Expression(String),
+    /// An expression in which [`OWN`] stands for the output's own value.
+    Expression(Math),
 }
 
 /// Stands for the output's own value in a σ expression until the output is named.
@@ -57,15 +58,15 @@ pub(crate) struct Measured {
 }
 
 /// A condition's entries of an experiment's `set`, and of its `initial` (the species it
-/// re-initialises after a preequilibration), as model-file text.
-pub(crate) type ConditionSettings = (Vec<String>, Vec<String>);
+/// re-initialises after a preequilibration): the model file's name and value of each.
+pub(crate) type ConditionSettings = (Vec<(String, Value)>, Vec<(String, Value)>);
 
-/// What an experiment sets, as model-file text: its condition's `set` and `initial`
+/// What an experiment sets: its condition's `set` and `initial`
 /// entries, its preequilibration's, whether it runs to its own steady state, and the other
 /// conditions it answers to (`also`: they set the same values).
 pub(crate) struct Simulation {
     pub(crate) settings: ConditionSettings,
-    pub(crate) preequilibrate: Option<Vec<String>>,
+    pub(crate) preequilibrate: Option<Vec<(String, Value)>>,
     pub(crate) steady: bool,
     pub(crate) also: Vec<String>,
 }
@@ -92,8 +93,4 @@ pub(crate) fn scale_of(cell: Option<Cell<'_>>, what: &str) -> Result<&'static st
         Some((_, "log10")) => Ok("log10"),
         Some((c, other)) => Err(c.err(format!("`{other}`: the {what} is lin, log or log10"))),
     }
-}
-
-pub(crate) fn toml_number(v: f64) -> String {
-    format!("{v:e}")
 }

@@ -2,8 +2,7 @@
 
 use std::path::Path;
 
-use toml::Spanned;
-use toml::de::DeValue;
+use super::document::Node;
 
 use super::reader::Reader;
 use super::{DataSpec, RecordKind};
@@ -13,7 +12,7 @@ use crate::error::ModelError;
 /// kind of record and the weights; refuses other keys.
 pub(super) fn read_data(
     r: &Reader<'_>,
-    value: Option<&Spanned<DeValue<'_>>>,
+    value: Option<&Node>,
     path: &Path,
 ) -> Result<DataSpec, ModelError> {
     let mut spec = DataSpec {
@@ -27,7 +26,7 @@ pub(super) fn read_data(
         return Ok(spec);
     };
     for (key, value) in r.table(value, "[data]")?.iter() {
-        match key.get_ref().as_ref() {
+        match key.name.as_str() {
             "file" => {
                 let f = r.string(value, "[data] file")?;
                 let base = path.parent().unwrap_or(Path::new(""));
@@ -35,13 +34,13 @@ pub(super) fn read_data(
             }
             "t0" => {
                 spec.t0 = r.number(value, "[data] t0")?;
-                spec.t0_at = Some(value.span().start);
+                spec.t0_at = Some(value.at);
             }
             "record" => spec.record = read_record(r, value)?,
             "weights" => spec.weights = read_weights(r, value)?,
             other => {
                 return Err(r.err(
-                    key.span().start,
+                    key.at,
                     format!("unknown key `{other}` in [data] (keys: file, t0, record, weights)"),
                 ));
             }
@@ -51,12 +50,12 @@ pub(super) fn read_data(
 }
 
 /// Reads `[data] record`: "discrete" or "continuous".
-fn read_record(r: &Reader<'_>, value: &Spanned<DeValue<'_>>) -> Result<RecordKind, ModelError> {
+fn read_record(r: &Reader<'_>, value: &Node) -> Result<RecordKind, ModelError> {
     match r.string(value, "[data] record")? {
         "discrete" => Ok(RecordKind::Discrete),
         "continuous" => Ok(RecordKind::Continuous),
         other => Err(r.err(
-            value.span().start,
+            value.at,
             format!("[data] record must be \"discrete\" or \"continuous\", got \"{other}\""),
         )),
     }
@@ -64,20 +63,16 @@ fn read_record(r: &Reader<'_>, value: &Spanned<DeValue<'_>>) -> Result<RecordKin
 
 /// Reads `[data.weights]`: a positive number per column, with the offset of the column's
 /// name (the data file, read later, says whether it is measured).
-fn read_weights(
-    r: &Reader<'_>,
-    value: &Spanned<DeValue<'_>>,
-) -> Result<Vec<(String, f64, usize)>, ModelError> {
+fn read_weights(r: &Reader<'_>, value: &Node) -> Result<Vec<(String, f64, usize)>, ModelError> {
     let mut weights = Vec::new();
     for (k, w) in r.table(value, "[data.weights]")?.iter() {
-        let weight = r.number(w, &format!("[data.weights] {}", k.get_ref()))?;
+        let weight = r.number(w, &format!("[data.weights] {}", k.name))?;
         if weight <= 0.0 {
-            return Err(r.err(
-                w.span().start,
-                format!("[data.weights] {} must be positive, got {weight}", k.get_ref()),
-            ));
+            return Err(
+                r.err(w.at, format!("[data.weights] {} must be positive, got {weight}", k.name))
+            );
         }
-        weights.push((k.get_ref().to_string(), weight, k.span().start));
+        weights.push((k.name.to_string(), weight, k.at));
     }
     Ok(weights)
 }

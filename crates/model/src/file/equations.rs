@@ -1,7 +1,7 @@
 //! The expressions of a model file: `[equations]`, one per state, and `[outputs]`.
 
+use super::document::{Node, Table, Value};
 use sysid_core::{NoiseDistribution, Transform};
-use toml::de::{DeTable, DeValue};
 
 use super::names::{Names, Scope};
 use super::reader::Reader;
@@ -13,8 +13,8 @@ use crate::expr::Program;
 /// state; returns them in state order.
 pub(super) fn read_equations(
     r: &Reader<'_>,
-    doc: &DeTable<'_>,
-    names: &Names<'_, '_>,
+    doc: &Table,
+    names: &Names<'_>,
     scope: &Scope,
 ) -> Result<Vec<Program>, ModelError> {
     let value = doc.get("equations").ok_or_else(|| {
@@ -22,10 +22,10 @@ pub(super) fn read_equations(
     })?;
     let mut equations: Vec<Option<Program>> = vec![None; names.states.len()];
     for (key, value) in r.table(value, "[equations]")?.iter() {
-        let name = key.get_ref();
+        let name = key.name.as_str();
         let Some(i) = scope.states.iter().position(|s| s == name) else {
             return Err(r.err(
-                key.span().start,
+                key.at,
                 format!(
                     "[equations]: `{name}` is not a state (states: {})",
                     scope.states.join(", ")
@@ -48,24 +48,24 @@ pub(super) fn read_equations(
 /// table `{ value, sigma, transform, distribution }`.
 pub(super) fn read_outputs(
     r: &Reader<'_>,
-    names: &Names<'_, '_>,
+    names: &Names<'_>,
     scope: &Scope,
 ) -> Result<Vec<OutputSpec>, ModelError> {
     names
         .outputs
         .iter()
         .map(|(key, value)| {
-            let name = key.get_ref().to_string();
-            let at = key.span().start;
+            let name = key.name.to_string();
+            let at = key.at;
             let what = format!("output {name}");
-            let DeValue::Table(t) = value.get_ref() else {
+            let Value::Table(t) = &value.value else {
                 let value = r.expression(value, &what, &|n| scope.resolve(n), &scope.listed)?;
                 let (noise, transform) = (NoiseSpec::Weights, Transform::Lin);
                 let distribution = NoiseDistribution::Normal;
                 return Ok(OutputSpec { name, value, noise, transform, distribution, at });
             };
             let expression = t.get("value").ok_or_else(|| {
-                r.err(value.span().start, format!("[outputs] {name}: a table needs `value`, the output's expression"))
+                r.err(value.at, format!("[outputs] {name}: a table needs `value`, the output's expression"))
             })?;
             let program = r.expression(expression, &what, &|n| scope.resolve(n), &scope.listed)?;
             let mut output = OutputSpec {
@@ -77,7 +77,7 @@ pub(super) fn read_outputs(
                 at,
             };
             for (k, v) in t.iter() {
-                match k.get_ref().as_ref() {
+                match k.name.as_str() {
                     "value" => {}
                     "sigma" => output.noise = read_sigma(r, &name, v, scope)?,
                     "transform" => {
@@ -87,7 +87,7 @@ pub(super) fn read_outputs(
                             "log10" => Transform::Log10,
                             other => {
                                 return Err(r.err(
-                                    v.span().start,
+                                    v.at,
                                     format!("[outputs] {name}.transform must be \"lin\", \"log\" or \"log10\", got \"{other}\""),
                                 ));
                             }
@@ -99,7 +99,7 @@ pub(super) fn read_outputs(
                             "laplace" => NoiseDistribution::Laplace,
                             other => {
                                 return Err(r.err(
-                                    v.span().start,
+                                    v.at,
                                     format!("[outputs] {name}.distribution must be \"normal\" or \"laplace\", got \"{other}\""),
                                 ));
                             }
@@ -107,7 +107,7 @@ pub(super) fn read_outputs(
                     }
                     other => {
                         return Err(r.err(
-                            k.span().start,
+                            k.at,
                             format!("[outputs] {name}: unknown key `{other}` (keys: value, sigma, transform, distribution)"),
                         ));
                     }
@@ -130,39 +130,36 @@ pub(super) fn read_outputs(
 fn read_sigma(
     r: &Reader<'_>,
     output: &str,
-    v: &toml::Spanned<DeValue<'_>>,
+    v: &Node,
     scope: &Scope,
 ) -> Result<NoiseSpec, ModelError> {
     let what = format!("[outputs] {output}.sigma");
-    match v.get_ref() {
-        DeValue::String(_) => {
+    match &v.value {
+        Value::String(_) | Value::Expr(_) => {
             let resolve = |n: &str| scope.resolve_sigma(n, output);
             let e = r.expression_with_names(v, &what, &resolve, &scope.sigma_names(output))?;
             if e.program.is_constant() {
                 let sigma = e.program.eval::<f64>(0.0, &[], &[], &[]);
-                check_sigma(sigma).map_err(|m| r.err(v.span().start, format!("{what} {m}")))?;
+                check_sigma(sigma).map_err(|m| r.err(v.at, format!("{what} {m}")))?;
                 return Ok(NoiseSpec::Number(sigma));
             }
             Ok(NoiseSpec::Expression(e))
         }
-        DeValue::Table(t) => {
+        Value::Table(t) => {
             let column = t.get("column").ok_or_else(|| {
                 r.err(
-                    v.span().start,
+                    v.at,
                     format!("{what}: a table takes `column = \"NAME\"`, the data column of σ"),
                 )
             })?;
-            if let Some((k, _)) = t.iter().find(|(k, _)| k.get_ref() != "column") {
-                return Err(r.err(
-                    k.span().start,
-                    format!("{what}: unknown key `{}` (keys: column)", k.get_ref()),
-                ));
+            if let Some((k, _)) = t.iter().find(|(k, _)| k.name != "column") {
+                return Err(r.err(k.at, format!("{what}: unknown key `{}` (keys: column)", k.name)));
             }
             Ok(NoiseSpec::Column(r.string(column, &format!("{what}.column"))?.to_string()))
         }
         _ => {
             let sigma = r.number(v, &what)?;
-            check_sigma(sigma).map_err(|m| r.err(v.span().start, format!("{what} {m}")))?;
+            check_sigma(sigma).map_err(|m| r.err(v.at, format!("{what} {m}")))?;
             Ok(NoiseSpec::Number(sigma))
         }
     }

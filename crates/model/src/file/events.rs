@@ -1,7 +1,6 @@
 //! `[[events]]`: where a condition on the state turns true, states are reset.
 
-use toml::Spanned;
-use toml::de::DeValue;
+use super::document::{Node, Value};
 
 use super::names::Scope;
 use super::reader::Reader;
@@ -14,18 +13,17 @@ use crate::expr::Slot;
 /// they are reset to, evaluated with the values just before the event.
 pub(super) fn read_events(
     r: &Reader<'_>,
-    value: Option<&Spanned<DeValue<'_>>>,
+    value: Option<&Node>,
     scope: &Scope,
     experiments: &[ExperimentSpec],
 ) -> Result<Vec<EventSpec>, ModelError> {
     let Some(value) = value else {
         return Ok(Vec::new());
     };
-    let DeValue::Array(items) = value.get_ref() else {
-        return Err(r.err(
-            value.span().start,
-            "`events` must be an array of tables: write each as [[events]]",
-        ));
+    let Value::Array(items) = &value.value else {
+        return Err(
+            r.err(value.at, "`events` must be an array of tables: write each as [[events]]")
+        );
     };
     // The events see states, parameters and t; inputs are refused by name below.
     let input = std::cell::Cell::new(None::<String>);
@@ -48,7 +46,7 @@ pub(super) fn read_events(
     for (number, item) in items.iter().enumerate() {
         let what = format!("event {}", number + 1);
         let table = r.table(item, "each [[events]]")?;
-        let at = item.span().start;
+        let at = item.at;
         let trigger = table.get("trigger").ok_or_else(|| {
             r.err(at, format!("[[events]] {what}: `trigger` is missing: the comparison that fires it, like \"lt(x, 1e-8)\""))
         })?;
@@ -61,10 +59,10 @@ pub(super) fn read_events(
         })?;
         let mut resets = Vec::new();
         for (key, value) in r.table(set, &format!("[[events]] {what}: set"))?.iter() {
-            let name = key.get_ref();
+            let name = key.name.as_str();
             let Some(i) = scope.states.iter().position(|s| s == name) else {
                 return Err(r.err(
-                    key.span().start,
+                    key.at,
                     format!(
                         "[[events]] {what}: `{name}` is not a state: an event resets states (states: {})",
                         scope.states.join(", ")
@@ -72,8 +70,8 @@ pub(super) fn read_events(
                 ));
             };
             let label = format!("{what}: {name}");
-            let reset = match value.get_ref() {
-                DeValue::String(_) => r
+            let reset = match &value.value {
+                Value::String(_) | Value::Expr(_) => r
                     .expression(value, &label, &resolve, &scope.listed)
                     .map_err(|e| no_inputs(&label, e))?,
                 _ => {
@@ -85,11 +83,11 @@ pub(super) fn read_events(
             resets.push((i, reset));
         }
         if let Some((k, _)) =
-            table.iter().find(|(k, _)| !["trigger", "set"].contains(&k.get_ref().as_ref()))
+            table.iter().find(|(k, _)| !["trigger", "set"].contains(&k.name.as_str()))
         {
             return Err(r.err(
-                k.span().start,
-                format!("[[events]] {what}: unknown key `{}` (keys: trigger, set)", k.get_ref()),
+                k.at,
+                format!("[[events]] {what}: unknown key `{}` (keys: trigger, set)", k.name),
             ));
         }
         out.push(EventSpec { condition, resets, at });

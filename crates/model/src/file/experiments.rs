@@ -3,8 +3,7 @@
 
 use std::path::Path;
 
-use toml::Spanned;
-use toml::de::DeValue;
+use super::document::{Node, Value};
 
 use super::names::Scope;
 use super::reader::Reader;
@@ -15,27 +14,27 @@ use crate::error::ModelError;
 /// preequilibrate, steady, initial, also }`.
 pub(super) fn read_experiments(
     r: &Reader<'_>,
-    value: Option<&Spanned<DeValue<'_>>>,
+    value: Option<&Node>,
     path: &Path,
     scope: &Scope,
 ) -> Result<Vec<ExperimentSpec>, ModelError> {
     let Some(value) = value else {
         return Ok(Vec::new());
     };
-    let DeValue::Array(items) = value.get_ref() else {
+    let Value::Array(items) = &value.value else {
         return Err(r.err(
-            value.span().start,
+            value.at,
             "`experiments` must be an array of tables: write each as [[experiments]]",
         ));
     };
     let mut out: Vec<ExperimentSpec> = Vec::with_capacity(items.len());
     for item in items {
         let table = r.table(item, "each [[experiments]]")?;
-        let name_value = table.get("name").ok_or_else(|| {
-            r.err(item.span().start, "[[experiments]]: an experiment needs `name`")
-        })?;
+        let name_value = table
+            .get("name")
+            .ok_or_else(|| r.err(item.at, "[[experiments]]: an experiment needs `name`"))?;
         let name = r.string(name_value, "[[experiments]] name")?.to_string();
-        let at = name_value.span().start;
+        let at = name_value.at;
         let valid = |name: &str| {
             !name.is_empty() && name.chars().all(|c| c.is_alphanumeric() || c == '_' || c == '-')
         };
@@ -48,9 +47,9 @@ pub(super) fn read_experiments(
             return Err(r.err(at, format!("[[experiments]]: two experiments are called `{name}`")));
         }
         let what = |key: &str| format!("experiment `{name}`: {key}");
-        let file = table.get("file").ok_or_else(|| {
-            r.err(item.span().start, what("`file` is missing: name its data file"))
-        })?;
+        let file = table
+            .get("file")
+            .ok_or_else(|| r.err(item.at, what("`file` is missing: name its data file")))?;
         let base = path.parent().unwrap_or(Path::new(""));
         let file_path = base.join(r.string(file, &what("file"))?);
         let mut spec = ExperimentSpec {
@@ -66,22 +65,21 @@ pub(super) fn read_experiments(
             at,
         };
         for (key, v) in table.iter() {
-            match key.get_ref().as_ref() {
+            match key.name.as_str() {
                 "name" | "file" => {}
                 "t0" => {
                     spec.t0 = r.number(v, &what("t0"))?;
-                    spec.t0_at = Some(v.span().start);
+                    spec.t0_at = Some(v.at);
                 }
                 "also" => {
-                    let DeValue::Array(items) = v.get_ref() else {
-                        return Err(r.err(
-                            v.span().start,
-                            what("also must be a list of names, like [\"a\", \"b\"]"),
-                        ));
+                    let Value::Array(items) = &v.value else {
+                        return Err(
+                            r.err(v.at, what("also must be a list of names, like [\"a\", \"b\"]"))
+                        );
                     };
                     for item in items {
                         let alias = r.string(item, &what("each entry of also"))?.to_string();
-                        let at = item.span().start;
+                        let at = item.at;
                         if !valid(&alias) {
                             return Err(r.err(
                                 at,
@@ -101,12 +99,12 @@ pub(super) fn read_experiments(
                     }
                 }
                 "steady" => {
-                    let DeValue::Boolean(steady) = v.get_ref() else {
-                        return Err(r.err(v.span().start, what("steady must be true or false")));
+                    let Value::Bool(steady) = &v.value else {
+                        return Err(r.err(v.at, what("steady must be true or false")));
                     };
                     if *steady && !scope.inputs.is_empty() {
                         return Err(r.err(
-                            v.span().start,
+                            v.at,
                             what("steady: a model with inputs has no steady state to run to"),
                         ));
                     }
@@ -115,7 +113,7 @@ pub(super) fn read_experiments(
                 key @ ("set" | "preequilibrate" | "initial") => {
                     if key == "preequilibrate" && !scope.inputs.is_empty() {
                         return Err(r.err(
-                            v.span().start,
+                            v.at,
                             what(
                                 "preequilibrate: a model with inputs has no steady state to run to",
                             ),
@@ -123,10 +121,10 @@ pub(super) fn read_experiments(
                     }
                     let mut list = Vec::new();
                     for (p, x) in r.table(v, &what(key))?.iter() {
-                        let parameter = p.get_ref().to_string();
+                        let parameter = p.name.to_string();
                         if key == "initial" && !scope.states.contains(&parameter) {
                             return Err(r.err(
-                                p.span().start,
+                                p.at,
                                 format!(
                                     "experiment `{name}`: initial `{parameter}`: not a state (states: {})",
                                     scope.states.join(", ")
@@ -135,7 +133,7 @@ pub(super) fn read_experiments(
                         }
                         if key != "initial" && !scope.parameters.contains(&parameter) {
                             return Err(r.err(
-                                p.span().start,
+                                p.at,
                                 format!(
                                     "experiment `{name}`: {key} `{parameter}`: not a parameter (parameters: {})",
                                     scope.parameters.join(", ")
@@ -143,8 +141,8 @@ pub(super) fn read_experiments(
                             ));
                         }
                         let key_what = what(&format!("{key} {parameter}"));
-                        let value = match x.get_ref() {
-                            DeValue::String(_) => {
+                        let value = match &x.value {
+                            Value::String(_) | Value::Expr(_) => {
                                 let resolve = |n: &str| scope.resolve_setting(n);
                                 SetValue::Expression(r.expression_with_names(
                                     x,
@@ -155,7 +153,7 @@ pub(super) fn read_experiments(
                             }
                             _ => SetValue::Number(r.number(x, &key_what)?),
                         };
-                        list.push((parameter, value, p.span().start));
+                        list.push((parameter, value, p.at));
                     }
                     match key {
                         "set" => spec.set = list,
@@ -165,7 +163,7 @@ pub(super) fn read_experiments(
                 }
                 other => {
                     return Err(r.err(
-                        key.span().start,
+                        key.at,
                         format!(
                             "experiment `{name}`: unknown key `{other}` (keys: name, file, t0, set, preequilibrate, steady, initial, also)"
                         ),

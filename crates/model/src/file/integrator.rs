@@ -1,8 +1,7 @@
 //! The `[integrator]` table: the scheme, tolerances and step budget.
 
+use super::document::Node;
 use sysid_ode::{Integrator, Scheme};
-use toml::Spanned;
-use toml::de::DeValue;
 
 use super::reader::Reader;
 use crate::error::ModelError;
@@ -11,14 +10,14 @@ use crate::error::ModelError;
 /// then the options' own validation, located at the table.
 pub(super) fn read_integrator(
     r: &Reader<'_>,
-    value: Option<&Spanned<DeValue<'_>>>,
+    value: Option<&Node>,
 ) -> Result<Integrator, ModelError> {
     let Some(value) = value else {
         return Ok(Integrator::default());
     };
     let mut integrator = Integrator::default();
     for (key, v) in r.table(value, "[integrator]")?.iter() {
-        match key.get_ref().as_ref() {
+        match key.name.as_str() {
             "method" => integrator.scheme = read_scheme(r, v)?,
             "rtol" => integrator.rtol = r.number(v, "[integrator] rtol")?,
             "atol" => integrator.atol = r.number(v, "[integrator] atol")?,
@@ -26,7 +25,7 @@ pub(super) fn read_integrator(
             "max_steps" => integrator.max_steps = r.number(v, "[integrator] max_steps")? as usize,
             other => {
                 return Err(r.err(
-                    key.span().start,
+                    key.at,
                     format!(
                         "unknown key `{other}` in [integrator] (keys: method, rtol, atol, step, max_steps)"
                     ),
@@ -37,13 +36,13 @@ pub(super) fn read_integrator(
     integrator.validate().map_err(|e| {
         // The file's key for the setting: `step` is the integrator's fixed step.
         let key = if e.name == "fixed_step" { "step" } else { e.name };
-        r.err(value.span().start, format!("[integrator] {key} {}", e.problem))
+        r.err(value.at, format!("[integrator] {key} {}", e.problem))
     })?;
     Ok(integrator)
 }
 
 /// Reads `[integrator] method`: "dopri5", "rk4", "rodas4", "rodas5p" or "auto".
-fn read_scheme(r: &Reader<'_>, v: &Spanned<DeValue<'_>>) -> Result<Scheme, ModelError> {
+fn read_scheme(r: &Reader<'_>, v: &Node) -> Result<Scheme, ModelError> {
     match r.string(v, "[integrator] method")? {
         "dopri5" => Ok(Scheme::Dopri5),
         "rk4" => Ok(Scheme::Rk4),
@@ -51,7 +50,7 @@ fn read_scheme(r: &Reader<'_>, v: &Spanned<DeValue<'_>>) -> Result<Scheme, Model
         "rodas5p" => Ok(Scheme::Rodas5p),
         "auto" => Ok(Scheme::Auto),
         other => Err(r.err(
-            v.span().start,
+            v.at,
             format!(
                 "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\" or \"auto\", got \"{other}\""
             ),

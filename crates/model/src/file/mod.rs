@@ -5,12 +5,12 @@ use std::path::{Path, PathBuf};
 
 use sysid_core::{NoiseDistribution, Transform, Unknown};
 use sysid_ode::{Integrator, Interpolation};
-use toml::de::DeTable;
 
 use crate::error::ModelError;
 use crate::expr::Program;
 
 mod data;
+pub mod document;
 mod equations;
 mod events;
 mod experiments;
@@ -20,13 +20,14 @@ mod reader;
 mod values;
 
 use data::read_data;
+use document::{Document, Table};
 pub use equations::{SIGMA_RANGE, check_sigma};
 use equations::{read_equations, read_outputs};
 use events::read_events;
 use experiments::read_experiments;
 use integrator::read_integrator;
 use names::{Names, Scope};
-use reader::Reader;
+use reader::{Positions, Reader};
 use values::{Values, read_unknowns, read_values};
 
 /// An expression of a model file that is not an equation (a setting, an initial value, a
@@ -156,8 +157,13 @@ pub struct DataSpec {
 pub struct ModelFile {
     /// Where it was read from.
     pub path: PathBuf,
-    /// Its text, for locating errors found later.
+    /// Its text: as written, or for a built document (an imported problem) as TOML
+    /// ([`Document::to_toml`]).
     pub text: String,
+    /// Empty where the positions (`at`) are byte offsets into `text`; for a built document,
+    /// where each position was written ([`Document::origins`]), so that an error found later
+    /// (σ at the start, say) names the user's file.
+    pub origins: Vec<ModelError>,
     /// State names.
     pub states: Vec<String>,
     /// Parameter names.
@@ -196,9 +202,6 @@ pub struct ModelFile {
     /// The files an imported problem was made from besides `path` (a PEtab problem's SBML
     /// and tables); empty for a model file.
     pub sources: Vec<PathBuf>,
-    /// Where an imported problem's lines come from, so that an error found in its text later
-    /// (σ at the start, say) names the user's file ([`SourceMap`](crate::SourceMap)).
-    pub source_map: crate::SourceMap,
 }
 
 /// The top-level keys: the sections of a model file.
@@ -234,9 +237,38 @@ impl ModelFile {
     /// `[unknowns]`, `[data]` and `[integrator]`. A leading byte-order mark is skipped.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ModelError> {
         let text = crate::table::without_bom(text);
-        let r = Reader::new(path, text);
-        let doc = r.document()?;
-        let doc = doc.get_ref();
+        let file = path.display().to_string();
+        let doc = Document::parse(text).map_err(|(at, m)| ModelError::at(&file, text, at, m))?;
+        let mut model = Self::check(&doc.root, path, Positions::Text(text))?;
+        model.text = text.to_string();
+        Ok(model)
+    }
+
+    /// Checks a built document as [`parse`](Self::parse) checks a file's, each error located
+    /// at its key's or value's origin; `path` names the document (an error at a position
+    /// without an origin names it) and anchors relative data paths. Its expressions may be
+    /// trees ([`document::Value::Expr`]), compiled as they are.
+    pub fn from_document(doc: &Document, path: &Path) -> Result<Self, ModelError> {
+        let mut model = Self::check(&doc.root, path, Positions::Origins(&doc.origins))?;
+        model.text = doc.to_toml();
+        model.origins = doc.origins.clone();
+        Ok(model)
+    }
+
+    /// An error at position `at` of the document (a key's or value's `at`).
+    pub fn err(&self, at: usize, message: impl Into<String>) -> ModelError {
+        self.positions().err(&self.path.display().to_string(), at, message)
+    }
+
+    fn positions(&self) -> Positions<'_> {
+        match self.origins.is_empty() {
+            true => Positions::Text(&self.text),
+            false => Positions::Origins(&self.origins),
+        }
+    }
+
+    fn check(doc: &Table, path: &Path, positions: Positions<'_>) -> Result<Self, ModelError> {
+        let r = Reader::new(path, positions);
         check_top_level_keys(&r, doc)?;
         let names = Names::read(&r, doc)?;
         let mut scope = Scope::new(&names);
@@ -254,7 +286,7 @@ impl ModelFile {
         let data = read_data(&r, doc.get("data"), path)?;
         if let (Some(value), false) = (doc.get("data"), experiments.is_empty()) {
             return Err(r.err(
-                value.span().start,
+                value.at,
                 "[data] and [[experiments]] together: with experiments, each experiment names its own data file",
             ));
         }
@@ -275,7 +307,8 @@ impl ModelFile {
         let events = read_events(&r, doc.get("events"), &scope, &experiments)?;
         Ok(Self {
             path: path.to_path_buf(),
-            text: text.to_string(),
+            text: String::new(),
+            origins: Vec::new(),
             states: scope.states,
             parameters: scope.parameters,
             inputs: scope.inputs,
@@ -293,18 +326,17 @@ impl ModelFile {
             states_at: names.states_at,
             tables: Vec::new(),
             sources: Vec::new(),
-            source_map: crate::SourceMap::default(),
         })
     }
 }
 
 /// Checks every top-level key is one of the model file's sections.
-fn check_top_level_keys(r: &Reader<'_>, doc: &DeTable<'_>) -> Result<(), ModelError> {
+fn check_top_level_keys(r: &Reader<'_>, doc: &Table) -> Result<(), ModelError> {
     for (key, _) in doc.iter() {
-        if !TOP_LEVEL.contains(&key.get_ref().as_ref()) {
+        if !TOP_LEVEL.contains(&key.name.as_str()) {
             return Err(r.err(
-                key.span().start,
-                format!("unknown key `{}` (keys: {})", key.get_ref(), TOP_LEVEL.join(", ")),
+                key.at,
+                format!("unknown key `{}` (keys: {})", key.name, TOP_LEVEL.join(", ")),
             ));
         }
     }

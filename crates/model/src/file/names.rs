@@ -1,16 +1,15 @@
 //! The names a model file declares: `states`, `parameters`, `inputs` and the keys of
 //! `[outputs]`, each a valid identifier used once; and the scope expressions resolve them in.
 
+use super::document::{Node, Table, Value};
 use sysid_ode::Interpolation;
-use toml::Spanned;
-use toml::de::{DeTable, DeValue};
 
 use super::reader::{Entry, Reader};
 use crate::error::ModelError;
 use crate::expr::Slot;
 
 /// The declared names, each with the byte offset where it is written.
-pub(super) struct Names<'a, 'i> {
+pub(super) struct Names<'a> {
     /// State names, in state order.
     pub(super) states: Vec<(String, usize)>,
     /// Byte offset of the `states` value, to locate model-wide errors.
@@ -22,13 +21,13 @@ pub(super) struct Names<'a, 'i> {
     /// How inputs are interpolated between samples.
     pub(super) input_mode: Interpolation,
     /// The `[outputs]` entries: their expressions are compiled once every name is known.
-    pub(super) outputs: Vec<Entry<'a, 'i>>,
+    pub(super) outputs: Vec<Entry<'a>>,
 }
 
-impl<'a, 'i> Names<'a, 'i> {
+impl<'a> Names<'a> {
     /// Reads `states`, `parameters`, `inputs` and the `[outputs]` keys; checks each name is
     /// valid and used once.
-    pub(super) fn read(r: &Reader<'_>, doc: &'a DeTable<'i>) -> Result<Self, ModelError> {
+    pub(super) fn read(r: &Reader<'_>, doc: &'a Table) -> Result<Self, ModelError> {
         let (states, states_at) = read_states(r, doc)?;
         let parameters = match doc.get("parameters") {
             Some(v) => r.names(v, "parameters")?,
@@ -38,7 +37,7 @@ impl<'a, 'i> Names<'a, 'i> {
             None => (Vec::new(), Interpolation::Linear),
             Some(v) => read_inputs(r, v)?,
         };
-        let outputs: Vec<Entry<'a, 'i>> = match doc.get("outputs") {
+        let outputs: Vec<Entry<'a>> = match doc.get("outputs") {
             Some(v) => r.table(v, "[outputs]")?.iter().collect(),
             None => Vec::new(),
         };
@@ -52,7 +51,7 @@ impl<'a, 'i> Names<'a, 'i> {
     fn check_unique(&self, r: &Reader<'_>) -> Result<(), ModelError> {
         let mut seen: Vec<(&str, &str)> = Vec::new();
         let outputs_named: Vec<(String, usize)> =
-            self.outputs.iter().map(|(k, _)| (k.get_ref().to_string(), k.span().start)).collect();
+            self.outputs.iter().map(|(k, _)| (k.name.to_string(), k.at)).collect();
         for (kind, list) in [
             ("a state", &self.states),
             ("a parameter", &self.parameters),
@@ -77,54 +76,47 @@ impl<'a, 'i> Names<'a, 'i> {
 }
 
 /// Reads `states`: required, a non-empty list of names; returns them and the list's offset.
-fn read_states(
-    r: &Reader<'_>,
-    doc: &DeTable<'_>,
-) -> Result<(Vec<(String, usize)>, usize), ModelError> {
+fn read_states(r: &Reader<'_>, doc: &Table) -> Result<(Vec<(String, usize)>, usize), ModelError> {
     let value =
         doc.get("states").ok_or_else(|| r.file_err("`states` is missing: list the state names"))?;
     let states = r.names(value, "states")?;
     if states.is_empty() {
-        return Err(
-            r.err(value.span().start, "`states` is empty: a model needs at least one state")
-        );
+        return Err(r.err(value.at, "`states` is empty: a model needs at least one state"));
     }
-    Ok((states, value.span().start))
+    Ok((states, value.at))
 }
 
 /// Reads `inputs`: a list of names (linear between samples) or a table `{ names, mode }`.
 fn read_inputs(
     r: &Reader<'_>,
-    value: &Spanned<DeValue<'_>>,
+    value: &Node,
 ) -> Result<(Vec<(String, usize)>, Interpolation), ModelError> {
-    match value.get_ref() {
-        DeValue::Array(_) => Ok((r.names(value, "inputs")?, Interpolation::Linear)),
-        DeValue::Table(t) => read_inputs_table(r, value, t),
-        _ => Err(
-            r.err(value.span().start, "`inputs` must be a list of names or a table {names, mode}")
-        ),
+    match &value.value {
+        Value::Array(_) => Ok((r.names(value, "inputs")?, Interpolation::Linear)),
+        Value::Table(t) => read_inputs_table(r, value, t),
+        _ => Err(r.err(value.at, "`inputs` must be a list of names or a table {names, mode}")),
     }
 }
 
 /// Reads the `[inputs]` table: `names` is required, `mode` is checked before stray keys.
 fn read_inputs_table(
     r: &Reader<'_>,
-    value: &Spanned<DeValue<'_>>,
-    t: &DeTable<'_>,
+    value: &Node,
+    t: &Table,
 ) -> Result<(Vec<(String, usize)>, Interpolation), ModelError> {
     let names = match t.get("names") {
         Some(n) => r.names(n, "inputs.names")?,
-        None => return Err(r.err(value.span().start, "[inputs] needs `names = [...]`")),
+        None => return Err(r.err(value.at, "[inputs] needs `names = [...]`")),
     };
     let mode = match t.get("mode") {
         None => Interpolation::Linear,
         Some(m) => read_input_mode(r, m)?,
     };
     for (key, _) in t.iter() {
-        if !["names", "mode"].contains(&key.get_ref().as_ref()) {
+        if !["names", "mode"].contains(&key.name.as_str()) {
             return Err(r.err(
-                key.span().start,
-                format!("unknown key `{}` in [inputs] (keys: names, mode)", key.get_ref()),
+                key.at,
+                format!("unknown key `{}` in [inputs] (keys: names, mode)", key.name),
             ));
         }
     }
@@ -132,14 +124,13 @@ fn read_inputs_table(
 }
 
 /// Reads `inputs.mode`: "linear" or "step".
-fn read_input_mode(r: &Reader<'_>, m: &Spanned<DeValue<'_>>) -> Result<Interpolation, ModelError> {
+fn read_input_mode(r: &Reader<'_>, m: &Node) -> Result<Interpolation, ModelError> {
     match r.string(m, "inputs.mode")? {
         "linear" => Ok(Interpolation::Linear),
         "step" => Ok(Interpolation::Step),
-        other => Err(r.err(
-            m.span().start,
-            format!("inputs.mode must be \"linear\" or \"step\", got \"{other}\""),
-        )),
+        other => {
+            Err(r.err(m.at, format!("inputs.mode must be \"linear\" or \"step\", got \"{other}\"")))
+        }
     }
 }
 
@@ -165,7 +156,7 @@ pub(super) struct Scope {
 
 impl Scope {
     /// The scope of the declared states, parameters and inputs.
-    pub(super) fn new(names: &Names<'_, '_>) -> Self {
+    pub(super) fn new(names: &Names<'_>) -> Self {
         let plain = |list: &[(String, usize)]| list.iter().map(|s| s.0.clone()).collect();
         let states: Vec<String> = plain(&names.states);
         let parameters: Vec<String> = plain(&names.parameters);

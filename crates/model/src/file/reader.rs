@@ -1,12 +1,10 @@
-//! Reading TOML values with their positions: numbers, strings, tables, names and
+//! Reading a document's values with their positions: numbers, strings, tables, names and
 //! expressions, each failing with a message located in the file.
 
 use std::path::Path;
 
-use toml::Spanned;
-use toml::de::{DeTable, DeValue};
-
 use super::Expression;
+use super::document::{Key, Node, Table, Value};
 use crate::error::{ModelError, char_offset};
 use crate::expr::{self, Program, Slot};
 
@@ -14,27 +12,47 @@ use crate::expr::{self, Program, Slot};
 const RESERVED: &[&str] =
     &["t", "exp", "log", "sqrt", "sin", "cos", "tan", "tanh", "abs", "min", "max"];
 
-/// The file being read: its name and text, to locate every error.
-pub(super) struct Reader<'a> {
-    file: String,
-    text: &'a str,
+/// What the positions of a document refer to.
+#[derive(Clone, Copy)]
+pub(super) enum Positions<'a> {
+    /// Byte offsets into the file's text.
+    Text(&'a str),
+    /// Indices into the origins of a built document: where each key and value was written.
+    Origins(&'a [ModelError]),
+}
+
+impl Positions<'_> {
+    /// An error at position `at` of the document called `file`.
+    pub(crate) fn err(self, file: &str, at: usize, message: impl Into<String>) -> ModelError {
+        match self {
+            Positions::Text(text) => ModelError::at(file, text, at, message),
+            Positions::Origins(origins) => match origins.get(at) {
+                Some(o) => ModelError {
+                    file: o.file.clone(),
+                    line: o.line,
+                    column: o.column,
+                    message: format!("{}{}", o.message, message.into()),
+                },
+                None => ModelError::file(file, message),
+            },
+        }
+    }
 }
 
 /// A key of a table and its value.
-pub(super) type Entry<'a, 'i> = (&'a Spanned<std::borrow::Cow<'i, str>>, &'a Spanned<DeValue<'i>>);
+pub(super) type Entry<'a> = (&'a Key, &'a Node);
+
+/// The document being read: its file's name and what its positions refer to, to locate
+/// every error.
+pub(super) struct Reader<'a> {
+    file: String,
+    positions: Positions<'a>,
+}
 
 impl<'a> Reader<'a> {
-    /// A reader of `text`, naming it after `path` in errors.
-    pub(super) fn new(path: &Path, text: &'a str) -> Self {
-        Self { file: path.display().to_string(), text }
-    }
-
-    /// Parses the text as TOML, keeping every key's and value's position.
-    pub(super) fn document(&self) -> Result<Spanned<DeTable<'a>>, ModelError> {
-        DeTable::parse(self.text).map_err(|e| {
-            let at = e.span().map_or(0, |s| s.start);
-            self.err(at, format!("TOML syntax error: {}", e.message().trim()))
-        })
+    /// A reader of a document at `path` whose positions are `positions`.
+    pub(super) fn new(path: &Path, positions: Positions<'a>) -> Self {
+        Self { file: path.display().to_string(), positions }
     }
 
     /// An error about the whole file, with no position.
@@ -42,75 +60,54 @@ impl<'a> Reader<'a> {
         ModelError::file(&self.file, message)
     }
 
-    /// An error at a byte offset of the file.
-    pub(super) fn err(&self, offset: usize, message: impl Into<String>) -> ModelError {
-        ModelError::at(&self.file, self.text, offset, message)
+    /// An error at a position of the document.
+    pub(super) fn err(&self, at: usize, message: impl Into<String>) -> ModelError {
+        self.positions.err(&self.file, at, message)
     }
 
-    /// A finite number (TOML integer or float).
-    pub(super) fn number(
-        &self,
-        value: &Spanned<DeValue<'_>>,
-        what: &str,
-    ) -> Result<f64, ModelError> {
-        let at = value.span().start;
-        let v = match value.get_ref() {
-            DeValue::Integer(i) => {
-                let digits: String = i.as_str().chars().filter(|c| *c != '_').collect();
-                i64::from_str_radix(&digits, i.radix()).map(|v| v as f64).ok()
-            }
-            DeValue::Float(f) => f.as_str().replace('_', "").parse::<f64>().ok(),
-            _ => None,
+    /// A finite number.
+    pub(super) fn number(&self, value: &Node, what: &str) -> Result<f64, ModelError> {
+        let Value::Number(v) = value.value else {
+            return Err(self.err(value.at, format!("{what} must be a number")));
         };
-        let v = v.ok_or_else(|| self.err(at, format!("{what} must be a number")))?;
         if !v.is_finite() {
-            return Err(self.err(at, format!("{what} must be a finite number, got {v}")));
+            return Err(self.err(value.at, format!("{what} must be a finite number, got {v}")));
         }
         Ok(v)
     }
 
     /// A string.
-    pub(super) fn string<'v>(
-        &self,
-        value: &'v Spanned<DeValue<'_>>,
-        what: &str,
-    ) -> Result<&'v str, ModelError> {
-        match value.get_ref() {
-            DeValue::String(s) => Ok(s),
-            _ => Err(self.err(value.span().start, format!("{what} must be a string"))),
+    pub(super) fn string<'v>(&self, value: &'v Node, what: &str) -> Result<&'v str, ModelError> {
+        match &value.value {
+            Value::String(s) => Ok(s),
+            _ => Err(self.err(value.at, format!("{what} must be a string"))),
         }
     }
 
     /// A table.
-    pub(super) fn table<'v, 'i>(
-        &self,
-        value: &'v Spanned<DeValue<'i>>,
-        what: &str,
-    ) -> Result<&'v DeTable<'i>, ModelError> {
-        match value.get_ref() {
-            DeValue::Table(t) => Ok(t),
-            _ => Err(self.err(value.span().start, format!("{what} must be a table"))),
+    pub(super) fn table<'v>(&self, value: &'v Node, what: &str) -> Result<&'v Table, ModelError> {
+        match &value.value {
+            Value::Table(t) => Ok(t),
+            _ => Err(self.err(value.at, format!("{what} must be a table"))),
         }
     }
 
     /// A list of names: strings, each a valid identifier.
     pub(super) fn names(
         &self,
-        value: &Spanned<DeValue<'_>>,
+        value: &Node,
         what: &str,
     ) -> Result<Vec<(String, usize)>, ModelError> {
-        let DeValue::Array(items) = value.get_ref() else {
-            return Err(self.err(
-                value.span().start,
-                format!("`{what}` must be a list of names, like [\"x\", \"y\"]"),
-            ));
+        let Value::Array(items) = &value.value else {
+            return Err(self
+                .err(value.at, format!("`{what}` must be a list of names, like [\"x\", \"y\"]")));
         };
         items
             .iter()
             .map(|item| {
                 let name = self.string(item, &format!("each entry of `{what}`"))?;
-                self.identifier(name, item.span().start)?;
-                Ok((name.to_string(), item.span().start))
+                self.identifier(name, item.at)?;
+                Ok((name.to_string(), item.at))
             })
             .collect()
     }
@@ -129,29 +126,32 @@ impl<'a> Reader<'a> {
         Ok(())
     }
 
-    /// Compiles an expression string with the names it uses, locating its errors in the
-    /// file.
+    /// Compiles an expression with the names it uses, locating its errors in the file.
     pub(super) fn expression_with_names(
         &self,
-        value: &Spanned<DeValue<'_>>,
+        value: &Node,
         what: &str,
         resolve: &dyn Fn(&str) -> Option<Slot>,
         names: &str,
     ) -> Result<Expression, ModelError> {
-        let program = self.expression(value, what, resolve, names)?;
-        let text = self.string(value, what)?.to_string();
-        let parsed = expr::parse(&text).expect("compiled above");
+        let parsed = self.parsed(value, what, names)?;
+        let program = Program::compile(&parsed, resolve)
+            .map_err(|e| self.expression_err(value, what, names, e))?;
+        let text = match &value.value {
+            Value::String(text) => text.clone(),
+            _ => parsed.text(),
+        };
         let bare = match &parsed {
             expr::Expr::Name(name, _) => Some(name.clone()),
             _ => None,
         };
-        Ok(Expression { uses: parsed.names(), text, program, at: value.span().start, bare })
+        Ok(Expression { uses: parsed.names(), text, program, at: value.at, bare })
     }
 
-    /// Compiles an expression string, locating its errors in the file.
+    /// Compiles an expression, locating its errors in the file.
     pub(super) fn expression(
         &self,
-        value: &Spanned<DeValue<'_>>,
+        value: &Node,
         what: &str,
         resolve: &dyn Fn(&str) -> Option<Slot>,
         names: &str,
@@ -164,7 +164,7 @@ impl<'a> Reader<'a> {
     /// the trigger turns true.
     pub(super) fn trigger(
         &self,
-        value: &Spanned<DeValue<'_>>,
+        value: &Node,
         what: &str,
         resolve: &dyn Fn(&str) -> Option<Slot>,
         names: &str,
@@ -186,33 +186,61 @@ impl<'a> Reader<'a> {
         })
     }
 
-    /// Parses an expression string, rewrites it by `rewrite` (an error there is located at
-    /// the string) and compiles it, locating its errors in the file.
+    /// The expression a value holds, a string parsed or a tree as built, rewritten by
+    /// `rewrite` (an error there is located at the value) and compiled, locating its errors
+    /// in the file.
     fn compiled(
         &self,
-        value: &Spanned<DeValue<'_>>,
+        value: &Node,
         what: &str,
         resolve: &dyn Fn(&str) -> Option<Slot>,
         names: &str,
         rewrite: impl FnOnce(expr::Expr) -> Result<expr::Expr, String>,
     ) -> Result<Program, ModelError> {
-        let text = self.string(value, what)?;
-        let start = value.span().start;
-        let quote =
-            if self.text[start..].starts_with("\"\"\"") || self.text[start..].starts_with("'''") {
-                3
-            } else {
-                1
-            };
-        let locate = |e: expr::ExprError| {
-            let mut message = format!("{what}: {}", e.message);
-            if e.message.starts_with("unknown name") {
-                message += &format!(" (names: {names})");
+        let parsed = self.parsed(value, what, names)?;
+        let parsed = rewrite(parsed).map_err(|m| self.err(value.at, m))?;
+        Program::compile(&parsed, resolve).map_err(|e| self.expression_err(value, what, names, e))
+    }
+
+    /// The expression of a value: a string parsed, or a built tree.
+    fn parsed(&self, value: &Node, what: &str, names: &str) -> Result<expr::Expr, ModelError> {
+        match &value.value {
+            Value::Expr(e) => match e.check() {
+                Ok(()) => Ok(e.clone()),
+                Err(error) => Err(self.expression_err(value, what, names, error)),
+            },
+            Value::String(text) => {
+                expr::parse(text).map_err(|e| self.expression_err(value, what, names, e))
             }
-            self.err(char_offset(self.text, start + quote, e.position), message)
-        };
-        let parsed = expr::parse(text).map_err(locate)?;
-        let parsed = rewrite(parsed).map_err(|m| self.err(start, m))?;
-        Program::compile(&parsed, resolve).map_err(locate)
+            _ => Err(self.err(value.at, format!("{what} must be a string"))),
+        }
+    }
+
+    /// The error `e` of the expression `value` holds: at its character in a string of the
+    /// text, at the value's origin in a built document.
+    fn expression_err(
+        &self,
+        value: &Node,
+        what: &str,
+        names: &str,
+        e: expr::ExprError,
+    ) -> ModelError {
+        let mut message = format!("{what}: {}", e.message);
+        if e.message.starts_with("unknown name") {
+            message += &format!(" (names: {names})");
+        }
+        match (self.positions, &value.value) {
+            (Positions::Text(text), Value::String(_)) => {
+                let start = value.at;
+                let quote =
+                    if text[start..].starts_with("\"\"\"") || text[start..].starts_with("'''") {
+                        3
+                    } else {
+                        1
+                    };
+                self.err(char_offset(text, start + quote, e.position), message)
+            }
+            _ => self.err(value.at, message),
+        }
     }
 }

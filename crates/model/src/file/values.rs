@@ -1,9 +1,8 @@
 //! What is known and what is unknown: `[unknowns]`, `[initial]` and `[known]`, which together
 //! (with what every experiment sets) give every state and parameter exactly once.
 
+use super::document::{Node, Table, Value};
 use sysid_core::{Distribution, Initialization, Prior, Transform, Unknown};
-use toml::Spanned;
-use toml::de::{DeTable, DeValue};
 
 use super::names::{Names, Scope};
 use super::reader::Reader;
@@ -23,8 +22,8 @@ pub(super) struct Values {
 /// nothing more).
 pub(super) fn read_values(
     r: &Reader<'_>,
-    doc: &DeTable<'_>,
-    names: &Names<'_, '_>,
+    doc: &Table,
+    names: &Names<'_>,
     scope: &Scope,
     unknowns: &[Unknown],
     (outputs, experiments): (&[OutputSpec], &[ExperimentSpec]),
@@ -67,7 +66,7 @@ impl Given {
     fn check_complete(
         &self,
         r: &Reader<'_>,
-        names: &Names<'_, '_>,
+        names: &Names<'_>,
         experiments: &[ExperimentSpec],
     ) -> Result<(), ModelError> {
         for (name, at) in &names.states {
@@ -110,7 +109,7 @@ impl Given {
 /// parameters and unknowns.
 fn read_initial(
     r: &Reader<'_>,
-    doc: &DeTable<'_>,
+    doc: &Table,
     scope: &Scope,
     given: &mut Given,
 ) -> Result<Values, ModelError> {
@@ -119,17 +118,17 @@ fn read_initial(
     };
     let (mut known, mut expressions) = (Vec::new(), Vec::new());
     for (key, value) in r.table(value, "[initial]")?.iter() {
-        let name = key.get_ref();
+        let name = key.name.as_str();
         if !scope.states.iter().any(|n| n == name) {
             return Err(r.err(
-                key.span().start,
+                key.at,
                 format!("[initial]: `{name}` is not a state (names: {})", scope.states.join(", ")),
             ));
         }
-        given.mark(r, name, "initial", key.span().start)?;
+        given.mark(r, name, "initial", key.at)?;
         let what = format!("[initial] {name}");
-        match value.get_ref() {
-            DeValue::String(_) => {
+        match &value.value {
+            Value::String(_) | Value::Expr(_) => {
                 let resolve = |n: &str| scope.resolve_setting(n);
                 let e = r.expression_with_names(value, &what, &resolve, &scope.setting_names())?;
                 expressions.push((name.to_string(), e));
@@ -143,7 +142,7 @@ fn read_initial(
 /// Reads `[known]`: a finite number for each parameter it lists.
 fn read_known(
     r: &Reader<'_>,
-    doc: &DeTable<'_>,
+    doc: &Table,
     scope: &Scope,
     given: &mut Given,
 ) -> Result<Vec<(String, f64)>, ModelError> {
@@ -152,17 +151,17 @@ fn read_known(
     };
     let mut known = Vec::new();
     for (key, value) in r.table(value, "[known]")?.iter() {
-        let name = key.get_ref();
+        let name = key.name.as_str();
         if !scope.parameters.iter().any(|n| n == name) {
             return Err(r.err(
-                key.span().start,
+                key.at,
                 format!(
                     "[known]: `{name}` is not a parameter (names: {})",
                     scope.parameters.join(", ")
                 ),
             ));
         }
-        given.mark(r, name, "known", key.span().start)?;
+        given.mark(r, name, "known", key.at)?;
         known.push((name.to_string(), r.number(value, &format!("[known] {name}"))?));
     }
     Ok(known)
@@ -183,7 +182,7 @@ pub(super) struct Unknowns {
 /// their own, and every key's byte offset.
 pub(super) fn read_unknowns(
     r: &Reader<'_>,
-    doc: &DeTable<'_>,
+    doc: &Table,
     scope: &Scope,
 ) -> Result<Unknowns, ModelError> {
     let Some(value) = doc.get("unknowns") else {
@@ -193,20 +192,20 @@ pub(super) fn read_unknowns(
     let mut unknowns = Vec::new();
     let mut extras = Vec::new();
     for (key, value) in r.table(value, "[unknowns]")?.iter() {
-        let name = key.get_ref();
+        let name = key.name.as_str();
         let model = scope.states.iter().chain(&scope.parameters).any(|n| n == name);
         if !model {
-            r.identifier(name, key.span().start)?;
+            r.identifier(name, key.at)?;
             if scope.inputs.iter().any(|n| n == name) {
-                return Err(r.err(key.span().start, format!("[unknowns]: `{name}` is an input")));
+                return Err(r.err(key.at, format!("[unknowns]: `{name}` is an input")));
             }
-            extras.push((name.to_string(), key.span().start));
+            extras.push((name.to_string(), key.at));
         }
         if unknowns.iter().any(|u: &Unknown| u.name == *name) {
-            return Err(r.err(key.span().start, format!("[unknowns]: `{name}` is listed twice")));
+            return Err(r.err(key.at, format!("[unknowns]: `{name}` is listed twice")));
         }
         unknowns.push(read_unknown(r, name, value)?);
-        at.push((name.to_string(), key.span().start));
+        at.push((name.to_string(), key.at));
     }
     Ok(Unknowns { list: unknowns, extras, keys: at })
 }
@@ -247,37 +246,30 @@ fn check_unknowns_used(
 }
 
 /// Reads one unknown: a number, its guess, or a table `{ guess, min, max, log }`.
-fn read_unknown(
-    r: &Reader<'_>,
-    name: &str,
-    value: &Spanned<DeValue<'_>>,
-) -> Result<Unknown, ModelError> {
-    let DeValue::Table(t) = value.get_ref() else {
+fn read_unknown(r: &Reader<'_>, name: &str, value: &Node) -> Result<Unknown, ModelError> {
+    let Value::Table(t) = &value.value else {
         return Ok(Unknown::new(name, r.number(value, &format!("[unknowns] {name}"))?));
     };
-    let guess = t.get("guess").ok_or_else(|| {
-        r.err(value.span().start, format!("[unknowns] {name}: an unknown needs `guess`"))
-    })?;
+    let guess = t
+        .get("guess")
+        .ok_or_else(|| r.err(value.at, format!("[unknowns] {name}: an unknown needs `guess`")))?;
     let mut u = Unknown::new(name, r.number(guess, &format!("[unknowns] {name}.guess"))?);
     for (k, v) in t.iter() {
-        match k.get_ref().as_ref() {
+        match k.name.as_str() {
             "guess" => {}
             "min" => u.min = Some(r.number(v, &format!("[unknowns] {name}.min"))?),
             "max" => u.max = Some(r.number(v, &format!("[unknowns] {name}.max"))?),
-            "log" => match v.get_ref() {
-                DeValue::Boolean(b) => u.log = *b,
+            "log" => match &v.value {
+                Value::Bool(b) => u.log = *b,
                 _ => {
-                    return Err(r.err(
-                        v.span().start,
-                        format!("[unknowns] {name}.log must be true or false"),
-                    ));
+                    return Err(r.err(v.at, format!("[unknowns] {name}.log must be true or false")));
                 }
             },
             "prior" => u.prior = Some(read_prior(r, name, v)?),
             "initialization" => u.initialization = Some(read_initialization(r, name, v)?),
             other => {
                 return Err(r.err(
-                    k.span().start,
+                    k.at,
                     format!(
                         "[unknowns] {name}: unknown key `{other}` (keys: guess, min, max, log, prior, initialization)"
                     ),
@@ -294,14 +286,13 @@ fn read_unknown(
 fn read_initialization(
     r: &Reader<'_>,
     name: &str,
-    value: &Spanned<DeValue<'_>>,
+    value: &Node,
 ) -> Result<Initialization, ModelError> {
     let what = format!("[unknowns] {name}.initialization");
     let t = r.table(value, &what)?;
     let needed = |key: &str| {
-        t.get(key).ok_or_else(|| {
-            r.err(value.span().start, format!("{what}: an initialization needs `{key}`"))
-        })
+        t.get(key)
+            .ok_or_else(|| r.err(value.at, format!("{what}: an initialization needs `{key}`")))
     };
     let kind = needed("distribution")?;
     let distribution = match r.string(kind, &format!("{what}.distribution"))? {
@@ -310,7 +301,7 @@ fn read_initialization(
         "laplace" => Distribution::Laplace,
         other => {
             return Err(r.err(
-                kind.span().start,
+                kind.at,
                 format!("{what}.distribution: `{other}` (distributions: uniform, normal, laplace)"),
             ));
         }
@@ -319,12 +310,12 @@ fn read_initialization(
     let b = r.number(needed("b")?, &format!("{what}.b"))?;
     let mut on = Transform::Lin;
     for (k, v) in t.iter() {
-        match k.get_ref().as_ref() {
+        match k.name.as_str() {
             "distribution" | "a" | "b" => {}
             "on" => on = read_scale(r, v, &format!("{what}.on"))?,
             other => {
                 return Err(r.err(
-                    k.span().start,
+                    k.at,
                     format!("{what}: unknown key `{other}` (keys: distribution, a, b, on)"),
                 ));
             }
@@ -332,7 +323,7 @@ fn read_initialization(
     }
     let init = Initialization { distribution, a, b, on };
     if !init.is_valid() {
-        let at = t.get("b").map_or(value.span().start, |v| v.span().start);
+        let at = t.get("b").map_or(value.at, |v| v.at);
         let rule = match distribution {
             Distribution::Uniform => "a < b",
             _ => "b > 0",
@@ -346,44 +337,35 @@ fn read_initialization(
 }
 
 /// Reads a scale: "lin", "log" or "log10".
-fn read_scale(
-    r: &Reader<'_>,
-    v: &Spanned<DeValue<'_>>,
-    what: &str,
-) -> Result<Transform, ModelError> {
+fn read_scale(r: &Reader<'_>, v: &Node, what: &str) -> Result<Transform, ModelError> {
     match r.string(v, what)? {
         "lin" => Ok(Transform::Lin),
         "log" => Ok(Transform::Log),
         "log10" => Ok(Transform::Log10),
-        other => Err(r.err(v.span().start, format!("{what}: `{other}` (scales: lin, log, log10)"))),
+        other => Err(r.err(v.at, format!("{what}: `{other}` (scales: lin, log, log10)"))),
     }
 }
 
 /// Reads `prior = { mean, sd, on, distribution }`: a normal prior (`distribution =
 /// "normal"`, the default; or `"laplace"`, mean its location and sd its scale b) on the value
 /// (`on = "lin"`, the default), its natural logarithm (`"log"`) or its log10 (`"log10"`).
-fn read_prior(
-    r: &Reader<'_>,
-    name: &str,
-    value: &Spanned<DeValue<'_>>,
-) -> Result<Prior, ModelError> {
+fn read_prior(r: &Reader<'_>, name: &str, value: &Node) -> Result<Prior, ModelError> {
     let what = format!("[unknowns] {name}.prior");
     let t = r.table(value, &what)?;
     let number = |key: &str| -> Result<f64, ModelError> {
-        let v = t
-            .get(key)
-            .ok_or_else(|| r.err(value.span().start, format!("{what}: a prior needs `{key}`")))?;
+        let v =
+            t.get(key).ok_or_else(|| r.err(value.at, format!("{what}: a prior needs `{key}`")))?;
         r.number(v, &format!("{what}.{key}"))
     };
     let (mean, sd) = (number("mean")?, number("sd")?);
     if sd <= 0.0 || sd.is_nan() {
-        let at = t.get("sd").map_or(value.span().start, |v| v.span().start);
+        let at = t.get("sd").map_or(value.at, |v| v.at);
         return Err(r.err(at, format!("{what}.sd must be positive, got {sd}")));
     }
     let mut on = Transform::Lin;
     let mut laplace = false;
     for (k, v) in t.iter() {
-        match k.get_ref().as_ref() {
+        match k.name.as_str() {
             "mean" | "sd" => {}
             "on" => on = read_scale(r, v, &format!("{what}.on"))?,
             "distribution" => {
@@ -392,7 +374,7 @@ fn read_prior(
                     "laplace" => true,
                     other => {
                         return Err(r.err(
-                            v.span().start,
+                            v.at,
                             format!("{what}.distribution: `{other}` (normal, laplace)"),
                         ));
                     }
@@ -400,7 +382,7 @@ fn read_prior(
             }
             other => {
                 return Err(r.err(
-                    k.span().start,
+                    k.at,
                     format!("{what}: unknown key `{other}` (keys: mean, sd, on, distribution)"),
                 ));
             }
