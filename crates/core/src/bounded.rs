@@ -20,7 +20,7 @@ use faer::linalg::solvers::SolveLstsq;
 use nalgebra::{DMatrix, DVector};
 
 use crate::certificate::Bound;
-use crate::linalg::{NormalFactor, Singular, as_faer};
+use crate::linalg::{Condition, NormalFactor, Singular, as_faer};
 
 /// A convex quadratic q(x) that can be minimised over a subset of its variables.
 pub trait Subproblem {
@@ -38,7 +38,7 @@ pub trait Subproblem {
         free: &[usize],
         x: &mut [f64],
         max_condition: f64,
-    ) -> Result<f64, Singular>;
+    ) -> Result<Condition, Singular>;
     /// ∇q at x.
     fn gradient(&self, x: &[f64]) -> DVector<f64>;
 }
@@ -61,7 +61,7 @@ impl Subproblem for Quadratic<'_> {
         free: &[usize],
         x: &mut [f64],
         max_condition: f64,
-    ) -> Result<f64, Singular> {
+    ) -> Result<Condition, Singular> {
         let held: Vec<usize> = (0..x.len()).filter(|i| !free.contains(i)).collect();
         // H_FF x_F = −(c_F + H_FA x_A).
         let rhs = DVector::from_fn(free.len(), |r, _| {
@@ -73,7 +73,7 @@ impl Subproblem for Quadratic<'_> {
         for (v, &i) in factor.solve(&rhs).iter().zip(free) {
             x[i] = *v;
         }
-        Ok(factor.condition())
+        Ok(factor.conditioning())
     }
 
     fn gradient(&self, x: &[f64]) -> DVector<f64> {
@@ -99,11 +99,11 @@ impl Subproblem for LinearLeastSquares<'_> {
         free: &[usize],
         x: &mut [f64],
         max_condition: f64,
-    ) -> Result<f64, Singular> {
+    ) -> Result<Condition, Singular> {
         let columns = self.b.select_columns(free);
         // The conditioning (and the unknowns a singular block involves) from the scaled
         // normal matrix; the solution from QR, which does not square it.
-        let condition = NormalFactor::new(&columns.tr_mul(&columns), max_condition)?.condition();
+        let condition = NormalFactor::new(&columns.tr_mul(&columns), max_condition)?.conditioning();
         let mut target = -self.a.clone();
         for j in (0..x.len()).filter(|j| !free.contains(j)) {
             target.axpy(-x[j], &self.b.column(j), 1.0);
@@ -129,7 +129,7 @@ pub struct BoxSolution {
     /// The bound each variable is held on.
     pub active: Vec<Option<Bound>>,
     /// Condition number of the last free block solved (1 when every variable is held).
-    pub condition: f64,
+    pub condition: Condition,
 }
 
 /// Minimises `q` over lo ≤ x ≤ hi from the feasible `x0` by the primal active-set method
@@ -158,7 +158,7 @@ pub fn minimise_in_box(
             }
         })
         .collect();
-    let mut condition = 1.0;
+    let mut condition = Condition::known(1.0);
     // A bound per round is entered or left; strict convexity bounds the rounds, this caps them.
     for _ in 0..4 * k + 10 {
         // Solve on the free set; step towards its solution until a bound blocks.

@@ -135,7 +135,7 @@ impl Geodesic {
             delta,
             predicted,
             lambda: v.lambda,
-            condition: v.condition,
+            condition: v.condition.clone(),
         }))
     }
 }

@@ -127,7 +127,7 @@ pub mod method {
     };
     pub use crate::fit::start_coordinates;
     pub use crate::geodesic::{Accelerated, GEODESIC_H, GEODESIC_RATIO, Geodesic};
-    pub use crate::linalg::{NormalFactor, Singular, as_faer};
+    pub use crate::linalg::{Condition, NormalFactor, Singular, as_faer};
     pub use crate::options::MAX_DERIVED_GTOL;
     pub use crate::step::{Advance, Iterate, Proposal, Step};
     pub use crate::termination::{PROGRESS, PROGRESS_WINDOW, SETTLE, SETTLE_WINDOW};

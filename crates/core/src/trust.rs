@@ -23,7 +23,7 @@ use sysid_ode::System;
 use crate::bounded::{Quadratic, minimise_in_box};
 use crate::evaluate::Linearization;
 use crate::evaluations::Evaluations;
-use crate::linalg::Singular;
+use crate::linalg::{Condition, Singular};
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate};
 use crate::termination::{Failure, Rule};
@@ -85,7 +85,7 @@ pub struct CurveStep {
     /// Its λ (0 for the Gauss–Newton step).
     pub lambda: f64,
     /// The condition number of the system solved.
-    pub condition: f64,
+    pub condition: Condition,
 }
 
 /// How much of the scaling d_i an iterate keeps when √A_ii has fallen below it.
@@ -170,7 +170,7 @@ impl Curve {
             delta,
             predicted,
             lambda: 0.0,
-            condition: f64::NAN,
+            condition: Condition::known(f64::NAN),
         }
     }
 

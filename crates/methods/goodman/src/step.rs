@@ -84,7 +84,7 @@ pub fn newton_step(
     };
     Ok(NewtonStep {
         delta: DVector::from_vec(solution.x),
-        condition: solution.condition,
+        condition: solution.condition.value(),
         active: solution.active,
     })
 }

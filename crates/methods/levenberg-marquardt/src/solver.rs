@@ -376,7 +376,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         self.model(ev, lin)?;
         let trial = self.step(ev, lin)?;
         let z = ev.problem().unknowns().moved(&current.z, trial.delta.as_slice(), 1.0);
-        let condition = Some(trial.condition);
+        let condition = Some(trial.condition.value());
         self.proposed = Some(trial);
         Ok(Proposal { z, condition, gradient_norm: None, stop: None })
     }

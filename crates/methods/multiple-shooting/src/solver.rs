@@ -344,7 +344,7 @@ impl<S: System> Step<S> for Shooting {
             dz: solution.x,
             dnodes,
         };
-        Ok(self.proposal(problem, current, direction, solution.condition))
+        Ok(self.proposal(problem, current, direction, solution.condition.value()))
     }
 
     fn advance(
@@ -421,7 +421,12 @@ impl Shooting {
         let (solution, _) = self.bounded_step(problem, &current.z, &w.jacobian, &w.r)?;
         let z = problem.unknowns().moved(&current.z, &solution.x, 1.0);
         self.proposed = Some(Proposed::Merged(solution.x, Box::new(lin)));
-        Ok(Proposal { z, condition: Some(solution.condition), gradient_norm: None, stop: None })
+        Ok(Proposal {
+            z,
+            condition: Some(solution.condition.value()),
+            gradient_norm: None,
+            stop: None,
+        })
     }
 
     /// The minimiser of ‖r + JΔz‖² over the box the bounds leave around z.

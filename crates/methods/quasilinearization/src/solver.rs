@@ -191,7 +191,7 @@ impl<S: System> Step<S> for Quasi<'_> {
                     .within(ev.problem(), &lin, radius, self.options.driver.max_condition)
                     .map_err(|_| failure)?;
                 let z = ev.problem().unknowns().moved(&current.z, first.delta.as_slice(), 1.0);
-                let condition = Some(first.condition);
+                let condition = Some(first.condition.value());
                 self.proposed = Some(Proposed::Safeguard { lin: Box::new(lin), first });
                 Ok(Proposal { z, condition, gradient_norm: None, stop: None })
             }

@@ -344,7 +344,7 @@ impl LeastSquares {
     ) -> Result<(DVector<f64>, f64), Singular> {
         let problem = LinearLeastSquares { b: &self.b, a: &self.a };
         let solution = minimise_in_box(&problem, (lo, hi), start, max_condition)?;
-        Ok((DVector::from_vec(solution.x), solution.condition))
+        Ok((DVector::from_vec(solution.x), solution.condition.value()))
     }
 
     /// The linear family's residual at c, a + B c.
