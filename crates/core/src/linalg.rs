@@ -6,9 +6,9 @@
 //! depend on the units of the unknowns, so its condition number measures identifiability
 //! rather than scaling. It is the condition number sysid reports.
 
-use faer::linalg::solvers::Solve;
 use std::sync::{Arc, OnceLock};
 
+use faer::linalg::solvers::Solve;
 use faer::{MatMut, MatRef, Side};
 use nalgebra::{DMatrix, DVector};
 
