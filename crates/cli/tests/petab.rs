@@ -545,6 +545,47 @@ fn the_default_fit_of_fiedler_from_nominal_plus_a_tenth_reaches_the_peers_optimu
     assert!((again.nll.unwrap() - nll).abs() <= 1e-6, "{} against {nll}", again.nll.unwrap());
 }
 
+/// Giordano's seven noise scales are estimated, start at σ = 1 and fit residuals of about
+/// 1e-5: the round that holds them fits ε ≈ 1e-8 ever more closely, and before the round
+/// handed over to the scales' closed form it crawled for the whole budget of 1 000
+/// iterations, the NLL still the nominal 287.63 with every σ at 1. The default fit from
+/// nominal must end at or below pyPESTO + fides' −3484.259434 from the same start
+/// (`scripts/reference/fides_petab.json`, +1e-3), and each returned σ must be where the NLL
+/// is least along it: 1 % either side raises the NLL (an evaluation beside the fit, not its
+/// own measure).
+#[test]
+fn the_noise_scales_move_where_a_round_at_held_scales_would_crawl() {
+    let giordano = problem("Giordano_Nature2020");
+    // Not certified (exit 1): the fit still falls, by about 0.1 over its last 100 iterations.
+    let out = sysid(&["fit", "--petab", &giordano, "--format", "json"]);
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let nll = fit["nll"].as_f64().expect("an NLL");
+    assert!(nll <= -3484.259434 + 1e-3, "{nll} above fides' −3484.259434");
+    let estimates = fit["estimates"].as_object().expect("estimates");
+    let at = |name: &str, factor: f64| -> f64 {
+        let sets: Vec<String> = estimates
+            .iter()
+            .map(|(k, v)| {
+                let v = v.as_f64().expect("a value");
+                format!("{k}={:e}", if k == name { v * factor } else { v })
+            })
+            .collect();
+        let out = evaluate_at(vec!["evaluate", "--petab", &giordano], &sets);
+        out["nll"].as_f64().expect("an NLL")
+    };
+    let here = at("", 1.0);
+    assert!((here - nll).abs() <= 1e-6 * nll.abs(), "evaluate gives {here}, the fit {nll}");
+    let scales: Vec<&String> = estimates.keys().filter(|k| k.starts_with("sd_")).collect();
+    assert_eq!(scales.len(), 7);
+    for name in scales {
+        for factor in [0.99, 1.01] {
+            let moved = at(name, factor);
+            assert!(moved > here, "{name} × {factor}: {moved} below {here}");
+        }
+    }
+}
+
 /// The best known points away from the nominal values (`best_points.tsv`) are certified
 /// minima at the values `best_known.tsv` gives:
 /// - Elowitz's, in another basin than the nominal's and 2.39 lower (−65.633227 against

@@ -686,11 +686,25 @@ impl<S: System> Problem<S> {
     /// [`profile_gain`](Self::profile_gain) from the weighted residuals `r` at the trial
     /// point (evaluated at s), as [`residuals`](Self::residuals) gives them.
     pub fn profile_gain_of(&self, r: &DVector<f64>) -> f64 {
+        self.scale_gains(r, |_, _| true)
+    }
+
+    /// The part of [`profile_gain`](Self::profile_gain) at `lin` from the scales whose
+    /// closed form there is below the held value: the data are fitted more closely than the
+    /// held scales say, and the weights would grow (0 without residual rows).
+    pub fn tightening_gain(&self, lin: &Linearization) -> f64 {
+        lin.residuals.as_ref().map_or(0.0, |res| self.scale_gains(&res.r, |s, sigma| sigma < s))
+    }
+
+    /// Σ over the scales that `keep(s, σ)` of what moving scale g from s_g to its closed
+    /// form σ_g lowers ε by, ε_g (1 − (s_g/σ_g)²) − 2 n_g ln(σ_g/s_g) (each term ≥ 0).
+    fn scale_gains(&self, r: &DVector<f64>, keep: impl Fn(f64, f64) -> bool) -> f64 {
         let sums = self.scale_sums(r);
         let Some(sigma) = self.closed_form_of(&sums) else { return 0.0 };
         sums.iter()
             .zip(&sigma)
             .zip(&self.scales)
+            .filter(|((_, sigma), j)| keep(self.held[**j], **sigma))
             .map(|((&(sum, n), sigma), &j)| {
                 let (s, ratio) = (self.held[j], self.held[j] / sigma);
                 sum / (s * s) * (1.0 - ratio * ratio) + 2.0 * n as f64 * ratio.ln()

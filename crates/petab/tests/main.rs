@@ -53,7 +53,8 @@ fn nll_at_nominal_matches_amicis_reference() {
 /// reference (Beer, Brannmark, Schwen), AMICI 1.0.1's value at rtol 1e-12 where it stores
 /// none (Raia, whose σ repeats its observable's parameter; Alkan, a piecewise without
 /// otherwise), else the NLL of the collection's own simulated data (Raimundez, with Laplace
-/// priors; Armistead, Bertozzi, Blasi, Perelson, Rahman; Liu, whose event resets a state). The NLL of the model alone (no
+/// priors; Armistead, Bertozzi, Blasi, Giordano, Perelson, Rahman; Liu, whose event resets a
+/// state). The NLL of the model alone (no
 /// sensitivities), at the problems' default tolerances.
 #[test]
 fn more_of_the_collection_matches_its_references() {
@@ -76,6 +77,7 @@ fn more_of_the_collection_matches_its_references() {
         ("Schwen_PONE2014", "Schwen_PONE2014.yaml"),
         ("Blasi_CellSystems2016", "Blasi_CellSystems2016.yaml"),
         ("Liu_IFACPapersOnLine2025", "Liu_IFACPapersOnLine2025.yaml"),
+        ("Giordano_Nature2020", "Giordano_Nature2020.yaml"),
     ] {
         let path = data().join(problem).join(file);
         let imported = import(&path).unwrap_or_else(|e| panic!("{problem}: {e}"));
