@@ -689,11 +689,14 @@ impl<S: System> Problem<S> {
         self.scale_gains(r, |_, _| true)
     }
 
-    /// The part of [`profile_gain`](Self::profile_gain) at `lin` from the scales whose
-    /// closed form there is below the held value: the data are fitted more closely than the
-    /// held scales say, and the weights would grow (0 without residual rows).
-    pub fn tightening_gain(&self, lin: &Linearization) -> f64 {
-        lin.residuals.as_ref().map_or(0.0, |res| self.scale_gains(&res.r, |s, sigma| sigma < s))
+    /// [`profile_gain`](Self::profile_gain) at `lin` in two parts: from the scales whose
+    /// closed form there is below the held value (the data fitted more closely than the held
+    /// scales say: the weights would grow), and from the others (0 without residual rows).
+    pub fn split_gain(&self, lin: &Linearization) -> (f64, f64) {
+        let Some(res) = lin.residuals.as_ref() else { return (0.0, 0.0) };
+        let tightening = self.scale_gains(&res.r, |s, sigma| sigma < s);
+        let loosening = self.scale_gains(&res.r, |s, sigma| sigma >= s);
+        (tightening, loosening)
     }
 
     /// Σ over the scales that `keep(s, σ)` of what moving scale g from s_g to its closed
