@@ -52,8 +52,17 @@ def shifted_copy(folder: Path, into: Path) -> Path:
     return target
 
 
+def problem_yaml(folder: Path) -> Path:
+    """The problem's YAML file: `<folder>.yaml`, else `problem.yaml`, else the only one.
+    (Zhao's folder also holds `petab_test_*.yaml`, a variant whose files are absent.)"""
+    for name in (f"{folder.name}.yaml", "problem.yaml"):
+        if (folder / name).exists():
+            return folder / name
+    return next(folder.glob("*.yaml"))
+
+
 def fit(sysid: str, folder: Path) -> dict:
-    yaml = next(folder.glob("*.yaml"))
+    yaml = problem_yaml(folder)
     run = subprocess.run([sysid, "fit", "--petab", str(yaml), "--format", "json"],
                          capture_output=True, text=True)
     if not run.stdout.strip():
@@ -87,7 +96,8 @@ def main() -> None:
     args = parser.parse_args()
     sysid = os.environ.get("SYSID", "target/release/sysid")
     fides = json.loads(args.fides.read_text()) if args.fides else {}
-    names = sorted(p.name for p in args.folder.iterdir() if (p / f"{p.name}.yaml").exists())
+    names = sorted(p.name for p in args.folder.iterdir()
+                   if p.is_dir() and any(p.glob("*.yaml")))
     if args.only:
         names = [n for n in names if n in args.only.split(",")]
     print("| problem | from nominal: objective | it | s | fides | s "
