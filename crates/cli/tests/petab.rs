@@ -15,8 +15,13 @@ fn evaluate_at<'a>(mut args: Vec<&'a str>, sets: &'a [String]) -> serde_json::Va
     for set in sets {
         args.extend(["--set", set.as_str()]);
     }
-    let out = sysid(&args);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    json_of(&args, 0)
+}
+
+/// The JSON `sysid` prints with `args`, its exit code `code` asserted.
+fn json_of(args: &[&str], code: i32) -> serde_json::Value {
+    let out = sysid(args);
+    assert_eq!(out.status.code(), Some(code), "{}", String::from_utf8_lossy(&out.stderr));
     serde_json::from_slice(&out.stdout).expect("JSON")
 }
 
@@ -138,9 +143,7 @@ fn evaluate_gives_the_nll_and_its_gradient() {
 #[test]
 fn a_fit_reports_the_nll_at_its_own_estimates() {
     let boehm = problem("Boehm_JProteomeRes2014");
-    let out = sysid(&["fit", "--petab", &boehm, "--format", "json"]);
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let fit = json_of(&["fit", "--petab", &boehm, "--format", "json"], 0);
     assert_eq!(fit["converged"], true, "{fit}");
     let estimates = fit["estimates"].as_object().expect("estimates");
     let sets: Vec<String> = estimates
@@ -557,9 +560,7 @@ fn the_default_fit_of_fiedler_from_nominal_plus_a_tenth_reaches_the_peers_optimu
 fn the_noise_scales_move_where_a_round_at_held_scales_would_crawl() {
     let giordano = problem("Giordano_Nature2020");
     // Not certified (exit 1): the fit still falls, by about 0.1 over its last 100 iterations.
-    let out = sysid(&["fit", "--petab", &giordano, "--format", "json"]);
-    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
-    let fit: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let fit = json_of(&["fit", "--petab", &giordano, "--format", "json"], 1);
     let nll = fit["nll"].as_f64().expect("an NLL");
     assert!(nll <= -3484.259434 + 1e-3, "{nll} above fides' −3484.259434");
     let estimates = fit["estimates"].as_object().expect("estimates");
