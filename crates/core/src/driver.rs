@@ -144,10 +144,11 @@ const MAX_ROUNDS: usize = 50;
 
 /// A round at held noise scales ends, uncertified, once moving the scales whose closed
 /// form is below their held value would lower ε by more than this many times what the
-/// round's last [`SETTLE_WINDOW`] iterations did: the round then crawls where the scales
-/// have more to give (the data fitted far more closely than the held σ say: Giordano's
-/// residuals of 1e-5 at σ = 1 took 1 000 iterations of a first round that lowered the NLL
-/// by 5e-7 while its σ, estimated, stood still). Scales that would grow do not count for
+/// round's last [`SETTLE_WINDOW`] iterations did (and than ε's integration error, rtol·ε):
+/// the round then crawls where the scales have more to give (the data fitted far more
+/// closely than the held σ say: Giordano's residuals of 1e-5 at σ = 1 took 1 000
+/// iterations of a first round that lowered the NLL by 5e-7 while its σ, estimated, stood
+/// still). Scales that would grow do not count for
 /// it, and hold the round where they would gain more than a tenth of that: far from the
 /// data their closed form flattens the landscape, which is why the first round holds them
 /// (methods.md, hierarchical optimisation; Alkan from nominal, where some series were fitted
@@ -382,7 +383,10 @@ fn drive_once<S: System>(
             let then = history[history.len() - 1 - SETTLE_WINDOW].cost;
             let (tightening, loosening) = ev.problem().split_gain(lin);
             let fall = (then - current.cost).max(0.0);
-            if then.is_finite() && tightening > HAND_OVER * fall.max(loosening) {
+            // (A gain within ε's integration error is none: the round stalled, it did not
+            // crawl past a gain.)
+            let resolution = ev.problem().integrator().rtol * epsilon.abs();
+            if then.is_finite() && tightening > HAND_OVER * fall.max(loosening).max(resolution) {
                 if coarse && let Some(failure) = end_coarse!(final) {
                     break Ending::Failed { iteration, failure };
                 }
