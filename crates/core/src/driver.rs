@@ -91,7 +91,7 @@ pub fn drive<S: System>(
             step,
             &z,
             (profiles, rounds.is_empty(), used),
-            !profiles,
+            !profiles && rounds.len() + 1 < MAX_ROUNDS,
         )?;
         if let Some(moved) = profiled {
             // Hierarchical optimisation: one run, at the closed form of the point it returns.
@@ -148,12 +148,13 @@ const MAX_ROUNDS: usize = 50;
 /// the round then crawls where the scales have more to give (the data fitted far more
 /// closely than the held σ say: Giordano's residuals of 1e-5 at σ = 1 took 1 000
 /// iterations of a first round that lowered the NLL by 5e-7 while its σ, estimated, stood
-/// still). Scales that would grow do not count for
-/// it, and hold the round where they would gain more than a tenth of that: far from the
-/// data their closed form flattens the landscape, which is why the first round holds them
-/// (methods.md, hierarchical optimisation; Alkan from nominal, where some series were fitted
-/// far too closely and others far too loosely, ended in a local minimum 12.5 higher when
-/// they did not hold it).
+/// still). Scales that would grow do not count for it, and hold the round where they would
+/// gain more than a tenth of that: far from the data their closed form flattens the
+/// landscape, which is why the first round holds them (methods.md, hierarchical
+/// optimisation; Alkan from nominal, where some series were fitted far too closely and
+/// others far too loosely, ended in a local minimum 12.5 higher when they did not hold it).
+/// The last round allowed ([`MAX_ROUNDS`]) never hands over: it ends the fit, whose
+/// termination would then name a rule that did not fire.
 const HAND_OVER: f64 = 10.0;
 
 /// One run of `step` at the problem's noise scales, or, where the method

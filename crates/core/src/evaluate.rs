@@ -686,7 +686,7 @@ impl<S: System> Problem<S> {
     /// [`profile_gain`](Self::profile_gain) from the weighted residuals `r` at the trial
     /// point (evaluated at s), as [`residuals`](Self::residuals) gives them.
     pub fn profile_gain_of(&self, r: &DVector<f64>) -> f64 {
-        self.scale_gains(r, |_, _| true)
+        self.gain_terms(r).iter().map(|&(gain, _)| gain).sum::<f64>().max(0.0)
     }
 
     /// [`profile_gain`](Self::profile_gain) at `lin` in two parts: from the scales whose
@@ -694,26 +694,27 @@ impl<S: System> Problem<S> {
     /// scales say: the weights would grow), and from the others (0 without residual rows).
     pub fn split_gain(&self, lin: &Linearization) -> (f64, f64) {
         let Some(res) = lin.residuals.as_ref() else { return (0.0, 0.0) };
-        let tightening = self.scale_gains(&res.r, |s, sigma| sigma < s);
-        let loosening = self.scale_gains(&res.r, |s, sigma| sigma >= s);
-        (tightening, loosening)
+        let terms = self.gain_terms(&res.r);
+        let part = |tightens: bool| {
+            terms.iter().filter(|t| t.1 == tightens).map(|t| t.0).sum::<f64>().max(0.0)
+        };
+        (part(true), part(false))
     }
 
-    /// Σ over the scales that `keep(s, σ)` of what moving scale g from s_g to its closed
-    /// form σ_g lowers ε by, ε_g (1 − (s_g/σ_g)²) − 2 n_g ln(σ_g/s_g) (each term ≥ 0).
-    fn scale_gains(&self, r: &DVector<f64>, keep: impl Fn(f64, f64) -> bool) -> f64 {
+    /// Per scale g, in order: what moving it from s_g to its closed form σ_g lowers ε by,
+    /// ε_g (1 − (s_g/σ_g)²) − 2 n_g ln(σ_g/s_g) (≥ 0 up to rounding), and whether σ_g < s_g.
+    /// Empty where the closed form cannot be formed.
+    fn gain_terms(&self, r: &DVector<f64>) -> Vec<(f64, bool)> {
         let sums = self.scale_sums(r);
-        let Some(sigma) = self.closed_form_of(&sums) else { return 0.0 };
+        let Some(sigma) = self.closed_form_of(&sums) else { return Vec::new() };
         sums.iter()
             .zip(&sigma)
             .zip(&self.scales)
-            .filter(|((_, sigma), j)| keep(self.held[**j], **sigma))
-            .map(|((&(sum, n), sigma), &j)| {
+            .map(|((&(sum, n), &sigma), &j)| {
                 let (s, ratio) = (self.held[j], self.held[j] / sigma);
-                sum / (s * s) * (1.0 - ratio * ratio) + 2.0 * n as f64 * ratio.ln()
+                (sum / (s * s) * (1.0 - ratio * ratio) + 2.0 * n as f64 * ratio.ln(), sigma < s)
             })
-            .sum::<f64>()
-            .max(0.0)
+            .collect()
     }
 
     /// The weighted residual vector at z, without sensitivities: the rows of
