@@ -548,6 +548,40 @@ fn the_default_fit_of_fiedler_from_nominal_plus_a_tenth_reaches_the_peers_optimu
     assert!((again.nll.unwrap() - nll).abs() <= 1e-6, "{} against {nll}", again.nll.unwrap());
 }
 
+/// Sneyd from nominal + 0.1 on each (log10) scale: its first round at held noise scales
+/// hands over to their closed form (25 iterations in all, 39 before the hand-over) and the
+/// fit certifies. The claim is checked by levenberg-marquardt from the returned point (the
+/// same NLL to 1e-6, certified) and against pyPESTO + fides' −319.792276 from the same start
+/// (`scripts/reference/fides_petab.json`, +1e-3).
+#[test]
+fn a_fit_certified_after_its_scales_handed_over_holds_under_a_second_method() {
+    let imported =
+        sysid_petab::import(std::path::Path::new(&problem("Sneyd_PNAS2002"))).expect("imports");
+    let problem = imported.model.problem(None).expect("a problem");
+    let unknowns = problem.unknowns();
+    let z: Vec<f64> = unknowns
+        .coordinates(&problem.guesses())
+        .iter()
+        .zip(unknowns.list())
+        .map(|(z, u)| {
+            let (lo, hi) = u.coordinate_bounds();
+            (z + 0.1 * std::f64::consts::LN_10).clamp(lo, hi)
+        })
+        .collect();
+    let start = unknowns.values(&z);
+    let registry = sysid_registry::Registry::standard();
+    let settings = sysid_registry::Settings::default();
+    let default = registry.build(sysid_registry::Role::Default.method(), &settings).unwrap();
+    let fit = default.fit_from(&problem, &start).expect("fits");
+    assert!(fit.converged(), "{}", fit.termination);
+    let nll = fit.nll.expect("a likelihood");
+    assert!(nll <= -319.792276 + 1e-3, "{nll} above fides' −319.792276");
+    let second = registry.build("levenberg-marquardt", &settings).unwrap();
+    let again = second.fit_from(&problem, &fit.values).expect("fits");
+    assert!(again.converged(), "{}", again.termination);
+    assert!((again.nll.unwrap() - nll).abs() <= 1e-6, "{} against {nll}", again.nll.unwrap());
+}
+
 /// Giordano's seven noise scales are estimated, start at σ = 1 and fit residuals of about
 /// 1e-5: the round that holds them fits ε ≈ 1e-8 ever more closely, and before the round
 /// handed over to the scales' closed form it crawled for the whole budget of 1 000
