@@ -219,6 +219,11 @@ impl Contract {
             );
         }
         self.object(&v["counts"], "counts", what);
+        if let Some(retry) = v.get("retry") {
+            self.object(retry, "retry", what);
+            let trust = ["levenberg-marquardt", "hybrid-newton", "nl2sol", "geodesic-lm"];
+            assert!(trust.contains(&v["method"].as_str().unwrap_or("")), "{what}: a retry");
+        }
         for x in v["experiments"].as_array().expect("experiments") {
             self.object(x, "experiments", what);
         }
@@ -544,6 +549,7 @@ fn every_documented_key_holds_in_every_kind_of_run() {
         "History rows",
         "unidentifiable",
         "counts",
+        "retry",
         "experiments",
         "starts",
         "A minimum",

@@ -294,6 +294,7 @@ impl Record<'_> {
             ),
             scales: Vec::new(),
             noise_model: problem.has_noise_model(),
+            retry: None,
         }
     }
 }

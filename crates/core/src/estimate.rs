@@ -95,6 +95,23 @@ pub struct Estimate {
     pub scales: Vec<ScaleEstimate>,
     /// Whether the problem has a noise model (tables then show the likelihood).
     pub noise_model: bool,
+    /// Where the fit was run twice from its start ([`Estimate::retried`]): how the first run
+    /// ended. `None` for a fit of one run.
+    pub retry: Option<Box<FirstRun>>,
+}
+
+/// How the first run of a fit run twice from its start ended ([`Estimate::retried`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct FirstRun {
+    /// Why it stopped.
+    pub termination: Termination,
+    /// Its objective at the point it reported: the NLL plus the prior's term, or ε without a
+    /// likelihood.
+    pub objective: f64,
+    /// Its updates of the unknowns.
+    pub iterations: usize,
+    /// Whether the estimate reported is this first run's (the second did no better).
+    pub reported: bool,
 }
 
 /// One experiment's share of a fit.
@@ -190,7 +207,35 @@ impl Estimate {
             experiments: ExperimentFit::all(problem, None),
             scales: Vec::new(),
             noise_model: problem.has_noise_model(),
+            retry: None,
         }
+    }
+
+    /// What a fit minimises at the reported point: the NLL plus the prior's term, or ε
+    /// without a likelihood (∞ where the point could not be evaluated).
+    pub fn objective(&self) -> f64 {
+        let value = self.nll.map_or(self.cost, |nll| nll + self.prior.unwrap_or(0.0));
+        if value.is_nan() { f64::INFINITY } else { value }
+    }
+
+    /// One fit of two runs from the same start: the second run's estimate where it is the
+    /// better (certified where the first is not, else the lower [`objective`](Self::objective)),
+    /// otherwise the first's, with the first run's ending in [`retry`](Self::retry) and the
+    /// work and time of both runs.
+    pub fn retried(first: Estimate, second: Estimate) -> Estimate {
+        let rank = |e: &Estimate| (e.converged(), -e.objective());
+        let second_better = rank(&second) > rank(&first);
+        let record = FirstRun {
+            termination: first.termination.clone(),
+            objective: first.objective(),
+            iterations: first.iterations,
+            reported: !second_better,
+        };
+        let (mut kept, other) = if second_better { (second, first) } else { (first, second) };
+        kept.counts += other.counts;
+        kept.elapsed += other.elapsed;
+        kept.retry = Some(Box::new(record));
+        kept
     }
 
     /// Whether the start could not be evaluated (a bad start or bad data, not a result).
@@ -387,6 +432,17 @@ impl Serialize for FitRecord<'_> {
         st.serialize_field("experiments", &experiments)?;
         st.serialize_field("aic", &e.aic().map(Num))?;
         st.serialize_field("bic", &e.bic().map(Num))?;
+        if let Some(first) = &e.retry {
+            st.serialize_field(
+                "retry",
+                &serde_json::json!({
+                    "first_termination_code": first.termination.code(),
+                    "first_objective": first.objective.is_finite().then_some(first.objective),
+                    "first_iterations": first.iterations,
+                    "reported": if first.reported { "first" } else { "second" },
+                }),
+            )?;
+        }
         st.end()
     }
 }

@@ -28,6 +28,14 @@ pub trait Method<S: System> {
     /// Fits from `start` (values of the unknowns, in the problem's order).
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError>;
 
+    /// One run from `start`, as a multistart runs each of its starts. A method that runs
+    /// again from the same start when its first run stalls on flat ground (the trust
+    /// regions' cautious retry, [`Estimate::retried`]) does not here: among many starts, the
+    /// next start is the retry. The default is [`fit_from`](Self::fit_from).
+    fn fit_once_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
+        self.fit_from(problem, start)
+    }
+
     /// Fits from the problem's starting guesses.
     fn fit(&self, problem: &Problem<S>) -> Result<Estimate, FitError> {
         self.fit_from(problem, &problem.guesses())

@@ -94,7 +94,7 @@ pub use adjoint::{ADJOINT_OPERATION_COST, NllGradient, Sensitivities};
 pub use certificate::{Bound, Certificate, NullSpace};
 pub use data::{Data, Record, Samples, Series};
 pub use error::{FitError, ProblemError};
-pub use estimate::{Estimate, ExperimentFit, FitRecord, Iteration, ScaleEstimate};
+pub use estimate::{Estimate, ExperimentFit, FirstRun, FitRecord, Iteration, ScaleEstimate};
 pub use evaluate::{Linearization, Observed, WeightedResiduals};
 pub use experiment::{Experiment, Setting};
 pub use fit::{Method, caught};

@@ -98,6 +98,15 @@ impl Estimate {
         out += "\n";
         out += &format!("  converged    {}\n", self.verdict());
         out += &format!("  termination  {}\n", self.termination);
+        if let Some(first) = &self.retry {
+            out += &format!(
+                "  retry        the first run from this start ended {} at objective {} after {} iterations, on flat ground; a second ran from the start with a first radius of one own scale, and the {} run is reported (the time and counts are both runs')\n",
+                first.termination.code(),
+                significant(first.objective, 10),
+                first.iterations,
+                if first.reported { "first" } else { "second" }
+            );
+        }
         if let Some(at) = self.failed_at() {
             out += &format!("  failed at    {at}\n");
         }

@@ -336,7 +336,7 @@ where
     M: Method<S> + ?Sized,
 {
     let began = std::time::Instant::now();
-    sysid_core::caught(|| method.fit_from(problem, start)).unwrap_or_else(|message| {
+    sysid_core::caught(|| method.fit_once_from(problem, start)).unwrap_or_else(|message| {
         Ok(Estimate::panicked(problem, method.name(), start, message, began.elapsed()))
     })
 }
@@ -652,6 +652,7 @@ mod tests {
             experiments: Vec::new(),
             scales: Vec::new(),
             noise_model: false,
+            retry: None,
         }
     }
 

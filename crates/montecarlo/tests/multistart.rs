@@ -243,3 +243,50 @@ fn a_start_that_panics_is_reported_and_the_others_stand() {
     assert!(some.best.converged(), "{}", some.best.termination);
     assert!(s.to_string().contains("3 fits panicked"), "{s}");
 }
+
+/// levenberg-marquardt whose whole fit (`fit_from`, which may retry from the same start) is
+/// refused: only its single run (`fit_once_from`) may be called.
+struct OnceOnly<'a, S: sysid_ode::System> {
+    inner: &'a (dyn sysid_core::Method<S> + Sync),
+}
+
+impl<S: sysid_ode::System> sysid_core::Method<S> for OnceOnly<'_, S> {
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+
+    fn fit_from(
+        &self,
+        _: &sysid_core::Problem<S>,
+        _: &[f64],
+    ) -> Result<sysid_core::Estimate, sysid_core::FitError> {
+        panic!("a start of a multistart ran the whole fit, retry included");
+    }
+
+    fn fit_once_from(
+        &self,
+        problem: &sysid_core::Problem<S>,
+        start: &[f64],
+    ) -> Result<sysid_core::Estimate, sysid_core::FitError> {
+        self.inner.fit_once_from(problem, start)
+    }
+}
+
+/// Each start of a multistart is one run of its method (docs/methods.md, "The cautious
+/// retry": among many starts, the next start is the retry): no start panics in `fit_from`,
+/// and each ends where the method's single run from it ends, with no `retry`.
+#[test]
+fn each_start_is_one_run() {
+    let case = sysid_systems::lotka_volterra::lotka_volterra();
+    let problem = case.problem(1).unwrap();
+    let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
+    let options = MultistartOptions { starts: 6, seed: 4, guess: false, ..Default::default() };
+    let once = OnceOnly { inner: &*method };
+    let run = multistart(&once, &problem, &options).expect("runs");
+    let s = &run.starts;
+    assert_eq!(s.count, 6);
+    for o in &s.waterfall {
+        assert_ne!(o.termination_code, "panicked", "start {}", o.start);
+    }
+    assert!(run.best.retry.is_none());
+}

@@ -256,6 +256,9 @@ impl<S: System> Method<S> for Built {
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
         with_method!(self, m => m.fit_from(problem, start))
     }
+    fn fit_once_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
+        with_method!(self, m => m.fit_once_from(problem, start))
+    }
 }
 
 /// A name the registry does not hold.

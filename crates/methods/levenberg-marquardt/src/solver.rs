@@ -43,7 +43,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Estimate, Failure, FitError, Linearization, Method, Problem, Rule,
+    Estimate, Failure, FitError, Linearization, Method, Problem, Rule, Termination,
     method::{
         Accelerated, Advance, Curve, CurveStep, Evaluations, Geodesic, Iterate, Proposal, Step,
         actual_decrease, differenced_hessian, drive,
@@ -143,10 +143,38 @@ impl<S: System> Method<S> for LevenbergMarquardt {
         }
     }
 
+    /// A run from `start`; where it stalls on flat ground (a plateau, or unknowns the model
+    /// does not respond to), a second, cautious run from the same start, whose first radius
+    /// is one own scale of the unknowns (‖D s‖) instead of MINPACK's 100·‖D z₀‖
+    /// ([`Estimate::retried`]; docs/methods.md, "The cautious retry").
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
+        let first = self.run(problem, start, false)?;
+        let flat = matches!(&first.termination,
+            Termination::Stalled { plateau, undetermined, .. } if *plateau || !undetermined.is_empty());
+        if !flat {
+            return Ok(first);
+        }
+        Ok(Estimate::retried(first, self.run(problem, start, true)?))
+    }
+
+    fn fit_once_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
+        self.run(problem, start, false)
+    }
+}
+
+impl LevenbergMarquardt {
+    /// One run from `start`: its first radius MINPACK's, or with `cautious` one own scale of
+    /// the unknowns.
+    fn run<S: System>(
+        &self,
+        problem: &Problem<S>,
+        start: &[f64],
+        cautious: bool,
+    ) -> Result<Estimate, FitError> {
         self.options.validate()?;
         let mut step = TrustRegion {
             options: &self.options,
+            cautious,
             curve: Curve::default(),
             radius: 0.0,
             proposed: None,
@@ -169,6 +197,8 @@ impl<S: System> Method<S> for LevenbergMarquardt {
 /// Hessian.
 struct TrustRegion<'o> {
     options: &'o LevenbergMarquardtOptions,
+    /// The first radius: one own scale of the unknowns instead of MINPACK's.
+    cautious: bool,
     curve: Curve,
     radius: f64,
     proposed: Option<CurveStep>,
@@ -356,6 +386,12 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         let scaled = self.curve.scaled_norm(&z);
         let factor = self.options.factor;
         self.radius = if scaled > 0.0 { factor * scaled } else { factor };
+        if self.cautious {
+            let unknowns = ev.problem().unknowns().list();
+            let own: Vec<f64> =
+                unknowns.iter().zip(&z).map(|(u, &z)| u.coordinate_scale(z)).collect();
+            self.radius = self.curve.scaled_norm(&own);
+        }
         Ok(Iterate::linearized(lin))
     }
 
