@@ -587,7 +587,8 @@ fn a_fit_certified_after_its_scales_handed_over_holds_under_a_second_method() {
 /// certified at or below pyPESTO + fides' 383.942588 from the same start
 /// (`scripts/reference/fides_petab.json`, +1e-3), report the second run with how the first
 /// ended, and count both runs' work; levenberg-marquardt from the returned point finds no
-/// point lower by more than 1e-5 (2.6e-8 of the NLL).
+/// point lower by more than 1e-5 (2.6e-8 of the NLL). The iteration budget is the fit's: the
+/// second run has what the first left, and there is none when nothing is left.
 #[test]
 fn a_fit_stalled_on_flat_ground_runs_again_with_a_cautious_first_step() {
     let (problem, start) = from_nominal_plus_a_tenth("Okuonghae_ChaosSolitonsFractals2020");
@@ -617,6 +618,35 @@ fn a_fit_stalled_on_flat_ground_runs_again_with_a_cautious_first_step() {
     let second = registry.build("levenberg-marquardt", &settings).unwrap();
     let again = second.fit_from(&problem, &fit.values).expect("fits");
     assert!(again.nll.unwrap() >= nll - 1e-5, "{} below {nll}", again.nll.unwrap());
+
+    // The budgets are the fit's: the second run has the iterations the first left (700 here,
+    // more than the 600 it takes), and with as many as the first run takes there is none.
+    let budget = |max_iterations| sysid_registry::Settings {
+        driver: sysid_core::DriverOptions { max_iterations, ..Default::default() },
+        ..Default::default()
+    };
+    let total = once.iterations + 700;
+    let short = registry.build(sysid_registry::Role::Default.method(), &budget(total)).unwrap();
+    let fit = short.fit_from(&problem, &start).expect("fits");
+    assert!(fit.converged(), "{}", fit.termination);
+    let first = fit.retry.as_ref().expect("a retry");
+    assert_eq!((first.iterations, first.reported), (once.iterations, false));
+    assert!(
+        first.iterations + fit.iterations <= total,
+        "{} + {}",
+        first.iterations,
+        fit.iterations
+    );
+    // 100 left: the second run stops at them, below where the first stalled.
+    let total = once.iterations + 100;
+    let short = registry.build(sysid_registry::Role::Default.method(), &budget(total)).unwrap();
+    let fit = short.fit_from(&problem, &start).expect("fits");
+    let first = fit.retry.as_ref().expect("a retry");
+    assert!(!first.reported && fit.nll.unwrap() < once.nll.unwrap(), "{}", fit.termination);
+    assert_eq!(first.iterations + fit.iterations, total, "{}", fit.termination);
+    let spent = budget(once.iterations);
+    let short = registry.build(sysid_registry::Role::Default.method(), &spent).unwrap();
+    assert!(short.fit_from(&problem, &start).expect("fits").retry.is_none());
 }
 
 /// Giordano's seven noise scales are estimated, start at σ = 1 and fit residuals of about

@@ -43,7 +43,7 @@
 
 use nalgebra::{DMatrix, DVector};
 use sysid_core::{
-    Estimate, Failure, FitError, Linearization, Method, Problem, Rule, Termination,
+    DriverOptions, Estimate, Failure, FitError, Linearization, Method, Problem, Rule, Termination,
     method::{
         Accelerated, Advance, Curve, CurveStep, Evaluations, Geodesic, Iterate, Proposal, Step,
         actual_decrease, differenced_hessian, drive,
@@ -147,33 +147,51 @@ impl<S: System> Method<S> for LevenbergMarquardt {
     /// does not respond to), a second, cautious run from the same start, whose first radius
     /// is one own scale of the unknowns (‖D s‖) instead of MINPACK's 100·‖D z₀‖
     /// ([`Estimate::retried`]; docs/methods.md, "The cautious retry").
+    /// The budgets (`max_iterations`, `max_integrations`, `max_seconds`) are the fit's: the
+    /// second run has what the first left, and there is none where nothing is left.
     fn fit_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
-        let first = self.run(problem, start, false)?;
+        let first = self.run(problem, start, &self.options, false)?;
         let flat = matches!(&first.termination,
             Termination::Stalled { plateau, undetermined, .. } if *plateau || !undetermined.is_empty());
-        if !flat {
+        let driver = &self.options.driver;
+        let left = DriverOptions {
+            max_iterations: driver.max_iterations.saturating_sub(first.iterations),
+            max_integrations: Some(
+                driver
+                    .integration_budget(problem.unknowns().len())
+                    .saturating_sub(first.counts.integrations),
+            ),
+            max_seconds: driver.max_seconds.map(|s| s - first.elapsed.as_secs_f64()),
+            ..*driver
+        };
+        let spent = left.max_iterations == 0
+            || left.max_integrations == Some(0)
+            || left.max_seconds.is_some_and(|s| s <= 0.0);
+        if !flat || spent {
             return Ok(first);
         }
-        Ok(Estimate::retried(first, self.run(problem, start, true)?))
+        let options = LevenbergMarquardtOptions { driver: left, ..self.options.clone() };
+        Ok(Estimate::retried(first, self.run(problem, start, &options, true)?))
     }
 
     fn fit_once_from(&self, problem: &Problem<S>, start: &[f64]) -> Result<Estimate, FitError> {
-        self.run(problem, start, false)
+        self.run(problem, start, &self.options, false)
     }
 }
 
 impl LevenbergMarquardt {
-    /// One run from `start`: its first radius MINPACK's, or with `cautious` one own scale of
-    /// the unknowns.
+    /// One run from `start` with `options`: its first radius MINPACK's, or with `cautious` one
+    /// own scale of the unknowns.
     fn run<S: System>(
         &self,
         problem: &Problem<S>,
         start: &[f64],
+        options: &LevenbergMarquardtOptions,
         cautious: bool,
     ) -> Result<Estimate, FitError> {
-        self.options.validate()?;
+        options.validate()?;
         let mut step = TrustRegion {
-            options: &self.options,
+            options,
             cautious,
             curve: Curve::default(),
             radius: 0.0,
@@ -187,7 +205,7 @@ impl LevenbergMarquardt {
             unscreened: false,
         };
         let name = Method::<S>::name(self);
-        drive(problem, name, &self.options.driver, &mut step, start)
+        drive(problem, name, &options.driver, &mut step, start)
     }
 }
 
