@@ -4,62 +4,17 @@
 //! better; the first run's ending is kept beside the report, and the work and time are both
 //! runs'.
 
-use sysid_core::{
-    Data, DriverOptions, Estimate, Failure, Problem, Rule, Termination,
-    method::{Advance, Evaluations, Iterate, Proposal, Step, drive},
-};
+mod walk;
+
+use sysid_core::{DriverOptions, Estimate, Problem, Rule, Termination, method::drive};
 use sysid_systems::FallingBody;
-
-/// Moves g's coordinate to `next(z)` at every iteration.
-struct Walk<F: Fn(f64) -> f64> {
-    next: F,
-}
-
-impl<F: Fn(f64) -> f64> Step<FallingBody> for Walk<F> {
-    fn start(
-        &mut self,
-        ev: &Evaluations<'_, FallingBody>,
-        z: Vec<f64>,
-    ) -> Result<Iterate, Failure> {
-        ev.linearize(&z).map(Iterate::linearized)
-    }
-
-    fn propose(
-        &mut self,
-        _: &Evaluations<'_, FallingBody>,
-        current: &Iterate,
-    ) -> Result<Proposal, Failure> {
-        let z = vec![(self.next)(current.z[0])];
-        Ok(Proposal { z, condition: None, gradient_norm: None, stop: None })
-    }
-
-    fn advance(
-        &mut self,
-        ev: &Evaluations<'_, FallingBody>,
-        _: &Iterate,
-        proposal: Proposal,
-    ) -> Result<Advance, Failure> {
-        ev.linearize(&proposal.z).map(|l| Advance::Moved(Iterate::linearized(l)))
-    }
-}
-
-/// y = g t²/2 against data whose least-squares g is 787/24.5.
-fn problem() -> Problem<FallingBody> {
-    Problem::builder(FallingBody::default())
-        .known("y", 0.0)
-        .known("v", 0.0)
-        .unknown("g", 30.0)
-        .data(Data::discrete().series("y", &[0.0, 1.0, 2.0, 3.0], &[1000.0, 17.0, 63.0, 145.0]))
-        .build()
-        .unwrap()
-}
+use walk::{dither, problem};
 
 /// A certified run (dithering about the minimum) and an uncertified one (dithering 0.02
 /// away, stopped by the progress rule), from starts beside the minimum.
 fn runs(problem: &Problem<FallingBody>) -> (Estimate, Estimate) {
     let options = DriverOptions { max_iterations: 1000, ..Default::default() };
     let centre = 787.0 / 24.5;
-    let dither = |c: f64| Walk { next: move |z: f64| 2.0 * c - z };
     let certified = drive(problem, "dither", &options, &mut dither(centre), &[centre + 2e-6]);
     let stalled = drive(problem, "dither", &options, &mut dither(centre), &[centre + 0.02]);
     let (certified, stalled) = (certified.unwrap(), stalled.unwrap());
