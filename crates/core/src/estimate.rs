@@ -105,8 +105,7 @@ pub struct Estimate {
 pub struct FirstRun {
     /// Why it stopped.
     pub termination: Termination,
-    /// Its objective at the point it reported: the NLL plus the prior's term, or ε without a
-    /// likelihood.
+    /// Its [`objective`](Estimate::objective) at the point it reported.
     pub objective: f64,
     /// Its updates of the unknowns.
     pub iterations: usize,
@@ -211,19 +210,24 @@ impl Estimate {
         }
     }
 
-    /// What a fit minimises at the reported point: the NLL plus the prior's term, or ε
-    /// without a likelihood (∞ where the point could not be evaluated).
+    /// What the fit minimises at the reported point, in units of ε/2: the negative
+    /// log-likelihood plus the priors' term where the fit has a likelihood (it differs from
+    /// ε/2 by a constant when σ is known, and is the objective when noise scales are
+    /// estimated, where ε at every round's end is about the number of data), else ε/2. NaN
+    /// where the point could not be evaluated.
     pub fn objective(&self) -> f64 {
-        let value = self.nll.map_or(self.cost, |nll| nll + self.prior.unwrap_or(0.0));
-        if value.is_nan() { f64::INFINITY } else { value }
+        self.nll.map_or(self.cost / 2.0, |nll| nll + self.prior.unwrap_or(0.0))
     }
 
     /// One fit of two runs from the same start: the second run's estimate where it is the
-    /// better (certified where the first is not, else the lower [`objective`](Self::objective)),
-    /// otherwise the first's, with the first run's ending in [`retry`](Self::retry) and the
-    /// work and time of both runs.
+    /// better (certified where the first is not, else the lower [`objective`](Self::objective);
+    /// a point that could not be evaluated is never the better), otherwise the first's, with
+    /// the first run's ending in [`retry`](Self::retry) and the work and time of both runs.
     pub fn retried(first: Estimate, second: Estimate) -> Estimate {
-        let rank = |e: &Estimate| (e.converged(), -e.objective());
+        let rank = |e: &Estimate| {
+            let objective = e.objective();
+            (e.converged(), if objective.is_nan() { f64::NEG_INFINITY } else { -objective })
+        };
         let second_better = rank(&second) > rank(&first);
         let record = FirstRun {
             termination: first.termination.clone(),

@@ -476,18 +476,10 @@ where
     Ok(Multistart { best, starts: summary })
 }
 
-/// What the fits minimise, in units of ε/2: the negative log-likelihood plus the priors'
-/// term where the fit has a likelihood (it differs from ε/2 by a constant when σ is known,
-/// and is the objective when noise scales are estimated, where ε at every round's end is
-/// about the number of data), else ε/2.
-pub fn objective(f: &Estimate) -> f64 {
-    f.nll.map_or(f.cost / 2.0, |nll| nll + f.prior.unwrap_or(0.0))
-}
-
-/// [`objective`] as the waterfall and [`StartDone`] report it: None where it is NaN (a fit
+/// [`Estimate::objective`] as the waterfall and [`StartDone`] report it: None where it is NaN (a fit
 /// that never evaluated a cost).
 fn reported_objective(f: &Estimate) -> Option<f64> {
-    Some(objective(f)).filter(|v| !v.is_nan())
+    Some(f.objective()).filter(|v| !v.is_nan())
 }
 
 /// [`SAME_MINIMUM_RTOL`] of ε, in the objective's units: ½·rtol·ε (for known σ exactly the
@@ -500,7 +492,7 @@ fn resolution(a: &Estimate, b: &Estimate) -> f64 {
 /// both exact fits (ε = 0 to rounding, where the relative difference of the costs is noise).
 fn same_minimum(a: &Estimate, b: &Estimate) -> bool {
     (a.certificate.exact_fit && b.certificate.exact_fit)
-        || (objective(a) - objective(b)).abs() <= resolution(a, b)
+        || (a.objective() - b.objective()).abs() <= resolution(a, b)
 }
 
 fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
@@ -508,12 +500,12 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
         fits.iter()
             .enumerate()
             .filter(|(_, f)| !converged || f.converged())
-            .filter(|(_, f)| !objective(f).is_nan())
-            .min_by(|a, b| objective(a.1).total_cmp(&objective(b.1)))
+            .filter(|(_, f)| !f.objective().is_nan())
+            .min_by(|a, b| a.1.objective().total_cmp(&b.1.objective()))
             .map(|(i, _)| i)
     };
     let lower = |a: usize, b: usize| {
-        objective(&fits[a]) < objective(&fits[b]) - resolution(&fits[a], &fits[b])
+        fits[a].objective() < fits[b].objective() - resolution(&fits[a], &fits[b])
     };
     let best_start = match (least(true), least(false)) {
         (Some(c), Some(any)) if lower(any, c) => any,
@@ -521,7 +513,7 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
         (None, any) => any.unwrap_or(0),
     };
     let mut order: Vec<usize> = (0..fits.len()).filter(|&i| fits[i].converged()).collect();
-    order.sort_by(|&a, &b| objective(&fits[a]).total_cmp(&objective(&fits[b])).then(a.cmp(&b)));
+    order.sort_by(|&a, &b| fits[a].objective().total_cmp(&fits[b].objective()).then(a.cmp(&b)));
     // A fit joins a minimum when it matches that minimum's least-cost fit (the first in cost
     // order); the minimum's start and estimates are those of the earliest start that reached it.
     let mut minima: Vec<(usize, Minimum)> = Vec::new();
@@ -548,7 +540,7 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
         fits.iter()
             .filter(|f| {
                 f.converged()
-                    && (same_minimum(f, best) || objective(f) - objective(best) <= threshold)
+                    && (same_minimum(f, best) || f.objective() - best.objective() <= threshold)
             })
             .count()
     } else {
