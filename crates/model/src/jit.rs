@@ -6,7 +6,10 @@
 //! work space that are read afterwards (the function values and the Jacobian's entries).
 //! A long program is compiled as several functions of at most [`SEGMENT`] operations, run
 //! one after the other; a value one of them computes and a later one reads passes through
-//! its register of the work space.
+//! its register of the work space. The tape's operations on the parameters and constants
+//! alone (its [fixed](Tape::fixed) part, first) are functions of their own, run only where
+//! the parameters differ from the last run's, which the work space's parameter registers
+//! keep (the code reads the parameters where they are, not there).
 //! Each operation is the one the interpreter performs, in the same order: no contraction
 //! into fused multiply-adds, no reassociation, and the library functions (exp, ln, sin, …,
 //! powi, powf) are the same Rust functions called through the C ABI, so the compiled
@@ -46,6 +49,11 @@ const SEGMENT: usize = 256;
 pub(crate) struct Compiled {
     /// The functions of the tape's segments, in order.
     functions: Vec<Function>,
+    /// How many of them, from the first, compute the tape's fixed part: skipped where the
+    /// parameters are those of the last run on the same work space.
+    fixed: usize,
+    /// The first register of the parameters.
+    parameters: usize,
     /// The lengths of y, α and u the code reads.
     inputs: (usize, usize, usize),
     /// The work space's length the code writes within.
@@ -72,12 +80,20 @@ impl Drop for Compiled {
 }
 
 impl Compiled {
-    /// Runs the code at (t, y, α, u), writing into `work`.
+    /// Runs the code at (t, y, α, u), writing into `work`: the fixed part only where α is
+    /// not, bit for bit, the α of the last run on `work` (a NaN always differs; a fresh work
+    /// space holds NaN there).
     pub(crate) fn run(&self, t: f64, y: &[f64], p: &[f64], u: &[f64], work: &mut [f64]) {
         let (n, np, nu) = self.inputs;
         assert!(y.len() >= n && p.len() >= np && u.len() >= nu, "the model's inputs");
         assert!(work.len() >= self.registers, "a work space of {} registers", self.registers);
-        for function in &self.functions {
+        let held = &mut work[self.parameters..self.parameters + np];
+        let same = held.iter().zip(p).all(|(a, b)| a.to_bits() == b.to_bits() && !a.is_nan());
+        if !same {
+            held.copy_from_slice(&p[..np]);
+        }
+        let from = if same { self.fixed } else { 0 };
+        for function in &self.functions[from..] {
             function(t, y.as_ptr(), p.as_ptr(), u.as_ptr(), work.as_mut_ptr());
         }
     }
@@ -134,8 +150,9 @@ const SEGMENTS_PER_THREAD: usize = 8;
 /// A long tape's segments are compiled on several threads, each into a module of its own
 /// (SalazarCavazos' first derivatives, 30 segments: 65-80 ms on one thread).
 pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compiled> {
-    let written = written(tape, stores);
-    let segments = tape.code().len().div_ceil(SEGMENT).max(1);
+    let (ranges, fixed) = segments(tape);
+    let written = written(tape, stores, &ranges);
+    let segments = ranges.len();
     let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let threads = cores.min(segments / SEGMENTS_PER_THREAD).max(1);
     let per = segments.div_ceil(threads);
@@ -144,7 +161,7 @@ pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compil
             tape,
             (stores, &written),
             quick,
-            (k * per, segments.min((k + 1) * per), segments),
+            (&ranges, k * per, segments.min((k + 1) * per)),
         )
     };
     let parts: Vec<Option<(JITModule, Vec<Function>)>> = if threads == 1 {
@@ -180,19 +197,37 @@ pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compil
     }
     Some(Compiled {
         functions,
+        fixed,
+        parameters: 1 + tape.dims().0,
         inputs: tape.dims(),
         registers: tape.len(),
         modules: Mutex::new(modules),
     })
 }
 
-/// Compiles segments `from..to` of `segments` into a module of their own: the module and
-/// the segments' functions, in order.
+/// The tape's segments: its fixed part in pieces of at most [`SEGMENT`] operations, then
+/// the rest likewise (at least one segment, which may be empty: the last stores the inputs
+/// among the stores at every run); and how many pieces the fixed part has.
+fn segments(tape: &Tape) -> (Vec<std::ops::Range<usize>>, usize) {
+    let pieces =
+        |from: usize, to: usize| (from..to).step_by(SEGMENT).map(move |a| a..to.min(a + SEGMENT));
+    let (fixed, len) = (tape.fixed(), tape.code().len());
+    let mut ranges: Vec<_> = pieces(0, fixed).collect();
+    let count = ranges.len();
+    ranges.extend(pieces(fixed, len));
+    if ranges.len() == count {
+        ranges.push(len..len);
+    }
+    (ranges, count)
+}
+
+/// Compiles segments `from..to` of `ranges` into a module of their own: the module and the
+/// segments' functions, in order.
 fn compile_segments(
     tape: &Tape,
     (stores, written): (&[u32], &[bool]),
     quick: bool,
-    (from, to, segments): (usize, usize, usize),
+    (ranges, from, to): (&[std::ops::Range<usize>], usize, usize),
 ) -> Option<(JITModule, Vec<Function>)> {
     let mut flags = settings::builder();
     if quick {
@@ -218,7 +253,8 @@ fn compile_segments(
     let mut values = vec![None; tape.len()];
     let mut ids = Vec::with_capacity(to - from);
     for k in from..to {
-        ids.push(define(&mut module, tape, (k, segments), (stores, written), &mut values)?);
+        let (range, last) = (ranges[k].clone(), k + 1 == ranges.len());
+        ids.push(define(&mut module, tape, (k, range, last), (stores, written), &mut values)?);
     }
     module.finalize_definitions().ok()?;
     // SAFETY: each code was compiled from the signature of `Function` (an f64 and four
@@ -235,16 +271,20 @@ fn compile_segments(
 }
 
 /// Whether each register is written to the work space by the function that computes it: it
-/// is in `stores`, or a later segment reads it.
-fn written(tape: &Tape, stores: &[u32]) -> Vec<bool> {
+/// is in `stores`, or a later segment of `ranges` reads it.
+fn written(tape: &Tape, stores: &[u32], ranges: &[std::ops::Range<usize>]) -> Vec<bool> {
     let first = tape.first();
+    let mut segment = vec![0; tape.code().len()];
+    for (k, range) in ranges.iter().enumerate() {
+        segment[range.clone()].fill(k);
+    }
     let mut written = vec![false; tape.len()];
     for &r in stores {
         written[r as usize] = true;
     }
     for (i, instr) in tape.code().iter().enumerate() {
         for r in instr.operands().map(|r| r as usize) {
-            if r >= first && (r - first) / SEGMENT != i / SEGMENT {
+            if r >= first && segment[r - first] != segment[i] {
                 written[r] = true;
             }
         }
@@ -252,15 +292,16 @@ fn written(tape: &Tape, stores: &[u32]) -> Vec<bool> {
     written
 }
 
-/// Declares the library functions and defines the function of segment `k` of `segments` in
-/// `module`: it computes its operations, loading what it reads from the inputs, constants
-/// and (for registers earlier segments computed) the work space, and stores the registers
-/// [`written`] says later code reads; the last segment stores the inputs among `stores` too.
+/// Declares the library functions and defines the function of segment `k` (the operations
+/// `range`) in `module`: it computes its operations, loading what it reads from the inputs,
+/// constants and (for registers earlier segments computed) the work space, and stores the
+/// registers [`written`] says later code reads; the `last` segment stores the inputs among
+/// `stores` too.
 /// `values` is scratch space of the tape's length, all `None`, and left so.
 fn define(
     module: &mut JITModule,
     tape: &Tape,
-    (k, segments): (usize, usize),
+    (k, range, last): (usize, std::ops::Range<usize>, bool),
     (stores, written): (&[u32], &[bool]),
     values: &mut [Option<Value>],
 ) -> Option<FuncId> {
@@ -308,7 +349,6 @@ fn define(
     let first = tape.first();
     let (n, np, nu) = tape.dims();
     let code = tape.code();
-    let range = k * SEGMENT..((k + 1) * SEGMENT).min(code.len());
     let mut touched: Vec<usize> = Vec::new();
     let load = |b: &mut FunctionBuilder, r: usize| -> Option<Value> {
         Some(match r {
@@ -394,7 +434,7 @@ fn define(
         let v = values[r].expect("computed here");
         b.ins().store(flags, v, work, offset(r as u32)?);
     }
-    if k + 1 == segments {
+    if last {
         for &r in stores.iter().filter(|&&r| (r as usize) < first) {
             if tape.constant(r as usize).is_none() {
                 let v = value(&mut b, values, &mut touched, r as usize)?;

@@ -551,8 +551,25 @@ fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (T
         register.insert(id, r as u32);
     }
     let first = first_constant + constants.len();
-    let mut code = Vec::new();
+    // The operations that read neither t, the states nor the inputs first (in the order
+    // they had: each still follows what it reads), the others after them.
+    // (`order` is by id: each term after its children.)
+    let mut varying: HashMap<Id, bool> =
+        HashMap::with_capacity_and_hasher(order.len(), Default::default());
     for &id in &order {
+        let term = graph.terms[id as usize];
+        let varies = match term {
+            Term::Var(Slot::Parameter(_)) | Term::Const(_) => false,
+            Term::Var(_) => true,
+            _ => children(term).any(|a| varying[&a]),
+        };
+        varying.insert(id, varies);
+    }
+    let (fixed, moving): (Vec<Id>, Vec<Id>) = order.iter().partition(|id| !varying[id]);
+    let leaf = |id: &Id| matches!(graph.terms[*id as usize], Term::Const(_) | Term::Var(_));
+    let fixed_count = fixed.iter().filter(|id| !leaf(id)).count();
+    let mut code = Vec::new();
+    for &id in fixed.iter().chain(&moving) {
         let r = |x: Id| register[&x];
         let instr = match graph.terms[id as usize] {
             Term::Const(_) | Term::Var(_) => continue,
@@ -589,7 +606,7 @@ fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (T
         code.push(instr);
     }
     let registers = outputs.iter().map(|id| register[id]).collect();
-    (Tape::new((n, np, nu), constants, code), registers)
+    (Tape::new((n, np, nu), constants, code, fixed_count), registers)
 }
 
 /// Functions f(t, y, α, u) (a model's right-hand side or its outputs) with their symbolic
@@ -825,5 +842,53 @@ mod tests {
         // dV'/dR = c and dR'/da = 1/c are registers the program already has: 10 operations
         // for the values, 13 for the eight entries.
         assert!(f.operations() <= 23, "{} operations: {:?}", f.operations(), f.tape.code());
+    }
+
+    /// The operations on the parameters alone come first, and the compiled code skips them
+    /// only where the parameters are, bit for bit, those of the last run on the same work
+    /// space: every run equals a fresh interpreted one, through a sequence that keeps the
+    /// parameters while t and the states move, changes one by 1e-12 of itself, flips a zero's
+    /// sign (1/c is +∞ or −∞) and comes back.
+    #[test]
+    #[cfg(feature = "jit")]
+    fn the_parameters_part_runs_again_only_where_the_parameters_change() {
+        let terms: Vec<String> =
+            (1..=60).map(|i| format!("exp(a * {i}.5) / (b + {i}) * c^2")).collect();
+        let first = format!("V * ({}) - R * exp(1 / c)", terms.join(" + "));
+        let f = Linearized::new(&compile(&[&first, "R * a - b * V + sin(t)"]), (2, 3, 0));
+        let code = f.tape.code();
+        let fixed = f.tape.fixed();
+        // More than one compiled function's worth, so that several are skipped.
+        assert!(fixed > 256 && fixed < code.len(), "{fixed} of {} operations", code.len());
+        // Registers 0, 1, 2: t, V, R.
+        let reads_t_or_y = |i: &Instr| i.operands().any(|r| r <= 2);
+        assert!(f.is_compiled());
+        assert!(!code[..fixed].iter().any(reads_t_or_y), "the fixed part reads t or y");
+        assert!(code[fixed..].iter().any(reads_t_or_y), "the rest reads t or y");
+        let interpreted = f.interpreted();
+        let mut work = f.workspace();
+        let p0 = [0.1, 0.2, 0.3];
+        let points: [(f64, [f64; 2], [f64; 3]); 7] = [
+            (0.0, [1.0, 2.0], p0),
+            (0.5, [1.5, -2.0], p0),
+            (0.7, [1.5, -2.0], [0.1, 0.2, 0.3 * (1.0 + 1e-12)]),
+            (0.9, [0.5, 2.0], p0),
+            (1.1, [0.5, 2.0], [0.1, 0.2, 0.0]),
+            (1.3, [0.5, 2.0], [0.1, 0.2, -0.0]),
+            (1.5, [0.25, 1.0], p0),
+        ];
+        for (t, y, p) in points {
+            f.eval(t, &y, &p, &[], &mut work);
+            let mut fresh = interpreted.workspace();
+            interpreted.eval(t, &y, &p, &[], &mut fresh);
+            for &r in f.values.iter().chain(&f.entries) {
+                let (u, v) = (work[r as usize], fresh[r as usize]);
+                assert_eq!(
+                    u.to_bits(),
+                    v.to_bits(),
+                    "t = {t}, p = {p:?}, register {r}: {u} vs {v}"
+                );
+            }
+        }
     }
 }

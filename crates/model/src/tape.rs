@@ -65,7 +65,9 @@ impl Instr {
 
 /// A straight-line program over f64 registers: register 0 holds t, then the n states, the
 /// parameters, the inputs and the constants; instruction i writes register `first + i`,
-/// reading only registers before it.
+/// reading only registers before it. The first [`fixed`](Self::fixed) instructions read
+/// neither t, the states nor the inputs: at the parameters of the last run their registers
+/// still hold their values, and the compiled code skips them.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Tape {
     n: usize,
@@ -73,16 +75,26 @@ pub(crate) struct Tape {
     nu: usize,
     constants: Vec<f64>,
     code: Vec<Instr>,
+    fixed: usize,
 }
 
 impl Tape {
-    /// The program of `constants` and `code` for n states, n_α parameters and n_u inputs.
+    /// The program of `constants` and `code` for n states, n_α parameters and n_u inputs,
+    /// whose first `fixed` instructions depend on the parameters and constants alone.
     pub(crate) fn new(
         (n, np, nu): (usize, usize, usize),
         constants: Vec<f64>,
         code: Vec<Instr>,
+        fixed: usize,
     ) -> Self {
-        Self { n, np, nu, constants, code }
+        debug_assert!(fixed <= code.len());
+        Self { n, np, nu, constants, code, fixed }
+    }
+
+    /// How many instructions, from the first, depend on the parameters and constants alone.
+    #[cfg(feature = "jit")]
+    pub(crate) fn fixed(&self) -> usize {
+        self.fixed
     }
 
     /// The first register holding a constant.
@@ -117,9 +129,11 @@ impl Tape {
         &self.code
     }
 
-    /// Registers with the constants loaded.
+    /// Registers with the constants loaded, and the parameters' NaN: no run has computed
+    /// the [fixed](Self::fixed) instructions' registers yet.
     pub(crate) fn registers(&self) -> Vec<f64> {
         let mut r = vec![0.0; self.len()];
+        r[1 + self.n..1 + self.n + self.np].fill(f64::NAN);
         let at = self.first_constant();
         r[at..at + self.constants.len()].copy_from_slice(&self.constants);
         r
