@@ -7,9 +7,10 @@
 //! A long program is compiled as several functions of at most [`SEGMENT`] operations, run
 //! one after the other; a value one of them computes and a later one reads passes through
 //! its register of the work space. The tape's operations on the parameters and constants
-//! alone (its [fixed](Tape::fixed) part, first) are functions of their own, run only where
-//! the parameters differ from the last run's, which the work space's parameter registers
-//! keep (the code reads the parameters where they are, not there).
+//! alone (its [fixed](Tape::fixed) part, first, where the emitter judged that skipping it
+//! pays) are functions of their own, run only where a parameter they read differs from the
+//! last run's, which the work space's parameter registers keep (the code reads the
+//! parameters where they are, not there).
 //! Each operation is the one the interpreter performs, in the same order: no contraction
 //! into fused multiply-adds, no reassociation, and the library functions (exp, ln, sin, …,
 //! powi, powf) are the same Rust functions called through the C ABI, so the compiled
@@ -50,10 +51,10 @@ pub(crate) struct Compiled {
     /// The functions of the tape's segments, in order.
     functions: Vec<Function>,
     /// How many of them, from the first, compute the tape's fixed part: skipped where the
-    /// parameters are those of the last run on the same work space.
+    /// parameters it reads are those of the last run on the same work space.
     fixed: usize,
-    /// The first register of the parameters.
-    parameters: usize,
+    /// The registers of the parameters the fixed part reads, with their index in α.
+    watched: Vec<(usize, usize)>,
     /// The lengths of y, α and u the code reads.
     inputs: (usize, usize, usize),
     /// The work space's length the code writes within.
@@ -80,19 +81,21 @@ impl Drop for Compiled {
 }
 
 impl Compiled {
-    /// Runs the code at (t, y, α, u), writing into `work`: the fixed part only where α is
-    /// not, bit for bit, the α of the last run on `work` (a NaN always differs; a fresh work
-    /// space holds NaN there).
+    /// Runs the code at (t, y, α, u), writing into `work`: the fixed part only where the
+    /// parameters it reads are not, bit for bit, those of the last run on `work` (a NaN
+    /// always differs; a fresh work space holds NaN there).
     pub(crate) fn run(&self, t: f64, y: &[f64], p: &[f64], u: &[f64], work: &mut [f64]) {
         let (n, np, nu) = self.inputs;
         assert!(y.len() >= n && p.len() >= np && u.len() >= nu, "the model's inputs");
         assert!(work.len() >= self.registers, "a work space of {} registers", self.registers);
-        let held = &mut work[self.parameters..self.parameters + np];
-        let same = held.iter().zip(p).all(|(a, b)| a.to_bits() == b.to_bits() && !a.is_nan());
-        if !same {
-            held.copy_from_slice(&p[..np]);
+        let mut from = self.fixed;
+        for &(r, q) in &self.watched {
+            let (held, now) = (work[r], p[q]);
+            if held.to_bits() != now.to_bits() || held.is_nan() {
+                work[r] = now;
+                from = 0;
+            }
         }
-        let from = if same { self.fixed } else { 0 };
         for function in &self.functions[from..] {
             function(t, y.as_ptr(), p.as_ptr(), u.as_ptr(), work.as_mut_ptr());
         }
@@ -151,6 +154,7 @@ const SEGMENTS_PER_THREAD: usize = 8;
 /// (SalazarCavazos' first derivatives, 30 segments: 65-80 ms on one thread).
 pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compiled> {
     let (ranges, fixed) = segments(tape);
+    let watched = watched(tape);
     let written = written(tape, stores, &ranges);
     let segments = ranges.len();
     let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
@@ -197,12 +201,28 @@ pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compil
     }
     Some(Compiled {
         functions,
-        fixed,
-        parameters: 1 + tape.dims().0,
+        // A fixed part that reads no parameter (none survives constant folding) is run
+        // every time: nothing would tell a fresh work space from a computed one.
+        fixed: if watched.is_empty() { 0 } else { fixed },
+        watched,
         inputs: tape.dims(),
         registers: tape.len(),
         modules: Mutex::new(modules),
     })
+}
+
+/// The registers of the parameters the tape's fixed part reads, each with its index in α.
+fn watched(tape: &Tape) -> Vec<(usize, usize)> {
+    let (n, np, _) = tape.dims();
+    let mut registers: Vec<usize> = tape.code()[..tape.fixed()]
+        .iter()
+        .flat_map(Instr::operands)
+        .map(|r| r as usize)
+        .filter(|r| (1 + n..1 + n + np).contains(r))
+        .collect();
+    registers.sort_unstable();
+    registers.dedup();
+    registers.into_iter().map(|r| (r, r - 1 - n)).collect()
 }
 
 /// The tape's segments: its fixed part in pieces of at most [`SEGMENT`] operations, then
