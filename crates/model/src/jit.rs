@@ -8,9 +8,9 @@
 //! one after the other; a value one of them computes and a later one reads passes through
 //! its register of the work space. The tape's operations on the parameters and constants
 //! alone (its [fixed](Tape::fixed) part, first, where the emitter judged that skipping it
-//! pays) are functions of their own, run only where a parameter they read differs from the
-//! last run's, which the work space's parameter registers keep (the code reads the
-//! parameters where they are, not there).
+//! pays) are functions of their own, run only where the parameters differ from the last
+//! run's, which the work space's parameter registers keep (the code reads the parameters
+//! where they are, not there).
 //! Each operation is the one the interpreter performs, in the same order: no contraction
 //! into fused multiply-adds, no reassociation, and the library functions (exp, ln, sin, …,
 //! powi, powf) are the same Rust functions called through the C ABI, so the compiled
@@ -51,10 +51,8 @@ pub(crate) struct Compiled {
     /// The functions of the tape's segments, in order.
     functions: Vec<Function>,
     /// How many of them, from the first, compute the tape's fixed part: skipped where the
-    /// parameters it reads are those of the last run on the same work space.
+    /// parameters are those of the last run on the same work space.
     fixed: usize,
-    /// The registers of the parameters the fixed part reads, with their index in α.
-    watched: Vec<(usize, usize)>,
     /// The lengths of y, α and u the code reads.
     inputs: (usize, usize, usize),
     /// The work space's length the code writes within.
@@ -81,19 +79,26 @@ impl Drop for Compiled {
 }
 
 impl Compiled {
-    /// Runs the code at (t, y, α, u), writing into `work`: the fixed part only where the
-    /// parameters it reads are not, bit for bit, those of the last run on `work` (a NaN
-    /// always differs; a fresh work space holds NaN there).
+    /// Runs the code at (t, y, α, u), writing into `work`: the fixed part only where α is
+    /// not, bit for bit, the α of the last run on `work` (a NaN always differs; a fresh work
+    /// space holds NaN there).
     pub(crate) fn run(&self, t: f64, y: &[f64], p: &[f64], u: &[f64], work: &mut [f64]) {
         let (n, np, nu) = self.inputs;
         assert!(y.len() >= n && p.len() >= np && u.len() >= nu, "the model's inputs");
         assert!(work.len() >= self.registers, "a work space of {} registers", self.registers);
-        let mut from = self.fixed;
-        for &(r, q) in &self.watched {
-            let (held, now) = (work[r], p[q]);
-            if held.to_bits() != now.to_bits() || held.is_nan() {
-                work[r] = now;
-                from = 0;
+        let mut from = 0;
+        if self.fixed > 0 {
+            // Without a branch per parameter: the comparison is a few vector operations.
+            let held = &mut work[1 + n..1 + n + np];
+            let (mut differ, mut nan) = (0, false);
+            for (a, b) in held.iter().zip(&p[..np]) {
+                differ |= a.to_bits() ^ b.to_bits();
+                nan |= a.is_nan();
+            }
+            if differ == 0 && !nan {
+                from = self.fixed;
+            } else {
+                held.copy_from_slice(&p[..np]);
             }
         }
         for function in &self.functions[from..] {
@@ -154,7 +159,6 @@ const SEGMENTS_PER_THREAD: usize = 8;
 /// (SalazarCavazos' first derivatives, 30 segments: 65-80 ms on one thread).
 pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compiled> {
     let (ranges, fixed) = segments(tape);
-    let watched = watched(tape);
     let written = written(tape, stores, &ranges);
     let segments = ranges.len();
     let cores = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
@@ -202,27 +206,23 @@ pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compil
     Some(Compiled {
         functions,
         // A fixed part that reads no parameter (none survives constant folding) is run
-        // every time: nothing would tell a fresh work space from a computed one.
-        fixed: if watched.is_empty() { 0 } else { fixed },
-        watched,
+        // every time: with no parameters nothing would tell a fresh work space from a
+        // computed one.
+        fixed: if reads_parameters(tape) { fixed } else { 0 },
         inputs: tape.dims(),
         registers: tape.len(),
         modules: Mutex::new(modules),
     })
 }
 
-/// The registers of the parameters the tape's fixed part reads, each with its index in α.
-fn watched(tape: &Tape) -> Vec<(usize, usize)> {
+/// Whether the tape's fixed part reads a parameter.
+fn reads_parameters(tape: &Tape) -> bool {
     let (n, np, _) = tape.dims();
-    let mut registers: Vec<usize> = tape.code()[..tape.fixed()]
+    let parameters = 1 + n..1 + n + np;
+    tape.code()[..tape.fixed()]
         .iter()
         .flat_map(Instr::operands)
-        .map(|r| r as usize)
-        .filter(|r| (1 + n..1 + n + np).contains(r))
-        .collect();
-    registers.sort_unstable();
-    registers.dedup();
-    registers.into_iter().map(|r| (r, r - 1 - n)).collect()
+        .any(|r| parameters.contains(&(r as usize)))
 }
 
 /// The tape's segments: its fixed part in pieces of at most [`SEGMENT`] operations, then

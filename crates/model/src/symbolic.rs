@@ -584,8 +584,8 @@ fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (T
     let leaf = |id: &Id| matches!(graph.terms[*id as usize], Term::Const(_) | Term::Var(_));
     let fixed_op = |id: &&Id| !leaf(id) && !varying[*id];
     // Skipping the fixed part saves its operations at a call ([`op_cost`], in loads); it
-    // costs a load for each of its values the rest reads, a comparison for each parameter it
-    // reads, and a function's call. Where it would not pay twice over (the costs are
+    // costs a load for each of its values the rest reads, the comparison of the parameters
+    // (counted as one load for each the part reads) and a function's call. Where it would not pay twice over (the costs are
     // estimates, and arithmetic done inline overlaps with other work where loads and
     // comparisons wait), the program keeps its order: measured, a part that saved about
     // its cost once made Smith's and Bachmann's NLL + gradient 3 % slower.
