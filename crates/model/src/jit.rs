@@ -205,24 +205,11 @@ pub(crate) fn compile(tape: &Tape, stores: &[u32], quick: bool) -> Option<Compil
     }
     Some(Compiled {
         functions,
-        // A fixed part that reads no parameter (none survives constant folding) is run
-        // every time: with no parameters nothing would tell a fresh work space from a
-        // computed one.
-        fixed: if reads_parameters(tape) { fixed } else { 0 },
+        fixed,
         inputs: tape.dims(),
         registers: tape.len(),
         modules: Mutex::new(modules),
     })
-}
-
-/// Whether the tape's fixed part reads a parameter.
-fn reads_parameters(tape: &Tape) -> bool {
-    let (n, np, _) = tape.dims();
-    let parameters = 1 + n..1 + n + np;
-    tape.code()[..tape.fixed()]
-        .iter()
-        .flat_map(Instr::operands)
-        .any(|r| parameters.contains(&(r as usize)))
 }
 
 /// The tape's segments: its fixed part in pieces of at most [`SEGMENT`] operations, then

@@ -545,6 +545,24 @@ fn op_cost(term: Term) -> usize {
     }
 }
 
+/// How many distinct terms that `keep` accepts the terms of `ids` that `from` accepts read.
+fn operands_read(
+    graph: &Graph,
+    ids: &[Id],
+    from: impl Fn(Id) -> bool,
+    keep: impl Fn(Id) -> bool,
+) -> usize {
+    let mut read: Vec<Id> = ids
+        .iter()
+        .filter(|&&id| from(id))
+        .flat_map(|&id| children(graph.terms[id as usize]))
+        .filter(|&c| keep(c))
+        .collect();
+    read.sort_unstable();
+    read.dedup();
+    read.len()
+}
+
 /// The program computing the terms `outputs` of `graph`, and the register of each.
 fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (Tape, Vec<u32>) {
     let order = graph.reachable(outputs);
@@ -581,33 +599,28 @@ fn emit(graph: &Graph, outputs: &[Id], (n, np, nu): (usize, usize, usize)) -> (T
         };
         varying.insert(id, varies);
     }
-    let leaf = |id: &Id| matches!(graph.terms[*id as usize], Term::Const(_) | Term::Var(_));
-    let fixed_op = |id: &&Id| !leaf(id) && !varying[*id];
+    let leaf = |id: Id| matches!(graph.terms[id as usize], Term::Const(_) | Term::Var(_));
+    let fixed_op = |id: Id| !leaf(id) && !varying[&id];
+    let moving_op = |id: Id| !leaf(id) && varying[&id];
+    let parameter = |id: Id| matches!(graph.terms[id as usize], Term::Var(Slot::Parameter(_)));
     // Skipping the fixed part saves its operations at a call ([`op_cost`], in loads); it
     // costs a load for each of its values the rest reads, the comparison of the parameters
     // (counted as one load for each the part reads) and a function's call. Where it would
     // not pay twice over (the costs are estimates, and arithmetic done inline overlaps with
     // other work where loads and comparisons wait), the program keeps its order: measured,
     // a part that saved about its cost once made Smith's and Bachmann's NLL + gradient 3 %
-    // slower.
-    let read_by = |ids: &mut dyn Iterator<Item = &Id>, keep: &dyn Fn(&Id) -> bool| {
-        let mut read: Vec<Id> =
-            ids.flat_map(|&id| children(graph.terms[id as usize])).filter(|c| keep(c)).collect();
-        read.sort_unstable();
-        read.dedup();
-        read.len()
-    };
+    // slower. A part that reads no parameter (none survives constant folding) is never
+    // skipped: nothing would tell a fresh work space from a computed one.
     let saved: usize =
-        order.iter().filter(fixed_op).map(|&id| op_cost(graph.terms[id as usize])).sum();
-    let crossing =
-        read_by(&mut order.iter().filter(|id| !leaf(id) && varying[*id]), &|c| fixed_op(&c));
-    let parameter = |c: &Id| matches!(graph.terms[*c as usize], Term::Var(Slot::Parameter(_)));
-    let watched = read_by(&mut order.iter().filter(fixed_op), &parameter);
-    let (fixed, moving): (Vec<Id>, Vec<Id>) = match saved > 2 * (crossing + watched + SKIP_CALL) {
-        true => order.iter().partition(|id| !varying[*id]),
+        order.iter().filter(|&&id| fixed_op(id)).map(|&id| op_cost(graph.terms[id as usize])).sum();
+    let crossing = operands_read(graph, &order, moving_op, fixed_op);
+    let watched = operands_read(graph, &order, fixed_op, parameter);
+    let pays = watched > 0 && saved > 2 * (crossing + watched + SKIP_CALL);
+    let (fixed, moving): (Vec<Id>, Vec<Id>) = match pays {
+        true => order.iter().partition(|&&id| !varying[&id]),
         false => (Vec::new(), order.clone()),
     };
-    let fixed_count = fixed.iter().filter(|id| !leaf(id)).count();
+    let fixed_count = fixed.iter().filter(|&&id| !leaf(id)).count();
     let mut code = Vec::new();
     for &id in fixed.iter().chain(&moving) {
         let r = |x: Id| register[&x];

@@ -65,9 +65,10 @@ impl Instr {
 
 /// A straight-line program over f64 registers: register 0 holds t, then the n states, the
 /// parameters, the inputs and the constants; instruction i writes register `first + i`,
-/// reading only registers before it. The first [`fixed`](Self::fixed) instructions read
-/// neither t, the states nor the inputs: at the parameters of the last run their registers
-/// still hold their values, and the compiled code skips them.
+/// reading only registers before it. The first [`fixed`](Self::fixed) instructions (none,
+/// or a part that reads at least one parameter) read neither t, the states nor the inputs:
+/// at the parameters of the last run their registers still hold their values, and the
+/// compiled code skips them.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct Tape {
     n: usize,

@@ -153,6 +153,9 @@ impl<S: System> Method<S> for LevenbergMarquardt {
         let first = self.run(problem, start, &self.options, false)?;
         let flat = matches!(&first.termination,
             Termination::Stalled { plateau, undetermined, .. } if *plateau || !undetermined.is_empty());
+        if !flat {
+            return Ok(first);
+        }
         let driver = &self.options.driver;
         let left = DriverOptions {
             max_iterations: driver.max_iterations.saturating_sub(first.iterations),
@@ -167,7 +170,7 @@ impl<S: System> Method<S> for LevenbergMarquardt {
         let spent = left.max_iterations == 0
             || left.max_integrations == Some(0)
             || left.max_seconds.is_some_and(|s| s <= 0.0);
-        if !flat || spent {
+        if spent {
             return Ok(first);
         }
         let options = LevenbergMarquardtOptions { driver: left, ..self.options.clone() };
