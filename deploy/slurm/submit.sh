@@ -18,7 +18,9 @@
 #
 # Extra sbatch options: $SBATCH_ARRAY_OPTS for the array (account, partition, --time,
 # --mem-per-cpu), $SBATCH_MERGE_OPTS for the merge job (account, partition). The binary:
-# $SYSID if set, else `sysid` on PATH.
+# $SYSID if set, else `sysid` on PATH. The workspace builds for the CPU of the machine that
+# builds (.cargo/config.toml); where the compute nodes are older than the login node, build
+# the portable binary: RUSTFLAGS="-C target-cpu=x86-64" cargo install --path crates/cli
 set -euo pipefail
 
 usage() {
