@@ -14,7 +14,7 @@
 use nalgebra::{Const, SVector, U1};
 use num_dual::{Derivative, DualSVec64};
 
-use crate::lu::by_width;
+use crate::lu::{PANEL, by_width, panels};
 use crate::sparse::SparseJacobian;
 use crate::system::{Function, System};
 
@@ -97,11 +97,26 @@ impl ProductPlan {
     /// out = J_y vy + J_α vp (K columns, row by row), J's entries read from `entries`; with
     /// `ADD`, out += instead.
     pub(crate) fn apply<const ADD: bool>(&self, entries: &[f64], vy: &[f64], out: &mut [f64]) {
-        by_width!(self.k, K => if K == 0 {
-            self.accumulate_any::<ADD>(self.k, entries, vy, out)
-        } else {
-            self.accumulate::<K, ADD>(entries, vy, out)
-        })
+        let k = self.k;
+        if k == 0 {
+            return;
+        }
+        if k <= PANEL {
+            return by_width!(k, K => self.accumulate::<K, ADD>(entries, vy, out));
+        }
+        // Wider: the states' terms panel by panel ([`panels`]), each panel's sums in
+        // registers, then the parameters' terms. Every entry of `out` receives the same terms in the same order as
+        // in one pass.
+        for (first, width) in panels(k) {
+            by_width!(width, W => self.accumulate_states::<W, ADD>(first, entries, vy, out));
+        }
+        let mut q = 0;
+        for (row, &(_, q_end)) in out.chunks_exact_mut(k).zip(&self.rows) {
+            for &(r, j, v) in &self.parameters[q..q_end as usize] {
+                row[j as usize] += entries[r as usize] * v;
+            }
+            q = q_end as usize;
+        }
     }
 
     /// The products row by row for K directions known at compile time: each row's K sums
@@ -137,51 +152,33 @@ impl ProductPlan {
         }
     }
 
-    /// The products for any number of directions: each row in blocks of [`BLOCK`] columns
-    /// whose sums stay in registers (as [`accumulate`](Self::accumulate) keeps a whole row's),
-    /// then the last k mod [`BLOCK`] columns one at a time. Every entry of `out` receives
-    /// the same terms in the same order either way.
-    fn accumulate_any<const ADD: bool>(
+    /// The states' terms J_y vy of columns `first..first + W` of the plan's k, row by row,
+    /// the panel's W sums in registers until they are stored.
+    #[inline(always)]
+    fn accumulate_states<const W: usize, const ADD: bool>(
         &self,
-        k: usize,
+        first: usize,
         entries: &[f64],
         vy: &[f64],
         out: &mut [f64],
     ) {
-        const BLOCK: usize = 8;
-        let (mut s, mut q) = (0, 0);
-        let blocked = k / BLOCK * BLOCK;
-        for (row, &(s_end, q_end)) in out.chunks_exact_mut(k).zip(&self.rows) {
-            let terms = &self.states[s..s_end as usize];
-            for (c, block) in row[..blocked].chunks_exact_mut(BLOCK).enumerate() {
-                let first = c * BLOCK;
-                let mut sums = [0.0; BLOCK];
-                if ADD {
-                    sums.copy_from_slice(block);
-                }
-                for &(r, column) in terms {
-                    let (a, at) = (entries[r as usize], column as usize + first);
-                    let direction: &[f64; BLOCK] =
-                        vy[at..at + BLOCK].try_into().expect("a block of values");
-                    for j in 0..BLOCK {
-                        sums[j] += a * direction[j];
-                    }
-                }
-                block.copy_from_slice(&sums);
+        let mut s = 0;
+        for (row, &(s_end, _)) in out.chunks_exact_mut(self.k).zip(&self.rows) {
+            let block: &mut [f64; W] =
+                (&mut row[first..first + W]).try_into().expect("a panel of values");
+            let mut sums = [0.0; W];
+            if ADD {
+                sums.copy_from_slice(block);
             }
-            // The remaining columns one by one, each sum in a register: summed in place, a
-            // column's every term would wait on the store of the one before.
-            for (j, o) in row.iter_mut().enumerate().skip(blocked) {
-                let mut sum = if ADD { *o } else { 0.0 };
-                for &(r, column) in terms {
-                    sum += entries[r as usize] * vy[column as usize + j];
+            for &(r, column) in &self.states[s..s_end as usize] {
+                let (a, at) = (entries[r as usize], column as usize + first);
+                let direction: &[f64; W] = vy[at..at + W].try_into().expect("a panel of values");
+                for j in 0..W {
+                    sums[j] += a * direction[j];
                 }
-                *o = sum;
             }
-            for &(r, j, v) in &self.parameters[q..q_end as usize] {
-                row[j as usize] += entries[r as usize] * v;
-            }
-            (s, q) = (s_end as usize, q_end as usize);
+            *block = sums;
+            s = s_end as usize;
         }
     }
 }
@@ -438,15 +435,15 @@ mod tests {
     }
 
     /// Every width the plan has a path for gives the products of the definition to the bit:
-    /// compile-time widths (1 to 16) and any other, whose rows go in blocks of eight with a
-    /// remainder (17, 24, 35), written over the output and added to it.
+    /// one pass of a compile-time width (1 to 32) and the panels of wider ones (33 as 17 +
+    /// 16, 70 as three), written over the output and added to it.
     #[test]
     fn the_products_are_the_definitions_at_every_width() {
         let (m, n) = (3, 4);
         // Rows in order; columns 4 and 5 are the two parameters.
         let pattern = [(0, 0), (0, 2), (0, 4), (1, 1), (1, 3), (1, 5), (2, 0), (2, 1), (2, 2)];
         let values: Vec<f64> = (0..pattern.len()).map(|e| (e as f64 * 0.7).sin() + 0.1).collect();
-        for k in [1, 5, 16, 17, 24, 35] {
+        for k in [1, 5, 16, 17, 24, 32, 33, 35, 70] {
             let vy: Vec<f64> = (0..n * k).map(|i| (i as f64 * 0.31).cos()).collect();
             // Sparse directions for the parameters, as unit seeds are.
             let vp: Vec<f64> =

@@ -134,45 +134,34 @@ impl Lu {
     /// Overwrites the n × k matrix R, stored row by row in r, with A⁻¹ R (k at most the
     /// `columns` given to [`new`](Self::new)).
     pub fn solve_rows(&mut self, r: &mut [f64], k: usize) {
-        // The k columns are the inner loop: known at compile time for the common small k, it
-        // is a few vector operations per row instead of a loop (SalazarCavazos' 75 states and
-        // 6 columns: 31 % of an NLL + gradient in this solve before).
-        by_width!(k, K => self.solve_block::<K>(r, k))
+        // The k columns are the inner loop: with k known at compile time, a row is a few
+        // vector operations instead of a loop, and its copies fixed moves (SalazarCavazos' 75
+        // states and 6 columns: 31 % of an NLL + gradient in this solve before; Elowitz's 18
+        // columns, 1.18× its NLL + gradient once 18 was a width of its own).
+        match k {
+            0 => {}
+            1..=PANEL => by_width!(k, K => self.solve_block::<K>(r)),
+            _ => self.solve_wide(r, k),
+        }
     }
 
-    /// [`solve_rows`](Self::solve_rows) with rows of K columns (`k` = K), or of `k` columns
-    /// for K = 0.
-    fn solve_block<const K: usize>(&mut self, r: &mut [f64], k: usize) {
+    /// [`solve_rows`](Self::solve_rows) with rows of K columns.
+    fn solve_block<const K: usize>(&mut self, r: &mut [f64]) {
         let n = self.n;
-        let (lu, x) = (&self.factors[..n * n], &mut self.work[..n * k]);
-        let r = &mut r[..n * k];
-        // P A = L U: row i of P R is row fwd[i] of R.
-        for (i, &from) in self.fwd.iter().enumerate() {
-            x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
-        }
-        // L Y = P R, unit diagonal: row j of Y leaves the rows below it.
-        for j in 0..n {
-            let (done, rest) = x.split_at_mut((j + 1) * k);
-            let solved = &done[j * k..];
-            for (row, &l) in rest.chunks_exact_mut(k).zip(&lu[j * n + j + 1..(j + 1) * n]) {
-                if l != 0.0 {
-                    eliminate::<K>(row, solved, l);
-                }
-            }
-        }
-        // U X = Y: row j of X leaves the rows above it.
-        for j in (0..n).rev() {
-            let (rest, done) = x.split_at_mut(j * k);
-            let solved = &mut done[..k];
-            let inverse_pivot = lu[j * n + j];
-            for v in solved.iter_mut() {
-                *v *= inverse_pivot;
-            }
-            for (row, &u) in rest.chunks_exact_mut(k).zip(&lu[j * n..j * n + j]) {
-                if u != 0.0 {
-                    eliminate::<K>(row, solved, u);
-                }
-            }
+        let (lu, x, r) = (&self.factors[..n * n], &mut self.work[..n * K], &mut r[..n * K]);
+        permute(&self.fwd, r, x, K);
+        solve_panel::<K>(lu, n, x, K, 0);
+        r.copy_from_slice(x);
+    }
+
+    /// [`solve_rows`](Self::solve_rows) with more than [`PANEL`] columns: the columns are
+    /// independent, so they are solved in [`panels`], each of a width known at compile time.
+    fn solve_wide(&mut self, r: &mut [f64], k: usize) {
+        let n = self.n;
+        let (lu, x, r) = (&self.factors[..n * n], &mut self.work[..n * k], &mut r[..n * k]);
+        permute(&self.fwd, r, x, k);
+        for (first, width) in panels(k) {
+            by_width!(width, W => solve_panel::<W>(lu, n, x, k, first));
         }
         r.copy_from_slice(x);
     }
@@ -200,8 +189,58 @@ impl Lu {
     }
 }
 
-/// `$body` with the const `$K` set to `$k` where it is 1 to 16, to 0 otherwise: a block solve's
-/// rows of K columns, known at compile time for the common small k (see [`Lu::solve_rows`]).
+/// x = P R for rows of k columns: row i of P R is row fwd[i] of R.
+#[inline(always)]
+fn permute(fwd: &[usize], r: &[f64], x: &mut [f64], k: usize) {
+    for (i, &from) in fwd.iter().enumerate() {
+        x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
+    }
+}
+
+/// Columns `first..first + K` of the permuted right-hand side `x` (n rows of k) solved with
+/// the factors `lu`: L Y = P R, then U X = Y.
+#[inline(always)]
+fn solve_panel<const K: usize>(lu: &[f64], n: usize, x: &mut [f64], k: usize, first: usize) {
+    let panel = first..first + K;
+    // L Y = P R, unit diagonal: row j of Y leaves the rows below it.
+    for j in 0..n {
+        let (done, rest) = x.split_at_mut((j + 1) * k);
+        let solved = &done[j * k..][panel.clone()];
+        for (row, &l) in rest.chunks_exact_mut(k).zip(&lu[j * n + j + 1..(j + 1) * n]) {
+            if l != 0.0 {
+                eliminate::<K>(&mut row[panel.clone()], solved, l);
+            }
+        }
+    }
+    // U X = Y: row j of X leaves the rows above it.
+    for j in (0..n).rev() {
+        let (rest, done) = x.split_at_mut(j * k);
+        let solved = &mut done[panel.clone()];
+        let inverse_pivot = lu[j * n + j];
+        for v in solved.iter_mut() {
+            *v *= inverse_pivot;
+        }
+        for (row, &u) in rest.chunks_exact_mut(k).zip(&lu[j * n..j * n + j]) {
+            if u != 0.0 {
+                eliminate::<K>(&mut row[panel.clone()], solved, u);
+            }
+        }
+    }
+}
+
+/// The widest panel of columns whose width is known at compile time ([`by_width`]).
+pub(crate) const PANEL: usize = 32;
+
+/// k columns as the fewest panels (first column, width) of at most [`PANEL`] columns, their
+/// widths as equal as can be (33 as 17 and 16, not 32 and a pass for one column).
+pub(crate) fn panels(k: usize) -> impl Iterator<Item = (usize, usize)> {
+    let count = k.div_ceil(PANEL);
+    let (width, wider) = (k / count.max(1), k % count.max(1));
+    (0..count).map(move |p| (p * width + p.min(wider), width + usize::from(p < wider)))
+}
+
+/// `$body` with the const `$K` set to `$k`, which must be 1 to [`PANEL`]: a panel's width
+/// known at compile time (see [`Lu::solve_rows`] and [`panels`]).
 macro_rules! by_width {
     ($k:expr, $K:ident => $body:expr) => {
         match $k {
@@ -269,31 +308,85 @@ macro_rules! by_width {
                 const $K: usize = 16;
                 $body
             }
-            _ => {
-                const $K: usize = 0;
+            17 => {
+                const $K: usize = 17;
                 $body
             }
+            18 => {
+                const $K: usize = 18;
+                $body
+            }
+            19 => {
+                const $K: usize = 19;
+                $body
+            }
+            20 => {
+                const $K: usize = 20;
+                $body
+            }
+            21 => {
+                const $K: usize = 21;
+                $body
+            }
+            22 => {
+                const $K: usize = 22;
+                $body
+            }
+            23 => {
+                const $K: usize = 23;
+                $body
+            }
+            24 => {
+                const $K: usize = 24;
+                $body
+            }
+            25 => {
+                const $K: usize = 25;
+                $body
+            }
+            26 => {
+                const $K: usize = 26;
+                $body
+            }
+            27 => {
+                const $K: usize = 27;
+                $body
+            }
+            28 => {
+                const $K: usize = 28;
+                $body
+            }
+            29 => {
+                const $K: usize = 29;
+                $body
+            }
+            30 => {
+                const $K: usize = 30;
+                $body
+            }
+            31 => {
+                const $K: usize = 31;
+                $body
+            }
+            32 => {
+                const $K: usize = 32;
+                $body
+            }
+            width => unreachable!("a panel of 1 to 32 columns, not {width}"),
         }
     };
 }
 pub(crate) use by_width;
 
-/// row −= factor · solved, over K columns (K known at compile time), or over every column
-/// of the row for K = 0.
+/// row −= factor · solved, over K columns (K known at compile time).
 #[inline(always)]
 pub(crate) fn eliminate<const K: usize>(row: &mut [f64], solved: &[f64], factor: f64) {
-    if K == 0 {
-        for (v, y) in row.iter_mut().zip(solved) {
-            *v -= factor * y;
-        }
-    } else {
-        let (row, solved): (&mut [f64; K], &[f64; K]) = (
-            (&mut row[..K]).try_into().expect("K columns"),
-            (&solved[..K]).try_into().expect("K columns"),
-        );
-        for c in 0..K {
-            row[c] -= factor * solved[c];
-        }
+    let (row, solved): (&mut [f64; K], &[f64; K]) = (
+        (&mut row[..K]).try_into().expect("K columns"),
+        (&solved[..K]).try_into().expect("K columns"),
+    );
+    for c in 0..K {
+        row[c] -= factor * solved[c];
     }
 }
 
@@ -369,15 +462,16 @@ mod tests {
         assert_eq!(lu.factor(|i, j| singular[i][j]), Err(FactorError::Singular));
     }
 
-    /// Every width of block, the fixed ones (1–16) and the general one (17, 20), gives each
-    /// column what the single solve gives it, to the last bit.
+    /// Every width of block, one panel of a width known at compile time (1–32) or several
+    /// (33 as 17 + 16, 72 as three of 24), gives each column what the single solve gives it,
+    /// to the last bit.
     #[test]
     fn block_solves_of_every_width_are_the_column_solves() {
         let n = 11;
         let entry = |i: usize, j: usize| {
             ((i * 5 + j * 7) % 13) as f64 - 6.0 + if i == j { 0.25 } else { 0.0 }
         };
-        for k in [1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 16, 17, 20] {
+        for k in [1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 16, 17, 18, 20, 31, 32, 33, 40, 72] {
             let mut lu = Lu::new(n, k);
             lu.factor(entry).unwrap();
             let b = |i: usize, j: usize| (i as f64 * 0.7 - j as f64 * 1.3).cos();
@@ -390,6 +484,28 @@ mod tests {
                     assert_eq!(rows[i * k + j].to_bits(), column[i].to_bits(), "k = {k}");
                 }
             }
+        }
+    }
+
+    /// The panels cover the k columns in order without gap or overlap, each 1 to PANEL wide,
+    /// as few as can be, their widths at most one apart.
+    #[test]
+    fn panels_cover_the_columns_evenly() {
+        assert_eq!(panels(0).count(), 0);
+        assert_eq!(panels(33).collect::<Vec<_>>(), [(0, 17), (17, 16)]);
+        assert_eq!(panels(72).collect::<Vec<_>>(), [(0, 24), (24, 24), (48, 24)]);
+        for k in 1..=200 {
+            let all: Vec<(usize, usize)> = panels(k).collect();
+            assert_eq!(all.len(), k.div_ceil(PANEL), "k = {k}");
+            let mut next = 0;
+            for &(first, width) in &all {
+                assert_eq!(first, next, "k = {k}");
+                assert!((1..=PANEL).contains(&width), "k = {k}");
+                next += width;
+            }
+            assert_eq!(next, k);
+            let widths = all.iter().map(|p| p.1);
+            assert!(widths.clone().max().unwrap() - widths.min().unwrap() <= 1, "k = {k}");
         }
     }
 }

@@ -19,7 +19,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
 use faer::sparse::linalg::amd;
 
-use crate::lu::{FactorError, Lu, by_width, eliminate};
+use crate::lu::{FactorError, Lu, PANEL, by_width, eliminate, panels};
 
 /// The largest multiplier accepted from diagonal pivots: 1/τ for threshold partial pivoting
 /// with τ = 10⁻³.
@@ -182,45 +182,66 @@ impl SparseLu {
                 _ => self.dense.solve_rows(r, k),
             };
         }
-        by_width!(k, K => self.solve_block::<K>(r, k))
+        match k {
+            0 => {}
+            1..=PANEL => by_width!(k, K => self.solve_block::<K>(r, K)),
+            _ => self.solve_block::<0>(r, k),
+        }
     }
 
-    /// [`solve_rows`](Self::solve_rows) with rows of K columns (`k` = K), or of `k` columns
-    /// for K = 0.
+    /// [`solve_rows`](Self::solve_rows) with rows of k columns: K = k for one panel of a
+    /// width known at compile time, or K = 0 for more than [`PANEL`] columns, solved in
+    /// [`panels`] (the columns are independent), as the dense solve does.
     fn solve_block<const K: usize>(&mut self, r: &mut [f64], k: usize) {
         let n = self.n;
         let x = &mut self.work[..n * k];
         for (i, &from) in self.order.iter().enumerate() {
             x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
         }
+        if K > 0 {
+            self.solve_panel::<K>(k, 0);
+        } else {
+            for (first, width) in panels(k) {
+                by_width!(width, W => self.solve_panel::<W>(k, first));
+            }
+        }
+        for (i, &to) in self.order.iter().enumerate() {
+            r[to * k..(to + 1) * k].copy_from_slice(&self.work[i * k..(i + 1) * k]);
+        }
+    }
+
+    /// Columns `first..first + K` of the permuted right-hand side in the work space (n rows
+    /// of k): L Y = R, then U X = Y.
+    #[inline(always)]
+    fn solve_panel<const K: usize>(&mut self, k: usize, first: usize) {
+        let n = self.n;
+        let panel = first..first + K;
+        let x = &mut self.work[..n * k];
         let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
         // L Y = R: row i less its multipliers times the rows before it.
         for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
             let (done, rest) = x.split_at_mut(i * k);
-            let target = &mut rest[..k];
+            let target = &mut rest[panel.clone()];
             for p in start..diagonal {
                 let (j, l) = (columns[p], values[p]);
                 if l != 0.0 {
-                    eliminate::<K>(target, &done[j * k..(j + 1) * k], l);
+                    eliminate::<K>(target, &done[j * k..][panel.clone()], l);
                 }
             }
         }
         // U X = Y: row i less U's entries times the rows after it, over the pivot.
         for i in (0..n).rev() {
             let (head, done) = x.split_at_mut((i + 1) * k);
-            let target = &mut head[i * k..];
+            let target = &mut head[i * k..][panel.clone()];
             let d = self.diagonal[i];
             for p in d + 1..starts[i + 1] {
                 let (j, u) = (columns[p] - i - 1, values[p]);
                 if u != 0.0 {
-                    eliminate::<K>(target, &done[j * k..(j + 1) * k], u);
+                    eliminate::<K>(target, &done[j * k..][panel.clone()], u);
                 }
             }
             let inverse_pivot = values[d];
             target.iter_mut().for_each(|v| *v *= inverse_pivot);
-        }
-        for (i, &to) in self.order.iter().enumerate() {
-            r[to * k..(to + 1) * k].copy_from_slice(&x[i * k..(i + 1) * k]);
         }
     }
 
@@ -393,6 +414,29 @@ mod tests {
         sparse.factor(10.0, &jac).expect("regular");
         assert!(!sparse.fell_back());
         agree(&mut sparse, &mut dense_of(n, &jac, 10.0), n);
+    }
+
+    /// A block of any width, one panel (up to 32 columns) or several, gives each column
+    /// what the single solve gives it, to the last bit.
+    #[test]
+    fn sparse_block_solves_of_every_width_are_the_column_solves() {
+        let n = 40;
+        let (pattern, jac) = chain(n);
+        for k in [1, 2, 7, 16, 17, 32, 33, 70] {
+            let mut sparse = SparseLu::new(n, &pattern, k).expect("ordered");
+            sparse.factor(10.0, &jac).expect("regular");
+            assert!(!sparse.fell_back());
+            let b = |i: usize, j: usize| (i as f64 * 0.7 - j as f64 * 1.3).cos();
+            let mut rows: Vec<f64> = (0..n).flat_map(|i| (0..k).map(move |j| b(i, j))).collect();
+            sparse.solve_rows(&mut rows, k);
+            for j in 0..k {
+                let mut column: Vec<f64> = (0..n).map(|i| b(i, j)).collect();
+                sparse.solve(&mut column);
+                for i in 0..n {
+                    assert_eq!(rows[i * k + j].to_bits(), column[i].to_bits(), "k = {k}");
+                }
+            }
+        }
     }
 
     /// Where a diagonal pivot is 0, or its multiplier beyond 10³, the step's matrix is
