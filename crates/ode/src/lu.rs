@@ -137,7 +137,8 @@ impl Lu {
         // The k columns are the inner loop: with k known at compile time, a row is a few
         // vector operations instead of a loop, and its copies fixed moves (SalazarCavazos' 75
         // states and 6 columns: 31 % of an NLL + gradient in this solve before; Elowitz's 18
-        // columns, 1.18× its NLL + gradient once 18 was a width of its own).
+        // columns, 1.18× its NLL + gradient once 18 was a width of its own). Wider rows are
+        // long enough for a run-time loop to vectorise well.
         match k {
             0 => {}
             1..=PANEL => by_width!(k, K => self.solve_block::<K>(r)),
@@ -154,15 +155,15 @@ impl Lu {
         r.copy_from_slice(x);
     }
 
-    /// [`solve_rows`](Self::solve_rows) with more than [`PANEL`] columns: the columns are
-    /// independent, so they are solved in [`panels`], each of a width known at compile time.
+    /// [`solve_rows`](Self::solve_rows) with more than [`PANEL`] columns: each row's columns
+    /// in one run-time loop, long enough to vectorise well. (Solved in panels of
+    /// compile-time width instead, Raimundez's NLL + gradient took 16 % in this solve
+    /// against 6 %: each panel goes over all the factors again.)
     fn solve_wide(&mut self, r: &mut [f64], k: usize) {
         let n = self.n;
         let (lu, x, r) = (&self.factors[..n * n], &mut self.work[..n * k], &mut r[..n * k]);
         permute(&self.fwd, r, x, k);
-        for (first, width) in panels(k) {
-            by_width!(width, W => solve_panel::<W>(lu, n, x, k, first));
-        }
+        solve_panel::<0>(lu, n, x, k, 0);
         r.copy_from_slice(x);
     }
 
@@ -198,10 +199,10 @@ fn permute(fwd: &[usize], r: &[f64], x: &mut [f64], k: usize) {
 }
 
 /// Columns `first..first + K` of the permuted right-hand side `x` (n rows of k) solved with
-/// the factors `lu`: L Y = P R, then U X = Y.
+/// the factors `lu`: L Y = P R, then U X = Y; for K = 0, columns `first..k`.
 #[inline(always)]
 fn solve_panel<const K: usize>(lu: &[f64], n: usize, x: &mut [f64], k: usize, first: usize) {
-    let panel = first..first + K;
+    let panel = first..if K == 0 { k } else { first + K };
     // L Y = P R, unit diagonal: row j of Y leaves the rows below it.
     for j in 0..n {
         let (done, rest) = x.split_at_mut((j + 1) * k);
@@ -378,9 +379,16 @@ macro_rules! by_width {
 }
 pub(crate) use by_width;
 
-/// row −= factor · solved, over K columns (K known at compile time).
+/// row −= factor · solved, over K columns (K known at compile time), or over every column
+/// of the row for K = 0.
 #[inline(always)]
 pub(crate) fn eliminate<const K: usize>(row: &mut [f64], solved: &[f64], factor: f64) {
+    if K == 0 {
+        for (v, y) in row.iter_mut().zip(solved) {
+            *v -= factor * y;
+        }
+        return;
+    }
     let (row, solved): (&mut [f64; K], &[f64; K]) = (
         (&mut row[..K]).try_into().expect("K columns"),
         (&solved[..K]).try_into().expect("K columns"),
@@ -462,9 +470,8 @@ mod tests {
         assert_eq!(lu.factor(|i, j| singular[i][j]), Err(FactorError::Singular));
     }
 
-    /// Every width of block, one panel of a width known at compile time (1–32) or several
-    /// (33 as 17 + 16, 72 as three of 24), gives each column what the single solve gives it,
-    /// to the last bit.
+    /// Every width of block, known at compile time (1–32) or wider in a run-time loop (33,
+    /// 40, 72), gives each column what the single solve gives it, to the last bit.
     #[test]
     fn block_solves_of_every_width_are_the_column_solves() {
         let n = 11;

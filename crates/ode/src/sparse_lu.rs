@@ -19,7 +19,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
 use faer::sparse::linalg::amd;
 
-use crate::lu::{FactorError, Lu, PANEL, by_width, eliminate, panels};
+use crate::lu::{FactorError, Lu, PANEL, by_width, eliminate};
 
 /// The largest multiplier accepted from diagonal pivots: 1/τ for threshold partial pivoting
 /// with τ = 10⁻³.
@@ -189,59 +189,43 @@ impl SparseLu {
         }
     }
 
-    /// [`solve_rows`](Self::solve_rows) with rows of k columns: K = k for one panel of a
-    /// width known at compile time, or K = 0 for more than [`PANEL`] columns, solved in
-    /// [`panels`] (the columns are independent), as the dense solve does.
+    /// [`solve_rows`](Self::solve_rows) with rows of k columns: K = k, a width known at
+    /// compile time, or K = 0 for more than [`PANEL`] columns, each row's columns in one
+    /// run-time loop, as the dense solve does.
     fn solve_block<const K: usize>(&mut self, r: &mut [f64], k: usize) {
         let n = self.n;
         let x = &mut self.work[..n * k];
         for (i, &from) in self.order.iter().enumerate() {
             x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
         }
-        if K > 0 {
-            self.solve_panel::<K>(k, 0);
-        } else {
-            for (first, width) in panels(k) {
-                by_width!(width, W => self.solve_panel::<W>(k, first));
-            }
-        }
-        for (i, &to) in self.order.iter().enumerate() {
-            r[to * k..(to + 1) * k].copy_from_slice(&self.work[i * k..(i + 1) * k]);
-        }
-    }
-
-    /// Columns `first..first + K` of the permuted right-hand side in the work space (n rows
-    /// of k): L Y = R, then U X = Y.
-    #[inline(always)]
-    fn solve_panel<const K: usize>(&mut self, k: usize, first: usize) {
-        let n = self.n;
-        let panel = first..first + K;
-        let x = &mut self.work[..n * k];
         let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
         // L Y = R: row i less its multipliers times the rows before it.
         for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
             let (done, rest) = x.split_at_mut(i * k);
-            let target = &mut rest[panel.clone()];
+            let target = &mut rest[..k];
             for p in start..diagonal {
                 let (j, l) = (columns[p], values[p]);
                 if l != 0.0 {
-                    eliminate::<K>(target, &done[j * k..][panel.clone()], l);
+                    eliminate::<K>(target, &done[j * k..(j + 1) * k], l);
                 }
             }
         }
         // U X = Y: row i less U's entries times the rows after it, over the pivot.
         for i in (0..n).rev() {
             let (head, done) = x.split_at_mut((i + 1) * k);
-            let target = &mut head[i * k..][panel.clone()];
+            let target = &mut head[i * k..(i + 1) * k];
             let d = self.diagonal[i];
             for p in d + 1..starts[i + 1] {
                 let (j, u) = (columns[p] - i - 1, values[p]);
                 if u != 0.0 {
-                    eliminate::<K>(target, &done[j * k..][panel.clone()], u);
+                    eliminate::<K>(target, &done[j * k..(j + 1) * k], u);
                 }
             }
             let inverse_pivot = values[d];
             target.iter_mut().for_each(|v| *v *= inverse_pivot);
+        }
+        for (i, &to) in self.order.iter().enumerate() {
+            r[to * k..(to + 1) * k].copy_from_slice(&self.work[i * k..(i + 1) * k]);
         }
     }
 
@@ -416,8 +400,8 @@ mod tests {
         agree(&mut sparse, &mut dense_of(n, &jac, 10.0), n);
     }
 
-    /// A block of any width, one panel (up to 32 columns) or several, gives each column
-    /// what the single solve gives it, to the last bit.
+    /// A block of any width, known at compile time (up to 32 columns) or wider in a
+    /// run-time loop, gives each column what the single solve gives it, to the last bit.
     #[test]
     fn sparse_block_solves_of_every_width_are_the_column_solves() {
         let n = 40;
