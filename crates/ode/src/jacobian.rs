@@ -105,8 +105,8 @@ impl ProductPlan {
             return by_width!(k, K => self.accumulate::<K, ADD>(entries, vy, out));
         }
         // Wider: the states' terms panel by panel ([`panels`]), each panel's sums in
-        // registers, then the parameters' terms. Every entry of `out` receives the same terms in the same order as
-        // in one pass.
+        // registers, then the parameters' terms. Every entry of `out` receives the same
+        // terms in the same order as in one pass.
         for (first, width) in panels(k) {
             by_width!(width, W => self.accumulate_states::<W, ADD>(first, entries, vy, out));
         }

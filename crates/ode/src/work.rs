@@ -188,6 +188,7 @@ impl<R: Rhs> Evaluator<'_, R> {
             for (m, &c) in floors.iter_mut().zip(columns) {
                 *m = (atol * c).max(rtol * *m);
             }
+            let floors = &floors[..k];
             for ((row_e, row), row_new) in rows(e, n, k).zip(rows(x, n, k)).zip(rows(xn, n, k)) {
                 add_squares(&mut sum, (row_e, row, row_new), rtol, |j| floors[j]);
             }
@@ -208,17 +209,22 @@ fn add_squares(
     floor: impl Fn(usize) -> f64,
 ) {
     let (x, xn) = (&x[..e.len()], &xn[..e.len()]);
-    let q = |i: usize| scaled(e[i], floor(i) + rtol * x[i].abs().max(xn[i].abs()));
-    let whole = e.len() / 4 * 4;
-    for i in (0..whole).step_by(4) {
-        for (lane, s) in sum.iter_mut().enumerate() {
-            let q = q(i + lane);
-            *s += q * q;
+    // In groups of four as arrays: indexed one by one, the loop stayed scalar, a division
+    // and two jumps per component (11 % of Raia's NLL + gradient in this norm).
+    let (e4, e_rest) = e.as_chunks::<4>();
+    let (x4, x_rest) = x.as_chunks::<4>();
+    let (xn4, xn_rest) = xn.as_chunks::<4>();
+    for (c, ((e, x), xn)) in e4.iter().zip(x4).zip(xn4).enumerate() {
+        let floors: [f64; 4] = std::array::from_fn(|lane| floor(4 * c + lane));
+        for lane in 0..4 {
+            let q = scaled(e[lane], floors[lane] + rtol * x[lane].abs().max(xn[lane].abs()));
+            sum[lane] += q * q;
         }
     }
-    for (i, s) in (whole..e.len()).zip(sum.iter_mut()) {
-        let q = q(i);
-        *s += q * q;
+    let whole = e4.len() * 4;
+    for (lane, ((e, x), xn)) in e_rest.iter().zip(x_rest).zip(xn_rest).enumerate() {
+        let q = scaled(*e, floor(whole + lane) + rtol * x.abs().max(xn.abs()));
+        sum[lane] += q * q;
     }
 }
 
@@ -238,5 +244,48 @@ fn scaled(e: f64, sk: f64) -> f64 {
         0.0
     } else {
         f64::INFINITY
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{add_squares, scaled};
+
+    /// The scaled error is the quotient wherever the scale is positive, to the bit, and 0
+    /// or ∞ where there is no scale (0, or NaN from a NaN state).
+    #[test]
+    fn scaled_errors_are_the_quotient_or_the_cases_without_a_scale() {
+        for (e, sk) in [(3.0, 7.0), (-1e-300, 3e-10), (0.0, 1.0), (1.0, f64::MIN_POSITIVE)] {
+            assert_eq!(scaled(e, sk).to_bits(), (e / sk).to_bits(), "{e} / {sk}");
+        }
+        let bits = |e: f64, sk: f64| scaled(e, sk).to_bits();
+        assert_eq!(bits(0.0, 0.0), 0.0f64.to_bits());
+        assert_eq!(bits(-0.0, 0.0), 0.0f64.to_bits());
+        assert_eq!(bits(2.0, 0.0), f64::INFINITY.to_bits());
+        assert_eq!(bits(-2.0, 0.0), f64::INFINITY.to_bits());
+        assert_eq!(bits(0.0, f64::NAN), 0.0f64.to_bits());
+        assert_eq!(bits(1.0, f64::NAN), f64::INFINITY.to_bits());
+    }
+
+    /// The partial sums take entry i into sum i mod 4, in order, whatever the length (the
+    /// groups of four and the rest alike), with each entry's own floor: the same sums to the
+    /// bit as adding the entries one by one.
+    #[test]
+    fn squares_go_to_the_sum_of_their_index_mod_four() {
+        for len in 0..14 {
+            let e: Vec<f64> = (0..len).map(|i| (i as f64 * 0.7).sin() * 1e-6).collect();
+            let x: Vec<f64> = (0..len).map(|i| (i as f64 * 1.3).cos()).collect();
+            let xn: Vec<f64> = (0..len).map(|i| (i as f64 * 0.4).sin() - 0.5).collect();
+            let floor = |i: usize| 1e-9 * (1 + i % 3) as f64;
+            let rtol = 1e-6;
+            let mut sum = [0.5, 0.25, 0.125, 1.0];
+            let mut expected = sum;
+            for i in 0..len {
+                let q = scaled(e[i], floor(i) + rtol * x[i].abs().max(xn[i].abs()));
+                expected[i % 4] += q * q;
+            }
+            add_squares(&mut sum, (&e, &x, &xn), rtol, floor);
+            assert_eq!(sum.map(f64::to_bits), expected.map(f64::to_bits), "length {len}");
+        }
     }
 }
