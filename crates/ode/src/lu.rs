@@ -153,29 +153,46 @@ impl Lu {
         // long enough for a run-time loop to vectorise well.
         match k {
             0 => {}
-            1..=PANEL => by_width!(k, K => self.solve_block::<K>(r)),
-            _ => self.solve_wide(r, k),
+            1..=PANEL => by_width!(k, K => self.solve_block::<K>(r, K)),
+            _ => self.solve_block::<0>(r, k),
         }
     }
 
-    /// [`solve_rows`](Self::solve_rows) with rows of K columns.
-    fn solve_block<const K: usize>(&mut self, r: &mut [f64]) {
-        let n = self.n;
-        let (lu, x, r) = (&self.factors[..n * n], &mut self.work[..n * K], &mut r[..n * K]);
-        permute(&self.fwd, r, x, K);
-        solve_panel::<K>(lu, n, x, K, 0);
-        r.copy_from_slice(x);
-    }
-
-    /// [`solve_rows`](Self::solve_rows) with more than [`PANEL`] columns: each row's columns
-    /// in one run-time loop, long enough to vectorise well. (Solved in panels of
-    /// compile-time width instead, Raimundez's NLL + gradient took 16 % in this solve
-    /// against 6 %: each panel goes over all the factors again.)
-    fn solve_wide(&mut self, r: &mut [f64], k: usize) {
+    /// [`solve_rows`](Self::solve_rows) with rows of K = `k` columns, or of `k` columns in a
+    /// run-time loop for K = 0 (more than [`PANEL`]: long enough to vectorise well; solved in
+    /// panels of compile-time width instead, Raimundez's NLL + gradient took 16 % in this
+    /// solve against 6 %, each panel going over all the factors again).
+    fn solve_block<const K: usize>(&mut self, r: &mut [f64], k: usize) {
         let n = self.n;
         let (lu, x, r) = (&self.factors[..n * n], &mut self.work[..n * k], &mut r[..n * k]);
-        permute(&self.fwd, r, x, k);
-        solve_panel::<0>(lu, n, x, k, 0);
+        // P A = L U: row i of P R is row fwd[i] of R.
+        for (i, &from) in self.fwd.iter().enumerate() {
+            x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
+        }
+        // L Y = P R, unit diagonal: row j of Y leaves the rows below it.
+        for j in 0..n {
+            let (done, rest) = x.split_at_mut((j + 1) * k);
+            let solved = &done[j * k..];
+            for (row, &l) in rest.chunks_exact_mut(k).zip(&lu[j * n + j + 1..(j + 1) * n]) {
+                if l != 0.0 {
+                    eliminate::<K>(row, solved, l);
+                }
+            }
+        }
+        // U X = Y: row j of X leaves the rows above it.
+        for j in (0..n).rev() {
+            let (rest, done) = x.split_at_mut(j * k);
+            let solved = &mut done[..k];
+            let inverse_pivot = lu[j * n + j];
+            for v in solved.iter_mut() {
+                *v *= inverse_pivot;
+            }
+            for (row, &u) in rest.chunks_exact_mut(k).zip(&lu[j * n..j * n + j]) {
+                if u != 0.0 {
+                    eliminate::<K>(row, solved, u);
+                }
+            }
+        }
         r.copy_from_slice(x);
     }
 
@@ -202,46 +219,7 @@ impl Lu {
     }
 }
 
-/// x = P R for rows of k columns: row i of P R is row fwd[i] of R.
-#[inline(always)]
-fn permute(fwd: &[usize], r: &[f64], x: &mut [f64], k: usize) {
-    for (i, &from) in fwd.iter().enumerate() {
-        x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
-    }
-}
-
-/// Columns `first..first + K` of the permuted right-hand side `x` (n rows of k) solved with
-/// the factors `lu`: L Y = P R, then U X = Y; for K = 0, columns `first..k`.
-#[inline(always)]
-fn solve_panel<const K: usize>(lu: &[f64], n: usize, x: &mut [f64], k: usize, first: usize) {
-    let panel = first..if K == 0 { k } else { first + K };
-    // L Y = P R, unit diagonal: row j of Y leaves the rows below it.
-    for j in 0..n {
-        let (done, rest) = x.split_at_mut((j + 1) * k);
-        let solved = &done[j * k..][panel.clone()];
-        for (row, &l) in rest.chunks_exact_mut(k).zip(&lu[j * n + j + 1..(j + 1) * n]) {
-            if l != 0.0 {
-                eliminate::<K>(&mut row[panel.clone()], solved, l);
-            }
-        }
-    }
-    // U X = Y: row j of X leaves the rows above it.
-    for j in (0..n).rev() {
-        let (rest, done) = x.split_at_mut(j * k);
-        let solved = &mut done[panel.clone()];
-        let inverse_pivot = lu[j * n + j];
-        for v in solved.iter_mut() {
-            *v *= inverse_pivot;
-        }
-        for (row, &u) in rest.chunks_exact_mut(k).zip(&lu[j * n..j * n + j]) {
-            if u != 0.0 {
-                eliminate::<K>(&mut row[panel.clone()], solved, u);
-            }
-        }
-    }
-}
-
-/// The widest panel of columns whose width is known at compile time ([`by_width`]).
+/// The widest block of columns whose width is known at compile time ([`by_width`]).
 pub(crate) const PANEL: usize = 32;
 
 /// k columns as the fewest panels (first column, width) of at most [`PANEL`] columns, their
@@ -252,7 +230,7 @@ pub(crate) fn panels(k: usize) -> impl Iterator<Item = (usize, usize)> {
     (0..count).map(move |p| (p * width + p.min(wider), width + usize::from(p < wider)))
 }
 
-/// `$body` with the const `$K` set to `$k`, which must be 1 to [`PANEL`]: a panel's width
+/// `$body` with the const `$K` set to `$k`, which must be 1 to [`PANEL`]: a block's width
 /// known at compile time (see [`Lu::solve_rows`] and [`panels`]).
 macro_rules! by_width {
     ($k:expr, $K:ident => $body:expr) => {
