@@ -1,5 +1,5 @@
-//! The linear algebra of implicit steps for a [`System`]: the exact Jacobian ∂g/∂y by dual
-//! numbers (or the system's analytic one), E = I/(γh) − ∂g/∂y factorised by LU, and,
+//! The linear algebra of implicit steps for a [`System`]: the exact Jacobian ∂g/∂y from the
+//! system's sparse Jacobian (else by dual numbers, or the system's analytic one), E = I/(γh) − ∂g/∂y factorised by LU, and,
 //! for the variational equations, the second-derivative coupling that makes the augmented
 //! system's iteration matrix block lower triangular with E on the diagonal.
 
@@ -26,7 +26,7 @@ pub struct IterationMatrix {
     value: Vec<f64>,
     /// For systems with hand-written Jacobians.
     analytic: Option<(DMatrix<f64>, DMatrix<f64>)>,
-    /// The work space of the system's sparse Jacobian, where E is factorised sparse.
+    /// The work space of the system's sparse Jacobian, where it has one.
     entries: Vec<f64>,
 }
 
@@ -38,13 +38,10 @@ impl IterationMatrix {
         let analytic = sys.analytic_jacobians();
         let sparse = sys.sparse_jacobian(Function::Rhs).filter(|_| !analytic);
         let lu = Factors::new(n, sparse.map(|j| j.pattern()), columns);
-        let entries = match &lu {
-            Factors::Sparse(_) => sparse.map(|j| j.workspace()).unwrap_or_default(),
-            Factors::Dense(_) => Vec::new(),
-        };
-        // Products with the identity give the Jacobian where neither the system's own
-        // Jacobians nor the sparse factors' entries do.
-        let directions = if analytic || lu.is_sparse() { 0 } else { n };
+        // The system's sparse Jacobian gives J's entries for either factors; products with
+        // the identity (n dual directions) give it where the system has none.
+        let entries = sparse.map(|j| j.workspace()).unwrap_or_default();
+        let directions = if analytic || sparse.is_some() { 0 } else { n };
         let mut identity = vec![0.0; n * directions];
         for i in 0..directions {
             identity[i * n + i] = 1.0;
@@ -75,14 +72,9 @@ impl IterationMatrix {
         inv_gamma_h: f64,
     ) -> Result<(), FactorError> {
         let n = self.n;
-        let sparse = match &self.lu {
-            Factors::Sparse(_) => sys.sparse_jacobian(Function::Rhs),
-            Factors::Dense(_) => None,
-        };
         match &mut self.analytic {
-            // The sparse factors read the Jacobian's entries where the system gives them;
-            // the others stay 0.
-            None if let Some(jacobian) = sparse => {
+            // J's entries where the system's sparse Jacobian gives them; the others stay 0.
+            None if let Some(jacobian) = sys.sparse_jacobian(Function::Rhs) => {
                 jacobian.eval(t, y, p, u, &mut self.entries);
                 for (&(i, c), &at) in jacobian.pattern().iter().zip(jacobian.entries()) {
                     if (c as usize) < n {
@@ -159,13 +151,20 @@ pub(crate) struct Structure {
     pub(crate) parameter_entries: u64,
     /// The second derivatives' program and entries, where the system has them.
     pub(crate) curvature: Option<(u64, u64)>,
+    /// Whether the system gives its sparse Jacobian (else its entries come from products
+    /// with the identity).
+    pub(crate) sparse: bool,
 }
 
 impl Structure {
-    /// The Jacobian as a dense matrix: f's program, its products with the n unit directions,
-    /// read out.
+    /// The Jacobian as a dense matrix: f's program with the Jacobian's entries, put in place
+    /// (n² entries read by the factorisation), or, without a sparse Jacobian, f's program
+    /// and its products with the n unit directions.
     pub(crate) fn dense_jacobian(&self) -> u64 {
-        self.linearized + self.state_entries * self.n + self.n * self.n
+        match self.sparse {
+            true => self.linearized + self.n * self.n,
+            false => self.linearized + self.state_entries * self.n + self.n * self.n,
+        }
     }
 
     /// An implicit step's factorisation and solve before its matrix exists: the Jacobian
@@ -190,6 +189,7 @@ impl Structure {
                     curvature: jacobian
                         .curvature()
                         .map(|c| (c.operations() as u64, c.pattern().len() as u64)),
+                    sparse: true,
                 }
             }
             None => Self {
@@ -198,6 +198,7 @@ impl Structure {
                 state_entries: n * n,
                 parameter_entries: n * np,
                 curvature: None,
+                sparse: false,
             },
         }
     }
