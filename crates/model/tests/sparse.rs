@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use sysid_model::{Model, ModelFile};
-use sysid_ode::{Inputs, Integrator, IterationMatrix, Ivp, SPARSE_FROM, Wrt};
+use sysid_ode::{Inputs, Integrator, IterationMatrix, Ivp, Wrt};
 
 /// A chain x_0 → x_1 → … → x_{n−1} → x_0 with rates spread over five decades, the last
 /// step saturating: dx_i/dt = k_{i−1} x_{i−1} − k_i x_i (x_{n−1} feeding x_0).
@@ -36,9 +36,48 @@ fn ring(n: usize) -> String {
     text
 }
 
+/// Every state of n feeding every other: a Jacobian with no zero.
+fn full(n: usize) -> String {
+    let names = |prefix: &str| (0..n).map(|i| format!("\"{prefix}{i}\"")).collect::<Vec<_>>();
+    let mut text = format!(
+        "states = [{}]\nparameters = [{}]\n[equations]\n",
+        names("x").join(", "),
+        names("k").join(", ")
+    );
+    let all = (0..n).map(|i| format!("x{i}")).collect::<Vec<_>>().join(" + ");
+    for i in 0..n {
+        let _ = writeln!(text, "x{i} = \"0.01 * ({all}) - k{i} * x{i}\"");
+    }
+    let _ = writeln!(text, "[initial]");
+    for i in 0..n {
+        let _ = writeln!(text, "x{i} = 1.0");
+    }
+    let _ = writeln!(text, "[unknowns]");
+    for i in 0..n {
+        let _ = writeln!(text, "k{i} = 1.0");
+    }
+    text
+}
+
 fn model_of(text: &str) -> Model {
     let file = ModelFile::parse(text, Path::new("model.toml")).unwrap_or_else(|e| panic!("{e}"));
     Model { file }
+}
+
+/// E is factorised sparse where its factors keep at most a quarter of n² entries
+/// (`SPARSE_SHARE`): a ring of 30 states (2 entries a row, the cycle closing fills the last
+/// row and column: about 3n of n²), not a ring of 6 (about 15 of 36) nor 30 states that all
+/// feed each other (n² of n²).
+#[test]
+fn factors_are_sparse_where_they_fill_little() {
+    let sparse = |text: &str| {
+        let model = model_of(text);
+        let p: Vec<f64> = model.file.unknowns.iter().map(|u| u.guess).collect();
+        IterationMatrix::new(&model.system(Inputs::new(Vec::new())), &p, 1).is_sparse()
+    };
+    assert!(sparse(&ring(30)));
+    assert!(!sparse(&ring(6)));
+    assert!(!sparse(&full(30)));
 }
 
 /// With dense factors the Jacobian is read from the system's sparse Jacobian, its entries put
@@ -81,7 +120,6 @@ fn dense_factors_read_the_sparse_jacobian() {
 #[test]
 fn sparse_and_dense_implicit_steps_integrate_alike() {
     let n = 120;
-    assert!(n >= SPARSE_FROM);
     let file = ModelFile::parse(&ring(n), Path::new("ring.toml")).unwrap_or_else(|e| panic!("{e}"));
     let model = Model { file };
     let sparse = model.system(Inputs::new(Vec::new()));

@@ -1,7 +1,8 @@
 //! The linear algebra of implicit steps for a [`System`]: the exact Jacobian ∂g/∂y from the
-//! system's sparse Jacobian (else by dual numbers, or the system's analytic one), E = I/(γh) − ∂g/∂y factorised by LU, and,
-//! for the variational equations, the second-derivative coupling that makes the augmented
-//! system's iteration matrix block lower triangular with E on the diagonal.
+//! system's sparse Jacobian (else by dual numbers, or the system's analytic one), E =
+//! I/(γh) − ∂g/∂y factorised by LU (dense, or sparse where its factors fill little), and, for
+//! the variational equations, the second-derivative coupling that makes the augmented system's
+//! iteration matrix block lower triangular with E on the diagonal.
 
 use nalgebra::DMatrix;
 use num_dual::HyperDual64;
@@ -204,8 +205,8 @@ impl Structure {
     }
 }
 
-/// The factors of E = I·c − J (n × n): dense, or sparse for a large system with a sparse
-/// Jacobian ([`SPARSE_FROM`]).
+/// The factors of E = I·c − J (n × n): dense, or sparse for a system with a sparse
+/// Jacobian whose factors fill little of n² ([`SPARSE_SHARE`]).
 pub(crate) enum Factors {
     Dense(Lu),
     Sparse(Box<SparseLu>),
@@ -214,12 +215,16 @@ pub(crate) enum Factors {
 impl Factors {
     /// For n states, J's nonzero entries (row, column) in `pattern` where they are known
     /// (columns from n on, the parameters', are left out), solving up to `columns`
-    /// right-hand sides at once: sparse from [`SPARSE_FROM`] states where the factors keep at
-    /// most half of n², else dense.
+    /// right-hand sides at once: sparse where the factors keep at most [`SPARSE_SHARE`] of
+    /// n² entries, else dense.
     pub(crate) fn new(n: usize, pattern: Option<&[(u32, u32)]>, columns: usize) -> Self {
-        match pattern.filter(|_| n >= SPARSE_FROM) {
+        let dense = n * n / SPARSE_SHARE;
+        // The factors hold at least J's own entries: too many of those, and the order and
+        // fill are not worth finding.
+        let few = |p: &&[(u32, u32)]| p.iter().filter(|e| (e.1 as usize) < n).count() <= dense;
+        match pattern.filter(few) {
             Some(pattern) => match SparseLu::new(n, pattern, columns) {
-                Some(lu) if lu.entries_of_factors() <= n * n / 2 => Self::Sparse(Box::new(lu)),
+                Some(lu) if lu.entries_of_factors() <= dense => Self::Sparse(Box::new(lu)),
                 _ => Self::Dense(Lu::new(n, columns)),
             },
             None => Self::Dense(Lu::new(n, columns)),
@@ -284,17 +289,20 @@ impl Factors {
     }
 }
 
-/// The fewest states from which E is factorised sparse ([`SparseLu`]), where the system
-/// gives its sparse Jacobian and the factors keep at most half of E's n² entries.
+/// E is factorised sparse ([`SparseLu`]) where the system gives its sparse Jacobian and the
+/// factors, in their fill-reducing order, keep at most 1/`SPARSE_SHARE` of E's n² entries.
 ///
-/// Measured on the PEtab collection (`sysid evaluate --gradient --repeat 5`, NLL and
-/// gradient at nominal, the dense LU's binary against the sparse one's, interleaved): from
-/// 33 to 75 states (Lucarelli, Laske, Alkan, SalazarCavazos) the two are equal within the
-/// machine's noise (±10 %); Smith (109 states in its largest experiment) takes 1.3–1.4 s
-/// against 1.9–2.2 s, Chen (500) about a third of the time. Lang (124 states) refuses the
-/// diagonal pivots at 98 % of its steps, which then factorise dense, and takes as long as
-/// before (a single run each: 142 s against 126 s, within the noise of runs that long).
-pub const SPARSE_FROM: usize = 100;
+/// The sparse factors cost an indexed multiply-add per entry, the dense ones a contiguous,
+/// vectorised one per entry of n²: the share is where the two meet. Measured on the PEtab
+/// collection (`scripts/petab/binaries_beside.py`, NLL + gradient at nominal, one thread,
+/// 2026-12-05; docs/petab.md, "Sparse factors by their fill"): sparse is faster with the
+/// factors at 15–21 % of n² (Lucarelli 1.25×, Isensee 1.23×, Alkan 1.14×, Raimundez 1.06×,
+/// Raia 1.05×, Laske 1.04×; Bachmann 0.98×); at a third, Elowitz (31 %) was 0.96× and Schwen
+/// (32 %) 1.05×; Zheng (37 %) and SalazarCavazos (45 %) were 0.86× and 0.88× sparse. Smith
+/// (11 % of n²; 1.3–1.4 s against 1.9–2.2 s dense), Lang (13 %) and Chen (3 %; a third of
+/// the dense time) were sparse before, from 100 states. Lang refuses the diagonal pivots at
+/// 98 % of its steps, which then factorise dense.
+pub const SPARSE_SHARE: usize = 4;
 
 /// The implicit solve of the state together with its sensitivities x = [y; S].
 ///

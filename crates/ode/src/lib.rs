@@ -14,9 +14,9 @@
 //! * integrators ([`Integrator`]): adaptive Dormand–Prince 5(4) with error control over all
 //!   components (sensitivities included) and dense output; classical RK4 with a fixed step;
 //!   for stiff systems Rodas4 and Rodas5P, Rosenbrock methods of order 4 and 5 with the
-//!   exact Jacobian and dense LU, or, for a system of [`SPARSE_FROM`] states or more
-//!   that gives its sparse Jacobian, a sparse LU in a fill-reducing order (its pattern
-//!   analysed once), integrating the sensitivities with the same factorisation; an
+//!   exact Jacobian and dense LU, or, for a system that gives its sparse Jacobian and whose
+//!   factors fill little of n² ([`SPARSE_SHARE`]), a sparse LU in a fill-reducing order
+//!   (its pattern analysed once), integrating the sensitivities with the same factorisation; an
 //!   automatic choice that starts with DOPRI5 and switches to Rodas5P when its steps are
 //!   limited by stability (Hairer's test, and the Jacobian's spectral radius by power
 //!   iteration), and back where Rodas5P's steps would be well inside DOPRI5's stability
@@ -102,7 +102,7 @@ mod wrt;
 pub use counts::{Costs, Counts};
 pub use driver::integrate;
 pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError};
-pub use implicit::{IterationMatrix, SPARSE_FROM};
+pub use implicit::{IterationMatrix, SPARSE_SHARE};
 pub use interpolant::{DenseSolution, Interpolant};
 pub use ivp::{
     Ivp, ModelRhs, ObservableGradient, SensitivityRhs, SensitivityTrajectory, Trajectory,
