@@ -13,7 +13,8 @@
 //! Diagonal pivots are safe where E is diagonally dominant, as it is for short steps; they
 //! are checked as threshold partial pivoting would (KLU's threshold, 10⁻³): a multiplier
 //! larger than 10³ in magnitude, or a zero or non-finite pivot, and the step's matrix is
-//! factorised dense with partial pivoting instead ([`Lu`]).
+//! factorised dense with partial pivoting instead ([`Lu`]), as are the next few steps'
+//! ([`MAX_SKIP`]).
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::SymbolicSparseColMatRef;
@@ -48,7 +49,17 @@ pub struct SparseLu {
     /// The dense factorisation of the steps where the diagonal pivots are refused.
     dense: Lu,
     use_dense: bool,
+    /// Factorisations still to go dense without trying the diagonal pivots, and how many
+    /// the next refusal skips ([`MAX_SKIP`]).
+    skip: u32,
+    backoff: u32,
 }
+
+/// The most factorisations that go dense, untried, after the diagonal pivots were refused:
+/// after a refusal the next 1, then 2, 4, … up to this many skip the attempt, which costs an
+/// elimination cut short where the matrix needs pivoting (Bachmann refuses them at most of
+/// its steps); a success starts the count again.
+const MAX_SKIP: u32 = 64;
 
 impl SparseLu {
     /// For n × n matrices whose entries off the diagonal are among `pattern` (row, column;
@@ -97,6 +108,8 @@ impl SparseLu {
             work: vec![0.0; n * columns.max(1)],
             dense: Lu::new(n, columns),
             use_dense: false,
+            skip: 0,
+            backoff: 0,
         })
     }
 
@@ -116,18 +129,26 @@ impl SparseLu {
     }
 
     /// Factorises E = I·`inv_gamma_h` − J, J the dense Jacobian row by row (only its entries
-    /// in the pattern are read).
+    /// in the pattern are read): along the pattern with diagonal pivots, or dense where they
+    /// are refused, or were refused lately ([`MAX_SKIP`]).
     pub fn factor(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<(), FactorError> {
         self.use_dense = false;
-        self.values.fill(0.0);
-        for &(slot, at, diagonal) in &self.entries {
-            self.values[slot] = if diagonal { inv_gamma_h } else { 0.0 } - jac[at];
-        }
-        if self.values.iter().any(|v| !v.is_finite()) {
-            return Err(FactorError::Singular);
-        }
-        if self.eliminate() {
-            return Ok(());
+        if self.skip == 0 {
+            self.values.fill(0.0);
+            for &(slot, at, diagonal) in &self.entries {
+                self.values[slot] = if diagonal { inv_gamma_h } else { 0.0 } - jac[at];
+            }
+            if self.values.iter().any(|v| !v.is_finite()) {
+                return Err(FactorError::Singular);
+            }
+            if self.eliminate() {
+                self.backoff = 0;
+                return Ok(());
+            }
+            self.backoff = (2 * self.backoff).clamp(1, MAX_SKIP);
+            self.skip = self.backoff;
+        } else {
+            self.skip -= 1;
         }
         self.use_dense = true;
         let n = self.n;
@@ -435,6 +456,35 @@ mod tests {
             let mut sparse = SparseLu::new(n, &pattern, 3).expect("ordered");
             sparse.factor(0.0, &jac).expect("regular");
             assert_eq!(sparse.fell_back(), falls_back, "d = {diagonal}");
+            let mut dense = Lu::new(n, 3);
+            dense.factor(|i, j| -jac[i * n + j]).expect("regular");
+            agree(&mut sparse, &mut dense, n);
+        }
+    }
+
+    /// After a refusal the next factorisations go dense untried, 1, then 2 after a second
+    /// refusal in a row; a success starts again from 1. Every one solves as the dense LU.
+    #[test]
+    fn refusals_skip_the_diagonal_pivots_for_a_while() {
+        let n = 2;
+        let pattern = [(0, 1), (1, 0)];
+        let mut sparse = SparseLu::new(n, &pattern, 3).expect("ordered");
+        // d = 0 is refused, d = 1e-2 accepted when tried.
+        let steps = [
+            (0.0, true),
+            (1e-2, true),
+            (0.0, true),
+            (1e-2, true),
+            (1e-2, true),
+            (1e-2, false),
+            (0.0, true),
+            (1e-2, true),
+            (1e-2, false),
+        ];
+        for (step, (diagonal, falls_back)) in steps.into_iter().enumerate() {
+            let jac = [-diagonal, -1.0, -1.0, -diagonal];
+            sparse.factor(0.0, &jac).expect("regular");
+            assert_eq!(sparse.fell_back(), falls_back, "step {step}");
             let mut dense = Lu::new(n, 3);
             dense.factor(|i, j| -jac[i * n + j]).expect("regular");
             agree(&mut sparse, &mut dense, n);
