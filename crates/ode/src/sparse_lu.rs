@@ -189,9 +189,40 @@ impl SparseLu {
         true
     }
 
-    /// Overwrites r (length n) with E⁻¹ r.
+    /// Overwrites r (length n) with E⁻¹ r: the block solve's operations at one column, each
+    /// row's sum kept in a register (where the block code stores it after every entry).
     pub fn solve(&mut self, r: &mut [f64]) {
-        self.solve_rows(r, 1);
+        if self.use_dense {
+            return self.dense.solve(r);
+        }
+        let n = self.n;
+        let x = &mut self.work[..n];
+        for (x, &from) in x.iter_mut().zip(&self.order) {
+            *x = r[from];
+        }
+        let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
+        for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
+            let mut v = x[i];
+            for (&j, &l) in columns[start..diagonal].iter().zip(&values[start..diagonal]) {
+                if l != 0.0 {
+                    v -= l * x[j];
+                }
+            }
+            x[i] = v;
+        }
+        for i in (0..n).rev() {
+            let (d, end) = (self.diagonal[i], starts[i + 1]);
+            let mut v = x[i];
+            for (&j, &u) in columns[d + 1..end].iter().zip(&values[d + 1..end]) {
+                if u != 0.0 {
+                    v -= u * x[j];
+                }
+            }
+            x[i] = v * values[d];
+        }
+        for (&x, &to) in x.iter().zip(&self.order) {
+            r[to] = x;
+        }
     }
 
     /// Overwrites the n × k matrix R, stored row by row in r, with E⁻¹ R (k at most the
