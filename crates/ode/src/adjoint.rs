@@ -293,6 +293,11 @@ struct AdjointRhs<'a, S> {
     k: usize,
     /// The column of each parameter among the k, where it has one.
     column_of: Vec<Option<usize>>,
+    /// The Jacobian's entries in its pattern's order, split by what their products feed:
+    /// (row i, state column c, entry) for −J_yᵀλ, and (row i, column j among the k, entry)
+    /// for −(∂g/∂α)ᵀλ, without the parameters that have no column.
+    states: Vec<(u32, u32, u32)>,
+    parameters: Vec<(u32, u32, u32)>,
     y: Vec<f64>,
     u: Vec<f64>,
     entries: Entries,
@@ -326,17 +331,32 @@ impl<'a, S: System> AdjointRhs<'a, S> {
                 column_of[q] = Some(j);
             }
         }
+        let n = sig.n_states();
+        let entries = Entries::new(ivp.system, ivp.p);
+        let (mut states, mut parameters) = (Vec::new(), Vec::new());
+        for (e, &(i, c)) in entries.pattern.iter().enumerate() {
+            match (c as usize).checked_sub(n) {
+                None => states.push((i, c, e as u32)),
+                Some(q) => {
+                    if let Some(j) = column_of[q] {
+                        parameters.push((i, j as u32, e as u32));
+                    }
+                }
+            }
+        }
         Self {
             sys: ivp.system,
             p: ivp.p,
             forward,
             hint: forward.len().saturating_sub(1),
-            n: sig.n_states(),
+            n,
             k: wrt.len(),
             column_of,
+            states,
+            parameters,
             y: ivp.y0.to_vec(),
             u: vec![0.0; sig.n_inputs()],
-            entries: Entries::new(ivp.system, ivp.p),
+            entries,
             implicit: None,
             evaluated_at: None,
             times,
@@ -426,13 +446,13 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         let (lambda, (dl, dm)) = (&x[..n], dx.split_at_mut(n));
         dl.fill(0.0);
         dm.fill(0.0);
-        for (&(i, c), &v) in self.entries.pattern.iter().zip(&self.entries.values) {
-            let (i, c) = (i as usize, c as usize);
-            if c < n {
-                dl[c] -= v * lambda[i];
-            } else if let Some(j) = self.column_of[c - n] {
-                dm[j] -= v * lambda[i];
-            }
+        // Each of dl and dm takes its terms in the pattern's order, as one pass over it would.
+        let values = &self.entries.values;
+        for &(i, c, e) in &self.states {
+            dl[c as usize] -= values[e as usize] * lambda[i as usize];
+        }
+        for &(i, j, e) in &self.parameters {
+            dm[j as usize] -= values[e as usize] * lambda[i as usize];
         }
     }
 
@@ -470,10 +490,8 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         let n = self.n;
         let (ra, rb) = r.split_at_mut(n);
         implicit.factors.solve_transposed(ra);
-        for (&(i, c), &v) in self.entries.pattern.iter().zip(&implicit.values) {
-            if let Some(j) = (c as usize).checked_sub(n).and_then(|q| self.column_of[q]) {
-                rb[j] -= v * ra[i as usize];
-            }
+        for &(i, j, e) in &self.parameters {
+            rb[j as usize] -= implicit.values[e as usize] * ra[i as usize];
         }
         for b in rb {
             *b /= implicit.inv_gamma_h;
