@@ -8,15 +8,20 @@ use std::path::Path;
 use sysid_model::{Model, ModelFile};
 use sysid_ode::{Inputs, Integrator, IterationMatrix, Ivp, Wrt};
 
-/// A chain x_0 → x_1 → … → x_{n−1} → x_0 with rates spread over five decades, the last
-/// step saturating: dx_i/dt = k_{i−1} x_{i−1} − k_i x_i (x_{n−1} feeding x_0).
-fn ring(n: usize) -> String {
+/// A model file's states x0…x{n−1} and parameters k0…k{n−1}, up to its `[equations]`.
+fn header(n: usize) -> String {
     let names = |prefix: &str| (0..n).map(|i| format!("\"{prefix}{i}\"")).collect::<Vec<_>>();
-    let mut text = format!(
+    format!(
         "states = [{}]\nparameters = [{}]\n[equations]\n",
         names("x").join(", "),
         names("k").join(", ")
-    );
+    )
+}
+
+/// A chain x_0 → x_1 → … → x_{n−1} → x_0 with rates spread over five decades, the last
+/// step saturating: dx_i/dt = k_{i−1} x_{i−1} − k_i x_i (x_{n−1} feeding x_0).
+fn ring(n: usize) -> String {
+    let mut text = header(n);
     let flux = |i: usize| match i {
         0 => format!("k{i} * x{i} / (1 + x{i})"),
         _ => format!("k{i} * x{i}"),
@@ -38,12 +43,7 @@ fn ring(n: usize) -> String {
 
 /// Every state of n feeding every other: a Jacobian with no zero.
 fn full(n: usize) -> String {
-    let names = |prefix: &str| (0..n).map(|i| format!("\"{prefix}{i}\"")).collect::<Vec<_>>();
-    let mut text = format!(
-        "states = [{}]\nparameters = [{}]\n[equations]\n",
-        names("x").join(", "),
-        names("k").join(", ")
-    );
+    let mut text = header(n);
     let all = (0..n).map(|i| format!("x{i}")).collect::<Vec<_>>().join(" + ");
     for i in 0..n {
         let _ = writeln!(text, "x{i} = \"0.01 * ({all}) - k{i} * x{i}\"");
