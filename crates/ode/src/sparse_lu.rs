@@ -251,6 +251,44 @@ impl SparseLu {
             x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
         }
         let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
+        if K > 0 {
+            // Each row's K values in registers until the row is done: the same operations in
+            // the same order as eliminating into memory entry by entry, below.
+            let row = |x: &[f64], i: usize| -> [f64; K] {
+                x[i * K..(i + 1) * K].try_into().expect("K columns")
+            };
+            for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
+                let mut v = row(x, i);
+                for (&j, &l) in columns[start..diagonal].iter().zip(&values[start..diagonal]) {
+                    if l != 0.0 {
+                        let solved = row(x, j);
+                        for c in 0..K {
+                            v[c] -= l * solved[c];
+                        }
+                    }
+                }
+                x[i * K..(i + 1) * K].copy_from_slice(&v);
+            }
+            for i in (0..n).rev() {
+                let (d, end) = (self.diagonal[i], starts[i + 1]);
+                let mut v = row(x, i);
+                for (&j, &u) in columns[d + 1..end].iter().zip(&values[d + 1..end]) {
+                    if u != 0.0 {
+                        let solved = row(x, j);
+                        for c in 0..K {
+                            v[c] -= u * solved[c];
+                        }
+                    }
+                }
+                let inverse_pivot = values[d];
+                v.iter_mut().for_each(|v| *v *= inverse_pivot);
+                x[i * K..(i + 1) * K].copy_from_slice(&v);
+            }
+            for (i, &to) in self.order.iter().enumerate() {
+                r[to * k..(to + 1) * k].copy_from_slice(&self.work[i * k..(i + 1) * k]);
+            }
+            return;
+        }
         // L Y = R: row i less its multipliers times the rows before it.
         for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
             let (done, rest) = x.split_at_mut(i * k);
