@@ -133,26 +133,31 @@ impl SparseLu {
     /// are refused, or were refused lately ([`MAX_SKIP`]).
     pub fn factor(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<(), FactorError> {
         self.use_dense = false;
-        if self.skip == 0 {
-            self.values.fill(0.0);
-            for &(slot, at, diagonal) in &self.entries {
-                self.values[slot] = if diagonal { inv_gamma_h } else { 0.0 } - jac[at];
-            }
-            if self.values.iter().any(|v| !v.is_finite()) {
-                return Err(FactorError::Singular);
-            }
-            if self.eliminate() {
-                self.backoff = 0;
-                return Ok(());
-            }
+        if self.skip > 0 {
+            self.skip -= 1;
+        } else if self.factor_along_pattern(inv_gamma_h, jac)? {
+            self.backoff = 0;
+            return Ok(());
+        } else {
             self.backoff = (2 * self.backoff).clamp(1, MAX_SKIP);
             self.skip = self.backoff;
-        } else {
-            self.skip -= 1;
         }
         self.use_dense = true;
         let n = self.n;
         self.dense.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
+    }
+
+    /// E's entries put in the factors' pattern and eliminated with diagonal pivots: whether
+    /// the pivots were accepted ([`eliminate`](Self::eliminate)).
+    fn factor_along_pattern(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<bool, FactorError> {
+        self.values.fill(0.0);
+        for &(slot, at, diagonal) in &self.entries {
+            self.values[slot] = if diagonal { inv_gamma_h } else { 0.0 } - jac[at];
+        }
+        if self.values.iter().any(|v| !v.is_finite()) {
+            return Err(FactorError::Singular);
+        }
+        Ok(self.eliminate())
     }
 
     /// Gaussian elimination along the pattern, row by row, with the diagonal as pivots;
@@ -189,40 +194,10 @@ impl SparseLu {
         true
     }
 
-    /// Overwrites r (length n) with E⁻¹ r: the block solve's operations at one column, each
-    /// row's sum kept in a register (where the block code stores it after every entry).
+    /// Overwrites r (length n) with E⁻¹ r: the block solve at K = 1, its row's sum in a
+    /// register.
     pub fn solve(&mut self, r: &mut [f64]) {
-        if self.use_dense {
-            return self.dense.solve(r);
-        }
-        let n = self.n;
-        let x = &mut self.work[..n];
-        for (x, &from) in x.iter_mut().zip(&self.order) {
-            *x = r[from];
-        }
-        let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
-        for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
-            let mut v = x[i];
-            for (&j, &l) in columns[start..diagonal].iter().zip(&values[start..diagonal]) {
-                if l != 0.0 {
-                    v -= l * x[j];
-                }
-            }
-            x[i] = v;
-        }
-        for i in (0..n).rev() {
-            let (d, end) = (self.diagonal[i], starts[i + 1]);
-            let mut v = x[i];
-            for (&j, &u) in columns[d + 1..end].iter().zip(&values[d + 1..end]) {
-                if u != 0.0 {
-                    v -= u * x[j];
-                }
-            }
-            x[i] = v * values[d];
-        }
-        for (&x, &to) in x.iter().zip(&self.order) {
-            r[to] = x;
-        }
+        self.solve_rows(r, 1);
     }
 
     /// Overwrites the n × k matrix R, stored row by row in r, with E⁻¹ R (k at most the
@@ -242,80 +217,21 @@ impl SparseLu {
     }
 
     /// [`solve_rows`](Self::solve_rows) with rows of k columns: K = k, a width known at
-    /// compile time, or K = 0 for more than [`PANEL`] columns, each row's columns in one
-    /// run-time loop, as the dense solve does.
+    /// compile time, each row's K values in registers until the row is done, or K = 0 for
+    /// more than [`PANEL`] columns, each row's columns in one run-time loop, as the dense
+    /// solve does. The two do the same operations in the same order.
     fn solve_block<const K: usize>(&mut self, r: &mut [f64], k: usize) {
-        let n = self.n;
-        let x = &mut self.work[..n * k];
+        let x = &mut self.work[..self.n * k];
         for (i, &from) in self.order.iter().enumerate() {
             x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
         }
-        let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
-        if K > 0 {
-            // Each row's K values in registers until the row is done: the same operations in
-            // the same order as eliminating into memory entry by entry, below.
-            let row = |x: &[f64], i: usize| -> [f64; K] {
-                x[i * K..(i + 1) * K].try_into().expect("K columns")
-            };
-            for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
-                let mut v = row(x, i);
-                for (&j, &l) in columns[start..diagonal].iter().zip(&values[start..diagonal]) {
-                    if l != 0.0 {
-                        let solved = row(x, j);
-                        for c in 0..K {
-                            v[c] -= l * solved[c];
-                        }
-                    }
-                }
-                x[i * K..(i + 1) * K].copy_from_slice(&v);
-            }
-            for i in (0..n).rev() {
-                let (d, end) = (self.diagonal[i], starts[i + 1]);
-                let mut v = row(x, i);
-                for (&j, &u) in columns[d + 1..end].iter().zip(&values[d + 1..end]) {
-                    if u != 0.0 {
-                        let solved = row(x, j);
-                        for c in 0..K {
-                            v[c] -= u * solved[c];
-                        }
-                    }
-                }
-                let inverse_pivot = values[d];
-                v.iter_mut().for_each(|v| *v *= inverse_pivot);
-                x[i * K..(i + 1) * K].copy_from_slice(&v);
-            }
-            for (i, &to) in self.order.iter().enumerate() {
-                r[to * k..(to + 1) * k].copy_from_slice(&self.work[i * k..(i + 1) * k]);
-            }
-            return;
-        }
-        // L Y = R: row i less its multipliers times the rows before it.
-        for (i, (&start, &diagonal)) in starts.iter().zip(&self.diagonal).enumerate() {
-            let (done, rest) = x.split_at_mut(i * k);
-            let target = &mut rest[..k];
-            for p in start..diagonal {
-                let (j, l) = (columns[p], values[p]);
-                if l != 0.0 {
-                    eliminate::<K>(target, &done[j * k..(j + 1) * k], l);
-                }
-            }
-        }
-        // U X = Y: row i less U's entries times the rows after it, over the pivot.
-        for i in (0..n).rev() {
-            let (head, done) = x.split_at_mut((i + 1) * k);
-            let target = &mut head[i * k..(i + 1) * k];
-            let d = self.diagonal[i];
-            for p in d + 1..starts[i + 1] {
-                let (j, u) = (columns[p] - i - 1, values[p]);
-                if u != 0.0 {
-                    eliminate::<K>(target, &done[j * k..(j + 1) * k], u);
-                }
-            }
-            let inverse_pivot = values[d];
-            target.iter_mut().for_each(|v| *v *= inverse_pivot);
+        let factors = (&self.starts[..], &self.diagonal[..], &self.columns[..], &self.values[..]);
+        match K {
+            0 => substitute_in_place(factors, x, k),
+            _ => substitute_in_registers::<K>(factors, x),
         }
         for (i, &to) in self.order.iter().enumerate() {
-            r[to * k..(to + 1) * k].copy_from_slice(&self.work[i * k..(i + 1) * k]);
+            r[to * k..(to + 1) * k].copy_from_slice(&x[i * k..(i + 1) * k]);
         }
     }
 
@@ -357,6 +273,74 @@ impl SparseLu {
         for (i, &to) in self.order.iter().enumerate() {
             r[to] = x[i];
         }
+    }
+}
+
+/// A row of the factors: where each row's entries start, where its diagonal is, and the
+/// entries' columns and values ([`SparseLu`]'s fields).
+type Rows<'a> = (&'a [usize], &'a [usize], &'a [usize], &'a [f64]);
+
+/// L Y = X, then U X = Y, in place on n rows of K columns in x (in the factors' order), each
+/// row's K values in registers until the row is done.
+fn substitute_in_registers<const K: usize>(
+    (starts, diagonal, columns, values): Rows<'_>,
+    x: &mut [f64],
+) {
+    let row =
+        |x: &[f64], i: usize| -> [f64; K] { x[i * K..(i + 1) * K].try_into().expect("K columns") };
+    // L Y = X: row i less its multipliers times the rows before it.
+    for (i, (&start, &d)) in starts.iter().zip(diagonal).enumerate() {
+        let mut v = row(x, i);
+        for (&j, &l) in columns[start..d].iter().zip(&values[start..d]) {
+            if l != 0.0 {
+                let solved = row(x, j);
+                for c in 0..K {
+                    v[c] -= l * solved[c];
+                }
+            }
+        }
+        x[i * K..(i + 1) * K].copy_from_slice(&v);
+    }
+    // U X = Y: row i less U's entries times the rows after it, over the pivot.
+    for i in (0..diagonal.len()).rev() {
+        let (d, end) = (diagonal[i], starts[i + 1]);
+        let mut v = row(x, i);
+        for (&j, &u) in columns[d + 1..end].iter().zip(&values[d + 1..end]) {
+            if u != 0.0 {
+                let solved = row(x, j);
+                for c in 0..K {
+                    v[c] -= u * solved[c];
+                }
+            }
+        }
+        let inverse_pivot = values[d];
+        v.iter_mut().for_each(|v| *v *= inverse_pivot);
+        x[i * K..(i + 1) * K].copy_from_slice(&v);
+    }
+}
+
+/// [`substitute_in_registers`] for k columns known at run time, each row updated in memory.
+fn substitute_in_place((starts, diagonal, columns, values): Rows<'_>, x: &mut [f64], k: usize) {
+    for (i, (&start, &d)) in starts.iter().zip(diagonal).enumerate() {
+        let (done, rest) = x.split_at_mut(i * k);
+        let target = &mut rest[..k];
+        for (&j, &l) in columns[start..d].iter().zip(&values[start..d]) {
+            if l != 0.0 {
+                eliminate::<0>(target, &done[j * k..(j + 1) * k], l);
+            }
+        }
+    }
+    for i in (0..diagonal.len()).rev() {
+        let (head, done) = x.split_at_mut((i + 1) * k);
+        let target = &mut head[i * k..(i + 1) * k];
+        let (d, end) = (diagonal[i], starts[i + 1]);
+        for (&j, &u) in columns[d + 1..end].iter().zip(&values[d + 1..end]) {
+            if u != 0.0 {
+                eliminate::<0>(target, &done[(j - i - 1) * k..(j - i) * k], u);
+            }
+        }
+        let inverse_pivot = values[d];
+        target.iter_mut().for_each(|v| *v *= inverse_pivot);
     }
 }
 
