@@ -41,7 +41,8 @@ impl IterationMatrix {
         let lu = Factors::new(n, sparse.map(|j| j.pattern()), columns);
         // The system's sparse Jacobian gives J's entries for either factors; products with
         // the identity (n dual directions) give it where the system has none.
-        let entries = sparse.map(|j| j.workspace()).unwrap_or_default();
+        let entries =
+            sparse.map(|j| j.state_columns().unwrap_or(j).workspace()).unwrap_or_default();
         let directions = if analytic || sparse.is_some() { 0 } else { n };
         let mut identity = vec![0.0; n * directions];
         for i in 0..directions {
@@ -74,8 +75,10 @@ impl IterationMatrix {
     ) -> Result<(), FactorError> {
         let n = self.n;
         match &mut self.analytic {
-            // J's entries where the system's sparse Jacobian gives them; the others stay 0.
+            // J's entries where the system's sparse Jacobian gives them (by the program of
+            // its state columns, where it has one); the others stay 0.
             None if let Some(jacobian) = sys.sparse_jacobian(Function::Rhs) => {
+                let jacobian = jacobian.state_columns().unwrap_or(jacobian);
                 jacobian.eval(t, y, p, u, &mut self.entries);
                 for (&(i, c), &at) in jacobian.pattern().iter().zip(jacobian.entries()) {
                     if (c as usize) < n {
@@ -131,7 +134,7 @@ impl IterationMatrix {
     pub(crate) fn costs(&self, s: &Structure) -> (u64, u64) {
         let jacobian = match (&self.analytic, &self.lu) {
             (None, Factors::Dense(_)) => s.dense_jacobian(),
-            _ => s.linearized,
+            _ => s.states,
         };
         let (factor, solve) = self.lu.costs();
         (jacobian + factor, solve)
@@ -147,6 +150,10 @@ pub(crate) struct Structure {
     pub(crate) n: u64,
     /// One evaluation of f with the Jacobian's entries.
     pub(crate) linearized: u64,
+    /// One evaluation of f alone, and of f with ∂f/∂y's entries (by the programs of their
+    /// own where the system has them, else `linearized`).
+    pub(crate) values: u64,
+    pub(crate) states: u64,
     /// Entries of ∂f/∂y and of ∂f/∂α.
     pub(crate) state_entries: u64,
     pub(crate) parameter_entries: u64,
@@ -163,7 +170,7 @@ impl Structure {
     /// and its products with the n unit directions.
     pub(crate) fn dense_jacobian(&self) -> u64 {
         match self.sparse {
-            true => self.linearized + self.n * self.n,
+            true => self.states + self.n * self.n,
             false => self.linearized + self.state_entries * self.n + self.n * self.n,
         }
     }
@@ -182,9 +189,13 @@ impl Structure {
             Some(jacobian) => {
                 let states = jacobian.pattern().iter().filter(|e| u64::from(e.1) < n).count();
                 let states = states as u64;
+                let alone =
+                    |part: Option<&dyn SparseJacobian>| part.unwrap_or(jacobian).operations();
                 Self {
                     n,
                     linearized: jacobian.operations() as u64,
+                    values: alone(jacobian.values_alone()) as u64,
+                    states: alone(jacobian.state_columns()) as u64,
                     state_entries: states,
                     parameter_entries: jacobian.pattern().len() as u64 - states,
                     curvature: jacobian
@@ -196,6 +207,8 @@ impl Structure {
             None => Self {
                 n,
                 linearized: 4 * n * (1 + n + np),
+                values: 4 * n * (1 + n + np),
+                states: 4 * n * (1 + n + np),
                 state_entries: n * n,
                 parameter_entries: n * np,
                 curvature: None,

@@ -14,6 +14,7 @@ use crate::lu::FactorError;
 use crate::options::Integrator;
 use crate::rhs::Rhs;
 use crate::signal::Side;
+use crate::sparse::SparseJacobian;
 use crate::system::{Function, Observable, System};
 use crate::wrt::{Wrt, parameter_seeds, wrt_name};
 
@@ -120,25 +121,31 @@ pub struct ModelRhs<'a, S> {
 impl<'a, S: System> ModelRhs<'a, S> {
     /// The right-hand side of `sys` at parameters `p`.
     pub fn new(sys: &'a S, p: &'a [f64]) -> Self {
-        let work = sys.sparse_jacobian(Function::Rhs).map(|j| j.workspace()).unwrap_or_default();
+        let work = functions_alone(sys).map(|f| f.workspace()).unwrap_or_default();
         let u = vec![0.0; sys.signature().n_inputs()];
         Self { sys, p, u, implicit: None, work, structure: Structure::of(sys) }
     }
 }
 
-/// f(t, y, α, u) into `dx`: from the system's own sparse Jacobian's evaluation where it has
-/// one (for a model file, machine code that computes f with the Jacobian's entries, faster
-/// than its interpreter), in `work`, its work space; else from [`System::rhs`].
+/// The program by which f alone is evaluated, where the system has a sparse Jacobian: its
+/// [values alone](SparseJacobian::values_alone), else the whole program.
+fn functions_alone<S: System>(sys: &S) -> Option<&dyn SparseJacobian> {
+    sys.sparse_jacobian(Function::Rhs).map(|j| j.values_alone().unwrap_or(j))
+}
+
+/// f(t, y, α, u) into `dx`: from the system's own sparse Jacobian's program where it has one
+/// (for a model file, machine code that computes f alone, faster than its interpreter), in
+/// `work`, that program's work space; else from [`System::rhs`].
 fn rhs_of<S: System>(
     sys: &S,
     (t, x, p, u): (f64, &[f64], &[f64], &[f64]),
     work: &mut [f64],
     dx: &mut [f64],
 ) {
-    match sys.sparse_jacobian(Function::Rhs) {
-        Some(jacobian) if !work.is_empty() => {
-            jacobian.eval(t, x, p, u, work);
-            for (d, &v) in dx.iter_mut().zip(jacobian.values()) {
+    match functions_alone(sys) {
+        Some(f) if !work.is_empty() => {
+            f.eval(t, x, p, u, work);
+            for (d, &v) in dx.iter_mut().zip(f.values()) {
                 *d = work[v as usize];
             }
         }
@@ -166,7 +173,7 @@ impl<S: System> Rhs for ModelRhs<'_, S> {
             Some(matrix) => matrix.costs(s),
             None => s.dense_implicit(),
         };
-        Costs { eval: s.linearized, factor, solve }
+        Costs { eval: s.values, factor, solve }
     }
     fn factor(
         &mut self,
@@ -250,10 +257,9 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
             moving: sys.moving_switches(p),
             fired: Vec::new(),
             atol: vec![1.0; wrt.len()],
-            work: sys
-                .sparse_jacobian(Function::Rhs)
+            work: functions_alone(sys)
                 .filter(|_| wrt.is_empty())
-                .map(|j| j.workspace())
+                .map(|f| f.workspace())
                 .unwrap_or_default(),
             structure: Structure::of(sys),
         }
@@ -308,7 +314,8 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
             Some(matrix) => matrix.costs(s, k),
             None => s.dense_implicit(),
         };
-        Costs { eval: s.linearized + products, factor, solve }
+        let eval = if k == 0 { s.values } else { s.linearized + products };
+        Costs { eval, factor, solve }
     }
 
     fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {

@@ -44,4 +44,19 @@ pub trait SparseJacobian: Send + Sync {
     fn curvature(&self) -> Option<&dyn SparseJacobian> {
         None
     }
+
+    /// The same functions with no Jacobian (an empty pattern), where the system has them
+    /// as a cheaper program: for evaluations that read f alone. Their values are those of
+    /// [`eval`](Self::eval) to the bit. Default: none ([`eval`](Self::eval) is read).
+    fn values_alone(&self) -> Option<&dyn SparseJacobian> {
+        None
+    }
+
+    /// The same functions with the Jacobian's state columns alone (the pattern's entries
+    /// whose column is below n, in the same order), where the system has them as a cheaper
+    /// program: for an implicit step's matrix. Values and entries are those of
+    /// [`eval`](Self::eval) to the bit. Default: none ([`eval`](Self::eval) is read).
+    fn state_columns(&self) -> Option<&dyn SparseJacobian> {
+        None
+    }
 }
