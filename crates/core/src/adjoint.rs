@@ -140,8 +140,13 @@ impl<S: System> Problem<S> {
 /// (2026-12-04, after forward's blocks of more than 16 columns got compile-time widths) 2.5
 /// takes Alkan in 0.88 of the time 3 took (53 of its 73 experiments by adjoint, not 35) and
 /// Smith in 0.96, and changes no other problem's time beyond the noise; at 2 Raia and
-/// Brannmark were 8 % slower, at 1.5 Elowitz 1.6 times.
-pub const ADJOINT_OPERATION_COST: f64 = 2.5;
+/// Brannmark were 8 % slower, at 1.5 Elowitz 1.6 times. Since f alone and f with ∂f/∂y
+/// have programs of their own (2026-12-05), the adjoint's forward pass costs less: its time
+/// per counted operation is 0.75–4.2 times forward's, the median 1.7, and 2 takes Laske in
+/// 0.67 of the time 2.5 took (its first condition, counted 2.36 times the adjoint's work by
+/// forward sensitivities, goes by adjoint) and Schwen in 0.96; Raia and Isensee, whose
+/// choices 2 also moves, are within the noise; at 1.6 Elowitz is 1.47 times slower.
+pub const ADJOINT_OPERATION_COST: f64 = 2.0;
 
 /// One experiment's rows, its part of U and whether it came from the adjoint, by the way
 /// [`Sensitivities::Auto`] chose for it (measuring both the first time), and whether the

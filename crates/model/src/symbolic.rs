@@ -728,7 +728,10 @@ impl Linearized {
         // in which the columns not read are not computed. Laske's f alone is 371 operations
         // and with ∂f/∂y 1 055, against 2 020 with ∂f/∂α too; SalazarCavazos' 2 983, 4 480
         // and 7 654. They are built from the same graph, so their values and entries are
-        // those of the whole program to the bit.
+        // those of the whole program to the bit. f with ∂f/∂y runs once per factorisation
+        // and is compiled quickly, as the second derivatives are: SalazarCavazos' import then
+        // takes 86 ms rather than 99 (two threads), its NLL + gradient and Laske's, Smith's
+        // and Alkan's within 1.5 % of those with the slower compilation.
         let (mut values, _) = Self::build(&mut graph, &roots, dims, Columns::None);
         let (mut states, _) = Self::build(&mut graph, &roots, dims, Columns::States);
         // Compiling takes longer than differentiating: the first derivatives are compiled on
@@ -745,7 +748,7 @@ impl Linearized {
             });
             let (mut second, _) = Self::build(&mut graph, &entries, dims, Columns::States);
             second.compile(true);
-            states.compile(false);
+            states.compile(true);
             compiling.join().unwrap_or_else(|e| std::panic::resume_unwind(e));
             second
         });
