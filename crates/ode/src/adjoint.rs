@@ -46,7 +46,7 @@
 use nalgebra::DMatrix;
 
 use crate::counts::{Costs, Counts, dense_lu};
-use crate::driver::{integrate, resolution};
+use crate::driver::{integrate_part, resolution};
 use crate::error::OdeError;
 use crate::events::Reset;
 use crate::implicit::{Factors, Structure};
@@ -166,12 +166,20 @@ impl<S: System> Ivp<'_, S> {
             // off with an error its estimate does not see (on `Tied` in the tests, 4e-6 of
             // the gradient at rtol 1e-8). In local time a first step of 1e-15 (Rahman's, from
             // quadratures that start at 0 with derivatives of 1e11) costs a few steps more.
-            let mut from = t_end;
+            // The automatic choice's scheme carries from part to part: λ jumps at a sample,
+            // the Jacobian −J_yᵀ along the forward solution does not.
+            let (mut from, mut stiff) = (t_end, false);
             for to in samples.into_iter().rev().chain([self.t0]) {
                 let mut local = Local::new(&mut rhs, from, to, &inner);
                 let local_stops = local.local.clone();
-                let (c, x_end) =
-                    integrate(integrator, &mut local, (0.0, &x), to - from, &local_stops, |_| {})?;
+                let (c, x_end) = integrate_part(
+                    integrator,
+                    &mut local,
+                    (0.0, &x),
+                    to - from,
+                    &local_stops,
+                    &mut stiff,
+                )?;
                 counts += c;
                 x = x_end;
                 if to > self.t0 {

@@ -47,6 +47,40 @@ pub(crate) fn integrate_selected<R: Rhs>(
     wants: impl FnMut(f64, f64) -> bool,
     on_step: impl FnMut(&Interpolant),
 ) -> Result<(Counts, Vec<f64>), OdeError> {
+    run_from(cfg, rhs, (t0, x0), t_end, stops, (wants, on_step), false).map(|(c, x, _)| (c, x))
+}
+
+/// [`integrate`] for one of the consecutive parts of an integration that restarts between
+/// them (the adjoint's, at every sample): under the automatic choice the part starts with
+/// Rodas5P where `stiff` says the part before it ended with Rodas5P, rather than spend
+/// fifteen or more DOPRI5 steps finding the stiffness again (the restart changes the state,
+/// not the Jacobian); `stiff` is then whether this part ended with Rodas5P.
+pub(crate) fn integrate_part<R: Rhs>(
+    cfg: &Integrator,
+    rhs: &mut R,
+    (t0, x0): (f64, &[f64]),
+    t_end: f64,
+    stops: &[f64],
+    stiff: &mut bool,
+) -> Result<(Counts, Vec<f64>), OdeError> {
+    let parts = (|_: f64, _: f64| true, |_: &Interpolant| {});
+    let (counts, x, ended_stiff) = run_from(cfg, rhs, (t0, x0), t_end, stops, parts, *stiff)?;
+    *stiff = ended_stiff;
+    Ok((counts, x))
+}
+
+/// [`integrate_selected`], starting with Rodas5P under the automatic choice where `stiff`
+/// (and the right-hand side has a Jacobian to factorise); also whether it ended with
+/// Rodas5P.
+fn run_from<R: Rhs>(
+    cfg: &Integrator,
+    rhs: &mut R,
+    (t0, x0): (f64, &[f64]),
+    t_end: f64,
+    stops: &[f64],
+    (wants, on_step): (impl FnMut(f64, f64) -> bool, impl FnMut(&Interpolant)),
+    stiff: bool,
+) -> Result<(Counts, Vec<f64>, bool), OdeError> {
     check_inputs(cfg, rhs, (t0, x0), t_end)?;
     if rhs.n_events() > 0 && t_end < t0 {
         return Err(OdeError::InvalidSetup(format!(
@@ -55,7 +89,10 @@ pub(crate) fn integrate_selected<R: Rhs>(
     }
     let mut run = Run::new(cfg, rhs, (t0, x0), t_end, wants, on_step);
     if t_end - t0 == 0.0 {
-        return Ok((run.ev.counts, x0.to_vec()));
+        return Ok((run.ev.counts, x0.to_vec(), stiff));
+    }
+    if stiff && cfg.scheme == Scheme::Auto {
+        run.start_implicit();
     }
     let ends = segment_ends(t0, t_end, stops);
     // t0 and t_end may be stops themselves (a switch at the last measurement): stages there
@@ -70,7 +107,8 @@ pub(crate) fn integrate_selected<R: Rhs>(
         let last = i + 1 == ends.len();
         run.segment(seg_end, (i > 0 || from_stop, !last || to_stop))?;
     }
-    Ok((run.ev.counts, run.work.x))
+    let ended_stiff = matches!(run.stepper, Active::Rodas5p);
+    Ok((run.ev.counts, run.work.x, ended_stiff))
 }
 
 /// Rejects what no integration can start from: an initial state of the wrong length, invalid
@@ -264,6 +302,15 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             explicit_again: 0,
             wants,
             on_step,
+        }
+    }
+
+    /// Starts with Rodas5P, as the automatic choice switches to it (if the right-hand side
+    /// has a Jacobian to factorise at the start).
+    fn start_implicit(&mut self) {
+        let t = self.t;
+        if self.ev.factor(t, self.ev.side(t), &self.work.x, 1.0).is_ok() {
+            self.stepper = Active::Rodas5p;
         }
     }
 
@@ -676,5 +723,40 @@ fn implicit_error(e: FactorError, t: f64) -> OdeError {
             "this right-hand side provides no Jacobian for the implicit integrator".into(),
         ),
         FactorError::Singular => OdeError::SingularJacobian { t },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ivp::ModelRhs;
+    use crate::testing::Decay;
+
+    /// x′ = −10⁴ x from x = 1, in two parts, [0, 1] and [1, 2]: the first starts with
+    /// DOPRI5, finds the stiffness and ends with Rodas5P; the second, told so, takes a
+    /// Jacobian at every step from its first (Rodas5P throughout), where started afresh it
+    /// spends its first fifteen or more steps with DOPRI5 (no Jacobian) finding the
+    /// stiffness again; both end at the same x to the tolerance.
+    #[test]
+    fn a_continued_part_starts_where_the_last_one_ended() {
+        let (sys, p) = (Decay::new(), [1e4]);
+        let cfg = Integrator::auto(1e-8, 1e-12);
+        let mut rhs = ModelRhs::new(&sys, &p);
+        let mut stiff = false;
+        let (first, x1) =
+            integrate_part(&cfg, &mut rhs, (0.0, &[1.0]), 1.0, &[], &mut stiff).unwrap();
+        assert!(stiff && first.jacobians > 0, "{first:?}");
+        let mut part = |stiff: bool| {
+            let mut carried = stiff;
+            let (counts, x) =
+                integrate_part(&cfg, &mut rhs, (1.0, &x1), 2.0, &[], &mut carried).unwrap();
+            assert!(carried, "the part ends stiff: {counts:?}");
+            (counts, x[0])
+        };
+        let ((continued, x_continued), (fresh, x_fresh)) = (part(true), part(false));
+        let attempted = |c: &Counts| c.steps + c.rejected_steps;
+        assert!(continued.jacobians >= attempted(&continued), "{continued:?}");
+        assert!(fresh.jacobians + 15 <= attempted(&fresh), "{fresh:?}");
+        assert!((x_continued - x_fresh).abs() <= 1e-10, "{x_continued:e} against {x_fresh:e}");
     }
 }
