@@ -833,10 +833,13 @@ fn within_1e6_of_the_largest<S: sysid_ode::System>(
 /// states, 39 parameters, 4 conditions), against the forward sensitivities at rtol 1e-11:
 /// every component within 1e-6 of the largest (measured 2.5e-7; the forward sensitivities
 /// at rtol 1e-8 are 7.9e-8 from it). Its backward integration measures λ and the quadratures
-/// each as a vector, and runs across the forward steps' ends: it takes fewer than three times
-/// the forward sensitivities' Jacobians (measured 1 284 against 476, the forward plain
-/// integration's included; 3 580 when each entry of λ was held to atol on its own and the
-/// backward steps stopped where the forward ones ended).
+/// each as a vector, and runs across the forward steps' ends: it took 1 284 Jacobians against
+/// the forward sensitivities' 476, the forward plain integration's included, and 3 580 when
+/// each entry of λ was held to atol on its own and the backward steps stopped where the
+/// forward ones ended. Since the backward parts keep Rodas5P from one to the next
+/// (2026-12-05) it takes more Jacobians (1 891) in fewer steps (7 421 against 8 639) and less
+/// time, so the bound is on the counted work, which those over-resolved steps would have
+/// nearly tripled: below the forward sensitivities' (measured 0.56 of it).
 #[test]
 fn the_adjoint_at_the_problems_tolerances_is_accurate_without_resolving_what_the_gradient_does_not_see()
  {
@@ -853,10 +856,10 @@ fn the_adjoint_at_the_problems_tolerances_is_accurate_without_resolving_what_the
         reference.nll_gradient(&z, Sensitivities::Forward).unwrap().expect("an NLL").gradient;
     within_1e6_of_the_largest(&problem, &adjoint.gradient, &reference);
     assert!(
-        adjoint.counts.jacobians < 3 * forward.counts.jacobians,
-        "{} Jacobians by adjoint, {} forward",
-        adjoint.counts.jacobians,
-        forward.counts.jacobians
+        adjoint.counts.operations < forward.counts.operations,
+        "the adjoint's counted work {:?}, forward's {:?}",
+        adjoint.counts,
+        forward.counts
     );
 }
 
