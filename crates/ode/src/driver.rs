@@ -63,8 +63,8 @@ pub(crate) fn integrate_part<R: Rhs>(
     stops: &[f64],
     stiff: &mut bool,
 ) -> Result<(Counts, Vec<f64>), OdeError> {
-    let parts = (|_: f64, _: f64| true, |_: &Interpolant| {});
-    let (counts, x, ended_stiff) = run_from(cfg, rhs, (t0, x0), t_end, stops, parts, *stiff)?;
+    let every_step = (|_: f64, _: f64| true, |_: &Interpolant| {});
+    let (counts, x, ended_stiff) = run_from(cfg, rhs, (t0, x0), t_end, stops, every_step, *stiff)?;
     *stiff = ended_stiff;
     Ok((counts, x))
 }

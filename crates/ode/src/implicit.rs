@@ -41,8 +41,7 @@ impl IterationMatrix {
         let lu = Factors::new(n, sparse.map(|j| j.pattern()), columns);
         // The system's sparse Jacobian gives J's entries for either factors; products with
         // the identity (n dual directions) give it where the system has none.
-        let entries =
-            sparse.map(|j| j.state_columns().unwrap_or(j).workspace()).unwrap_or_default();
+        let entries = sparse.map(|j| j.for_state_columns().workspace()).unwrap_or_default();
         let directions = if analytic || sparse.is_some() { 0 } else { n };
         let mut identity = vec![0.0; n * directions];
         for i in 0..directions {
@@ -78,7 +77,7 @@ impl IterationMatrix {
             // J's entries where the system's sparse Jacobian gives them (by the program of
             // its state columns, where it has one); the others stay 0.
             None if let Some(jacobian) = sys.sparse_jacobian(Function::Rhs) => {
-                let jacobian = jacobian.state_columns().unwrap_or(jacobian);
+                let jacobian = jacobian.for_state_columns();
                 jacobian.eval(t, y, p, u, &mut self.entries);
                 for (&(i, c), &at) in jacobian.pattern().iter().zip(jacobian.entries()) {
                     if (c as usize) < n {
@@ -189,13 +188,11 @@ impl Structure {
             Some(jacobian) => {
                 let states = jacobian.pattern().iter().filter(|e| u64::from(e.1) < n).count();
                 let states = states as u64;
-                let alone =
-                    |part: Option<&dyn SparseJacobian>| part.unwrap_or(jacobian).operations();
                 Self {
                     n,
                     linearized: jacobian.operations() as u64,
-                    values: alone(jacobian.values_alone()) as u64,
-                    states: alone(jacobian.state_columns()) as u64,
+                    values: jacobian.for_values().operations() as u64,
+                    states: jacobian.for_state_columns().operations() as u64,
                     state_entries: states,
                     parameter_entries: jacobian.pattern().len() as u64 - states,
                     curvature: jacobian
@@ -204,16 +201,19 @@ impl Structure {
                     sparse: true,
                 }
             }
-            None => Self {
-                n,
-                linearized: 4 * n * (1 + n + np),
-                values: 4 * n * (1 + n + np),
-                states: 4 * n * (1 + n + np),
-                state_entries: n * n,
-                parameter_entries: n * np,
-                curvature: None,
-                sparse: false,
-            },
+            None => {
+                let linearized = 4 * n * (1 + n + np);
+                Self {
+                    n,
+                    linearized,
+                    values: linearized,
+                    states: linearized,
+                    state_entries: n * n,
+                    parameter_entries: n * np,
+                    curvature: None,
+                    sparse: false,
+                }
+            }
         }
     }
 }

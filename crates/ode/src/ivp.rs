@@ -130,7 +130,7 @@ impl<'a, S: System> ModelRhs<'a, S> {
 /// The program by which f alone is evaluated, where the system has a sparse Jacobian: its
 /// [values alone](SparseJacobian::values_alone), else the whole program.
 fn functions_alone<S: System>(sys: &S) -> Option<&dyn SparseJacobian> {
-    sys.sparse_jacobian(Function::Rhs).map(|j| j.values_alone().unwrap_or(j))
+    sys.sparse_jacobian(Function::Rhs).map(|j| j.for_values())
 }
 
 /// f(t, y, α, u) into `dx`: from the system's own sparse Jacobian's program where it has one

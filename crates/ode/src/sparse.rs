@@ -60,3 +60,17 @@ pub trait SparseJacobian: Send + Sync {
         None
     }
 }
+
+impl dyn SparseJacobian + '_ {
+    /// The program that evaluates f alone: [`values_alone`](SparseJacobian::values_alone)
+    /// where there is one, else this one.
+    pub fn for_values(&self) -> &dyn SparseJacobian {
+        self.values_alone().unwrap_or(self)
+    }
+
+    /// The program that evaluates f with ∂f/∂y:
+    /// [`state_columns`](SparseJacobian::state_columns) where there is one, else this one.
+    pub fn for_state_columns(&self) -> &dyn SparseJacobian {
+        self.state_columns().unwrap_or(self)
+    }
+}
