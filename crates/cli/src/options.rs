@@ -366,6 +366,9 @@ pub enum SchemeArg {
     Rodas5p,
     /// DOPRI5, switching to Rodas5P when the steps become limited by stability (the default of PEtab problems).
     Auto,
+    /// Variable-order BDF (numerical differentiation formulas, orders 1–5), the factorised
+    /// matrix kept over many steps (implicit, for large stiff systems; no state events).
+    Bdf,
 }
 
 impl From<SchemeArg> for Scheme {
@@ -376,6 +379,7 @@ impl From<SchemeArg> for Scheme {
             SchemeArg::Rodas4 => Scheme::Rodas4,
             SchemeArg::Rodas5p => Scheme::Rodas5p,
             SchemeArg::Auto => Scheme::Auto,
+            SchemeArg::Bdf => Scheme::Bdf,
         }
     }
 }

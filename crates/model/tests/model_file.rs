@@ -661,7 +661,7 @@ fn integrator() {
         ),
         (
             format!("{OK}[integrator]\nmethod = \"euler\"\n"),
-            "models/m.toml:12:10: [integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\" or \"auto\", got \"euler\"",
+            "models/m.toml:12:10: [integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\", \"bdf\" or \"auto\", got \"euler\"",
         ),
         (
             format!("{OK}[integrator]\nmethod = 1\n"),

@@ -43,12 +43,24 @@ impl Control {
 }
 
 /// Hairer's starting step size for a given direction (Solving ODE I, Section II.4), from
-/// (t, w.x) with `w.k[0]` = f(t, x); one evaluation of f, into `w.k[1]`.
+/// (t, w.x) with `w.k[0]` = f(t, x); one evaluation of f, into `w.k[1]`. For a scheme of
+/// order 4 or more ([`initial_step_of_order`] for another).
 pub(crate) fn initial_step<R: Rhs>(
     ev: &mut Evaluator<'_, R>,
     w: &mut Work,
     t: f64,
     dir: f64,
+) -> f64 {
+    initial_step_of_order(ev, w, t, dir, 4)
+}
+
+/// [`initial_step`] for a first step of order `order`: its error grows as h^(order + 1).
+pub(crate) fn initial_step_of_order<R: Rhs>(
+    ev: &mut Evaluator<'_, R>,
+    w: &mut Work,
+    t: f64,
+    dir: f64,
+    order: i32,
 ) -> f64 {
     let n = w.x.len() as f64;
     let (rtol, atol) = (ev.cfg.rtol, ev.cfg.atol);
@@ -85,7 +97,11 @@ pub(crate) fn initial_step<R: Rhs>(
     }
     let der2 = (der2 / n).sqrt() / h;
     let der12 = der2.abs().max(dnf);
-    let h1 = if der12 <= 1e-15 { (h * 1e-3).max(1e-6) } else { (0.01 / der12).powf(0.2) };
+    let h1 = if der12 <= 1e-15 {
+        (h * 1e-3).max(1e-6)
+    } else {
+        (0.01 / der12).powf(1.0 / f64::from(order + 1))
+    };
     // Likewise where the second derivative's estimate overflows: the first guess stands.
     let h1 = if h1 > 0.0 { h1 } else { h };
     (100.0 * h).min(h1).min(ev.cfg.max_step)

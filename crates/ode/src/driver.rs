@@ -3,7 +3,8 @@
 //! DOPRI5 and Rodas5P, and one interpolant per accepted step. Schemes are reached only
 //! through [`Stepper`].
 
-use crate::control::{Control, MIN_FACTOR, initial_step};
+use crate::bdf::{Attempt, DIVERGED_FACTOR, History};
+use crate::control::{Control, MIN_FACTOR, initial_step, initial_step_of_order};
 use crate::counts::Counts;
 use crate::dopri5::Dopri5;
 use crate::error::{BLOW_UP_GROWTH, OdeError};
@@ -82,6 +83,11 @@ fn run_from<R: Rhs>(
     stiff: bool,
 ) -> Result<(Counts, Vec<f64>, bool), OdeError> {
     check_inputs(cfg, rhs, (t0, x0), t_end)?;
+    if rhs.n_events() > 0 && cfg.scheme == Scheme::Bdf {
+        return Err(OdeError::InvalidSetup(
+            "the model's state events are located by the one-step schemes only, not by bdf (use rodas5p or auto)".into(),
+        ));
+    }
     if rhs.n_events() > 0 && t_end < t0 {
         return Err(OdeError::InvalidSetup(format!(
             "the model's state events fire integrating forward in time only, not from {t0} back to {t_end}"
@@ -169,13 +175,15 @@ enum Active {
 
 impl Active {
     /// The scheme that steps first for `scheme` (the automatic choice starts with DOPRI5):
-    /// the one place a [`Scheme`] is mapped to its [`Stepper`].
+    /// the one place a [`Scheme`] is mapped to its [`Stepper`]. The multistep scheme keeps
+    /// a history no one-step [`Stepper`] has and steps in its own loop
+    /// ([`Run::multistep_segment`]); its integration never steps with the one named here.
     fn first(scheme: Scheme) -> Self {
         match scheme {
             Scheme::Dopri5 | Scheme::Auto => Self::Dopri5,
             Scheme::Rk4 => Self::Rk4,
             Scheme::Rodas4 => Self::Rodas4,
-            Scheme::Rodas5p => Self::Rodas5p,
+            Scheme::Rodas5p | Scheme::Bdf => Self::Rodas5p,
         }
     }
 }
@@ -259,6 +267,8 @@ struct Run<'r, R: Rhs, W, O> {
     conditions_next: Vec<f64>,
     /// The state at a time inside a step, where an event is being located.
     inside: Vec<f64>,
+    /// The multistep scheme's differences and matrix age, once it has stepped.
+    multistep: Option<Box<History>>,
 }
 
 impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, W, O> {
@@ -302,6 +312,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             explicit_again: 0,
             wants,
             on_step,
+            multistep: None,
         }
     }
 
@@ -325,6 +336,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         self.update_conditions();
         match self.ev.cfg.fixed_step {
             Some(fixed) => self.fixed_segment(fixed, seg_end),
+            None if self.ev.cfg.scheme == Scheme::Bdf => self.multistep_segment(seg_end),
             None => self.adaptive_segment(seg_end),
         }
     }
@@ -429,6 +441,65 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             {
                 self.observe_non_stiffness(hs);
             }
+            if lands {
+                return Ok(());
+            }
+        }
+    }
+
+    /// The multistep scheme's steps to the end of the segment, started afresh at order 1
+    /// (at a discontinuity the past says nothing of what follows), the last landing on it.
+    fn multistep_segment(&mut self, seg_end: f64) -> Result<(), OdeError> {
+        let n = self.work.x.len();
+        let mut history = self.multistep.take().unwrap_or_else(|| Box::new(History::new(n)));
+        let done = self.multistep_steps(&mut history, seg_end);
+        self.multistep = Some(history);
+        done
+    }
+
+    fn multistep_steps(&mut self, history: &mut History, seg_end: f64) -> Result<(), OdeError> {
+        if self.h == 0.0 {
+            self.h = initial_step_of_order(&mut self.ev, &mut self.work, self.t, self.dir, 1);
+        }
+        let max_step = self.ev.cfg.max_step;
+        history.start(&self.work.x, &self.work.k[0], self.dir * self.h.min(max_step));
+        loop {
+            self.check_budget()?;
+            let remaining = seg_end - self.t;
+            let mut hs = history.h().abs().min(max_step);
+            let lands = hs * 1.01 >= remaining.abs();
+            if lands {
+                hs = remaining.abs();
+            }
+            self.check_step_size(hs, None)?;
+            history.rescale(self.dir * hs);
+            let t_next = if lands { seg_end } else { self.t + self.dir * hs };
+            let attempt = match history.attempt(&mut self.ev, t_next) {
+                Ok(attempt) => attempt,
+                Err(FactorError::Singular) => Attempt::Diverged,
+                Err(e) => return Err(implicit_error(e, self.t)),
+            };
+            let err = match attempt {
+                Attempt::Converged(err) if err <= 1.0 => err,
+                Attempt::Converged(err) => {
+                    self.ev.counts.rejected_steps += 1;
+                    let factor = history.rejected(err);
+                    history.rescale(self.dir * hs * factor);
+                    continue;
+                }
+                Attempt::Diverged => {
+                    self.ev.counts.rejected_steps += 1;
+                    history.rescale(self.dir * hs * DIVERGED_FACTOR);
+                    continue;
+                }
+            };
+            let factor = history.accept(&mut self.ev, err);
+            self.work.x_new.copy_from_slice(history.solution());
+            self.accept_with(t_next, |w, t, t_next| history.dense(&mut w.interpolant, t, t_next))?;
+            if let Some(factor) = factor {
+                history.rescale(self.dir * hs * factor);
+            }
+            self.h = history.h().abs();
             if lands {
                 return Ok(());
             }
@@ -578,6 +649,18 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
     /// Accepts the step from t to t_next held in `work`: interpolant and callback (if
     /// wanted), advance.
     fn accept(&mut self, t_next: f64) -> Result<(), OdeError> {
+        let stepper = self.stepper;
+        self.accept_with(t_next, |w, t, t_next| {
+            <Active as Stepper<R>>::dense(&stepper, w, t, t_next)
+        })
+    }
+
+    /// [`accept`](Self::accept), the interpolant formed by `dense`.
+    fn accept_with(
+        &mut self,
+        t_next: f64,
+        dense: impl FnOnce(&mut Work, f64, f64),
+    ) -> Result<(), OdeError> {
         let t = self.t;
         if let Some(i) = self.work.x_new.iter().position(|v| !v.is_finite()) {
             let e = OdeError::NonFinite { t, what: self.ev.rhs.describe(i) };
@@ -585,7 +668,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         }
         self.ev.counts.steps += 1;
         if (self.wants)(t, t_next) {
-            <Active as Stepper<R>>::dense(&self.stepper, &mut self.work, t, t_next);
+            dense(&mut self.work, t, t_next);
             (self.on_step)(&self.work.interpolant);
         }
         std::mem::swap(&mut self.work.x, &mut self.work.x_new);

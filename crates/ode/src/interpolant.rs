@@ -6,10 +6,11 @@ use crate::signal::Side;
 /// The solution on one accepted step from `t` to `t + h` (h may be negative), as the
 /// polynomial in θ = (s − t)/h
 ///
-/// x(s) = r₁ + θ (r₂ + (1−θ)(r₃ + θ (r₄ + (1−θ) r₅)))
+/// x(s) = r₁ + θ (r₂ + (1−θ)(r₃ + θ (r₄ + (1−θ)(r₅ + θ r₆))))
 ///
-/// which is Hairer's form for DOPRI5 (r₅ ≠ 0, order 4) and, with r₅ = 0, the cubic Hermite
-/// interpolant through both ends and their slopes (order 3) used for RK4.
+/// which is Hairer's form for DOPRI5 (r₅ ≠ 0, r₆ = 0, order 4) and, with r₅ = r₆ = 0, the
+/// cubic Hermite interpolant through both ends and their slopes (order 3) used for RK4; r₆
+/// extends it to degree 5, the multistep scheme's interpolating polynomial at order 5.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Interpolant {
     t: f64,
@@ -17,13 +18,20 @@ pub struct Interpolant {
     t_end: f64,
     h: f64,
     dim: usize,
-    /// r₁..r₅, each of length `dim`, stored one after another.
+    /// r₁..r₆, each of length `dim`, stored one after another.
     coefficients: Vec<f64>,
+    /// Whether r₆ was last written (by the multistep scheme): the one-step schemes write
+    /// r₁..r₅ and find r₆ = 0.
+    sixth: bool,
 }
+
+/// The coefficient vectors of a step's polynomial.
+const COEFFICIENTS: usize = 6;
 
 impl Interpolant {
     pub(crate) fn new(dim: usize) -> Self {
-        Self { t: 0.0, t_end: 0.0, h: 0.0, dim, coefficients: vec![0.0; 5 * dim] }
+        let coefficients = vec![0.0; COEFFICIENTS * dim];
+        Self { t: 0.0, t_end: 0.0, h: 0.0, dim, coefficients, sixth: false }
     }
 
     pub(crate) fn set_span(&mut self, t: f64, t_end: f64) {
@@ -57,12 +65,29 @@ impl Interpolant {
         self.set_span(t, t_end);
     }
 
+    /// r₁..r₅, for a scheme whose polynomial is of degree 4 at most (r₆ = 0).
     pub(crate) fn coefficients_mut(&mut self) -> [&mut [f64]; 5] {
+        let clear = std::mem::take(&mut self.sixth);
+        let [r1, r2, r3, r4, r5, r6] = self.split();
+        if clear {
+            r6.fill(0.0);
+        }
+        [r1, r2, r3, r4, r5]
+    }
+
+    /// r₁..r₆, all of which the caller writes.
+    pub(crate) fn coefficients6_mut(&mut self) -> [&mut [f64]; COEFFICIENTS] {
+        self.sixth = true;
+        self.split()
+    }
+
+    fn split(&mut self) -> [&mut [f64]; COEFFICIENTS] {
         let (r1, rest) = self.coefficients.split_at_mut(self.dim);
         let (r2, rest) = rest.split_at_mut(self.dim);
         let (r3, rest) = rest.split_at_mut(self.dim);
-        let (r4, r5) = rest.split_at_mut(self.dim);
-        [r1, r2, r3, r4, r5]
+        let (r4, rest) = rest.split_at_mut(self.dim);
+        let (r5, r6) = rest.split_at_mut(self.dim);
+        [r1, r2, r3, r4, r5, r6]
     }
 
     /// Where the step starts.
@@ -108,7 +133,7 @@ pub struct DenseSolution {
     /// (start, end) of each step as integrated (end < start for a backward step), in
     /// increasing time once finished.
     spans: Vec<(f64, f64)>,
-    /// 5·dim coefficients per step (r₁..r₅ of [`Interpolant`]).
+    /// 6·dim coefficients per step (r₁..r₆ of [`Interpolant`]).
     coefficients: Vec<f64>,
     /// The state events fired along the solution, in order: (event, τ, the state before
     /// it). A step ends at each τ and the next begins there, after the reset.
@@ -141,7 +166,7 @@ impl DenseSolution {
         }
         let mut order: Vec<usize> = (0..self.spans.len()).collect();
         order.sort_by(|&a, &b| lower(self.spans[a]).total_cmp(&lower(self.spans[b])));
-        let w = 5 * self.dim;
+        let w = COEFFICIENTS * self.dim;
         let spans = order.iter().map(|&i| self.spans[i]).collect();
         let mut coefficients = Vec::with_capacity(self.coefficients.len());
         for &i in &order {
@@ -197,7 +222,7 @@ impl DenseSolution {
         if ends_there {
             *hint = other;
             let (a, b) = self.spans[other];
-            let w = 5 * self.dim;
+            let w = COEFFICIENTS * self.dim;
             evaluate(a, b, self.dim, &self.coefficients[other * w..(other + 1) * w], t, 0, out);
         }
         true
@@ -226,7 +251,7 @@ impl DenseSolution {
         let Some(i) = found else { return false };
         *hint = i;
         let (a, b) = self.spans[i];
-        let w = 5 * self.dim;
+        let w = COEFFICIENTS * self.dim;
         evaluate(a, b, self.dim, &self.coefficients[i * w..(i + 1) * w], t, 0, out);
         true
     }
@@ -234,7 +259,7 @@ impl DenseSolution {
     /// The same solution under a linear map L of its vectors: `map(x, out)` writes L x (of
     /// length `dim`). Exact, because the interpolants are linear in their coefficients.
     pub fn map(&self, dim: usize, mut map: impl FnMut(&[f64], &mut [f64])) -> DenseSolution {
-        let mut coefficients = vec![0.0; self.spans.len() * 5 * dim];
+        let mut coefficients = vec![0.0; self.spans.len() * COEFFICIENTS * dim];
         for (r, o) in self.coefficients.chunks(self.dim).zip(coefficients.chunks_mut(dim)) {
             map(r, o);
         }
@@ -250,7 +275,7 @@ fn upper((a, b): (f64, f64)) -> f64 {
     a.max(b)
 }
 
-/// Evaluates the interpolation polynomial of a step from a to b with coefficients r₁..r₅ (each of
+/// Evaluates the interpolation polynomial of a step from a to b with coefficients r₁..r₆ (each of
 /// length `dim`, stored one after another) at s, components `first..first + out.len()`.
 fn evaluate(a: f64, b: f64, dim: usize, c: &[f64], s: f64, first: usize, out: &mut [f64]) {
     let h = b - a;
@@ -262,6 +287,9 @@ fn evaluate(a: f64, b: f64, dim: usize, c: &[f64], s: f64, first: usize, out: &m
             + theta
                 * (c[dim + i]
                     + theta1
-                        * (c[2 * dim + i] + theta * (c[3 * dim + i] + theta1 * c[4 * dim + i])));
+                        * (c[2 * dim + i]
+                            + theta
+                                * (c[3 * dim + i]
+                                    + theta1 * (c[4 * dim + i] + theta * c[5 * dim + i]))));
     }
 }

@@ -70,6 +70,7 @@
 #![warn(missing_docs)]
 
 mod adjoint;
+mod bdf;
 mod control;
 mod counts;
 mod dopri5;

@@ -27,6 +27,12 @@ pub enum Scheme {
     /// steps), a third of the way to DOPRI5's stability boundary. What imported PEtab
     /// problems use.
     Auto,
+    /// Variable-order, variable-step numerical differentiation formulas (orders 1–4, and
+    /// BDF5; Shampine & Reichelt's ode15s) for stiff systems: one to three evaluations and
+    /// solves a step, the factorised matrix kept over many steps (CVODE's rules for forming it
+    /// again), interpolating polynomial of the step's order as dense output. Not with a fixed
+    /// step, nor with state events.
+    Bdf,
 }
 
 /// How to integrate: scheme, tolerances and limits. Plain data with documented defaults.
@@ -102,6 +108,11 @@ impl Integrator {
         Self { scheme: Scheme::Auto, rtol, atol, ..Self::default() }
     }
 
+    /// The multistep scheme (stiff, orders 1 to 5) with the given tolerances.
+    pub fn bdf(rtol: f64, atol: f64) -> Self {
+        Self { scheme: Scheme::Bdf, rtol, atol, ..Self::default() }
+    }
+
     /// RK4 with a fixed step h.
     pub fn rk4(h: f64) -> Self {
         Self { scheme: Scheme::Rk4, fixed_step: Some(h), ..Self::default() }
@@ -154,6 +165,12 @@ impl Integrator {
                 "fixed_step",
                 "cannot be used with the automatic choice of scheme, which needs error control"
                     .into(),
+            );
+        }
+        if self.scheme == Scheme::Bdf && self.fixed_step.is_some() {
+            return bad(
+                "fixed_step",
+                "cannot be used with BDF, whose order and step follow its error estimates".into(),
             );
         }
         if self.scheme == Scheme::Rk4 && self.fixed_step.is_none() {

@@ -71,7 +71,11 @@ fn decay_gradient_matches_the_closed_form() {
     let c = [0.7, 1.0, 0.5, -2.0, 3.0];
     let ivp = Ivp::new(&sys, 1.0, &[2.0], &[0.3]);
     let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0)];
-    for integrator in [Integrator::dopri5(1e-12, 1e-14), Integrator::rodas5p(1e-11, 1e-14)] {
+    for integrator in [
+        Integrator::dopri5(1e-12, 1e-14),
+        Integrator::rodas5p(1e-11, 1e-14),
+        Integrator::bdf(1e-11, 1e-14),
+    ] {
         let g = adjoint_sum(&ivp, &integrator, &wrt, None, (&times, &c));
         let (mut dk, mut dx0) = (0.0, 0.0);
         for (&t, &c) in times.iter().zip(&c) {
@@ -100,7 +104,11 @@ fn lotka_volterra_adjoint_agrees_with_forward_sensitivities() {
     ];
     let times: Vec<f64> = (0..=15).map(|i| 1.0 + 0.9 * i as f64).collect();
     let c = seeds(2, times.len());
-    for integrator in [Integrator::dopri5(1e-11, 1e-12), Integrator::rodas5p(1e-11, 1e-12)] {
+    for integrator in [
+        Integrator::dopri5(1e-11, 1e-12),
+        Integrator::rodas5p(1e-11, 1e-12),
+        Integrator::bdf(1e-11, 1e-12),
+    ] {
         let fwd = forward_sum(&ivp, &integrator, &wrt, None, (&times, &c));
         let adj = adjoint_sum(&ivp, &integrator, &wrt, None, (&times, &c));
         agree(&adj, &fwd, 1e-7);
@@ -154,14 +162,15 @@ fn stiff_robertson_adjoint_agrees_with_forward_sensitivities() {
     // Weighted as a fit would weigh y2, which is 1e-5 the size of the others.
     let c: Vec<f64> =
         seeds(3, times.len()).chunks(3).flat_map(|s| [s[0], 1e4 * s[1], s[2]]).collect();
-    let integrator = Integrator::rodas5p(1e-10, 1e-14);
-    let fwd = forward_sum(&ivp, &integrator, &wrt, None, (&times, &c));
-    let (_, forward) = ivp.solve_dense(&integrator, &times).unwrap();
-    let (adj, counts) = ivp.adjoint(&integrator, &wrt, None, (&forward, &times, &c)).unwrap();
-    for (j, (a, f)) in adj.iter().zip(&fwd).enumerate() {
-        assert_close(*a, *f, 1e-6 * if j == 1 { 1e3 } else { 1.0 });
+    for integrator in [Integrator::rodas5p(1e-10, 1e-14), Integrator::bdf(1e-10, 1e-14)] {
+        let fwd = forward_sum(&ivp, &integrator, &wrt, None, (&times, &c));
+        let (_, forward) = ivp.solve_dense(&integrator, &times).unwrap();
+        let (adj, counts) = ivp.adjoint(&integrator, &wrt, None, (&forward, &times, &c)).unwrap();
+        for (j, (a, f)) in adj.iter().zip(&fwd).enumerate() {
+            assert_close(*a, *f, 1e-6 * if j == 1 { 1e3 } else { 1.0 });
+        }
+        assert!(counts.jacobians > 0, "the backward steps are implicit: {counts:?}");
     }
-    assert!(counts.jacobians > 0, "the backward steps are implicit: {counts:?}");
 }
 
 /// y′ = −k (y − a cos t): with k = 10⁴ the solution follows a cos t on the slow scale while

@@ -5,6 +5,7 @@ mod common;
 
 mod adjoint;
 mod allocations;
+mod bdf;
 mod events;
 mod integrators;
 mod sensitivities;

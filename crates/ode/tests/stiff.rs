@@ -78,7 +78,7 @@ fn robertson_sensitivities_match_central_differences() {
     }
 }
 
-fn robertson_sensitivities_against_differences(integrator: Integrator) {
+pub(crate) fn robertson_sensitivities_against_differences(integrator: Integrator) {
     let sys = Robertson::default();
     let wrt = [Wrt::Parameter(0), Wrt::Parameter(1), Wrt::Parameter(2), Wrt::InitialValue(0)];
     let times = [0.01, 1.0, 40.0, 1e3];

@@ -162,7 +162,7 @@ impl<S: System + Clone> Case<S> {
     /// the smallest concentration measured.
     pub fn truth_integrator(&self) -> Integrator {
         match self.integrator.scheme {
-            Scheme::Rodas4 | Scheme::Rodas5p | Scheme::Auto => {
+            Scheme::Rodas4 | Scheme::Rodas5p | Scheme::Auto | Scheme::Bdf => {
                 Integrator::rodas4(1e-11, 1e-18).with_max_steps(10_000_000)
             }
             _ => truth_integrator(),

@@ -41,18 +41,19 @@ pub(super) fn read_integrator(
     Ok(integrator)
 }
 
-/// Reads `[integrator] method`: "dopri5", "rk4", "rodas4", "rodas5p" or "auto".
+/// Reads `[integrator] method`: "dopri5", "rk4", "rodas4", "rodas5p", "bdf" or "auto".
 fn read_scheme(r: &Reader<'_>, v: &Node) -> Result<Scheme, ModelError> {
     match r.string(v, "[integrator] method")? {
         "dopri5" => Ok(Scheme::Dopri5),
         "rk4" => Ok(Scheme::Rk4),
         "rodas4" => Ok(Scheme::Rodas4),
         "rodas5p" => Ok(Scheme::Rodas5p),
+        "bdf" => Ok(Scheme::Bdf),
         "auto" => Ok(Scheme::Auto),
         other => Err(r.err(
             v.at,
             format!(
-                "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\" or \"auto\", got \"{other}\""
+                "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\", \"bdf\" or \"auto\", got \"{other}\""
             ),
         )),
     }

@@ -1,0 +1,149 @@
+//! The multistep scheme (`Scheme::Bdf`) against the same independent references as the
+//! Rosenbrock schemes (tests/stiff.rs): Robertson's kinetics and van der Pol with μ = 1000
+//! against Radau IIA solutions by scipy, sensitivities against central differences and
+//! closed forms, dense output against the closed form in both directions, and its global
+//! error proportional to the tolerance. Its error is not extrapolated as the one-step
+//! schemes' is (they step with the higher of their two orders): at a given rtol its global
+//! error is 10–40 times rtol where theirs is 1–5 times.
+
+use crate::common;
+
+use common::{Oscillator, robertson_rates, stiff_reference};
+use sysid_ode::testing::Decay;
+use sysid_ode::testing::{assert_close, assert_close_abs};
+use sysid_ode::{Integrator, Ivp, OdeError, Wrt};
+use sysid_systems::{Robertson, VanDerPol};
+
+const ROBERTSON_Y0: [f64; 3] = [1.0, 0.0, 0.0];
+
+/// Asserts agreement with a reference value to c·(rtol·|y| + atol) plus twice the spread of
+/// the independent reference runs.
+#[track_caller]
+fn assert_reference(actual: f64, (value, spread): (f64, f64), (rtol, atol): (f64, f64), c: f64) {
+    assert_close_abs(actual, value, c * (rtol * value.abs() + atol) + 2.0 * spread * value.abs());
+}
+
+#[test]
+fn robertson_matches_the_reference_at_40_and_4e5() {
+    let (rtol, atol) = (1e-10, 1e-14);
+    let times = [40.0, 4e5];
+    let sol = Ivp::new(&Robertson::default(), 0.0, &ROBERTSON_Y0, &robertson_rates())
+        .solve(&Integrator::bdf(rtol, atol), &times)
+        .unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        for (i, name) in ["y1", "y2", "y3"].iter().enumerate() {
+            // Measured: within 37 (rtol·|y| + atol), y1 at t = 4e5 (0.0049, its error
+            // 1.9e-11 carried from y3 ≈ 1, which conserves the mass with it).
+            assert_reference(
+                sol.state(m)[i],
+                stiff_reference("robertson", t, name),
+                (rtol, atol),
+                50.0,
+            );
+        }
+    }
+    let total: f64 = sol.state(1).iter().sum();
+    assert_close(total, 1.0, 1e-12);
+    // Measured 1 523 steps and 1 756 evaluations of f: about one Newton iteration a step,
+    // 123 factorisations (Rodas5P takes a Jacobian and eight evaluations every step).
+    let counts = sol.counts();
+    assert!(counts.steps < 2_500 && counts.rhs_evaluations < 2 * counts.steps, "{counts:?}");
+    assert!(counts.jacobians * 5 < counts.steps, "{counts:?}");
+}
+
+#[test]
+fn van_der_pol_with_mu_1000_over_one_period() {
+    let rtol = 1e-10;
+    let times = [1000.0, 2000.0];
+    let sol = Ivp::new(&VanDerPol::default(), 0.0, &[2.0, 0.0], &[1000.0])
+        .solve(&Integrator::bdf(rtol, rtol), &times)
+        .unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        for (i, name) in ["x", "v"].iter().enumerate() {
+            // Measured: within 241 (rtol·|y| + atol), v at t = 2000, after two jumps whose
+            // errors the slow phases carry.
+            assert_reference(
+                sol.state(m)[i],
+                stiff_reference("vdp1000", t, name),
+                (rtol, rtol),
+                300.0,
+            );
+        }
+    }
+    assert!(sol.counts().steps < 20_000, "{:?}", sol.counts());
+}
+
+/// The sensitivities, corrected with the states in one Newton iteration, against central
+/// differences of tight Rodas4 integrations (tests/stiff.rs).
+#[test]
+fn robertson_sensitivities_match_central_differences() {
+    crate::stiff::robertson_sensitivities_against_differences(Integrator::bdf(1e-11, 1e-17));
+}
+
+/// x′ = −k x on both sides of t0 with its sensitivity, and the harmonic oscillator at 5 000
+/// output times, against their closed forms: the interpolating polynomial between the
+/// steps (of degree up to five) is as accurate as the steps.
+#[test]
+fn dense_output_and_backward_integration() {
+    let decay = Decay::new();
+    let times = [-3.0, -1.0, 0.5, 2.0, 4.0];
+    let sol = Ivp::new(&decay, 2.0, &[1.5], &[0.4])
+        .solve_sensitivities(&Integrator::bdf(1e-11, 1e-13), &[Wrt::Parameter(0)], &times)
+        .unwrap();
+    // Measured: the state and the sensitivity within 5.7e-10 of themselves (the largest at
+    // t = −3, integrating back, where the solution has grown 7.4 times).
+    for (m, &t) in times.iter().enumerate() {
+        let (x, _, dk) = Decay::exact(1.5, 0.4, t - 2.0);
+        assert_close(sol.state(m)[0], x, 1e-9);
+        assert_close_abs(sol.sensitivity(m)[(0, 0)], dk, 1e-9 * dk.abs().max(1.0));
+    }
+
+    let sys = Oscillator::new(false);
+    let times: Vec<f64> = (0..5000).map(|i| 0.002 * i as f64 + 0.0007).collect();
+    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0])
+        .solve(&Integrator::bdf(1e-10, 1e-12), &times)
+        .unwrap();
+    let mut worst: f64 = 0.0;
+    for (m, &t) in times.iter().enumerate() {
+        let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, t);
+        worst = worst.max((sol.state(m)[0] - x).abs()).max((sol.state(m)[1] - v).abs());
+    }
+    // Measured 2.0e-8 over ten time units (as at the steps, 203 rtol; the test above).
+    assert!(worst < 4e-8, "worst dense-output error {worst:e} ({:?})", sol.counts());
+}
+
+/// The global error follows the tolerance: on the oscillator over ten time units (89 to 407
+/// steps) it falls by 5–2 000 times per decade of rtol (measured 62 and 32: the order rises
+/// as the tolerance tightens), and stays within 300 rtol (measured 40, 64 and 203 rtol at
+/// rtol 1e-6, 1e-8 and 1e-10: each step's error is held to the tolerance, and they add up).
+#[test]
+fn the_error_is_proportional_to_the_tolerance() {
+    let sys = Oscillator::new(false);
+    let errors: Vec<f64> = [1e-6, 1e-8, 1e-10]
+        .iter()
+        .map(|&rtol| {
+            let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0])
+                .solve(&Integrator::bdf(rtol, rtol), &[10.0])
+                .unwrap();
+            let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, 10.0);
+            let e = (sol.state(0)[0] - x).hypot(sol.state(0)[1] - v);
+            assert!(e < 300.0 * rtol, "error {e:e} at rtol {rtol:e}");
+            e
+        })
+        .collect();
+    for pair in errors.windows(2) {
+        let ratio = pair[0] / pair[1];
+        assert!((5.0..2000.0).contains(&ratio), "errors {errors:?}");
+    }
+}
+
+/// What it cannot do is refused by name: a fixed step, and state events.
+#[test]
+fn a_fixed_step_and_state_events_are_refused() {
+    let fixed = Integrator::bdf(1e-8, 1e-10).with_fixed_step(0.1);
+    let refused = fixed.validate().unwrap_err();
+    assert_eq!(refused.name, "fixed_step");
+    let decay = Decay::new();
+    let err = Ivp::new(&decay, 0.0, &[1.0], &[0.5]).solve(&fixed, &[1.0]).unwrap_err();
+    assert!(matches!(err, OdeError::InvalidSetup(ref m) if m.contains("BDF")), "{err}");
+}
