@@ -117,6 +117,8 @@ pub(crate) struct History {
     correction: Vec<f64>,
     f: Vec<f64>,
     delta: Vec<f64>,
+    /// Spare rows for re-expressing the differences.
+    rows: Vec<Vec<f64>>,
 }
 
 impl History {
@@ -138,6 +140,7 @@ impl History {
             correction: vec![0.0; n],
             f: vec![0.0; n],
             delta: vec![0.0; n],
+            rows: Vec::new(),
         }
     }
 
@@ -178,15 +181,25 @@ impl History {
         }
         let q = self.order;
         let weights = rescaling(q, h / self.h);
+        // Row by row into spare rows, every pass over contiguous vectors: d'_i = Σ_k w_ik d_k,
+        // k = 1..=q (the first row, y itself, maps to itself).
         let n = self.d[0].len();
-        for m in 0..n {
-            let old: [f64; MAX_ORDER + 1] =
-                std::array::from_fn(|k| if k <= q { self.d[k][m] } else { 0.0 });
-            // The first difference row, y itself, maps to itself.
-            for (d, w) in self.d[1..=q].iter_mut().zip(&weights[1..=q]) {
-                d[m] = (1..=q).map(|k| w[k] * old[k]).sum();
+        let mut new = std::mem::take(&mut self.rows);
+        while new.len() < q {
+            new.push(vec![0.0; n]);
+        }
+        for (row, w) in new[..q].iter_mut().zip(&weights[1..=q]) {
+            row.fill(0.0);
+            for (d, &w) in self.d[1..=q].iter().zip(&w[1..=q]) {
+                for (r, d) in row.iter_mut().zip(d) {
+                    *r += w * d;
+                }
             }
         }
+        for (d, row) in self.d[1..=q].iter_mut().zip(&mut new[..q]) {
+            std::mem::swap(d, row);
+        }
+        self.rows = new;
         self.h = h;
         self.equal_steps = 0;
     }
