@@ -8,6 +8,7 @@
 
 use crate::common;
 
+use crate::stiff::assert_reference;
 use common::{Oscillator, robertson_rates, stiff_reference};
 use sysid_ode::testing::Decay;
 use sysid_ode::testing::{assert_close, assert_close_abs};
@@ -15,13 +16,6 @@ use sysid_ode::{Integrator, Ivp, OdeError, Wrt};
 use sysid_systems::{Robertson, VanDerPol};
 
 const ROBERTSON_Y0: [f64; 3] = [1.0, 0.0, 0.0];
-
-/// Asserts agreement with a reference value to c·(rtol·|y| + atol) plus twice the spread of
-/// the independent reference runs.
-#[track_caller]
-fn assert_reference(actual: f64, (value, spread): (f64, f64), (rtol, atol): (f64, f64), c: f64) {
-    assert_close_abs(actual, value, c * (rtol * value.abs() + atol) + 2.0 * spread * value.abs());
-}
 
 #[test]
 fn robertson_matches_the_reference_at_40_and_4e5() {

@@ -21,7 +21,12 @@ const ROSENBROCK: [fn(f64, f64) -> Integrator; 2] = [Integrator::rodas4, Integra
 /// integrator at these tolerances should reach, plus twice the spread of the independent
 /// reference runs (the reference's own error estimate).
 #[track_caller]
-fn assert_reference(actual: f64, (value, spread): (f64, f64), (rtol, atol): (f64, f64), c: f64) {
+pub(crate) fn assert_reference(
+    actual: f64,
+    (value, spread): (f64, f64),
+    (rtol, atol): (f64, f64),
+    c: f64,
+) {
     assert_close_abs(actual, value, c * (rtol * value.abs() + atol) + 2.0 * spread * value.abs());
 }
 
