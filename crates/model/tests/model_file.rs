@@ -836,6 +836,22 @@ fn a_file_with_every_section_reads_every_value() {
     assert_eq!(file.states_at, at("[\"x\", \"y\"]"));
 }
 
+/// Every adaptive `[integrator] method` reads as its scheme (`rk4` needs a `step`: the errors above).
+#[test]
+fn every_method_name_reads_as_its_scheme() {
+    for (name, scheme) in [
+        ("dopri5", Scheme::Dopri5),
+        ("rodas4", Scheme::Rodas4),
+        ("rodas5p", Scheme::Rodas5p),
+        ("bdf", Scheme::Bdf),
+        ("auto", Scheme::Auto),
+    ] {
+        let text = FULL.replace("method = \"rodas4\"", &format!("method = \"{name}\""));
+        let file = ModelFile::parse(&text, Path::new("models/m.toml")).unwrap();
+        assert_eq!(file.integrator.scheme, scheme, "{name}");
+    }
+}
+
 /// A prior's distribution: normal by default, `"laplace"` with location `mean` and scale
 /// `sd`; any other is refused at its value.
 #[test]
