@@ -367,7 +367,8 @@ pub enum SchemeArg {
     /// DOPRI5, switching to Rodas5P when the steps become limited by stability (the default of PEtab problems).
     Auto,
     /// Variable-order BDF (numerical differentiation formulas, orders 1–5), the factorised
-    /// matrix kept over many steps (implicit, for large stiff systems; no state events).
+    /// matrix kept over many steps (implicit, for large stiff systems; its error at a given
+    /// --rtol is tens of times the one-step schemes': ask for a tenth; no state events).
     Bdf,
 }
 
