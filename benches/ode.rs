@@ -4,8 +4,8 @@
 //! Every run is the case's initial-value problem at the truth (or the reference answer), at
 //! the case's tolerances (rtol, atol for states and sensitivities alike), with output at the
 //! case's measurement times and, for `sensitivities`, derivatives with respect to the case's
-//! unknowns. Solvers: sysid's explicit DOPRI5 and implicit Rodas4, diffsol's explicit
-//! Tsit45 and implicit BDF (dense nalgebra LU). All four get their Jacobian products from
+//! unknowns. Solvers: sysid's explicit DOPRI5, implicit Rodas4 and multistep BDF, diffsol's
+//! explicit Tsit45 and implicit BDF (dense nalgebra LU). All five get their Jacobian products from
 //! the same dual-number evaluation of the model, so the comparison is between integrators,
 //! not model code. `tests/agreement.rs` of `sysid-peer-diffsol` checks that they agree.
 //!
@@ -37,6 +37,7 @@ impl Visit for Bench<'_, '_> {
         let ours = [
             ("sysid-dopri5", Integrator::dopri5(rtol, atol).with_max_steps(10_000_000)),
             ("sysid-rodas4", Integrator::rodas4(rtol, atol).with_max_steps(10_000_000)),
+            ("sysid-bdf", Integrator::bdf(rtol, atol).with_max_steps(10_000_000)),
         ];
         let ivp = |y0, p| Ivp::new(&case.system, case.t0, y0, p);
         let peer = |y0, p| Peer::new(&case.system, case.t0, y0, p, rtol, atol);
