@@ -26,6 +26,7 @@
 //! corrector). The local error is (κ_q γ_q + 1/(q+1)) d; the error norm is the one every
 //! scheme shares, sensitivities included.
 
+use crate::control::{MIN_FACTOR, SAFETY};
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
 use crate::rhs::Rhs;
@@ -36,10 +37,9 @@ pub(crate) const MAX_ORDER: usize = 5;
 /// κ_q of the numerical differentiation formulas (Shampine & Reichelt, Table 1); 0 is BDF.
 /// Order 5 is BDF5: an NDF of order 5 loses too much stability.
 const KAPPA: [f64; MAX_ORDER + 1] = [0.0, -0.1850, -1.0 / 9.0, -0.0823, -0.0415, 0.0];
-/// The largest growth of the step in one change.
+/// The largest growth of the step in one change. (The smallest ratio after a failed error
+/// test, and the safety factor, are the one-step schemes' [`MIN_FACTOR`] and [`SAFETY`].)
 const MAX_FACTOR: f64 = 10.0;
-/// The smallest ratio of a new step to the old after a failed error test.
-const MIN_FACTOR: f64 = 0.2;
 /// The step after a Newton iteration that failed with a fresh matrix, as a share of the
 /// failed one (CVODE's ETACF).
 pub(crate) const DIVERGED_FACTOR: f64 = 0.25;
@@ -394,10 +394,10 @@ impl History {
 }
 
 /// The safety factor of a new step after an attempt that took `iterations` Newton iterations:
-/// 0.9, less where the iteration was slow (Shampine & Reichelt's rule).
+/// [`SAFETY`], less where the iteration was slow (Shampine & Reichelt's rule).
 fn safety(iterations: usize) -> f64 {
     let most = NEWTON_ITERATIONS as f64;
-    0.9 * (2.0 * most + 1.0) / (2.0 * most + iterations as f64)
+    SAFETY * (2.0 * most + 1.0) / (2.0 * most + iterations as f64)
 }
 
 /// The weights w of the differences at the step ρh for order q: d'_i = Σ_k w_ik d_k, w the

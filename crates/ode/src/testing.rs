@@ -54,3 +54,21 @@ pub fn assert_close_abs(actual: f64, expected: f64, tol: f64) {
     let err = (actual - expected).abs();
     assert!(err <= tol, "{actual:e} differs from {expected:e} by {err:.3e}, allowed {tol:.1e}");
 }
+
+/// max over m, c of |a_m[c] − b_m[c]| / max_m |b_m[c]|, m over `count` output times: the
+/// largest difference of two solutions, each component scaled by its largest magnitude in b
+/// (so a sensitivity of 1e5 and one of 1e-3 are judged alike).
+pub fn scaled_difference(
+    count: usize,
+    a: impl Fn(usize) -> Vec<f64>,
+    b: impl Fn(usize) -> Vec<f64>,
+) -> f64 {
+    let (a, b): (Vec<Vec<f64>>, Vec<Vec<f64>>) = (0..count).map(|m| (a(m), b(m))).unzip();
+    let width = b[0].len();
+    (0..width)
+        .map(|c| {
+            let scale = b.iter().map(|b| b[c].abs()).fold(1e-300, f64::max);
+            a.iter().zip(&b).map(|(a, b)| (a[c] - b[c]).abs() / scale).fold(0.0, f64::max)
+        })
+        .fold(0.0, f64::max)
+}

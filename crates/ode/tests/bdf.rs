@@ -11,7 +11,7 @@ use crate::common;
 use crate::stiff::assert_reference;
 use common::{Oscillator, robertson_rates, stiff_reference};
 use sysid_ode::testing::Decay;
-use sysid_ode::testing::{assert_close, assert_close_abs};
+use sysid_ode::testing::{assert_close, assert_close_abs, scaled_difference};
 use sysid_ode::{Integrator, Ivp, OdeError, Wrt};
 use sysid_systems::{Robertson, VanDerPol};
 
@@ -164,19 +164,14 @@ impl sysid_systems::Visit for AgainstTight {
         let bdf = ivp
             .solve_sensitivities(&Integrator::bdf(1e-10, atol), wrt, times)
             .unwrap_or_else(|e| panic!("{}: {e}", case.name));
-        let scaled = |a: &dyn Fn(usize) -> Vec<f64>, b: &dyn Fn(usize) -> Vec<f64>| {
-            let (a, b): (Vec<_>, Vec<_>) = (0..times.len()).map(|m| (a(m), b(m))).unzip();
-            (0..b[0].len())
-                .map(|c| {
-                    let scale = b.iter().map(|b: &Vec<f64>| b[c].abs()).fold(1e-300, f64::max);
-                    a.iter().zip(&b).map(|(a, b)| (a[c] - b[c]).abs() / scale).fold(0.0, f64::max)
-                })
-                .fold(0.0, f64::max)
-        };
-        let states = scaled(&|m| bdf.state(m).to_vec(), &|m| reference.state(m).to_vec());
-        let sens = scaled(&|m| bdf.sensitivity(m).iter().copied().collect(), &|m| {
-            reference.sensitivity(m).iter().copied().collect()
-        });
+        let count = times.len();
+        let states =
+            scaled_difference(count, |m| bdf.state(m).to_vec(), |m| reference.state(m).to_vec());
+        let sens = scaled_difference(
+            count,
+            |m| bdf.sensitivity(m).iter().copied().collect(),
+            |m| reference.sensitivity(m).iter().copied().collect(),
+        );
         (states, sens)
     }
 }

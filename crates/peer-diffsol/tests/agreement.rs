@@ -2,6 +2,7 @@
 //! and diffsol's (Tsit45, BDF) must give the same states and sensitivities at the truth, on
 //! the case's output times, with sensitivities to the case's unknowns.
 
+use sysid_ode::testing::scaled_difference;
 use sysid_ode::{Integrator, Ivp, Scheme, System};
 use sysid_peer_diffsol::{Peer, Solver};
 use sysid_systems::{Case, NAMES, Visit, visit};
@@ -43,22 +44,6 @@ impl Visit for Disagreement {
         );
         (states, sens)
     }
-}
-
-/// max over m, c of |a_m[c] − b_m[c]| / max_m |b_m[c]|.
-fn scaled_difference(
-    count: usize,
-    a: impl Fn(usize) -> Vec<f64>,
-    b: impl Fn(usize) -> Vec<f64>,
-) -> f64 {
-    let (a, b): (Vec<Vec<f64>>, Vec<Vec<f64>>) = (0..count).map(|m| (a(m), b(m))).unzip();
-    let width = b[0].len();
-    (0..width)
-        .map(|c| {
-            let scale = b.iter().map(|b| b[c].abs()).fold(1e-300, f64::max);
-            a.iter().zip(&b).map(|(a, b)| (a[c] - b[c]).abs() / scale).fold(0.0, f64::max)
-        })
-        .fold(0.0, f64::max)
 }
 
 /// At rtol 1e-10 the global error of a fifth-order explicit method stays near rtol (measured:
