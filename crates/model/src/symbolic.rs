@@ -683,6 +683,8 @@ pub struct Linearized {
     parts: Option<std::sync::Arc<Parts>>,
     /// Whether the functions' derivative with respect to t is 0.
     time_free: bool,
+    /// The sparse LU's order and fill of the pattern, found once.
+    lu_plan: sysid_ode::PlanCell,
 }
 
 /// Which derivatives a [`Linearized`] program computes besides its functions.
@@ -795,6 +797,7 @@ impl Linearized {
             curvature: None,
             parts: None,
             time_free: false,
+            lu_plan: sysid_ode::PlanCell::default(),
         };
         (linearized, outputs[roots.len()..].to_vec())
     }
@@ -866,6 +869,10 @@ impl SparseJacobian for Linearized {
 
     fn workspace(&self) -> Vec<f64> {
         self.tape.registers()
+    }
+
+    fn lu_plan(&self) -> Option<&sysid_ode::PlanCell> {
+        Some(&self.lu_plan)
     }
 
     fn operations(&self) -> usize {

@@ -475,7 +475,11 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         let n = self.n;
         let implicit = self.implicit.get_or_insert_with(|| {
             Box::new(Implicit {
-                factors: Factors::new(n, Some(&self.entries.pattern), 1),
+                factors: match self.sys.sparse_jacobian(Function::Rhs) {
+                    // The same pattern as the forward integration's: the same plan.
+                    Some(jacobian) => Factors::of(n, Some(jacobian), 1),
+                    None => Factors::new(n, Some(&self.entries.pattern), 1),
+                },
                 jac: vec![0.0; n * n],
                 values: vec![0.0; self.entries.values.len()],
                 inv_gamma_h,

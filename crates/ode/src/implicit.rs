@@ -4,6 +4,8 @@
 //! the variational equations, the second-derivative coupling that makes the augmented system's
 //! iteration matrix block lower triangular with E on the diagonal.
 
+use std::sync::Arc;
+
 use nalgebra::DMatrix;
 use num_dual::HyperDual64;
 
@@ -11,7 +13,7 @@ use crate::counts::dense_lu;
 use crate::jacobian::{JacobianProducts, ProductPlan};
 use crate::lu::{FactorError, Lu};
 use crate::sparse::SparseJacobian;
-use crate::sparse_lu::SparseLu;
+use crate::sparse_lu::{Plan, PlanCell, SparseLu};
 use crate::system::{Function, System};
 use crate::wrt::{Wrt, parameter_seeds};
 
@@ -38,7 +40,7 @@ impl IterationMatrix {
         let (n, np) = (sig.n_states(), sig.n_parameters());
         let analytic = sys.analytic_jacobians();
         let sparse = sys.sparse_jacobian(Function::Rhs).filter(|_| !analytic);
-        let lu = Factors::new(n, sparse.map(|j| j.pattern()), columns);
+        let lu = Factors::of(n, sparse, columns);
         // The system's sparse Jacobian gives J's entries for either factors; products with
         // the identity (n dual directions) give it where the system has none.
         let entries = sparse.map(|j| j.for_state_columns().workspace()).unwrap_or_default();
@@ -218,6 +220,12 @@ impl Structure {
     }
 }
 
+/// J's entries (row, column), and where the system keeps the sparse LU's plan of them.
+struct Pattern<'a> {
+    entries: &'a [(u32, u32)],
+    cell: Option<&'a PlanCell>,
+}
+
 /// The factors of E = I·c − J (n × n): dense, or sparse for a system with a sparse
 /// Jacobian whose factors fill little of n² ([`SPARSE_SHARE`]).
 pub(crate) enum Factors {
@@ -231,16 +239,32 @@ impl Factors {
     /// right-hand sides at once: sparse where the factors keep at most [`SPARSE_SHARE`] of
     /// n² entries, else dense.
     pub(crate) fn new(n: usize, pattern: Option<&[(u32, u32)]>, columns: usize) -> Self {
+        Self::planned(n, pattern.map(|p| Pattern { entries: p, cell: None }), columns)
+    }
+
+    /// The factors of a system's sparse Jacobian `jacobian`: [`new`](Self::new) with its
+    /// pattern, the order and fill found once for the system where it keeps them
+    /// ([`SparseJacobian::lu_plan`]).
+    pub(crate) fn of(n: usize, jacobian: Option<&dyn SparseJacobian>, columns: usize) -> Self {
+        let pattern = jacobian.map(|j| Pattern { entries: j.pattern(), cell: j.lu_plan() });
+        Self::planned(n, pattern, columns)
+    }
+
+    fn planned(n: usize, pattern: Option<Pattern<'_>>, columns: usize) -> Self {
         let dense = n * n / SPARSE_SHARE;
         // The factors hold at least J's own entries: too many of those, and the order and
         // fill are not worth finding.
-        let few = |p: &&[(u32, u32)]| p.iter().filter(|e| (e.1 as usize) < n).count() <= dense;
-        match pattern.filter(few) {
-            Some(pattern) => match SparseLu::new(n, pattern, columns) {
-                Some(lu) if lu.entries_of_factors() <= dense => Self::Sparse(Box::new(lu)),
-                _ => Self::Dense(Lu::new(n, columns)),
-            },
-            None => Self::Dense(Lu::new(n, columns)),
+        let few =
+            |p: &Pattern<'_>| p.entries.iter().filter(|e| (e.1 as usize) < n).count() <= dense;
+        let plan = |p: Pattern<'_>| match p.cell {
+            Some(cell) => cell.get_or_find(n, p.entries),
+            None => Plan::new(n, p.entries).map(Arc::new),
+        };
+        match pattern.filter(few).and_then(plan) {
+            Some(plan) if plan.entries_of_factors() <= dense => {
+                Self::Sparse(Box::new(SparseLu::with_plan(plan, columns)))
+            }
+            _ => Self::Dense(Lu::new(n, columns)),
         }
     }
 

@@ -122,6 +122,6 @@ pub use options::{Integrator, InvalidSetting, MIN_RTOL, Scheme};
 pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput};
 pub use rhs::Rhs;
 pub use signal::{Inputs, Interpolation, Side, Signal};
-pub use sparse::SparseJacobian;
+pub use sparse::{PlanCell, SparseJacobian};
 pub use system::{Function, Observable, Ode, OdeSystem, Scalar, Signature, System};
 pub use wrt::{Wrt, wrt_name};

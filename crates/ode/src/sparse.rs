@@ -7,6 +7,8 @@
 //! ([`JacobianProducts`](crate::JacobianProducts)), instead of a dual-number evaluation of the
 //! whole model per chunk of directions.
 
+pub use crate::sparse_lu::PlanCell;
+
 /// A function f(t, y, α, u) of m values evaluated with the nonzero entries of its Jacobian.
 ///
 /// The contract: [`eval`](Self::eval) fills a work space from which f_i is read at
@@ -57,6 +59,14 @@ pub trait SparseJacobian: Send + Sync {
     /// program: for an implicit step's matrix. Values and entries are those of
     /// [`eval`](Self::eval) to the bit. Default: none ([`eval`](Self::eval) is read).
     fn state_columns(&self) -> Option<&dyn SparseJacobian> {
+        None
+    }
+
+    /// Where the sparse LU of an implicit step keeps the order and fill of this pattern, so
+    /// that they are found once for the system rather than at every integration (each
+    /// condition, each backward part of an adjoint, each evaluation of a fit). Default:
+    /// none (found again at every integration).
+    fn lu_plan(&self) -> Option<&PlanCell> {
         None
     }
 }

@@ -26,8 +26,11 @@ use crate::lu::{FactorError, Lu, PANEL, by_width, eliminate};
 /// with τ = 10⁻³.
 const MAX_MULTIPLIER: f64 = 1e3;
 
-/// E's pattern in a fill-reducing order, its factors, and the dense fallback.
-pub struct SparseLu {
+/// What the factors' work depends on that the pattern alone fixes: the fill-reducing order
+/// and the factors' pattern in it. Found once per system ([`PlanCell`]) and shared by every
+/// integration's [`SparseLu`].
+#[derive(Debug)]
+pub struct Plan {
     n: usize,
     /// The order: row and column `order[i]` of E is row and column i of the factored matrix.
     order: Vec<usize>,
@@ -37,17 +40,40 @@ pub struct SparseLu {
     columns: Vec<usize>,
     /// Where each row's diagonal entry is.
     diagonal: Vec<usize>,
+    /// E's own entries: (where in the factors' values, index i·n + j of the dense Jacobian,
+    /// on the diagonal).
+    entries: Vec<(usize, usize, bool)>,
+}
+
+/// A system's [`Plan`], found at its first sparse factorisation and kept for every later
+/// integration (its conditions, its adjoint's backward parts, the fits' evaluations):
+/// [`SparseJacobian::lu_plan`](crate::SparseJacobian::lu_plan). Empty until then.
+#[derive(Clone, Debug, Default)]
+pub struct PlanCell(std::sync::OnceLock<Option<std::sync::Arc<Plan>>>);
+
+impl PlanCell {
+    /// The plan of n × n matrices with the entries `pattern` off the diagonal (columns n and
+    /// beyond ignored), found on the first call; `None` where the order cannot be computed.
+    /// Every call must give the same pattern (a cell belongs to one system's Jacobian).
+    pub fn get_or_find(&self, n: usize, pattern: &[(u32, u32)]) -> Option<std::sync::Arc<Plan>> {
+        self.0.get_or_init(|| Plan::new(n, pattern).map(std::sync::Arc::new)).clone()
+    }
+}
+
+/// E's factors along a shared [`Plan`], and the dense fallback.
+pub struct SparseLu {
+    plan: std::sync::Arc<Plan>,
     /// The factors: L's multipliers, U's entries, and the reciprocal of U's diagonal.
     values: Vec<f64>,
-    /// E's own entries: (where in `values`, index i·n + j of the dense Jacobian, on the
-    /// diagonal).
-    entries: Vec<(usize, usize, bool)>,
     /// A row of the matrix being eliminated, dense.
     row: Vec<f64>,
     /// The right-hand sides in the order, row by row.
     work: Vec<f64>,
-    /// The dense factorisation of the steps where the diagonal pivots are refused.
-    dense: Lu,
+    /// The dense factorisation of the steps where the diagonal pivots are refused, formed
+    /// at the first refusal (n² values that most integrations never touch).
+    dense: Option<Lu>,
+    /// The most right-hand sides solved at once.
+    width: usize,
     use_dense: bool,
     /// Factorisations still to go dense without trying the diagonal pivots, and how many
     /// the next refusal skips ([`MAX_SKIP`]).
@@ -61,11 +87,11 @@ pub struct SparseLu {
 /// its steps); a success starts the count again.
 const MAX_SKIP: u32 = 64;
 
-impl SparseLu {
+impl Plan {
     /// For n × n matrices whose entries off the diagonal are among `pattern` (row, column;
-    /// columns n and beyond are ignored: the Jacobian's parameter columns), with solves of
-    /// up to `columns` right-hand sides at once; `None` where the order cannot be computed.
-    pub fn new(n: usize, pattern: &[(u32, u32)], columns: usize) -> Option<Self> {
+    /// columns n and beyond are ignored: the Jacobian's parameter columns); `None` where the
+    /// order cannot be computed.
+    pub fn new(n: usize, pattern: &[(u32, u32)]) -> Option<Self> {
         let mut entries: Vec<(usize, usize)> = pattern
             .iter()
             .map(|&(i, j)| (i as usize, j as usize))
@@ -96,31 +122,48 @@ impl SparseLu {
             .iter()
             .map(|&(i, j)| (slot(position[i], position[j]), i * n + j, i == j))
             .collect();
-        Some(Self {
-            n,
-            order,
-            values: vec![0.0; all.len()],
-            columns: all,
-            starts,
-            diagonal,
-            entries,
-            row: vec![0.0; n],
-            work: vec![0.0; n * columns.max(1)],
-            dense: Lu::new(n, columns),
-            use_dense: false,
-            skip: 0,
-            backoff: 0,
-        })
+        Some(Self { n, order, columns: all, starts, diagonal, entries })
     }
 
     /// The entries of the factors L and U (the diagonal once).
     pub fn entries_of_factors(&self) -> usize {
         self.columns.len()
     }
+}
+
+impl SparseLu {
+    /// For n × n matrices whose entries off the diagonal are among `pattern` (row, column;
+    /// columns n and beyond are ignored: the Jacobian's parameter columns), with solves of
+    /// up to `columns` right-hand sides at once; `None` where the order cannot be computed.
+    #[cfg(test)]
+    pub fn new(n: usize, pattern: &[(u32, u32)], columns: usize) -> Option<Self> {
+        Some(Self::with_plan(std::sync::Arc::new(Plan::new(n, pattern)?), columns))
+    }
+
+    /// Along a plan found before, with solves of up to `columns` right-hand sides at once.
+    pub fn with_plan(plan: std::sync::Arc<Plan>, columns: usize) -> Self {
+        let n = plan.n;
+        Self {
+            values: vec![0.0; plan.columns.len()],
+            row: vec![0.0; n],
+            work: vec![0.0; n * columns.max(1)],
+            plan,
+            dense: None,
+            width: columns,
+            use_dense: false,
+            skip: 0,
+            backoff: 0,
+        }
+    }
+
+    /// The entries of the factors L and U (the diagonal once).
+    pub fn entries_of_factors(&self) -> usize {
+        self.plan.entries_of_factors()
+    }
 
     /// The order n.
     pub fn dim(&self) -> usize {
-        self.n
+        self.plan.n
     }
 
     /// Whether the last factorisation fell back to the dense LU.
@@ -143,15 +186,16 @@ impl SparseLu {
             self.skip = self.backoff;
         }
         self.use_dense = true;
-        let n = self.n;
-        self.dense.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
+        let (n, width) = (self.plan.n, self.width);
+        let dense = self.dense.get_or_insert_with(|| Lu::new(n, width));
+        dense.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
     }
 
     /// E's entries put in the factors' pattern and eliminated with diagonal pivots: whether
     /// the pivots were accepted ([`eliminate`](Self::eliminate)).
     fn factor_along_pattern(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<bool, FactorError> {
         self.values.fill(0.0);
-        for &(slot, at, diagonal) in &self.entries {
+        for &(slot, at, diagonal) in &self.plan.entries {
             self.values[slot] = if diagonal { inv_gamma_h } else { 0.0 } - jac[at];
         }
         if self.values.iter().any(|v| !v.is_finite()) {
@@ -163,8 +207,9 @@ impl SparseLu {
     /// Gaussian elimination along the pattern, row by row, with the diagonal as pivots;
     /// false where a pivot is zero or not finite or a multiplier exceeds [`MAX_MULTIPLIER`].
     fn eliminate(&mut self) -> bool {
-        let Self { starts, columns, diagonal, values, row, .. } = self;
-        for i in 0..self.n {
+        let Self { plan, values, row, .. } = self;
+        let Plan { starts, columns, diagonal, .. } = &**plan;
+        for i in 0..plan.n {
             let own = starts[i]..starts[i + 1];
             for p in own.clone() {
                 row[columns[p]] = values[p];
@@ -203,10 +248,10 @@ impl SparseLu {
     /// Overwrites the n × k matrix R, stored row by row in r, with E⁻¹ R (k at most the
     /// `columns` given to [`new`](Self::new)).
     pub fn solve_rows(&mut self, r: &mut [f64], k: usize) {
-        if self.use_dense {
+        if let Some(dense) = self.dense.as_mut().filter(|_| self.use_dense) {
             return match k {
-                1 => self.dense.solve(r),
-                _ => self.dense.solve_rows(r, k),
+                1 => dense.solve(r),
+                _ => dense.solve_rows(r, k),
             };
         }
         match k {
@@ -221,16 +266,17 @@ impl SparseLu {
     /// more than [`PANEL`] columns, each row's columns in one run-time loop, as the dense
     /// solve does. The two do the same operations in the same order.
     fn solve_block<const K: usize>(&mut self, r: &mut [f64], k: usize) {
-        let x = &mut self.work[..self.n * k];
-        for (i, &from) in self.order.iter().enumerate() {
+        let plan = &*self.plan;
+        let x = &mut self.work[..plan.n * k];
+        for (i, &from) in plan.order.iter().enumerate() {
             x[i * k..(i + 1) * k].copy_from_slice(&r[from * k..(from + 1) * k]);
         }
-        let factors = (&self.starts[..], &self.diagonal[..], &self.columns[..], &self.values[..]);
+        let factors = (&plan.starts[..], &plan.diagonal[..], &plan.columns[..], &self.values[..]);
         match K {
             0 => substitute_in_place(factors, x, k),
             _ => substitute_in_registers::<K>(factors, x),
         }
-        for (i, &to) in self.order.iter().enumerate() {
+        for (i, &to) in plan.order.iter().enumerate() {
             r[to * k..(to + 1) * k].copy_from_slice(&x[i * k..(i + 1) * k]);
         }
     }
@@ -239,19 +285,20 @@ impl SparseLu {
     /// Uᵀ z = P r, Lᵀ w = z, x = Pᵀ w; U's and L's rows are scattered as the columns of Uᵀ
     /// and Lᵀ.
     pub fn solve_transposed(&mut self, r: &mut [f64]) {
-        if self.use_dense {
-            return self.dense.solve_transposed(r);
+        if let Some(dense) = self.dense.as_mut().filter(|_| self.use_dense) {
+            return dense.solve_transposed(r);
         }
-        let n = self.n;
+        let plan = &*self.plan;
+        let n = plan.n;
         let x = &mut self.work[..n];
-        for (i, &from) in self.order.iter().enumerate() {
+        for (i, &from) in plan.order.iter().enumerate() {
             x[i] = r[from];
         }
-        let (starts, columns, values) = (&self.starts, &self.columns, &self.values);
+        let (starts, columns, values) = (&plan.starts, &plan.columns, &self.values);
         // Uᵀ z = P r: z_i is final once the rows before it are scattered; then row i of U
         // leaves it from the equations after it.
         for i in 0..n {
-            let d = self.diagonal[i];
+            let d = plan.diagonal[i];
             let zi = x[i] * values[d];
             x[i] = zi;
             if zi != 0.0 {
@@ -265,12 +312,12 @@ impl SparseLu {
         for i in (0..n).rev() {
             let wi = x[i];
             if wi != 0.0 {
-                for p in starts[i]..self.diagonal[i] {
+                for p in starts[i]..plan.diagonal[i] {
                     x[columns[p]] -= values[p] * wi;
                 }
             }
         }
-        for (i, &to) in self.order.iter().enumerate() {
+        for (i, &to) in plan.order.iter().enumerate() {
             r[to] = x[i];
         }
     }
@@ -472,6 +519,34 @@ mod tests {
         sparse.factor(10.0, &jac).expect("regular");
         assert!(!sparse.fell_back());
         agree(&mut sparse, &mut dense_of(n, &jac, 10.0), n);
+    }
+
+    /// A system's plan is found once: every later call of its cell hands out the same one,
+    /// and factors along it solve as factors along a plan of their own do, to the bit (two
+    /// integrations of one system, each with factors of its own, on one plan).
+    #[test]
+    fn a_plan_is_found_once_and_shared() {
+        let n = 40;
+        let (pattern, jac) = chain(n);
+        let cell = PlanCell::default();
+        let first = cell.get_or_find(n, &pattern).expect("ordered");
+        let again = cell.get_or_find(n, &pattern).expect("ordered");
+        assert!(std::sync::Arc::ptr_eq(&first, &again));
+        let (mut one, mut other) = (SparseLu::with_plan(first, 3), SparseLu::with_plan(again, 3));
+        let mut own = SparseLu::new(n, &pattern, 3).expect("ordered");
+        for (lu, h) in [(&mut one, 10.0), (&mut other, 20.0), (&mut own, 10.0)] {
+            lu.factor(h, &jac).expect("regular");
+        }
+        let r: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        let solved = |lu: &mut SparseLu| {
+            let mut x = r.clone();
+            lu.solve(&mut x);
+            x
+        };
+        assert_eq!(solved(&mut one), solved(&mut own));
+        // The other integration's factors are its own, at its own step.
+        assert_ne!(solved(&mut other), solved(&mut own));
+        agree(&mut other, &mut dense_of(n, &jac, 20.0), n);
     }
 
     /// A block of any width, known at compile time (up to 32 columns) or wider in a
