@@ -2,11 +2,11 @@
 //! Jacobian has few entries per row (a reaction network: Chen's 500 species).
 //!
 //! E's pattern is the Jacobian's and the diagonal, the same at every step, so the work that
-//! depends on the pattern alone is done once per integration, not per step: a fill-reducing
-//! symmetric order
+//! depends on the pattern alone is done once, not per step: a fill-reducing symmetric order
 //! (approximate minimum degree on E + Eᵀ, faer's AMD) and the pattern of the factors in that
-//! order. Each step then refills the values and eliminates along the pattern with the
-//! diagonal as pivots, and the solves (k right-hand sides stored row by row, the
+//! order, a [`Plan`], found once per system where the system keeps it ([`PlanCell`]), else
+//! once per integration. Each step then refills the values and eliminates along the pattern
+//! with the diagonal as pivots, and the solves (k right-hand sides stored row by row, the
 //! sensitivities' layout) cost one multiply-add per entry of the factors and column, the
 //! columns contiguous in the inner loop.
 //!
