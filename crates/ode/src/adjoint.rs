@@ -475,10 +475,11 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         let n = self.n;
         let implicit = self.implicit.get_or_insert_with(|| {
             Box::new(Implicit {
-                factors: match self.sys.sparse_jacobian(Function::Rhs) {
-                    // The same pattern as the forward integration's: the same plan.
-                    Some(jacobian) => Factors::of(n, Some(jacobian), 1),
-                    None => Factors::new(n, Some(&self.entries.pattern), 1),
+                factors: match (&self.entries.source, self.sys.sparse_jacobian(Function::Rhs)) {
+                    // Entries from the system's sparse Jacobian are in its pattern, the forward
+                    // integration's: its plan.
+                    (Source::Sparse(_), Some(jacobian)) => Factors::of(n, Some(jacobian), 1),
+                    _ => Factors::new(n, Some(&self.entries.pattern), 1),
                 },
                 jac: vec![0.0; n * n],
                 values: vec![0.0; self.entries.values.len()],

@@ -56,7 +56,9 @@ impl PlanCell {
     /// beyond ignored), found on the first call; `None` where the order cannot be computed.
     /// Every call must give the same pattern (a cell belongs to one system's Jacobian).
     pub fn get_or_find(&self, n: usize, pattern: &[(u32, u32)]) -> Option<std::sync::Arc<Plan>> {
-        self.0.get_or_init(|| Plan::new(n, pattern).map(std::sync::Arc::new)).clone()
+        let plan = self.0.get_or_init(|| Plan::new(n, pattern).map(std::sync::Arc::new)).clone();
+        debug_assert!(plan.as_ref().is_none_or(|p| p.n == n), "a plan of another order");
+        plan
     }
 }
 
