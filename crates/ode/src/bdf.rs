@@ -304,15 +304,24 @@ impl History {
     }
 
     /// The factor of the step after a failed error test with norm `err` (> 1); from the
-    /// second failure in a row the order drops by one as well (CVODE).
-    pub(crate) fn rejected(&mut self, err: f64) -> f64 {
+    /// second failure in a row the order drops by one as well (CVODE drops it from the
+    /// fourth). Whether the history is then to be started afresh at the point
+    /// ([`History::start`], with f there): from the second failure in a row at order 1.
+    ///
+    /// At order 1 the first difference is the last step's secant, whose slope is off by about
+    /// h_old·y″/2 however short the new step: the predictor's error, which is the error
+    /// estimate, then shrinks only as h, not h², and repeated failures take the step down to
+    /// t's resolution (Chen_MSB2009 by `bdf` at rtol 1e-9, atol 1e-13, where an input ramps
+    /// from 0 to 1e7 within 0.01 after t = 1799.99, failed so at a step of 5.6e-12). CVODE
+    /// reloads its first column from f where failures persist at the first order.
+    pub(crate) fn rejected(&mut self, err: f64) -> (f64, bool) {
         self.failures += 1;
         let q = self.order;
         let factor = (safety(self.iterations) * err.powf(-1.0 / (q + 1) as f64)).max(MIN_FACTOR);
         if self.failures >= 2 && q > 1 {
             self.order = q - 1;
         }
-        factor
+        (factor, self.failures >= 2 && self.order == 1)
     }
 
     /// Takes the converged attempt with error norm `err` as the new point: the differences

@@ -104,5 +104,14 @@ pub(crate) fn initial_step_of_order<R: Rhs>(
     };
     // Likewise where the second derivative's estimate overflows: the first guess stands.
     let h1 = if h1 > 0.0 { h1 } else { h };
-    (100.0 * h).min(h1).min(ev.cfg.max_step)
+    (100.0 * h).min(h1).max(LEAST_FIRST_STEP * t.abs()).min(ev.cfg.max_step)
 }
+
+/// The least first step, relative to |t|: 64 units in the last place of t, four times what
+/// the driver's underflow test refuses. Hairer's estimate samples f at t + h for a first
+/// guess h and can fall below t's resolution where f changes fast just after t (an input
+/// switched on at t = 1799.99 that ramps to 1e7 within 0.01, as Chen_MSB2009's does, gave
+/// 9.5e-13 for `bdf`'s first step at rtol 1e-9, atol 1e-13, where t resolves 6.4e-12): the
+/// integration then failed before its first trial. The error test, not the estimate, decides
+/// how short the steps must be.
+const LEAST_FIRST_STEP: f64 = 64.0 * f64::EPSILON;

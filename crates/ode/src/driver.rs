@@ -484,8 +484,13 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
                 Attempt::Converged(err) if err <= 1.0 => err,
                 Attempt::Converged(err) => {
                     self.ev.counts.rejected_steps += 1;
-                    let factor = history.rejected(err);
-                    history.rescale(self.dir * hs * factor);
+                    let (factor, afresh) = history.rejected(err);
+                    if afresh {
+                        self.ev.f(self.t, &self.work.x, &mut self.work.k[0]);
+                        history.start(&self.work.x, &self.work.k[0], self.dir * hs * factor);
+                    } else {
+                        history.rescale(self.dir * hs * factor);
+                    }
                     continue;
                 }
                 Attempt::Diverged => {

@@ -191,3 +191,66 @@ fn every_catalogue_system_agrees_with_a_tight_integration() {
         assert!(states < 3e-7 && sens < 3e-7, "{name}: {states:e}, {sens:e}");
     }
 }
+
+/// An input that ramps from 0 to 1e7 within 0.01 time units, switched on at t0
+/// (Chen_MSB2009's `Step10Mio`: 1e7·sin(50π(t − 1799.99)) until t = 1800), driving a chain
+/// a → b → ∅.
+struct Ramp {
+    sig: sysid_ode::Signature,
+    t0: f64,
+}
+
+impl Ramp {
+    const OMEGA: f64 = 50.0 * std::f64::consts::PI;
+    const AMPLITUDE: f64 = 1e7;
+
+    fn new(t0: f64) -> Self {
+        Self { sig: sysid_ode::Signature::new(&["a", "b"], &["k1", "k2"]), t0 }
+    }
+}
+
+impl sysid_ode::System for Ramp {
+    fn signature(&self) -> &sysid_ode::Signature {
+        &self.sig
+    }
+    fn rhs<T: sysid_ode::Scalar>(&self, t: f64, y: &[T], p: &[T], _u: &[f64], dy: &mut [T]) {
+        let input = Self::AMPLITUDE * (Self::OMEGA * (t - self.t0)).sin();
+        dy[0] = T::from(input) - p[0] * y[0];
+        dy[1] = p[0] * y[0] - p[1] * y[1];
+    }
+}
+
+/// Where t is far from 0 its resolution bounds the steps: at t = 1799.99 a step of 6.4e-12 or
+/// less does not move t. Two defects took `bdf` there on this ramp (and on Chen_MSB2009 at
+/// rtol 1e-9, atol 1e-13, which failed at t = 1799.99000032 with a step of 5.6e-12): Hairer's
+/// first-step estimate, 9.5e-13, below the resolution, and error-test failures that took the
+/// order down to 1 with the last step's secant as the first difference, whose slope is off by
+/// about h_old·y″/2 however short the new step (the error estimate then falls only as h).
+/// The first step is now at least 64 ulps of t, and failures at order 1 start the differences
+/// afresh from f at the point, as CVODE reloads its first column. The states at three times
+/// against Rodas5P at rtol 1e-12, atol 1e-16 on the same chain switched on at t = 0, where t
+/// resolves any step: within 1e-7 relative, the scheme's 100 rtol (measured 3.5e-9, in 270
+/// steps; without the fresh start it fails at t = 1799.9900000046, without the floor at its
+/// first step).
+#[test]
+fn a_fast_input_far_from_t_0_integrates() {
+    let p = [30.0, 2.0];
+    let offsets = [0.002, 0.005, 0.01];
+    let far = Ramp::new(1799.99);
+    let times: Vec<f64> = offsets.iter().map(|s| far.t0 + s).collect();
+    let bdf = Ivp::new(&far, far.t0, &[0.0, 0.0], &p)
+        .solve(&Integrator::bdf(1e-9, 1e-13), &times)
+        .unwrap();
+    let near = Ramp::new(0.0);
+    let tight = Ivp::new(&near, 0.0, &[0.0, 0.0], &p)
+        .solve(&Integrator::rodas5p(1e-12, 1e-16), &offsets)
+        .unwrap();
+    let mut worst: f64 = 0.0;
+    for m in 0..offsets.len() {
+        for i in 0..2 {
+            let (x, r) = (bdf.state(m)[i], tight.state(m)[i]);
+            worst = worst.max((x - r).abs() / r.abs());
+        }
+    }
+    assert!(worst < 1e-7, "largest relative error {worst:e} ({:?})", bdf.counts());
+}
