@@ -108,7 +108,8 @@ pub(crate) fn initial_step_of_order<R: Rhs>(
 }
 
 /// The least first step, relative to |t|: 64 units in the last place of t, four times what
-/// the driver's underflow test refuses. Hairer's estimate samples f at t + h for a first
+/// the driver's underflow test refuses; the driver's `resolution(t)` without its floor at
+/// |t| < 1, so that near t = 0 the estimate stands as it was. Hairer's estimate samples f at t + h for a first
 /// guess h and can fall below t's resolution where f changes fast just after t (an input
 /// switched on at t = 1799.99 that ramps to 1e7 within 0.01, as Chen_MSB2009's does, gave
 /// 9.5e-13 for `bdf`'s first step at rtol 1e-9, atol 1e-13, where t resolves 6.4e-12): the
