@@ -119,6 +119,44 @@ fn each_experiment_alone_is_not_identifiable() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Multiple shooting on the "high" experiment, which sees only the product scale_high·kp:
+/// its condensed least squares is singular at every point, and the step is damped there
+/// (Levenberg's, the least damping that solves it) instead of the fit being refused. It
+/// ends at the minimum levenberg-marquardt reaches from the same start (the NLL to 1e-9 of
+/// itself, both certified: a first-order check neither method's stopping rule decides),
+/// with the same product of the two unknowns the data cannot tell apart, and names them.
+#[test]
+fn multiple_shooting_steps_where_the_data_cannot_tell_two_unknowns_apart() {
+    let dir = std::env::temp_dir().join(format!("sysid-two-doses-ms-{}", std::process::id()));
+    let high = Model::load(&one_experiment("high", &dir)).unwrap().problem(None).unwrap();
+    let fit = |name: &str| {
+        Registry::standard().build(name, &Settings::default()).unwrap().fit(&high).unwrap()
+    };
+    let (ms, lm) = (fit("multiple-shooting"), fit("levenberg-marquardt"));
+    for (name, e) in [("multiple-shooting", &ms), ("levenberg-marquardt", &lm)] {
+        assert!(e.certificate.holds(), "{name}: {}", e.termination);
+        let space = e.certificate.null_space.as_ref().expect("a direction the data cannot see");
+        for unknown in ["kp", "scale_high"] {
+            assert!(space.unknowns.iter().any(|u| u == unknown), "{name}: {:?}", space.unknowns);
+        }
+    }
+    // Measured: the likelihoods agree to 5e-13 of themselves.
+    let (a, b) = (ms.nll.unwrap(), lm.nll.unwrap());
+    assert!((a - b).abs() <= 1e-9 * b.abs(), "nll {a} against {b}");
+    // Along the direction the data cannot see, the two may stop apart; the product they see
+    // is the same (measured: to 5e-10 of itself).
+    let names = high.names();
+    let product = |values: &[f64]| {
+        ["kp", "scale_high"]
+            .iter()
+            .map(|n| values[names.iter().position(|x| x == n).unwrap()])
+            .product::<f64>()
+    };
+    let (a, b) = (product(&ms.values), product(&lm.values));
+    assert!((a / b - 1.0).abs() <= 1e-8, "kp·scale_high {a} against {b}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Boehm et al.'s STAT5 model written by hand: the likelihood at PEtab's nominal values is
 /// the published 138.22199693517703 (AMICI's benchmark; scipy at rtol 1e-12 gives
 /// 138.2219977), to 1e-3 as AMICI checks itself; and a fit from there does not end higher.

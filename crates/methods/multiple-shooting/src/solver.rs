@@ -125,6 +125,11 @@ impl<S: System> Method<S> for MultipleShooting {
 const MAX_BACKTRACKS: usize = 30;
 /// Armijo's constant.
 const ARMIJO: f64 = 1e-4;
+/// The least Levenberg damping of a condensed step the data do not determine, relative to
+/// each column's squared norm (raised a hundredfold at a time, up to 1).
+const DAMPING_FROM: f64 = 1e-10;
+/// The least column scale of the damping, relative to the largest.
+const DAMPING_FLOOR: f64 = 1e-6;
 
 /// The state of the iteration: a grid per experiment, the node values at the current iterate
 /// and the sweeps there, the penalty μ, and the direction of the last proposal.
@@ -438,12 +443,41 @@ impl Shooting {
         r: &DVector<f64>,
     ) -> Result<(BoxSolution, DVector<f64>), Failure> {
         let (lo, hi) = problem.unknowns().step_box(z, jacobian.tr_mul(r).as_slice());
+        let origin = vec![0.0; z.len()];
         let subproblem = LinearLeastSquares { b: jacobian, a: r };
-        let solution =
-            minimise_in_box(&subproblem, (&lo, &hi), &vec![0.0; z.len()], self.max_condition)
-                .map_err(|s| Failure::singular(&s, &problem.names()))?;
-        let dz = DVector::from_column_slice(&solution.x);
-        Ok((solution, dz))
+        let singular = match minimise_in_box(&subproblem, (&lo, &hi), &origin, self.max_condition) {
+            Ok(solution) => {
+                let dz = DVector::from_column_slice(&solution.x);
+                return Ok((solution, dz));
+            }
+            Err(singular) => singular,
+        };
+        // Directions the data do not see: Levenberg's damping λ·diag(J̃ᵀJ̃) (Marquardt's
+        // scaling), the least λ from DAMPING_FROM up that makes the step solvable. The step
+        // still satisfies the linearised matching conditions (the nodes follow Δz), and it
+        // descends the merit function: λ only shortens Δz towards the gradient's direction.
+        let (rows, k) = jacobian.shape();
+        let norms: Vec<f64> = jacobian.column_iter().map(|c| c.norm()).collect();
+        let largest = norms.iter().copied().fold(0.0, f64::max);
+        let floor = if largest > 0.0 { DAMPING_FLOOR * largest } else { 1.0 };
+        let mut lambda = DAMPING_FROM;
+        while lambda <= 1.0 {
+            let mut b = DMatrix::zeros(rows + k, k);
+            b.rows_mut(0, rows).copy_from(jacobian);
+            for (i, d) in norms.iter().enumerate() {
+                b[(rows + i, i)] = lambda.sqrt() * d.max(floor);
+            }
+            let mut a = DVector::zeros(rows + k);
+            a.rows_mut(0, rows).copy_from(r);
+            let damped = LinearLeastSquares { b: &b, a: &a };
+            if let Ok(solution) = minimise_in_box(&damped, (&lo, &hi), &origin, self.max_condition)
+            {
+                let dz = DVector::from_column_slice(&solution.x);
+                return Ok((solution, dz));
+            }
+            lambda *= 100.0;
+        }
+        Err(Failure::singular(&singular, &problem.names()))
     }
 
     /// The driver's proposal for `direction`, kept for the advance.
