@@ -32,4 +32,4 @@ mod options;
 mod solver;
 
 pub use options::{Hessian, LevenbergMarquardtOptions};
-pub use solver::{FAST_FALL, LevenbergMarquardt, SCREEN_FROM};
+pub use solver::{CRAWL_FALL, CRAWL_WINDOW, FAST_FALL, LevenbergMarquardt, SCREEN_FROM};

@@ -48,6 +48,13 @@ pub struct LevenbergMarquardtOptions {
     /// reject it (default on). It changes what a fit costs, not the points it visits.
     #[serde(default = "on")]
     pub screen: bool,
+    /// While the fit crawls (its cost fell by less than [`CRAWL_FALL`](crate::CRAWL_FALL)
+    /// of itself over the last [`CRAWL_WINDOW`](crate::CRAWL_WINDOW) iterations), correct a
+    /// rejected trial by a chord step with the iterate's Jacobian and judge the corrected
+    /// point instead (one more linearization per corrected trial; docs/methods.md). Default
+    /// off; `nl2sol` turns it on.
+    #[serde(default)]
+    pub correct: bool,
 }
 
 fn on() -> bool {
@@ -63,6 +70,7 @@ impl Default for LevenbergMarquardtOptions {
             hessian: Hessian::GaussNewton,
             geodesic: false,
             screen: true,
+            correct: false,
         }
     }
 }
@@ -91,6 +99,11 @@ impl LevenbergMarquardtOptions {
     /// The same options with the screening of trials on or off.
     pub fn with_screen(self, screen: bool) -> Self {
         Self { screen, ..self }
+    }
+
+    /// The same options with the crawl's corrector on or off.
+    pub fn with_correct(self, correct: bool) -> Self {
+        Self { correct, ..self }
     }
 
     /// Checks the method's own options (the driver's are checked by

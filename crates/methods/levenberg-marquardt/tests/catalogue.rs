@@ -99,6 +99,40 @@ impl Visit for Screening {
     }
 }
 
+struct Correcting;
+
+impl Visit for Correcting {
+    type Output = ();
+    fn visit<S: System + Clone + Send + Sync + 'static>(self, case: Case<S>) -> Self::Output {
+        use sysid_levenberg_marquardt::{Hessian, LevenbergMarquardtOptions};
+        let problem = case.problem(1).unwrap();
+        let on = LevenbergMarquardt::adaptive(LevenbergMarquardtOptions::default());
+        let off = LevenbergMarquardt::new(
+            LevenbergMarquardtOptions::default()
+                .with_hessian(Hessian::Adaptive)
+                .with_correct(false),
+        );
+        let (on, off) = (on.fit(&problem).unwrap(), off.fit(&problem).unwrap());
+        assert_eq!(on.method, "nl2sol", "{}", case.name);
+        assert_eq!(on.iterations, off.iterations, "{}", case.name);
+        assert_eq!(on.counts.integrations, off.counts.integrations, "{}", case.name);
+        for (a, b) in on.history.iter().zip(&off.history) {
+            assert_eq!(a.cost.to_bits(), b.cost.to_bits(), "{}", case.name);
+        }
+    }
+}
+
+/// The crawl's corrector ([`sysid_levenberg_marquardt::CRAWL_FALL`]) acts only where a fit
+/// has crept for [`sysid_levenberg_marquardt::CRAWL_WINDOW`] iterations: on every catalogue
+/// system nl2sol converges before that, and its fit is the same to the bit with the
+/// corrector on and off (its effect on the PEtab problems' crawls is in docs/methods.md).
+#[test]
+fn the_crawls_corrector_leaves_a_fit_that_does_not_crawl_alone() {
+    for name in sysid_systems::NAMES {
+        sysid_systems::visit(name, Correcting).unwrap();
+    }
+}
+
 #[test]
 fn screening_trials_changes_the_cost_of_a_fit_not_its_path() {
     let mut screened = 0;
