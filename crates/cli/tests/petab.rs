@@ -750,11 +750,13 @@ fn the_noise_scales_move_where_a_round_at_held_scales_would_crawl() {
 
 /// The best known points away from the nominal values (`best_points.tsv`) are certified
 /// minima at the values `best_known.tsv` gives:
-/// - Elowitz's, in another basin than the nominal's and 2.39 lower (−65.633227 against
-///   −63.239749), with 8 of its 21 unknowns on bounds, found by start 7 of a 100-start
-///   multistart of nl2sol (`sysid fit --petab … --starts 100 --starts-without-guess
-///   --starts-budget 600`); AMICI evaluates it to −65.6332289 (the point before it,
-///   −65.493149, came from nl2sol at nominal + 0.1 with a first trust radius of ‖D z₀‖);
+/// - Elowitz's, in another basin than the nominal's and 2.40 lower (−65.635120 against
+///   −63.239749), with 8 of its 21 unknowns on bounds, found by start 48 of a 100-start
+///   multistart of nl2sol with the crawl's corrector (`sysid fit --petab … --starts 100
+///   --starts-without-guess`, 2026-12-05); AMICI fails to integrate it at its default
+///   tolerances and evaluates it to −65.6351197679 at rtol 1e-12, atol 1e-16 (the points
+///   before it: −65.633227, start 7 of a run with `--starts-budget 600`, AMICI −65.6332289;
+///   −65.493149, nl2sol at nominal + 0.1 with a first trust radius of ‖D z₀‖);
 /// - Zheng's, −293.713896 with 22 of its 46 unknowns on bounds (nominal −278.333533), found
 ///   by start 78 of a 100-start multistart of nl2sol (`sysid fit --petab … --starts 100
 ///   --starts-without-guess`); AMICI evaluates it to −293.713858 at its default tolerances
