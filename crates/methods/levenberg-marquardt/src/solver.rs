@@ -609,8 +609,9 @@ impl TrustRegion<'_> {
         self.costs.len() > CRAWL_WINDOW && self.costs[0] - cost < CRAWL_FALL * cost.abs()
     }
 
-    /// The trial `l` (the step `trial` from the iterate `lin`) corrected by a chord step, a
-    /// Gauss–Newton step from the trial with the iterate's Jacobian J and the same λ:
+    /// The trial `l` (the step `trial` from the iterate `lin`) corrected by a chord step with
+    /// the iterate's Jacobian J and the same λ (with λ = 0 and no bound in the way, the
+    /// Gauss–Newton step from the trial with J):
     /// (A + λD²) c = −Jᵀ(r(z + δ) − r(z) − Jδ), solved on the unknowns the step leaves free,
     /// and z + δ + c put in the box, linearized. The bend r(z + δ) − r(z) − Jδ is what the
     /// linear model missed over the step; in a curved valley it is the step's departure from
