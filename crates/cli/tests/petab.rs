@@ -25,6 +25,15 @@ fn json_of(args: &[&str], code: i32) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).expect("JSON")
 }
 
+/// `NAME=VALUE` for each estimate of a fit's JSON, for `--set` or `--start`.
+fn assignments(fit: &serde_json::Value) -> Vec<String> {
+    let estimates = fit["estimates"].as_object().expect("estimates");
+    estimates
+        .iter()
+        .map(|(name, v)| format!("{name}={:?}", v.as_f64().expect("a number")))
+        .collect()
+}
+
 /// `NAME=VALUE` for each row of `problem` in a table of points (columns problem,
 /// parameterId, value: `best_points.tsv` and the like).
 fn point_of(table: &str, problem: &str) -> Vec<String> {
@@ -145,11 +154,7 @@ fn a_fit_reports_the_nll_at_its_own_estimates() {
     let boehm = problem("Boehm_JProteomeRes2014");
     let fit = json_of(&["fit", "--petab", &boehm, "--format", "json"], 0);
     assert_eq!(fit["converged"], true, "{fit}");
-    let estimates = fit["estimates"].as_object().expect("estimates");
-    let sets: Vec<String> = estimates
-        .iter()
-        .map(|(name, v)| format!("{name}={:?}", v.as_f64().expect("a number")))
-        .collect();
+    let sets = assignments(&fit);
     let args = vec!["evaluate", "--petab", &boehm, "--gradient", "--sensitivities", "forward"];
     let at = evaluate_at(args, &sets);
     let (reported, there) = (fit["nll"].as_f64().unwrap(), at["nll"].as_f64().unwrap());
@@ -553,12 +558,7 @@ fn the_default_fit_of_brannmark_from_nominal_certifies_past_its_crawl() {
     assert_eq!(fit["converged"], true, "{}", fit["termination"]);
     let nll = fit["nll"].as_f64().expect("an NLL");
     assert!(nll <= 141.824850 + 1e-3, "{nll}");
-    let starts: Vec<String> = fit["estimates"]
-        .as_object()
-        .expect("the estimates")
-        .iter()
-        .map(|(name, v)| format!("{name}={}", v.as_f64().expect("a value")))
-        .collect();
+    let starts = assignments(&fit);
     let mut args = vec!["fit", "--petab", &yaml, "--method", "levenberg-marquardt"];
     for start in &starts {
         args.extend(["--start", start.as_str()]);
@@ -867,12 +867,7 @@ fn a_fit_whose_progress_the_integration_cannot_resolve_goes_on_finer() {
     let fit: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
     assert_eq!(fit["converged"], true, "{}", fit["termination"]);
     assert_eq!(out.status.code(), Some(0));
-    let sets: Vec<String> = fit["estimates"]
-        .as_object()
-        .expect("estimates")
-        .iter()
-        .map(|(name, v)| format!("{name}={:?}", v.as_f64().expect("a number")))
-        .collect();
+    let sets = assignments(&fit);
     let args = vec!["evaluate", "--petab", &yaml, "--integrator", "rodas5p", "--rtol", "1e-12"];
     let tight = evaluate_at([args, vec!["--atol", "1e-16"]].concat(), &sets);
     let (reported, there) = (fit["nll"].as_f64().unwrap(), tight["nll"].as_f64().unwrap());

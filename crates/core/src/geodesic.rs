@@ -22,7 +22,6 @@ use sysid_ode::System;
 
 use crate::evaluate::Linearization;
 use crate::evaluations::Evaluations;
-use crate::linalg::NormalFactor;
 use crate::termination::Failure;
 use crate::trust::{Curve, CurveStep};
 
@@ -104,23 +103,9 @@ impl Geodesic {
         let guarded = |i: usize| curve.guarded.get(i).copied().unwrap_or(false);
         let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &guarded);
         let k = v.delta.len();
-        let free: Vec<usize> =
-            (0..k).filter(|&i| v.delta[i] > lo[i] && v.delta[i] < hi[i]).collect();
-        if free.is_empty() {
-            return Ok(Accelerated::Unavailable);
-        }
-        let mut h = lin.normal.select_rows(&free).select_columns(&free);
-        for (r, &i) in free.iter().enumerate() {
-            h[(r, r)] += v.lambda * curve.scale[i] * curve.scale[i];
-        }
-        let Ok(factor) = NormalFactor::new(&h, max_condition) else {
+        let Some(a) = curve.correction(lin, v, &-force, (&lo, &hi), max_condition) else {
             return Ok(Accelerated::Unavailable);
         };
-        let solved = factor.solve(&-force.select_rows(&free));
-        let mut a = DVector::zeros(k);
-        for (r, &i) in free.iter().enumerate() {
-            a[i] = solved[r];
-        }
         let ratio = 2.0 * curve.scaled_norm(a.as_slice()) / v.scaled_norm;
         if !(ratio <= GEODESIC_RATIO && ratio.is_finite()) {
             return Ok(Accelerated::TooCurved);

@@ -23,7 +23,7 @@ use sysid_ode::System;
 use crate::bounded::{Quadratic, minimise_in_box};
 use crate::evaluate::Linearization;
 use crate::evaluations::Evaluations;
-use crate::linalg::{Condition, Singular};
+use crate::linalg::{Condition, NormalFactor, Singular};
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate};
 use crate::termination::{Failure, Rule};
@@ -177,6 +177,38 @@ impl Curve {
     /// ‖Dv‖.
     pub fn scaled_norm(&self, v: &[f64]) -> f64 {
         v.iter().zip(&self.scale).map(|(v, d)| (v * d).powi(2)).sum::<f64>().sqrt()
+    }
+
+    /// The correction a of the step `v` from the iterate `lin`: (A + λD²) a = `rhs` solved on
+    /// the unknowns `v` leaves free in the box (lo, hi), with `v`'s λ; the unknowns on a bound
+    /// of the step stay there (a_i = 0). None where no unknown is free or that system is
+    /// singular. Geodesic acceleration's second-order term and the crawl's chord step are
+    /// such corrections.
+    pub fn correction(
+        &self,
+        lin: &Linearization,
+        v: &CurveStep,
+        rhs: &DVector<f64>,
+        (lo, hi): (&[f64], &[f64]),
+        max_condition: f64,
+    ) -> Option<DVector<f64>> {
+        let k = v.delta.len();
+        let free: Vec<usize> =
+            (0..k).filter(|&i| v.delta[i] > lo[i] && v.delta[i] < hi[i]).collect();
+        if free.is_empty() {
+            return None;
+        }
+        let mut h = lin.normal.select_rows(&free).select_columns(&free);
+        for (r, &i) in free.iter().enumerate() {
+            h[(r, r)] += v.lambda * self.scale[i] * self.scale[i];
+        }
+        let factor = NormalFactor::new(&h, max_condition).ok()?;
+        let solved = factor.solve(&rhs.select_rows(&free));
+        let mut a = DVector::zeros(k);
+        for (r, &i) in free.iter().enumerate() {
+            a[i] = solved[r];
+        }
+        Some(a)
     }
 
     /// δ(λ) in the box, with ‖Dδ‖ and the predicted decrease.

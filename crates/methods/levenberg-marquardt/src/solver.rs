@@ -47,8 +47,8 @@ use nalgebra::{DMatrix, DVector};
 use sysid_core::{
     DriverOptions, Estimate, Failure, FitError, Linearization, Method, Problem, Rule, Termination,
     method::{
-        Accelerated, Advance, Curve, CurveStep, Evaluations, Geodesic, Iterate, NormalFactor,
-        Proposal, Step, actual_decrease, differenced_hessian, drive,
+        Accelerated, Advance, Curve, CurveStep, Evaluations, Geodesic, Iterate, Proposal, Step,
+        actual_decrease, differenced_hessian, drive,
     },
 };
 use sysid_ode::System;
@@ -632,26 +632,16 @@ impl TrustRegion<'_> {
             return Ok(None);
         }
         let bend = &at.r - &rows.r - &rows.jacobian * &trial.delta;
-        let force = rows.jacobian.tr_mul(&bend);
+        let force = -rows.jacobian.tr_mul(&bend);
         let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &|_| false);
-        let k = trial.delta.len();
-        let free: Vec<usize> =
-            (0..k).filter(|&i| trial.delta[i] > lo[i] && trial.delta[i] < hi[i]).collect();
-        if free.is_empty() {
-            return Ok(None);
-        }
-        let mut h = lin.normal.select_rows(&free).select_columns(&free);
-        for (r, &i) in free.iter().enumerate() {
-            h[(r, r)] += trial.lambda * self.curve.scale[i] * self.curve.scale[i];
-        }
-        let Ok(factor) = NormalFactor::new(&h, self.options.driver.max_condition) else {
+        let max_condition = self.options.driver.max_condition;
+        let Some(c) = self.curve.correction(lin, trial, &force, (&lo, &hi), max_condition) else {
             return Ok(None);
         };
-        let solved = factor.solve(&-force.select_rows(&free));
-        let mut delta = trial.delta.clone();
-        for (r, &i) in free.iter().enumerate() {
-            delta[i] = (delta[i] + solved[r]).clamp(lo[i], hi[i]);
-        }
+        let delta = DVector::from_fn(trial.delta.len(), |i, _| match c[i] {
+            0.0 => trial.delta[i],
+            c => (trial.delta[i] + c).clamp(lo[i], hi[i]),
+        });
         let z = problem.unknowns().moved(&lin.z, delta.as_slice(), 1.0);
         match ev.linearize(&z) {
             Ok(c) => Ok(Some((c, z))),

@@ -460,15 +460,16 @@ impl Shooting {
         let norms: Vec<f64> = jacobian.column_iter().map(|c| c.norm()).collect();
         let largest = norms.iter().copied().fold(0.0, f64::max);
         let floor = if largest > 0.0 { DAMPING_FLOOR * largest } else { 1.0 };
+        // [J̃; √λ D] and [r̃; 0], the damping rows set again for each λ.
+        let mut b = DMatrix::zeros(rows + k, k);
+        b.rows_mut(0, rows).copy_from(jacobian);
+        let mut a = DVector::zeros(rows + k);
+        a.rows_mut(0, rows).copy_from(r);
         let mut lambda = DAMPING_FROM;
         while lambda <= 1.0 {
-            let mut b = DMatrix::zeros(rows + k, k);
-            b.rows_mut(0, rows).copy_from(jacobian);
             for (i, d) in norms.iter().enumerate() {
                 b[(rows + i, i)] = lambda.sqrt() * d.max(floor);
             }
-            let mut a = DVector::zeros(rows + k);
-            a.rows_mut(0, rows).copy_from(r);
             let damped = LinearLeastSquares { b: &b, a: &a };
             if let Ok(solution) = minimise_in_box(&damped, (&lo, &hi), &origin, self.max_condition)
             {
