@@ -49,7 +49,7 @@ pub struct LevenbergMarquardtOptions {
     #[serde(default = "on")]
     pub screen: bool,
     /// While the fit crawls (its cost fell by less than [`CRAWL_FALL`](crate::CRAWL_FALL)
-    /// of itself over the last [`CRAWL_WINDOW`](crate::CRAWL_WINDOW) iterations), correct a
+    /// of ε over the last [`CRAWL_WINDOW`](crate::CRAWL_WINDOW) iterations), correct a
     /// rejected trial by a chord step with the iterate's Jacobian and judge the corrected
     /// point instead (one more linearization per corrected trial; docs/methods.md). Default
     /// off; `nl2sol` turns it on.

@@ -95,8 +95,9 @@ const SCREEN_MEMORY: f64 = 0.25;
 /// The iterations over which a crawl is judged ([`CRAWL_FALL`]).
 pub const CRAWL_WINDOW: usize = 50;
 
-/// A fit crawls where its cost fell by less than this share of itself over the last
-/// [`CRAWL_WINDOW`] iterations: a narrow curved valley, where the straight step leaves the
+/// A fit crawls where its cost fell by less than this share of ε over the last
+/// [`CRAWL_WINDOW`] iterations (ε itself, or under hierarchical optimisation ε at the
+/// iterate's scales, whose profile cost has an arbitrary constant): a narrow curved valley, where the straight step leaves the
 /// floor within a short distance and the trust region creeps along it (Crauste from
 /// nominal + 0.1: ε falling by 2e-6 of itself an iteration for 800 iterations). While it
 /// does, a rejected trial is corrected by a chord step with the iterate's Jacobian, which
@@ -477,7 +478,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         let lin = current.linearization.as_ref().expect("the iterates are linearized");
         let resolution = problem.integrator().rtol * lin.cost;
         let negligible = negligible_step(problem, &current.z, self.options.driver.step_tolerance);
-        let crawling = self.options.correct && self.crawls(current.cost);
+        let crawling = self.options.correct && self.crawls(current.cost, lin.cost);
         let mut trial = match self.proposed.take() {
             Some(trial) => trial,
             None => self.step(ev, lin)?,
@@ -599,14 +600,18 @@ impl<S: System> Step<S> for TrustRegion<'_> {
 
 impl TrustRegion<'_> {
     /// Records the cost of the iterate an advance starts from, and whether the run crawls
-    /// there: its cost fell by less than [`CRAWL_FALL`] of itself over the last
-    /// [`CRAWL_WINDOW`] iterations.
-    fn crawls(&mut self, cost: f64) -> bool {
+    /// there: its cost fell by less than [`CRAWL_FALL`] of ε over the last [`CRAWL_WINDOW`]
+    /// iterations. `cost` is the iterate's as the driver records it, `epsilon` its ε: under
+    /// hierarchical optimisation the cost is the profile's, twice the NLL up to a constant,
+    /// whose differences compare between iterates but whose size is the constant's (it
+    /// crosses 0), so the fall is measured against ε, as the driver's progress rule measures
+    /// it.
+    fn crawls(&mut self, cost: f64, epsilon: f64) -> bool {
         self.costs.push_back(cost);
         if self.costs.len() > CRAWL_WINDOW + 1 {
             self.costs.pop_front();
         }
-        self.costs.len() > CRAWL_WINDOW && self.costs[0] - cost < CRAWL_FALL * cost.abs()
+        crawled(&self.costs, epsilon)
     }
 
     /// The trial `l` (the step `trial` from the iterate `lin`) corrected by a chord step with
@@ -706,10 +711,48 @@ impl TrustRegion<'_> {
     }
 }
 
+/// Whether `costs`, the last [`CRAWL_WINDOW`] + 1 iterates' oldest first, fell by less than
+/// [`CRAWL_FALL`] of `epsilon`, the last one's ε.
+fn crawled(costs: &VecDeque<f64>, epsilon: f64) -> bool {
+    match (costs.front(), costs.back()) {
+        (Some(first), Some(last)) if costs.len() > CRAWL_WINDOW => {
+            first - last < CRAWL_FALL * epsilon.abs()
+        }
+        _ => false,
+    }
+}
+
 /// The step length below which a step does not count: tol·(‖z‖ + tol), tol the resolvable
 /// step tolerance.
 fn negligible_step<S: System>(problem: &Problem<S>, z: &[f64], step_tolerance: f64) -> f64 {
     let step_tolerance = problem.resolvable_step(step_tolerance);
     let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
     step_tolerance * (z_norm + step_tolerance)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Costs falling evenly by `fall` over the window, from `first`.
+    fn window(first: f64, fall: f64) -> VecDeque<f64> {
+        (0..=CRAWL_WINDOW).map(|i| first - fall * i as f64 / CRAWL_WINDOW as f64).collect()
+    }
+
+    /// Under hierarchical optimisation a cost is the profile's, 2·NLL up to a constant that
+    /// can put it near 0: the crawl is judged against ε, so the same fall is a crawl or not
+    /// whatever the constant.
+    #[test]
+    fn a_crawl_is_judged_against_epsilon_not_the_profiles_constant() {
+        let epsilon = 313.0;
+        let slow = 0.5 * CRAWL_FALL * epsilon;
+        let fast = 2.0 * CRAWL_FALL * epsilon;
+        for first in [0.1, -40.0, 1e4] {
+            assert!(crawled(&window(first, slow), epsilon), "from {first}");
+            assert!(!crawled(&window(first, fast), epsilon), "from {first}");
+        }
+        let mut short = window(0.1, slow);
+        short.pop_front();
+        assert!(!crawled(&short, epsilon), "a window not yet full");
+    }
 }
