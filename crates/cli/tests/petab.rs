@@ -814,11 +814,11 @@ fn the_best_known_points_are_certified_minima_at_their_values() {
 }
 
 /// The best known values sysid has not certified at the problem's tolerances
-/// (`uncertified_points.tsv`: Borghans' oscillator, −123.685351, where the NLL at rtol 1e-8
-/// is 0.04 off) are the objective at their points to 1e-6 by two schemes at tight
+/// (`uncertified_points.tsv`: Borghans' oscillator, −125.269093, where the NLL at rtol 1e-8
+/// is 3.6 off) are the objective at their points to 1e-6 by two schemes at tight
 /// tolerances: Rodas5P at rtol 1e-12 and DOPRI5 at rtol 1e-13. AMICI at rtol 1e-14, atol
-/// 1e-24 gives −123.6853508622 there (`scripts/reference/at_point.py --points
-/// uncertified_points.tsv`; at its default tolerances −87.28).
+/// 1e-24 gives −125.2690927068 there (`scripts/reference/at_point.py --points
+/// uncertified_points.tsv`; at its default tolerances −123.30).
 #[test]
 fn the_uncertified_best_points_evaluate_to_their_values_at_tight_tolerances() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");

@@ -645,7 +645,7 @@ const ACCURATE: f64 = 0.1;
 /// columns), is less than 1/[`ACCURATE`] times the cost's integration error. A trust
 /// region's trials there are judged on differences of costs that are mostly that error, and
 /// the run stops short of the minimum (Borghans' oscillator at rtol 1e-8: m = 1.25e-4, NLL
-/// −123.387, the minimum −123.685).
+/// −123.387, a certified minimum at −123.685 beyond it).
 fn unresolved(c: &crate::Certificate, gtol: f64, epsilon: f64) -> bool {
     !c.has_undetermined()
         && c.optimality > gtol
