@@ -45,6 +45,42 @@ fn written(dir: &Path, model: &str) -> (Problem<ModelSystem>, Vec<f64>) {
     (problem, z)
 }
 
+/// Every row of a fit's history is ε + 2 Σ_g n_g ln(σ_g/s_g) at the scales σ it was evaluated
+/// at, s the fit's first scales: twice the objective up to one constant for the whole fit, so
+/// that rows of different rounds compare (docs/json.md, the history's `cost`). Checked for
+/// every method on the two-dose problem, whose noise scales move from their guesses (the
+/// trust-region methods profile them after a first round at the guesses, the others hold them
+/// a round at a time): the fall from the first row (the start, at the guessed scales) to the
+/// last (at the scales the fit ends with) is the fall of twice the objective between them,
+/// to 1e-6 of the objective (the first row of a coarse-first method is at rtol 1e-6).
+#[test]
+fn the_history_rows_of_every_round_compare() {
+    let problem = load("examples/two-doses/model.toml");
+    let first_scales = problem.scale_values();
+    let twice = |values: &[f64], scales: &[f64]| {
+        let at = problem.with_scales(scales);
+        let z = at.unknowns().coordinates(values);
+        2.0 * (at.nll_at(&z).unwrap().unwrap() + at.prior_nll_at(&z).unwrap_or(0.0))
+    };
+    for (name, method) in Registry::standard().build_all(&Settings::default()) {
+        let e = method.fit(&problem).unwrap_or_else(|err| panic!("{name}: {err}"));
+        assert!(e.converged(), "{name}: {}", e.termination);
+        let scales: Vec<f64> = e.scales.iter().map(|s| s.value).collect();
+        // The scales moved, so the fit ran more than one round (or profiled): the rows'
+        // constants would differ without the shift.
+        let moved = scales.iter().zip(&first_scales).map(|(s, f)| (s / f).ln().abs());
+        assert!(moved.fold(0.0, f64::max) > 0.1, "{name}: {scales:?} from {first_scales:?}");
+        let (first, last) = (e.history.first().unwrap(), e.history.last().unwrap());
+        let fall = first.cost - last.cost;
+        let want = twice(&first.values, &first_scales) - twice(&last.values, &scales);
+        let scale = twice(&last.values, &scales).abs().max(1.0);
+        assert!(
+            (fall - want).abs() <= 1e-6 * scale,
+            "{name}: the rows fall {fall}, the objective {want}"
+        );
+    }
+}
+
 /// Every method reaches scipy's maximum-likelihood estimate of the two-dose problem: the
 /// likelihood to 1e-6 relative, each estimate to 1e-4 relative (the tolerances; the
 /// reference itself is good to 1e-12).

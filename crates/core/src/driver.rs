@@ -93,6 +93,8 @@ pub fn drive<S: System>(
             (profiles, rounds.is_empty(), used),
             !profiles && rounds.len() + 1 < MAX_ROUNDS,
         )?;
+        let mut estimate = estimate;
+        on_first_scales(problem, &sigma, &mut estimate);
         if let Some(moved) = profiled {
             // Hierarchical optimisation: one run, at the closed form of the point it returns.
             let held = problem.with_scales(&ended);
@@ -120,6 +122,26 @@ pub fn drive<S: System>(
         }
         sigma = next.expect("a round whose scales cannot be formed is the last");
         z = rounds.last().expect("a round").values.clone();
+    }
+}
+
+/// A round's history measured as the first round's: a round run at the scales `sigma`
+/// records ε at them (or, profiling, ε + 2 Σ_g n_g ln(ŝ_g/σ_g)); adding 2 Σ_g n_g
+/// ln(σ_g/s_g), s the fit's first scales, makes every row ε + 2 Σ_g n_g ln(σ̂_g/s_g) at the
+/// scales σ̂ it was evaluated at: twice the NLL up to one constant for the whole fit, so
+/// that the rows of different rounds compare (the first row with the last, say).
+fn on_first_scales<S: System>(problem: &Problem<S>, sigma: &[f64], estimate: &mut Estimate) {
+    let first = problem.scale_values();
+    let shift: f64 = sigma
+        .iter()
+        .zip(&first)
+        .zip(problem.scale_samples())
+        .map(|((s, s0), n)| 2.0 * n as f64 * (s / s0).ln())
+        .sum();
+    if shift != 0.0 {
+        for row in &mut estimate.history {
+            row.cost += shift;
+        }
     }
 }
 
