@@ -132,7 +132,10 @@ impl Record<'_> {
                 },
             },
             Ending::MaxIterations => Termination::MaxIterations {
-                fell: fell(&history),
+                fell: fell(
+                    &history,
+                    current.linearization.as_ref().map_or(current.cost, |l| l.cost),
+                ),
                 moving: moving(ev.problem(), &history),
             },
             Ending::TimeLimit(seconds) => Termination::TimeLimit { seconds },
@@ -439,12 +442,14 @@ impl<S: System> Problem<S> {
 
 /// How much the cost fell over the last [`PROGRESS_WINDOW`] iterations of `history`; None
 /// for a shorter history, a cost that is not finite at either end, or a fall the progress
-/// rule counts as none (at most [`PROGRESS`] of the cost).
-fn fell(history: &[Iteration]) -> Option<f64> {
+/// rule counts as none (at most [`PROGRESS`] of `epsilon`, the last iterate's ε, as the
+/// driver's rule measures it: under hierarchical optimisation the rows' costs are the
+/// profile's, twice the NLL up to a constant, whose size says nothing).
+fn fell(history: &[Iteration], epsilon: f64) -> Option<f64> {
     let last = history.last()?.cost;
     let then = history[history.len().checked_sub(PROGRESS_WINDOW + 1)?].cost;
     let fell = then - last;
-    (fell.is_finite() && fell > PROGRESS * last.abs()).then_some(fell)
+    (fell.is_finite() && fell > PROGRESS * epsilon.abs()).then_some(fell)
 }
 
 /// The unknowns whose coordinates moved most over the last [`PROGRESS_WINDOW`] iterations
@@ -473,4 +478,43 @@ fn moving<S: System>(problem: &Problem<S>, history: &[Iteration]) -> Vec<String>
         .take(5)
         .map(|m| m.1.to_string())
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A history whose costs fall evenly by `fall` over the progress window, from `first`.
+    fn history(first: f64, fall: f64) -> Vec<Iteration> {
+        (0..=PROGRESS_WINDOW)
+            .map(|i| Iteration {
+                iteration: i,
+                cost: first - fall * i as f64 / PROGRESS_WINDOW as f64,
+                gradient_norm: 0.0,
+                step_norm: None,
+                condition: None,
+                optimality: None,
+                values: Vec::new(),
+                diagnostics: Default::default(),
+            })
+            .collect()
+    }
+
+    /// The fall the iteration limit reports is judged against ε, whatever constant the
+    /// profile's costs carry (near 0 here, where a fall of any size was counted).
+    #[test]
+    fn the_fall_at_the_limit_is_judged_against_epsilon() {
+        let epsilon = 313.0;
+        for first in [0.1, -40.0, 1e4] {
+            assert_eq!(fell(&history(first, 0.5 * PROGRESS * epsilon), epsilon), None, "{first}");
+            let fast = 2.0 * PROGRESS * epsilon;
+            let got = fell(&history(first, fast), epsilon).expect("a fall");
+            assert!((got - fast).abs() <= 1e-9 * first.abs().max(1.0), "{first}: {got}");
+        }
+        assert_eq!(
+            fell(&history(0.1, 1.0)[1..], epsilon),
+            None,
+            "a history shorter than the window"
+        );
+    }
 }
