@@ -96,10 +96,11 @@ const SCREEN_MEMORY: f64 = 0.25;
 pub const CRAWL_WINDOW: usize = 50;
 
 /// A fit crawls where its cost fell by less than this share of ε over the last
-/// [`CRAWL_WINDOW`] iterations (ε itself, or under hierarchical optimisation ε at the
-/// iterate's scales, whose profile cost has an arbitrary constant): a narrow curved valley, where the straight step leaves the
-/// floor within a short distance and the trust region creeps along it (Crauste from
-/// nominal + 0.1: ε falling by 2e-6 of itself an iteration for 800 iterations). While it
+/// [`CRAWL_WINDOW`] iterations (under hierarchical optimisation ε at the iterate's scales:
+/// the profile cost has an arbitrary constant): a narrow curved valley, where the straight
+/// step leaves the floor within a short distance and the trust region creeps along it
+/// (Crauste from nominal + 0.1: ε falling by 2e-6 of itself an iteration for 800
+/// iterations). While it
 /// does, a rejected trial is corrected by a chord step with the iterate's Jacobian, which
 /// brings it back towards the floor ([`LevenbergMarquardtOptions::correct`]). The share is
 /// ten times what the crawl of Crauste's shifted fit lowers ε by over the window, and below
