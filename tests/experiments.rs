@@ -72,8 +72,9 @@ fn the_history_rows_of_every_round_compare() {
         assert!(moved.fold(0.0, f64::max) > 0.1, "{name}: {scales:?} from {first_scales:?}");
         let (first, last) = (e.history.first().unwrap(), e.history.last().unwrap());
         let fall = first.cost - last.cost;
-        let want = twice(&first.values, &first_scales) - twice(&last.values, &scales);
-        let scale = twice(&last.values, &scales).abs().max(1.0);
+        let at_last = twice(&last.values, &scales);
+        let want = twice(&first.values, &first_scales) - at_last;
+        let scale = at_last.abs().max(1.0);
         assert!(
             (fall - want).abs() <= 1e-6 * scale,
             "{name}: the rows fall {fall}, the objective {want}"

@@ -132,10 +132,7 @@ impl Record<'_> {
                 },
             },
             Ending::MaxIterations => Termination::MaxIterations {
-                fell: fell(
-                    &history,
-                    current.linearization.as_ref().map_or(current.cost, |l| l.cost),
-                ),
+                fell: fell(&history, current.epsilon()),
                 moving: moving(ev.problem(), &history),
             },
             Ending::TimeLimit(seconds) => Termination::TimeLimit { seconds },

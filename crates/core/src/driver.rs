@@ -66,6 +66,8 @@ pub fn drive<S: System>(
     let mut sigma = problem.scale_values();
     let mut z = start.to_vec();
     let mut rounds: Vec<Estimate> = Vec::new();
+    // The fit's first scales, which every round's history is measured on.
+    let first = Profile::new(problem, true);
     let started = Instant::now();
     loop {
         let used: usize = rounds.iter().map(|e| e.iterations).sum();
@@ -84,7 +86,7 @@ pub fn drive<S: System>(
         // method profiles, are one run at the closed form of every iterate.
         let profiles = step.profiles() && !rounds.is_empty();
         // Only the first round integrates coarsely first: the later ones start near a minimum.
-        let (estimate, ended, profiled, handed_over) = drive_once(
+        let (mut estimate, ended, profiled, handed_over) = drive_once(
             &problem.with_scales(&sigma),
             method,
             &round_options,
@@ -93,8 +95,7 @@ pub fn drive<S: System>(
             (profiles, rounds.is_empty(), used),
             !profiles && rounds.len() + 1 < MAX_ROUNDS,
         )?;
-        let mut estimate = estimate;
-        on_first_scales(problem, &sigma, &mut estimate);
+        on_first_scales(&first, &sigma, &mut estimate);
         if let Some(moved) = profiled {
             // Hierarchical optimisation: one run, at the closed form of the point it returns.
             let held = problem.with_scales(&ended);
@@ -127,17 +128,12 @@ pub fn drive<S: System>(
 
 /// A round's history measured as the first round's: a round run at the scales `sigma`
 /// records ε at them (or, profiling, ε + 2 Σ_g n_g ln(ŝ_g/σ_g)); adding 2 Σ_g n_g
-/// ln(σ_g/s_g), s the fit's first scales, makes every row ε + 2 Σ_g n_g ln(σ̂_g/s_g) at the
-/// scales σ̂ it was evaluated at: twice the NLL up to one constant for the whole fit, so
-/// that the rows of different rounds compare (the first row with the last, say).
-fn on_first_scales<S: System>(problem: &Problem<S>, sigma: &[f64], estimate: &mut Estimate) {
-    let first = problem.scale_values();
-    let shift: f64 = sigma
-        .iter()
-        .zip(&first)
-        .zip(problem.scale_samples())
-        .map(|((s, s0), n)| 2.0 * n as f64 * (s / s0).ln())
-        .sum();
+/// ln(σ_g/s_g) ([`Profile::shift`] from `first`, the fit's first scales s) makes every row
+/// ε + 2 Σ_g n_g ln(σ̂_g/s_g) at the scales σ̂ it was evaluated at: twice the NLL up to one
+/// constant for the whole fit, so that the rows of different rounds compare (the first row
+/// with the last, say).
+fn on_first_scales(first: &Profile, sigma: &[f64], estimate: &mut Estimate) {
+    let shift = first.shift(sigma);
     if shift != 0.0 {
         for row in &mut estimate.history {
             row.cost += shift;
@@ -339,7 +335,7 @@ fn drive_once<S: System>(
         // ε at the iterate (under hierarchical optimisation the iterate's cost is the
         // profile's, which compares between iterates; ε is what an exact fit and the crawl's
         // scale are judged by).
-        let epsilon = current.linearization.as_ref().map_or(current.cost, |l| l.cost);
+        let epsilon = current.epsilon();
         if crate::observer::listening() {
             let p = ev.problem();
             let objective = current

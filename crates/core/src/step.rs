@@ -49,6 +49,13 @@ impl Iterate {
         Self { linearization: Some(lin), ..self }
     }
 
+    /// ε at the iterate: its linearization's where it has one (under hierarchical
+    /// optimisation the iterate's `cost` is the profile's, twice the NLL up to a constant,
+    /// whose size says nothing; relative rules measure against this), else its cost.
+    pub fn epsilon(&self) -> f64 {
+        self.linearization.as_ref().map_or(self.cost, |l| l.cost)
+    }
+
     /// The same iterate with one more named value in its diagnostics.
     pub fn with(mut self, name: &'static str, value: f64) -> Self {
         self.diagnostics.push(name, value);

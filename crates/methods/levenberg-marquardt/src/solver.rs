@@ -498,7 +498,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 && self.rejections >= SCREEN_FROM
                 && trial.predicted > resolution
                 && !problem.is_continuous();
-            let (evaluated, decrease) = match screened {
+            let (mut evaluated, mut decrease) = match screened {
                 true => match ev.residuals(&z) {
                     Ok(r) => {
                         let gain = if ev.profiling() { problem.profile_gain_of(&r) } else { 0.0 };
@@ -526,7 +526,6 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 },
                 false => self.evaluate(ev, lin, &z, trial.predicted, resolution)?,
             };
-            let (mut evaluated, mut decrease) = (evaluated, decrease);
             // In a crawl, a rejected trial that left the valley's floor is brought back
             // towards it, and the corrected point is judged by the same test.
             if crawling
