@@ -24,7 +24,7 @@ use sysid::registry::{Boxed, Registry, Settings};
 use sysid::systems::{self, Case, Visit, stress};
 
 /// Most iterations of a run here. The claims are what is checked, not how far a budget
-/// takes a method: at the default 1 000, quasilinearization's run on van-der-pol-three-point
+/// takes a method: at 1 000, quasilinearization's run on van-der-pol-three-point
 /// that never converges took 80 of the test's 160 seconds alone.
 const MAX_ITERATIONS: usize = 250;
 

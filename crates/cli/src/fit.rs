@@ -48,10 +48,9 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
             not_an_input(&path, &context.inputs, "--waterfall")?;
         }
     }
-    let settings = args.options.settings();
     let watch = context.watch(&args.method.method, args.options.log_every);
     let (estimate, starts) =
-        fit_from_starts(&problem, &args.method.method, &settings, &args.starts, &watch)?;
+        fit_from_starts(&problem, &args.method.method, &args.options, &args.starts, &watch)?;
     match args.format {
         Format::Json => {
             let record = with_starts(estimate.record(&context.name), starts.as_ref());

@@ -153,19 +153,21 @@ pub fn fit(problem: &AnyProblem, name: &str, settings: &Settings) -> anyhow::Res
 }
 
 /// Fits with the named method from the problem's guess, or from the starts of `--starts`
-/// (the best fit, and what the starts found), telling `watch` how it goes. The start is
-/// unusable only when every start is.
+/// (the best fit, and what the starts found), telling `watch` how it goes: one fit with the
+/// settings of `options`, each start with its [start settings](MethodArgs::start_settings).
+/// The start is unusable only when every start is.
 pub fn fit_from_starts(
     problem: &AnyProblem,
     name: &str,
-    settings: &Settings,
+    options: &MethodArgs,
     starts: &StartsArgs,
     watch: &Rc<Watch>,
 ) -> anyhow::Result<(Estimate, Option<Starts>)> {
-    let Some(options) = starts.options()? else {
-        return Ok((watching(watch, || fit(problem, name, settings))?, None));
+    let Some(drawn) = starts.options()? else {
+        return Ok((watching(watch, || fit(problem, name, &options.settings()))?, None));
     };
-    let (best, starts) = best_of_starts(problem, &*method(name, settings)?, &options, watch)?;
+    let m = method(name, &options.start_settings())?;
+    let (best, starts) = best_of_starts(problem, &*m, &drawn, watch)?;
     Ok((best, Some(starts)))
 }
 

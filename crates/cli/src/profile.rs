@@ -92,10 +92,10 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     if let Some(twice) = only.iter().enumerate().find(|(k, i)| only[..*k].contains(i)) {
         bail!("--only: `{}` is named twice", names[*twice.1]);
     }
-    let settings = args.options.settings();
     let watch = context.watch(&args.method.method, args.options.log_every);
     let (optimum, _) =
-        fit_from_starts(&problem, &args.method.method, &settings, &args.starts, &watch)?;
+        fit_from_starts(&problem, &args.method.method, &args.options, &args.starts, &watch)?;
+    let settings = args.options.settings();
     let m = method(&args.method.method, &settings)?;
     let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));
     let options =

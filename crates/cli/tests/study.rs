@@ -166,7 +166,7 @@ fn settings_that_change_results_travel_with_the_study() {
         (vec!["--integrator", "rodas4"], "integrator.scheme dopri5 vs rodas4"),
         (vec!["--ql-start", "data"], "settings.ql_start guess vs data"),
         (vec!["--gtol", "1e-4"], "driver.gtol (not recorded) vs 0.0001"),
-        (vec!["--max-iterations", "7"], "driver.max_iterations 1000 vs 7"),
+        (vec!["--max-iterations", "7"], "driver.max_iterations 3000 vs 7"),
     ] {
         let mut args = short.to_vec();
         args.push("--resume");

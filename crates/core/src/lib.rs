@@ -100,7 +100,9 @@ pub use experiment::{Experiment, Setting};
 pub use fit::{Method, caught};
 pub use kinks::{Around, SLIVER};
 pub use noise::{Noise, NoiseDistribution, Transform};
-pub use options::{DEFAULT_GTOL, Driven, DriverOptions, OptionsError};
+pub use options::{
+    DEFAULT_GTOL, Driven, DriverOptions, MAX_ITERATIONS, OptionsError, START_MAX_ITERATIONS,
+};
 pub use problem::{Problem, ProblemBuilder};
 pub use step::Diagnostics;
 pub use termination::{Failure, Rule, Termination};

@@ -594,6 +594,9 @@ impl PyProblem {
         {
             return Err(PyValueError::new_err("progress must be a callable (or None)"));
         }
+        // Each start of a multistart has its own budget where none is named.
+        let max_iterations =
+            max_iterations.or(starts.is_some().then_some(sysid_core::START_MAX_ITERATIONS));
         let settings = settings(max_iterations, gtol, max_integrations, max_seconds, coarse_first)?;
         let method = build(method, &settings)?;
         let fix: Vec<(String, f64)> = fix.unwrap_or_default().into_iter().collect();

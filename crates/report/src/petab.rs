@@ -263,6 +263,7 @@ fn starts<S: sysid_ode::System + Sync>(
     let name = Role::Default.method();
     let options = starting.options;
     let mut settings = Settings::default();
+    settings.driver.max_iterations = sysid_core::START_MAX_ITERATIONS;
     settings.driver.max_seconds = starting.seconds;
     let method = Registry::standard().build(name, &settings).map_err(|e| e.to_string())?;
     let run = sysid_montecarlo::multistart(method.as_ref(), problem, options)

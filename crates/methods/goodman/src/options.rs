@@ -8,7 +8,7 @@ use sysid_core::{Driven, DriverOptions, OptionsError};
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GoodmanOptions {
     /// The iteration's budgets, step and gradient tolerances and the certificate's
-    /// tolerance, shared by every method ([`DriverOptions`]: 1000 iterations, step and gradient
+    /// tolerance, shared by every method ([`DriverOptions`]: 3000 iterations, step and gradient
     /// tolerances 1e-10, singular above condition 1e12).
     pub driver: DriverOptions,
     /// Stop when the decrease of ε the next Newton step predicts, δᵀAδ, is at most this
