@@ -453,3 +453,23 @@ impl IntegratorArgs {
         self.apply_to(Integrator::default()).map(|_| ())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The budgets docs/terminations.md states: 3000 iterations for one fit, 1000 for each
+    /// start of `--starts`, and `--max-iterations` for both where given.
+    #[test]
+    fn one_fit_and_each_start_have_their_documented_budgets() {
+        let none = MethodArgs::default();
+        assert_eq!(none.settings().driver.max_iterations, 3000);
+        assert_eq!(none.start_settings().driver.max_iterations, 1000);
+        let given = MethodArgs { max_iterations: Some(7), ..MethodArgs::default() };
+        assert_eq!(given.settings().driver.max_iterations, 7);
+        assert_eq!(given.start_settings().driver.max_iterations, 7);
+        // Everything else of a start's driver is the fit's.
+        let none_start = none.start_settings().driver;
+        assert_eq!(DriverOptions { max_iterations: 3000, ..none_start }, none.settings().driver);
+    }
+}
