@@ -24,8 +24,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (name, value) in fit.names.iter().zip(&fit.values) {
         println!("  {name:24} {value:.6e}");
     }
-    let run =
-        multistart(&*method, &problem, &MultistartOptions { starts: 10, ..Default::default() })?;
+    // Each start with a start's budget (1 000 iterations) rather than one fit's (3 000), as
+    // `sysid fit --starts` runs them: another start costs less than a long crawl.
+    let mut settings = Settings::default();
+    settings.driver.max_iterations = sysid::core::START_MAX_ITERATIONS;
+    let per_start = Registry::standard().build(Role::Default.method(), &settings)?;
+    let options = MultistartOptions { starts: 10, ..Default::default() };
+    let run = multistart(&*per_start, &problem, &options)?;
     let s = &run.starts;
     println!(
         "10 starts: best NLL {:.6}, {} converged, {} within 0.1 of the best, {:.1} s",

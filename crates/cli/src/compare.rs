@@ -69,8 +69,12 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         }
         (false, source) => vec![source.clone()],
     };
-    let settings = args.options.settings();
     let starts = args.starts.options()?;
+    // Each start of --starts has a start's budget; without, one fit's.
+    let settings = match starts {
+        Some(_) => args.options.start_settings(),
+        None => args.options.settings(),
+    };
     let mut json = Vec::new();
     let mut tables = Vec::new();
     let mut summaries = Vec::new();

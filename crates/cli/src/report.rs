@@ -64,8 +64,8 @@ pub struct ReportArgs {
     #[arg(long, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
     petab_start_seconds: Option<f64>,
     /// Most iterations of every fit in the catalogue's sections (studies, basin maps,
-    /// multistarts, profiles) and of every PEtab profile point; the PEtab section's fits and
-    /// multistarts keep the methods' own budget.
+    /// multistarts, profiles) and of every PEtab profile point; the PEtab section's fits have
+    /// one fit's default budget (3000), its multistarts a start's (1000).
     #[arg(long, default_value_t = sysid_report::CATALOGUE_ITERATIONS, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     max_iterations: usize,
     /// Instead of the report: time one NLL + gradient at nominal of every PEtab problem in

@@ -108,17 +108,18 @@ pub const MAX_DERIVED_GTOL: f64 = 1e-3;
 pub const MAX_ITERATIONS: usize = 3000;
 
 /// The iteration budget of each start of a multistart where the caller names none (the
-/// command line's `--starts`, Python's `starts=`, the report's multistarts). A start that
-/// crawls past 1 000 iterations seldom ends at the best optimum, and another start costs less:
-/// of 11 PEtab problems × 40 random starts, 3 000 iterations a start changed two problems
-/// only, Okuonghae (2.5 times the time, 17 certified instead of 12, the same 4 within 0.1 of
-/// the best) and Crauste (12 % more time, the same counts).
+/// command line's `--starts`, Python's `starts=`, the report's PEtab multistarts; the
+/// library's `sysid_montecarlo::multistart` runs the method it is given, with that method's
+/// budget). A start that crawls past 1 000 iterations seldom ends at the best optimum, and
+/// another start costs less: of 11 PEtab problems × 40 random starts, 3 000 iterations a start
+/// changed two problems only, Okuonghae (2.5 times the time, 17 certified instead of 12, the
+/// same 4 within 0.1 of the best) and Crauste (12 % more time, the same counts).
 pub const START_MAX_ITERATIONS: usize = 1000;
 
 /// Options of the iteration driver, the same for every method (a method's options embed
-/// them). Defaults: [`MAX_ITERATIONS`] (3 000) iterations, step tolerance 1e-10, gradient tolerance 1e-10, gtol
-/// 100·rtol within [[`DEFAULT_GTOL`], [`MAX_DERIVED_GTOL`]], singular above condition 1e12, integration budget
-/// 10·(k + 1)·(max_iterations + 1) for k unknowns.
+/// them). Defaults: [`MAX_ITERATIONS`] (3 000) iterations, step tolerance 1e-10, gradient
+/// tolerance 1e-10, gtol 100·rtol within [[`DEFAULT_GTOL`], [`MAX_DERIVED_GTOL`]], singular
+/// above condition 1e12, integration budget 10·(k + 1)·(max_iterations + 1) for k unknowns.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DriverOptions {

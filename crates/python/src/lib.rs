@@ -566,6 +566,8 @@ impl PyProblem {
 
     /// Fits the problem: a `sysid.FitResult` over the fit's JSON object (docs/json.md).
     ///
+    /// `max_iterations`: by default 3000 for one fit, 1000 for each start of `starts`.
+    ///
     /// `progress`, a callable, is called while the fit runs with a dict: for a single fit
     /// at each iterate (`iteration`, `objective`, `cost`, `optimality`, `coarse`), with
     /// `starts` as each start ends (`start`, `done`, `total`, `objective`, `converged`).

@@ -41,8 +41,9 @@ pub struct ReportOptions {
     /// point (termination `time_limit`, not converged); none: no limit.
     pub petab_start_seconds: Option<f64>,
     /// Most iterations of every fit of the catalogue's sections and of every profile point
-    /// (default [`CATALOGUE_ITERATIONS`]); the PEtab section's fits and multistarts keep the
-    /// methods' own budget.
+    /// (default [`CATALOGUE_ITERATIONS`]); the PEtab section's fits have one fit's default
+    /// budget ([`sysid_core::MAX_ITERATIONS`]) and its multistarts a start's
+    /// ([`sysid_core::START_MAX_ITERATIONS`]).
     pub max_iterations: usize,
 }
 
