@@ -766,11 +766,16 @@ fn the_noise_scales_move_where_a_round_at_held_scales_would_crawl() {
 ///   of an earlier run of the same command with `--starts-budget 900`);
 /// - Schwen's, 952.421726 with its prior's term (nominal 956.518370), found by a 20-start
 ///   multistart of nl2sol (`--starts 20 --starts-without-guess`) and fitted again from its
-///   start's end (`--start`).
+///   start's end (`--start`);
+/// - Okuonghae's, 373.547669 with 5 of its 16 unknowns on bounds (the default fit from nominal
+///   certifies 383.918495, pyPESTO + fides from nominal ends at 376.390530), the end of start
+///   48 of a 100-start multistart of nl2sol at the iteration limit (373.561151), fitted on from
+///   there until it certified; AMICI evaluates it to 373.5476688021 at rtol 1e-12, atol 1e-16
+///   (373.5476655 at its defaults).
 ///
 /// AMICI's values are from `scripts/reference/at_point.py`. levenberg-marquardt started at
 /// each point certifies it, at the problem's tolerances and at tolerances 1000 times
-/// tighter.
+/// tighter, at the value to 1e-6 + 1e-8 of it.
 #[test]
 fn the_best_known_points_are_certified_minima_at_their_values() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
@@ -783,7 +788,15 @@ fn the_best_known_points_are_certified_minima_at_their_values() {
     let mut names: Vec<&str> =
         points.lines().skip(1).map(|l| l.split('\t').next().unwrap()).collect();
     names.dedup();
-    assert_eq!(names, ["Elowitz_Nature2000", "Zheng_PNAS2012", "Schwen_PONE2014"]);
+    assert_eq!(
+        names,
+        [
+            "Elowitz_Nature2000",
+            "Zheng_PNAS2012",
+            "Schwen_PONE2014",
+            "Okuonghae_ChaosSolitonsFractals2020"
+        ]
+    );
     for name in names {
         let imported = sysid_petab::import(std::path::Path::new(&problem(name))).expect("imports");
         let problem = imported.model.problem(None).expect("a problem");
@@ -807,9 +820,12 @@ fn the_best_known_points_are_certified_minima_at_their_values() {
         for problem in [problem, tight] {
             let fit = method.fit_from(&problem, &values).expect("fits");
             assert!(fit.converged(), "{name}: {}", fit.termination);
-            // The NLL plus the priors' term (best_known.tsv rounds it to 1e-6).
+            // The NLL plus the priors' term (best_known.tsv rounds it to 1e-6). A certified
+            // point of a flat minimum may sit a little above it: Okuonghae's, where
+            // levenberg-marquardt stops 1.2e-6 above nl2sol's point (3e-9 of the value).
             let objective = fit.nll.unwrap() + fit.prior.unwrap_or(0.0);
-            assert!((objective - best(name)).abs() <= 1e-6, "{name}: {objective}");
+            let tolerance = 1e-6 + 1e-8 * best(name).abs();
+            assert!((objective - best(name)).abs() <= tolerance, "{name}: {objective}");
             assert_eq!(fit.prior.is_some(), problem.n_priors() > 0, "{name}");
         }
     }
