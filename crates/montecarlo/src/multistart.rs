@@ -30,6 +30,11 @@
 //! converged to an objective within [`REACHED`] of the best's (the field's threshold for a
 //! successful start); the distinct minima are the converged fits grouped by
 //! [`SAME_MINIMUM_RTOL`], least first.
+//!
+//! When every start has run (and the time budget is not spent), the start that ran out of
+//! iterations lowest is fitted on once from where it stopped, with the method's budget again,
+//! where it ended below every converged start: its crawl was going where no other start went.
+//! Its row says `continued`, and its iterations and time count both fits.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -187,6 +192,9 @@ pub struct Outcome {
     pub start_values: serde_json::Map<String, serde_json::Value>,
     /// Where it ended, by name.
     pub estimates: serde_json::Map<String, serde_json::Value>,
+    /// Whether it was fitted on once more after every start had run (the module's docs):
+    /// its `iterations` and `elapsed_ms` then count both fits.
+    pub continued: bool,
 }
 
 impl std::fmt::Display for Starts {
@@ -230,6 +238,9 @@ impl std::fmt::Display for Starts {
         }
         if self.not_started > 0 {
             write!(f, "; {} more drawn, not begun within the time budget", self.not_started)?;
+        }
+        if let Some(o) = self.waterfall.iter().find(|o| o.continued) {
+            write!(f, "; start {} fitted on from the iteration limit", o.start)?;
         }
         let mut panicked: Vec<usize> = self
             .waterfall
@@ -451,7 +462,24 @@ where
         .flatten()
         .collect();
     runs.sort_by_key(|r| r.0);
-    let runs: Vec<Run> = runs.into_iter().map(|r| r.1).collect();
+    let mut runs: Vec<Run> = runs.into_iter().map(|r| r.1).collect();
+    let continued = match (spent(), promising(&runs)) {
+        (false, Some(j)) => {
+            let began = std::time::Instant::now();
+            let on = fit_from(&runs[j].fit.values)?;
+            let run = &mut runs[j];
+            // The continuation is kept where it ended no higher (it begins at the start's
+            // point, but its noise scales begin again at the problem's values).
+            if on.objective() <= run.fit.objective() {
+                let before = run.fit.iterations;
+                run.fit = on;
+                run.fit.iterations += before;
+            }
+            run.ms += began.elapsed().as_secs_f64() * 1e3;
+            Some(j)
+        }
+        _ => None,
+    };
     let not_started = starts.len() - runs.len();
     let redrawn = runs.iter().map(|r| r.redrawn).sum();
     let times: Vec<f64> = runs.iter().map(|r| r.ms).collect();
@@ -471,9 +499,29 @@ where
     for row in &mut summary.waterfall {
         row.elapsed_ms = times[row.start];
         row.start_values = std::mem::take(&mut from[row.start]);
+        row.continued = continued == Some(row.start);
     }
     let best = fits.into_iter().nth(summary.best_start).expect("the best start's fit");
     Ok(Multistart { best, starts: summary })
+}
+
+/// The start fitted on once more, with its method's budget again, after every start has run:
+/// the one that ran out of iterations lowest, where that is below every converged start (by
+/// more than [`resolution`]). Its crawl was going where no other start went, and one more
+/// start's budget there is worth more than another random start (Okuonghae: start 48 of 100
+/// ended at the limit at 373.561151 and certifies 373.547669 when fitted on, 2.36 below the
+/// least converged start).
+fn promising(runs: &[Run]) -> Option<usize> {
+    let at_limit = runs
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| matches!(r.fit.termination, Termination::MaxIterations { .. }))
+        .filter(|(_, r)| r.fit.objective().is_finite())
+        .min_by(|a, b| a.1.fit.objective().total_cmp(&b.1.fit.objective()))?;
+    let below = |r: &Run| {
+        at_limit.1.fit.objective() < r.fit.objective() - resolution(&at_limit.1.fit, &r.fit)
+    };
+    runs.iter().filter(|r| r.fit.converged()).all(below).then_some(at_limit.0)
 }
 
 /// [`Estimate::objective`] as the waterfall and [`StartDone`] report it: None where it is NaN (a fit
@@ -559,6 +607,7 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
             elapsed_ms: 0.0,
             start_values: serde_json::Map::new(),
             estimates: named(f),
+            continued: false,
         })
         .collect();
     waterfall.sort_by(|a, b| {

@@ -290,3 +290,47 @@ fn each_start_is_one_run() {
     }
     assert!(run.best.retry.is_none());
 }
+
+/// After every start has run, the start that ended at the iteration limit lowest, below every
+/// converged start, is fitted on once from where it stopped, and only that one. Checked
+/// against each start's fit run again on its own: the continued row's iterations are both
+/// fits', its objective the lower of the two, and no other row is continued.
+#[test]
+fn the_lowest_start_at_the_limit_is_fitted_on_once() {
+    let case = sysid_systems::lotka_volterra::lotka_volterra();
+    let problem = case.problem(1).unwrap();
+    let mut settings = Settings::default();
+    settings.driver.max_iterations = 2;
+    let method = Registry::standard().build("levenberg-marquardt", &settings).unwrap();
+    let options = MultistartOptions { starts: 6, seed: 4, guess: false, ..Default::default() };
+    let run = multistart(&*method, &problem, &options).expect("runs");
+    assert_eq!(run.starts.redrawn, 0, "the starts are the drawn ones");
+    let first: Vec<_> = starts(&problem, &options)
+        .iter()
+        .map(|s| method.fit_once_from(&problem, s).expect("fits"))
+        .collect();
+    let at_limit = |f: &sysid_core::Estimate| f.termination.code() == "max_iterations";
+    let lowest = (0..first.len())
+        .filter(|&j| at_limit(&first[j]))
+        .min_by(|&a, &b| first[a].objective().total_cmp(&first[b].objective()))
+        .expect("a start at the limit");
+    assert!(
+        first.iter().filter(|f| f.converged()).all(|f| first[lowest].objective() < f.objective()),
+        "the case needs the lowest start at the limit below every converged one"
+    );
+    let on = method.fit_once_from(&problem, &first[lowest].values).expect("fits on");
+    let said = run.starts.to_string();
+    assert!(said.contains(&format!("start {lowest} fitted on from the iteration limit")), "{said}");
+    for row in &run.starts.waterfall {
+        assert_eq!(row.continued, row.start == lowest, "start {}", row.start);
+        let f = &first[row.start];
+        if row.start == lowest {
+            assert_eq!(row.iterations, f.iterations + on.iterations);
+            let expected = f.objective().min(on.objective());
+            assert_eq!(row.objective.unwrap().to_bits(), expected.to_bits());
+        } else {
+            assert_eq!(row.iterations, f.iterations, "start {}", row.start);
+            assert_eq!(row.objective.unwrap().to_bits(), f.objective().to_bits());
+        }
+    }
+}
