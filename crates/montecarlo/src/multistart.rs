@@ -509,7 +509,7 @@ where
 /// the one that ran out of iterations lowest, where that is below every converged start (by
 /// more than [`resolution`]). Its crawl was going where no other start went, and one more
 /// start's budget there is worth more than another random start (Okuonghae: start 48 of 100
-/// ended at the limit at 373.561151 and certifies 373.547669 when fitted on, 2.36 below the
+/// ended at the limit at 373.561151 and certifies 373.547669 when fitted on, 2.37 below the
 /// least converged start).
 fn promising(runs: &[Run]) -> Option<usize> {
     let at_limit = runs
