@@ -466,17 +466,20 @@ where
     let continued = match (spent(), promising(&runs)) {
         (false, Some(j)) => {
             let began = std::time::Instant::now();
-            let on = fit_from(&runs[j].fit.values)?;
-            let run = &mut runs[j];
-            // The continuation is kept where it ended no higher (it begins at the start's
-            // point, but its noise scales begin again at the problem's values).
-            if on.objective() <= run.fit.objective() {
-                let before = run.fit.iterations;
-                run.fit = on;
-                run.fit.iterations += before;
-            }
-            run.ms += began.elapsed().as_secs_f64() * 1e3;
-            Some(j)
+            // A continuation that cannot be run loses nothing: every start's result stands.
+            let on = fit_from(&runs[j].fit.values).ok();
+            on.map(|on| {
+                let run = &mut runs[j];
+                // Kept where it ended no higher (it begins at the start's point, but its
+                // noise scales begin again at the problem's values).
+                if on.objective() <= run.fit.objective() {
+                    let before = run.fit.iterations;
+                    run.fit = on;
+                    run.fit.iterations += before;
+                }
+                run.ms += began.elapsed().as_secs_f64() * 1e3;
+                j
+            })
         }
         _ => None,
     };
