@@ -33,8 +33,9 @@
 //!
 //! When every start has run (and the time budget is not spent), the start that ran out of
 //! iterations lowest is fitted on once from where it stopped, with the method's budget again,
-//! where it ended below every converged start: its crawl was going where no other start went.
-//! Its row says `continued`, and its iterations and time count both fits.
+//! where it ended below every converged start (or none converged): its crawl was going where
+//! no other start went. Where the continuation ends no higher it is kept: its row says
+//! `continued`, and its iterations, time, evaluations and history are both fits' as one.
 
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -192,8 +193,8 @@ pub struct Outcome {
     pub start_values: serde_json::Map<String, serde_json::Value>,
     /// Where it ended, by name.
     pub estimates: serde_json::Map<String, serde_json::Value>,
-    /// Whether it was fitted on once more after every start had run (the module's docs):
-    /// its `iterations` and `elapsed_ms` then count both fits.
+    /// Whether it was fitted on once more after every start had run and the continuation
+    /// kept (the module's docs): its `iterations` and `elapsed_ms` then count both fits.
     pub continued: bool,
 }
 
@@ -466,17 +467,12 @@ where
     let continued = match (spent(), promising(&runs)) {
         (false, Some(j)) => {
             let began = std::time::Instant::now();
-            // A continuation that cannot be run loses nothing: every start's result stands.
-            let on = fit_from(&runs[j].fit.values).ok();
-            on.map(|on| {
+            // A continuation that cannot be run (an error) or that ends higher loses nothing:
+            // the start's first end stands, and its row is as before (the time spent counts in
+            // the run's only).
+            fit_from(&runs[j].fit.values).ok().filter(|on| kept(&runs[j].fit, on)).map(|on| {
                 let run = &mut runs[j];
-                // Kept where it ended no higher (it begins at the start's point, but its
-                // noise scales begin again at the problem's values).
-                if on.objective() <= run.fit.objective() {
-                    let before = run.fit.iterations;
-                    run.fit = on;
-                    run.fit.iterations += before;
-                }
+                fit_on(&mut run.fit, on);
                 run.ms += began.elapsed().as_secs_f64() * 1e3;
                 j
             })
@@ -510,7 +506,8 @@ where
 
 /// The start fitted on once more, with its method's budget again, after every start has run:
 /// the one that ran out of iterations lowest, where that is below every converged start (by
-/// more than [`resolution`]). Its crawl was going where no other start went, and one more
+/// more than [`resolution`]), or where none converged. Its crawl was going where no other
+/// start went, and one more
 /// start's budget there is worth more than another random start (Okuonghae: start 48 of 100
 /// ended at the limit at 373.561151 and certifies 373.547669 when fitted on, 2.37 below the
 /// least converged start).
@@ -525,6 +522,36 @@ fn promising(runs: &[Run]) -> Option<usize> {
         at_limit.1.fit.objective() < r.fit.objective() - resolution(&at_limit.1.fit, &r.fit)
     };
     runs.iter().filter(|r| r.fit.converged()).all(below).then_some(at_limit.0)
+}
+
+/// Whether the continuation `on` of `first` is kept: where it ended no higher, or certified
+/// within [`resolution`] above (it begins at the start's point, but its noise scales begin
+/// again at the problem's values). A NaN objective (a fit that panicked) is never kept.
+fn kept(first: &Estimate, on: &Estimate) -> bool {
+    on.objective() <= first.objective()
+        || (on.converged() && on.objective() <= first.objective() + resolution(first, on))
+}
+
+/// `fit` continued by `on`, as one fit: the continuation's end, with the iterations,
+/// evaluations and time of both, and both histories on one count of iterations (the
+/// continuation's first row, the first fit's end evaluated again at the problem's noise
+/// scales, replaces that fit's last, as a new round of scales does in the driver).
+fn fit_on(fit: &mut Estimate, mut on: Estimate) {
+    let before = fit.iterations;
+    let mut history = std::mem::take(&mut fit.history);
+    if !on.history.is_empty() {
+        history.pop();
+    }
+    history.extend(on.history.into_iter().map(|mut row| {
+        row.iteration += before;
+        row
+    }));
+    on.history = history;
+    on.iterations += before;
+    on.best_iteration += before;
+    on.counts += fit.counts;
+    on.elapsed += fit.elapsed;
+    *fit = on;
 }
 
 /// [`Estimate::objective`] as the waterfall and [`StartDone`] report it: None where it is NaN (a fit
@@ -722,6 +749,79 @@ mod tests {
         assert_eq!(best(&fits), 1);
         let fits = [fit_nll(48.0, 138.22 - 1e-4, false), fit_nll(48.0, 138.22, true)];
         assert_eq!(best(&fits), 0);
+    }
+
+    /// Runs ending at these fits, for [`promising`].
+    fn runs(fits: Vec<Estimate>) -> Vec<Run> {
+        fits.into_iter().map(|fit| Run { fit, redrawn: 0, ms: 0.0, from: vec![] }).collect()
+    }
+
+    #[test]
+    fn the_start_fitted_on_is_the_lowest_at_the_limit_below_every_converged_one() {
+        let promising = |fits: Vec<Estimate>| promising(&runs(fits));
+        // Below the converged start: the lowest of those at the limit.
+        assert_eq!(promising(vec![fit(48.0, false), fit(50.0, true)]), Some(0));
+        assert_eq!(promising(vec![fit(48.0, false), fit(47.0, false), fit(50.0, true)]), Some(1));
+        // Above a converged start, or below it only within ½·1e-6·ε: none.
+        assert_eq!(promising(vec![fit(50.0, false), fit(48.0, true)]), None);
+        assert_eq!(promising(vec![fit(48.0, false), fit(50.0, true), fit(47.0, true)]), None);
+        assert_eq!(promising(vec![fit(50.0 * (1.0 - 1e-7), false), fit(50.0, true)]), None);
+        // None converged: the least of all. None at the limit, or only at NaN: none.
+        assert_eq!(promising(vec![fit(48.0, false), fit(47.0, false)]), Some(1));
+        assert_eq!(promising(vec![fit(48.0, true)]), None);
+        assert_eq!(promising(vec![fit(f64::NAN, false), fit(50.0, true)]), None);
+    }
+
+    #[test]
+    fn a_continuation_is_kept_where_it_ends_no_higher_and_then_counts_both_fits() {
+        // Kept no higher, or certified within ½·1e-6·ε above; never higher, never NaN.
+        assert!(kept(&fit(48.0, false), &fit(47.0, true)));
+        assert!(kept(&fit(48.0, false), &fit(48.0, false)));
+        assert!(kept(&fit(48.0, false), &fit(48.0 * (1.0 + 1e-7), true)));
+        assert!(!kept(&fit(48.0, false), &fit(48.0 * (1.0 + 1e-7), false)));
+        assert!(!kept(&fit(48.0, false), &fit(49.0, true)));
+        assert!(!kept(&fit(48.0, false), &fit(f64::NAN, false)));
+        // One fit of 1 000 iterations then 40, with its best iterate at the continuation's
+        // 40th: iteration 1 040 of 1 041 rows, the continuation's first row in place of the
+        // first fit's last (the same point).
+        let rows = |n: usize, cost: f64| -> Vec<sysid_core::Iteration> {
+            (0..=n)
+                .map(|iteration| sysid_core::Iteration {
+                    iteration,
+                    cost: cost - iteration as f64 * 1e-3,
+                    gradient_norm: 1.0,
+                    step_norm: None,
+                    condition: None,
+                    optimality: None,
+                    values: vec![],
+                    diagnostics: Default::default(),
+                })
+                .collect()
+        };
+        let first = Estimate {
+            iterations: 1000,
+            best_iteration: 1000,
+            history: rows(1000, 49.0),
+            elapsed: Duration::from_millis(300),
+            counts: sysid_ode::Counts { steps: 9000, integrations: 1500, ..Default::default() },
+            ..fit(48.0, false)
+        };
+        let on = Estimate {
+            iterations: 40,
+            best_iteration: 40,
+            history: rows(40, 48.0),
+            elapsed: Duration::from_millis(20),
+            counts: sysid_ode::Counts { steps: 400, integrations: 60, ..Default::default() },
+            ..fit(47.96, true)
+        };
+        let mut fit = first;
+        fit_on(&mut fit, on);
+        assert_eq!((fit.iterations, fit.best_iteration, fit.history.len()), (1040, 1040, 1041));
+        assert!(fit.history.iter().enumerate().all(|(i, row)| row.iteration == i));
+        assert_eq!((fit.history[999].cost, fit.history[1000].cost), (49.0 - 0.999, 48.0));
+        assert_eq!(fit.elapsed, Duration::from_millis(320));
+        assert_eq!((fit.counts.steps, fit.counts.integrations), (9400, 1560));
+        assert!(fit.converged());
     }
 
     fn best(fits: &[Estimate]) -> usize {
