@@ -221,11 +221,15 @@ impl MethodArgs {
         Settings { driver, ql_start, shooting_intervals: self.shooting_intervals }
     }
 
-    /// The settings of each start of `--starts`: [`settings`](Self::settings), with
-    /// [`START_MAX_ITERATIONS`] iterations where `--max-iterations` is not given.
-    pub fn start_settings(&self) -> Settings {
+    /// The settings of one fit, or of each start where there are `starts` (the options of
+    /// `--starts`): [`settings`](Self::settings), with [`START_MAX_ITERATIONS`] iterations
+    /// for each start where `--max-iterations` is not given. Every entry point with
+    /// `--starts` takes its settings here.
+    pub fn settings_for(&self, starts: Option<&sysid_montecarlo::MultistartOptions>) -> Settings {
         let mut settings = self.settings();
-        settings.driver.max_iterations = self.max_iterations.unwrap_or(START_MAX_ITERATIONS);
+        if starts.is_some() {
+            settings.driver.max_iterations = self.max_iterations.unwrap_or(START_MAX_ITERATIONS);
+        }
         settings
     }
 
@@ -273,14 +277,16 @@ fn parse_fix(s: &str) -> Result<(String, f64), String> {
     Ok((name.to_string(), v))
 }
 
-/// `--starts`: multistart for `fit` and `compare`.
+/// `--starts`: multistart for `fit`, `compare` and `profile`.
 #[derive(Args, Debug, Clone, Default)]
 pub struct StartsArgs {
     /// Fit from N starts instead of one, in parallel: the guess, then N − 1 starts drawn
     /// uniformly on each unknown's scale within its bounds (--start-sampling), ±ρ
     /// (--start-spread) around the guess for unknowns without two bounds. Prints the best
     /// fit, how many starts reached it (converged within 0.1 of its objective), the
-    /// distinct minima and every start's outcome (the waterfall, in the JSON).
+    /// distinct minima and every start's outcome (the waterfall, in the JSON). Each start
+    /// may take 1000 iterations (--max-iterations); the start that ran out of them lowest,
+    /// below every converged start, may be fitted on once more at the end.
     #[arg(long, value_name = "N", value_parser = count, allow_hyphen_values = true)]
     pub starts: Option<usize>,
     /// Seed of the starts' draws (default 1).
@@ -459,17 +465,21 @@ mod tests {
     use super::*;
 
     /// The budgets docs/terminations.md states: 3000 iterations for one fit, 1000 for each
-    /// start of `--starts`, and `--max-iterations` for both where given.
+    /// start of `--starts`, and `--max-iterations` for both where given (also where it is the
+    /// other default's number).
     #[test]
     fn one_fit_and_each_start_have_their_documented_budgets() {
+        let starts = sysid_montecarlo::MultistartOptions::default();
+        let budget = |args: &MethodArgs, starts| args.settings_for(starts).driver.max_iterations;
         let none = MethodArgs::default();
-        assert_eq!(none.settings().driver.max_iterations, 3000);
-        assert_eq!(none.start_settings().driver.max_iterations, 1000);
-        let given = MethodArgs { max_iterations: Some(7), ..MethodArgs::default() };
-        assert_eq!(given.settings().driver.max_iterations, 7);
-        assert_eq!(given.start_settings().driver.max_iterations, 7);
-        // Everything else of a start's driver is the fit's.
-        let none_start = none.start_settings().driver;
-        assert_eq!(DriverOptions { max_iterations: 3000, ..none_start }, none.settings().driver);
+        assert_eq!((budget(&none, None), budget(&none, Some(&starts))), (3000, 1000));
+        for given in [7, 1000, 3000] {
+            let args = MethodArgs { max_iterations: Some(given), ..MethodArgs::default() };
+            assert_eq!((budget(&args, None), budget(&args, Some(&starts))), (given, given));
+        }
+        // Everything else of a start's settings is the fit's.
+        let (fit, start) = (none.settings_for(None), none.settings_for(Some(&starts)));
+        assert_eq!(DriverOptions { max_iterations: 3000, ..start.driver }, fit.driver);
+        assert_eq!(start.shooting_intervals, fit.shooting_intervals);
     }
 }

@@ -154,7 +154,7 @@ pub fn fit(problem: &AnyProblem, name: &str, settings: &Settings) -> anyhow::Res
 
 /// Fits with the named method from the problem's guess, or from the starts of `--starts`
 /// (the best fit, and what the starts found), telling `watch` how it goes: one fit with the
-/// settings of `options`, each start with its [start settings](MethodArgs::start_settings).
+/// settings of `options`, each start with a start's ([`MethodArgs::settings_for`]).
 /// The start is unusable only when every start is.
 pub fn fit_from_starts(
     problem: &AnyProblem,
@@ -163,10 +163,12 @@ pub fn fit_from_starts(
     starts: &StartsArgs,
     watch: &Rc<Watch>,
 ) -> anyhow::Result<(Estimate, Option<Starts>)> {
-    let Some(drawn) = starts.options()? else {
-        return Ok((watching(watch, || fit(problem, name, &options.settings()))?, None));
+    let drawn = starts.options()?;
+    let settings = options.settings_for(drawn.as_ref());
+    let Some(drawn) = drawn else {
+        return Ok((watching(watch, || fit(problem, name, &settings))?, None));
     };
-    let m = method(name, &options.start_settings())?;
+    let m = method(name, &settings)?;
     let (best, starts) = best_of_starts(problem, &*m, &drawn, watch)?;
     Ok((best, Some(starts)))
 }
