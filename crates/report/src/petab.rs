@@ -458,8 +458,8 @@ fn markdown(
         md,
         "Profiles are traced where the {lm} fit certifies and the problem has at most \
          {PROFILED_UNKNOWNS} free unknowns, each point re-optimised with at most {} \
-         iterations (the report's `--max-iterations`; each fit from nominal or nominal + 0.1 \
-         above may take {} iterations, each start of a multistart {}).\n",
+         iterations (the report's `--max-iterations`; each fit from nominal above may take {} \
+         iterations, each start of a multistart {}).\n",
         profile_settings.driver.max_iterations,
         sysid_core::MAX_ITERATIONS,
         sysid_core::START_MAX_ITERATIONS
