@@ -309,35 +309,13 @@ pub(crate) fn with_scales<S: System>(
     rounds: Vec<Estimate>,
     moved: f64,
 ) -> Estimate {
-    let (iterations, counts) = rounds.iter().fold((0, sysid_ode::Counts::default()), |acc, e| {
-        let mut c = acc.1;
-        c += e.counts;
-        (acc.0 + e.iterations, c)
-    });
-    let mut history = Vec::new();
-    let mut offset = 0;
-    let elapsed = rounds.iter().map(|e| e.elapsed).sum();
-    let mut last = None;
-    for (r, e) in rounds.into_iter().enumerate() {
-        // A round starts where the last one stopped, at the scales' new values: its first
-        // row replaces the last one's, so that each row is the point as last evaluated (and
-        // the reported point's row is the certificate's).
-        if r > 0 && !e.history.is_empty() {
-            history.pop();
-        }
-        history.extend(e.history.iter().cloned().map(|mut row| {
-            row.iteration += offset;
-            row
-        }));
-        offset += e.iterations;
-        last = Some(e);
-    }
-    let mut e = last.expect("at least one round");
-    e.best_iteration += offset - e.iterations;
-    e.iterations = iterations;
-    e.history = history;
-    e.counts = counts;
-    e.elapsed = elapsed;
+    // A round starts where the last one stopped, at the scales' new values: its first row
+    // replaces the last one's, so that each row is the point as last evaluated (and the
+    // reported point's row is the certificate's).
+    let mut rounds = rounds.into_iter();
+    let mut e = rounds.next().expect("at least one round");
+    rounds.for_each(|next| e.continue_with(next));
+    let iterations = e.iterations;
     e.certificate.scales = Some(moved);
     if !e.certificate.holds()
         && let Termination::Converged(rule) = e.termination

@@ -219,6 +219,29 @@ impl Estimate {
         self.nll.map_or(self.cost / 2.0, |nll| nll + self.prior.unwrap_or(0.0))
     }
 
+    /// Makes this fit and `next`, a fit begun where this one ended, one fit: `next`'s end,
+    /// with the iterations, evaluations and time of both, and both histories on one count of
+    /// iterations. `next`'s first row (this fit's end, evaluated again: at new noise scales
+    /// in a new round of the driver, or at the problem's in a multistart's continuation)
+    /// replaces this fit's last.
+    pub fn continue_with(&mut self, mut next: Estimate) {
+        let before = self.iterations;
+        let mut history = std::mem::take(&mut self.history);
+        if !next.history.is_empty() {
+            history.pop();
+        }
+        history.extend(next.history.into_iter().map(|mut row| {
+            row.iteration += before;
+            row
+        }));
+        next.history = history;
+        next.iterations += before;
+        next.best_iteration += before;
+        next.counts += self.counts;
+        next.elapsed += self.elapsed;
+        *self = next;
+    }
+
     /// One fit of two runs from the same start: the second run's estimate where it is the
     /// better (certified where the first is not, else the lower [`objective`](Self::objective);
     /// a point that could not be evaluated is never the better), otherwise the first's, with

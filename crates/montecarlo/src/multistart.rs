@@ -472,7 +472,7 @@ where
             // the run's only).
             fit_from(&runs[j].fit.values).ok().filter(|on| kept(&runs[j].fit, on)).map(|on| {
                 let run = &mut runs[j];
-                fit_on(&mut run.fit, on);
+                run.fit.continue_with(on);
                 run.ms += began.elapsed().as_secs_f64() * 1e3;
                 j
             })
@@ -507,8 +507,7 @@ where
 /// The start fitted on once more, with its method's budget again, after every start has run:
 /// the one that ran out of iterations lowest, where that is below every converged start (by
 /// more than [`resolution`]), or where none converged. Its crawl was going where no other
-/// start went, and one more
-/// start's budget there is worth more than another random start (Okuonghae: start 48 of 100
+/// start went, and one more start's budget there is worth more than another random start (Okuonghae: start 48 of 100
 /// ended at the limit at 373.561151 and certifies 373.547669 when fitted on, 2.37 below the
 /// least converged start).
 fn promising(runs: &[Run]) -> Option<usize> {
@@ -530,28 +529,6 @@ fn promising(runs: &[Run]) -> Option<usize> {
 fn kept(first: &Estimate, on: &Estimate) -> bool {
     on.objective() <= first.objective()
         || (on.converged() && on.objective() <= first.objective() + resolution(first, on))
-}
-
-/// `fit` continued by `on`, as one fit: the continuation's end, with the iterations,
-/// evaluations and time of both, and both histories on one count of iterations (the
-/// continuation's first row, the first fit's end evaluated again at the problem's noise
-/// scales, replaces that fit's last, as a new round of scales does in the driver).
-fn fit_on(fit: &mut Estimate, mut on: Estimate) {
-    let before = fit.iterations;
-    let mut history = std::mem::take(&mut fit.history);
-    if !on.history.is_empty() {
-        history.pop();
-    }
-    history.extend(on.history.into_iter().map(|mut row| {
-        row.iteration += before;
-        row
-    }));
-    on.history = history;
-    on.iterations += before;
-    on.best_iteration += before;
-    on.counts += fit.counts;
-    on.elapsed += fit.elapsed;
-    *fit = on;
 }
 
 /// [`Estimate::objective`] as the waterfall and [`StartDone`] report it: None where it is NaN (a fit
@@ -815,7 +792,7 @@ mod tests {
             ..fit(47.96, true)
         };
         let mut fit = first;
-        fit_on(&mut fit, on);
+        fit.continue_with(on);
         assert_eq!((fit.iterations, fit.best_iteration, fit.history.len()), (1040, 1040, 1041));
         assert!(fit.history.iter().enumerate().all(|(i, row)| row.iteration == i));
         assert_eq!((fit.history[999].cost, fit.history[1000].cost), (49.0 - 0.999, 48.0));
