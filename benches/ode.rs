@@ -4,10 +4,10 @@
 //! Every run is the case's initial-value problem at the truth (or the reference answer), at
 //! the case's tolerances (rtol, atol for states and sensitivities alike), with output at the
 //! case's measurement times and, for `sensitivities`, derivatives with respect to the case's
-//! unknowns. Solvers: sysid's explicit DOPRI5, implicit Rodas4 and multistep BDF, diffsol's
-//! explicit Tsit45 and implicit BDF (dense nalgebra LU). All five get their Jacobian products from
-//! the same dual-number evaluation of the model, so the comparison is between integrators,
-//! not model code. `tests/agreement.rs` of `sysid-peer-diffsol` checks that they agree.
+//! unknowns. Solvers: sysid's explicit DOPRI5 and DOP853, implicit Rodas4 and multistep BDF,
+//! diffsol's explicit Tsit45 and implicit BDF (dense nalgebra LU). All six get their Jacobian
+//! products from the same dual-number evaluation of the model, so the comparison is between
+//! integrators, not model code. `tests/agreement.rs` of `sysid-peer-diffsol` checks that they agree.
 //!
 //! `SYSID_BENCH_SYSTEMS=van-der-pol,robertson cargo bench -p sysid --bench ode` limits the
 //! run to some systems.
@@ -36,6 +36,7 @@ impl Visit for Bench<'_, '_> {
         // An explicit integrator on a stiff case takes ~10⁵ steps: allow them.
         let ours = [
             ("sysid-dopri5", Integrator::dopri5(rtol, atol).with_max_steps(10_000_000)),
+            ("sysid-dop853", Integrator::dop853(rtol, atol).with_max_steps(10_000_000)),
             ("sysid-rodas4", Integrator::rodas4(rtol, atol).with_max_steps(10_000_000)),
             ("sysid-bdf", Integrator::bdf(rtol, atol).with_max_steps(10_000_000)),
         ];

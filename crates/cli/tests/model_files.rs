@@ -579,7 +579,7 @@ fn integrator_choices_are_checked() {
         "radau",
         &model,
         DECAY_DATA,
-        "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\", \"bdf\" or \"auto\", got \"radau\"",
+        "[integrator] method must be \"dopri5\", \"dop853\", \"rk4\", \"rodas4\", \"rodas5p\", \"bdf\" or \"auto\", got \"radau\"",
     );
     let case = Case::new("rk4-step", DECAY, DECAY_DATA);
     let out = sysid(&["fit", "--model", &case.model(), "--integrator", "rk4"]);

@@ -130,6 +130,7 @@ impl<'p, S: System> Evaluations<'p, S> {
         reference.fixed_step = None;
         reference.scheme = match integrator.scheme {
             Scheme::Rk4 | Scheme::Dopri5 | Scheme::Auto => Scheme::Dopri5,
+            Scheme::Dop853 => Scheme::Dop853,
             stiff @ (Scheme::Rodas4 | Scheme::Rodas5p | Scheme::Bdf) => stiff,
         };
         reference.rtol = REFERENCE_RTOL;

@@ -168,7 +168,7 @@ fn experiments_with_events_go_by_adjoint_through_their_jumps() {
 fn an_event_fires_once_whichever_way_the_model_is_integrated() {
     let dir = scratch("fires-once", &with_event());
     let mut nlls = Vec::new();
-    for method in ["rodas5p", "dopri5", "rodas4"] {
+    for method in ["rodas5p", "dopri5", "dop853", "rodas4"] {
         let text = with_event().replace("method = \"rodas5p\"", &format!("method = \"{method}\""));
         std::fs::write(dir.join("m.toml"), text).unwrap();
         let problem = Model::load(&dir.join("m.toml")).unwrap().problem(None).unwrap();

@@ -661,7 +661,7 @@ fn integrator() {
         ),
         (
             format!("{OK}[integrator]\nmethod = \"euler\"\n"),
-            "models/m.toml:12:10: [integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\", \"bdf\" or \"auto\", got \"euler\"",
+            "models/m.toml:12:10: [integrator] method must be \"dopri5\", \"dop853\", \"rk4\", \"rodas4\", \"rodas5p\", \"bdf\" or \"auto\", got \"euler\"",
         ),
         (
             format!("{OK}[integrator]\nmethod = 1\n"),
@@ -841,6 +841,7 @@ fn a_file_with_every_section_reads_every_value() {
 fn every_method_name_reads_as_its_scheme() {
     for (name, scheme) in [
         ("dopri5", Scheme::Dopri5),
+        ("dop853", Scheme::Dop853),
         ("rodas4", Scheme::Rodas4),
         ("rodas5p", Scheme::Rodas5p),
         ("bdf", Scheme::Bdf),

@@ -43,18 +43,9 @@ impl Control {
 }
 
 /// Hairer's starting step size for a given direction (Solving ODE I, Section II.4), from
-/// (t, w.x) with `w.k[0]` = f(t, x); one evaluation of f, into `w.k[1]`. For a scheme of
-/// order 4 or more ([`initial_step_of_order`] for another).
-pub(crate) fn initial_step<R: Rhs>(
-    ev: &mut Evaluator<'_, R>,
-    w: &mut Work,
-    t: f64,
-    dir: f64,
-) -> f64 {
-    initial_step_of_order(ev, w, t, dir, 4)
-}
-
-/// [`initial_step`] for a first step of order `order`: its error grows as h^(order + 1).
+/// (t, w.x) with `w.k[0]` = f(t, x), for a first step of order `order` (its error grows as
+/// h^(order + 1): 4 for DOPRI5 and the Rosenbrock schemes, 8 for DOP853, 1 for the
+/// multistep scheme's first step); one evaluation of f, into `w.k[1]`.
 pub(crate) fn initial_step_of_order<R: Rhs>(
     ev: &mut Evaluator<'_, R>,
     w: &mut Work,

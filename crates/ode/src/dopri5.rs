@@ -113,7 +113,7 @@ impl<R: Rhs> Stepper<R> for Dopri5 {
 
     /// Hairer's form: the cubic Hermite interpolant through both ends and their slopes, plus
     /// the fourth-order term r₅ from the stages (his code's CONTD5).
-    fn dense(&self, w: &mut Work, t: f64, t_next: f64) {
+    fn dense(&self, _: &mut Evaluator<'_, R>, w: &mut Work, t: f64, t_next: f64) {
         let h = t_next - t;
         let n = w.x.len();
         let (x, xn, k) = (&w.x[..n], &w.x_new[..n], &w.k);

@@ -4,8 +4,9 @@
 //! through [`Stepper`].
 
 use crate::bdf::{Attempt, DIVERGED_FACTOR, History};
-use crate::control::{Control, MIN_FACTOR, initial_step, initial_step_of_order};
+use crate::control::{Control, MIN_FACTOR, initial_step_of_order};
 use crate::counts::Counts;
+use crate::dop853::Dop853;
 use crate::dopri5::Dopri5;
 use crate::error::{BLOW_UP_GROWTH, OdeError};
 use crate::interpolant::Interpolant;
@@ -169,6 +170,7 @@ fn segment_ends(t0: f64, t_end: f64, stops: &[f64]) -> Vec<f64> {
 #[derive(Clone, Copy, Debug)]
 enum Active {
     Dopri5,
+    Dop853,
     Rk4,
     Rodas4,
     Rodas5p,
@@ -182,6 +184,7 @@ impl Active {
     fn first(scheme: Scheme) -> Self {
         match scheme {
             Scheme::Dopri5 | Scheme::Auto => Self::Dopri5,
+            Scheme::Dop853 => Self::Dop853,
             Scheme::Rk4 => Self::Rk4,
             Scheme::Rodas4 => Self::Rodas4,
             Scheme::Rodas5p | Scheme::Bdf => Self::Rodas5p,
@@ -200,6 +203,7 @@ impl<R: Rhs> Stepper<R> for Active {
     ) -> Result<f64, FactorError> {
         match self {
             Self::Dopri5 => Dopri5.step(ev, w, t, h),
+            Self::Dop853 => Dop853.step(ev, w, t, h),
             Self::Rk4 => Rk4.step(ev, w, t, h),
             Self::Rodas4 => Rodas4.step(ev, w, t, h),
             Self::Rodas5p => Rodas5p.step(ev, w, t, h),
@@ -207,18 +211,20 @@ impl<R: Rhs> Stepper<R> for Active {
     }
 
     #[inline]
-    fn dense(&self, w: &mut Work, t: f64, t_next: f64) {
+    fn dense(&self, ev: &mut Evaluator<'_, R>, w: &mut Work, t: f64, t_next: f64) {
         match self {
-            Self::Dopri5 => <Dopri5 as Stepper<R>>::dense(&Dopri5, w, t, t_next),
-            Self::Rk4 => <Rk4 as Stepper<R>>::dense(&Rk4, w, t, t_next),
-            Self::Rodas4 => <Rodas4 as Stepper<R>>::dense(&Rodas4, w, t, t_next),
-            Self::Rodas5p => <Rodas5p as Stepper<R>>::dense(&Rodas5p, w, t, t_next),
+            Self::Dopri5 => Dopri5.dense(ev, w, t, t_next),
+            Self::Dop853 => Dop853.dense(ev, w, t, t_next),
+            Self::Rk4 => Rk4.dense(ev, w, t, t_next),
+            Self::Rodas4 => Rodas4.dense(ev, w, t, t_next),
+            Self::Rodas5p => Rodas5p.dense(ev, w, t, t_next),
         }
     }
 
     fn control(&self) -> Option<Control> {
         match self {
             Self::Dopri5 => <Dopri5 as Stepper<R>>::control(&Dopri5),
+            Self::Dop853 => <Dop853 as Stepper<R>>::control(&Dop853),
             Self::Rk4 => <Rk4 as Stepper<R>>::control(&Rk4),
             Self::Rodas4 => <Rodas4 as Stepper<R>>::control(&Rodas4),
             Self::Rodas5p => <Rodas5p as Stepper<R>>::control(&Rodas5p),
@@ -228,6 +234,7 @@ impl<R: Rhs> Stepper<R> for Active {
     fn stiffness_estimate(&self, w: &Work, h: f64) -> Option<f64> {
         match self {
             Self::Dopri5 => <Dopri5 as Stepper<R>>::stiffness_estimate(&Dopri5, w, h),
+            Self::Dop853 => <Dop853 as Stepper<R>>::stiffness_estimate(&Dop853, w, h),
             Self::Rk4 => <Rk4 as Stepper<R>>::stiffness_estimate(&Rk4, w, h),
             Self::Rodas4 => <Rodas4 as Stepper<R>>::stiffness_estimate(&Rodas4, w, h),
             Self::Rodas5p => <Rodas5p as Stepper<R>>::stiffness_estimate(&Rodas5p, w, h),
@@ -380,7 +387,8 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
     /// Error-controlled steps to the end of the segment, the last landing on it exactly.
     fn adaptive_segment(&mut self, seg_end: f64) -> Result<(), OdeError> {
         if self.h == 0.0 {
-            self.h = initial_step(&mut self.ev, &mut self.work, self.t, self.dir);
+            let order = <Active as Stepper<R>>::first_step_order(&self.stepper);
+            self.h = initial_step_of_order(&mut self.ev, &mut self.work, self.t, self.dir, order);
         }
         let mut last_rejected = false;
         // The component that was NaN or infinite in the last rejected trial step, if any:
@@ -501,7 +509,9 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             };
             let factor = history.accept(&mut self.ev, err);
             self.work.x_new.copy_from_slice(history.solution());
-            self.accept_with(t_next, |w, t, t_next| history.dense(&mut w.interpolant, t, t_next))?;
+            self.accept_with(t_next, |_, w, t, t_next| {
+                history.dense(&mut w.interpolant, t, t_next)
+            })?;
             if let Some(factor) = factor {
                 history.rescale(self.dir * hs * factor);
             }
@@ -656,8 +666,8 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
     /// wanted), advance.
     fn accept(&mut self, t_next: f64) -> Result<(), OdeError> {
         let stepper = self.stepper;
-        self.accept_with(t_next, |w, t, t_next| {
-            <Active as Stepper<R>>::dense(&stepper, w, t, t_next)
+        self.accept_with(t_next, |ev, w, t, t_next| {
+            <Active as Stepper<R>>::dense(&stepper, ev, w, t, t_next)
         })
     }
 
@@ -665,7 +675,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
     fn accept_with(
         &mut self,
         t_next: f64,
-        dense: impl FnOnce(&mut Work, f64, f64),
+        dense: impl FnOnce(&mut Evaluator<'r, R>, &mut Work, f64, f64),
     ) -> Result<(), OdeError> {
         let t = self.t;
         if let Some(i) = self.work.x_new.iter().position(|v| !v.is_finite()) {
@@ -674,7 +684,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         }
         self.ev.counts.steps += 1;
         if (self.wants)(t, t_next) {
-            dense(&mut self.work, t, t_next);
+            dense(&mut self.ev, &mut self.work, t, t_next);
             (self.on_step)(&self.work.interpolant);
         }
         std::mem::swap(&mut self.work.x, &mut self.work.x_new);
@@ -710,7 +720,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             return Vec::new();
         }
         let falling: Vec<usize> = (0..next.len()).filter(|&i| falls(i)).collect();
-        <Active as Stepper<R>>::dense(&self.stepper, &mut self.work, t, t_next);
+        <Active as Stepper<R>>::dense(&self.stepper, &mut self.ev, &mut self.work, t, t_next);
         let mut all = vec![0.0; self.conditions.len()];
         let mut located: Vec<(usize, f64)> = falling
             .into_iter()

@@ -6,11 +6,13 @@ use crate::signal::Side;
 /// The solution on one accepted step from `t` to `t + h` (h may be negative), as the
 /// polynomial in θ = (s − t)/h
 ///
-/// x(s) = r₁ + θ (r₂ + (1−θ)(r₃ + θ (r₄ + (1−θ)(r₅ + θ r₆))))
+/// x(s) = r₁ + θ (r₂ + (1−θ)(r₃ + θ (r₄ + (1−θ)(r₅ + θ (r₆ + (1−θ)(r₇ + θ r₈))))))
 ///
 /// which is Hairer's form for DOPRI5 (r₅ ≠ 0, r₆ = 0, order 4) and, with r₅ = r₆ = 0, the
 /// cubic Hermite interpolant through both ends and their slopes (order 3) used for RK4; r₆
-/// extends it to degree 5, the multistep scheme's interpolating polynomial at order 5.
+/// extends it to degree 5, the multistep scheme's interpolating polynomial at order 5, and
+/// r₇, r₈ to degree 7, DOP853's dense output of order 7. A step's polynomial has six
+/// coefficient vectors (r₇ = r₈ = 0, not stored) or all eight (DOP853's).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Interpolant {
     t: f64,
@@ -18,20 +20,25 @@ pub struct Interpolant {
     t_end: f64,
     h: f64,
     dim: usize,
-    /// r₁..r₆, each of length `dim`, stored one after another.
+    /// r₁..r₈, each of length `dim`, stored one after another; the first `terms` of them
+    /// are the step's.
     coefficients: Vec<f64>,
-    /// Whether r₆ was last written (by the multistep scheme): the one-step schemes write
-    /// r₁..r₅ and find r₆ = 0.
+    /// How many of r₁..r₈ the step's polynomial has: [`TERMS`] or [`ALL_TERMS`].
+    terms: usize,
+    /// Whether r₆ was last written (by the multistep scheme or DOP853): the other one-step
+    /// schemes write r₁..r₅ and find r₆ = 0.
     sixth: bool,
 }
 
-/// The coefficient vectors of a step's polynomial.
-const COEFFICIENTS: usize = 6;
+/// The coefficient vectors of a step's polynomial but DOP853's (r₁..r₆).
+const TERMS: usize = 6;
+/// The coefficient vectors of DOP853's polynomial (r₁..r₈).
+const ALL_TERMS: usize = 8;
 
 impl Interpolant {
     pub(crate) fn new(dim: usize) -> Self {
-        let coefficients = vec![0.0; COEFFICIENTS * dim];
-        Self { t: 0.0, t_end: 0.0, h: 0.0, dim, coefficients, sixth: false }
+        let coefficients = vec![0.0; ALL_TERMS * dim];
+        Self { t: 0.0, t_end: 0.0, h: 0.0, dim, coefficients, terms: TERMS, sixth: false }
     }
 
     pub(crate) fn set_span(&mut self, t: f64, t_end: f64) {
@@ -68,7 +75,8 @@ impl Interpolant {
     /// r₁..r₅, for a scheme whose polynomial is of degree 4 at most (r₆ = 0).
     pub(crate) fn coefficients_mut(&mut self) -> [&mut [f64]; 5] {
         let clear = std::mem::take(&mut self.sixth);
-        let [r1, r2, r3, r4, r5, r6] = self.split();
+        self.terms = TERMS;
+        let [r1, r2, r3, r4, r5, r6, _, _] = self.split();
         if clear {
             r6.fill(0.0);
         }
@@ -76,18 +84,33 @@ impl Interpolant {
     }
 
     /// r₁..r₆, all of which the caller writes.
-    pub(crate) fn coefficients6_mut(&mut self) -> [&mut [f64]; COEFFICIENTS] {
+    pub(crate) fn coefficients6_mut(&mut self) -> [&mut [f64]; TERMS] {
         self.sixth = true;
+        self.terms = TERMS;
+        let [r1, r2, r3, r4, r5, r6, _, _] = self.split();
+        [r1, r2, r3, r4, r5, r6]
+    }
+
+    /// r₁..r₈, all of which the caller writes (DOP853's polynomial of degree 7).
+    pub(crate) fn coefficients8_mut(&mut self) -> [&mut [f64]; ALL_TERMS] {
+        self.sixth = true;
+        self.terms = ALL_TERMS;
         self.split()
     }
 
-    fn split(&mut self) -> [&mut [f64]; COEFFICIENTS] {
-        let (r1, rest) = self.coefficients.split_at_mut(self.dim);
-        let (r2, rest) = rest.split_at_mut(self.dim);
-        let (r3, rest) = rest.split_at_mut(self.dim);
-        let (r4, rest) = rest.split_at_mut(self.dim);
-        let (r5, r6) = rest.split_at_mut(self.dim);
-        [r1, r2, r3, r4, r5, r6]
+    fn split(&mut self) -> [&mut [f64]; ALL_TERMS] {
+        let dim = self.dim;
+        let mut rest = self.coefficients.as_mut_slice();
+        std::array::from_fn(|_| {
+            let (r, tail) = std::mem::take(&mut rest).split_at_mut(dim);
+            rest = tail;
+            r
+        })
+    }
+
+    /// The step's coefficient vectors, r₁ to the last it has.
+    fn used(&self) -> &[f64] {
+        &self.coefficients[..self.terms * self.dim]
     }
 
     /// Where the step starts.
@@ -119,7 +142,7 @@ impl Interpolant {
 
     /// Writes components `first .. first + out.len()` of the solution at s into `out`.
     pub fn eval_range(&self, s: f64, first: usize, out: &mut [f64]) {
-        evaluate(self.t, self.t_end, self.dim, &self.coefficients, s, first, out);
+        evaluate(self.t, self.t_end, self.dim, self.used(), s, first, out);
     }
 }
 
@@ -134,8 +157,12 @@ pub struct DenseSolution {
     /// (start, end) of each step as integrated (end < start for a backward step), in
     /// increasing time once finished.
     spans: Vec<(f64, f64)>,
-    /// 6·dim coefficients per step (r₁..r₆ of [`Interpolant`]).
+    /// The coefficients of every step (r₁..r₆ of [`Interpolant`], or r₁..r₈ for DOP853's),
+    /// one step after another.
     coefficients: Vec<f64>,
+    /// Where each step's coefficients begin in `coefficients`, and after the last step its
+    /// end (empty while no step is stored).
+    offsets: Vec<usize>,
     /// The state events fired along the solution, in order: (event, τ, the state before
     /// it). A step ends at each τ and the next begins there, after the reset.
     pub(crate) fired: Vec<Fired>,
@@ -181,7 +208,12 @@ impl DenseSolution {
             Ok(mut spare) if !spare.is_empty() => spare.remove(0),
             _ => Vec::new(),
         };
-        Self { dim, spans: Vec::new(), coefficients, fired: Vec::new() }
+        Self { dim, spans: Vec::new(), coefficients, offsets: Vec::new(), fired: Vec::new() }
+    }
+
+    /// The coefficients of step i.
+    fn step(&self, i: usize) -> &[f64] {
+        &self.coefficients[self.offsets[i]..self.offsets[i + 1]]
     }
 
     /// Length of the vectors.
@@ -193,8 +225,12 @@ impl DenseSolution {
     /// time; call [`finish`](Self::finish) after integrating in both directions.
     pub fn push(&mut self, step: &Interpolant) {
         debug_assert_eq!(step.dim, self.dim);
+        if self.offsets.is_empty() {
+            self.offsets.push(self.coefficients.len());
+        }
         self.spans.push((step.t, step.t_end));
-        self.coefficients.extend_from_slice(&step.coefficients);
+        self.coefficients.extend_from_slice(step.used());
+        self.offsets.push(self.coefficients.len());
     }
 
     /// Puts the steps in increasing time.
@@ -204,14 +240,17 @@ impl DenseSolution {
         }
         let mut order: Vec<usize> = (0..self.spans.len()).collect();
         order.sort_by(|&a, &b| lower(self.spans[a]).total_cmp(&lower(self.spans[b])));
-        let w = COEFFICIENTS * self.dim;
         let spans = order.iter().map(|&i| self.spans[i]).collect();
         let mut coefficients = Vec::with_capacity(self.coefficients.len());
+        let mut offsets = Vec::with_capacity(self.offsets.len());
+        offsets.push(0);
         for &i in &order {
-            coefficients.extend_from_slice(&self.coefficients[i * w..(i + 1) * w]);
+            coefficients.extend_from_slice(self.step(i));
+            offsets.push(coefficients.len());
         }
         self.spans = spans;
         self.coefficients = coefficients;
+        self.offsets = offsets;
     }
 
     /// The span covered, if any step is stored.
@@ -260,8 +299,7 @@ impl DenseSolution {
         if ends_there {
             *hint = other;
             let (a, b) = self.spans[other];
-            let w = COEFFICIENTS * self.dim;
-            evaluate(a, b, self.dim, &self.coefficients[other * w..(other + 1) * w], t, 0, out);
+            evaluate(a, b, self.dim, self.step(other), t, 0, out);
         }
         true
     }
@@ -289,19 +327,20 @@ impl DenseSolution {
         let Some(i) = found else { return false };
         *hint = i;
         let (a, b) = self.spans[i];
-        let w = COEFFICIENTS * self.dim;
-        evaluate(a, b, self.dim, &self.coefficients[i * w..(i + 1) * w], t, 0, out);
+        evaluate(a, b, self.dim, self.step(i), t, 0, out);
         true
     }
 
     /// The same solution under a linear map L of its vectors: `map(x, out)` writes L x (of
     /// length `dim`). Exact, because the interpolants are linear in their coefficients.
     pub fn map(&self, dim: usize, mut map: impl FnMut(&[f64], &mut [f64])) -> DenseSolution {
-        let mut coefficients = vec![0.0; self.spans.len() * COEFFICIENTS * dim];
+        let vectors = self.coefficients.len() / self.dim.max(1);
+        let mut coefficients = vec![0.0; vectors * dim];
         for (r, o) in self.coefficients.chunks(self.dim).zip(coefficients.chunks_mut(dim)) {
             map(r, o);
         }
-        DenseSolution { dim, spans: self.spans.clone(), coefficients, fired: Vec::new() }
+        let offsets = self.offsets.iter().map(|&o| o / self.dim.max(1) * dim).collect();
+        DenseSolution { dim, spans: self.spans.clone(), coefficients, offsets, fired: Vec::new() }
     }
 }
 
@@ -313,12 +352,24 @@ fn upper((a, b): (f64, f64)) -> f64 {
     a.max(b)
 }
 
-/// Evaluates the interpolation polynomial of a step from a to b with coefficients r₁..r₆ (each of
-/// length `dim`, stored one after another) at s, components `first..first + out.len()`.
+/// Evaluates the interpolation polynomial of a step from a to b with coefficients r₁..r₆ or
+/// r₁..r₈ (each of length `dim`, stored one after another) at s, components
+/// `first..first + out.len()`.
 fn evaluate(a: f64, b: f64, dim: usize, c: &[f64], s: f64, first: usize, out: &mut [f64]) {
     let h = b - a;
     let theta = if h == 0.0 { 0.0 } else { (s - a) / h };
     let theta1 = 1.0 - theta;
+    if c.len() == ALL_TERMS * dim {
+        for (k, o) in out.iter_mut().enumerate() {
+            let i = first + k;
+            let r = |j: usize| c[j * dim + i];
+            let tail = r(5) + theta1 * (r(6) + theta * r(7));
+            *o = r(0)
+                + theta
+                    * (r(1) + theta1 * (r(2) + theta * (r(3) + theta1 * (r(4) + theta * tail))));
+        }
+        return;
+    }
     for (k, o) in out.iter_mut().enumerate() {
         let i = first + k;
         *o = c[i]

@@ -12,7 +12,9 @@
 //!
 //! What it provides:
 //! * integrators ([`Integrator`]): adaptive Dormand–Prince 5(4) with error control over all
-//!   components (sensitivities included) and dense output; classical RK4 with a fixed step;
+//!   components (sensitivities included) and dense output; Dormand–Prince 8(5,3), Hairer's
+//!   DOP853, for tight tolerances (order 8, dense output of order 7); classical RK4 with a
+//!   fixed step;
 //!   for stiff systems Rodas4 and Rodas5P, Rosenbrock methods of order 4 and 5 with the
 //!   exact Jacobian and dense LU, or, for a system that gives its sparse Jacobian and whose
 //!   factors fill little of n² ([`SPARSE_SHARE`]), a sparse LU in a fill-reducing order
@@ -80,6 +82,7 @@ mod adjoint;
 mod bdf;
 mod control;
 mod counts;
+mod dop853;
 mod dopri5;
 mod driver;
 mod error;

@@ -43,7 +43,7 @@ impl<R: Rhs> Stepper<R> for Rk4 {
         Ok(f64::NAN)
     }
 
-    fn dense(&self, w: &mut Work, t: f64, t_next: f64) {
+    fn dense(&self, _: &mut Evaluator<'_, R>, w: &mut Work, t: f64, t_next: f64) {
         let n = w.x.len();
         let (x, xn, k) = (&w.x[..n], &w.x_new[..n], &w.k);
         w.interpolant.set_hermite((t, t_next), (x, xn), (&k[0][..n], &k[6][..n]));

@@ -244,7 +244,7 @@ impl<R: Rhs> Stepper<R> for Rodas5p {
 
     /// From the stage increments in `w.k`: r₁ = x, r₂ = x_new − x, r₃ = K₁,
     /// r₄ = K₂ + K₃, r₅ = −K₃ (the form of [`crate::Interpolant`]: θ K₃ = K₃ − (1 − θ) K₃).
-    fn dense(&self, w: &mut Work, t: f64, t_next: f64) {
+    fn dense(&self, _: &mut Evaluator<'_, R>, w: &mut Work, t: f64, t_next: f64) {
         let n = w.x.len();
         let [r1, r2, r3, r4, r5] = w.interpolant.coefficients_mut();
         let k = &w.k;

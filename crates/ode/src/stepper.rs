@@ -26,15 +26,22 @@ pub(crate) trait Stepper<R: Rhs> {
         h: f64,
     ) -> Result<f64, FactorError>;
 
-    /// Fills `w.interpolant` for the step just taken from t to t_next.
-    fn dense(&self, w: &mut Work, t: f64, t_next: f64);
+    /// Fills `w.interpolant` for the step just taken from t to t_next (DOP853 evaluates f
+    /// for it; the other schemes form it from their stages).
+    fn dense(&self, ev: &mut Evaluator<'_, R>, w: &mut Work, t: f64, t_next: f64);
 
     /// The step-size controller; `None` for a scheme without an error estimate, which
     /// [`Integrator::validate`](crate::Integrator::validate) allows only with a fixed step.
     fn control(&self) -> Option<Control>;
 
+    /// The order whose error the first step's size is estimated for
+    /// ([`initial_step_of_order`](crate::control::initial_step_of_order)).
+    fn first_step_order(&self) -> i32 {
+        4
+    }
+
     /// Hairer's estimate of h·λ, λ the dominant eigenvalue of ∂f/∂x, for the step just
-    /// taken; `None` for schemes that give none (only DOPRI5 does).
+    /// taken, on DOPRI5's scale; `None` for schemes that give none (DOPRI5 and DOP853 do).
     fn stiffness_estimate(&self, w: &Work, h: f64) -> Option<f64> {
         let _ = (w, h);
         None

@@ -17,6 +17,8 @@ pub(crate) struct Work {
     /// Rosenbrock: f(t, x) and ∂f/∂t at the start of the step.
     pub(crate) f0: Vec<f64>,
     pub(crate) ft: Vec<f64>,
+    /// DOP853's stages beyond `k`, allocated at its first step.
+    pub(crate) more: Vec<Vec<f64>>,
     pub(crate) interpolant: Interpolant,
 }
 
@@ -29,6 +31,7 @@ impl Work {
             x_new: vec![0.0; n],
             f0: vec![0.0; n],
             ft: vec![0.0; n],
+            more: Vec::new(),
             interpolant: Interpolant::new(n),
         }
     }

@@ -73,6 +73,7 @@ fn decay_gradient_matches_the_closed_form() {
     let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0)];
     for integrator in [
         Integrator::dopri5(1e-12, 1e-14),
+        Integrator::dop853(1e-12, 1e-14),
         Integrator::rodas5p(1e-11, 1e-14),
         Integrator::bdf(1e-11, 1e-14),
     ] {
@@ -106,6 +107,7 @@ fn lotka_volterra_adjoint_agrees_with_forward_sensitivities() {
     let c = seeds(2, times.len());
     for integrator in [
         Integrator::dopri5(1e-11, 1e-12),
+        Integrator::dop853(1e-11, 1e-12),
         Integrator::rodas5p(1e-11, 1e-12),
         Integrator::bdf(1e-11, 1e-12),
     ] {

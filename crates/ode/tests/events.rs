@@ -27,9 +27,10 @@ impl System for Sawtooth {
     }
 }
 
-fn integrators() -> [Integrator; 4] {
+fn integrators() -> [Integrator; 5] {
     [
         Integrator::dopri5(1e-11, 1e-13),
+        Integrator::dop853(1e-11, 1e-13),
         Integrator::rodas4(1e-10, 1e-12),
         Integrator::rodas5p(1e-10, 1e-12),
         Integrator::rk4(1e-3),

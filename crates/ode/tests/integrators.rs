@@ -114,6 +114,69 @@ fn dopri5_converges_with_order_five() {
     }
 }
 
+#[test]
+fn dop853_converges_with_order_eight() {
+    let orders =
+        observed_orders(|h| Integrator::dop853(1e-8, 1e-10).with_fixed_step(h), &[1.0, 0.5, 0.25]);
+    for p in orders {
+        assert!((p - 8.0).abs() < 0.2, "observed order {p}");
+    }
+}
+
+/// DOP853 against the closed forms at tight tolerances: at the steps' ends, between them
+/// (2 000 output times from its dense output of order 7), and the parameter's sensitivity.
+#[test]
+fn dop853_matches_closed_forms_at_and_between_its_steps() {
+    let tight = Integrator::dop853(1e-12, 1e-14);
+    let sys = Decay::new();
+    let times: Vec<f64> = (0..=20).map(|i| 0.5 * i as f64).collect();
+    let sol = Ivp::new(&sys, 0.0, &[3.0], &[0.7]).solve(&tight, &times).unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        assert_close(sol.state(m)[0], Decay::exact(3.0, 0.7, t).0, 1e-9);
+    }
+    let sys = Oscillator::new(false);
+    let times: Vec<f64> = (0..2000).map(|i| 0.005 * i as f64 + 0.0013).collect();
+    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0])
+        .solve(&Integrator::dop853(1e-10, 1e-12), &times)
+        .unwrap();
+    assert!(sol.counts().steps < 100, "{} steps", sol.counts().steps);
+    let mut worst: f64 = 0.0;
+    for (m, &t) in times.iter().enumerate() {
+        let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, t);
+        worst = worst.max((sol.state(m)[0] - x).abs()).max((sol.state(m)[1] - v).abs());
+    }
+    assert!(worst < 1e-9, "worst dense-output error {worst:e}");
+    let times: Vec<f64> = (1..=20).map(|i| 0.5 * i as f64).collect();
+    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.3], &[1.7])
+        .solve_sensitivities(&tight, &[sysid_ode::Wrt::Parameter(0)], &times)
+        .unwrap();
+    for (m, &t) in times.iter().enumerate() {
+        let (x, v, dx, dv) = Oscillator::exact(1.0, 0.3, 1.7, t);
+        assert_close_abs(sol.state(m)[0], x, 1e-9);
+        assert_close_abs(sol.state(m)[1], v, 2e-9);
+        assert_close_abs(sol.sensitivity(m)[(0, 0)], dx, 1e-9 * (1.0 + t));
+        assert_close_abs(sol.sensitivity(m)[(1, 0)], dv, 1e-9 * (1.0 + 2.0 * t));
+    }
+}
+
+/// What DOP853 is for: at rtol 1e-12 it reaches DOPRI5's accuracy or better with fewer
+/// evaluations of f, on a problem that is not stiff (the oscillator over 20 periods).
+#[test]
+fn dop853_needs_fewer_evaluations_than_dopri5_at_tight_tolerances() {
+    let sys = Oscillator::new(false);
+    let t_end = 40.0 * std::f64::consts::PI;
+    let run = |integrator: Integrator| {
+        let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0]).solve(&integrator, &[t_end]).unwrap();
+        let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, t_end);
+        let error = (sol.state(0)[0] - x).abs().max((sol.state(0)[1] - v).abs());
+        (sol.counts().rhs_evaluations, error)
+    };
+    let (dopri5, dopri5_error) = run(Integrator::dopri5(1e-12, 1e-14));
+    let (dop853, dop853_error) = run(Integrator::dop853(1e-12, 1e-14));
+    assert!(dop853_error <= dopri5_error.max(1e-10), "{dop853_error:e} against {dopri5_error:e}");
+    assert!(2 * dop853 < dopri5, "{dop853} evaluations against DOPRI5's {dopri5}");
+}
+
 /// x' = u(t) with a piecewise-constant input (a doublet).
 struct Integrator1 {
     sig: Signature,
@@ -463,7 +526,9 @@ impl sysid_ode::Rhs for Charged {
 #[test]
 fn operations_charge_every_call_its_cost() {
     use sysid_ode::Scheme;
-    for scheme in [Scheme::Dopri5, Scheme::Rodas4, Scheme::Rodas5p, Scheme::Auto, Scheme::Bdf] {
+    for scheme in
+        [Scheme::Dopri5, Scheme::Dop853, Scheme::Rodas4, Scheme::Rodas5p, Scheme::Auto, Scheme::Bdf]
+    {
         let mut rhs =
             Charged { a: [[-1.0, 0.5], [0.0, -2000.0]], inverse: [[0.0; 2]; 2], calls: (0, 0, 0) };
         let cfg = Integrator { scheme, ..Integrator::dopri5(1e-8, 1e-10) };
@@ -477,7 +542,7 @@ fn operations_charge_every_call_its_cost() {
             c.eval * evals + c.factor * factors + c.solve * solves,
             "{scheme:?}: {evals} evaluations, {factors} factorisations, {solves} solves"
         );
-        let implicit = scheme != Scheme::Dopri5;
+        let implicit = !matches!(scheme, Scheme::Dopri5 | Scheme::Dop853);
         assert_eq!(factors > 0 && solves > 0, implicit, "{scheme:?}");
     }
 }

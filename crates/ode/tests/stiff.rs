@@ -360,3 +360,16 @@ fn the_automatic_choice_returns_to_dopri5_where_the_stiffness_ends() {
         assert_close_abs(implicit.state(m)[0], t.cos(), 1e-6);
     }
 }
+
+/// DOP853 on a stiff problem is limited by stability as DOPRI5 is, and says so when its
+/// step budget runs out: its estimate of h·λ, on DOPRI5's scale, passes the same test.
+#[test]
+fn dop853_names_stiffness_when_its_budget_runs_out() {
+    let (system, rates) = (Robertson::default(), robertson_rates());
+    let robertson = Ivp::new(&system, 0.0, &ROBERTSON_Y0, &rates);
+    let budget = Integrator::dop853(1e-8, 1e-14).with_max_steps(10_000);
+    match robertson.solve(&budget, &[40.0]) {
+        Err(OdeError::Stiff { since, .. }) => assert!(since < 1.0, "stiff since {since}"),
+        other => panic!("expected a stiffness error, got {other:?}"),
+    }
+}

@@ -356,7 +356,7 @@ impl PyProblem {
             integrator.scheme =
                 serde_json::from_value(serde_json::Value::from(scheme)).map_err(|_| {
                     PyValueError::new_err(format!(
-                        "unknown scheme {scheme:?} (schemes: dopri5, rk4, rodas4, rodas5p, bdf, auto)"
+                        "unknown scheme {scheme:?} (schemes: dopri5, dop853, rk4, rodas4, rodas5p, bdf, auto)"
                     ))
                 })?;
         }

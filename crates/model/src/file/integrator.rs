@@ -41,10 +41,11 @@ pub(super) fn read_integrator(
     Ok(integrator)
 }
 
-/// Reads `[integrator] method`: "dopri5", "rk4", "rodas4", "rodas5p", "bdf" or "auto".
+/// Reads `[integrator] method`: "dopri5", "dop853", "rk4", "rodas4", "rodas5p", "bdf" or "auto".
 fn read_scheme(r: &Reader<'_>, v: &Node) -> Result<Scheme, ModelError> {
     match r.string(v, "[integrator] method")? {
         "dopri5" => Ok(Scheme::Dopri5),
+        "dop853" => Ok(Scheme::Dop853),
         "rk4" => Ok(Scheme::Rk4),
         "rodas4" => Ok(Scheme::Rodas4),
         "rodas5p" => Ok(Scheme::Rodas5p),
@@ -53,7 +54,7 @@ fn read_scheme(r: &Reader<'_>, v: &Node) -> Result<Scheme, ModelError> {
         other => Err(r.err(
             v.at,
             format!(
-                "[integrator] method must be \"dopri5\", \"rk4\", \"rodas4\", \"rodas5p\", \"bdf\" or \"auto\", got \"{other}\""
+                "[integrator] method must be \"dopri5\", \"dop853\", \"rk4\", \"rodas4\", \"rodas5p\", \"bdf\" or \"auto\", got \"{other}\""
             ),
         )),
     }

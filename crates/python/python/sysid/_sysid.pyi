@@ -31,7 +31,7 @@ class Problem:
         self,
         rtol: Optional[float] = None,
         atol: Optional[float] = None,
-        scheme: Optional[Literal["dopri5", "rk4", "rodas4", "rodas5p", "auto"]] = None,
+        scheme: Optional[Literal["dopri5", "dop853", "rk4", "rodas4", "rodas5p", "bdf", "auto"]] = None,
     ) -> "Problem": ...
     @property
     def name(self) -> str: ...
