@@ -447,6 +447,19 @@ class Catalogue(unittest.TestCase):
         fd = np.array([(p.nll(x + h * e) - p.nll(x - h * e)) / (2 * h) for e in np.eye(len(x))])
         np.testing.assert_allclose(gradient, fd, rtol=1e-6)
 
+    def test_every_scheme_gives_the_same_nll_and_gradient_at_tight_tolerances(self):
+        # Lotka–Volterra is not stiff: the explicit schemes and the automatic choice agree to
+        # their tolerances, and an unknown scheme is refused with the list of schemes.
+        p = sysid.Problem.from_catalogue("lotka-volterra", seed=3)
+        x = p.nominal
+        reference = p.with_integrator(rtol=1e-12, atol=1e-14, scheme="dopri5").nll_and_gradient(x)
+        for scheme in ["dop853", "auto", "rodas5p"]:
+            nll, gradient = p.with_integrator(rtol=1e-12, atol=1e-14, scheme=scheme).nll_and_gradient(x)
+            self.assertAlmostEqual(nll, reference[0], delta=1e-9 * abs(reference[0]), msg=scheme)
+            np.testing.assert_allclose(gradient, reference[1], rtol=1e-7, err_msg=scheme)
+        with self.assertRaisesRegex(ValueError, r"unknown scheme \"euler\" \(schemes: dopri5, dop853, "):
+            p.with_integrator(scheme="euler")
+
     def test_bad_names_and_records_raise_with_the_reason(self):
         with self.assertRaisesRegex(ValueError, r'unknown system "nope" \(systems: falling-body, '):
             sysid.Problem.from_catalogue("nope")
