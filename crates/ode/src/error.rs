@@ -57,7 +57,7 @@ pub enum OdeError {
     /// The explicit integrator ran out of steps on a problem that its stiffness test
     /// flagged: the steps were limited by stability, not accuracy.
     #[error(
-        "too many steps ({steps}) at t = {t}: the problem is stiff from t = {since} on (DOPRI5's steps are limited by stability); use the rodas4 or auto integrator"
+        "too many steps ({steps}) at t = {t}: the problem is stiff from t = {since} on (the explicit scheme's steps are limited by stability, not accuracy); use the rodas5p or auto integrator"
     )]
     Stiff {
         /// Where the budget ran out.

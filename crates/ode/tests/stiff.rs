@@ -369,7 +369,14 @@ fn dop853_names_stiffness_when_its_budget_runs_out() {
     let robertson = Ivp::new(&system, 0.0, &ROBERTSON_Y0, &rates);
     let budget = Integrator::dop853(1e-8, 1e-14).with_max_steps(10_000);
     match robertson.solve(&budget, &[40.0]) {
-        Err(OdeError::Stiff { since, .. }) => assert!(since < 1.0, "stiff since {since}"),
+        Err(e @ OdeError::Stiff { since, .. }) => {
+            assert!(since < 1.0, "stiff since {since}");
+            let message = e.to_string();
+            assert!(
+                message.contains("the explicit scheme's steps are limited by stability"),
+                "{message}"
+            );
+        }
         other => panic!("expected a stiffness error, got {other:?}"),
     }
 }
