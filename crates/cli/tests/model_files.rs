@@ -569,7 +569,7 @@ fn a_stiff_model_file_fits_with_rodas4_and_explicit_integration_says_why_it_fail
         sysid(&["fit", "--model", &case.model(), "--integrator", "dopri5", "--max-steps", "20000"]);
     let stderr = text(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("stiff") && stderr.contains("rodas4"), "{stderr}");
+    assert!(stderr.contains("stiff") && stderr.contains("rodas5p"), "{stderr}");
 }
 
 #[test]
