@@ -507,9 +507,9 @@ where
 /// The start fitted on once more, with its method's budget again, after every start has run:
 /// the one that ran out of iterations lowest, where that is below every converged start (by
 /// more than [`resolution`]), or where none converged. Its crawl was going where no other
-/// start went, and one more start's budget there is worth more than another random start (Okuonghae: start 48 of 100
-/// ended at the limit at 373.561151 and certifies 373.547669 when fitted on, 2.37 below the
-/// least converged start).
+/// start went, and one more start's budget there is worth more than another random start
+/// (Okuonghae: start 48 of 100 ended at the limit at 373.561151 and certifies 373.547669 when
+/// fitted on, 2.37 below the least converged start).
 fn promising(runs: &[Run]) -> Option<usize> {
     let at_limit = runs
         .iter()

@@ -216,8 +216,8 @@ const CONTROL: Control = Control { exponent: 0.125, beta: 0.0, max_factor: 6.0 }
 const DOP853_TO_DOPRI5: f64 = 3.25 / 6.1;
 
 /// The stages the step keeps beyond [`Work::k`]: 7 to 12, the order-3 difference, and the
-/// dense output's 14 to 16.
-const MORE: usize = 10;
+/// dense output's 14 to 16 ([`Work::new`] allocates them for an integration by DOP853).
+pub(crate) const MORE: usize = 10;
 
 /// The DOP853 scheme.
 pub(crate) struct Dop853;
@@ -266,13 +266,10 @@ impl<R: Rhs> Stepper<R> for Dop853 {
         h: f64,
     ) -> Result<f64, FactorError> {
         let n = w.x.len();
-        if w.more.len() < MORE {
-            w.more.resize_with(MORE, || vec![0.0; n]);
-        }
         let Work { k, tmp, x, x_new, more, .. } = w;
         let [k1, k2, k3, k4, k5, k6, k13, e5] = k;
         let [k7, k8, k9, k10, k11, k12, e3, ..] = &mut more[..] else {
-            unreachable!("DOP853's stages are allocated above")
+            unreachable!("Work::new allocates DOP853's stages")
         };
         let (x, tmp) = (&x[..n], &mut tmp[..n]);
         stage(tmp, x, h, [(A21, k1)]);
@@ -375,8 +372,7 @@ impl<R: Rhs> Stepper<R> for Dop853 {
                 (B12 - BHH3, k12),
             ],
         );
-        let err5 = ev.error_norm(e5, x, xn);
-        let err3 = ev.error_norm(e3, x, xn);
+        let [err5, err3] = ev.error_norms([e5, e3], x, xn);
         let squared = err5 * err5;
         let denominator = (squared + 0.01 * err3 * err3).sqrt();
         // Both zero: an exact step. NaN passes on, and the loop retries shorter.
@@ -391,7 +387,7 @@ impl<R: Rhs> Stepper<R> for Dop853 {
         let Work { k, tmp, x, x_new, more, interpolant, .. } = w;
         let [k1, _, _, _, _, k6, k13, _] = k;
         let [k7, k8, k9, k10, k11, k12, _, k14, k15, k16] = &mut more[..] else {
-            unreachable!("a dense output follows a step")
+            unreachable!("Work::new allocates DOP853's stages")
         };
         let (x, xn, tmp) = (&x[..n], &x_new[..n], &mut tmp[..n]);
         stage(

@@ -288,7 +288,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         wants: W,
         on_step: O,
     ) -> Self {
-        let mut work = Work::new(x0.len());
+        let mut work = Work::new(x0.len(), cfg.scheme);
         work.x.copy_from_slice(x0);
         let counts = Counts { integrations: 1, ..Counts::default() };
         let events = rhs.n_events();

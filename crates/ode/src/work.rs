@@ -2,9 +2,10 @@
 //! the inside of the current segment) and the stage vectors, allocated once per integration.
 
 use crate::counts::{Costs, Counts};
+use crate::dop853::MORE;
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
-use crate::options::Integrator;
+use crate::options::{Integrator, Scheme};
 use crate::rhs::Rhs;
 use crate::signal::Side;
 
@@ -17,13 +18,16 @@ pub(crate) struct Work {
     /// Rosenbrock: f(t, x) and ∂f/∂t at the start of the step.
     pub(crate) f0: Vec<f64>,
     pub(crate) ft: Vec<f64>,
-    /// DOP853's stages beyond `k`, allocated at its first step.
+    /// DOP853's stages beyond `k` ([`MORE`](crate::dop853::MORE) of them; none for the
+    /// other schemes).
     pub(crate) more: Vec<Vec<f64>>,
     pub(crate) interpolant: Interpolant,
 }
 
 impl Work {
-    pub(crate) fn new(n: usize) -> Self {
+    /// Stage vectors of length n for an integration by `scheme`.
+    pub(crate) fn new(n: usize, scheme: Scheme) -> Self {
+        let more = if scheme == Scheme::Dop853 { MORE } else { 0 };
         Self {
             k: std::array::from_fn(|_| vec![0.0; n]),
             tmp: vec![0.0; n],
@@ -31,7 +35,7 @@ impl Work {
             x_new: vec![0.0; n],
             f0: vec![0.0; n],
             ft: vec![0.0; n],
-            more: Vec::new(),
+            more: (0..more).map(|_| vec![0.0; n]).collect(),
             interpolant: Interpolant::new(n),
         }
     }
@@ -156,24 +160,42 @@ impl<R: Rhs> Evaluator<'_, R> {
     /// not to atol on its own: held to atol, such entries set the step on Weber's problem,
     /// where half the trial steps were rejected for entries of 1e-11 in columns of 1e-3.
     pub(crate) fn error_norm(&mut self, e: &[f64], x: &[f64], xn: &[f64]) -> f64 {
+        let [norm] = self.error_norms([e], x, xn);
+        norm
+    }
+
+    /// [`error_norm`](Self::error_norm) of each of E error estimates of the same step (DOP853
+    /// has two), the scales of the step's ends found once.
+    pub(crate) fn error_norms<const E: usize>(
+        &mut self,
+        es: [&[f64]; E],
+        x: &[f64],
+        xn: &[f64],
+    ) -> [f64; E] {
         let (rtol, atol) = (self.cfg.rtol, self.cfg.atol);
-        let len = e.len();
-        let mut sum = [0.0; 4];
+        // Every estimate is as long as the state it measures.
+        let len = es[0].len();
+        let mut sums = [[0.0; 4]; E];
+        let norms = |sums: &[[f64; 4]; E]| sums.map(|sum| (total(&sum) / len as f64).sqrt());
         if self.rhs.errors_as_vectors() {
             let states = self.rhs.states().min(len);
             for range in [0..states, states..len] {
-                let (e, x, xn) = (&e[range.clone()], &x[range.clone()], &xn[range]);
+                let (x, xn) = (&x[range.clone()], &xn[range.clone()]);
                 let largest = x.iter().chain(xn).fold(0.0_f64, |m, v| m.max(v.abs()));
                 let floor = atol.max(rtol * largest);
-                add_squares(&mut sum, (e, x, xn), rtol, |_| floor);
+                for (sum, e) in sums.iter_mut().zip(es) {
+                    add_squares(sum, (&e[range.clone()], x, xn), rtol, |_| floor);
+                }
             }
-            return (total(&sum) / len as f64).sqrt();
+            return norms(&sums);
         }
         // Without sensitivity columns every component is a state.
         let columns = self.rhs.column_atol().unwrap_or(&[]);
         let k = columns.len();
         let n = len / (1 + k);
-        add_squares(&mut sum, (&e[..n], &x[..n], &xn[..n]), rtol, |_| atol);
+        for (sum, e) in sums.iter_mut().zip(es) {
+            add_squares(sum, (&e[..n], &x[..n], &xn[..n]), rtol, |_| atol);
+        }
         if k > 0 {
             // Each column's floor max(atol·c_j, rtol·m_j), its largest entry m_j found in one
             // pass over the rows of S (n × k, row by row), then the entries row by row.
@@ -192,11 +214,14 @@ impl<R: Rhs> Evaluator<'_, R> {
                 *m = (atol * c).max(rtol * *m);
             }
             let floors = &floors[..k];
-            for ((row_e, row), row_new) in rows(e, n, k).zip(rows(x, n, k)).zip(rows(xn, n, k)) {
-                add_squares(&mut sum, (row_e, row, row_new), rtol, |j| floors[j]);
+            for (sum, e) in sums.iter_mut().zip(es) {
+                let ends = rows(x, n, k).zip(rows(xn, n, k));
+                for (row_e, (row, row_new)) in rows(e, n, k).zip(ends) {
+                    add_squares(sum, (row_e, row, row_new), rtol, |j| floors[j]);
+                }
             }
         }
-        (total(&sum) / len as f64).sqrt()
+        norms(&sums)
     }
 }
 

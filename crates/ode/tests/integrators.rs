@@ -51,20 +51,25 @@ fn falling_body_is_exact() {
     }
 }
 
-#[test]
-fn dense_output_between_steps_matches_closed_form() {
-    // 2000 output times against far fewer steps: the values come from the interpolant.
+/// The oscillator at 2 000 output times, far more than the integrator's steps, so that the
+/// values come from its dense output: the steps taken and the largest error against the
+/// closed form.
+fn dense_output_against_closed_form(integrator: &Integrator) -> (u64, f64) {
     let sys = Oscillator::new(false);
     let times: Vec<f64> = (0..2000).map(|i| 0.005 * i as f64 + 0.0013).collect();
-    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0])
-        .solve(&Integrator::dopri5(1e-10, 1e-12), &times)
-        .unwrap();
-    assert!(sol.counts().steps < 400, "{} steps", sol.counts().steps);
+    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0]).solve(integrator, &times).unwrap();
     let mut worst: f64 = 0.0;
     for (m, &t) in times.iter().enumerate() {
         let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, t);
         worst = worst.max((sol.state(m)[0] - x).abs()).max((sol.state(m)[1] - v).abs());
     }
+    (sol.counts().steps, worst)
+}
+
+#[test]
+fn dense_output_between_steps_matches_closed_form() {
+    let (steps, worst) = dense_output_against_closed_form(&Integrator::dopri5(1e-10, 1e-12));
+    assert!(steps < 400, "{steps} steps");
     // The order-4 interpolant keeps the error at the level of the tolerance.
     assert!(worst < 1e-9, "worst dense-output error {worst:e}");
 }
@@ -134,18 +139,10 @@ fn dop853_matches_closed_forms_at_and_between_its_steps() {
     for (m, &t) in times.iter().enumerate() {
         assert_close(sol.state(m)[0], Decay::exact(3.0, 0.7, t).0, 1e-9);
     }
-    let sys = Oscillator::new(false);
-    let times: Vec<f64> = (0..2000).map(|i| 0.005 * i as f64 + 0.0013).collect();
-    let sol = Ivp::new(&sys, 0.0, &[1.0, 0.0], &[1.0])
-        .solve(&Integrator::dop853(1e-10, 1e-12), &times)
-        .unwrap();
-    assert!(sol.counts().steps < 100, "{} steps", sol.counts().steps);
-    let mut worst: f64 = 0.0;
-    for (m, &t) in times.iter().enumerate() {
-        let (x, v, _, _) = Oscillator::exact(1.0, 0.0, 1.0, t);
-        worst = worst.max((sol.state(m)[0] - x).abs()).max((sol.state(m)[1] - v).abs());
-    }
+    let (steps, worst) = dense_output_against_closed_form(&Integrator::dop853(1e-10, 1e-12));
+    assert!(steps < 100, "{steps} steps");
     assert!(worst < 1e-9, "worst dense-output error {worst:e}");
+    let sys = Oscillator::new(false);
     let times: Vec<f64> = (1..=20).map(|i| 0.5 * i as f64).collect();
     let sol = Ivp::new(&sys, 0.0, &[1.0, 0.3], &[1.7])
         .solve_sensitivities(&tight, &[sysid_ode::Wrt::Parameter(0)], &times)
