@@ -1168,6 +1168,23 @@ fn power<T: Scalar>(x: T, c: f64) -> T {
     if c > 1.0 && x.re() == 0.0 { x * 0.0 + 0.0 } else { x.powf(c) }
 }
 
+/// tanh x. num-dual's is sinh x / cosh x, ∞/∞ = NaN beyond |x| ≈ 710, where tanh is ±1
+/// and its derivative 1 − tanh² is 0 (a steep switch tanh(k·(x − x₀)), or tanh of a term
+/// with a pole). Past |x| = 20, where tanh x rounds to ±1, it is (1 − u)/(1 + u) with
+/// u = e^(−2|x|) (sign restored), whose value and derivative 4u/(1 + u)² stay finite; below,
+/// where that form loses digits, num-dual's.
+#[inline(always)]
+fn tanh<T: Scalar>(x: T) -> T {
+    let re = x.re();
+    if re.abs() <= 20.0 {
+        x.tanh()
+    } else {
+        let u = if re > 0.0 { (x * -2.0).exp() } else { (x * 2.0).exp() };
+        let magnitude = (-u + 1.0) / (u + 1.0);
+        if re > 0.0 { magnitude } else { -magnitude }
+    }
+}
+
 /// One operation on its operands' values.
 #[inline(always)]
 fn compute<T: Scalar>(node: Node, get: impl Fn(Operand) -> T) -> T {
@@ -1194,7 +1211,7 @@ fn compute<T: Scalar>(node: Node, get: impl Fn(Operand) -> T) -> T {
                 Func::Sin => x.sin(),
                 Func::Cos => x.cos(),
                 Func::Tan => x.tan(),
-                Func::Tanh => x.tanh(),
+                Func::Tanh => tanh(x),
                 Func::Abs => x.abs(),
                 _ => unreachable!("compiled to nodes of their own"),
             }
