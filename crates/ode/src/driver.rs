@@ -11,7 +11,7 @@ use crate::dopri5::Dopri5;
 use crate::error::{BLOW_UP_GROWTH, OdeError};
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
-use crate::options::{Integrator, Scheme};
+use crate::options::{AUTO_DOP853_RTOL, Integrator, Scheme};
 use crate::rhs::Rhs;
 use crate::rk4::Rk4;
 use crate::rodas4::Rodas4;
@@ -181,14 +181,21 @@ impl Active {
     /// the one place a [`Scheme`] is mapped to its [`Stepper`]. The multistep scheme keeps
     /// a history no one-step [`Stepper`] has and steps in its own loop
     /// ([`Run::multistep_segment`]); its integration never steps with the one named here.
-    fn first(scheme: Scheme) -> Self {
-        match scheme {
-            Scheme::Dopri5 | Scheme::Auto => Self::Dopri5,
+    fn first(cfg: &Integrator) -> Self {
+        match cfg.scheme {
+            Scheme::Auto => Self::explicit(cfg),
+            Scheme::Dopri5 => Self::Dopri5,
             Scheme::Dop853 => Self::Dop853,
             Scheme::Rk4 => Self::Rk4,
             Scheme::Rodas4 => Self::Rodas4,
             Scheme::Rodas5p | Scheme::Bdf => Self::Rodas5p,
         }
+    }
+
+    /// The automatic choice's explicit scheme: DOP853 at rtol ≤ [`AUTO_DOP853_RTOL`], DOPRI5
+    /// above.
+    fn explicit(cfg: &Integrator) -> Self {
+        if cfg.rtol <= AUTO_DOP853_RTOL { Self::Dop853 } else { Self::Dopri5 }
     }
 }
 
@@ -288,7 +295,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         wants: W,
         on_step: O,
     ) -> Self {
-        let mut work = Work::new(x0.len(), cfg.scheme);
+        let mut work = Work::new(x0.len(), matches!(Active::first(cfg), Active::Dop853));
         work.x.copy_from_slice(x0);
         let counts = Counts { integrations: 1, ..Counts::default() };
         let events = rhs.n_events();
@@ -307,7 +314,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
                 floors: Vec::new(),
             },
             work,
-            stepper: Active::first(cfg.scheme),
+            stepper: Active::first(cfg),
             t: t0,
             t_end,
             dir: (t_end - t0).signum(),
@@ -607,7 +614,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
     fn observe_stiffness(&mut self, h_lambda: f64, h: f64) {
         let auto = self.ev.cfg.scheme == Scheme::Auto;
         let mut h_lambda = h_lambda;
-        if auto && matches!(self.stepper, Active::Dopri5) {
+        if auto && matches!(self.stepper, Active::Dopri5 | Active::Dop853) {
             self.refresh_spectral(h);
             // On the scale of Hairer's threshold, which the test applies to both.
             let spectral =
@@ -644,7 +651,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         if self.explicit_again >= EXPLICIT_REFRESHES {
             self.explicit_again = 0;
             self.stiffness = Stiffness::default();
-            self.stepper = Active::Dopri5;
+            self.stepper = Active::explicit(&self.ev.cfg);
             // DOPRI5's first stage is f(t, x), which a Rodas5P step does not leave behind.
             self.ev.f(self.t, &self.work.x, &mut self.work.k[0]);
         }

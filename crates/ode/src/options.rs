@@ -30,7 +30,8 @@ pub enum Scheme {
     /// h·|λ|max > 3 with the Jacobian's spectral radius by power iteration, which still sees
     /// the fast modes once they have decayed), then Rodas5P; back to DOPRI5 where h·|λ|max of
     /// Rodas5P's steps stays below 1 (two refreshes of the estimate in a row, 32 accepted
-    /// steps), a third of the way to DOPRI5's stability boundary. What imported PEtab
+    /// steps), a third of the way to DOPRI5's stability boundary. At rtol ≤
+    /// [`AUTO_DOP853_RTOL`] DOP853 takes DOPRI5's place throughout. What imported PEtab
     /// problems use.
     Auto,
     /// Variable-order, variable-step numerical differentiation formulas (orders 1–4, and
@@ -40,6 +41,16 @@ pub enum Scheme {
     /// step, nor with state events.
     Bdf,
 }
+
+/// The rtol at and below which [`Scheme::Auto`] steps explicitly with DOP853 instead of
+/// DOPRI5 (Rodas5P where the model is stiff, as above it). DOP853's order 8 pays at tight
+/// tolerances (0.4–0.6 of DOPRI5's time at rtol 1e-12 in the `ode` bench's `-tight` runs and
+/// on Borghans), not at the default 1e-8 (1.1–1.4 times). A fit's driver integrates at 1e-11
+/// only where it refines; Borghans' fit from nominal, which does for most of its 3 000
+/// iterations, takes a third of the time. Not higher: at rtol 1e-9, atol 1e-13 DOP853's
+/// longer steps hold a state of Fujita's that lies below atol only to atol, and a fit lost
+/// its certificate (docs/petab.md, "DOP853 at tight tolerances").
+pub const AUTO_DOP853_RTOL: f64 = 1e-11;
 
 /// How to integrate: scheme, tolerances and limits. Plain data with documented defaults.
 ///

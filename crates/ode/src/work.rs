@@ -5,7 +5,7 @@ use crate::counts::{Costs, Counts};
 use crate::dop853::MORE;
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
-use crate::options::{Integrator, Scheme};
+use crate::options::Integrator;
 use crate::rhs::Rhs;
 use crate::signal::Side;
 
@@ -25,9 +25,10 @@ pub(crate) struct Work {
 }
 
 impl Work {
-    /// Stage vectors of length n for an integration by `scheme`.
-    pub(crate) fn new(n: usize, scheme: Scheme) -> Self {
-        let more = if scheme == Scheme::Dop853 { MORE } else { 0 };
+    /// Stage vectors of length n, DOP853's among them for an integration that may step with
+    /// it.
+    pub(crate) fn new(n: usize, dop853: bool) -> Self {
+        let more = if dop853 { MORE } else { 0 };
         Self {
             k: std::array::from_fn(|_| vec![0.0; n]),
             tmp: vec![0.0; n],

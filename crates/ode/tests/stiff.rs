@@ -9,7 +9,7 @@ use crate::common;
 use common::{Oscillator, robertson_rates, stiff_reference};
 use sysid_ode::testing::Decay;
 use sysid_ode::testing::{assert_close, assert_close_abs};
-use sysid_ode::{Integrator, Ivp, OdeError, SensitivityTrajectory, Wrt};
+use sysid_ode::{AUTO_DOP853_RTOL, Integrator, Ivp, OdeError, SensitivityTrajectory, Wrt};
 use sysid_systems::{Robertson, VanDerPol};
 
 const ROBERTSON_Y0: [f64; 3] = [1.0, 0.0, 0.0];
@@ -273,6 +273,45 @@ fn the_automatic_choice_switches_only_on_stiff_problems() {
         ] {
             assert_eq!(sol.unwrap().counts().jacobians, 0, "switched at tolerance {tol}");
         }
+    }
+}
+
+/// At rtol ≤ [`AUTO_DOP853_RTOL`] the automatic choice steps with DOP853 where it steps with
+/// DOPRI5 above: on models that are not stiff its steps are `dop853`'s (states and
+/// sensitivities to the bit, the same steps and rejections; its stiffness tests add
+/// evaluations of f, not steps), at ten times that rtol `dopri5`'s; on Robertson's it still
+/// switches to Rodas5P, and ends within the tolerance of DOPRI5 run at it throughout.
+#[test]
+fn the_automatic_choice_steps_with_dop853_at_tight_tolerances() {
+    fn steps_as<S: sysid_ode::System>(ivp: &Ivp<'_, S>) {
+        let wrt = [Wrt::Parameter(0), Wrt::InitialValue(0)];
+        let times = [0.5, 3.0, 20.0];
+        for (rtol, explicit) in [
+            (AUTO_DOP853_RTOL, Integrator::dop853 as fn(f64, f64) -> Integrator),
+            (10.0 * AUTO_DOP853_RTOL, Integrator::dopri5),
+        ] {
+            let atol = 1e-3 * rtol;
+            let auto =
+                ivp.solve_sensitivities(&Integrator::auto(rtol, atol), &wrt, &times).unwrap();
+            let alone = ivp.solve_sensitivities(&explicit(rtol, atol), &wrt, &times).unwrap();
+            let (a, b) = (auto.counts(), alone.counts());
+            assert_eq!((a.steps, a.rejected_steps, a.jacobians), (b.steps, b.rejected_steps, 0));
+            for (m, t) in times.iter().enumerate() {
+                assert_eq!(auto.state(m), alone.state(m), "rtol {rtol:e}, t = {t}");
+                assert_eq!(auto.sensitivity_slice(m), alone.sensitivity_slice(m));
+            }
+        }
+    }
+    let (vdp, oscillator) = (VanDerPol::default(), Oscillator::new(false));
+    steps_as(&Ivp::new(&vdp, 0.0, &[2.0, 0.0], &[1.0]));
+    steps_as(&Ivp::new(&oscillator, 0.0, &[1.0, 0.0], &[3.0]));
+    let (rob, rates) = (Robertson::default(), robertson_rates());
+    let robertson = Ivp::new(&rob, 0.0, &ROBERTSON_Y0, &rates);
+    let auto = robertson.solve(&Integrator::auto(AUTO_DOP853_RTOL, 1e-20), &[40.0]).unwrap();
+    assert!(auto.counts().jacobians > 0, "{:?}", auto.counts());
+    let explicit = robertson.solve(&Integrator::dopri5(AUTO_DOP853_RTOL, 1e-20), &[40.0]).unwrap();
+    for (a, b) in auto.state(0).iter().zip(explicit.state(0)) {
+        assert_close_abs(*a, *b, 1e-9 * b.abs() + 1e-19);
     }
 }
 
