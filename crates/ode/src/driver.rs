@@ -652,7 +652,8 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
             self.explicit_again = 0;
             self.stiffness = Stiffness::default();
             self.stepper = Active::explicit(&self.ev.cfg);
-            // DOPRI5's first stage is f(t, x), which a Rodas5P step does not leave behind.
+            // The explicit schemes' first stage is f(t, x) in k[0], which a Rodas5P step does not
+            // leave behind.
             self.ev.f(self.t, &self.work.x, &mut self.work.k[0]);
         }
     }
