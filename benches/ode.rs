@@ -4,11 +4,12 @@
 //! Every run is the case's initial-value problem at the truth (or the reference answer), at
 //! the case's tolerances (rtol, atol for states and sensitivities alike), with output at the
 //! case's measurement times and, for `sensitivities`, derivatives with respect to the case's
-//! unknowns; DOPRI5 and DOP853 also at 1e-4 of those tolerances (`-tight`). Solvers: sysid's
-//! explicit DOPRI5 and DOP853, implicit Rodas4 and multistep BDF, diffsol's explicit Tsit45
-//! and implicit BDF (dense nalgebra LU). All six get their Jacobian products from the same
-//! dual-number evaluation of the model, so the comparison is between integrators, not model
-//! code. `tests/agreement.rs` of `sysid-peer-diffsol` checks that they agree.
+//! unknowns; DOPRI5, DOP853 and the automatic choice also at 1e-4 of those tolerances
+//! (`-tight`). Solvers: sysid's explicit DOPRI5 and DOP853, implicit Rodas4, multistep BDF
+//! and the automatic choice, diffsol's explicit Tsit45 and implicit BDF (dense nalgebra LU).
+//! All seven get their Jacobian products from the same dual-number evaluation of the model,
+//! so the comparison is between integrators, not model code. `tests/agreement.rs` of
+//! `sysid-peer-diffsol` checks that they agree.
 //!
 //! `SYSID_BENCH_SYSTEMS=van-der-pol,robertson cargo bench -p sysid --bench ode` limits the
 //! run to some systems.
@@ -39,6 +40,8 @@ impl Visit for Bench<'_, '_> {
         let ours = [
             ("sysid-dopri5", Integrator::dopri5(rtol, atol).with_max_steps(10_000_000)),
             ("sysid-dop853", Integrator::dop853(rtol, atol).with_max_steps(10_000_000)),
+            ("sysid-rodas4", Integrator::rodas4(rtol, atol).with_max_steps(10_000_000)),
+            ("sysid-bdf", Integrator::bdf(rtol, atol).with_max_steps(10_000_000)),
             // The two explicit schemes at 1e-4 of the case's tolerances (rtol no tighter than
             // an integration accepts), where DOP853's order 8 is meant to pay.
             (
@@ -49,6 +52,10 @@ impl Visit for Bench<'_, '_> {
                 "sysid-dop853-tight",
                 Integrator::dop853(tight, atol * 1e-4).with_max_steps(10_000_000),
             ),
+            // The automatic choice at both: DOPRI5's steps, DOP853's at rtol ≤
+            // AUTO_DOP853_RTOL (and Rodas5P's on a stiff case), with its stiffness tests.
+            ("sysid-auto", Integrator::auto(rtol, atol).with_max_steps(10_000_000)),
+            ("sysid-auto-tight", Integrator::auto(tight, atol * 1e-4).with_max_steps(10_000_000)),
         ];
         let ivp = |y0, p| Ivp::new(&case.system, case.t0, y0, p);
         let peer = |y0, p| Peer::new(&case.system, case.t0, y0, p, rtol, atol);
