@@ -1171,18 +1171,17 @@ fn power<T: Scalar>(x: T, c: f64) -> T {
 /// tanh x. num-dual's is sinh x / cosh x, ∞/∞ = NaN beyond |x| ≈ 710, where tanh is ±1
 /// and its derivative 1 − tanh² is 0 (a steep switch tanh(k·(x − x₀)), or tanh of a term
 /// with a pole). Past |x| = 20, where tanh x rounds to ±1, it is (1 − u)/(1 + u) with
-/// u = e^(−2|x|) (sign restored), whose value and derivative 4u/(1 + u)² stay finite; below,
-/// where that form loses digits, num-dual's.
+/// u = e^(−2|x|), times the sign of x, whose value and derivative 4u/(1 + u)² stay finite;
+/// below, where that form loses digits, num-dual's.
 #[inline(always)]
 fn tanh<T: Scalar>(x: T) -> T {
     let re = x.re();
     if re.abs() <= 20.0 {
-        x.tanh()
-    } else {
-        let u = if re > 0.0 { (x * -2.0).exp() } else { (x * 2.0).exp() };
-        let magnitude = (-u + 1.0) / (u + 1.0);
-        if re > 0.0 { magnitude } else { -magnitude }
+        return x.tanh();
     }
+    let sign = re.signum();
+    let u = (x * (-2.0 * sign)).exp();
+    (-u + 1.0) / (u + 1.0) * sign
 }
 
 /// One operation on its operands' values.

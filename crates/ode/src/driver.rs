@@ -295,7 +295,8 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         wants: W,
         on_step: O,
     ) -> Self {
-        let mut work = Work::new(x0.len(), matches!(Active::first(cfg), Active::Dop853));
+        let stepper = Active::first(cfg);
+        let mut work = Work::new(x0.len(), matches!(stepper, Active::Dop853));
         work.x.copy_from_slice(x0);
         let counts = Counts { integrations: 1, ..Counts::default() };
         let events = rhs.n_events();
@@ -314,7 +315,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
                 floors: Vec::new(),
             },
             work,
-            stepper: Active::first(cfg),
+            stepper,
             t: t0,
             t_end,
             dir: (t_end - t0).signum(),

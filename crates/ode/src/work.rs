@@ -166,7 +166,7 @@ impl<R: Rhs> Evaluator<'_, R> {
     }
 
     /// [`error_norm`](Self::error_norm) of each of E error estimates of the same step (DOP853
-    /// has two), the scales of the step's ends found once.
+    /// has two), the floors (each range's or column's largest entry) found once for all E.
     pub(crate) fn error_norms<const E: usize>(
         &mut self,
         es: [&[f64]; E],
