@@ -6,7 +6,7 @@
 use crate::bdf::{Attempt, DIVERGED_FACTOR, History};
 use crate::control::{Control, MIN_FACTOR, initial_step_of_order};
 use crate::counts::Counts;
-use crate::dop853::Dop853;
+use crate::dop853::{self, Dop853};
 use crate::dopri5::Dopri5;
 use crate::error::{BLOW_UP_GROWTH, OdeError};
 use crate::interpolant::Interpolant;
@@ -296,7 +296,8 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         on_step: O,
     ) -> Self {
         let stepper = Active::first(cfg);
-        let mut work = Work::new(x0.len(), matches!(stepper, Active::Dop853));
+        let more = if matches!(stepper, Active::Dop853) { dop853::MORE } else { 0 };
+        let mut work = Work::new(x0.len(), more);
         work.x.copy_from_slice(x0);
         let counts = Counts { integrations: 1, ..Counts::default() };
         let events = rhs.n_events();

@@ -2,7 +2,6 @@
 //! the inside of the current segment) and the stage vectors, allocated once per integration.
 
 use crate::counts::{Costs, Counts};
-use crate::dop853::MORE;
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
 use crate::options::Integrator;
@@ -25,10 +24,9 @@ pub(crate) struct Work {
 }
 
 impl Work {
-    /// Stage vectors of length n, DOP853's among them for an integration that may step with
-    /// it.
-    pub(crate) fn new(n: usize, dop853: bool) -> Self {
-        let more = if dop853 { MORE } else { 0 };
+    /// Stage vectors of length n, and `more` of them beyond `k` (DOP853's further stages for
+    /// an integration that may step with it, else none).
+    pub(crate) fn new(n: usize, more: usize) -> Self {
         Self {
             k: std::array::from_fn(|_| vec![0.0; n]),
             tmp: vec![0.0; n],
