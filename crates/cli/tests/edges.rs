@@ -660,3 +660,93 @@ fn converges_where_dopri5_does(integrator: &[&str]) {
         assert!((ours - theirs).abs() <= 1e-5 * se, "{name}: {ours} against {theirs} (se {se})");
     }
 }
+
+/// A point whose check cannot be integrated is not a convergence. The kinetics example at its
+/// rtol 1e-8 takes under 100 steps, and its certificate's integration at a tenth of that more
+/// than 140 (measured: the fit converges from `--max-steps 150`): with a budget of 120 the
+/// working integrations succeed and the check fails. Before, that check's failure counted as
+/// an error of 0 and the fit said converged (optimality_error 0). Now it is stalled at the
+/// minimum the unbudgeted fit certifies (kept, to 1e-7), with the check's error in its
+/// termination, no optimality_error and no standard errors.
+#[test]
+fn a_check_that_cannot_be_integrated_is_not_a_convergence() {
+    let model = "examples/kinetics/model.toml";
+    let reference = json(&["fit", "--model", model]);
+    assert_eq!(reference["converged"], true, "{}", reference["termination"]);
+    let fit = json(&["fit", "--model", model, "--max-steps", "120"]);
+    assert_eq!(fit["converged"], false, "{fit}");
+    assert_eq!(fit["termination_code"], "stalled_step", "{}", fit["termination"]);
+    let said = fit["termination"].as_str().unwrap();
+    for needle in ["the integration at a tenth of them fails there", "too many steps: 120"] {
+        assert!(said.contains(needle), "`{needle}` not in {said}");
+    }
+    assert!(fit["optimality_error"].is_null(), "{fit}");
+    assert!(fit["optimality"].as_f64().unwrap() <= fit["gtol"].as_f64().unwrap(), "{fit}");
+    assert!(fit["std_errors"].as_object().unwrap().values().all(Value::is_null), "{fit}");
+    for name in ["k1", "k2"] {
+        let (got, want) = (fit["estimates"][name].as_f64(), reference["estimates"][name].as_f64());
+        let (got, want) = (got.unwrap(), want.unwrap());
+        assert!((got / want - 1.0).abs() < 1e-7, "{name}: {got} against {want}");
+    }
+    let fit = json(&["fit", "--model", model, "--max-steps", "150"]);
+    assert_eq!(fit["converged"], true, "a budget the check fits in: {}", fit["termination"]);
+}
+
+/// `evaluate` says when the integration that measures its error fails: the printed digits
+/// are then confirmed by nothing. With a step budget between what rtol 1e-8 takes at the
+/// kinetics example's guess (112 steps) and what a tenth of it takes (more than 160), the NLL
+/// is the unbudgeted one, its error null, and `unchecked` gives the finer integration's
+/// failure.
+#[test]
+fn an_evaluation_whose_check_fails_says_so() {
+    let model = "examples/kinetics/model.toml";
+    let free = json(&["evaluate", "--model", model]);
+    assert!(free["unchecked"].is_null(), "{free}");
+    assert!(free["nll_error"].as_f64().is_some(), "{free}");
+    let tight = json(&["evaluate", "--model", model, "--max-steps", "130"]);
+    assert_eq!(tight["nll"], free["nll"], "the same integration: {tight}");
+    assert!(tight["nll_error"].is_null(), "{tight}");
+    let why = tight["unchecked"].as_str().unwrap_or_else(|| panic!("{tight}"));
+    assert!(why.contains("too many steps: 130"), "{why}");
+    let table = text(&sysid(&["evaluate", "--model", model, "--max-steps", "130"]).stdout);
+    assert!(table.contains("unchecked    at a tenth of the tolerances"), "{table}");
+}
+
+/// Crauste's pathogen grows as P′ = ρ_P P² − …: at this point (where a start of its
+/// multistart stopped) it blows up about a nanosecond before the last sample time, t = 28.
+/// DOPRI5 says so at rtol 1e-8; Rodas5P and DOP853 stepped over the pole there and gave a
+/// finite NLL (8488.0994), and at rtol 1e-10 fail as DOPRI5 does. Whatever a scheme does at
+/// 1e-8, no finite NLL goes out unflagged: either the evaluation fails or its check does.
+#[test]
+fn a_pole_stepped_over_is_flagged() {
+    let yaml = "tests/data/petab/Crauste_CellSystems2017/Crauste_CellSystems2017.yaml";
+    let point = [
+        "delta_EL=0.000907108610003959",
+        "delta_LM=0.315553786958955",
+        "delta_NE=6.359501288532649e-5",
+        "mu_EE=3.6214666420522237",
+        "mu_LE=2.2003261961362055",
+        "mu_LL=8.509212333443622e-10",
+        "mu_N=0.00012761372959031283",
+        "mu_P=1e-5",
+        "mu_PE=5.104778895489316e-10",
+        "mu_PL=2.5718569602259107",
+        "rho_E=1.0649229647508747e-5",
+        "rho_P=0.036090336254111004",
+    ];
+    for scheme in ["dopri5", "rodas5p", "dop853"] {
+        let mut args =
+            vec!["evaluate", "--petab", yaml, "--integrator", scheme, "--format", "json"];
+        for p in &point {
+            args.extend(["--set", p]);
+        }
+        let out = sysid(&args);
+        if out.status.code() == Some(2) {
+            assert!(text(&out.stderr).contains("blows up"), "{scheme}: {}", text(&out.stderr));
+            continue;
+        }
+        let e: Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}"));
+        let why = e["unchecked"].as_str().unwrap_or_else(|| panic!("{scheme}: unflagged {e}"));
+        assert!(why.contains("blows up"), "{scheme}: {why}");
+    }
+}

@@ -130,6 +130,9 @@ impl Record<'_> {
                     Rule::Progress => moving(ev.problem(), &history),
                     _ => Vec::new(),
                 },
+                unchecked: stalled.as_ref().and_then(|(.., c)| {
+                    c.unchecked.clone().filter(|_| c.exact_fit || c.optimality <= c.gtol)
+                }),
             },
             Ending::MaxIterations => Termination::MaxIterations {
                 fell: fell(&history, current.epsilon()),
@@ -185,8 +188,11 @@ impl Record<'_> {
                 // error measurement, or below.
                 let mut kinks_judged = false;
                 // A fixed step's cost is the model's only as far as the step resolves it:
-                // its error is always measured, an exact fit included, and a reference that
-                // cannot be integrated leaves the claim unproven (∞).
+                // its error is always measured, an exact fit included. A reference that
+                // cannot be integrated leaves the claim unproven (∞): the working
+                // integration may have stepped over a singularity that the finer one meets
+                // (Crauste's pathogen, P′ = ρ P² − …, blows up just before the last sample at
+                // points Rodas5P and DOP853 integrate at rtol 1e-8 and fail at 1e-10).
                 if (fixed || !certificate.exact_fit)
                     && certificate.optimality.is_finite()
                     && let Some(finer) = ev.reference()
@@ -216,8 +222,10 @@ impl Record<'_> {
                                 certificate.cost_error = (lin.cost - fine.cost).abs();
                             }
                         }
-                        Err(_) if fixed => certificate.error = f64::INFINITY,
-                        Err(_) => {}
+                        Err(e) => {
+                            certificate.error = f64::INFINITY;
+                            certificate.unchecked = Some(e.to_string());
+                        }
                     }
                 }
                 if !kinks_judged && !certificate.exact_fit {
@@ -328,6 +336,7 @@ pub(crate) fn with_scales<S: System>(
             plateau: false,
             undetermined: Vec::new(),
             moving: Vec::new(),
+            unchecked: None,
         };
     }
     let converged = e.certificate.holds();

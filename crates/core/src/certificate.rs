@@ -118,7 +118,8 @@ pub struct Certificate {
     /// max_i m_i (module docs); 0 for an exact fit, ∞ when r, g or A is not finite.
     pub optimality: f64,
     /// The integration error of `optimality`, measured by integrating again at a tenth of
-    /// the tolerance (0 where not measured: an exact fit, a point that failed).
+    /// the tolerance (0 where not measured: an exact fit, a point that failed; ∞ where that
+    /// integration fails, [`unchecked`](Self::unchecked)).
     pub error: f64,
     /// The integration error of ε at the point, |ε − ε′| with ε′ from the same integration
     /// again at a tenth of the tolerance (0 where `error` is not measured).
@@ -133,6 +134,12 @@ pub struct Certificate {
     pub flat: Vec<bool>,
     /// The direction the data cannot identify, when the normal matrix is singular there.
     pub null_space: Option<NullSpace>,
+    /// Why `error` could not be measured: the failure of the integration at a tenth of the
+    /// tolerance (or of a fixed step's error-controlled reference) at the point. Its value
+    /// then rests on an integration that a finer one contradicts (a singularity of the model
+    /// that the working integration stepped over, say) or cannot confirm: `error` is ∞ and
+    /// the point is not certified.
+    pub unchecked: Option<String>,
     /// With noise scales set in closed form (see [`drive`](crate::method::drive)): the largest
     /// relative change |ln(ŝ/s)| their closed form would still make at the point; it must be
     /// at most gtol too. `None` without noise scales.
@@ -141,9 +148,11 @@ pub struct Certificate {
 
 impl Certificate {
     /// Whether the point is certified: the first-order test holds (or ε = 0 to rounding),
-    /// no unknown is undetermined and not every unknown is flat.
+    /// its integration error could be measured where it is due, no unknown is undetermined
+    /// and not every unknown is flat.
     pub fn holds(&self) -> bool {
         (self.exact_fit || self.optimality + self.error <= self.gtol)
+            && self.unchecked.is_none()
             && self.scales.is_none_or(|m| m <= self.gtol)
             && !self.plateau()
             && !self.has_undetermined()
@@ -186,6 +195,7 @@ impl Certificate {
             flat: vec![false; k],
             null_space: None,
             scales: None,
+            unchecked: None,
         }
     }
 }
@@ -401,6 +411,7 @@ pub fn certify<S: System>(
         flat,
         null_space,
         scales: None,
+        unchecked: None,
     }
 }
 
@@ -444,6 +455,7 @@ mod tests {
             flat,
             null_space: None,
             scales: None,
+            unchecked: None,
         }
     }
 

@@ -204,6 +204,10 @@ pub enum Termination {
         /// After [`Rule::Progress`]: the unknowns still moving over its window, most first
         /// (those whose coordinate moved at least a tenth of the most any did, at most 5).
         moving: Vec<String>,
+        /// Where the point passes the first-order test at the working integration but the
+        /// integration that measures its error (at a tenth of the tolerances) fails there:
+        /// that failure ([`Certificate::unchecked`](crate::Certificate::unchecked)).
+        unchecked: Option<String>,
     },
     /// The iteration budget ran out.
     MaxIterations {
@@ -289,6 +293,12 @@ impl fmt::Display for Termination {
                     if undetermined.len() == 1 { "is" } else { "are" },
                     if undetermined.len() == 1 { "it" } else { "them" },
                     if undetermined.len() == 1 { "it moves" } else { "they move" }
+                )
+            }
+            Termination::Stalled { rule, iteration, optimality, unchecked: Some(why), .. } => {
+                write!(
+                    f,
+                    "stalled at iteration {iteration}: {rule}; the first-order test passes at the working tolerances (optimality {optimality:.2e}), but the integration at a tenth of them fails there ({why}): the point's figures are not confirmed, and it is not a certified minimum"
                 )
             }
             Termination::Stalled { rule, iteration, optimality, moving, .. }
@@ -400,6 +410,7 @@ mod tests {
                 plateau: false,
                 undetermined: vec![],
                 moving: vec![],
+                unchecked: None,
             });
         }
         terminations.push(Termination::Converged(Rule::ExactFit));

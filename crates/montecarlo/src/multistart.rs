@@ -691,6 +691,7 @@ mod tests {
                 flat: vec![false],
                 null_space: None,
                 scales: None,
+                unchecked: None,
             },
             history: Vec::new(),
             elapsed: Duration::ZERO,
