@@ -835,8 +835,9 @@ fn the_best_known_points_are_certified_minima_at_their_values() {
 /// (`uncertified_points.tsv`) are the objective at their points to 1e-6 by two schemes at
 /// tight tolerances: Rodas5P at rtol 1e-12 and DOPRI5 at rtol 1e-13 (`scripts/reference/
 /// at_point.py --points uncertified_points.tsv` gives AMICI's):
-/// - Borghans' oscillator, −125.269093, where the NLL at rtol 1e-8 is 3.6 off; AMICI at rtol
-///   1e-14, atol 1e-24: −125.2690927068 (at its default tolerances −123.30);
+/// - Borghans' oscillator, −125.345008 (the default fit from nominal with `--max-iterations
+///   20000`, still falling), where the NLL at rtol 1e-8 is 0.39 off; measured −125.3450080480
+///   with Rodas5P at rtol 1e-13, −125.3450079989 with DOPRI5 at 1e-14;
 /// - Giordano's −3488.428124, where the default fit from nominal stops by the progress rule
 ///   with alpha_0 still moving (optimality 6.2e-6); AMICI at rtol 1e-12, atol 1e-16:
 ///   −3488.4281241528 (at its defaults −3488.428118).
