@@ -667,7 +667,7 @@ fn converges_where_dopri5_does(integrator: &[&str]) {
 /// working integrations succeed and the check fails. Before, that check's failure counted as
 /// an error of 0 and the fit said converged (optimality_error 0). Now it is stalled at the
 /// minimum the unbudgeted fit certifies (kept, to 1e-7), with the check's error in its
-/// termination, no optimality_error and no standard errors.
+/// termination, no optimality_error or cost_error and no standard errors.
 #[test]
 fn a_check_that_cannot_be_integrated_is_not_a_convergence() {
     let model = "examples/kinetics/model.toml";
@@ -680,9 +680,17 @@ fn a_check_that_cannot_be_integrated_is_not_a_convergence() {
     for needle in ["the integration at a tenth of them fails there", "too many steps: 120"] {
         assert!(said.contains(needle), "`{needle}` not in {said}");
     }
-    assert!(fit["optimality_error"].is_null(), "{fit}");
+    for key in ["optimality_error", "cost_error"] {
+        assert!(fit[key].is_null(), "{key}: {fit}");
+    }
     assert!(fit["optimality"].as_f64().unwrap() <= fit["gtol"].as_f64().unwrap(), "{fit}");
     assert!(fit["std_errors"].as_object().unwrap().values().all(Value::is_null), "{fit}");
+    let table = text(&sysid(&["fit", "--model", model, "--max-steps", "120"]).stdout);
+    assert!(table.contains("converged    no (first-order optimality"), "{table}");
+    assert!(
+        table.contains("unconfirmed: the integration that measures its error fails"),
+        "{table}"
+    );
     for name in ["k1", "k2"] {
         let (got, want) = (fit["estimates"][name].as_f64(), reference["estimates"][name].as_f64());
         let (got, want) = (got.unwrap(), want.unwrap());

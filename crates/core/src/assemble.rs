@@ -223,7 +223,8 @@ impl Record<'_> {
                             }
                         }
                         Err(e) => {
-                            certificate.error = f64::INFINITY;
+                            (certificate.error, certificate.cost_error) =
+                                (f64::INFINITY, f64::INFINITY);
                             certificate.unchecked = Some(e.to_string());
                         }
                     }

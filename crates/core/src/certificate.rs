@@ -122,7 +122,8 @@ pub struct Certificate {
     /// integration fails, [`unchecked`](Self::unchecked)).
     pub error: f64,
     /// The integration error of ε at the point, |ε − ε′| with ε′ from the same integration
-    /// again at a tenth of the tolerance (0 where `error` is not measured).
+    /// again at a tenth of the tolerance (0 where `error` is not measured, ∞ where that
+    /// integration fails).
     pub cost_error: f64,
     /// The tolerance it was held to.
     pub gtol: f64,

@@ -505,6 +505,11 @@ impl Estimate {
                 "no (the noise scales' closed form would still move them by {moved:.2e} relative > gtol {:.0e})",
                 c.gtol
             )
+        } else if c.unchecked.is_some() && (c.exact_fit || c.optimality <= c.gtol) {
+            format!(
+                "no (first-order optimality {:.2e} ≤ gtol {:.0e} at the working integration, unconfirmed: the integration that measures its error fails)",
+                c.optimality, c.gtol
+            )
         } else if c.exact_fit {
             "yes (the model passes through the data: ε = 0 to rounding)".into()
         } else if c.holds() && c.corner() {
@@ -516,6 +521,11 @@ impl Estimate {
             format!(
                 "yes (first-order optimality {:.2e} ± {:.0e} ≤ gtol {:.0e})",
                 c.optimality, c.error, c.gtol
+            )
+        } else if c.error.is_infinite() {
+            format!(
+                "no (first-order optimality {:.2e} > gtol {:.0e}; its integration error unmeasured)",
+                c.optimality, c.gtol
             )
         } else {
             format!(
