@@ -485,4 +485,18 @@ mod tests {
         c.exact_fit = true;
         assert!(!c.holds());
     }
+
+    /// A point whose check integration failed is not certified, whatever its measure says:
+    /// not with optimality far below gtol, not as an exact fit (a fixed step's reference that
+    /// cannot be integrated proves nothing either).
+    #[test]
+    fn a_point_whose_check_failed_is_not_certified() {
+        for exact_fit in [false, true] {
+            let mut c = certificate(vec![false, false], vec![None, None]);
+            c.exact_fit = exact_fit;
+            assert!(c.holds(), "exact fit {exact_fit}");
+            c.unchecked = Some("too many steps".into());
+            assert!(!c.holds(), "exact fit {exact_fit}");
+        }
+    }
 }

@@ -355,6 +355,26 @@ impl fmt::Display for Termination {
 mod tests {
     use super::*;
 
+    /// A stall at a point that passed the first-order test with a check that could not be
+    /// integrated says so, with the check's error, and keeps the rule's code.
+    #[test]
+    fn an_unchecked_stall_names_the_failing_check() {
+        let t = Termination::Stalled {
+            rule: Rule::Step,
+            iteration: 6,
+            optimality: 7.8e-9,
+            plateau: false,
+            undetermined: vec![],
+            moving: vec!["k1".into()],
+            unchecked: Some("too many steps: 120 steps taken".into()),
+        };
+        assert_eq!(t.code(), "stalled_step");
+        let said = t.to_string();
+        for needle in ["optimality 7.80e-9", "a tenth of them fails there", "too many steps: 120"] {
+            assert!(said.contains(needle), "`{needle}` not in {said}");
+        }
+    }
+
     /// docs/terminations.md is the contract: every code the driver can form has its row
     /// there (a code in backticks at the start of a table row, alone or in a list).
     #[test]
