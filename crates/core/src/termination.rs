@@ -205,8 +205,8 @@ pub enum Termination {
         /// (those whose coordinate moved at least a tenth of the most any did, at most 5).
         moving: Vec<String>,
         /// Where the point passes the first-order test at the working integration but the
-        /// integration that measures its error (at a tenth of the tolerances) fails there:
-        /// that failure ([`Certificate::unchecked`](crate::Certificate::unchecked)).
+        /// integration that measures its error (at a tenth of the tolerances; for a fixed
+        /// step, with error control) fails there: that failure ([`Certificate::unchecked`](crate::Certificate::unchecked)).
         unchecked: Option<String>,
     },
     /// The iteration budget ran out.
@@ -298,7 +298,7 @@ impl fmt::Display for Termination {
             Termination::Stalled { rule, iteration, optimality, unchecked: Some(why), .. } => {
                 write!(
                     f,
-                    "stalled at iteration {iteration}: {rule}; the first-order test passes at the working tolerances (optimality {optimality:.2e}), but the integration at a tenth of them fails there ({why}): the point's figures are not confirmed, and it is not a certified minimum"
+                    "stalled at iteration {iteration}: {rule}; the first-order test passes at the working integration (optimality {optimality:.2e}), but the integration that checks it (at a tenth of the tolerances; for a fixed step, with error control) fails there ({why}): the point's figures are not confirmed, and it is not a certified minimum"
                 )
             }
             Termination::Stalled { rule, iteration, optimality, moving, .. }
@@ -370,7 +370,9 @@ mod tests {
         };
         assert_eq!(t.code(), "stalled_step");
         let said = t.to_string();
-        for needle in ["optimality 7.80e-9", "a tenth of them fails there", "too many steps: 120"] {
+        for needle in
+            ["optimality 7.80e-9", "the integration that checks it", "too many steps: 120"]
+        {
             assert!(said.contains(needle), "`{needle}` not in {said}");
         }
     }
