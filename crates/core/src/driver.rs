@@ -674,7 +674,10 @@ const ACCURATE: f64 = 0.1;
 /// the run stops short of the minimum (Borghans' oscillator at rtol 1e-8: m = 1.25e-4, NLL
 /// −123.387, a certified minimum at −123.685 beyond it).
 fn unresolved(c: &crate::Certificate, gtol: f64, epsilon: f64) -> bool {
-    !c.has_undetermined()
+    // A check that could not be integrated resolves nothing: its cost error is ∞, and a
+    // finer integration fails at the same point.
+    c.unchecked.is_none()
+        && !c.has_undetermined()
         && c.optimality > gtol
         && c.optimality.is_finite()
         && c.cost_error > ACCURATE * c.optimality.powi(2) * epsilon.abs()
