@@ -758,3 +758,39 @@ fn a_pole_stepped_over_is_flagged() {
         assert!(why.contains("blows up"), "{scheme}: {why}");
     }
 }
+
+/// A fit whose trust region shrinks to nothing because every step towards a lower cost
+/// fails to integrate says so. From the start where Crauste's multistart (seed 1, start 77)
+/// began, the cost falls towards parameters at which the pathogen (P′ = ρ_P P² − …) blows up
+/// before the last sample: within 13 iterations every trial longer than about 1e-11 (scaled)
+/// blows up, and the fit stops by its step rule. Not converged; its termination gives the last
+/// trial's blow-up and says where it stopped.
+#[test]
+fn a_fit_stopped_by_trials_that_cannot_be_integrated_says_so() {
+    let yaml = "tests/data/petab/Crauste_CellSystems2017/Crauste_CellSystems2017.yaml";
+    let start = [
+        "delta_EL=0.0010643898831892882",
+        "delta_LM=0.17935038467306663",
+        "delta_NE=6.352543867844434e-05",
+        "mu_EE=3.611594043728478",
+        "mu_LE=0.03557410601733028",
+        "mu_LL=8.509207324147367e-10",
+        "mu_N=0.0001275358608748132",
+        "mu_P=4.464093707868592e-05",
+        "mu_PE=6.387089348309907e-10",
+        "mu_PL=3.021524021296286",
+        "rho_E=2.8383371422767558e-05",
+        "rho_P=0.03579349923542714",
+    ];
+    let mut args = vec!["fit", "--petab", yaml, "--max-iterations", "1000"];
+    for s in &start {
+        args.extend(["--start", s]);
+    }
+    let fit = json(&args);
+    assert_eq!(fit["converged"], false, "{fit}");
+    assert!(fit["termination_code"].as_str().unwrap().starts_with("stalled_"), "{fit}");
+    let said = fit["termination"].as_str().unwrap();
+    for needle in ["its last trial step could not be integrated", "blows up", "Pathogen"] {
+        assert!(said.contains(needle), "`{needle}` not in {said}");
+    }
+}

@@ -133,6 +133,7 @@ impl Record<'_> {
                 unchecked: stalled.as_ref().and_then(|(.., c)| {
                     c.unchecked.clone().filter(|_| c.exact_fit || c.optimality <= c.gtol)
                 }),
+                blocked: ev.last_failed().map(|e| e.to_string()),
             },
             Ending::MaxIterations => Termination::MaxIterations {
                 fell: fell(&history, current.epsilon()),
@@ -338,6 +339,7 @@ pub(crate) fn with_scales<S: System>(
             undetermined: Vec::new(),
             moving: Vec::new(),
             unchecked: None,
+            blocked: None,
         };
     }
     let converged = e.certificate.holds();

@@ -18,7 +18,7 @@
 //! learn the same; the iterates' own cost moves the limit with them. The certificate's
 //! evaluations are never paced, nor is the accurate plain cost ([`Evaluations::cost`]).
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 
 use nalgebra::DVector;
 use sysid_ode::{Counts, Integrator, OdeError, Scheme, System};
@@ -41,6 +41,8 @@ pub struct Evaluations<'p, S> {
     /// The step limit of each experiment's integration while the integrations are
     /// [paced](Self::pace) below the problem's own `max_steps`.
     limit: Option<usize>,
+    /// The error of the last integration made here, where it failed ([`last_failed`](Self::last_failed)).
+    failed: RefCell<Option<OdeError>>,
 }
 
 /// A paced integration may take this many times the steps (accepted and rejected) of the
@@ -95,7 +97,15 @@ impl<'p, S: System> Evaluations<'p, S> {
             counts: Cell::new(Counts::default()),
             profiling: false,
             limit: None,
+            failed: RefCell::new(None),
         }
+    }
+
+    /// The error of the last integration made through these evaluations, where it failed:
+    /// a method that stops after its trials could not be integrated (a trust region shrunk
+    /// to nothing at the edge of where the model has a solution) says so by it.
+    pub fn last_failed(&self) -> Option<OdeError> {
+        self.failed.borrow().clone()
     }
 
     /// The problem, at the integrator tolerances of the run so far.
@@ -208,6 +218,7 @@ impl<'p, S: System> Evaluations<'p, S> {
         match integrate() {
             Ok((value, counts)) => {
                 self.add(counts);
+                *self.failed.borrow_mut() = None;
                 Ok(value)
             }
             Err(error) => {
@@ -221,6 +232,7 @@ impl<'p, S: System> Evaluations<'p, S> {
                     _ => 0,
                 };
                 self.add(Counts { integrations: 1, steps, ..Counts::default() });
+                *self.failed.borrow_mut() = Some(error.clone());
                 Err(Failure::Integration { error, at: self.values(z) })
             }
         }

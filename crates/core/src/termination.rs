@@ -206,8 +206,14 @@ pub enum Termination {
         moving: Vec<String>,
         /// Where the point passes the first-order test at the working integration but the
         /// integration that measures its error (at a tenth of the tolerances; for a fixed
-        /// step, with error control) fails there: that failure ([`Certificate::unchecked`](crate::Certificate::unchecked)).
+        /// step, with error control) fails there: that failure
+        /// ([`Certificate::unchecked`](crate::Certificate::unchecked)).
         unchecked: Option<String>,
+        /// Where the method's last trial before the stop could not be integrated: its
+        /// error. A trust region that shrinks to nothing because every step towards a lower
+        /// cost fails to integrate has stopped at the edge of where the model has a solution
+        /// (a blow-up), not at a minimum.
+        blocked: Option<String>,
     },
     /// The iteration budget ran out.
     MaxIterations {
@@ -277,6 +283,20 @@ impl Termination {
 
 impl fmt::Display for Termination {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.sentence(f)?;
+        match self {
+            Termination::Stalled { blocked: Some(why), .. } => write!(
+                f,
+                "; its last trial step could not be integrated ({why}): it stopped at the edge of where the model can be integrated"
+            ),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Termination {
+    /// The sentence for people, without what a stall's last trial met.
+    fn sentence(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Termination::Converged(rule) => write!(f, "converged: {rule}"),
             Termination::Stalled { rule, iteration, plateau: true, .. } => write!(
@@ -367,6 +387,7 @@ mod tests {
             undetermined: vec![],
             moving: vec!["k1".into()],
             unchecked: Some("too many steps: 120 steps taken".into()),
+            blocked: None,
         };
         assert_eq!(t.code(), "stalled_step");
         let said = t.to_string();
@@ -375,6 +396,24 @@ mod tests {
         {
             assert!(said.contains(needle), "`{needle}` not in {said}");
         }
+        assert!(!said.contains("last trial"), "{said}");
+        // A stall whose last trial could not be integrated ends with that trial's error,
+        // whatever else it says.
+        let t = Termination::Stalled {
+            rule: Rule::Step,
+            iteration: 13,
+            optimality: 0.3,
+            plateau: false,
+            undetermined: vec!["rho_E".into()],
+            moving: vec![],
+            unchecked: None,
+            blocked: Some("the solution blows up".into()),
+        };
+        let said = t.to_string();
+        assert!(said.contains("rho_E is not determined"), "{said}");
+        let end =
+            "(the solution blows up): it stopped at the edge of where the model can be integrated";
+        assert!(said.ends_with(end), "{said}");
     }
 
     /// docs/terminations.md is the contract: every code the driver can form has its row
@@ -433,6 +472,7 @@ mod tests {
                 undetermined: vec![],
                 moving: vec![],
                 unchecked: None,
+                blocked: None,
             });
         }
         terminations.push(Termination::Converged(Rule::ExactFit));
