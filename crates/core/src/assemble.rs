@@ -130,9 +130,9 @@ impl Record<'_> {
                     Rule::Progress => moving(ev.problem(), &history),
                     _ => Vec::new(),
                 },
-                unchecked: stalled.as_ref().and_then(|(.., c)| {
-                    c.unchecked.clone().filter(|_| c.exact_fit || c.optimality <= c.gtol)
-                }),
+                unchecked: stalled
+                    .as_ref()
+                    .and_then(|(.., c)| c.unchecked.clone().filter(|_| c.unconfirmed())),
                 blocked: ev.last_failed().map(|e| e.to_string()),
             },
             Ending::MaxIterations => Termination::MaxIterations {

@@ -159,6 +159,14 @@ impl Certificate {
             && !self.has_undetermined()
     }
 
+    /// Whether the point passes the first-order test (or is an exact fit) at the working
+    /// integration while the integration that checks it could not be made
+    /// ([`unchecked`](Self::unchecked)): the one reason it is not certified that no further
+    /// step or finer integration can remove.
+    pub fn unconfirmed(&self) -> bool {
+        self.unchecked.is_some() && (self.exact_fit || self.optimality <= self.gtol)
+    }
+
     /// The unknowns (indices) the model does not respond to at the point and that do not
     /// rest on a bound: the data do not determine them, and the cost may go on falling as
     /// they move (module docs).

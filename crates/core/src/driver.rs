@@ -488,15 +488,11 @@ fn drive_once<S: System>(
             // the tolerances fails there, going on at it would fail at once: the point is
             // reported, its check unmade. Where it fails the test as well, the extra steps
             // go on as for any failing point.
-            let unchecked = judged.1.unchecked.is_some();
-            if judged.1.holds()
-                || extra >= EXTRA_STEPS
-                || (unchecked && judged.1.optimality <= gtol)
-            {
+            if judged.1.holds() || extra >= EXTRA_STEPS || judged.1.unconfirmed() {
                 verdict = Some(judged);
                 break Ending::Rule(rule);
             }
-            if ((!unchecked && judged.1.error > ACCURATE * gtol)
+            if ((judged.1.unchecked.is_none() && judged.1.error > ACCURATE * gtol)
                 || unresolved(&judged.1, gtol, epsilon))
                 && let Some(finer) = ev.finer()
             {

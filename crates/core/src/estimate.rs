@@ -505,7 +505,7 @@ impl Estimate {
                 "no (the noise scales' closed form would still move them by {moved:.2e} relative > gtol {:.0e})",
                 c.gtol
             )
-        } else if c.unchecked.is_some() && (c.exact_fit || c.optimality <= c.gtol) {
+        } else if c.unconfirmed() {
             format!(
                 "no (first-order optimality {:.2e} ≤ gtol {:.0e} at the working integration, unconfirmed: the integration that measures its error fails)",
                 c.optimality, c.gtol
