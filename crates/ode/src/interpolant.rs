@@ -211,6 +211,17 @@ impl DenseSolution {
         Self { dim, spans: Vec::new(), coefficients, offsets: Vec::new(), fired: Vec::new() }
     }
 
+    /// The solution over the single instant t, where it is y: what an integration over an
+    /// empty span (every sample at t0, as a steady state measured at t = 0) leaves, so that
+    /// evaluating it at t gives y instead of finding no step.
+    pub fn at_instant(t: f64, y: &[f64]) -> Self {
+        let dim = y.len();
+        let mut coefficients = vec![0.0; TERMS * dim];
+        coefficients[..dim].copy_from_slice(y);
+        let offsets = vec![0, coefficients.len()];
+        Self { dim, spans: vec![(t, t)], coefficients, offsets, fired: Vec::new() }
+    }
+
     /// The coefficients of step i.
     fn step(&self, i: usize) -> &[f64] {
         &self.coefficients[self.offsets[i]..self.offsets[i + 1]]

@@ -232,6 +232,10 @@ pub fn integrate_family<S: System>(
         }
     }
     dense.finish();
+    if dense.is_empty() {
+        // Every sample at t0: the family is its initial value there.
+        dense = DenseSolution::at_instant(t0, &w0);
+    }
     Ok(Family { dense, counts })
 }
 

@@ -144,7 +144,11 @@ impl Trajectory {
             (DenseSolution::new(y0.len()), Counts::default())
         } else {
             let ivp = Ivp::new(e.system(), e.t0(), &y0, &p);
-            ivp.dense(problem.integrator(), &[], e.span())?
+            let (states, counts) = ivp.dense(problem.integrator(), &[], e.span())?;
+            // Every sample at t0 (a steady state measured at t = 0): nothing to integrate.
+            let states =
+                if states.is_empty() { DenseSolution::at_instant(e.t0(), &y0) } else { states };
+            (states, counts)
         };
         let follow = match start {
             Start::Data => data_interpolants(e),
