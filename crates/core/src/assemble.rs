@@ -318,6 +318,7 @@ pub(crate) fn with_scales<S: System>(
     held: &Problem<S>,
     rounds: Vec<Estimate>,
     moved: f64,
+    out_of_iterations: bool,
 ) -> Estimate {
     // A round starts where the last one stopped, at the scales' new values: its first row
     // replaces the last one's, so that each row is the point as last evaluated (and the
@@ -330,16 +331,21 @@ pub(crate) fn with_scales<S: System>(
     if !e.certificate.holds()
         && let Termination::Converged(rule) = e.termination
     {
-        // The fit of the last round was certified, but the scales would still move.
-        e.termination = Termination::Stalled {
-            rule,
-            iteration: iterations,
-            optimality: e.certificate.optimality.max(moved),
-            plateau: false,
-            undetermined: Vec::new(),
-            moving: Vec::new(),
-            unchecked: None,
-            blocked: None,
+        // The fit of the last round was certified, but the scales would still move: the
+        // iteration budget ran out before they could, or the rounds stalled.
+        e.termination = if out_of_iterations {
+            Termination::MaxIterations { fell: None, moving: Vec::new() }
+        } else {
+            Termination::Stalled {
+                rule,
+                iteration: iterations,
+                optimality: e.certificate.optimality.max(moved),
+                plateau: false,
+                undetermined: Vec::new(),
+                moving: Vec::new(),
+                unchecked: None,
+                blocked: None,
+            }
         };
     }
     let converged = e.certificate.holds();

@@ -75,7 +75,10 @@ pub fn drive<S: System>(
         let round_options = DriverOptions {
             max_iterations: options.max_iterations.saturating_sub(used),
             max_integrations: Some(
-                options.integration_budget(problem.unknowns().len()).saturating_sub(spent).max(1),
+                options
+                    .integration_budget(problem.unknowns().len(), problem.experiments().len())
+                    .saturating_sub(spent)
+                    .max(1),
             ),
             max_seconds: options
                 .max_seconds
@@ -100,7 +103,7 @@ pub fn drive<S: System>(
             // Hierarchical optimisation: one run, at the closed form of the point it returns.
             let held = problem.with_scales(&ended);
             rounds.push(estimate);
-            return Ok(crate::assemble::with_scales(problem, &held, rounds, moved));
+            return Ok(crate::assemble::with_scales(problem, &held, rounds, moved, false));
         }
         let held = problem.with_scales(&sigma);
         let next = held.optimal_scales(&estimate.values);
@@ -110,16 +113,18 @@ pub fn drive<S: System>(
         // Where the returned point cannot be evaluated again at the held scales (`next` is
         // None), there is no closed form to move to: the rounds end there, the scales
         // unsettled (`moved` ∞), rather than at a panic.
+        let out_of_iterations = estimate.iterations >= round_options.max_iterations;
         let last = estimate.start_failed()
             || next.is_none()
             || !(estimate.converged() || handed_over)
             || moved <= 1e-3 * gtol
-            || estimate.iterations >= round_options.max_iterations
+            || out_of_iterations
             || matches!(estimate.termination, crate::Termination::TimeLimit { .. })
             || rounds.len() + 1 >= MAX_ROUNDS;
         rounds.push(estimate);
         if last {
-            return Ok(crate::assemble::with_scales(problem, &held, rounds, moved));
+            let e = crate::assemble::with_scales(problem, &held, rounds, moved, out_of_iterations);
+            return Ok(e);
         }
         sigma = next.expect("a round whose scales cannot be formed is the last");
         z = rounds.last().expect("a round").values.clone();
@@ -196,7 +201,10 @@ fn drive_once<S: System>(
 ) -> Result<(Estimate, Vec<f64>, Option<f64>, bool), FitError> {
     let started = Instant::now();
     let z0 = start_coordinates(problem, start)?;
-    let mut ev = Evaluations::new(problem, options.integration_budget(problem.unknowns().len()));
+    let mut ev = Evaluations::new(
+        problem,
+        options.integration_budget(problem.unknowns().len(), problem.experiments().len()),
+    );
     // Coarse first: `ev` integrates at the coarse tolerances until the stage ends
     // (`end_coarse`), then at the problem's own.
     let mut coarse = coarse && options.coarse_first && step.coarse_first() && {

@@ -35,8 +35,17 @@ impl Estimate {
         let mut out = String::new();
         // A column of expected values only where there are some.
         let column = |v: &str| expected.map_or(String::new(), |_| format!(" {v:>24}"));
+        // The names' column as wide as the longest name (PEtab's run to 30 characters).
+        let w = self
+            .names
+            .iter()
+            .chain(self.scales.iter().map(|s| &s.name))
+            .map(|n| n.chars().count())
+            .max()
+            .unwrap_or(0)
+            .max(10);
         out += &format!(
-            "  {:<10} {:>24} {:>14} {:>34}{}\n",
+            "  {:<w$} {:>24} {:>14} {:>34}{}\n",
             "unknown",
             "estimate",
             "std. error",
@@ -72,7 +81,7 @@ impl Estimate {
                 None => "",
             };
             out += &format!(
-                "  {name:<10} {:>24} {se:>14} {interval:>34}{}{bound}\n",
+                "  {name:<w$} {:>24} {se:>14} {interval:>34}{}{bound}\n",
                 significant(self.values[i], 10),
                 column(&value)
             );
@@ -89,7 +98,7 @@ impl Estimate {
                 _ => "",
             };
             out += &format!(
-                "  {:<10} {:>24} {se:>14} {interval:>34}{}{bound}   (noise scale, closed form)\n",
+                "  {:<w$} {:>24} {se:>14} {interval:>34}{}{bound}   (noise scale, closed form)\n",
                 scale.name,
                 significant(scale.value, 10),
                 column(""),
