@@ -272,9 +272,12 @@ fn the_certificate_states_its_integration_error() {
 #[test]
 fn a_huge_iteration_count_does_not_wrap_the_budget() {
     let options = DriverOptions { max_iterations: usize::MAX, ..DriverOptions::default() };
-    assert_eq!(options.integration_budget(3), u64::MAX);
+    assert_eq!(options.integration_budget(3, 1), u64::MAX);
+    assert_eq!(options.integration_budget(3, 7), u64::MAX);
     let options = DriverOptions { max_iterations: 50, ..DriverOptions::default() };
-    assert_eq!(options.integration_budget(3), 10 * 4 * 51);
+    assert_eq!(options.integration_budget(3, 1), 10 * 4 * 51);
+    // Each experiment's integration counts as one: E experiments, E times the budget.
+    assert_eq!(options.integration_budget(3, 7), 10 * 4 * 51 * 7);
 }
 
 /// Noise-free data (the model's own trajectory at k1 = 0.8, k2 = 0.3, integrated at the

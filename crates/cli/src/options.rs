@@ -167,7 +167,8 @@ pub struct MethodArgs {
     #[arg(long, value_name = "TOL", value_parser = number, allow_hyphen_values = true)]
     pub gtol: Option<f64>,
     /// Hard budget of model integrations per fit, line-search and halving trials included
-    /// (default 10·(k + 1)·(max iterations + 1) for k unknowns).
+    /// (default 10·(k + 1)·(max iterations + 1)·E for k unknowns and E experiments: each
+    /// experiment's integration counts as one).
     #[arg(long, value_name = "N", value_parser = seed, allow_hyphen_values = true)]
     pub max_integrations: Option<u64>,
     /// Wall-clock limit of one fit in seconds (each start's, with --starts), read between

@@ -119,7 +119,7 @@ pub const START_MAX_ITERATIONS: usize = 1000;
 /// Options of the iteration driver, the same for every method (a method's options embed
 /// them). Defaults: [`MAX_ITERATIONS`] (3 000) iterations, step tolerance 1e-10, gradient
 /// tolerance 1e-10, gtol 100·rtol within [[`DEFAULT_GTOL`], [`MAX_DERIVED_GTOL`]], singular
-/// above condition 1e12, integration budget 10·(k + 1)·(max_iterations + 1) for k unknowns.
+/// above condition 1e12, integration budget 10·(k + 1)·(max_iterations + 1)·E for k unknowns and E experiments.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
 pub struct DriverOptions {
@@ -140,7 +140,7 @@ pub struct DriverOptions {
     /// form exceeds this.
     pub max_condition: f64,
     /// The hard budget of model integrations (trial points of line searches and halvings
-    /// included); `None`: 10·(k + 1)·(max_iterations + 1).
+    /// included); `None`: 10·(k + 1)·(max_iterations + 1)·E for E experiments.
     pub max_integrations: Option<u64>,
     /// The wall-clock limit of one fit in seconds, read between iterations (an iteration
     /// begun runs to its end): the fit then stops with its best point, `time_limit`.
@@ -271,11 +271,15 @@ impl DriverOptions {
         self.gtol.unwrap_or((100.0 * rtol).clamp(DEFAULT_GTOL, MAX_DERIVED_GTOL))
     }
 
-    /// The integration budget for k unknowns (saturating: a huge iteration count gives a
-    /// huge budget, never a wrapped one).
-    pub fn integration_budget(&self, k: usize) -> u64 {
+    /// The integration budget for k unknowns and a problem of `experiments` experiments:
+    /// 10·(k + 1)·(max_iterations + 1) evaluations of the model, each integrating every
+    /// experiment once (saturating: a huge iteration count gives a huge budget, never a
+    /// wrapped one).
+    pub fn integration_budget(&self, k: usize, experiments: usize) -> u64 {
         self.max_integrations.unwrap_or_else(|| {
-            (10 * (k as u64 + 1)).saturating_mul((self.max_iterations as u64).saturating_add(1))
+            (10 * (k as u64 + 1))
+                .saturating_mul((self.max_iterations as u64).saturating_add(1))
+                .saturating_mul(experiments.max(1) as u64)
         })
     }
 }

@@ -187,7 +187,7 @@ impl<S: System> Method<S> for LevenbergMarquardt {
             max_iterations: driver.max_iterations.saturating_sub(first.iterations),
             max_integrations: Some(
                 driver
-                    .integration_budget(problem.unknowns().len())
+                    .integration_budget(problem.unknowns().len(), problem.experiments().len())
                     .saturating_sub(first.counts.integrations),
             ),
             max_seconds: driver.max_seconds.map(|s| s - first.elapsed.as_secs_f64()),
