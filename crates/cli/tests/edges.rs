@@ -912,3 +912,17 @@ fn the_default_integration_budget_covers_every_experiment() {
     assert_eq!(fit["iterations"], 3, "{fit}");
     assert!((got / k - 1.0).abs() < 1e-6, "k {got}");
 }
+
+/// A preequilibration whose steady state cannot be found says why. DOPRI5 on Brannmark's
+/// stiff preequilibration runs out of steps on the way to the steady state; the evaluation
+/// was refused with "the steady state of `IR` … (preequilibration), became non-finite at
+/// t = 0", and nothing of the stiffness. The message now carries what stopped the search,
+/// with the integrator's advice.
+#[test]
+fn a_steady_state_that_is_not_found_says_why() {
+    let yaml = "tests/data/petab/Brannmark_JBC2010/Brannmark_JBC2010.yaml";
+    refused(
+        &["evaluate", "--petab", yaml, "--integrator", "dopri5"],
+        &["(preequilibration), which was not found (", "stiff", "use the rodas5p or auto"],
+    );
+}

@@ -38,6 +38,12 @@ pub trait SettingFunction: Send + Sync {
     /// evaluation computes afresh: for timing one evaluation
     /// ([`Problem::forget_cached`](crate::Problem::forget_cached)). Default: nothing kept.
     fn forget(&self) {}
+    /// Why its value at `v`, last evaluated, is not finite, where it knows (a steady state
+    /// that was not found: what stopped the search for it), for messages. Default: `None`.
+    fn failure(&self, v: &[f64]) -> Option<String> {
+        let _ = v;
+        None
+    }
 }
 
 /// How an experiment sets one initial value or parameter of its system.
@@ -278,7 +284,14 @@ impl<S: System> Planned<S> {
         let bad = |values: &[f64], settings: &[Resolved], names: &[&str], kind: &str| {
             let i = values.iter().position(|x| !x.is_finite())?;
             let what = match &settings[i] {
-                Resolved::Function(g) => format!("{kind} `{}`, {},", names[i], g.describe()),
+                Resolved::Function(g) => match g.failure(v) {
+                    Some(why) => format!(
+                        "{kind} `{}`, {}, which was not found ({why}),",
+                        names[i],
+                        g.describe()
+                    ),
+                    None => format!("{kind} `{}`, {},", names[i], g.describe()),
+                },
                 _ => format!("{kind} `{}`", names[i]),
             };
             Some(sysid_ode::OdeError::NonFinite { t: self.t0, what })

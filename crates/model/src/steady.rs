@@ -59,8 +59,9 @@ pub(crate) struct SteadyState {
 /// solve, made the fits wait for each other.
 const CACHED: usize = 64;
 
-/// A point, the integrator that solved there and its steady state (None: not found).
-type Cached = (Integrator, Vec<f64>, Option<Solved>);
+/// A point, the integrator that solved there and its steady state (or why it was not
+/// found).
+type Cached = (Integrator, Vec<f64>, Result<Solved, String>);
 
 /// A steady state and its derivatives ∂y/∂v (n × n_v, row by row).
 #[derive(Clone)]
@@ -123,7 +124,7 @@ impl SteadyState {
         states.iter().enumerate().map(|s| Setting::Function(Arc::new(component(s)))).collect()
     }
 
-    fn solved(&self, v: &[f64], integrator: &Integrator) -> Option<Solved> {
+    fn solved(&self, v: &[f64], integrator: &Integrator) -> Result<Solved, String> {
         let same = |at: &[f64]| at.iter().zip(v).all(|(a, b)| a.to_bits() == b.to_bits());
         {
             let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
@@ -162,7 +163,7 @@ impl SteadyState {
         }
     }
 
-    fn solve(&self, v: &[f64], integrator: &Integrator) -> Option<Solved> {
+    fn solve(&self, v: &[f64], integrator: &Integrator) -> Result<Solved, String> {
         let nv = v.len();
         let (np, n) = (self.parameters.len(), self.initial.len());
         let mut dp = vec![0.0; np * nv];
@@ -180,7 +181,7 @@ impl SteadyState {
             })
             .collect();
         if !p.iter().chain(&y0).all(|x| x.is_finite()) {
-            return None;
+            return Err("its parameters or initial values are not finite there".into());
         }
         let sys = &self.system;
         // The columns the unknowns move.
@@ -205,10 +206,12 @@ impl SteadyState {
                 by_decades(&mut augmented, x, integrator, |t, x, next, scheme| {
                     let (y, s) = x.split_at(n);
                     let ivp = Ivp::new(sys, t, y, &p);
-                    let trajectory = ivp.solve_sensitivities_from(scheme, &wrt, s, &[next]).ok()?;
+                    let trajectory = ivp
+                        .solve_sensitivities_from(scheme, &wrt, s, &[next])
+                        .map_err(|e| towards(t, next, &e))?;
                     let mut x = trajectory.state(0).to_vec();
                     x.extend_from_slice(trajectory.sensitivity_slice(0));
-                    Some((x, trajectory.counts().jacobians > 0))
+                    Ok((x, trajectory.counts().jacobians > 0))
                 })?
                 .1
             }
@@ -225,21 +228,30 @@ impl SteadyState {
             }
         }
         let y = x[..n].to_vec();
-        y.iter().chain(&dy).all(|x| x.is_finite()).then_some(Solved { y, dy })
+        if y.iter().chain(&dy).all(|x| x.is_finite()) {
+            Ok(Solved { y, dy })
+        } else {
+            Err("the state or its sensitivities there are not finite".into())
+        }
     }
+}
+
+/// Why the integration of a decade towards a steady state failed, for messages.
+fn towards(t: f64, next: f64, error: &sysid_ode::OdeError) -> String {
+    format!("integrating towards it from t = {t} to {next}: {error}")
 }
 
 /// Integrates `x` (a state, or a state and its sensitivities) on by decades, t = 1, 10, 100,
 /// …, each by `decade(t, x, next, integrator)` (the new x, and whether the decade went stiff),
 /// until `rhs` says it has [settled] or a decade from t ≥ 10 moved it by at most [`STILL`]
-/// tolerances, at a steady pace: the time it settled by and x there. None where it has not by
-/// [`LAST`] or a decade fails.
+/// tolerances, at a steady pace: the time it settled by and x there. Why not where it has not
+/// by [`LAST`] or a decade fails.
 fn by_decades(
     rhs: &mut impl Rhs,
     mut x: Vec<f64>,
     integrator: &Integrator,
-    mut decade: impl FnMut(f64, &[f64], f64, &Integrator) -> Option<(Vec<f64>, bool)>,
-) -> Option<(f64, Vec<f64>)> {
+    mut decade: impl FnMut(f64, &[f64], f64, &Integrator) -> Result<(Vec<f64>, bool), String>,
+) -> Result<(f64, Vec<f64>), String> {
     let mut t = 0.0;
     // How far the last decade moved, in tolerances of the farthest-moving component.
     let mut last_moved = None;
@@ -248,7 +260,7 @@ fn by_decades(
     while !settled(rhs, t, &x, integrator) {
         let next = if t == 0.0 { 1.0 } else { 10.0 * t };
         if next > LAST {
-            return None;
+            return Err(format!("it had not settled by t = {LAST:e}"));
         }
         let (after, stiff) = decade(t, &x, next, &scheme)?;
         // A decade that went stiff under the automatic scheme (it factorised Jacobians)
@@ -282,7 +294,7 @@ fn by_decades(
             break;
         }
     }
-    Some((t, x))
+    Ok((t, x))
 }
 
 /// The smallest modulus an eigenvalue of the Jacobian at the steady state may have, relative
@@ -333,9 +345,11 @@ fn by_newton(
     }
     let mut model = ModelRhs::new(sys, p);
     let (t, y) = by_decades(&mut model, y0.to_vec(), integrator, |t, y, next, scheme| {
-        let trajectory = Ivp::new(sys, t, y, p).solve(scheme, &[next]).ok()?;
-        Some((trajectory.state(0).to_vec(), trajectory.counts().jacobians > 0))
-    })?;
+        let trajectory =
+            Ivp::new(sys, t, y, p).solve(scheme, &[next]).map_err(|e| towards(t, next, &e))?;
+        Ok((trajectory.state(0).to_vec(), trajectory.counts().jacobians > 0))
+    })
+    .ok()?;
     let (j, f) = jacobian(t, &y)?;
     let step = j.lu().solve(&f)?;
     let tolerances = y
@@ -387,14 +401,20 @@ impl SettingFunction for Component {
     fn eval(&self, v: &[f64], gradient: &mut [f64]) -> f64 {
         let nv = v.len();
         match self.steady.solved(v, &self.integrator) {
-            Some(s) => {
+            Ok(s) => {
                 for &j in &self.steady.uses {
                     gradient[j] = s.dy[self.state * nv + j];
                 }
                 s.y[self.state]
             }
-            None => f64::NAN,
+            Err(_) => f64::NAN,
         }
+    }
+    fn failure(&self, v: &[f64]) -> Option<String> {
+        let same = |at: &[f64]| at.iter().zip(v).all(|(a, b)| a.to_bits() == b.to_bits());
+        let cache = self.steady.cache.lock().unwrap_or_else(|e| e.into_inner());
+        let (.., solved) = cache.iter().find(|(i, at, _)| *i == self.integrator && same(at))?;
+        solved.as_ref().err().cloned()
     }
     fn uses(&self) -> &[usize] {
         &self.steady.uses
