@@ -926,3 +926,52 @@ fn a_steady_state_that_is_not_found_says_why() {
         &["(preequilibration), which was not found (", "stiff", "use the rodas5p or auto"],
     );
 }
+
+/// A point the model cannot be integrated at has no cost. Perelson's start at c = 9.24,
+/// δ = 127.7, σ = 1e5 (start 3 of `--starts 4`, seed 1, with quasilinearization): V decays
+/// as e^(−δt) to 0, its log10 observable is −∞, and quasilinearization failed there at
+/// iteration 0. Its fit reported the method's own ε (9.8e-8, from an integration 10 times
+/// tighter, with σ = 1e5) as its cost, and the multistart ranked that start best: the whole
+/// run said `integration_failed` with no NLL though the guess's start certified 222.280770
+/// (best_known.tsv). The cost is now null there, as the contract says, and the start is not
+/// ranked.
+#[test]
+fn a_point_that_cannot_be_integrated_has_no_cost_and_is_never_best() {
+    let yaml = "tests/data/petab/Perelson_Science1996/Perelson_Science1996.yaml";
+    let fit = json(&[
+        "fit",
+        "--petab",
+        yaml,
+        "--method",
+        "quasilinearization",
+        "--start",
+        "c=9.238507364574616",
+        "--start",
+        "delta=127.67393293114299",
+        "--start",
+        "sd_task0_model0_perelson1_V=100000.0",
+    ]);
+    assert_eq!(fit["termination_code"], "integration_failed", "{}", fit["termination"]);
+    assert!(fit["cost"].is_null() && fit["nll"].is_null(), "{fit}");
+    let many = json(&[
+        "fit",
+        "--petab",
+        yaml,
+        "--method",
+        "quasilinearization",
+        "--starts",
+        "4",
+        "--max-iterations",
+        "5",
+    ]);
+    assert_eq!(many["converged"], true, "{}", many["termination"]);
+    let nll = many["nll"].as_f64().unwrap();
+    assert!((nll - 222.280770).abs() < 1e-6, "{nll}");
+    for start in many["starts"]["waterfall"].as_array().unwrap() {
+        if start["cost"].is_null() {
+            assert!(start["objective"].is_null(), "{start}");
+        } else {
+            assert!(start["objective"].as_f64().unwrap() >= nll - 1e-9, "{start}");
+        }
+    }
+}

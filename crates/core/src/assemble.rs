@@ -285,9 +285,11 @@ impl Record<'_> {
             intervals,
             covariance,
             // One measure for every method: ε from the integration the certificate judged
-            // (the problem's integrator, with sensitivities); the method's own where there is
-            // none.
-            cost: lin.map_or(point.cost, |l| l.cost),
+            // (the problem's integrator, with sensitivities); none (NaN) where the point could
+            // not be evaluated so. The method's own figure there (quasilinearization's, from an
+            // integration 10 times tighter) stays in the history: as the fit's cost it ranked
+            // a start that cannot be integrated first in a multistart (Perelson).
+            cost: lin.map_or(f64::NAN, |l| l.cost),
             dof,
             iterations,
             best_iteration,
