@@ -934,7 +934,8 @@ fn a_steady_state_that_is_not_found_says_why() {
 /// tighter, with σ = 1e5) as its cost, and the multistart ranked that start best: the whole
 /// run said `integration_failed` with no NLL though the guess's start certified 222.280770
 /// (best_known.tsv). The cost is now null there, as the contract says, and the start is not
-/// ranked.
+/// ranked. The termination names the observable that left its scale (V < 0 by the
+/// integration's error, whose log10 is NaN), not a row number.
 #[test]
 fn a_point_that_cannot_be_integrated_has_no_cost_and_is_never_best() {
     let yaml = "tests/data/petab/Perelson_Science1996/Perelson_Science1996.yaml";
@@ -952,6 +953,9 @@ fn a_point_that_cannot_be_integrated_has_no_cost_and_is_never_best() {
         "sd_task0_model0_perelson1_V=100000.0",
     ]);
     assert_eq!(fit["termination_code"], "integration_failed", "{}", fit["termination"]);
+    // The row is named (it was "residual 12 became non-finite").
+    let said = fit["termination"].as_str().unwrap();
+    assert!(said.contains("`task0_model0_perelson1_V` of experiment `condition1` on its log10 scale (the model gives "), "{said}");
     assert!(fit["cost"].is_null() && fit["nll"].is_null(), "{fit}");
     let many = json(&[
         "fit",

@@ -16,7 +16,7 @@ use sysid_ode::{Counts, Integrator, Ivp, Observable, ObservableGradient, OdeErro
 
 use crate::confidence::band_half_width;
 use crate::experiment::Planned;
-use crate::noise::{NOISE_ROW_SHIFT, NoiseArgs, NoiseDistribution, NoiseGradient};
+use crate::noise::{NOISE_ROW_SHIFT, NoiseArgs, NoiseDistribution, NoiseGradient, Transform};
 use crate::plan::{Plan, PlannedNoise, Sampled};
 use crate::problem::Problem;
 
@@ -1056,6 +1056,23 @@ pub(crate) fn sample_rows<'s, S: System>(
                 }
             }
             let (th, slope) = (s.transform.apply(h), s.transform.derivative(h));
+            if !th.is_finite() {
+                // Named here: the end's check can only count rows.
+                let what = match s.transform {
+                    Transform::Lin => format!(
+                        "the observable `{}` of experiment `{}`",
+                        s.observable_name(e.system()),
+                        e.name
+                    ),
+                    scale => format!(
+                        "the observable `{}` of experiment `{}` on its {} scale (the model gives {h:e})",
+                        s.observable_name(e.system()),
+                        e.name,
+                        scale.name()
+                    ),
+                };
+                return Err(OdeError::NonFinite { t: times[m], what });
+            }
             let laplace = s.distribution == NoiseDistribution::Laplace;
             let PlannedNoise::Function(f) = &s.noise else {
                 // Normal: R = √w·d. Laplace: R = sign(d)·√(2|d|/b), and A takes the Fisher
