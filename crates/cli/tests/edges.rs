@@ -979,3 +979,21 @@ fn a_point_that_cannot_be_integrated_has_no_cost_and_is_never_best() {
         }
     }
 }
+
+/// A profile cut short by its point budget is undecided. Perelson's c and δ are
+/// identifiable: with the default 60 points both profiles cross ΔNLL = 1.92 on both sides.
+/// With `--max-points 8` no side gets there (the steps aim at a rise of a tenth of the
+/// threshold), and both were called "practically non-identifiable", a claim about the data
+/// that only the budget made. They are now `undecided`.
+#[test]
+fn a_profile_cut_short_by_its_point_budget_is_undecided() {
+    let yaml = "tests/data/petab/Perelson_Science1996/Perelson_Science1996.yaml";
+    let labels = |extra: &[&str]| {
+        let mut args = vec!["profile", "--petab", yaml];
+        args.extend(extra);
+        let out = json(&args);
+        ["c", "delta"].map(|name| out["profiles"][name]["label"].as_str().unwrap().to_string())
+    };
+    assert_eq!(labels(&[]), ["identifiable", "identifiable"]);
+    assert_eq!(labels(&["--max-points", "8"]), ["undecided", "undecided"]);
+}

@@ -20,8 +20,11 @@
 //!
 //! **Verdicts**: `identifiable` when both sides cross; `structurally_non_identifiable` when
 //! the profile rises by less than 1e-3 of the threshold over the whole range walked;
-//! `practically_non_identifiable` otherwise (a side reaches a bound or the step budget
-//! without crossing).
+//! `practically_non_identifiable` when a side stays below the threshold up to the unknown's
+//! bound, or until the step budget ran out with its steps at their longest ([`MAX_STEP`]:
+//! the profile too flat for them to reach a rise of a tenth of the threshold); `undecided`
+//! when a side's budget ran out before either (its steps still shorter: the profile was
+//! rising, and more points may cross), which a larger budget decides.
 //!
 //! **A fit that panics** (a defect in sysid) ends its side there: the profile keeps the points
 //! walked before it, its other side is still traced, its verdict is `failed` with the panic's
@@ -197,8 +200,12 @@ pub struct Point {
 pub enum Label {
     /// Both sides cross the threshold.
     Identifiable,
-    /// A side reaches a bound or the step budget without crossing.
+    /// A side reaches a bound without crossing, or the step budget with its steps at their
+    /// longest (the profile flat).
     PracticallyNonIdentifiable,
+    /// A side's step budget ran out while its steps were still shorter than the longest:
+    /// the profile was rising and had not crossed; more points decide.
+    Undecided,
     /// The profile is flat: it rises by less than 1e-3 of the threshold over the range
     /// walked.
     StructurallyNonIdentifiable,
@@ -213,6 +220,7 @@ impl Label {
         match self {
             Label::Identifiable => "identifiable",
             Label::PracticallyNonIdentifiable => "practically non-identifiable",
+            Label::Undecided => "undecided (the point budget ran out before the threshold)",
             Label::StructurallyNonIdentifiable => "structurally non-identifiable",
             Label::Failed => "failed (a fit along it panicked)",
         }
@@ -301,6 +309,8 @@ pub enum Outcome {
 enum End {
     Crossed(f64),
     Open,
+    /// The step budget ran out below the threshold with steps shorter than the longest.
+    Budget,
     Better(Point),
     /// A fit panicked, with this message.
     Failed(String),
@@ -383,13 +393,14 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         };
         let mut points = vec![at.clone()];
         let mut interval = [None, None];
-        let (mut open, mut failed) = (false, None);
+        let (mut open, mut budget, mut failed) = (false, false, None);
         for (side, direction) in [-1.0, 1.0].into_iter().enumerate() {
             let (walked, end) = self.side(&at, direction)?;
             points.extend(walked);
             match end {
                 End::Crossed(value) => interval[side] = Some(value),
                 End::Open => open = true,
+                End::Budget => budget = true,
                 End::Better(point) => return Ok(Err(point)),
                 End::Failed(message) => failed = failed.or(Some(message)),
             }
@@ -400,6 +411,8 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             Label::Failed
         } else if rise < 1e-3 * self.options.threshold {
             Label::StructurallyNonIdentifiable
+        } else if budget {
+            Label::Undecided
         } else if open {
             Label::PracticallyNonIdentifiable
         } else {
@@ -519,7 +532,9 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             h = (h * grow).min(MAX_STEP * scale);
             (z, previous) = (next_z, point);
         }
-        Ok((points, End::Open))
+        // Out of steps: open where they had grown to the longest (the profile flat), else
+        // undecided.
+        Ok((points, if h >= MAX_STEP * scale { End::Open } else { End::Budget }))
     }
 
     /// The value where the profile crosses the threshold between `a` (below) and `b`

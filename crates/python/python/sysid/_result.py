@@ -95,8 +95,10 @@ class Profile:
         low, high = record["interval"]
         #: The 95 % interval (low, high); None at an end whose side did not cross the threshold.
         self.interval: Tuple[Optional[float], Optional[float]] = (low, high)
-        #: ``identifiable``, ``practically_non_identifiable``, ``structurally_non_identifiable``
-        #: or ``failed`` (a fit along the profile panicked, a defect in sysid: no verdict).
+        #: ``identifiable``, ``practically_non_identifiable``, ``undecided`` (the point budget
+        #: ran out before the profile crossed the threshold while it was still rising),
+        #: ``structurally_non_identifiable`` or ``failed`` (a fit along the profile panicked, a
+        #: defect in sysid: no verdict).
         self.label: str = record["label"]
         #: None, or the message of the panic that ended a side's tracing (the points before it
         #: are kept).
