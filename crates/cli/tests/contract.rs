@@ -311,7 +311,10 @@ fn table_agrees(args: &[&str], fit: &Value) {
         .filter(|l| l.ends_with("(noise scale, closed form)"))
         .map(String::from)
         .collect();
-    for (name, estimate) in fit["estimates"].as_object().expect("estimates") {
+    let estimates = fit["estimates"].as_object().expect("estimates");
+    // The names' column is as wide as the longest name (noise scales included), at least 10.
+    let w = estimates.keys().map(|n| n.chars().count()).max().unwrap_or(0).max(10);
+    for (name, estimate) in estimates {
         let bound = bounds.get(name).and_then(Value::as_str);
         let se = match (bound, fit["std_errors"][name].as_f64()) {
             (Some("prior_location"), _) => "at prior".to_string(),
@@ -331,7 +334,7 @@ fn table_agrees(args: &[&str], fit: &Value) {
             _ => "—".to_string(),
         };
         let row = format!(
-            "  {name:<10} {:>24} {se:>14} {interval:>34}",
+            "  {name:<w$} {:>24} {se:>14} {interval:>34}",
             significant(estimate.as_f64().expect("a finite estimate"), 10)
         );
         assert!(
