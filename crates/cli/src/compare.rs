@@ -104,7 +104,10 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         Format::Json => emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?,
         Format::Table if args.verbose => emit(&tables.join("\n"))?,
         Format::Table if summaries.len() > 1 => emit(&matrix(&methods, &summaries))?,
-        Format::Table => emit(&(compact_header() + &tables.concat()))?,
+        Format::Table => {
+            let name = summaries.first().map_or("", |s| s.system.as_str());
+            emit(&(compact_header(name) + &tables.concat()))?
+        }
     }
     Ok(Outcome::Success)
 }

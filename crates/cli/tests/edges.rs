@@ -997,3 +997,14 @@ fn a_profile_cut_short_by_its_point_budget_is_undecided() {
     assert_eq!(labels(&[]), ["identifiable", "identifiable"]);
     assert_eq!(labels(&["--max-points", "8"]), ["undecided", "undecided"]);
 }
+
+/// A start off its bounds is refused with the number as the user wrote it, not as 301
+/// digits (`--start k_phos=1e300` printed 1 and 300 zeros).
+#[test]
+fn a_start_off_its_bounds_is_refused_in_few_digits() {
+    let yaml = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
+    refused(
+        &["fit", "--petab", yaml, "--start", "k_phos=1e300"],
+        &["unknown `k_phos`: start 1e300: above its max 100000"],
+    );
+}

@@ -336,7 +336,7 @@ impl<S: System> Problem<S> {
             if let Some(wrong) = wrong {
                 return Err(ProblemError::InvalidUnknown {
                     name: name.clone(),
-                    message: format!("start {value}: {wrong}"),
+                    message: format!("start {}: {wrong}", crate::format::shortest(*value)),
                 });
             }
             u.guess = *value;

@@ -226,22 +226,30 @@ pub struct Compared<'a> {
     pub note: Option<String>,
 }
 
-/// The header of [`compact`]'s lines.
-pub fn compact_header() -> String {
+/// The header of [`compact`]'s lines for the problem called `system`.
+pub fn compact_header(system: &str) -> String {
+    let w = system_width(system);
     format!(
-        "{:<24} {:<24} {:>4} {:>5} {:>18} {:>10}  {}\n",
+        "{:<w$} {:<24} {:>4} {:>5} {:>18} {:>10}  {}\n",
         "system", "method", "conv", "iter", "cost ε", "time ms", "termination"
     )
+}
+
+/// The width of [`compact`]'s first column: the problem's name (a PEtab problem's is its YAML
+/// file's path), at least 24.
+fn system_width(system: &str) -> usize {
+    system.chars().count().max(24)
 }
 
 /// A comparison in one line per method: system, method, converged, iterations, cost, time,
 /// the termination code and the note.
 pub fn compact(system: &str, rows: &[Compared<'_>]) -> String {
+    let w = system_width(system);
     let mut out = String::new();
     for row in rows {
         out += &match &row.fit {
             Ok(e) => format!(
-                "{system:<24} {:<24} {:>4} {:>5} {:>18} {:>10.3}  {}{}\n",
+                "{system:<w$} {:<24} {:>4} {:>5} {:>18} {:>10.3}  {}{}\n",
                 row.method,
                 if e.converged() { "yes" } else { "no" },
                 e.iterations,
@@ -253,7 +261,7 @@ pub fn compact(system: &str, rows: &[Compared<'_>]) -> String {
                     _ => String::new(),
                 } + &row.note.as_ref().map_or(String::new(), |n| format!(", {n}")),
             ),
-            Err(message) => format!("{system:<24} {:<24} error: {message}\n", row.method),
+            Err(message) => format!("{system:<w$} {:<24} error: {message}\n", row.method),
         };
     }
     out

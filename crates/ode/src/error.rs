@@ -6,12 +6,19 @@ use thiserror::Error;
 /// least 1), beyond which a failed integration is reported as [`OdeError::BlowUp`].
 pub const BLOW_UP_GROWTH: f64 = 1e6;
 
+/// A time in a message: every digit, in exponent form outside [1e-4, 1e9) (a step size
+/// underflow at t = 1e-300 printed three hundred zeros).
+fn time(t: &f64) -> String {
+    let a = t.abs();
+    if a != 0.0 && !(1e-4..1e9).contains(&a) { format!("{t:e}") } else { format!("{t}") }
+}
+
 /// Why an integration stopped before reaching its end.
 #[derive(Clone, Debug, Error, PartialEq)]
 pub enum OdeError {
     /// The step size fell below what the floating-point resolution of t allows: the solution
     /// is singular near t, or the problem is too stiff for the method.
-    #[error("step size underflow at t = {t}: step {h:e} is below the resolution of t")]
+    #[error("step size underflow at t = {}: step {h:e} is below the resolution of t", time(.t))]
     StepSizeTooSmall {
         /// Where the integration stopped.
         t: f64,
@@ -19,7 +26,7 @@ pub enum OdeError {
         h: f64,
     },
     /// A state or sensitivity became NaN or infinite.
-    #[error("{what} became non-finite at t = {t}")]
+    #[error("{what} became non-finite at t = {}", time(.t))]
     NonFinite {
         /// Where the integration stopped (the start of the step that produced the value).
         t: f64,
@@ -27,7 +34,7 @@ pub enum OdeError {
         what: String,
     },
     /// The step budget was used up.
-    #[error("too many steps: {steps} steps taken by t = {t} without reaching {t_end}")]
+    #[error("too many steps: {steps} steps taken by t = {} without reaching {}", time(.t), time(.t_end))]
     TooManySteps {
         /// Where the integration stopped.
         t: f64,
@@ -57,7 +64,9 @@ pub enum OdeError {
     /// The explicit integrator ran out of steps on a problem that its stiffness test
     /// flagged: the steps were limited by stability, not accuracy.
     #[error(
-        "too many steps ({steps}) at t = {t}: the problem is stiff from t = {since} on (the explicit scheme's steps are limited by stability, not accuracy); use the rodas5p or auto integrator"
+        "too many steps ({steps}) at t = {}: the problem is stiff from t = {} on (the explicit scheme's steps are limited by stability, not accuracy); use the rodas5p or auto integrator",
+        time(.t),
+        time(.since)
     )]
     Stiff {
         /// Where the budget ran out.
@@ -72,7 +81,8 @@ pub enum OdeError {
     /// magnitude at the start (at least 1). A finite-time singularity, or exponential growth
     /// faster than the integrator can follow.
     #[error(
-        "the solution blows up: {what} reaches {value:.3e} at t = {t} (it started at most {start:.3e} in magnitude)"
+        "the solution blows up: {what} reaches {value:.3e} at t = {} (it started at most {start:.3e} in magnitude)",
+        time(.t)
     )]
     BlowUp {
         /// Where the integration stopped.
@@ -87,7 +97,7 @@ pub enum OdeError {
         steps: usize,
     },
     /// The implicit integrator's iteration matrix is singular.
-    #[error("the implicit step matrix is singular at t = {t}")]
+    #[error("the implicit step matrix is singular at t = {}", time(.t))]
     SingularJacobian {
         /// Where.
         t: f64,
@@ -160,4 +170,29 @@ pub enum SignalError {
         /// The offending time.
         time: f64,
     },
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Times far from 1 are written in exponent form (a step size underflow near t = 1e-271
+    /// printed 270 zeros), the others as they are.
+    #[test]
+    fn times_in_messages_are_short() {
+        let tiny = OdeError::StepSizeTooSmall { t: 2.5e-271, h: 3.9e-286 };
+        assert_eq!(
+            tiny.to_string(),
+            "step size underflow at t = 2.5e-271: step 3.9e-286 is below the resolution of t"
+        );
+        let plain = OdeError::NonFinite { t: 4.968, what: "state y".into() };
+        assert_eq!(plain.to_string(), "state y became non-finite at t = 4.968");
+        let zero = OdeError::NonFinite { t: 0.0, what: "state y".into() };
+        assert_eq!(zero.to_string(), "state y became non-finite at t = 0");
+        let far = OdeError::TooManySteps { steps: 10, t: 3e11, t_end: 1e12 };
+        assert_eq!(
+            far.to_string(),
+            "too many steps: 10 steps taken by t = 3e11 without reaching 1e12"
+        );
+    }
 }
