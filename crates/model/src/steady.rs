@@ -124,15 +124,17 @@ impl SteadyState {
         states.iter().enumerate().map(|s| Setting::Function(Arc::new(component(s)))).collect()
     }
 
-    fn solved(&self, v: &[f64], integrator: &Integrator) -> Result<Solved, String> {
+    /// The steady state solved at `v` with `integrator` (or why it was not found), if it is
+    /// still in the cache.
+    fn cached(&self, v: &[f64], integrator: &Integrator) -> Option<Result<Solved, String>> {
         let same = |at: &[f64]| at.iter().zip(v).all(|(a, b)| a.to_bits() == b.to_bits());
-        {
-            let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
-            if let Some((_, _, solved)) =
-                cache.iter().find(|(i, at, _)| i == integrator && same(at))
-            {
-                return solved.clone();
-            }
+        let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+        cache.iter().find(|(i, at, _)| i == integrator && same(at)).map(|(.., s)| s.clone())
+    }
+
+    fn solved(&self, v: &[f64], integrator: &Integrator) -> Result<Solved, String> {
+        if let Some(solved) = self.cached(v, integrator) {
+            return solved;
         }
         // Solved without the lock: fits on other threads need their own points meanwhile.
         let solved = self.solve(v, integrator);
@@ -411,10 +413,7 @@ impl SettingFunction for Component {
         }
     }
     fn failure(&self, v: &[f64]) -> Option<String> {
-        let same = |at: &[f64]| at.iter().zip(v).all(|(a, b)| a.to_bits() == b.to_bits());
-        let cache = self.steady.cache.lock().unwrap_or_else(|e| e.into_inner());
-        let (.., solved) = cache.iter().find(|(i, at, _)| *i == self.integrator && same(at))?;
-        solved.as_ref().err().cloned()
+        self.steady.cached(v, &self.integrator)?.err()
     }
     fn uses(&self) -> &[usize] {
         &self.steady.uses
