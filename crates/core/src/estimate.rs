@@ -237,6 +237,13 @@ impl Estimate {
         next.history = history;
         next.iterations += before;
         next.best_iteration += before;
+        // The iteration its termination names, on the same count.
+        match &mut next.termination {
+            Termination::Stalled { iteration, .. } | Termination::Failed { iteration, .. } => {
+                *iteration += before;
+            }
+            _ => {}
+        }
         next.counts += self.counts;
         next.elapsed += self.elapsed;
         *self = next;

@@ -659,7 +659,7 @@ fn by_name<'a>(
 mod tests {
     use std::time::Duration;
 
-    use sysid_core::{Certificate, Rule};
+    use sysid_core::{Certificate, Failure, Rule};
 
     use super::*;
 
@@ -800,6 +800,23 @@ mod tests {
         assert_eq!(fit.elapsed, Duration::from_millis(320));
         assert_eq!((fit.counts.steps, fit.counts.integrations), (9400, 1560));
         assert!(fit.converged());
+    }
+
+    /// A continuation's termination names its iteration on the whole fit's count: Crauste's
+    /// start 2 (goodman, `--starts 5 --max-iterations 3`) said "failed stepping from
+    /// iteration 1" after 4 iterations, its continuation's own count.
+    #[test]
+    fn a_continuations_termination_counts_the_whole_fits_iterations() {
+        let failure = Failure::NonFinite { what: "ε".into(), at: vec![1.0] };
+        let on = Estimate {
+            termination: Termination::Failed { iteration: 1, failure },
+            ..fit(47.0, false)
+        };
+        let mut fit = Estimate { iterations: 3, best_iteration: 3, ..fit(48.0, false) };
+        fit.continue_with(on);
+        assert_eq!(fit.iterations, 4);
+        assert!(matches!(fit.termination, Termination::Failed { iteration: 4, .. }));
+        assert!(fit.termination.to_string().starts_with("failed stepping from iteration 4:"));
     }
 
     fn best(fits: &[Estimate]) -> usize {
