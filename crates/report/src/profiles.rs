@@ -1,7 +1,9 @@
 //! Profile likelihoods: one column per unknown. Above, ΔNLL along the profile with the
 //! threshold (dashed) and the interval's ends (vertical lines); below, how the other unknowns
-//! compensate: each one's value relative to the optimum's along the path. The unknown's axis
-//! is logarithmic where it is estimated on a log scale.
+//! compensate: each one's shift from the optimum along the path in its own coordinate over
+//! that coordinate's scale (ln(θ/θ̂) on a log scale, Δθ/max(|θ̂|, |guess|, 1) otherwise), on a
+//! linear axis through 0. The unknown's axis is logarithmic where it is estimated on a log
+//! scale.
 
 use plotters::coord::Shift;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
@@ -60,6 +62,8 @@ impl Profiles {
     ) -> Self {
         let names = problem.names();
         let base = sysid_profile::nll(optimum);
+        let unknowns = problem.unknowns();
+        let at = unknowns.coordinates(&optimum.values);
         let panels = profiles
             .iter()
             .map(|p| {
@@ -68,9 +72,17 @@ impl Profiles {
                     .points
                     .iter()
                     .map(|q| {
+                        // Each other unknown's shift from the optimum in its own coordinate
+                        // over that coordinate's scale: ln(θ/θ̂) on a log scale, else
+                        // Δθ / max(|θ̂|, |guess|, 1). Signed: a ratio on a log axis lost
+                        // every point where an unknown with a negative optimum changed sign.
+                        let z = unknowns.coordinates(&q.estimates);
                         let others = (0..names.len())
                             .filter(|&j| j != i)
-                            .map(|j| q.estimates[j] / optimum.values[j])
+                            .map(|j| {
+                                let u = &unknowns.list()[j];
+                                (z[j] - at[j]) / u.coordinate_scale(at[j])
+                            })
                             .collect();
                         (q.value, q.nll - base, others)
                     })
@@ -168,11 +180,11 @@ impl Profiles {
             .margin(8)
             .x_label_area_size(28)
             .y_label_area_size(44)
-            .build_cartesian_2d(x, others_range(panel).log_scale())?;
+            .build_cartesian_2d(x, others_range(panel))?;
         others
             .configure_mesh()
             .x_desc(panel.name.as_str())
-            .y_desc("others / optimum")
+            .y_desc("others' shift from the optimum")
             .x_label_formatter(&|v| tick(*v))
             .y_label_formatter(&|v| tick(*v))
             .label_style((FONT, 11))
@@ -181,11 +193,12 @@ impl Profiles {
     }
 }
 
-/// The range of the others' relative values (a log axis around 1).
+/// The range of the others' shifts (a linear axis through 0).
 fn others_range(panel: &ProfilePanel) -> std::ops::Range<f64> {
-    let values = panel.points.iter().flat_map(|p| p.2.iter().copied()).filter(|v| *v > 0.0);
-    let (lo, hi) = values.fold((1.0f64, 1.0f64), |(a, b), v| (a.min(v), b.max(v)));
-    lo / 1.5..hi * 1.5
+    let values = panel.points.iter().flat_map(|p| p.2.iter().copied()).filter(|v| v.is_finite());
+    let (lo, hi) = values.fold((0.0f64, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+    let (lo, hi) = padded(lo, hi, 0.05);
+    lo..hi
 }
 
 fn draw_profile<DB, X>(
@@ -241,7 +254,7 @@ where
         let color = look(k + 1).color;
         let path = panel.points.iter().filter_map(|p| {
             let v = *p.2.get(k)?;
-            (v > 0.0).then_some((p.0, v))
+            v.is_finite().then_some((p.0, v))
         });
         chart
             .draw_series(LineSeries::new(path, color.stroke_width(2)))?
@@ -296,7 +309,8 @@ pub(crate) fn write_profiles<S: System + Sync>(
     Ok(Some(format!(
         "Profile likelihoods around the fit ({method_name} re-optimising the others): \
          ΔNLL with the pointwise 95 % threshold 1.92 (dashed) and the interval's ends, \
-         and below how the other unknowns compensate. {}.",
+         and below how the other unknowns compensate: each one's shift from the optimum, \
+         ln(θ/θ̂) on a log scale, Δθ/max(|θ̂|, |guess|, 1) otherwise. {}.",
         verdicts.join(", ")
     )))
 }
