@@ -62,11 +62,24 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
             }
         },
     };
+    // Each experiment's output times, checked before the fit: bad input is refused before
+    // any work (`--step 0` was refused only after the whole fit, below its report).
+    let mut times_of = Vec::with_capacity(experiments.len());
     for &i in &experiments {
         let (t0, name) = (problem.experiments()[i].t0(), problem.experiments()[i].name());
         if args.until <= t0 {
             bail!("--until {} must lie after t0 = {t0} (experiment `{name}`)", args.until);
         }
+        let step = args.step.unwrap_or((args.until - t0) / 200.0);
+        if !(step > 0.0 && step.is_finite()) {
+            bail!("--step must be positive, got {step}");
+        }
+        let what = format!("--step {step:e} from t0 = {t0} to --until {}", args.until);
+        let mut times = spaced(t0, args.until, step, &what)?;
+        if times.last().is_some_and(|&t| t < args.until) {
+            times.push(args.until);
+        }
+        times_of.push(times);
     }
     let watch = context.watch(&args.method.method, args.options.log_every);
     let estimate =
@@ -91,18 +104,8 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
     }
     let several = experiments.len() > 1;
     let mut text = String::new();
-    for i in experiments {
+    for (i, times) in experiments.into_iter().zip(times_of) {
         let e = &problem.experiments()[i];
-        let t0 = e.t0();
-        let step = args.step.unwrap_or((args.until - t0) / 200.0);
-        if !(step > 0.0 && step.is_finite()) {
-            bail!("--step must be positive, got {step}");
-        }
-        let what = format!("--step {step:e} from t0 = {t0} to --until {}", args.until);
-        let mut times = spaced(t0, args.until, step, &what)?;
-        if times.last().is_some_and(|&t| t < args.until) {
-            times.push(args.until);
-        }
         let states = problem.trajectory(i, &estimate.values, band, &times)?;
         if text.is_empty() {
             text += if several { "experiment,t" } else { "t" };

@@ -1008,3 +1008,19 @@ fn a_start_off_its_bounds_is_refused_in_few_digits() {
         &["unknown `k_phos`: start 1e300: above its max 100000"],
     );
 }
+
+/// `predict`'s output times are checked before the fit. `--step 0` was refused only after
+/// the whole fit, under its report's "no covariance" line (Fujita: two lines on stderr,
+/// seconds of fitting); now at once, in one line.
+#[test]
+fn predict_refuses_its_times_before_it_fits() {
+    let yaml = "tests/data/petab/Fujita_SciSignal2010/Fujita_SciSignal2010.yaml";
+    refused(
+        &["predict", "--petab", yaml, "--until", "100", "--step", "0"],
+        &["--step must be positive"],
+    );
+    refused(
+        &["predict", "--petab", yaml, "--until", "1e9", "--step", "1e-3"],
+        &["more than the 10000000"],
+    );
+}
