@@ -98,6 +98,27 @@ pub struct MergeArgs {
     force: bool,
 }
 
+/// The study's specification from its options.
+fn spec(
+    args: &StudyArgs,
+    system: &str,
+    methods: Vec<String>,
+    settings: BTreeMap<String, String>,
+) -> StudySpec {
+    StudySpec {
+        system: system.to_string(),
+        methods,
+        reference: args.reference.clone(),
+        trials: args.trials,
+        noise: args.noise,
+        perturb: args.perturb,
+        seed: args.source.seed,
+        fixed: args.options.fix.clone(),
+        driver: args.options.settings().driver,
+        settings,
+    }
+}
+
 /// Runs `sysid study`.
 pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
@@ -112,6 +133,9 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
         None => Role::Study.methods().into_iter().map(String::from).collect(),
     };
     sysid_registry::parse_list(&args.reference)?;
+    // The numbers checked before any work: a model file's reference fit comes first and can
+    // take minutes (`--trials 0` on Fujita was refused only after it).
+    spec(args, "", methods.clone(), BTreeMap::new()).validate()?;
     if args.basin.is_some() && (args.shard.is_some() || args.resume) {
         bail!("a basin map runs in one go: --shard and --resume are for trials");
     }
@@ -219,18 +243,7 @@ fn run_scenario(
     settings: BTreeMap<String, String>,
 ) -> anyhow::Result<Outcome> {
     let method_settings = args.options.settings();
-    let spec = StudySpec {
-        system: system.to_string(),
-        methods: methods.clone(),
-        reference: args.reference.clone(),
-        trials: args.trials,
-        noise: args.noise,
-        perturb: args.perturb,
-        seed: args.source.seed,
-        fixed: args.options.fix.clone(),
-        driver: method_settings.driver,
-        settings,
-    };
+    let spec = spec(args, system, methods.clone(), settings);
     let build = |m: &str| method(m, &method_settings);
     let fits = methods.iter().map(|m| build(m)).collect::<anyhow::Result<Vec<_>>>()?;
     let study = Study::new(spec, scenario, fits, build(&args.reference)?)?;

@@ -1024,3 +1024,22 @@ fn predict_refuses_its_times_before_it_fits() {
         &["more than the 10000000"],
     );
 }
+
+/// A study's numbers are checked before its reference fit, which on a PEtab problem comes
+/// first and can take minutes: `--trials 0` on Fujita was refused only after it (more than a
+/// minute here). Now at once, and nothing is written.
+#[test]
+fn a_study_refuses_its_numbers_before_the_reference_fit() {
+    let dir = Scratch::new("study-numbers");
+    let out = dir.path("study");
+    let yaml = "tests/data/petab/Fujita_SciSignal2010/Fujita_SciSignal2010.yaml";
+    refused(
+        &["study", "--petab", yaml, "--trials", "0", "--out", &out],
+        &["--trials must be at least 1"],
+    );
+    refused(
+        &["study", "--petab", yaml, "--noise", "0", "--out", &out],
+        &["--noise must be a positive"],
+    );
+    assert!(!Path::new(&out).exists(), "{out} was written");
+}
