@@ -1043,3 +1043,17 @@ fn a_study_refuses_its_numbers_before_the_reference_fit() {
     );
     assert!(!Path::new(&out).exists(), "{out} was written");
 }
+
+/// The report checks `--petab-starts` with its other numbers, before any section: 0 was
+/// refused by the multistart only when the PEtab section began, after the catalogue's
+/// sections (minutes).
+#[test]
+fn the_report_refuses_no_petab_starts_before_any_section() {
+    let dir = Scratch::new("report-starts");
+    let out = dir.path("report");
+    refused(
+        &["report", "--out", &out, "--petab", "tests/data/petab", "--petab-starts", "0"],
+        &["--petab-starts must be at least 1"],
+    );
+    assert!(!Path::new(&out).exists(), "{out} was written");
+}

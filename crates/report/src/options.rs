@@ -91,6 +91,11 @@ impl ReportOptions {
         if self.starts == 0 {
             anyhow::bail!("--starts must be at least 1");
         }
+        // Checked here, before the catalogue's sections: the multistart's own check came
+        // only when the PEtab section began, after minutes of them.
+        if self.petab_starts == 0 {
+            anyhow::bail!("--petab-starts must be at least 1");
+        }
         if self.max_iterations == 0 {
             anyhow::bail!("--max-iterations must be at least 1");
         }
