@@ -767,7 +767,7 @@ fn start_begins_a_fit_elsewhere_and_refits_any_start_of_a_multistart() {
         ),
         (
             &["--petab", petab, "--start", "k_phos=1e9"],
-            "--start: unknown `k_phos`: start 1000000000: above its max 100000",
+            "--start: unknown `k_phos`: start 1e9: above its max 100000",
         ),
         (
             &["--petab", petab, "--start", "k_phos=-1"],
