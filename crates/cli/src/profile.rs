@@ -24,7 +24,8 @@ pub struct ProfileArgs {
     /// instead of the pointwise χ²₁(0.95)/2 = 1.92.
     #[arg(long)]
     simultaneous: bool,
-    /// Most points per side of a profile.
+    /// Most points per side of a profile (a side that runs out of them while still rising is
+    /// `undecided`).
     #[arg(
         long,
         default_value_t = 60,
