@@ -1058,19 +1058,15 @@ pub(crate) fn sample_rows<'s, S: System>(
             let (th, slope) = (s.transform.apply(h), s.transform.derivative(h));
             if !th.is_finite() {
                 // Named here: the end's check can only count rows.
-                let what = match s.transform {
-                    Transform::Lin => format!(
-                        "the observable `{}` of experiment `{}`",
-                        s.observable_name(e.system()),
-                        e.name
-                    ),
-                    scale => format!(
-                        "the observable `{}` of experiment `{}` on its {} scale (the model gives {h:e})",
-                        s.observable_name(e.system()),
-                        e.name,
-                        scale.name()
-                    ),
-                };
+                let mut what = format!(
+                    "the observable `{}` of experiment `{}`",
+                    s.observable_name(e.system()),
+                    e.name
+                );
+                if s.transform != Transform::Lin {
+                    what +=
+                        &format!(" on its {} scale (the model gives {h:e})", s.transform.name());
+                }
                 return Err(OdeError::NonFinite { t: times[m], what });
             }
             let laplace = s.distribution == NoiseDistribution::Laplace;

@@ -284,14 +284,12 @@ impl<S: System> Planned<S> {
         let bad = |values: &[f64], settings: &[Resolved], names: &[&str], kind: &str| {
             let i = values.iter().position(|x| !x.is_finite())?;
             let what = match &settings[i] {
-                Resolved::Function(g) => match g.failure(v) {
-                    Some(why) => format!(
-                        "{kind} `{}`, {}, which was not found ({why}),",
-                        names[i],
-                        g.describe()
-                    ),
-                    None => format!("{kind} `{}`, {},", names[i], g.describe()),
-                },
+                Resolved::Function(g) => {
+                    let why = g
+                        .failure(v)
+                        .map_or(String::new(), |w| format!(" which was not found ({w}),"));
+                    format!("{kind} `{}`, {},{why}", names[i], g.describe())
+                }
                 _ => format!("{kind} `{}`", names[i]),
             };
             Some(sysid_ode::OdeError::NonFinite { t: self.t0, what })

@@ -27,11 +27,8 @@ pub fn significant(v: f64, digits: usize) -> String {
 }
 
 /// The shortest representation that reads back to the same f64, in exponent form outside
-/// [1e-4, 1e9).
-pub fn shortest(v: f64) -> String {
-    let a = v.abs();
-    if a != 0.0 && !(1e-4..1e9).contains(&a) { format!("{v:e}") } else { format!("{v}") }
-}
+/// [1e-4, 1e9) (the integrators' messages write their times so).
+pub use sysid_ode::shortest;
 
 #[cfg(test)]
 mod tests {

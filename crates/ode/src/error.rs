@@ -6,11 +6,17 @@ use thiserror::Error;
 /// least 1), beyond which a failed integration is reported as [`OdeError::BlowUp`].
 pub const BLOW_UP_GROWTH: f64 = 1e6;
 
-/// A time in a message: every digit, in exponent form outside [1e-4, 1e9) (a step size
-/// underflow at t = 1e-300 printed three hundred zeros).
+/// The shortest representation that reads back to the same f64, in exponent form outside
+/// [1e-4, 1e9): for numbers in messages and tables (a step size underflow at t = 1e-300
+/// printed three hundred zeros). `sysid_core::format::shortest` is this one.
+pub fn shortest(v: f64) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-4..1e9).contains(&a) { format!("{v:e}") } else { format!("{v}") }
+}
+
+/// A time of an error's message, by [`shortest`].
 fn time(t: &f64) -> String {
-    let a = t.abs();
-    if a != 0.0 && !(1e-4..1e9).contains(&a) { format!("{t:e}") } else { format!("{t}") }
+    shortest(*t)
 }
 
 /// Why an integration stopped before reaching its end.

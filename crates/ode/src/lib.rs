@@ -112,7 +112,7 @@ mod wrt;
 
 pub use counts::{Costs, Counts};
 pub use driver::integrate;
-pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError};
+pub use error::{BLOW_UP_GROWTH, OdeError, SignalError, SignatureError, shortest};
 pub use implicit::{IterationMatrix, SPARSE_SHARE};
 pub use interpolant::{DenseSolution, Interpolant};
 pub use ivp::{
