@@ -866,10 +866,17 @@ fn quasilinearization_fits_a_problem_measured_at_steady_state_only() {
 #[test]
 fn a_budget_that_runs_out_before_the_noise_scales_move_is_not_a_stall() {
     let yaml = "tests/data/petab/Blasi_CellSystems2016/Blasi_CellSystems2016.yaml";
+    // Every budget that converges is checked against a second method's minimum:
+    // quasilinearization's, iterating on whole trajectories instead of the trust region.
+    let second = json(&["fit", "--petab", yaml, "--method", "quasilinearization"]);
+    assert_eq!(second["converged"], true, "{}", second["termination"]);
+    let minimum = second["nll"].as_f64().unwrap();
     let mut converged = 0;
     for budget in 1..=5 {
         let fit = json(&["fit", "--petab", yaml, "--max-iterations", &budget.to_string()]);
         if fit["converged"] == true {
+            let nll = fit["nll"].as_f64().unwrap();
+            assert!((nll - minimum).abs() < 1e-8, "{budget}: {nll} against {minimum}");
             converged += 1;
             continue;
         }
