@@ -99,6 +99,22 @@ impl Space {
     pub fn current_z(&self) -> Vec<f64> {
         self.z(&self.free_w())
     }
+    /// Whether another unknown is held, or one at another value, than in `other`.
+    pub fn holds_otherwise(&self, other: &Space) -> bool {
+        let bits = |h: &Option<f64>| h.map(f64::to_bits);
+        self.held.iter().zip(&other.held).any(|(a, b)| bits(a) != bits(b))
+    }
+    /// Moves to z, on the way from a point of `before` to one of `self`: the unknowns both
+    /// hold at the same value stay held, every other one is free at its z.
+    pub fn hold_between(&mut self, before: &Space, z: &[f64]) {
+        let bits = |h: &Option<f64>| h.map(f64::to_bits);
+        for (i, &zi) in z.iter().enumerate() {
+            if self.held[i].is_none() || bits(&self.held[i]) != bits(&before.held[i]) {
+                self.held[i] = None;
+                self.w[i] = self.maps[i].w(zi);
+            }
+        }
+    }
 }
 
 /// The residual operator handed to argmin for one iteration.

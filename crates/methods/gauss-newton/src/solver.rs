@@ -84,6 +84,11 @@ impl<S: System> Method<S> for GaussNewton {
     }
 }
 
+/// How many times a step that changed the held unknowns and raised the cost is halved as a
+/// whole before it is taken again with the unknowns held as before (2⁻¹²: a step that short
+/// is no longer the model's).
+const MAX_WHOLE_HALVINGS: usize = 12;
+
 /// The largest change of a bounded unknown's free coordinate w that a line search starts
 /// with (softplus: a factor e⁴ ≈ 55 near the bound, 4 coordinate units far from it).
 const MAX_MAPPED_MOVE: f64 = 4.0;
@@ -220,8 +225,8 @@ impl<S: System> Step<S> for Adapter<'_> {
         Ok(self.iterate(e))
     }
 
-    /// One Gauss–Newton step by argmin's solver on the free unknowns: the full step, or
-    /// argmin's backtracking Armijo line search along it on ½‖r‖² with its gradient Jᵀr.
+    /// The unknowns to hold from the projected Gauss–Newton model ([`Adapter::hold`]),
+    /// then one step of argmin's solver on the others ([`Adapter::step`]).
     fn propose(
         &mut self,
         ev: &Evaluations<'_, S>,
@@ -231,7 +236,75 @@ impl<S: System> Step<S> for Adapter<'_> {
         // The unknowns the projected Gauss–Newton model holds on their bounds are held
         // there; argmin moves the others.
         let here = self.operator(ev).with_jacobian(&self.space.current_z())?;
+        let before = self.space.clone();
         self.hold(ev.problem(), &here);
+        let proposal = self.step(ev)?;
+        if !self.options.line_search || !self.space.holds_otherwise(&before) {
+            return Ok(proposal);
+        }
+        // The line search moves the free unknowns only: the holding and releasing, made from
+        // the Gauss–Newton model alone, is kept only where the whole step does not raise the
+        // cost (beyond its accuracy). Far from a minimum that model can pin an unknown on
+        // the far bound and release others by factors of e¹⁸ (Boehm from its nominal
+        // values, k_imp_homo = 9.8e4: ε from 48 to 908 in one step). Otherwise the step is
+        // halved as a whole, in the coordinates z, where the box is convex: the unknowns
+        // held before and after stay held, the others are free where the shorter step puts
+        // them. Where no such step lowers the cost, the step is taken again with the
+        // unknowns held as they were.
+        let cost = 0.5 * here.r.norm_squared();
+        let resolution = ev.problem().integrator().rtol * cost;
+        let moved = self.operator(ev).evaluate(&proposal.z)?;
+        if 0.5 * moved.r.norm_squared() <= cost + resolution {
+            return Ok(proposal);
+        }
+        let mut alpha = 0.5;
+        for _ in 0..MAX_WHOLE_HALVINGS {
+            let z: Vec<f64> =
+                here.z.iter().zip(&proposal.z).map(|(a, b)| a + alpha * (b - a)).collect();
+            let trial = self.operator(ev).evaluate(&z)?;
+            if trial.is_finite() && 0.5 * trial.r.norm_squared() < cost {
+                self.space.hold_between(&before, &z);
+                return Ok(Proposal { z: self.space.current_z(), ..proposal });
+            }
+            alpha *= 0.5;
+        }
+        self.space = before;
+        // The point it was taken from is evaluated, its Jacobian too; the failure met at a
+        // rejected point (if any) is not this step's.
+        *self.cache.borrow_mut() = Cache { last: Some(here), failure: None };
+        self.step(ev)
+    }
+
+    /// The driver's iterate at a point argmin moved to (already evaluated); argmin's rule
+    /// judges the change of ‖r‖.
+    fn advance(
+        &mut self,
+        ev: &Evaluations<'_, S>,
+        _current: &Iterate,
+        _proposal: Proposal,
+    ) -> Result<Advance, Failure> {
+        let op = self.operator(ev);
+        let z = self.space.current_z();
+        let e = op.evaluate(&z)?;
+        if !e.is_finite() {
+            return Err(op.failure_at(&z));
+        }
+        let norm = e.r.norm();
+        let change = (self.norm - norm).abs();
+        self.norm = norm;
+        let next = self.iterate(e);
+        Ok(if change < self.tolerance {
+            Advance::MovedThenStop(next, Rule::CostChange)
+        } else {
+            Advance::Moved(next)
+        })
+    }
+}
+
+impl Adapter<'_> {
+    /// One Gauss–Newton step by argmin's solver on the unknowns not held: the full step, or
+    /// argmin's backtracking Armijo line search along it on ½‖r‖² with its gradient Jᵀr.
+    fn step<S: System>(&mut self, ev: &Evaluations<'_, S>) -> Result<Proposal, Failure> {
         let w = Vector::from_vec(self.space.free_w());
         if w.is_empty() {
             let z = self.space.current_z();
@@ -269,32 +342,6 @@ impl<S: System> Step<S> for Adapter<'_> {
         })
     }
 
-    /// The point argmin moved to (already evaluated); argmin's rule judges the change of ‖r‖.
-    fn advance(
-        &mut self,
-        ev: &Evaluations<'_, S>,
-        _current: &Iterate,
-        _proposal: Proposal,
-    ) -> Result<Advance, Failure> {
-        let op = self.operator(ev);
-        let z = self.space.current_z();
-        let e = op.evaluate(&z)?;
-        if !e.is_finite() {
-            return Err(op.failure_at(&z));
-        }
-        let norm = e.r.norm();
-        let change = (self.norm - norm).abs();
-        self.norm = norm;
-        let next = self.iterate(e);
-        Ok(if change < self.tolerance {
-            Advance::MovedThenStop(next, Rule::CostChange)
-        } else {
-            Advance::Moved(next)
-        })
-    }
-}
-
-impl Adapter<'_> {
     /// Whether the free unknown i sits on the curved part of its map at w.
     fn curved(&self, i: usize, w: f64) -> bool {
         let map = self.space.maps[i];
