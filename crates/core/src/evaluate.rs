@@ -1076,6 +1076,18 @@ pub(crate) fn sample_rows<'s, S: System>(
                 // as d goes to 0.
                 let w = sample.sqrt_weight;
                 let (r, dr) = s.distribution.residual(th - sample.value, w);
+                if !r.is_finite() {
+                    // A noise scale of 0 or ∞ (a weight of ∞ or 0), named here as above.
+                    let what = format!(
+                        "the residual of the observable `{}` of experiment `{}` (the square root of its weight {}; the model gives {}, the datum is {})",
+                        s.observable_name(e.system()),
+                        e.name,
+                        crate::format::shortest(w),
+                        crate::format::shortest(th),
+                        crate::format::shortest(sample.value)
+                    );
+                    return Err(OdeError::NonFinite { t: times[m], what });
+                }
                 out.r.push(r);
                 out.samples.push(m);
                 out.data_cost += r * r;

@@ -17,7 +17,7 @@ use std::sync::{Arc, Mutex};
 
 use nalgebra::DMatrix;
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1};
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
 use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyValueError};
 use pyo3::prelude::*;
@@ -42,6 +42,30 @@ fn sysid_error(message: impl std::fmt::Display) -> PyErr {
 
 /// A numpy vector.
 type Array1<'py> = Bound<'py, PyArray1<f64>>;
+/// A vector argument: a numpy array, or anything numpy's `asarray` makes a 1-D array of
+/// floats of (a list, a tuple, integers, a strided view such as a matrix's column).
+type Vector<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
+
+/// A vector argument's values.
+fn entries(v: &Vector<'_>) -> Vec<f64> {
+    v.as_array().to_vec()
+}
+
+/// A whole number argument that must be at least `least`, taken as a Python int of any sign
+/// so that a negative one is named (pyo3 would raise `OverflowError` without the name).
+fn whole(name: &str, value: i64, least: i64) -> PyResult<u64> {
+    if value < least {
+        return Err(PyValueError::new_err(format!("{name} must be at least {least}, got {value}")));
+    }
+    Ok(value.unsigned_abs())
+}
+
+/// A seed: any non-negative int below 2⁶⁴.
+fn seed(value: i128) -> PyResult<u64> {
+    u64::try_from(value).map_err(|_| {
+        PyValueError::new_err(format!("seed must be a whole number in [0, 2^64), got {value}"))
+    })
+}
 /// A numpy matrix.
 type Array2Py<'py> = Bound<'py, PyArray2<f64>>;
 
@@ -155,14 +179,14 @@ impl PyProblem {
     fn value_and_gradient<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray1<'py, f64>,
+        x: Vector<'py>,
         (scale, sensitivities): (&str, &str),
         priors: bool,
     ) -> PyResult<(f64, Array1<'py>)> {
         let scale = Scale::parse(scale)?;
         let how = match sensitivities {
             "forward" => {
-                let e = self.evaluate(py, x.as_slice()?, scale)?;
+                let e = self.evaluate(py, &entries(&x), scale)?;
                 let value = if priors { e.objective()? } else { e.nll()? };
                 return Ok((value, e.gradient(priors, scale).into_pyarray(py)));
             }
@@ -174,7 +198,7 @@ impl PyProblem {
                 )));
             }
         };
-        let z = self.coordinates(x.as_slice()?, scale)?;
+        let z = self.coordinates(&entries(&x), scale)?;
         let k = self.problem.unknowns().len();
         let problem = self.at_scales(&z);
         let e = py
@@ -302,10 +326,7 @@ impl PyProblem {
     /// Imports a PEtab problem from its YAML file.
     #[staticmethod]
     fn from_petab(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let model = py
-            .allow_threads(|| sysid_petab::import(&path))
-            .map_err(|e| sysid_error(format!("{}: {e}", path.display())))?
-            .model;
+        let model = py.allow_threads(|| sysid_petab::import(&path)).map_err(sysid_error)?.model;
         let problem = any::model_problem(model.problem(None).map_err(sysid_error)?);
         Ok(Self { problem: Arc::new(problem), name: path.display().to_string() })
     }
@@ -324,7 +345,8 @@ impl PyProblem {
     /// published record, or synthetic data drawn with `seed` (the command line's `--seed`).
     #[staticmethod]
     #[pyo3(signature = (name, seed=1))]
-    fn from_catalogue(py: Python<'_>, name: &str, seed: u64) -> PyResult<Self> {
+    fn from_catalogue(py: Python<'_>, name: &str, seed: i128) -> PyResult<Self> {
+        let seed = self::seed(seed)?;
         let case = any::case(name).ok_or_else(|| {
             PyValueError::new_err(format!(
                 "unknown system {name:?} (systems: {})",
@@ -413,25 +435,25 @@ impl PyProblem {
     fn to_parameter_scale<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray1<'py, f64>,
+        x: Vector<'py>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(self.coordinates(x.as_slice()?, Scale::Linear)?.into_pyarray(py))
+        Ok(self.coordinates(&entries(&x), Scale::Linear)?.into_pyarray(py))
     }
 
     /// The point `z` (on the parameter scale) on the linear scale.
     fn to_linear_scale<'py>(
         &self,
         py: Python<'py>,
-        z: PyReadonlyArray1<'py, f64>,
+        z: Vector<'py>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let z = self.coordinates(z.as_slice()?, Scale::Parameter)?;
+        let z = self.coordinates(&entries(&z), Scale::Parameter)?;
         Ok(self.values(&z).into_pyarray(py))
     }
 
     /// The negative log-likelihood at x (priors excluded, as the fit JSON's `nll`).
     #[pyo3(signature = (x, scale="linear"))]
-    fn nll(&self, py: Python<'_>, x: PyReadonlyArray1<'_, f64>, scale: &str) -> PyResult<f64> {
-        self.evaluate(py, x.as_slice()?, Scale::parse(scale)?)?.nll()
+    fn nll(&self, py: Python<'_>, x: Vector<'_>, scale: &str) -> PyResult<f64> {
+        self.evaluate(py, &entries(&x), Scale::parse(scale)?)?.nll()
     }
 
     /// The negative log-likelihood at x and its gradient on `scale`. `sensitivities`: "auto" (each experiment by whichever of forward
@@ -441,7 +463,7 @@ impl PyProblem {
     fn nll_and_gradient<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray1<'py, f64>,
+        x: Vector<'py>,
         scale: &str,
         sensitivities: &str,
     ) -> PyResult<(f64, Array1<'py>)> {
@@ -451,13 +473,8 @@ impl PyProblem {
     /// The objective the fits minimise at x: the NLL plus the priors' negative log-density
     /// where the problem has priors (what pyPESTO minimises), the NLL otherwise.
     #[pyo3(signature = (x, scale="linear"))]
-    fn objective(
-        &self,
-        py: Python<'_>,
-        x: PyReadonlyArray1<'_, f64>,
-        scale: &str,
-    ) -> PyResult<f64> {
-        self.evaluate(py, x.as_slice()?, Scale::parse(scale)?)?.objective()
+    fn objective(&self, py: Python<'_>, x: Vector<'_>, scale: &str) -> PyResult<f64> {
+        self.evaluate(py, &entries(&x), Scale::parse(scale)?)?.objective()
     }
 
     /// The objective and its gradient on `scale`. `sensitivities`: "auto" (each experiment by whichever of forward
@@ -467,7 +484,7 @@ impl PyProblem {
     fn objective_and_gradient<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray1<'py, f64>,
+        x: Vector<'py>,
         scale: &str,
         sensitivities: &str,
     ) -> PyResult<(f64, Array1<'py>)> {
@@ -482,11 +499,11 @@ impl PyProblem {
     fn fisher<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray1<'py, f64>,
+        x: Vector<'py>,
         scale: &str,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let scale = Scale::parse(scale)?;
-        Ok(matrix(py, &self.evaluate(py, x.as_slice()?, scale)?.fisher(scale)))
+        Ok(matrix(py, &self.evaluate(py, &entries(&x), scale)?.fisher(scale)))
     }
 
     /// The weighted residuals r and their Jacobian ∂r/∂x on `scale`: a row per measurement,
@@ -497,11 +514,11 @@ impl PyProblem {
     fn residuals_and_jacobian<'py>(
         &self,
         py: Python<'py>,
-        x: PyReadonlyArray1<'py, f64>,
+        x: Vector<'py>,
         scale: &str,
     ) -> PyResult<(Array1<'py>, Array2Py<'py>)> {
         let scale = Scale::parse(scale)?;
-        let e = self.evaluate(py, x.as_slice()?, scale)?;
+        let e = self.evaluate(py, &entries(&x), scale)?;
         let r: Vec<f64> = e.rows().r.iter().copied().collect();
         Ok((r.into_pyarray(py), matrix(py, &e.jacobian(scale))))
     }
@@ -512,14 +529,14 @@ impl PyProblem {
     fn simulate<'py>(
         &self,
         py: Python<'py>,
-        times: PyReadonlyArray1<'py, f64>,
-        x: Option<PyReadonlyArray1<'py, f64>>,
+        times: Vector<'py>,
+        x: Option<Vector<'py>>,
         experiment: Option<Bound<'py, PyAny>>,
         scale: &str,
     ) -> PyResult<Bound<'py, PyDict>> {
         let scale = Scale::parse(scale)?;
         let z = match &x {
-            Some(x) => self.coordinates(x.as_slice()?, scale)?,
+            Some(x) => self.coordinates(&entries(x), scale)?,
             None => self.parameters().iter().map(|u| u.coordinate(u.guess)).collect(),
         };
         let k = self.problem.unknowns().len();
@@ -527,8 +544,8 @@ impl PyProblem {
         let names = self.experiments();
         let index = match experiment {
             None => 0,
-            Some(e) => match e.extract::<usize>() {
-                Ok(i) if i < names.len() => i,
+            Some(e) => match e.extract::<i64>() {
+                Ok(i) if usize::try_from(i).is_ok_and(|i| i < names.len()) => i as usize,
                 Ok(i) => {
                     return Err(PyValueError::new_err(format!(
                         "experiment {i}: the problem has {} experiments",
@@ -546,7 +563,7 @@ impl PyProblem {
                 }
             },
         };
-        let times = times.as_slice()?.to_vec();
+        let times = entries(&times);
         if let Some(t) = times.iter().find(|t| !t.is_finite()) {
             return Err(PyValueError::new_err(format!("times: {t} is not finite")));
         }
@@ -578,13 +595,13 @@ impl PyProblem {
         &self,
         py: Python<'py>,
         method: Option<&str>,
-        starts: Option<usize>,
-        seed: u64,
+        starts: Option<i64>,
+        seed: i128,
         sampling: &str,
         include_nominal: bool,
-        max_iterations: Option<usize>,
+        max_iterations: Option<i64>,
         gtol: Option<f64>,
-        max_integrations: Option<u64>,
+        max_integrations: Option<i64>,
         max_seconds: Option<f64>,
         fix: Option<std::collections::BTreeMap<String, f64>>,
         start: Option<std::collections::BTreeMap<String, f64>>,
@@ -596,6 +613,12 @@ impl PyProblem {
         {
             return Err(PyValueError::new_err("progress must be a callable (or None)"));
         }
+        let starts = starts.map(|n| whole("starts", n, 1)).transpose()?.map(|n| n as usize);
+        let seed = self::seed(seed)?;
+        let max_iterations =
+            max_iterations.map(|n| whole("max_iterations", n, 0)).transpose()?.map(|n| n as usize);
+        let max_integrations =
+            max_integrations.map(|n| whole("max_integrations", n, 1)).transpose()?;
         // Each start of a multistart has its own budget where none is named.
         let max_iterations =
             max_iterations.or(starts.is_some().then_some(sysid_core::START_MAX_ITERATIONS));
@@ -695,8 +718,8 @@ impl PyProblem {
         method: Option<&str>,
         only: Option<Vec<String>>,
         simultaneous: bool,
-        max_points: usize,
-        max_iterations: Option<usize>,
+        max_points: i64,
+        max_iterations: Option<i64>,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         if let Some(p) = &progress
@@ -704,12 +727,11 @@ impl PyProblem {
         {
             return Err(PyValueError::new_err("progress must be a callable (or None)"));
         }
+        // A profile re-optimises the others at every point: at least one of each.
+        let max_points = whole("max_points", max_points, 1)? as usize;
+        let max_iterations =
+            max_iterations.map(|n| whole("max_iterations", n, 1)).transpose()?.map(|n| n as usize);
         let settings = settings(max_iterations, None, None, None, true)?;
-        if max_points == 0 || settings.driver.max_iterations == 0 {
-            return Err(PyValueError::new_err(
-                "max_points and max_iterations must be at least 1: a profile re-optimises the others at every point",
-            ));
-        }
         let method = build(method, &settings)?;
         let names = self.problem.names();
         let mut which = Vec::new();
@@ -770,10 +792,10 @@ impl PyProblem {
     fn _rust_seconds_per_evaluation(
         &self,
         py: Python<'_>,
-        z: PyReadonlyArray1<'_, f64>,
+        z: Vector<'_>,
         repeat: usize,
     ) -> PyResult<f64> {
-        let mut z = self.coordinates(z.as_slice()?, Scale::Parameter)?;
+        let mut z = self.coordinates(&entries(&z), Scale::Parameter)?;
         z.truncate(self.problem.unknowns().len());
         let problem = &self.problem;
         py.allow_threads(|| {

@@ -295,6 +295,45 @@ class Boehm(unittest.TestCase):
             self.p.fit(method="newton")
         with self.assertRaisesRegex(sysid.SysidError, "nowhere.yaml"):
             sysid.Problem.from_petab(os.path.join(PETAB, "nowhere.yaml"))
+        # The path once, as the command line says it (it was said twice).
+        with self.assertRaises(sysid.SysidError) as missing:
+            sysid.Problem.from_petab(os.path.join(PETAB, "nowhere.yaml"))
+        self.assertEqual(str(missing.exception).count("nowhere.yaml"), 1, str(missing.exception))
+        # A negative count is named (pyo3 alone raises OverflowError without the name).
+        for keyword, message in [
+            ({"starts": -1}, "starts must be at least 1, got -1"),
+            ({"max_iterations": -2}, "max_iterations must be at least 0, got -2"),
+            ({"max_integrations": 0}, "max_integrations must be at least 1, got 0"),
+            ({"seed": -1}, r"seed must be a whole number in \[0, 2\^64\), got -1"),
+        ]:
+            with self.assertRaisesRegex(ValueError, message):
+                self.p.fit(**keyword)
+        with self.assertRaisesRegex(ValueError, "max_points must be at least 1, got 0"):
+            self.p.profile(only=["k_phos"], max_points=0)
+        with self.assertRaisesRegex(TypeError, "argument 'x'"):
+            self.p.nll(np.ones((2, 9)))
+        with self.assertRaisesRegex(ValueError, "experiment -1: the problem has 1 experiments"):
+            self.p.simulate([1.0], experiment=-1)
+        # A noise scale of 0 (its ln far below any bound) names the residual it made infinite.
+        with self.assertRaisesRegex(sysid.SysidError, "the residual of the observable `pSTAT5A_rel` of experiment"):
+            self.p.nll(np.full(9, -800.0), scale="parameter")
+
+    def test_anything_numpy_makes_a_vector_of_is_a_vector(self):
+        # The stubs promise array-likes: a list, a tuple, integers, a matrix's column (not
+        # contiguous) are the array they stand for; they raised TypeError.
+        x = self.p.nominal
+        nll = self.p.nll(x)
+        self.assertEqual(self.p.nll(list(x)), nll)
+        self.assertEqual(self.p.nll(tuple(x)), nll)
+        self.assertEqual(self.p.nll(np.column_stack([x, x])[:, 1]), nll)
+        ones = self.p.nll(np.ones(9))
+        self.assertEqual(self.p.nll([1] * 9), ones)
+        times = [0.0, 10.0, 20.0]
+        self.assertEqual(
+            {k: list(v) for k, v in self.p.simulate(times).items()},
+            {k: list(v) for k, v in self.p.simulate(np.array(times), x=x).items()},
+        )
+        np.testing.assert_array_equal(self.p.to_parameter_scale(list(x)), self.p.to_parameter_scale(x))
 
 
 class Readme(unittest.TestCase):
