@@ -260,11 +260,19 @@ fn evaluate(
 ) -> anyhow::Result<Evaluation> {
     let no_likelihood =
         || anyhow!("the problem's data are a continuous record: it has no likelihood");
-    let cannot =
-        |e: sysid_ode::OdeError| anyhow!("the model cannot be integrated at this point: {e}");
+    // Not only an integration that fails: a residual or a derivative too large for a float.
+    let cannot = |e: sysid_ode::OdeError| anyhow!("the NLL cannot be evaluated at this point: {e}");
+    let overflows = |nll: f64| {
+        anyhow!(
+            "the NLL cannot be evaluated at this point: it is {nll}, a residual too large for a float (a noise scale near 0, or values far from the data's)"
+        )
+    };
     let prior = problem.prior_nll_at(z);
     let Some(how) = gradient else {
         let (nll, counts) = problem.nll_and_counts(z).map_err(cannot)?.ok_or_else(no_likelihood)?;
+        if !nll.is_finite() {
+            return Err(overflows(nll));
+        }
         return Ok(Evaluation {
             nll,
             prior,
@@ -278,6 +286,9 @@ fn evaluate(
     };
     let e =
         problem.nll_gradient(z, how.sensitivities()).map_err(cannot)?.ok_or_else(no_likelihood)?;
+    if !e.nll.is_finite() {
+        return Err(overflows(e.nll));
+    }
     // ∂/∂value = ∂/∂z / (∂value/∂z).
     let g = e
         .gradient

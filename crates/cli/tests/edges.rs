@@ -1094,3 +1094,23 @@ fn the_gauss_newton_line_searches_never_raise_the_cost() {
         }
     }
 }
+
+/// A point where the NLL overflows is refused with the reason, not printed as `inf ± NaN`
+/// with exit 0; a gradient that overflows names the parameter (it said "component 6") and
+/// neither says the model could not be integrated: it was.
+#[test]
+fn an_nll_that_overflows_is_refused_with_its_reason() {
+    let yaml = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
+    refused(
+        &["evaluate", "--petab", yaml, "--set", "sd_pSTAT5A_rel=1e-300"],
+        &["the NLL cannot be evaluated at this point: it is inf", "a noise scale near 0"],
+    );
+    refused(
+        &["evaluate", "--petab", yaml, "--set", "sd_pSTAT5A_rel=1e-300", "--format", "json"],
+        &["it is inf"],
+    );
+    refused(
+        &["evaluate", "--petab", yaml, "--gradient", "--set", "sd_pSTAT5A_rel=1e-150"],
+        &["the NLL's derivative with respect to `sd_pSTAT5A_rel` became non-finite"],
+    );
+}

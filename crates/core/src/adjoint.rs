@@ -111,9 +111,14 @@ impl<S: System> Problem<S> {
         gradient
             .extend(self.scale_gradient(all.iter().flat_map(|(rows, ..)| rows.r.iter().copied())));
         if let Some(i) = gradient.iter().position(|g| !g.is_finite()) {
+            // Named: an unknown's, or a noise scale's (after the unknowns).
+            let name = match i.checked_sub(k) {
+                None => &self.unknowns.list()[i].name,
+                Some(s) => &self.declared[self.scales[s]].name,
+            };
             return Err(OdeError::NonFinite {
                 t: self.span().0,
-                what: format!("component {i} of the NLL's gradient"),
+                what: format!("the NLL's derivative with respect to `{name}`"),
             });
         }
         Ok(Some(NllGradient { nll: nlls.iter().sum(), gradient, counts, fell_back, by_adjoint }))

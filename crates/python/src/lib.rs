@@ -170,7 +170,7 @@ impl PyProblem {
         let problem = self.at_scales(&z);
         let lin = py
             .allow_threads(|| problem.residuals_and_jacobian(&z[..k]))
-            .map_err(|e| sysid_error(format!("the model cannot be integrated at x: {e}")))?;
+            .map_err(|e| sysid_error(format!("the model cannot be evaluated at x: {e}")))?;
         Ok(Evaluated { problem, lin, chain: self.chain(&z) })
     }
 
@@ -203,7 +203,7 @@ impl PyProblem {
         let problem = self.at_scales(&z);
         let e = py
             .allow_threads(|| problem.nll_gradient(&z[..k], how))
-            .map_err(|e| sysid_error(format!("the model cannot be integrated at x: {e}")))?
+            .map_err(|e| sysid_error(format!("the model cannot be evaluated at x: {e}")))?
             .ok_or_else(|| {
                 sysid_error("the problem's data are a continuous record: it has no likelihood")
             })?;
