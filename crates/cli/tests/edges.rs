@@ -1093,6 +1093,19 @@ fn the_gauss_newton_line_searches_never_raise_the_cost() {
             );
         }
     }
+    // docs/guide.md's example of a stalled run is this fit: exit 1, stalled on the cost
+    // change at a point that is not a minimum (first-order optimality 4.16e-5 > gtol 1e-6).
+    let out =
+        sysid(&["fit", "--model", "examples/boehm/model.toml", "--method", "gauss-newton-fd"]);
+    let table = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{table}");
+    let guide = std::fs::read_to_string(root().join("docs/guide.md")).unwrap();
+    let shown =
+        table.lines().filter(|l| l.starts_with("  converged ") || l.starts_with("  termination "));
+    assert_eq!(shown.clone().count(), 2, "{table}");
+    for line in shown {
+        assert!(guide.contains(line), "docs/guide.md does not show `{line}`");
+    }
 }
 
 /// A point where the NLL overflows is refused with the reason, not printed as `inf ± NaN`
