@@ -118,7 +118,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
             if several {
                 text += &format!("{},", e.name());
             }
-            text += &format!("{t}");
+            text += &shortest(*t);
             for s in &states {
                 let y = s.values[m];
                 let y_text = shortest(y);

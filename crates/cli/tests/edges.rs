@@ -1127,3 +1127,31 @@ fn an_nll_that_overflows_is_refused_with_its_reason() {
         &["the NLL's derivative with respect to `sd_pSTAT5A_rel` became non-finite"],
     );
 }
+
+/// The CSVs' times are written as their values are (docs/guide.md: every digit, in exponent
+/// form outside [1e-4, 1e9)): `predict --until 1e300` wrote the time 5e299 as 300 digits.
+#[test]
+fn the_csvs_times_are_in_exponent_form_where_their_values_are() {
+    let yaml = "tests/data/petab/Bruno_JExpBot2016/Bruno_JExpBot2016.yaml";
+    let body = "examples/falling-body/model.toml";
+    for args in [
+        vec!["predict", "--petab", yaml, "--until", "1e300"],
+        vec!["simulate", "--model", body, "--times", "0:2e12:1e12"],
+        vec!["simulate", "--model", body, "--times", "0:1e-5:5e-6"],
+    ] {
+        let out = sysid(&args);
+        let csv = text(&out.stdout);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {}", text(&out.stderr));
+        // The time's column: the first, or after the experiment's name.
+        let column = csv.lines().next().and_then(|h| h.split(',').position(|c| c == "t"));
+        let column = column.unwrap_or_else(|| panic!("{args:?}: no column t in {csv}"));
+        let times: Vec<&str> =
+            csv.lines().skip(1).map(|l| l.split(',').nth(column).unwrap_or_default()).collect();
+        assert!(times.len() >= 2, "{args:?}: {csv}");
+        // Every time but each experiment's t0 = 0 lies outside [1e-4, 1e9).
+        for t in times.iter().filter(|t| **t != "0") {
+            let value: f64 = t.parse().unwrap_or_else(|_| panic!("{args:?}: `{t}`"));
+            assert!(t.contains('e') && t.len() <= 24, "{args:?}: the time `{t}` ({value})");
+        }
+    }
+}

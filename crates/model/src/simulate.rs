@@ -110,7 +110,7 @@ impl Model {
                 if several {
                     text += &format!("{name},");
                 }
-                text += &format!("{}", decimal(t));
+                text += &shortest(decimal(t));
                 for v in sol.state(m) {
                     text += &format!(",{}", shortest(*v));
                 }
@@ -168,7 +168,7 @@ pub fn data_csv(data: &Data, intervals: usize) -> String {
     out += "\n";
     let mut cursor = vec![0; columns.len()];
     for &t in &times {
-        out += &format!("{}", decimal(t));
+        out += &shortest(decimal(t));
         for (c, (_, points)) in columns.iter().enumerate() {
             out += ",";
             if points.get(cursor[c]).is_some_and(|p| p.0.total_cmp(&t).is_eq()) {
