@@ -1071,9 +1071,9 @@ fn the_report_refuses_no_petab_starts_before_any_section() {
 /// (9.8e4) on its lower bound 1e-5 at the first step: ε from 47.98 to 908.6, and on through
 /// a hundred iterations between 120 and 1 100. A change of the held unknowns is now kept
 /// only where the whole step, halved as a whole if need be, does not raise the cost. Every
-/// iterate's ε is at most the
-/// previous one's plus the accuracy a step is judged at (the integrator's rtol, 1e-8 here,
-/// relative: `gauss-newton-ls` takes steps within it at its noise floor).
+/// iterate's ε is at most the previous one's plus the accuracy a step is judged at (the
+/// integrator's rtol, 1e-8 here, relative: `gauss-newton-ls` takes steps within it at its
+/// noise floor).
 #[test]
 fn the_gauss_newton_line_searches_never_raise_the_cost() {
     for method in ["gauss-newton-fd", "gauss-newton-ls"] {

@@ -111,14 +111,13 @@ impl<S: System> Problem<S> {
         gradient
             .extend(self.scale_gradient(all.iter().flat_map(|(rows, ..)| rows.r.iter().copied())));
         if let Some(i) = gradient.iter().position(|g| !g.is_finite()) {
-            // Named: an unknown's, or a noise scale's (after the unknowns).
-            let name = match i.checked_sub(k) {
-                None => &self.unknowns.list()[i].name,
-                Some(s) => &self.declared[self.scales[s]].name,
-            };
+            // Named: the gradient is in the order of the parameters.
             return Err(OdeError::NonFinite {
                 t: self.span().0,
-                what: format!("the NLL's derivative with respect to `{name}`"),
+                what: format!(
+                    "the NLL's derivative with respect to `{}`",
+                    self.parameters()[i].name
+                ),
             });
         }
         Ok(Some(NllGradient { nll: nlls.iter().sum(), gradient, counts, fell_back, by_adjoint }))

@@ -101,20 +101,23 @@ impl Space {
     }
     /// Whether another unknown is held, or one at another value, than in `other`.
     pub fn holds_otherwise(&self, other: &Space) -> bool {
-        let bits = |h: &Option<f64>| h.map(f64::to_bits);
-        self.held.iter().zip(&other.held).any(|(a, b)| bits(a) != bits(b))
+        self.held.iter().zip(&other.held).any(|(a, b)| !same_hold(*a, *b))
     }
     /// Moves to z, on the way from a point of `before` to one of `self`: the unknowns both
     /// hold at the same value stay held, every other one is free at its z.
     pub fn hold_between(&mut self, before: &Space, z: &[f64]) {
-        let bits = |h: &Option<f64>| h.map(f64::to_bits);
         for (i, &zi) in z.iter().enumerate() {
-            if self.held[i].is_none() || bits(&self.held[i]) != bits(&before.held[i]) {
+            if self.held[i].is_none() || !same_hold(self.held[i], before.held[i]) {
                 self.held[i] = None;
                 self.w[i] = self.maps[i].w(zi);
             }
         }
     }
+}
+
+/// Whether two unknowns' holds are the same: both free, or both held at the same value.
+fn same_hold(a: Option<f64>, b: Option<f64>) -> bool {
+    a.map(f64::to_bits) == b.map(f64::to_bits)
 }
 
 /// The residual operator handed to argmin for one iteration.
