@@ -1085,6 +1085,15 @@ fn the_gauss_newton_line_searches_never_raise_the_cost() {
             .map(|h| h["cost"].as_f64().unwrap())
             .collect();
         assert!(costs.len() > 2, "{method}: {costs:?}");
+        // A convergence it claims is the minimum a second method certifies (nl2sol's NLL,
+        // 6e-10 apart here; the integration error of either is about 1e-7).
+        if fit["converged"] == true {
+            let second =
+                json(&["fit", "--model", "examples/boehm/model.toml", "--method", "nl2sol"]);
+            assert_eq!(second["converged"], true, "{}", second["termination"]);
+            let (nll, minimum) = (fit["nll"].as_f64().unwrap(), second["nll"].as_f64().unwrap());
+            assert!((nll - minimum).abs() < 1e-8, "{method}: {nll} against nl2sol's {minimum}");
+        }
         for (i, pair) in costs.windows(2).enumerate() {
             assert!(
                 pair[1] <= pair[0] * (1.0 + 1e-8),
