@@ -313,6 +313,22 @@ fn evaluate(
     })
 }
 
+/// An NLL for the table: ten decimals, as references are compared, but no more digits than
+/// an f64 holds (17 significant: Alkan's 281515999.42949665 had 19), and in exponent form
+/// outside [1e-4, 1e9) as every number the guide shows (an NLL of 1.2e302 was 303 digits).
+fn ten_decimals(v: f64) -> String {
+    let a = v.abs();
+    if !v.is_finite() || a == 0.0 {
+        return format!("{v:.10}");
+    }
+    if !(1e-4..1e9).contains(&a) {
+        return sysid_core::format::shortest(v);
+    }
+    let before = a.log10().floor() as i64 + 1;
+    let decimals = (17 - before).clamp(0, 10) as usize;
+    format!("{v:.decimals$}")
+}
+
 /// The readable report.
 fn table(
     name: &str,
@@ -321,7 +337,7 @@ fn table(
     (e, (error, unchecked)): (&Evaluation, (Option<&IntegrationError>, Option<&str>)),
     (ms, import_ms, repeat): (f64, f64, usize),
 ) -> String {
-    let mut out = format!("{name}\n  NLL          {:.10}", e.nll);
+    let mut out = format!("{name}\n  NLL          {}", ten_decimals(e.nll));
     out += &match error {
         Some(x) => format!(" ± {:.1e} (integration)\n", x.nll),
         None => "\n".to_string(),
@@ -332,7 +348,11 @@ fn table(
         );
     }
     if let Some(p) = e.prior {
-        out += &format!("  prior        {p:.10}\n  objective    {:.10}\n", e.nll + p);
+        out += &format!(
+            "  prior        {}\n  objective    {}\n",
+            ten_decimals(p),
+            ten_decimals(e.nll + p)
+        );
     }
     out += &format!(
         "  time         {ms:.3} ms per evaluation (median of {repeat}){}; import {import_ms:.1} ms\n",
@@ -389,4 +409,20 @@ fn table(
         out.push('\n');
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ten_decimals;
+
+    #[test]
+    fn an_nll_has_ten_decimals_within_what_a_float_holds() {
+        assert_eq!(ten_decimals(138.22199767), "138.2219976700");
+        assert_eq!(ten_decimals(-58622.91412236), "-58622.9141223600");
+        assert_eq!(ten_decimals(281515999.42949665), "281515999.42949665");
+        assert_eq!(ten_decimals(1.1870620432654152e302), "1.1870620432654152e302");
+        assert_eq!(ten_decimals(2.5e-7), "2.5e-7");
+        assert_eq!(ten_decimals(0.0), "0.0000000000");
+        assert_eq!(ten_decimals(f64::INFINITY), "inf");
+    }
 }

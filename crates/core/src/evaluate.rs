@@ -1076,17 +1076,27 @@ pub(crate) fn sample_rows<'s, S: System>(
                 // as d goes to 0.
                 let w = sample.sqrt_weight;
                 let (r, dr) = s.distribution.residual(th - sample.value, w);
-                if !r.is_finite() {
-                    // A noise scale of 0 or ∞ (a weight of ∞ or 0), named here as above.
+                if !(r * r).is_finite() {
+                    // A noise scale of 0 or ∞ (a weight of ∞ or 0), or near 0 so that the
+                    // residual's square, the NLL's term, overflows: named here as above.
+                    let shortest = crate::format::shortest;
+                    let (square, residual) = match r.is_finite() {
+                        true => ("the square of ", format!("{}: ", shortest(r))),
+                        false => ("", String::new()),
+                    };
                     let what = format!(
-                        "the residual of the observable `{}` of experiment `{}` (the square root of its weight {}; the model gives {}, the datum is {})",
+                        "{square}the residual of the observable `{}` of experiment `{}` ({residual}the square root of its weight {}; the model gives {}, the datum is {})",
                         s.observable_name(e.system()),
                         e.name,
-                        crate::format::shortest(w),
-                        crate::format::shortest(th),
-                        crate::format::shortest(sample.value)
+                        shortest(w),
+                        shortest(th),
+                        shortest(sample.value)
                     );
-                    return Err(OdeError::NonFinite { t: times[m], what });
+                    let t = times[m];
+                    return Err(match r.is_finite() {
+                        true => OdeError::Overflow { t, what },
+                        false => OdeError::NonFinite { t, what },
+                    });
                 }
                 out.r.push(r);
                 out.samples.push(m);

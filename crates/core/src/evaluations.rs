@@ -221,6 +221,11 @@ impl<'p, S: System> Evaluations<'p, S> {
                 *self.failed.borrow_mut() = None;
                 Ok(value)
             }
+            // The model integrated; a residual's square overflowed.
+            Err(OdeError::Overflow { what, .. }) => {
+                *self.failed.borrow_mut() = None;
+                Err(Failure::NonFinite { what, at: self.values(z) })
+            }
             Err(error) => {
                 // A failed integration counts as one; one that ran out of steps or blew up,
                 // with the steps it took (accepted and rejected together, as the budget

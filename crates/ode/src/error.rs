@@ -39,6 +39,15 @@ pub enum OdeError {
         /// Which quantity: "state y", "sensitivity ∂y/∂g", or "component 7" at the raw level.
         what: String,
     },
+    /// A quantity computed from a finite solution is too large for a float (the square of a
+    /// residual whose weight is near ∞): the model integrated, the value does not exist.
+    #[error("{what} overflows at t = {}", time(.t))]
+    Overflow {
+        /// Where (the sample's time).
+        t: f64,
+        /// Which quantity, with the numbers that make it.
+        what: String,
+    },
     /// The step budget was used up.
     #[error("too many steps: {steps} steps taken by t = {} without reaching {}", time(.t), time(.t_end))]
     TooManySteps {

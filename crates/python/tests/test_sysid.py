@@ -317,6 +317,12 @@ class Boehm(unittest.TestCase):
         # A noise scale of 0 (its ln far below any bound) names the residual it made infinite.
         with self.assertRaisesRegex(sysid.SysidError, "the residual of the observable `pSTAT5A_rel` of experiment"):
             self.p.nll(np.full(9, -800.0), scale="parameter")
+        # A noise scale near 0 whose residual's square overflows: nll returned inf.
+        x = np.array(self.p.nominal)
+        x[self.p.parameter_names.index("sd_pSTAT5A_rel")] = 1e-300
+        for f in (self.p.nll, self.p.objective, self.p.nll_and_gradient):
+            with self.assertRaisesRegex(sysid.SysidError, "the square of the residual of the observable `pSTAT5A_rel`"):
+                f(x)
 
     def test_anything_numpy_makes_a_vector_of_is_a_vector(self):
         # The stubs promise array-likes: a list, a tuple, integers, a matrix's column (not
