@@ -143,6 +143,62 @@ fn a_byte_order_mark_at_the_start_of_a_file_is_skipped() {
     );
 }
 
+/// The header is read as the table reads it: R's write.csv quotes every name (`"t","x"`), and
+/// the quoted time column was refused as `"t"`; an empty file says so.
+#[test]
+fn a_quoted_header_is_its_names() {
+    for (tag, data) in [
+        ("quoted", "\"t\",\"x\"\n0,2\n1,0.9\n2,0.4\n3,0.18\n"),
+        ("quoted-bom", "\u{feff}\"time\",x\n0,2\n1,0.9\n2,0.4\n3,0.18\n"),
+    ] {
+        let case = Case::new(tag, DECAY, data);
+        let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+        assert_eq!(out.status.code(), Some(0), "{tag}: {}", text(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let k = json["estimates"]["k"].as_f64().unwrap();
+        assert!((k - 0.8).abs() < 0.02, "{tag}: k = {k}");
+    }
+    bad(
+        "quoted-x",
+        DECAY,
+        "\"x\",\"t\"\n2,0\n",
+        "data.csv:1: the first column must be the time, named `t` or `time`; found `x`",
+    );
+    bad("empty", DECAY, "", "data.csv:1: the file is empty: its first row must name the columns");
+    bad("blank", DECAY, "\n\n", "data.csv:1: the file is empty");
+}
+
+/// A noise scale is σ: a negative guess was fitted as |σ| and reported converged at −1, its
+/// interval reversed; fixed or started there it is refused too.
+#[test]
+fn a_noise_scale_must_be_positive() {
+    let model =
+        DECAY.replace("[initial]", "[outputs]\ny = { value = \"x\", sigma = \"sd\" }\n[initial]");
+    let data = "t,y\n0,2\n1,0.9\n2,0.4\n3,0.18\n";
+    let scale =
+        |guess: &str| model.replace("k = 0.5\n", &format!("k = 0.5\nsd = {{ guess = {guess} }}\n"));
+    let needle = "unknown `sd`: a noise scale is a σ: it must be positive and finite, got ";
+    // At the unknown's key, as the bounds' errors (which named the file alone).
+    bad("scale-negative", &scale("-1"), data, &format!("model.toml:11:1: {needle}-1"));
+    let reversed = DECAY.replace("k = 0.5", "k = { guess = 0.5, min = 1.0, max = 0.1 }");
+    bad(
+        "reversed",
+        &reversed,
+        DECAY_DATA,
+        "model.toml:8:1: unknown `k`: min 1 is not below max 0.1",
+    );
+    bad("scale-zero", &scale("0"), data, needle);
+    let case = Case::new("scale-fixed", &scale("1"), data);
+    for flag in ["--fix", "--start"] {
+        let out = sysid(&["fit", "--model", &case.model(), flag, "sd=-2"]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag}: {stderr}");
+        assert!(stderr.contains(needle), "{flag}: {stderr}");
+    }
+    let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}
+
 #[test]
 fn a_file_that_cannot_be_read_says_why_once() {
     // The system's reason appears once, after the path: the CLI prints the whole error

@@ -51,8 +51,9 @@ fn overflow(table: &Table, text: &str, name: &str, weight: f64) -> Result<(), Mo
                 line: line.map(|l| l as usize),
                 column: line.and_then(|l| cell_position(text, l, field)),
                 message: format!(
-                    "column `{name}`: {:e} is too large for least squares: its weighted square overflows (the largest usable magnitude is {LARGEST:.1e}/√w, w = {weight})",
-                    cells[row].unwrap_or_default()
+                    "column `{name}`: {:e} is too large for least squares: its weighted square overflows (the largest usable magnitude is {LARGEST:.1e}/√w, w = {})",
+                    cells[row].unwrap_or_default(),
+                    sysid_core::format::shortest(weight)
                 ),
             })
         }
@@ -119,17 +120,27 @@ fn sigma_column(model: &ModelFile, name: &str) -> bool {
 
 /// Checks the first column's name is `t` or `time`, before its values are read as times.
 fn check_time_column(text: &str, file: &str) -> Result<(), ModelError> {
-    let time =
-        text.lines().next().and_then(|h| h.split(',').next()).map(str::trim).unwrap_or_default();
+    let refuse = |message: String| ModelError {
+        file: file.to_string(),
+        line: Some(1),
+        column: None,
+        message,
+    };
+    if text.trim().is_empty() {
+        return Err(refuse(
+            "the file is empty: its first row must name the columns, the time first (`t` or `time`)"
+                .into(),
+        ));
+    }
+    // The header as the table reads it, so that a quoted name (`"t","x"`, as R's write.csv
+    // writes it) is its name; a header the reader refuses is the table's to report.
+    let mut reader = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(text.as_bytes());
+    let Ok(header) = reader.headers() else { return Ok(()) };
+    let time = header.get(0).unwrap_or_default();
     if !time.eq_ignore_ascii_case("t") && !time.eq_ignore_ascii_case("time") {
-        return Err(ModelError {
-            file: file.to_string(),
-            line: Some(1),
-            column: None,
-            message: format!(
-                "the first column must be the time, named `t` or `time`; found `{time}`"
-            ),
-        });
+        return Err(refuse(format!(
+            "the first column must be the time, named `t` or `time`; found `{time}`"
+        )));
     }
     Ok(())
 }
@@ -229,7 +240,9 @@ fn check_start(
             line: line.map(|l| l as usize),
             column: line.and_then(|l| cell_position(text, l, field)),
             message: format!(
-                "column `{name}`: {what} at t = {t} lies before t0 = {t0} ({t0_in}), the time of the initial values: the data must start at t0 or later"
+                "column `{name}`: {what} at t = {} lies before t0 = {} ({t0_in}), the time of the initial values: the data must start at t0 or later",
+                sysid_core::format::shortest(t),
+                sysid_core::format::shortest(t0)
             ),
         });
     }

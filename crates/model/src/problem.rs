@@ -628,9 +628,15 @@ impl Model {
             _ => self.file.path.display().to_string(),
         };
         match e {
-            ProblemError::InvalidUnknown { .. } | ProblemError::NoUnknowns => {
-                self.located(e.to_string())
+            // At the unknown's key, where it is one of the file's.
+            ProblemError::InvalidUnknown { ref name, .. } => {
+                let f = &self.file;
+                match f.unknowns.iter().position(|u| &u.name == name) {
+                    Some(i) if i < f.unknowns_at.len() => f.err(f.unknowns_at[i], e.to_string()),
+                    _ => self.located(e.to_string()),
+                }
             }
+            ProblemError::NoUnknowns => self.located(e.to_string()),
             other => ModelError::file(&file, other.to_string()),
         }
     }

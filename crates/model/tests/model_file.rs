@@ -581,6 +581,15 @@ fn data() {
             format!("{OK}[data.weights]\nx = -1.5\n"),
             "models/m.toml:12:5: [data.weights] x must be positive, got -1.5",
         ),
+        // Subnormal weights fitted nothing and were reported an exact fit.
+        (
+            format!("{OK}[data.weights]\nx = 1e-320\n"),
+            "models/m.toml:12:5: [data.weights] x must lie between 1e-300 and 1e300 (1/σ² for σ between 1e-150 and 1e150), got 1e-320: beyond them a weighted square vanishes (a unit slip?)",
+        ),
+        (
+            format!("{OK}[data.weights]\nx = 1e301\n"),
+            "models/m.toml:12:5: [data.weights] x must lie between 1e-300 and 1e300 (1/σ² for σ between 1e-150 and 1e150), got 1e301: beyond them a weighted square overflows (a unit slip?)",
+        ),
         (
             format!("{OK}[data]\nformat = \"csv\"\n"),
             "models/m.toml:12:1: unknown key `format` in [data] (keys: file, t0, record, weights)",
@@ -644,6 +653,11 @@ fn data_before_t0() {
     for (data_table, csv, expected) in cases {
         assert_eq!(problem(data_table, csv).unwrap_err().to_string(), expected, "{csv}");
     }
+    // A time far from 0 in exponent form (it was 309 digits).
+    assert_eq!(
+        problem("t0 = 1e308\n", "t,y\n0,0.1\n").unwrap_err().to_string(),
+        format!("{d}:2:3: column `y`: a sample at t = 0 lies before t0 = 1e308 ({m}:13:6), {tail}")
+    );
     // Discrete data from t0 on, a row before t0 without a measured value, are accepted.
     assert_eq!(problem("t0 = 0.5\n", "t,x,y\n0,,\n0.5,1,0\n1,0.6,0.4\n2,0.4,0.6\n"), Ok(()));
     std::fs::remove_dir_all(&dir).unwrap();

@@ -183,6 +183,9 @@ pub struct ModelFile {
     pub initial: Vec<(String, Expression)>,
     /// Unknowns with guesses, bounds and scales.
     pub unknowns: Vec<Unknown>,
+    /// The byte offset of each unknown's key in `[unknowns]`, in the order of `unknowns`: an
+    /// error found later in an unknown (its bounds, a noise scale's guess) is located there.
+    pub unknowns_at: Vec<usize>,
     /// The unknowns that are neither states nor parameters (used by a σ or a setting), in
     /// the order of `[unknowns]`.
     pub extras: Vec<String>,
@@ -276,6 +279,7 @@ impl ModelFile {
         let read = read_unknowns(&r, doc, &scope)?;
         let unknowns = read.list;
         scope.unknowns_at = read.keys;
+        let unknowns_at = scope.unknowns_at.iter().map(|(_, at)| *at).collect();
         let extras: Vec<String> = read.extras.iter().map(|e| e.0.clone()).collect();
         scope.extras = extras.clone();
         scope.extras_at = read.extras;
@@ -318,6 +322,7 @@ impl ModelFile {
             known,
             initial,
             unknowns,
+            unknowns_at,
             extras,
             data,
             experiments,
