@@ -78,6 +78,20 @@ pub fn writable(path: &Path, option: &str) -> anyhow::Result<()> {
     if path.is_dir() {
         bail!("{option} {}: that is a folder, not a file", path.display());
     }
+    // A folder that exists but cannot be written (`/proc`) was found only after the work,
+    // its results printed and the exit 2: a file made and removed again tells now.
+    let probe = folder.join(format!(".sysid-write-check-{}", std::process::id()));
+    match std::fs::OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(_) => {
+            let _ = std::fs::remove_file(&probe);
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+        Err(e) => bail!(
+            "{option} {}: the folder {} cannot be written: {e}",
+            path.display(),
+            folder.display()
+        ),
+    }
     Ok(())
 }
 

@@ -153,6 +153,15 @@ fn table(context: &Context, profiled: &Profiled) -> String {
             better.len()
         );
     }
+    // A point's fit that stopped short lies above the profile, which then crosses early:
+    // intervals too narrow, an unknown called identifiable that may not be.
+    let points = profiles.iter().flat_map(|p| &p.points);
+    let (short, all) = (points.clone().filter(|q| !q.converged).count(), points.count());
+    if short > 0 {
+        text += &format!(
+            "  warning: {short} of the {all} points' fits did not converge: their NLL may lie above the profile's, and the intervals may be too narrow (the JSON's `converged` says which)\n"
+        );
+    }
     text += &format!(
         "\n  {:<22} {:>14} {:>14} {:>14}  {}\n",
         "unknown", "estimate", "95 % low", "95 % high", "verdict"

@@ -1172,3 +1172,25 @@ fn the_csvs_times_are_in_exponent_form_where_their_values_are() {
         }
     }
 }
+
+/// A figure into a folder that exists but cannot be written is refused before the work (the
+/// profile printed its whole table, then exited 2); a profile whose points' fits stopped
+/// short says so beside its verdicts.
+#[test]
+fn a_profile_says_what_its_points_rest_on() {
+    refused(
+        &["profile", "--system", "falling-body", "--figure", "/proc/fig"],
+        &["--figure /proc/fig.png: the folder /proc cannot be written"],
+    );
+    refused(
+        &["fit", "--system", "falling-body", "--starts", "2", "--waterfall", "/proc/w"],
+        &["the folder /proc cannot be written"],
+    );
+    let out = sysid(&["profile", "--system", "van-der-pol", "--max-iterations", "1"]);
+    let table = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(table.contains("points' fits did not converge"), "{table}");
+    let out = sysid(&["profile", "--system", "falling-body"]);
+    let table = text(&out.stdout);
+    assert!(!table.contains("did not converge"), "{table}");
+}

@@ -19,7 +19,8 @@
 //! to fit again from there.
 //!
 //! **Verdicts**: `identifiable` when both sides cross; `structurally_non_identifiable` when
-//! the profile rises by less than 1e-3 of the threshold over the whole range walked;
+//! the profile rises by less than 1e-3 of the threshold over the whole range walked, each
+//! side to the unknown's bound or with its steps at their longest;
 //! `practically_non_identifiable` when a side stays below the threshold up to the unknown's
 //! bound, or until the step budget ran out with its steps at their longest ([`MAX_STEP`]:
 //! the profile too flat for them to reach a rise of a tenth of the threshold); `undecided`
@@ -407,12 +408,15 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         }
         points.sort_by(|a, b| a.value.total_cmp(&b.value));
         let rise = points.iter().map(|p| p.nll - base).fold(0.0, f64::max);
+        // A side whose budget ran out with its steps still short decides nothing, flat or
+        // not: with `--max-points 2` no point was walked, the rise was 0, and an identifiable
+        // unknown was called structurally non-identifiable.
         let label = if failed.is_some() {
             Label::Failed
-        } else if rise < 1e-3 * self.options.threshold {
-            Label::StructurallyNonIdentifiable
         } else if budget {
             Label::Undecided
+        } else if rise < 1e-3 * self.options.threshold {
+            Label::StructurallyNonIdentifiable
         } else if open {
             Label::PracticallyNonIdentifiable
         } else {

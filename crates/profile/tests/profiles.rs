@@ -188,3 +188,25 @@ fn a_fit_that_panics_fails_its_profile_and_the_others_stand() {
     let other = plain.iter().find(|p| p.name != name).unwrap();
     assert!(serde_json::to_value(other.record()).unwrap()["failed"].is_null());
 }
+
+/// A budget too short to walk anywhere decides nothing: with two points the profiles of the
+/// falling body's identifiable unknowns had risen by nothing yet and were called structurally
+/// non-identifiable. With the budget that crosses (the test above), they are identifiable.
+#[test]
+fn a_budget_too_short_to_walk_is_undecided() {
+    let case = sysid_systems::falling_body::falling_body();
+    let problem = case.problem(1).unwrap();
+    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
+    let optimum = goodman.fit(&problem).unwrap();
+    for max_steps in [1, 2] {
+        let options = ProfileOptions { max_steps, ..ProfileOptions::default() };
+        let Outcome::Profiles(profiles) =
+            profile(&*goodman, &problem, &optimum, &[], &options).unwrap()
+        else {
+            panic!("a better optimum");
+        };
+        for p in &profiles {
+            assert_eq!(p.label, Label::Undecided, "{max_steps}: {}: {:?}", p.name, p.points);
+        }
+    }
+}
