@@ -140,6 +140,25 @@ pub fn method(name: &str, settings: &Settings) -> anyhow::Result<Boxed<AnySystem
     Ok(Registry::standard().build(name, settings)?)
 }
 
+/// The methods as they run under `settings`, by the names they report: `quasilinearization`
+/// with `--ql-start data` is `quasilinearization-data` (compare's table said the one where its
+/// JSON said the other, and the list could then hold one method twice).
+pub fn as_run(names: Vec<String>, settings: &Settings) -> anyhow::Result<Vec<String>> {
+    let mut out: Vec<String> = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        let actual = method(name, settings)?.name().to_string();
+        if let Some(j) = out.iter().position(|m| *m == actual) {
+            anyhow::bail!(
+                "--methods: `{}` and `{name}` are one method here, `{actual}` (--ql-start)",
+                names[j]
+            );
+        }
+        debug_assert_eq!(out.len(), i);
+        out.push(actual);
+    }
+    Ok(out)
+}
+
 /// Fits with the named method. A start that cannot be used is bad input, not a result of the
 /// method: a model that cannot be evaluated there, or unknowns the data cannot tell apart
 /// there before any step was taken.

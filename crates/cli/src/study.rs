@@ -132,6 +132,7 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
         Some(list) => sysid_registry::parse_list(list)?,
         None => Role::Study.methods().into_iter().map(String::from).collect(),
     };
+    let methods = crate::problem::as_run(methods, &args.options.settings())?;
     sysid_registry::parse_list(&args.reference)?;
     // The numbers checked before any work: a model file's reference fit comes first and can
     // take minutes (`--trials 0` on Fujita was refused only after it).

@@ -1048,6 +1048,13 @@ fn a_study_refuses_its_numbers_before_the_reference_fit() {
         &["study", "--petab", yaml, "--noise", "0", "--out", &out],
         &["--noise must be a positive"],
     );
+    // 1.7e308 drew infinite starts, written as null, which --resume and merge refused.
+    for rho in ["1.7e308", "1e7"] {
+        refused(
+            &["study", "--petab", yaml, "--perturb", rho, "--out", &out],
+            &["--perturb must lie between 0 and 1e6"],
+        );
+    }
     assert!(!Path::new(&out).exists(), "{out} was written");
 }
 
@@ -1193,4 +1200,23 @@ fn a_profile_says_what_its_points_rest_on() {
     let out = sysid(&["profile", "--system", "falling-body"]);
     let table = text(&out.stdout);
     assert!(!table.contains("did not converge"), "{table}");
+}
+
+/// `--ql-start data` makes `quasilinearization` `quasilinearization-data`: compare's table
+/// named the row `quasilinearization` where its JSON said `quasilinearization-data`, and the
+/// two listed together were one method twice.
+#[test]
+fn a_method_is_named_as_it_runs() {
+    let args = ["compare", "--system", "van-der-pol", "--ql-start", "data", "--methods"];
+    let out = sysid(&[&args[..], &["quasilinearization,goodman"]].concat());
+    let table = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(table.contains(" quasilinearization-data "), "{table}");
+    let out = sysid(&[&args[..], &["quasilinearization,goodman", "--format", "json"]].concat());
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json[0]["method"], "quasilinearization-data", "{json}");
+    refused(
+        &[&args[..], &["quasilinearization,quasilinearization-data"]].concat(),
+        &["`quasilinearization` and `quasilinearization-data` are one method here"],
+    );
 }

@@ -91,9 +91,11 @@ impl StudySpec {
                 self.noise
             )));
         }
-        if !(self.perturb >= 0.0 && self.perturb.is_finite()) {
+        // 1.7e308 drew infinite starts, which trials.jsonl wrote as null and its own
+        // --resume and merge then refused.
+        if !(0.0..=MAX_PERTURB).contains(&self.perturb) {
             return Err(StudyError::Setup(format!(
-                "--perturb must be non-negative, got {}",
+                "--perturb must lie between 0 and {MAX_PERTURB:e} (a start up to a million times the truth), got {}",
                 self.perturb
             )));
         }
@@ -251,8 +253,12 @@ fn reference_cost(fit: &Result<Estimate, sysid_core::FitError>) -> Option<f64> {
     }
 }
 
+/// The largest start perturbation ρ a study takes.
+pub const MAX_PERTURB: f64 = 1e6;
+
 /// The start of one unknown: truth·(1 + ρu), truth·(1 + ρ)^u on a log scale, truth + ρu for a
-/// truth of 0; inside the unknown's bounds.
+/// truth of 0; inside the unknown's bounds, and finite (a truth near the largest float times
+/// 1 + ρ is held at it).
 pub fn perturb(unknown: &Unknown, truth: f64, rho: f64, u: f64) -> f64 {
     let v = if unknown.log {
         truth * (1.0 + rho).powf(u)
@@ -262,6 +268,7 @@ pub fn perturb(unknown: &Unknown, truth: f64, rho: f64, u: f64) -> f64 {
         truth * (1.0 + rho * u)
     };
     v.clamp(unknown.min.unwrap_or(f64::NEG_INFINITY), unknown.max.unwrap_or(f64::INFINITY))
+        .clamp(-f64::MAX, f64::MAX)
 }
 
 /// The record of one fit. `reference` is `None` for the reference fit itself, and
