@@ -165,6 +165,14 @@ fn a_quoted_header_is_its_names() {
         "data.csv:1: the first column must be the time, named `t` or `time`; found `x`",
     );
     bad("empty", DECAY, "", "data.csv:1: the file is empty: its first row must name the columns");
+    // Relative weights all far below 1 underflow ε: 1e-320 alone was reported an exact fit.
+    let tiny = DECAY.to_string() + "[data.weights]\nx = 1e-320\n";
+    bad(
+        "tiny-weights",
+        &tiny,
+        DECAY_DATA,
+        "model.toml:12:1: [data.weights]: the largest weight, 1e-320, is below 1e-300",
+    );
     bad("blank", DECAY, "\n\n", "data.csv:1: the file is empty");
 }
 
@@ -197,6 +205,16 @@ fn a_noise_scale_must_be_positive() {
     }
     let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    // The scale alone free: its standard error sd/√(2N) in the JSON as in the table (the
+    // JSON's was null).
+    let out = sysid(&["fit", "--model", &case.model(), "--fix", "k=0.8", "--format", "json"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let sd = json["estimates"]["sd"].as_f64().unwrap();
+    let se = json["std_errors"]["sd"].as_f64().unwrap_or_else(|| panic!("{json}"));
+    assert!((se - sd / 8f64.sqrt()).abs() <= 1e-12 * sd, "{se} against {sd}/√8");
+    let [lo, hi] = [0, 1].map(|i| json["intervals"]["sd"][i].as_f64().unwrap());
+    assert!(lo < sd && sd < hi, "[{lo}, {hi}] around {sd}");
 }
 
 #[test]

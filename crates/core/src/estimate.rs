@@ -399,10 +399,13 @@ impl Serialize for FitRecord<'_> {
             e.values.iter().chain(e.scales.iter().map(|s| &s.value)).map(|&v| Num(v)).collect();
         st.serialize_field("estimates", &Named(&names, &values))?;
         let scale_errors = e.scales.iter().map(|s| Num(s.std_error.unwrap_or(f64::NAN)));
-        let errors: Vec<Num> = match &e.std_errors {
-            Some(se) => se.iter().map(|&v| Num(v)).chain(scale_errors).collect(),
-            None => names.iter().map(|_| Num(f64::NAN)).collect(),
+        // The scales' own, as the table shows them, also where the free unknowns have none
+        // (all of them fixed: the scale's error was null here and printed in the table).
+        let free_errors: Vec<Num> = match &e.std_errors {
+            Some(se) => se.iter().map(|&v| Num(v)).collect(),
+            None => e.values.iter().map(|_| Num(f64::NAN)).collect(),
         };
+        let errors: Vec<Num> = free_errors.into_iter().chain(scale_errors).collect();
         st.serialize_field("std_errors", &Named(&names, &errors))?;
         st.serialize_field("history", &e.history)?;
         st.serialize_field("elapsed_ms", &(e.elapsed.as_secs_f64() * 1e3))?;
@@ -426,10 +429,12 @@ impl Serialize for FitRecord<'_> {
         let finite =
             |&[a, b]: &[f64; 2]| (a.is_finite() && b.is_finite()).then_some([Num(a), Num(b)]);
         let scale_intervals = e.scales.iter().map(|s| s.interval.as_ref().and_then(finite));
-        let intervals: Vec<Option<[Num; 2]>> = match &e.intervals {
-            Some(list) => list.iter().map(finite).chain(scale_intervals).collect(),
-            None => names.iter().map(|_| None).collect(),
+        let free_intervals: Vec<Option<[Num; 2]>> = match &e.intervals {
+            Some(list) => list.iter().map(finite).collect(),
+            None => e.values.iter().map(|_| None).collect(),
         };
+        let intervals: Vec<Option<[Num; 2]>> =
+            free_intervals.into_iter().chain(scale_intervals).collect();
         st.serialize_field("intervals", &Named(&names, &intervals))?;
         st.serialize_field("best_iteration", &e.best_iteration)?;
         if let Some(at) = e.termination.failure().and_then(|f| f.at()) {

@@ -1094,7 +1094,7 @@ pub(crate) fn sample_rows<'s, S: System>(
                     );
                     let t = times[m];
                     return Err(match r.is_finite() {
-                        true => OdeError::Overflow { t, what },
+                        true => OdeError::Unrepresentable { t, what: format!("{what} overflows") },
                         false => OdeError::NonFinite { t, what },
                     });
                 }
@@ -1140,11 +1140,14 @@ pub(crate) fn sample_rows<'s, S: System>(
             out.in_normal.push(false);
             let b2 = 2.0 * sigma.ln() + NOISE_ROW_SHIFT;
             if b2.is_nan() || b2 <= 0.0 {
-                return Err(OdeError::NonFinite {
+                // Not an integration's failure: the model integrated.
+                return Err(OdeError::Unrepresentable {
                     t: times[m],
                     what: format!(
-                        "σ = {sigma:e} of `{}`, below the likelihood's floor e^-25",
-                        s.observable_name(e.system())
+                        "σ = {sigma:e} of `{}` lies below e^{} ≈ {:.1e}, the least σ a noise expression may take (the likelihood's row for ln σ is √(2 ln σ + {NOISE_ROW_SHIFT}))",
+                        s.observable_name(e.system()),
+                        -NOISE_ROW_SHIFT / 2.0,
+                        (-NOISE_ROW_SHIFT / 2.0).exp()
                     ),
                 });
             }

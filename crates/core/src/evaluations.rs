@@ -221,8 +221,9 @@ impl<'p, S: System> Evaluations<'p, S> {
                 *self.failed.borrow_mut() = None;
                 Ok(value)
             }
-            // The model integrated; a residual's square overflowed.
-            Err(OdeError::Overflow { what, .. }) => {
+            // The model integrated; a residual's square overflowed, or a σ fell below what
+            // the likelihood's rows hold.
+            Err(OdeError::Unrepresentable { what, .. }) => {
                 *self.failed.borrow_mut() = None;
                 Err(Failure::NonFinite { what, at: self.values(z) })
             }
@@ -317,7 +318,7 @@ impl<'p, S: System> Evaluations<'p, S> {
             }
             _ => what.to_string(),
         };
-        Failure::NonFinite { what, at: self.values(z) }
+        Failure::NonFinite { what: format!("{what} is not finite"), at: self.values(z) }
     }
 }
 

@@ -96,9 +96,10 @@ pub enum Failure {
         at: Vec<f64>,
     },
     /// The model integrated, but ε, its gradient or the normal matrix is not finite there
-    /// (overflow).
+    /// (overflow), or a residual's square overflows.
     NonFinite {
-        /// Which quantity, and the residual row when one overflows.
+        /// What is not finite, as a clause ("ε is not finite"), with the residual row when one
+        /// overflows.
         what: String,
         /// The unknowns where it happened.
         at: Vec<f64>,
@@ -152,7 +153,7 @@ impl fmt::Display for Failure {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Failure::Integration { error, .. } => write!(f, "{error}"),
-            Failure::NonFinite { what, .. } => write!(f, "{what} is not finite"),
+            Failure::NonFinite { what, .. } => write!(f, "{what}"),
             Failure::Singular { unknowns, condition } => write!(
                 f,
                 "singular normal matrix (condition {condition:.1e}) involving {}",
@@ -433,7 +434,7 @@ mod tests {
             Termination::MaxIterations { fell: None, moving: vec![] },
             Termination::IntegrationBudget { integrations: 3 },
             Termination::TimeLimit { seconds: 1.0 },
-            failure(Failure::NonFinite { what: "ε".into(), at: vec![] }),
+            failure(Failure::NonFinite { what: "ε is not finite".into(), at: vec![] }),
             failure(Failure::Singular { unknowns: vec![], condition: 1e13 }),
             failure(Failure::Solver("argmin".into())),
             failure(Failure::Integration {

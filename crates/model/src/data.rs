@@ -178,6 +178,25 @@ fn check_weights(model: &ModelFile, table: &Table, file: &str) -> Result<(), Mod
                 .err(*at, format!("[data.weights]: `{name}` is not a measured column of {file}")));
         }
     }
+    // Relative weights all below 1e-300: ε and the normal matrix underflow (1e-320 alone was
+    // fitted to nothing and reported an exact fit with standard errors 0).
+    let weighted = table.names().iter().filter(|n| {
+        measurable(model, n)
+            && model.outputs.iter().all(|o| o.name != **n || matches!(o.noise, NoiseSpec::Weights))
+    });
+    // Each weighted column's weight and where it is given (none: 1, from nowhere).
+    let weight_of =
+        |n: &String| model.data.weights.iter().find(|w| &w.0 == n).map_or((1.0, 0), |w| (w.1, w.2));
+    let largest = weighted.map(weight_of).max_by(|a, b| a.0.total_cmp(&b.0));
+    let least = crate::file::WEIGHT_RANGE.0;
+    if let Some((largest, at)) = largest.filter(|w| w.0 < least) {
+        return Err(model.err(
+            at,
+            format!(
+                "[data.weights]: the largest weight, {largest:e}, is below {least:e}: weights are relative, and with all of them so small ε and its derivatives underflow (scale them up together: the estimates and standard errors stay)"
+            ),
+        ));
+    }
     Ok(())
 }
 

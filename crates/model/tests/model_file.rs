@@ -581,14 +581,9 @@ fn data() {
             format!("{OK}[data.weights]\nx = -1.5\n"),
             "models/m.toml:12:5: [data.weights] x must be positive, got -1.5",
         ),
-        // Subnormal weights fitted nothing and were reported an exact fit.
-        (
-            format!("{OK}[data.weights]\nx = 1e-320\n"),
-            "models/m.toml:12:5: [data.weights] x must lie between 1e-300 and 1e300 (1/σ² for σ between 1e-150 and 1e150), got 1e-320: beyond them a weighted square vanishes (a unit slip?)",
-        ),
         (
             format!("{OK}[data.weights]\nx = 1e301\n"),
-            "models/m.toml:12:5: [data.weights] x must lie between 1e-300 and 1e300 (1/σ² for σ between 1e-150 and 1e150), got 1e301: beyond them a weighted square overflows (a unit slip?)",
+            "models/m.toml:12:5: [data.weights] x must be at most 1e300, got 1e301: beyond it a weighted square overflows (a unit slip?)",
         ),
         (
             format!("{OK}[data]\nformat = \"csv\"\n"),

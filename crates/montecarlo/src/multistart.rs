@@ -807,7 +807,7 @@ mod tests {
     /// iteration 1" after 4 iterations, its continuation's own count.
     #[test]
     fn a_continuations_termination_counts_the_whole_fits_iterations() {
-        let failure = Failure::NonFinite { what: "ε".into(), at: vec![1.0] };
+        let failure = Failure::NonFinite { what: "ε is not finite".into(), at: vec![1.0] };
         let on = Estimate {
             termination: Termination::Failed { iteration: 1, failure },
             ..fit(47.0, false)

@@ -39,13 +39,14 @@ pub enum OdeError {
         /// Which quantity: "state y", "sensitivity ∂y/∂g", or "component 7" at the raw level.
         what: String,
     },
-    /// A quantity computed from a finite solution is too large for a float (the square of a
-    /// residual whose weight is near ∞): the model integrated, the value does not exist.
-    #[error("{what} overflows at t = {}", time(.t))]
-    Overflow {
+    /// A quantity computed from a finite solution cannot be represented: the square of a
+    /// residual whose weight is near ∞ overflows, a σ lies below what the likelihood's rows
+    /// hold. The model integrated; the value does not exist.
+    #[error("{what} (at t = {})", time(.t))]
+    Unrepresentable {
         /// Where (the sample's time).
         t: f64,
-        /// Which quantity, with the numbers that make it.
+        /// What, as a clause with the numbers that make it.
         what: String,
     },
     /// The step budget was used up.

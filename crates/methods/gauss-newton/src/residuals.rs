@@ -209,7 +209,7 @@ impl<S: System> Residuals<'_, S> {
     /// The failure remembered for a point whose residuals are infinite.
     pub fn failure_at(&self, z: &[f64]) -> Failure {
         self.cache.borrow_mut().failure.take().unwrap_or_else(|| Failure::NonFinite {
-            what: "the residuals".into(),
+            what: "the residuals are not finite".into(),
             at: self.ev.problem().unknowns().values(z),
         })
     }
