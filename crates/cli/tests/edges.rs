@@ -1221,3 +1221,24 @@ fn a_method_is_named_as_it_runs() {
         &["`quasilinearization` and `quasilinearization-data` are one method here"],
     );
 }
+
+/// `simulate --set` of a parameter an experiment sets itself is refused, naming it: `dose`,
+/// set by every experiment of examples/two-doses, was silently ignored, and `scale`, set by
+/// `high` to its own unknown, was overridden there. In an experiment that does not set it,
+/// the value is used.
+#[test]
+fn simulate_sets_only_what_no_experiment_sets() {
+    let model = "examples/two-doses/model.toml";
+    let base = ["simulate", "--model", model, "--times", "0:2:1"];
+    refused(&[&base[..], &["--set", "dose=3"]].concat(), &["experiment `low` sets `dose` itself"]);
+    refused(&[&base[..], &["--set", "scale=2"]].concat(), &["experiment `high` sets `scale`"]);
+    let out = sysid(&[&base[..], &["--set", "scale=2", "--experiment", "low"]].concat());
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let csv = text(&out.stdout);
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    for row in csv.lines().skip(1) {
+        let v: Vec<f64> = row.split(',').map(|c| c.parse().unwrap()).collect();
+        assert!((v[column("Bm")] - 2.0 * v[column("B")]).abs() <= 1e-15, "{row}");
+    }
+}
