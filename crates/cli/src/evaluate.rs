@@ -110,6 +110,16 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
     let parameters = problem.parameters();
     let names: Vec<String> = parameters.iter().map(|u| u.name.clone()).collect();
     let published = context.nominal.iter().map(|(name, value)| format!("{name}={value:?}"));
+    // The user's names once each (the last of two was kept silently; --fix and --start refuse
+    // a name given twice); a published nominal value outside its bounds comes first.
+    let name = |s: &String| s.split_once('=').map(|(n, _)| n.trim().to_string());
+    for (k, s) in args.set.iter().enumerate() {
+        if let Some(n) =
+            name(s).filter(|n| args.set[..k].iter().any(|t| name(t).as_ref() == Some(n)))
+        {
+            bail!("--set {n}: given twice");
+        }
+    }
     let set: Vec<String> = published.chain(args.set.iter().cloned()).collect();
     let values = point(&problem, &parameters, &set)?;
     let k = problem.unknowns().len();

@@ -36,17 +36,23 @@ fn refused(field: &str, problem: impl std::fmt::Display) -> anyhow::Error {
 /// A count (`--max-iterations 20`): a whole number ≥ 0; anything else, a negative number
 /// included, is refused with what was given.
 pub fn count(s: &str) -> Result<usize, String> {
-    s.trim().parse::<usize>().map_err(|_| match s.trim().parse::<f64>() {
-        Ok(v) if v < 0.0 => format!("must be a whole number ≥ 0, got {v}"),
-        Ok(v) => format!("must be a whole number, got {v}"),
+    // As given: `99999999999999999999` read back as a float was 100000000000000000000.
+    let given = s.trim();
+    given.parse::<usize>().map_err(|_| match given.parse::<f64>() {
+        Ok(v) if v < 0.0 => format!("is a count, not negative: got {given}"),
+        Ok(v) if v.fract() == 0.0 => {
+            format!("must be a whole number at most {}, got {given}", usize::MAX)
+        }
+        Ok(_) => format!("must be a whole number, got {given}"),
         Err(_) => format!("`{s}` is not a whole number"),
     })
 }
 
 /// A seed: a whole number ≥ 0.
 pub fn seed(s: &str) -> Result<u64, String> {
-    s.trim().parse::<u64>().map_err(|_| match s.trim().parse::<f64>() {
-        Ok(v) => format!("must be a whole number ≥ 0, got {v}"),
+    let given = s.trim();
+    given.parse::<u64>().map_err(|_| match given.parse::<f64>() {
+        Ok(_) => format!("must be a whole number from 0 to {}, got {given}", u64::MAX),
         Err(_) => format!("`{s}` is not a whole number"),
     })
 }

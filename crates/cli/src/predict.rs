@@ -86,7 +86,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
         watching(&watch, || fit(&problem, &args.method.method, &args.options.settings()))?;
     if !estimate.converged() {
         eprintln!(
-            "{}: {} did not converge ({}; {}): no prediction written",
+            "{}: {} did not converge (converged: {}; {}): no prediction written",
             context.name,
             estimate.method,
             estimate.verdict(),

@@ -337,10 +337,10 @@ fn unusable_start(problem: &AnyProblem, e: &Estimate, start_point: &str) -> Opti
         }
         _ if e.iterations == 0 && e.certificate.plateau() && e.certificate.exact_fit => {
             Some(format!(
-                "the data cannot identify {}: no measured value depends on {} (the data are matched whatever {} are: measurements only where the model does not respond to the unknowns, such as known initial values at t0): add data, or fix them",
+                "the data cannot identify {}: no measured value depends on {} (the data are matched whatever {}: measurements only where the model does not respond to the unknowns, such as known initial values at t0): add data, or fix them",
                 e.names.join(", "),
                 if e.names.len() == 1 { "it" } else { "them" },
-                if e.names.len() == 1 { "its value" } else { "their values" }
+                if e.names.len() == 1 { "its value is" } else { "their values are" }
             ))
         }
         _ if e.iterations == 0 && e.certificate.plateau() => Some(format!(

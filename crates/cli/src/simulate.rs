@@ -72,6 +72,9 @@ fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
         if !value.is_finite() {
             bail!("--set {name}: `{value}` is not a finite number");
         }
+        if set.iter().any(|(n, _): &(String, f64)| n == name.trim()) {
+            bail!("--set {}: given twice", name.trim());
+        }
         set.push((name.trim().to_string(), value));
     }
     let model = args.source.load(path)?;

@@ -259,8 +259,10 @@ fn run_scenario(
                 )
             })
         };
-        let (a, b) =
-            axes.split_once(',').ok_or_else(|| anyhow!("--basin takes two unknowns, U1,U2"))?;
+        let (a, b) = axes
+            .split_once(',')
+            .filter(|(_, b)| !b.contains(','))
+            .ok_or_else(|| anyhow!("--basin takes two unknowns, U1,U2: got `{axes}`"))?;
         let total = args.grid.saturating_mul(args.grid);
         let bar = progress_bar(total as u64, "starts");
         let log = Watch::new(format!("{system} basin"), args.options.log_every);
@@ -302,8 +304,9 @@ pub fn merge(args: &MergeArgs) -> anyhow::Result<Outcome> {
     let summary = files::merge(&args.shards, out, args.force)?;
     emit(&summary.markdown())?;
     eprintln!(
-        "{} shards merged into {} ({} trials)",
+        "{} shard{} merged into {} ({} trials)",
         args.shards.len(),
+        if args.shards.len() == 1 { "" } else { "s" },
         out.display(),
         summary.trials
     );

@@ -386,6 +386,19 @@ fn table_agrees(args: &[&str], fit: &Value) {
             error > 0.0,
             "{args:?}: nll_error {error} and the table's nll line disagree"
         );
+        // The prior and what the fit minimised, where the JSON has a prior (the table showed
+        // the NLL alone).
+        match fit["prior"].as_f64() {
+            Some(prior) => assert!(
+                line("  prior        ").starts_with(&format!(
+                    "  prior        {} (negative log-prior); objective {}",
+                    significant(prior, 10),
+                    significant(nll + prior, 10)
+                )),
+                "{args:?}: the table's prior line"
+            ),
+            None => assert!(!table.contains("  prior        "), "{args:?}: a prior line"),
+        }
     }
 }
 

@@ -315,7 +315,12 @@ fn absurd_options_are_refused_by_name() {
         (vec!["--rtol", "1e-300"], vec!["--rtol", "at least 1e-14"]),
         (vec!["--atol", "-1"], vec!["--atol"]),
         (vec!["--gtol", "2"], vec!["--gtol"]),
-        (vec!["--max-iterations", "-1"], vec!["--max-iterations", "got -1"]),
+        (vec!["--max-iterations", "-1"], vec!["--max-iterations", "not negative: got -1"]),
+        // As typed (it was read back as 100000000000000000000).
+        (
+            vec!["--max-iterations", "99999999999999999999"],
+            vec!["--max-iterations", "got 99999999999999999999"],
+        ),
         (vec!["--max-steps", "0"], vec!["--max-steps"]),
         (vec!["--starts", "0"], vec!["--starts"]),
         (vec!["--starts", "3", "--start-spread", "-1"], vec!["--start-spread"]),
@@ -339,6 +344,25 @@ fn absurd_options_are_refused_by_name() {
     refused(
         &["study", "--system", "falling-body", "--noise", "1e-320", "--out", "/nonexistent/x"],
         &["--noise", "between 1e-150 and 1e150"],
+    );
+    // inf is not "without noise".
+    refused(
+        &["study", "--system", "falling-body", "--noise", "inf", "--out", "/nonexistent/x"],
+        &["--noise must lie between 1e-150 and 1e150", "got inf"],
+    );
+    refused(
+        &["study", "--system", "van-der-pol", "--basin", "mu,x,v", "--out", "/nonexistent/x"],
+        &["--basin takes two unknowns, U1,U2: got `mu,x,v`"],
+    );
+    refused(
+        &["simulate", "--model", &model, "--times", "0:1:1", "--set", "k1=1", "--set", "k1=2"],
+        &["--set k1: given twice"],
+    );
+    refused(&["profile", "--petab", &model], &["not a PEtab problem file: line"]);
+    // The last of two was kept.
+    refused(
+        &["evaluate", "--model", &model, "--set", "k1=1", "--set", "k1=2"],
+        &["--set k1: given twice"],
     );
 }
 

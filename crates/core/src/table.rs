@@ -156,6 +156,15 @@ impl Estimate {
                 "  nll          {}{error} (negative log-likelihood{criteria})\n",
                 significant(nll, 10)
             );
+            // What the fit minimised, where priors pull the estimates from the data's optimum
+            // (the JSON's `prior`: the table showed the NLL alone).
+            if let Some(prior) = self.prior {
+                out += &format!(
+                    "  prior        {} (negative log-prior); objective {} (nll + prior, what the fit minimises)\n",
+                    significant(prior, 10),
+                    significant(nll + prior, 10)
+                );
+            }
         }
         if self.experiments.len() > 1 {
             for x in &self.experiments {

@@ -78,7 +78,7 @@ impl StudySpec {
                 self.trials
             )));
         }
-        if !(self.noise > 0.0 && self.noise.is_finite()) {
+        if self.noise.is_nan() || self.noise <= 0.0 {
             return Err(StudyError::Setup(format!(
                 "--noise must be a positive multiple of σ, got {}: without noise every trial \
                  fits the truth's own data, whose Cramér–Rao bound is zero",

@@ -128,7 +128,10 @@ pub fn import(yaml: &Path) -> Result<Imported, ModelError> {
     let text = std::fs::read_to_string(yaml)
         .map_err(|e| ModelError::file(&name, format!("cannot be read: {e}")))?;
     let problem: ProblemFile = serde_saphyr::from_str(&text).map_err(|e| {
-        ModelError::file(&name, format!("not a PEtab problem file: {}", first_line(&e.to_string())))
+        let reason = e.to_string();
+        let reason = first_line(&reason);
+        let reason = reason.strip_prefix("error: ").unwrap_or(reason);
+        ModelError::file(&name, format!("not a PEtab problem file: {reason}"))
     })?;
     if !problem.format_version.is_one() {
         return Err(ModelError::file(&name, "only PEtab format version 1 is supported"));
