@@ -263,6 +263,7 @@ fn run_scenario(
             .split_once(',')
             .filter(|(_, b)| !b.contains(','))
             .ok_or_else(|| anyhow!("--basin takes two unknowns, U1,U2: got `{axes}`"))?;
+        sysid_montecarlo::Basin::check_dir(&args.out, args.force)?;
         let total = args.grid.saturating_mul(args.grid);
         let bar = progress_bar(total as u64, "starts");
         let log = Watch::new(format!("{system} basin"), args.options.log_every);

@@ -311,6 +311,16 @@ fn basin_map_over_two_unknowns() {
     assert!(Path::new(&out).join("basin.md").is_file());
     // The centre of the grid is the truth: Goodman converges there.
     assert!(text(&run.stdout).contains("goodman"), "{}", text(&run.stdout));
+    // The markdown's rows as drawn: the second unknown's largest value on top.
+    let md = std::fs::read_to_string(Path::new(&out).join("basin.md")).unwrap();
+    assert!(md.contains("at the top") && md.contains("at the bottom"), "{md}");
+    // A second map into the same folder is refused before the work (it replaced the first
+    // silently), and the first stays.
+    let again = sysid(&["study", "--system", "van-der-pol", "--basin", "mu,v", "--out", &out]);
+    assert_eq!(again.status.code(), Some(2), "{}", text(&again.stdout));
+    assert!(text(&again.stderr).contains("already holds a basin map"), "{}", text(&again.stderr));
+    let kept = std::fs::read_to_string(Path::new(&out).join("basin.json")).unwrap();
+    assert_eq!(serde_json::from_str::<serde_json::Value>(&kept).unwrap(), map);
 }
 
 #[test]

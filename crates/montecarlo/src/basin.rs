@@ -138,7 +138,7 @@ impl Basin {
     pub fn markdown(&self) -> String {
         let s = &self.spec;
         let mut out = format!(
-            "# Basin of convergence: {}\n\n{} × {} starts of {} (columns, {} … {}) and {} (rows, {} … {}), the \
+            "# Basin of convergence: {}\n\n{} × {} starts of {} (columns, {} … {} from the left) and {} (rows, {} at the top … {} at the bottom, as on a plot; basin.json's rows run the other way), the \
              other unknowns at the truth; data of trial 0 (noise {}·σ, seed {}). `#` reaches the \
              reference fit's minimum, `o` converges elsewhere, `.` fails.\n",
             s.system,
@@ -148,8 +148,8 @@ impl Basin {
             significant(self.x[0]),
             significant(self.x[self.x.len() - 1]),
             self.axes[1],
-            significant(self.y[0]),
             significant(self.y[self.y.len() - 1]),
+            significant(self.y[0]),
             s.noise,
             s.seed
         );
@@ -176,8 +176,26 @@ impl Basin {
         out
     }
 
-    /// Writes `basin.json` and `basin.md` into `dir`, under its lock; `force` as in
-    /// [`RunOptions`](crate::files::RunOptions).
+    /// Whether `dir` can take a new basin map: none there yet (a second one replaced the
+    /// first silently, after a run that may take hours), and `force` as in
+    /// [`RunOptions`](crate::files::RunOptions). `sysid study --basin` checks it before the
+    /// work; the report, which regenerates its own, does not.
+    pub fn check_dir(dir: &Path, force: bool) -> Result<(), StudyError> {
+        files::check_owned(dir, force)?;
+        let existing = dir.join(files::BASIN_FILE);
+        if existing.exists() {
+            return Err(StudyError::Mismatch(format!(
+                "{} already holds a basin map: give another --out, or remove {} and {}",
+                dir.display(),
+                files::BASIN_FILE,
+                files::BASIN_MD
+            )));
+        }
+        Ok(())
+    }
+
+    /// Writes `basin.json` and `basin.md` into `dir`, under its lock, replacing a map there;
+    /// `force` as in [`RunOptions`](crate::files::RunOptions).
     pub fn write(&self, dir: &Path, force: bool) -> Result<(), StudyError> {
         files::check_owned(dir, force)?;
         let _lock = files::DirLock::acquire(dir)?;
