@@ -146,7 +146,34 @@ fn shards_merge_into_the_unsharded_study() {
     assert_eq!(mixed.status.code(), Some(2));
     let err = text(&mixed.stderr);
     assert!(err.contains("integrator.max_steps 100000 vs 700"), "{err}");
+    // The shards' own indices differ by design and are not named as a setting.
+    assert!(!err.contains("shard.index"), "{err}");
     assert!(!Path::new(&scratch.path("never")).exists(), "a refused merge writes nothing");
+    // Shards of two splits that overlap are named as such (it asked "the same shard twice?").
+    let third = scratch.path("third");
+    assert_eq!(study(&third, &["--shard", "1/3"]).status.code(), Some(0));
+    let overlap = sysid(&["merge", &one, &third, "--out", &scratch.path("never")]);
+    assert_eq!(overlap.status.code(), Some(2));
+    let err = text(&overlap.stderr);
+    assert!(
+        err.contains("(shard 1/2) and")
+            && err.contains("(shard 1/3): shards of different splits that overlap"),
+        "{err}"
+    );
+    // A whole study that lacks trials is incomplete as a whole, not as shard "1".
+    let cut = scratch.path("cut");
+    std::fs::create_dir_all(&cut).unwrap();
+    for f in ["study.json", "trials.jsonl"] {
+        let text = std::fs::read_to_string(Path::new(&whole).join(f)).unwrap();
+        let kept: String = match f {
+            "trials.jsonl" => text.lines().take(5).map(|l| format!("{l}\n")).collect(),
+            _ => text,
+        };
+        std::fs::write(Path::new(&cut).join(f), kept).unwrap();
+    }
+    let check = sysid(&["merge", "--check", &cut]);
+    assert_eq!(check.status.code(), Some(1), "{}", text(&check.stderr));
+    assert!(text(&check.stdout).ends_with("incomplete: whole study\n"), "{}", text(&check.stdout));
     // Nor do they make a complete study for --check (it said `complete`).
     let check = sysid(&["merge", "--check", &one, &steps]);
     assert_eq!(check.status.code(), Some(2), "{}", text(&check.stdout));

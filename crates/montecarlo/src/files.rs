@@ -277,7 +277,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
         }
     }
     let mut records = Vec::new();
-    let mut seen = BTreeMap::new();
+    let mut seen: BTreeMap<usize, (PathBuf, Option<Shard>)> = BTreeMap::new();
     let mut lacking = Vec::new();
     for (dir, header) in dirs.iter().zip(&headers) {
         let complete = read_complete(dir, header)?;
@@ -292,11 +292,19 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
             ));
         }
         for t in got {
-            if let Some(other) = seen.insert(t, dir.clone()) {
+            if let Some((other, shard)) = seen.insert(t, (dir.clone(), header.shard)) {
+                // Shards of one split never share a trial; of two splits (1/4 beside 2/3)
+                // they may.
+                let why = match shard == header.shard {
+                    true => "the same shard twice?",
+                    false => "shards of different splits that overlap",
+                };
                 return Err(StudyError::Mismatch(format!(
-                    "trial {t} is in both {} and {}: the same shard twice?",
+                    "trial {t} is in both {} (shard {}) and {} (shard {}): {why}",
                     other.display(),
-                    dir.display()
+                    shard_name(shard),
+                    dir.display(),
+                    shard_name(header.shard)
                 )));
             }
         }
@@ -411,7 +419,11 @@ pub fn check(dirs: &[PathBuf]) -> Result<(String, bool), StudyError> {
     if incomplete.is_empty() {
         return Ok((text + "complete\n", true));
     }
-    let list: Vec<String> = incomplete.iter().map(usize::to_string).collect();
+    // A whole study is no shard "1".
+    let list: Vec<String> = match shards.iter().all(|s| s.shard.is_none()) {
+        true => vec![shard_name(None)],
+        false => incomplete.iter().map(usize::to_string).collect(),
+    };
     Ok((text + &format!("incomplete: {}\n", list.join(",")), false))
 }
 
@@ -658,7 +670,9 @@ fn difference(a: &Header, b: &Header) -> String {
     let value = |h: &Header| serde_json::to_value(h).expect("headers serialise");
     let mut diffs = Vec::new();
     differ("", &value(a), &value(b), &mut diffs);
-    let derived = |d: &String| ["unknowns ", "truth ", "crb_sd "].iter().any(|k| d.starts_with(k));
+    // Shards of one study differ in their shard by design.
+    let derived =
+        |d: &String| ["unknowns ", "truth ", "crb_sd ", "shard"].iter().any(|k| d.starts_with(k));
     let settings: Vec<&String> = diffs.iter().filter(|d| !derived(d)).collect();
     if settings.is_empty() {
         "the truth or the Cramér–Rao bound (the data or the model differ)".into()
