@@ -211,6 +211,11 @@ fn point(
                 names.join(", ")
             );
         };
+        // A noise scale is σ (its NLL took ln(−1) = NaN and blamed a residual).
+        let scale = i >= problem.unknowns().len();
+        if scale && value <= 0.0 {
+            bail!("--set {name}: a noise scale is a σ: it must be positive, got {value}");
+        }
         if !value.is_finite() || (parameters[i].log && value <= 0.0) {
             bail!(
                 "--set {name}: {value} is not {}",

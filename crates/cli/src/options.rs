@@ -40,7 +40,7 @@ pub fn count(s: &str) -> Result<usize, String> {
     let given = s.trim();
     given.parse::<usize>().map_err(|_| match given.parse::<f64>() {
         Ok(v) if v < 0.0 => format!("is a count, not negative: got {given}"),
-        Ok(v) if v.fract() == 0.0 => {
+        Ok(v) if v >= usize::MAX as f64 => {
             format!("must be a whole number at most {}, got {given}", usize::MAX)
         }
         Ok(_) => format!("must be a whole number, got {given}"),

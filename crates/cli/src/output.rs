@@ -62,7 +62,8 @@ fn same_file(a: &Path, b: &Path) -> bool {
 }
 
 /// Checks that a file can be written at `path` before the work that produces it: its folder
-/// exists and is a folder. `option` names the option that gave it.
+/// exists, is a folder and takes a new file (one is made and removed), and `path` is not a
+/// folder. `option` names the option that gave it.
 pub fn writable(path: &Path, option: &str) -> anyhow::Result<()> {
     let folder = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,

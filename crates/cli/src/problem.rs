@@ -145,15 +145,11 @@ pub fn method(name: &str, settings: &Settings) -> anyhow::Result<Boxed<AnySystem
 /// JSON said the other, and the list could then hold one method twice).
 pub fn as_run(names: Vec<String>, settings: &Settings) -> anyhow::Result<Vec<String>> {
     let mut out: Vec<String> = Vec::with_capacity(names.len());
-    for (i, name) in names.iter().enumerate() {
+    for name in &names {
         let actual = method(name, settings)?.name().to_string();
         if let Some(j) = out.iter().position(|m| *m == actual) {
-            anyhow::bail!(
-                "--methods: `{}` and `{name}` are one method here, `{actual}` (--ql-start)",
-                names[j]
-            );
+            anyhow::bail!("--methods: `{}` and `{name}` are one method here, `{actual}`", names[j]);
         }
-        debug_assert_eq!(out.len(), i);
         out.push(actual);
     }
     Ok(out)

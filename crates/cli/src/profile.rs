@@ -155,7 +155,8 @@ fn table(context: &Context, profiled: &Profiled) -> String {
     }
     // A point's fit that stopped short lies above the profile, which then crosses early:
     // intervals too narrow, an unknown called identifiable that may not be.
-    let points = profiles.iter().flat_map(|p| &p.points);
+    // Each profile holds the optimum too, which has its own warning above.
+    let points = profiles.iter().flat_map(|p| &p.points).filter(|q| q.estimates != optimum.values);
     let (short, all) = (points.clone().filter(|q| !q.converged).count(), points.count());
     if short > 0 {
         text += &format!(

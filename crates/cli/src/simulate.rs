@@ -63,7 +63,7 @@ fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
         bail!("a model's trajectory needs its times: add --times A:B:STEP, e.g. --times 0:10:0.1");
     };
     let times = parse_times(times)?;
-    let mut set = Vec::with_capacity(args.set.len());
+    let mut set: Vec<(String, f64)> = Vec::with_capacity(args.set.len());
     for s in &args.set {
         let (name, value) =
             s.split_once('=').ok_or_else(|| anyhow!("--set takes NAME=VALUE, got `{s}`"))?;
@@ -72,7 +72,7 @@ fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
         if !value.is_finite() {
             bail!("--set {name}: `{value}` is not a finite number");
         }
-        if set.iter().any(|(n, _): &(String, f64)| n == name.trim()) {
+        if set.iter().any(|(n, _)| n == name.trim()) {
             bail!("--set {}: given twice", name.trim());
         }
         set.push((name.trim().to_string(), value));

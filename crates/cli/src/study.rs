@@ -132,13 +132,20 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
         Some(list) => sysid_registry::parse_list(list)?,
         None => Role::Study.methods().into_iter().map(String::from).collect(),
     };
-    let methods = crate::problem::as_run(methods, &args.options.settings())?;
+    // One method listed twice under two names is refused; the names stay as given, as
+    // study.json has recorded them (with `settings.ql_start`), so that a study begun before
+    // resumes and merges.
+    crate::problem::as_run(methods.clone(), &args.options.settings())?;
     sysid_registry::parse_list(&args.reference)?;
     // The numbers checked before any work: a model file's reference fit comes first and can
     // take minutes (`--trials 0` on Fujita was refused only after it).
     spec(args, "", methods.clone(), BTreeMap::new()).validate()?;
     if args.basin.is_some() && (args.shard.is_some() || args.resume) {
         bail!("a basin map runs in one go: --shard and --resume are for trials");
+    }
+    if args.basin.is_some() {
+        // Before the reference fit too (a model file's can take minutes).
+        sysid_montecarlo::Basin::check_dir(&args.out, args.force)?;
     }
     match (&args.source.system, args.source.file()) {
         (Some(name), _) => {
@@ -263,7 +270,6 @@ fn run_scenario(
             .split_once(',')
             .filter(|(_, b)| !b.contains(','))
             .ok_or_else(|| anyhow!("--basin takes two unknowns, U1,U2: got `{axes}`"))?;
-        sysid_montecarlo::Basin::check_dir(&args.out, args.force)?;
         let total = args.grid.saturating_mul(args.grid);
         let bar = progress_bar(total as u64, "starts");
         let log = Watch::new(format!("{system} basin"), args.options.log_every);

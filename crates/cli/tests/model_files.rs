@@ -185,7 +185,7 @@ fn a_noise_scale_must_be_positive() {
     let data = "t,y\n0,2\n1,0.9\n2,0.4\n3,0.18\n";
     let scale =
         |guess: &str| model.replace("k = 0.5\n", &format!("k = 0.5\nsd = {{ guess = {guess} }}\n"));
-    let needle = "unknown `sd`: a noise scale is a σ: it must be positive and finite, got ";
+    let needle = "unknown `sd`: a noise scale is a σ: it must not be negative, and finite, got ";
     // At the unknown's key, as the bounds' errors (which named the file alone).
     bad("scale-negative", &scale("-1"), data, &format!("model.toml:11:1: {needle}-1"));
     let reversed = DECAY.replace("k = 0.5", "k = { guess = 0.5, min = 1.0, max = 0.1 }");
@@ -195,13 +195,26 @@ fn a_noise_scale_must_be_positive() {
         DECAY_DATA,
         "model.toml:8:1: unknown `k`: min 1 is not below max 0.1",
     );
-    bad("scale-zero", &scale("0"), data, needle);
+    // 0 makes the residuals infinite, named at the start (not as an integration's failure).
+    bad(
+        "scale-zero",
+        &scale("0"),
+        data,
+        "the starting guess cannot be used (k = 0.5): the residual of the observable `y`",
+    );
     let case = Case::new("scale-fixed", &scale("1"), data);
     for flag in ["--fix", "--start"] {
         let out = sysid(&["fit", "--model", &case.model(), flag, "sd=-2"]);
         let stderr = text(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{flag}: {stderr}");
         assert!(stderr.contains(needle), "{flag}: {stderr}");
+    }
+    // evaluate's --set too (its NLL took ln(−1) and blamed a residual).
+    for v in ["sd=-1", "sd=0"] {
+        let out = sysid(&["evaluate", "--model", &case.model(), "--set", v]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{v}: {stderr}");
+        assert!(stderr.contains("--set sd: a noise scale is a σ: it must be positive"), "{stderr}");
     }
     let out = sysid(&["fit", "--model", &case.model(), "--format", "json"]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));

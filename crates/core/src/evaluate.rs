@@ -1092,10 +1092,11 @@ pub(crate) fn sample_rows<'s, S: System>(
                         shortest(th),
                         shortest(sample.value)
                     );
-                    let t = times[m];
-                    return Err(match r.is_finite() {
-                        true => OdeError::Unrepresentable { t, what: format!("{what} overflows") },
-                        false => OdeError::NonFinite { t, what },
+                    // The model integrated: not an integration's failure, whichever.
+                    let verb = if r.is_finite() { "overflows" } else { "is not finite" };
+                    return Err(OdeError::Unrepresentable {
+                        t: times[m],
+                        what: format!("{what} {verb}"),
                     });
                 }
                 out.r.push(r);
@@ -1134,6 +1135,21 @@ pub(crate) fn sample_rows<'s, S: System>(
                 true => s.distribution.residual(diff, 1.0 / sigma),
                 false => (diff / sigma, 1.0 / sigma),
             };
+            if !(r * r).is_finite() {
+                // As for a known σ above: named, and not an integration's failure.
+                return Err(OdeError::Unrepresentable {
+                    t: times[m],
+                    what: format!(
+                        "the square of the residual of the observable `{}` of experiment `{}` ({}: σ = {}, the model gives {}, the datum is {}) overflows",
+                        s.observable_name(e.system()),
+                        e.name,
+                        crate::format::shortest(r),
+                        crate::format::shortest(sigma),
+                        crate::format::shortest(th),
+                        crate::format::shortest(sample.value)
+                    ),
+                });
+            }
             out.r.push(r);
             out.samples.push(m);
             out.data_cost += r * r;

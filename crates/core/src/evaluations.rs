@@ -224,6 +224,9 @@ impl<'p, S: System> Evaluations<'p, S> {
             // The model integrated; a residual's square overflowed, or a σ fell below what
             // the likelihood's rows hold.
             Err(OdeError::Unrepresentable { what, .. }) => {
+                // Counted as the failures below are: one integration (its work is not known
+                // here), so that the budget still ends every fit.
+                self.add(Counts { integrations: 1, ..Counts::default() });
                 *self.failed.borrow_mut() = None;
                 Err(Failure::NonFinite { what, at: self.values(z) })
             }

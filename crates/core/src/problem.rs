@@ -451,16 +451,18 @@ impl<S: System> Problem<S> {
         }
         self.unknowns = Unknowns::new(self.free.iter().map(|&j| declared[j].clone()).collect());
         // A noise scale is σ itself (times positive factors): σ = −1 fitted as 1 and was
-        // reported converged at −1, its interval reversed.
+        // reported converged at −1, its interval reversed. (0 is left to the evaluation,
+        // which names the residual it makes infinite: a PEtab problem whose nominal σ is 0
+        // still imports, for starts elsewhere.)
         let scaled = self.experiments.iter().flat_map(|e| e.sampled().series.iter());
         for series in scaled {
             if let PlannedNoise::Scale { unknown, .. } = series.noise {
                 let value = self.held[unknown];
-                if !(value > 0.0 && value.is_finite()) {
+                if value < 0.0 || !value.is_finite() {
                     return Err(ProblemError::InvalidUnknown {
                         name: declared[unknown].name.clone(),
                         message: format!(
-                            "a noise scale is a σ: it must be positive and finite, got {}",
+                            "a noise scale is a σ: it must not be negative, and finite, got {}",
                             crate::format::shortest(value)
                         ),
                     });

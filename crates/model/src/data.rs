@@ -193,7 +193,7 @@ fn check_weights(model: &ModelFile, table: &Table, file: &str) -> Result<(), Mod
         return Err(model.err(
             at,
             format!(
-                "[data.weights]: the largest weight, {largest:e}, is below {least:e}: weights are relative, and with all of them so small ε and its derivatives underflow (scale them up together: the estimates and standard errors stay)"
+                "[data.weights]: the largest weight, {largest:e}, is below {least:e}: ε and its derivatives underflow (relative weights may be scaled up together, which changes no estimate or standard error; beside a noise model they are 1/σ², a σ above 1e150)"
             ),
         ));
     }

@@ -74,19 +74,20 @@ impl Model {
             // An experiment's own setting of a parameter is its condition: `--set dose=3` was
             // ignored where the experiments set the dose, and `--set scale=2` overrode the
             // setting of one that set it; neither is a trajectory of the file's experiment.
+            // (A preequilibration's settings hold before t0 only: the experiment runs on the
+            // value given here.) Its own initial values likewise.
             for (name, _) in set {
                 let sets = |x: &crate::file::ExperimentSpec| {
-                    let pre = x.preequilibrate.iter().flatten();
-                    x.set.iter().chain(pre).any(|(n, ..)| n == name)
+                    x.set.iter().chain(&x.initial).any(|(n, ..)| n == name)
                 };
-                let chosen = f.experiments.iter().filter(|x| {
+                let mut chosen = f.experiments.iter().filter(|x| {
                     experiment.is_none_or(|n| x.name == n || x.also.iter().any(|a| a == n))
                 });
-                if let Some(x) = chosen.into_iter().find(|x| sets(x)) {
+                if let Some(x) = chosen.find(|x| sets(x)) {
                     return Err(ModelError::file(
                         &path,
                         format!(
-                            "--set {name}: experiment `{}` sets `{name}` itself (its condition); change it in the experiment's `set`, or simulate the others with --experiment",
+                            "--set {name}: experiment `{}` sets `{name}` itself (its condition, in its `set` or `initial`); change it there, or simulate the others with --experiment",
                             x.name
                         ),
                     ));

@@ -272,7 +272,7 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
                 "{} and {} hold different studies: {}",
                 first.display(),
                 dir.display(),
-                difference(&headers[0], header)
+                difference(&whole, &Header { shard: None, ..header.clone() })
             )));
         }
     }
@@ -295,16 +295,23 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
             if let Some((other, shard)) = seen.insert(t, (dir.clone(), header.shard)) {
                 // Shards of one split never share a trial; of two splits (1/4 beside 2/3)
                 // they may.
-                let why = match shard == header.shard {
-                    true => "the same shard twice?",
-                    false => "shards of different splits that overlap",
+                let why = match (shard == header.shard, shard.is_none() || header.shard.is_none()) {
+                    (true, _) => "the same shard twice?",
+                    (false, true) => {
+                        "a whole study holds every trial: merge its shards or take it alone"
+                    }
+                    (false, false) => "shards of different splits that overlap",
+                };
+                let of = |s: Option<Shard>| match s {
+                    Some(s) => format!("shard {}/{}", s.index, s.count),
+                    None => "the whole study".into(),
                 };
                 return Err(StudyError::Mismatch(format!(
-                    "trial {t} is in both {} (shard {}) and {} (shard {}): {why}",
+                    "trial {t} is in both {} ({}) and {} ({}): {why}",
                     other.display(),
-                    shard_name(shard),
+                    of(shard),
                     dir.display(),
-                    shard_name(header.shard)
+                    of(header.shard)
                 )));
             }
         }
@@ -396,7 +403,7 @@ pub fn check(dirs: &[PathBuf]) -> Result<(String, bool), StudyError> {
                     "{} and {} hold different studies: {}",
                     dir.display(),
                     other.display(),
-                    difference(first, header)
+                    difference(&whole, &Header { shard: None, ..header.clone() })
                 )));
             }
         }
@@ -670,9 +677,7 @@ fn difference(a: &Header, b: &Header) -> String {
     let value = |h: &Header| serde_json::to_value(h).expect("headers serialise");
     let mut diffs = Vec::new();
     differ("", &value(a), &value(b), &mut diffs);
-    // Shards of one study differ in their shard by design.
-    let derived =
-        |d: &String| ["unknowns ", "truth ", "crb_sd ", "shard"].iter().any(|k| d.starts_with(k));
+    let derived = |d: &String| ["unknowns ", "truth ", "crb_sd "].iter().any(|k| d.starts_with(k));
     let settings: Vec<&String> = diffs.iter().filter(|d| !derived(d)).collect();
     if settings.is_empty() {
         "the truth or the Cramér–Rao bound (the data or the model differ)".into()

@@ -126,9 +126,17 @@ impl PyProblem {
                 self.parameter_names().join(", ")
             )));
         }
-        for (u, &v) in unknowns.iter().zip(x) {
+        let free = self.problem.unknowns().len();
+        for (i, (u, &v)) in unknowns.iter().zip(x).enumerate() {
             if !v.is_finite() {
                 return Err(PyValueError::new_err(format!("x[{}] = {v} is not finite", u.name)));
+            }
+            // A noise scale is σ; on a linear scale its coordinate is itself.
+            if i >= free && !u.log && v <= 0.0 {
+                return Err(PyValueError::new_err(format!(
+                    "{} = {v}: a noise scale is a σ: it must be positive",
+                    u.name
+                )));
             }
             if scale == Scale::Linear && u.log && v <= 0.0 {
                 return Err(PyValueError::new_err(format!(
