@@ -55,6 +55,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
     args.integrator.validate()?;
     args.starts.options()?;
+    args.starts.check_start(&args.options.start)?;
     let methods = match &args.methods {
         Some(list) => sysid_registry::parse_list(list)?,
         None => ENTRIES.iter().map(|e| e.name.to_string()).collect(),

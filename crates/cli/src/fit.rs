@@ -36,6 +36,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
     args.integrator.validate()?;
     args.starts.options()?;
+    args.starts.check_start(&args.options.start)?;
     sysid_registry::parse_list(&args.method.method)?;
     let (problem, context) = problem(&args.source, &args.integrator, &args.options)?;
     // Where the figure goes is checked before the work, not after it.

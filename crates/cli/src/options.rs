@@ -319,6 +319,17 @@ pub struct StartsArgs {
 }
 
 impl StartsArgs {
+    /// Refuses `--start` beside `--starts-without-guess`: `--start` sets the first start,
+    /// which that option draws instead (it was ignored silently).
+    pub fn check_start(&self, start: &[(String, f64)]) -> anyhow::Result<()> {
+        if self.starts_without_guess && !start.is_empty() {
+            anyhow::bail!(
+                "--start sets the first start of --starts, which --starts-without-guess draws instead: give one of them"
+            );
+        }
+        Ok(())
+    }
+
     /// The multistart options, when --starts was given (checked by the multistart's own
     /// check, each refusal naming its flag).
     pub fn options(&self) -> anyhow::Result<Option<sysid_montecarlo::MultistartOptions>> {

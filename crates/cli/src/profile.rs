@@ -54,6 +54,7 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     args.options.validate()?;
     args.integrator.validate()?;
     args.starts.options()?;
+    args.starts.check_start(&args.options.start)?;
     sysid_registry::parse_list(&args.method.method)?;
     if args.max_points == 0 {
         bail!("--max-points must be at least 1");

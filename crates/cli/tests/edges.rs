@@ -364,6 +364,11 @@ fn absurd_options_are_refused_by_name() {
         &["evaluate", "--model", &model, "--set", "k1=1", "--set", "k1=2"],
         &["--set k1: given twice"],
     );
+    // --start was ignored beside --starts-without-guess.
+    refused(
+        &["fit", "--model", &model, "--starts", "3", "--starts-without-guess", "--start", "k1=0.7"],
+        &["--start sets the first start of --starts, which --starts-without-guess draws"],
+    );
 }
 
 /// Bad model files and data: each refused at its file, line and column, with the cause.
@@ -525,6 +530,62 @@ fn bad_petab_problems_are_refused_where_they_are_wrong() {
                 .into()
             }),
             vec![PARAMETERS, ":2:", "lowerBound", "needs this bound"],
+        ),
+        // A negative nominal value on a log scale was taken at the bound with a warning.
+        (
+            "negative-nominal",
+            PARAMETERS,
+            Box::new(|t| {
+                t.replacen("log10\t1E-05\t100000\t0.026982514033029", "log10\t1E-05\t100000\t-3", 1)
+                    .into()
+            }),
+            vec![
+                PARAMETERS,
+                ":2:",
+                "nominalValue",
+                "nominal value -3 of `Epo_degradation_BaF3` is negative",
+            ],
+        ),
+        // The bounds' errors at the bound's cell (they were at the nominal value's).
+        (
+            "reversed-bounds",
+            PARAMETERS,
+            Box::new(|t| {
+                t.replacen(
+                    "log10\t1E-05\t100000\t0.026982514033029",
+                    "log10\t100000\t1E-05\t0.026982514033029",
+                    1,
+                )
+                .into()
+            }),
+            vec![PARAMETERS, ":2:", "lowerBound", "above its upper bound"],
+        ),
+        // Equal bounds were refused by the problem after a warning: two lines.
+        (
+            "equal-bounds",
+            PARAMETERS,
+            Box::new(|t| {
+                t.replacen(
+                    "log10\t1E-05\t100000\t0.026982514033029",
+                    "log10\t2\t2\t0.026982514033029",
+                    1,
+                )
+                .into()
+            }),
+            vec![PARAMETERS, ":2:", "lowerBound", "equal to its upper bound 2"],
+        ),
+        (
+            "zero-bound",
+            PARAMETERS,
+            Box::new(|t| {
+                t.replacen(
+                    "log10\t1E-05\t100000\t0.026982514033029",
+                    "log10\t0\t100000\t0.026982514033029",
+                    1,
+                )
+                .into()
+            }),
+            vec![PARAMETERS, ":2:", "lowerBound", "must be positive"],
         ),
         (
             "empty-bound",

@@ -135,7 +135,7 @@ impl Builder<'_> {
         }
         if value.abs() > MAX_MEASUREMENT {
             return Err(value_cell.err(format!(
-                "{value:e} is too large for least squares: no measured quantity is that large, and its weighted square overflows for σ below about 1e-4 (the largest magnitude taken is {MAX_MEASUREMENT:e}; a unit slip?)"
+                "{value:e} is larger than any measured quantity (the largest magnitude taken is {MAX_MEASUREMENT:e}, beyond which a weighted square overflows for σ below about 1e-4; a unit slip?)"
             )));
         }
         if observable.transform != "lin" && value <= 0.0 {

@@ -91,21 +91,42 @@ impl Builder<'_> {
             };
             if estimated {
                 let c = nominal_cell;
+                // The bounds' own cells, for their errors (they were reported at the nominal
+                // value's).
+                let lower_cell = lower.map_or(c, |l| t.cell(row, l));
                 if !p.nominal.is_finite() {
                     return Err(c.err(format!(
                         "nominal value {} of `{}` is not a finite number",
                         p.nominal, pid.text
                     )));
                 }
-                if p.lower > p.upper {
-                    return Err(c.err(format!(
-                        "`{}` has its lower bound {} above its upper bound {}",
-                        pid.text, p.lower, p.upper
+                if p.lower >= p.upper {
+                    // Equal bounds were refused only later, by the problem, after a warning
+                    // that the nominal value lay outside them.
+                    return Err(lower_cell.err(format!(
+                        "`{}` has its lower bound {} {} its upper bound {}: an estimated parameter needs room between them (estimate 0 holds it at its nominal value)",
+                        pid.text,
+                        p.lower,
+                        if p.lower > p.upper { "above" } else { "equal to" },
+                        p.upper
                     )));
                 }
                 // PEtab does not require the nominal value within the bounds (Lang's
                 // kDpApc_1: 0 on a log scale bounded by 1e-24): the fits start from the
-                // nearest bound, and the import says so.
+                // nearest bound, and the import says so. A negative one on a log scale is no
+                // value there (it was taken at the bound, with a warning).
+                if log && p.nominal < 0.0 {
+                    return Err(c.err(format!(
+                        "nominal value {} of `{}` is negative, and `{}` is estimated on a log scale",
+                        p.nominal, pid.text, pid.text
+                    )));
+                }
+                if log && p.lower > f64::NEG_INFINITY && p.lower <= 0.0 {
+                    return Err(lower_cell.err(format!(
+                        "`{}` is estimated on a log scale, so its bounds and nominal value must be positive",
+                        pid.text
+                    )));
+                }
                 if p.nominal < p.lower || p.nominal > p.upper {
                     let moved = p.nominal.clamp(p.lower, p.upper);
                     let kept = !log || p.nominal > 0.0;

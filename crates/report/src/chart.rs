@@ -32,7 +32,21 @@ pub struct ReportError {
 
 /// The two files [`save`] writes for `stem`: `<stem>.png` and `<stem>.svg`.
 pub fn figure_paths(stem: &Path) -> [PathBuf; 2] {
-    [stem.with_extension("png"), stem.with_extension("svg")]
+    // A stem's own dots stay (`seed1.rho0.5` was written as `seed1.rho0.png`, so that a sweep
+    // overwrote its figures); a `.png` or `.svg` given is the figure's.
+    let given = stem.extension().and_then(|e| e.to_str());
+    let base = match given {
+        Some(e) if e.eq_ignore_ascii_case("png") || e.eq_ignore_ascii_case("svg") => {
+            stem.with_extension("")
+        }
+        _ => stem.to_path_buf(),
+    };
+    ["png", "svg"].map(|e| {
+        let mut name = base.clone().into_os_string();
+        name.push(".");
+        name.push(e);
+        PathBuf::from(name)
+    })
 }
 
 /// Writes `figure` to `<stem>.png` and `<stem>.svg` and returns the two paths. A file that
@@ -166,6 +180,15 @@ pub(crate) fn one_two_five(v: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_figures_stem_keeps_its_dots() {
+        let paths = |s: &str| figure_paths(Path::new(s)).map(|p| p.display().to_string());
+        assert_eq!(paths("wf/seed1.rho0.5"), ["wf/seed1.rho0.5.png", "wf/seed1.rho0.5.svg"]);
+        assert_eq!(paths("w"), ["w.png", "w.svg"]);
+        assert_eq!(paths("w.png"), ["w.png", "w.svg"]);
+        assert_eq!(paths("w.SVG"), ["w.png", "w.svg"]);
+    }
 
     #[test]
     fn ranges_and_ticks() {

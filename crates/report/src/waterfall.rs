@@ -43,11 +43,13 @@ impl Figure for Waterfall {
         let points = self.points();
         let n = points.len().max(1) as f64;
         let (lo, hi) = log_range(points.iter().map(|p| p.1).chain([1.0, 1.1]));
+        let mut caption = "final objective of every start, sorted (filled: converged; dashed: within 0.1 of the best)".to_string();
+        let left_out = self.starts.len() - points.len();
+        if left_out > 0 {
+            caption += &format!("; {left_out} that could not begin, not drawn");
+        }
         let mut chart = ChartBuilder::on(&root)
-            .caption(
-                "final objective of every start, sorted (filled: converged; dashed: within 0.1 of the best)",
-                (FONT, 15),
-            )
+            .caption(caption, (FONT, 15))
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
@@ -55,7 +57,8 @@ impl Figure for Waterfall {
         chart
             .configure_mesh()
             .x_desc("start, sorted by final objective")
-            .x_label_formatter(&|v| format!("{v:.0}"))
+            .x_labels(points.len().clamp(1, 12))
+            .x_label_formatter(&rank_label)
             .y_desc("objective − best + 1")
             .y_label_formatter(&|v| decade(*v))
             .label_style((FONT, 12))
@@ -75,9 +78,24 @@ impl Figure for Waterfall {
     }
 }
 
+/// A tick of the rank axis: the rank where the tick is on one, nothing between (with a few
+/// starts the ticks fell at halves, printed rounded: `1 1 1 1 1 2 2 2 2 2`).
+fn rank_label(v: &f64) -> String {
+    match (v - v.round()).abs() < 1e-9 && *v >= 1.0 {
+        true => format!("{v:.0}"),
+        false => String::new(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_rank_axis_is_labelled_at_whole_ranks_only() {
+        let labels: Vec<String> = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0].iter().map(rank_label).collect();
+        assert_eq!(labels, ["", "1", "", "2", "", "3"]);
+    }
 
     #[test]
     fn the_best_is_at_one_and_the_rest_follow_in_order() {
