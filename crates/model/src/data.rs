@@ -188,7 +188,7 @@ fn check_weights(model: &ModelFile, table: &Table, file: &str) -> Result<(), Mod
     let weight_of =
         |n: &String| model.data.weights.iter().find(|w| &w.0 == n).map_or((1.0, 0), |w| (w.1, w.2));
     let largest = weighted.map(weight_of).max_by(|a, b| a.0.total_cmp(&b.0));
-    let least = crate::file::WEIGHT_RANGE.0;
+    let least = crate::file::LEAST_WEIGHT;
     if let Some((largest, at)) = largest.filter(|w| w.0 < least) {
         return Err(model.err(
             at,

@@ -582,10 +582,6 @@ fn data() {
             "models/m.toml:12:5: [data.weights] x must be positive, got -1.5",
         ),
         (
-            format!("{OK}[data.weights]\nx = 1e301\n"),
-            "models/m.toml:12:5: [data.weights] x must be at most 1e300, got 1e301: beyond it a weighted square overflows (a unit slip?)",
-        ),
-        (
             format!("{OK}[data]\nformat = \"csv\"\n"),
             "models/m.toml:12:1: unknown key `format` in [data] (keys: file, t0, record, weights)",
         ),

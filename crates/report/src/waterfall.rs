@@ -64,10 +64,13 @@ impl Figure for Waterfall {
             .label_style((FONT, 12))
             .axis_desc_style((FONT, 14))
             .draw()?;
-        chart.draw_series(std::iter::once(PathElement::new(
-            vec![(0.5, 1.1), (n + 0.5, 1.1)],
+        // Dashed, as the caption says (it was drawn solid).
+        chart.draw_series(DashedLineSeries::new(
+            [(0.5, 1.1), (n + 0.5, 1.1)],
+            6,
+            4,
             BLACK.stroke_width(1),
-        )))?;
+        ))?;
         let color = look(0).color;
         chart.draw_series(LineSeries::new(points.iter().map(|p| (p.0, p.1)), color.mix(0.5)))?;
         for &(x, y, converged) in &points {

@@ -169,8 +169,9 @@ fn read_sigma(
 /// overflows or vanishes.
 pub const SIGMA_RANGE: (f64, f64) = (1e-150, 1e150);
 
-/// The weights 1/σ² of [`SIGMA_RANGE`].
-pub const WEIGHT_RANGE: (f64, f64) = (1e-300, 1e300);
+/// The least weight the largest weighted column of a data file may have: 1/σ² of the
+/// largest σ of [`SIGMA_RANGE`]; below it ε and its derivatives underflow.
+pub const LEAST_WEIGHT: f64 = 1e-300;
 
 /// Checks a known σ: positive, and within [`SIGMA_RANGE`]; the error says what is wrong
 /// without naming the σ.

@@ -21,7 +21,7 @@ mod values;
 
 use data::read_data;
 use document::{Document, Table};
-pub use equations::{SIGMA_RANGE, WEIGHT_RANGE, check_sigma};
+pub use equations::{LEAST_WEIGHT, SIGMA_RANGE, check_sigma};
 use equations::{read_equations, read_outputs};
 use events::read_events;
 use experiments::read_experiments;
