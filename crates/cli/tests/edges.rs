@@ -475,6 +475,20 @@ fn bad_petab_problems_are_refused_where_they_are_wrong() {
             Box::new(move |t| t.replacen(first, "(pApB / 0 + 200", 1).into()),
             vec![OBSERVABLES, ":2:", "observableFormula", "division by a constant zero"],
         ),
+        // An undefined name is located where it is written: the formula's cell, or the
+        // measurement row's parameter cell (both were at the row's observableId).
+        (
+            "undefined-in-formula",
+            OBSERVABLES,
+            Box::new(move |t| t.replacen(first, "(100 * pApQ + 200", 1).into()),
+            vec![OBSERVABLES, ":2:", "observableFormula", "uses `pApQ`"],
+        ),
+        (
+            "undefined-in-row",
+            MEASUREMENTS,
+            Box::new(|t| t.replacen("\tsd_pSTAT5A_rel\t", "\tsd_nope\t", 1).into()),
+            vec![MEASUREMENTS, ":2:", "noiseParameters", "uses `sd_nope`"],
+        ),
         (
             "ci",
             SBML,

@@ -193,8 +193,17 @@ impl Builder<'_> {
         let [formula, noise] =
             placeholders(t, row, oc, [&observable.formula, &observable.noise], "observable")?;
         let [noise] = placeholders(t, row, oc, [&noise], "noise")?;
-        let value_math = self.resolve_names(&self.dynamic(&formula), oc, states, None)?;
-        let noise_math = self.resolve_names(&self.dynamic(&noise), oc, states, Some(oc.text))?;
+        // The row's cells that filled the placeholders: the noise formula may hold the
+        // observable's parameters too.
+        let (given, noise_given) =
+            (t.cell_named(row, "observableParameters"), t.cell_named(row, "noiseParameters"));
+        let value_cells: Vec<Cell<'_>> = given.into_iter().collect();
+        let noise_cells: Vec<Cell<'_>> = noise_given.into_iter().chain(given).collect();
+        let written = (&observable.formula, &observable.formula_at, &value_cells[..]);
+        let value_math = self.resolve_names(&self.dynamic(&formula), oc, states, None, written)?;
+        let written = (&observable.noise, &observable.noise_at, &noise_cells[..]);
+        let noise_math =
+            self.resolve_names(&self.dynamic(&noise), oc, states, Some(oc.text), written)?;
         Ok(Output {
             observable: oc.text.to_string(),
             value: value_math,

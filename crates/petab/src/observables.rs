@@ -97,12 +97,16 @@ impl Builder<'_> {
 
     /// Checks every name of an observable's expression is something the model has, after
     /// putting the nominal value in place of a PEtab parameter that is not estimated.
+    /// `written` says where an unknown name was written, so that its error is there: the
+    /// formula as the observable table has it and where, then the measurement row's parameter
+    /// cells that filled its placeholders (the error was at the row's observableId).
     pub(crate) fn resolve_names(
         &self,
         m: &Math,
         at: Cell<'_>,
         states: &[String],
         own: Option<&str>,
+        written: (&Math, &ModelError, &[Cell<'_>]),
     ) -> Result<Math, ModelError> {
         let s = self.sbml;
         let m = m.substitute(&|n| {
@@ -127,10 +131,17 @@ impl Builder<'_> {
                 || s.parameters.iter().any(|p| p.0 == n)
                 || s.compartments.iter().any(|c| c.0 == n);
             if !known {
-                return Err(at.err(format!(
+                let message = format!(
                     "observable `{}` uses `{n}`, which is no species, parameter or compartment of the model and not in the parameter table",
                     at.text
-                )));
+                );
+                let (formula, formula_at, cells) = written;
+                let given = |c: &&Cell<'_>| c.text.split(';').any(|v| v.trim() == n);
+                return Err(match (formula.names().contains(&n), cells.iter().find(given)) {
+                    (true, _) => crate::at(formula_at, message),
+                    (false, Some(cell)) => cell.err(message),
+                    (false, None) => at.err(message),
+                });
             }
         }
         Ok(m)
