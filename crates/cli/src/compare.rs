@@ -73,7 +73,7 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
     let starts = args.starts.options()?;
     // Each start of --starts has a start's budget; without, one fit's.
     let settings = args.options.settings_for(starts.as_ref());
-    let methods = crate::problem::as_run(methods, &settings)?;
+    let methods = crate::problem::as_run(&methods, &settings)?;
     let mut json = Vec::new();
     let mut tables = Vec::new();
     let mut summaries = Vec::new();

@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use sysid_core::Sensitivities;
 
 use crate::Outcome;
-use crate::options::{Format, IntegratorArgs, SourceArgs, count};
+use crate::options::{Format, IntegratorArgs, SourceArgs, count, once_each, parse_fix};
 use crate::output::emit;
 use crate::problem::{AnyProblem, with_integrator};
 
@@ -41,8 +41,8 @@ pub struct EvaluateArgs {
     /// value or guess, e.g. --set k1=0.8. Repeat for several. Without it a PEtab problem is
     /// evaluated at its table's nominal values, those outside their bounds included (where
     /// positive on a log scale), though fits start from the bounds.
-    #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
-    set: Vec<String>,
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
+    set: Vec<(String, f64)>,
     /// Output format: a readable table, or the JSON object of docs/json.md.
     #[arg(long, value_enum, default_value_t = Format::Table)]
     format: Format,
@@ -109,18 +109,9 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
     let import_ms = started.elapsed().as_secs_f64() * 1e3;
     let parameters = problem.parameters();
     let names: Vec<String> = parameters.iter().map(|u| u.name.clone()).collect();
-    let published = context.nominal.iter().map(|(name, value)| format!("{name}={value:?}"));
-    // The user's names once each (the last of two was kept silently; --fix and --start refuse
-    // a name given twice); a published nominal value outside its bounds comes first.
-    let name = |s: &String| s.split_once('=').map(|(n, _)| n.trim().to_string());
-    for (k, s) in args.set.iter().enumerate() {
-        if let Some(n) =
-            name(s).filter(|n| args.set[..k].iter().any(|t| name(t).as_ref() == Some(n)))
-        {
-            bail!("--set {n}: given twice");
-        }
-    }
-    let set: Vec<String> = published.chain(args.set.iter().cloned()).collect();
+    // The user's names once each; a published nominal value outside its bounds comes first.
+    once_each(&args.set, "--set")?;
+    let set: Vec<(String, f64)> = context.nominal.iter().chain(&args.set).cloned().collect();
     let values = point(&problem, &parameters, &set)?;
     let k = problem.unknowns().len();
     let held = match problem.scales().is_empty() {
@@ -194,16 +185,12 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
 fn point(
     problem: &AnyProblem,
     parameters: &[&sysid_core::Unknown],
-    set: &[String],
+    set: &[(String, f64)],
 ) -> anyhow::Result<Vec<f64>> {
     let mut values: Vec<f64> =
         problem.unknowns().guesses().into_iter().chain(problem.scale_values()).collect();
-    for s in set {
-        let (name, value) =
-            s.split_once('=').ok_or_else(|| anyhow!("--set takes NAME=VALUE, got `{s}`"))?;
-        let name = name.trim();
-        let value: f64 =
-            value.trim().parse().map_err(|_| anyhow!("--set {name}: `{value}` is not a number"))?;
+    for (name, value) in set {
+        let (name, value) = (name.as_str(), *value);
         let Some(i) = parameters.iter().position(|u| u.name == name) else {
             let names: Vec<&str> = parameters.iter().map(|u| u.name.as_str()).collect();
             bail!(
@@ -216,15 +203,9 @@ fn point(
         if scale && value <= 0.0 {
             bail!("--set {name}: a noise scale is a σ: it must be positive, got {value}");
         }
-        if !value.is_finite() || (parameters[i].log && value <= 0.0) {
-            bail!(
-                "--set {name}: {value} is not {}",
-                if parameters[i].log {
-                    "a positive number (it is on a log scale)"
-                } else {
-                    "a finite number"
-                }
-            );
+        // Finite: the values are read by parse_fix, the published ones are numbers.
+        if parameters[i].log && value <= 0.0 {
+            bail!("--set {name}: {value} is not a positive number (it is on a log scale)");
         }
         values[i] = value;
     }

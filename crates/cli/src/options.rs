@@ -269,7 +269,7 @@ impl MethodArgs {
 }
 
 /// `NAME=VALUE` of `--fix` and `--start`.
-fn parse_fix(s: &str) -> Result<(String, f64), String> {
+pub(crate) fn parse_fix(s: &str) -> Result<(String, f64), String> {
     let (name, value) =
         s.split_once('=').ok_or_else(|| format!("`{s}`: expected NAME=VALUE, as in k1=0.5"))?;
     let name = name.trim();
@@ -282,6 +282,17 @@ fn parse_fix(s: &str) -> Result<(String, f64), String> {
         return Err(format!("`{s}`: the value must be a finite number"));
     }
     Ok((name.to_string(), v))
+}
+
+/// Refuses a name that `pairs` (an option's NAME=VALUE values, as [`parse_fix`] reads them)
+/// gives twice: the last was kept silently.
+pub(crate) fn once_each(pairs: &[(String, f64)], option: &str) -> anyhow::Result<()> {
+    for (k, (name, _)) in pairs.iter().enumerate() {
+        if pairs[..k].iter().any(|(n, _)| n == name) {
+            anyhow::bail!("{option} {name}: given twice");
+        }
+    }
+    Ok(())
 }
 
 /// `--starts`: multistart for `fit`, `compare` and `profile`.

@@ -143,9 +143,9 @@ pub fn method(name: &str, settings: &Settings) -> anyhow::Result<Boxed<AnySystem
 /// The methods as they run under `settings`, by the names they report: `quasilinearization`
 /// with `--ql-start data` is `quasilinearization-data` (compare's table said the one where its
 /// JSON said the other, and the list could then hold one method twice).
-pub fn as_run(names: Vec<String>, settings: &Settings) -> anyhow::Result<Vec<String>> {
+pub fn as_run(names: &[String], settings: &Settings) -> anyhow::Result<Vec<String>> {
     let mut out: Vec<String> = Vec::with_capacity(names.len());
-    for name in &names {
+    for name in names {
         let actual = method(name, settings)?.name().to_string();
         if let Some(j) = out.iter().position(|m| *m == actual) {
             anyhow::bail!("--methods: `{}` and `{name}` are one method here, `{actual}`", names[j]);

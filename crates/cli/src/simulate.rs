@@ -2,12 +2,12 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, bail};
+use anyhow::bail;
 use clap::Args;
 use sysid_core::{Data, Record};
 
 use crate::Outcome;
-use crate::options::SourceArgs;
+use crate::options::{SourceArgs, once_each, parse_fix};
 use crate::output::{intervals, not_an_input, parse_times, writable, write_output};
 use crate::problem::{case, no_source};
 
@@ -23,8 +23,8 @@ pub struct SimulateArgs {
     times: Option<String>,
     /// Set an unknown (or known) value, e.g. --set k1=0.8; unknowns are at their guesses
     /// otherwise. Repeat for several.
-    #[arg(long = "set", value_name = "NAME=VALUE", allow_hyphen_values = true)]
-    set: Vec<String>,
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
+    set: Vec<(String, f64)>,
     /// Only this experiment of a model file with [[experiments]] (default: all, a first
     /// column naming each row's experiment).
     #[arg(long, value_name = "NAME")]
@@ -63,27 +63,19 @@ fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
         bail!("a model's trajectory needs its times: add --times A:B:STEP, e.g. --times 0:10:0.1");
     };
     let times = parse_times(times)?;
-    let mut set: Vec<(String, f64)> = Vec::with_capacity(args.set.len());
-    for s in &args.set {
-        let (name, value) =
-            s.split_once('=').ok_or_else(|| anyhow!("--set takes NAME=VALUE, got `{s}`"))?;
-        let value: f64 =
-            value.trim().parse().map_err(|_| anyhow!("--set {name}: `{value}` is not a number"))?;
-        if !value.is_finite() {
-            bail!("--set {name}: `{value}` is not a finite number");
-        }
-        if set.iter().any(|(n, _)| n == name.trim()) {
-            bail!("--set {}: given twice", name.trim());
-        }
-        set.push((name.trim().to_string(), value));
-    }
+    once_each(&args.set, "--set")?;
     let model = args.source.load(path)?;
     if let Some(out) = &args.out {
         let inputs: Vec<PathBuf> =
             model.inputs().into_iter().chain(args.source.data.clone()).collect();
         not_an_input(out, &inputs, "--out")?;
     }
-    Ok(model.simulate(&set, args.source.data.as_deref(), &times, args.experiment.as_deref())?)
+    Ok(model.simulate(
+        &args.set,
+        args.source.data.as_deref(),
+        &times,
+        args.experiment.as_deref(),
+    )?)
 }
 
 /// The data as CSV, a record given as a function sampled every `step` (rounded to divide

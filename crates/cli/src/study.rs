@@ -135,7 +135,7 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     // One method listed twice under two names is refused; the names stay as given, as
     // study.json has recorded them (with `settings.ql_start`), so that a study begun before
     // resumes and merges.
-    crate::problem::as_run(methods.clone(), &args.options.settings())?;
+    crate::problem::as_run(&methods, &args.options.settings())?;
     sysid_registry::parse_list(&args.reference)?;
     // The numbers checked before any work: a model file's reference fit comes first and can
     // take minutes (`--trials 0` on Fujita was refused only after it).

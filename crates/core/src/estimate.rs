@@ -401,11 +401,12 @@ impl Serialize for FitRecord<'_> {
         let scale_errors = e.scales.iter().map(|s| Num(s.std_error.unwrap_or(f64::NAN)));
         // The scales' own, as the table shows them, also where the free unknowns have none
         // (all of them fixed: the scale's error was null here and printed in the table).
-        let free_errors: Vec<Num> = match &e.std_errors {
-            Some(se) => se.iter().map(|&v| Num(v)).collect(),
-            None => e.values.iter().map(|_| Num(f64::NAN)).collect(),
-        };
-        let errors: Vec<Num> = free_errors.into_iter().chain(scale_errors).collect();
+        let free = 0..e.values.len();
+        let errors: Vec<Num> = free
+            .clone()
+            .map(|i| Num(e.std_errors.as_ref().map_or(f64::NAN, |se| se[i])))
+            .chain(scale_errors)
+            .collect();
         st.serialize_field("std_errors", &Named(&names, &errors))?;
         st.serialize_field("history", &e.history)?;
         st.serialize_field("elapsed_ms", &(e.elapsed.as_secs_f64() * 1e3))?;
@@ -429,12 +430,10 @@ impl Serialize for FitRecord<'_> {
         let finite =
             |&[a, b]: &[f64; 2]| (a.is_finite() && b.is_finite()).then_some([Num(a), Num(b)]);
         let scale_intervals = e.scales.iter().map(|s| s.interval.as_ref().and_then(finite));
-        let free_intervals: Vec<Option<[Num; 2]>> = match &e.intervals {
-            Some(list) => list.iter().map(finite).collect(),
-            None => e.values.iter().map(|_| None).collect(),
-        };
-        let intervals: Vec<Option<[Num; 2]>> =
-            free_intervals.into_iter().chain(scale_intervals).collect();
+        let intervals: Vec<Option<[Num; 2]>> = free
+            .map(|i| e.intervals.as_ref().and_then(|list| finite(&list[i])))
+            .chain(scale_intervals)
+            .collect();
         st.serialize_field("intervals", &Named(&names, &intervals))?;
         st.serialize_field("best_iteration", &e.best_iteration)?;
         if let Some(at) = e.termination.failure().and_then(|f| f.at()) {

@@ -16,6 +16,7 @@ use sysid_ode::{Counts, Integrator, Ivp, Observable, ObservableGradient, OdeErro
 
 use crate::confidence::band_half_width;
 use crate::experiment::Planned;
+use crate::format::shortest;
 use crate::noise::{NOISE_ROW_SHIFT, NoiseArgs, NoiseDistribution, NoiseGradient, Transform};
 use crate::plan::{Plan, PlannedNoise, Sampled};
 use crate::problem::Problem;
@@ -999,6 +1000,32 @@ pub(crate) fn experiment_rows<S: System>(
     Ok(rows)
 }
 
+/// The error of a sample's residual r that is not finite, or whose square (its term of the
+/// NLL) overflows, at time `t`: named by its observable and experiment, how it is weighed
+/// (`weighed`), the model's value and the datum. The model integrated: not an integration's
+/// failure.
+fn unrepresentable(
+    t: f64,
+    (observable, experiment): (&str, &str),
+    r: f64,
+    weighed: &str,
+    (model, datum): (f64, f64),
+) -> OdeError {
+    let residual =
+        format!("the residual of the observable `{observable}` of experiment `{experiment}`");
+    let (model, datum) = (shortest(model), shortest(datum));
+    let what = match r.is_finite() {
+        true => format!(
+            "the square of {residual} ({}: {weighed}; the model gives {model}, the datum is {datum}) overflows",
+            shortest(r)
+        ),
+        false => format!(
+            "{residual} ({weighed}; the model gives {model}, the datum is {datum}) is not finite"
+        ),
+    };
+    OdeError::Unrepresentable { t, what }
+}
+
 /// The rows of experiment `e` from its states and sensitivities at the sample times
 /// (`point(m)`: y(t_m) and S(t_m), n × `slots.len()` row by row, or empty without a
 /// Jacobian), with parameters `p` and the slots' Jacobian `dz` (slots × columns): a row's
@@ -1078,26 +1105,17 @@ pub(crate) fn sample_rows<'s, S: System>(
                 let (r, dr) = s.distribution.residual(th - sample.value, w);
                 if !(r * r).is_finite() {
                     // A noise scale of 0 or ∞ (a weight of ∞ or 0), or near 0 so that the
-                    // residual's square, the NLL's term, overflows: named here as above.
-                    let shortest = crate::format::shortest;
-                    let (square, residual) = match r.is_finite() {
-                        true => ("the square of ", format!("{}: ", shortest(r))),
-                        false => ("", String::new()),
-                    };
-                    let what = format!(
-                        "{square}the residual of the observable `{}` of experiment `{}` ({residual}the square root of its weight {}; the model gives {}, the datum is {})",
-                        s.observable_name(e.system()),
-                        e.name,
-                        shortest(w),
-                        shortest(th),
-                        shortest(sample.value)
-                    );
-                    // The model integrated: not an integration's failure, whichever.
-                    let verb = if r.is_finite() { "overflows" } else { "is not finite" };
-                    return Err(OdeError::Unrepresentable {
-                        t: times[m],
-                        what: format!("{what} {verb}"),
-                    });
+                    // residual's square, the NLL's term, overflows.
+                    let weighed = format!("the square root of its weight {}", shortest(w));
+                    let name = s.observable_name(e.system());
+                    let observable = (name.as_str(), e.name.as_str());
+                    return Err(unrepresentable(
+                        times[m],
+                        observable,
+                        r,
+                        &weighed,
+                        (th, sample.value),
+                    ));
                 }
                 out.r.push(r);
                 out.samples.push(m);
@@ -1136,19 +1154,10 @@ pub(crate) fn sample_rows<'s, S: System>(
                 false => (diff / sigma, 1.0 / sigma),
             };
             if !(r * r).is_finite() {
-                // As for a known σ above: named, and not an integration's failure.
-                return Err(OdeError::Unrepresentable {
-                    t: times[m],
-                    what: format!(
-                        "the square of the residual of the observable `{}` of experiment `{}` ({}: σ = {}, the model gives {}, the datum is {}) overflows",
-                        s.observable_name(e.system()),
-                        e.name,
-                        crate::format::shortest(r),
-                        crate::format::shortest(sigma),
-                        crate::format::shortest(th),
-                        crate::format::shortest(sample.value)
-                    ),
-                });
+                let weighed = format!("σ = {}", shortest(sigma));
+                let name = s.observable_name(e.system());
+                let observable = (name.as_str(), e.name.as_str());
+                return Err(unrepresentable(times[m], observable, r, &weighed, (th, sample.value)));
             }
             out.r.push(r);
             out.samples.push(m);
