@@ -28,6 +28,8 @@ impl Builder<'_> {
         if measured.experiments.is_empty() {
             return Err(ModelError::file(&self.tables.measurements[0].file, "no measurements"));
         }
+        let used: Vec<&str> = measured.outputs.iter().map(|o| o.observable.as_str()).collect();
+        self.check_unused_observables(&used, states)?;
         Ok(measured)
     }
 

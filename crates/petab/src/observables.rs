@@ -125,16 +125,8 @@ impl Builder<'_> {
             }
         });
         for n in m.names() {
-            let known = n == OWN
-                || states.contains(&n)
-                || self.parameters.contains_key(&n)
-                || s.parameters.iter().any(|p| p.0 == n)
-                || s.compartments.iter().any(|c| c.0 == n);
-            if !known {
-                let message = format!(
-                    "observable `{}` uses `{n}`, which is no species, parameter or compartment of the model and not in the parameter table",
-                    at.text
-                );
+            if !self.known(&n, states) {
+                let message = undefined(at.text, &n);
                 let (formula, formula_at, cells) = written;
                 let given = |c: &&Cell<'_>| c.text.split(';').any(|v| v.trim() == n);
                 return Err(match (formula.names().contains(&n), cells.iter().find(given)) {
@@ -146,6 +138,60 @@ impl Builder<'_> {
         }
         Ok(m)
     }
+
+    /// Whether `n` is something an observable's expression may name: its own value (in a
+    /// noise formula), a state, a parameter of the table or of the model, a compartment.
+    fn known(&self, n: &str, states: &[String]) -> bool {
+        let s = self.sbml;
+        n == OWN
+            || states.iter().any(|x| x == n)
+            || self.parameters.contains_key(n)
+            || s.parameters.iter().any(|p| p.0 == n)
+            || s.compartments.iter().any(|c| c.0 == n)
+    }
+
+    /// Checks the names of the observables no measurement uses, as a used one's are checked
+    /// row by row: a name the model does not have is an error in the file whether or not a
+    /// row measures it (a misspelt formula would otherwise wait for the first row that
+    /// does). Their placeholders, which only a row fills, are taken as given.
+    pub(crate) fn check_unused_observables(
+        &self,
+        used: &[&str],
+        states: &[String],
+    ) -> Result<(), ModelError> {
+        let mut unused: Vec<(&String, &Observable)> =
+            self.observables.iter().filter(|(id, _)| !used.contains(&id.as_str())).collect();
+        unused.sort_by_key(|(id, _)| *id);
+        for (id, o) in unused {
+            let placeholder = |n: &str| {
+                ["observableParameter", "noiseParameter"].iter().any(|kind| {
+                    n.strip_prefix(kind)
+                        .and_then(|rest| rest.strip_suffix(&format!("_{id}")))
+                        .is_some_and(|k| k.parse::<usize>().is_ok())
+                })
+            };
+            for (m, at, own) in
+                [(&o.formula, &o.formula_at, None), (&o.noise, &o.noise_at, Some(id))]
+            {
+                let dynamic = self.dynamic(m);
+                let unknown = dynamic
+                    .names()
+                    .into_iter()
+                    .find(|n| own != Some(n) && !placeholder(n) && !self.known(n, states));
+                if let Some(n) = unknown {
+                    return Err(crate::at(at, undefined(id, &n)));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The error of observable `id` naming `n`, which the model does not have.
+fn undefined(id: &str, n: &str) -> String {
+    format!(
+        "observable `{id}` uses `{n}`, which is no species, parameter or compartment of the model and not in the parameter table"
+    )
 }
 
 /// `formulas` with row `row`'s observable or noise parameters (`kind`) in place of their

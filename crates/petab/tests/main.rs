@@ -260,6 +260,28 @@ fn bad_input_is_located() {
     let e = error_of(&path);
     assert!(e.contains("uses `specC99`, which is no species, parameter or compartment"), "{e}");
 
+    // An observable no row measures is checked all the same, at its formula's cell; its
+    // placeholders, which only a row would fill, are taken as given.
+    let unused = |formula: &'static str, noise: &'static str| {
+        move |t: String| format!("{}\nunused\t\t{formula}\t{noise}\tlin\tnormal\n", t.trim_end())
+    };
+    let path = edited("unused", "observables", unused("2 * STAT5A_typo", "1"));
+    let e = error_of(&path);
+    assert!(
+        e.contains("observables_Boehm_JProteomeRes2014.tsv:5:")
+            && e.contains("column `observableFormula`: observable `unused` uses `STAT5A_typo`"),
+        "{e}"
+    );
+    let path = edited("unused-noise", "observables", unused("STAT5A", "0.1 * unused + sd_x"));
+    let e = error_of(&path);
+    assert!(e.contains("column `noiseFormula`: observable `unused` uses `sd_x`"), "{e}");
+    let path = edited(
+        "unused-placeholders",
+        "observables",
+        unused("observableParameter1_unused * STAT5A", "noiseParameter1_unused + 0.1 * unused"),
+    );
+    import(&path).expect("an unused observable's placeholders are left to the rows");
+
     let path = edited("sbml", "model_", |t| t.replacen("<listOfReactions>", "<listOfReactions", 1));
     let e = error_of(&path);
     assert!(e.contains("model_Boehm_JProteomeRes2014.xml:") && e.contains("not valid XML"), "{e}");
