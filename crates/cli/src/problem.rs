@@ -113,7 +113,9 @@ pub fn prepare(
 ) -> anyhow::Result<AnyProblem> {
     let problem =
         with_integrator(problem, integrator)?.with_fixed(&options.fix).map_err(|e| match e {
-            ProblemError::AllFixed(_) | ProblemError::NotAnUnknown { .. } => {
+            ProblemError::AllFixed(_)
+            | ProblemError::NotAnUnknown { .. }
+            | ProblemError::InvalidUnknown { .. } => {
                 anyhow::anyhow!("--fix: {e}")
             }
             e => e.into(),

@@ -773,6 +773,14 @@ fn start_begins_a_fit_elsewhere_and_refits_any_start_of_a_multistart() {
             &["--petab", petab, "--start", "k_phos=-1"],
             "unknown `k_phos`: start -1: it is on a log scale, so it must be positive",
         ),
+        (
+            &["--petab", petab, "--fix", "k_phos=1e9"],
+            "--fix: unknown `k_phos`: fixed at 1e9: above its max 100000",
+        ),
+        (
+            &["--petab", petab, "--fix", "k_phos=1e-6"],
+            "--fix: unknown `k_phos`: fixed at 1e-6: below its min 1e-5",
+        ),
     ] {
         let out = sysid(&[&["fit"][..], args].concat());
         assert_eq!(out.status.code(), Some(2), "{args:?}");

@@ -308,6 +308,27 @@ impl<S: System> Problem<S> {
                     value: *value,
                 });
             }
+            // Within the bounds, as a start must be: a few units in the last place are
+            // allowed, for a value mapped back from a bound's coordinate (a profile's last
+            // point, exp(ln hi)).
+            let slack = |b: f64| 8.0 * f64::EPSILON * b.abs();
+            let below = u
+                .min
+                .filter(|&lo| *value < lo - slack(lo))
+                .map(|lo| format!("below its min {}", crate::format::shortest(lo)));
+            let above = u
+                .max
+                .filter(|&hi| *value > hi + slack(hi))
+                .map(|hi| format!("above its max {}", crate::format::shortest(hi)));
+            if let Some(wrong) = below.or(above) {
+                return Err(ProblemError::InvalidUnknown {
+                    name: name.clone(),
+                    message: format!(
+                        "fixed at {}: {wrong} (a value held must lie within the unknown's bounds, as its estimate must)",
+                        crate::format::shortest(*value)
+                    ),
+                });
+            }
             self.held[j] = *value;
             self.free.retain(|&f| f != j);
             self.scales.retain(|&s| s != j);
@@ -326,8 +347,14 @@ impl<S: System> Problem<S> {
         for (i, (name, value)) in start.iter().enumerate() {
             let j = self.movable(start, i, "started")?;
             let u = &mut self.declared[j];
-            let below = u.min.filter(|lo| value < lo).map(|lo| format!("below its min {lo}"));
-            let above = u.max.filter(|hi| value > hi).map(|hi| format!("above its max {hi}"));
+            let below = u
+                .min
+                .filter(|lo| value < lo)
+                .map(|lo| format!("below its min {}", crate::format::shortest(lo)));
+            let above = u
+                .max
+                .filter(|hi| value > hi)
+                .map(|hi| format!("above its max {}", crate::format::shortest(hi)));
             let wrong = match (value.is_finite(), u.log && *value <= 0.0) {
                 (false, _) => Some("it must be finite".to_string()),
                 (_, true) => Some("it is on a log scale, so it must be positive".to_string()),

@@ -147,7 +147,7 @@ impl Estimate {
             // The integration's share of the figure, where the certificate measured it.
             let error = match self.nll_error() {
                 Some(e) if e.is_infinite() => {
-                    " (its integration error unmeasured: the integration at a tenth of the tolerances fails)".to_string()
+                    " (its integration error unmeasured: its evaluation at a tenth of the tolerances fails)".to_string()
                 }
                 Some(e) if e > 0.0 => format!(" ± {e:.1e} (integration)"),
                 _ => String::new(),

@@ -319,7 +319,7 @@ impl Termination {
             Termination::Stalled { rule, iteration, optimality, unchecked: Some(why), .. } => {
                 write!(
                     f,
-                    "stalled at iteration {iteration}: {rule}; the first-order test passes at the working integration (optimality {optimality:.2e}), but the integration that checks it (at a tenth of the tolerances; for a fixed step, with error control) fails there ({why}): the point's figures are not confirmed, and it is not a certified minimum"
+                    "stalled at iteration {iteration}: {rule}; the first-order test passes at the working integration (optimality {optimality:.2e}), but the evaluation that checks it (integrated again at a tenth of the tolerances; for a fixed step, with error control) fails there ({why}): the point's figures are not confirmed, and it is not a certified minimum"
                 )
             }
             Termination::Stalled { rule, iteration, optimality, moving, .. }
@@ -392,9 +392,11 @@ mod tests {
         };
         assert_eq!(t.code(), "stalled_step");
         let said = t.to_string();
-        for needle in
-            ["optimality 7.80e-9", "the integration that checks it", "too many steps: 120"]
-        {
+        for needle in [
+            "optimality 7.80e-9",
+            "the evaluation that checks it (integrated again",
+            "too many steps: 120",
+        ] {
             assert!(said.contains(needle), "`{needle}` not in {said}");
         }
         assert!(!said.contains("last trial"), "{said}");

@@ -5,7 +5,7 @@ use nalgebra::DMatrix;
 use rand::Rng;
 use rand_distr::StandardNormal;
 use sysid_core::{Data, Problem, Samples, Series, Transform, method::NormalFactor};
-use sysid_ode::System;
+use sysid_ode::{OdeError, System};
 use sysid_systems::{Case, DataSource};
 
 use crate::error::StudyError;
@@ -99,9 +99,7 @@ impl<S: System + Clone> Scenario<S> {
             )));
         }
         let z = problem.unknowns().coordinates(&truth);
-        let (cost, _) = problem.cost(&z).map_err(|e| {
-            StudyError::Setup(format!("the model cannot be integrated at the truth: {e}"))
-        })?;
+        let (cost, _) = problem.cost(&z).map_err(at_truth)?;
         let s = (cost / (n - k) as f64).sqrt();
         if s == 0.0 {
             return Err(StudyError::Setup(
@@ -201,9 +199,7 @@ impl<S: System + Clone> Scenario<S> {
     pub fn cramer_rao(&self, noise: f64) -> Result<DMatrix<f64>, StudyError> {
         let problem = self.with_data(self.clean_data())?;
         let z = problem.unknowns().coordinates(&self.truth);
-        let lin = problem.residuals_and_jacobian(&z).map_err(|e| {
-            StudyError::Setup(format!("the model cannot be integrated at the truth: {e}"))
-        })?;
+        let lin = problem.residuals_and_jacobian(&z).map_err(at_truth)?;
         let fisher = if problem.has_noise_model() {
             // The noise model's own Fisher information, for noise `noise` times its σ.
             lin.normal.clone() / (noise * noise)
@@ -255,14 +251,40 @@ fn predictions<S: System>(problem: &Problem<S>, truth: &[f64]) -> Result<Vec<f64
         return Err(StudyError::Setup(format!("{} true values for {k} unknowns", truth.len())));
     }
     let z = problem.unknowns().coordinates(truth);
-    problem
-        .predictions(&z)
-        .map_err(|e| StudyError::Setup(format!("the model cannot be integrated at the truth: {e}")))
+    problem.predictions(&z).map_err(at_truth)
+}
+
+/// What stops a study at the truth: the model cannot be integrated there, or it integrates
+/// and a value there cannot be represented (a residual whose square overflows).
+fn at_truth(e: OdeError) -> StudyError {
+    StudyError::Setup(match e {
+        OdeError::Unrepresentable { .. } => format!("the model integrates at the truth, but {e}"),
+        e => format!("the model cannot be integrated at the truth: {e}"),
+    })
 }
 
 fn sample_count(series: &Series) -> usize {
     match &series.samples {
         Samples::Points { values, .. } => values.len(),
         Samples::Function(_) => 0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A failure at the truth is called an integration failure only where it is one.
+    #[test]
+    fn a_value_that_overflows_at_the_truth_is_not_called_an_integration_failure() {
+        let overflow = OdeError::Unrepresentable { t: 2.0, what: "ε overflows".into() };
+        let message = at_truth(overflow).to_string();
+        assert!(
+            message.contains("the model integrates at the truth, but ε overflows"),
+            "{message}"
+        );
+        let failed = OdeError::TooManySteps { t: 1.0, t_end: 2.0, steps: 10 };
+        let message = at_truth(failed).to_string();
+        assert!(message.contains("cannot be integrated at the truth: too many steps"), "{message}");
     }
 }

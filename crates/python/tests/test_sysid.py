@@ -308,6 +308,8 @@ class Boehm(unittest.TestCase):
         ]:
             with self.assertRaisesRegex(ValueError, message):
                 self.p.fit(**keyword)
+        with self.assertRaisesRegex(ValueError, "fix: unknown `k_phos`: fixed at 1e9: above its max 100000"):
+            self.p.fit(fix={"k_phos": 1e9})
         with self.assertRaisesRegex(ValueError, "max_points must be at least 1, got 0"):
             self.p.profile(only=["k_phos"], max_points=0)
         with self.assertRaisesRegex(TypeError, "argument 'x'"):
