@@ -274,7 +274,8 @@ pub struct Minimum {
     pub nll: Option<f64>,
     /// How many starts reached it.
     pub count: usize,
-    /// The first start (in order) that reached it.
+    /// The start of that fit (the least objective among those that reached it; the earliest
+    /// of equal ones).
     pub start: usize,
     /// The estimates of that fit, by name, in the problem's order.
     pub estimates: serde_json::Map<String, serde_json::Value>,
@@ -569,19 +570,14 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
     };
     let mut order: Vec<usize> = (0..fits.len()).filter(|&i| fits[i].converged()).collect();
     order.sort_by(|&a, &b| fits[a].objective().total_cmp(&fits[b].objective()).then(a.cmp(&b)));
-    // A fit joins a minimum when it matches that minimum's least-cost fit (the first in cost
-    // order); the minimum's start and estimates are those of the earliest start that reached it.
+    // A fit joins a minimum when it matches that minimum's least fit (the first in the
+    // objective's order), which the minimum reports whole: its start, estimates, ε and NLL
+    // belong to one fit.
     let mut minima: Vec<(usize, Minimum)> = Vec::new();
     for i in order {
         let fit = &fits[i];
         match minima.last_mut() {
-            Some((least, m)) if same_minimum(fit, &fits[*least]) => {
-                m.count += 1;
-                if i < m.start {
-                    m.start = i;
-                    m.estimates = named(fit);
-                }
-            }
+            Some((least, m)) if same_minimum(fit, &fits[*least]) => m.count += 1,
             _ => minima.push((
                 i,
                 Minimum { cost: fit.cost, nll: fit.nll, count: 1, start: i, estimates: named(fit) },
@@ -727,6 +723,21 @@ mod tests {
         assert_eq!(best(&fits), 1);
         let fits = [fit_nll(48.0, 138.22 - 1e-4, false), fit_nll(48.0, 138.22, true)];
         assert_eq!(best(&fits), 0);
+    }
+
+    /// A minimum reports one fit whole: the one that reached it lowest, a later start here.
+    /// (It paired the earliest start and its estimates with the least fit's NLL.)
+    #[test]
+    fn a_minimum_is_the_fit_that_reached_it_lowest() {
+        let fits = [
+            Estimate { values: vec![1.0], ..fit_nll(48.0, 138.22 + 1e-6, true) },
+            Estimate { values: vec![2.0], ..fit_nll(48.0, 138.22, true) },
+        ];
+        let s = summarise(&fits, &MultistartOptions::default());
+        let m = &s.minima[..];
+        assert_eq!((m.len(), m[0].count, m[0].start, m[0].nll), (1, 2, 1, Some(138.22)));
+        assert_eq!(m[0].estimates["a"], serde_json::json!(2.0));
+        assert_eq!(s.best_start, m[0].start);
     }
 
     /// Runs ending at these fits, for [`promising`].
