@@ -225,6 +225,12 @@ fn settings_that_change_results_travel_with_the_study() {
         header.contains("\"model\": \"sha256:") && header.contains("\"data\": \"sha256:"),
         "{header}"
     );
+    // The same file by another path (as from another folder) is the same study: the path
+    // was compared as written (`system model.toml vs /work/model.toml`).
+    let elsewhere = dir.join("..").join("model").join("model.toml").display().to_string();
+    let again = ["study", "--model", &elsewhere, "--trials", "2", "--resume", "--out", &out];
+    let again = sysid(&again);
+    assert_eq!(again.status.code(), Some(0), "{}", text(&again.stderr));
     let text_model = std::fs::read_to_string(&model).unwrap();
     std::fs::write(&model, format!("{text_model}\n# edited\n")).unwrap();
     let edited = sysid(&args);

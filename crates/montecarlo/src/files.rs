@@ -100,6 +100,19 @@ pub struct Header {
 }
 
 impl Header {
+    /// This header under `other`'s name where both record the same model by its content
+    /// (settings `model`, a digest of the file): a model file's study is named by its path as
+    /// given, and `m.toml` run from its folder is `/work/m.toml` from elsewhere (a batch job's
+    /// folder, a shard's). Another system is another study.
+    fn named_as(&self, other: &Header) -> Header {
+        let digest = |h: &Header| h.spec.settings.get("model").cloned();
+        let mut header = self.clone();
+        if digest(self).is_some() && digest(self) == digest(other) {
+            header.spec.system = other.spec.system.clone();
+        }
+        header
+    }
+
     /// The header of `study` (computes the Cramér–Rao bound).
     pub fn of<S: System + Clone + Send + Sync>(
         study: &Study<S>,
@@ -167,6 +180,7 @@ pub fn run<S: System + Clone + Send + Sync>(
             )));
         }
         let existing = read_header(&study_file)?;
+        let header = header.named_as(&existing);
         if existing != header {
             return Err(StudyError::Mismatch(format!(
                 "{} holds a different study: {} (its setting first); resume it with its own \
@@ -267,12 +281,13 @@ pub fn merge(dirs: &[PathBuf], out: &Path, force: bool) -> Result<Summary, Study
     }
     let whole = Header { shard: None, ..headers[0].clone() };
     for (dir, header) in dirs.iter().zip(&headers) {
-        if (Header { shard: None, ..header.clone() }) != whole {
+        let header = Header { shard: None, ..header.named_as(&whole) };
+        if header != whole {
             return Err(StudyError::Mismatch(format!(
                 "{} and {} hold different studies: {}",
                 first.display(),
                 dir.display(),
-                difference(&whole, &Header { shard: None, ..header.clone() })
+                difference(&whole, &header)
             )));
         }
     }
