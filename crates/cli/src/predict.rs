@@ -94,7 +94,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
         );
         return Ok(Outcome::NotConverged);
     }
-    // The band: Student's t for the fit's N − k degrees of freedom.
+    // The band: Student's t for the fit's N − k_free degrees of freedom, as the intervals'.
     let band = estimate.band();
     if band.is_none() {
         eprintln!(

@@ -7,7 +7,7 @@ use clap::Args;
 use sysid_core::{Data, Record};
 
 use crate::Outcome;
-use crate::options::{SourceArgs, once_each, parse_fix};
+use crate::options::{IntegratorArgs, SourceArgs, once_each, parse_fix};
 use crate::output::{intervals, not_an_input, parse_times, writable, write_output};
 use crate::problem::{case, no_source};
 
@@ -35,6 +35,8 @@ pub struct SimulateArgs {
     /// Write to this file instead of standard output.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
+    #[command(flatten)]
+    integrator: IntegratorArgs,
 }
 
 /// Runs `sysid simulate`.
@@ -45,9 +47,12 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
     if !(args.step > 0.0 && args.step.is_finite()) {
         bail!("--step must be a positive number, got {}", args.step);
     }
+    args.integrator.validate()?;
     let text = match (&args.source.system, args.source.file()) {
         (Some(name), _) => {
-            let data = case(name)?.data(args.source.seed)?;
+            let mut case = case(name)?;
+            case.integrator = args.integrator.apply_to(case.integrator)?;
+            let data = case.data(args.source.seed)?;
             data_csv(&data, args.step)?
         }
         (None, Some(path)) => model_csv(path, args)?,
@@ -64,7 +69,8 @@ fn model_csv(path: &Path, args: &SimulateArgs) -> anyhow::Result<String> {
     };
     let times = parse_times(times)?;
     once_each(&args.set, "--set")?;
-    let model = args.source.load(path)?;
+    let mut model = args.source.load(path)?;
+    model.file.integrator = args.integrator.apply_to(model.file.integrator)?;
     if let Some(out) = &args.out {
         let inputs: Vec<PathBuf> =
             model.inputs().into_iter().chain(args.source.data.clone()).collect();

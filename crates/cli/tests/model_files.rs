@@ -96,6 +96,23 @@ fn the_workflow_fits_simulates_and_predicts() {
     assert_eq!(lines.len(), 6);
     let x2: f64 = lines[5].split(',').nth(1).unwrap().parse().unwrap();
     assert!((x2 - 2.0 * (-1.6f64).exp()).abs() < 1e-7, "{x2}");
+    // The integrator's options hold for one simulation as for a fit: the classical
+    // Runge–Kutta step of 0.5 multiplies x by R(hλ) = 1 + z + z²/2 + z³/6 + z⁴/24, z = −0.4,
+    // at each of the four steps to t = 2.
+    let simulate = |extra: &[&str]| {
+        let base = ["simulate", "--model", &case.model(), "--times", "0:2:0.5", "--set", "k=0.8"];
+        sysid(&[&base[..], extra].concat())
+    };
+    let out = simulate(&["--integrator", "rk4", "--fixed-step", "0.5"]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let last = text(&out.stdout).lines().last().unwrap().to_string();
+    let x2: f64 = last.split(',').nth(1).unwrap().parse().unwrap();
+    let z: f64 = -0.4;
+    let r = 1.0 + z + z * z / 2.0 + z.powi(3) / 6.0 + z.powi(4) / 24.0;
+    assert!((x2 - 2.0 * r.powi(4)).abs() <= 1e-15, "{x2} vs {}", 2.0 * r.powi(4));
+    let out = simulate(&["--max-steps", "1"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("too many steps: 1 steps"), "{}", text(&out.stderr));
 
     let pred = case.path("pred.csv");
     let out = sysid(&[
@@ -250,6 +267,24 @@ fn a_file_that_cannot_be_read_says_why_once() {
         assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
         assert!(stderr.starts_with(&format!("error: {path}: ")), "{args:?}: {stderr}");
         assert_eq!(stderr.matches("(os error").count(), 1, "{args:?}: {stderr}");
+    }
+    // A data file that cannot be read says what named it: the model file's key, or --data
+    // (it said only the data file's path).
+    let nowhere = case.path("nowhere.csv").display().to_string();
+    let unnamed = DECAY.replace("data.csv", "nowhere.csv");
+    let elsewhere = Case::new("unreadable-data", &unnamed, DECAY_DATA);
+    let model_path = elsewhere.model();
+    for (args, named) in [
+        (vec!["fit", "--model", &model_path], format!("that `[data] file` in {model_path} names")),
+        (vec!["fit", "--model", &model, "--data", &nowhere], "given by --data".to_string()),
+    ] {
+        let out = sysid(&args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.trim_end().ends_with(&format!("the data file {named}")),
+            "{args:?}: {stderr}"
+        );
     }
 }
 

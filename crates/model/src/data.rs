@@ -32,6 +32,9 @@ pub struct Start<'a> {
     pub at: Option<usize>,
     /// Which table gives it: "`[data]`" or "experiment `low`".
     pub table: &'a str,
+    /// What names the data file, for an error that cannot read it: "that `[data] file` in
+    /// m.toml names", "given by --data".
+    pub named_by: &'a str,
 }
 
 /// The largest weighted magnitude whose square an f64 holds: a value beyond it makes the
@@ -76,7 +79,9 @@ fn table_error(e: TableError) -> ModelError {
 /// named after states, outputs or inputs; empty cells are missing values. A leading
 /// byte-order mark is skipped.
 pub fn read(model: &ModelFile, path: &Path) -> Result<ModelData, ModelError> {
-    let start = Start { t0: model.data.t0, at: model.data.t0_at, table: "[data]" };
+    let named_by = format!("that `[data] file` in {} names", model.path.display());
+    let start =
+        Start { t0: model.data.t0, at: model.data.t0_at, table: "[data]", named_by: &named_by };
     read_from(model, path, start)
 }
 
@@ -91,8 +96,9 @@ pub fn read_from(
     let (text, table) = match held {
         Some(table) => (String::new(), table),
         None => {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| ModelError::file(&file, e.to_string()))?;
+            let text = std::fs::read_to_string(path).map_err(|e| {
+                ModelError::file(&file, format!("{e}: the data file {}", start.named_by))
+            })?;
             let text = without_bom(&text).to_string();
             check_time_column(&text, &file)?;
             let table = Table::parse(&text, &file).map_err(table_error)?;

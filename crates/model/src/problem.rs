@@ -223,12 +223,25 @@ impl Model {
     /// located where the user wrote its subject ([`ModelFile::origins`](crate::ModelFile)).
     pub fn problem(&self, data: Option<&Path>) -> Result<Problem<ModelSystem>, ModelError> {
         let f = &self.file;
+        let model = f.path.display();
+        let named: Vec<String> = match data {
+            Some(_) => vec!["given by --data".into()],
+            None if f.experiments.is_empty() => {
+                vec![format!("that `[data] file` in {model} names")]
+            }
+            None => f
+                .experiments
+                .iter()
+                .map(|e| format!("that experiment `{}`'s `file` in {model} names", e.name))
+                .collect(),
+        };
         let plans: Vec<Plan<'_>> = if f.experiments.is_empty() {
             let file = match data {
                 Some(p) => p,
                 None => self.data_path()?,
             };
-            let start = Start { t0: f.data.t0, at: f.data.t0_at, table: "[data]" };
+            let start =
+                Start { t0: f.data.t0, at: f.data.t0_at, table: "[data]", named_by: &named[0] };
             vec![Plan {
                 name: sysid_core::plan::SINGLE_EXPERIMENT.into(),
                 file,
@@ -247,10 +260,11 @@ impl Model {
             }
             f.experiments
                 .iter()
-                .map(|e| Plan {
+                .zip(&named)
+                .map(|(e, named_by)| Plan {
                     name: e.name.clone(),
                     file: &e.file,
-                    start: Start { t0: e.t0, at: e.t0_at, table: "[[experiments]]" },
+                    start: Start { t0: e.t0, at: e.t0_at, table: "[[experiments]]", named_by },
                     set: e.set.iter().map(|(p, v, _)| (p.clone(), v)).collect(),
                     preequilibrate: e
                         .preequilibrate
@@ -574,7 +588,9 @@ impl Model {
                         (vec![0.0; n], vec![0.0; np], vec![0.0; v.len()]);
                     let mut g = NoiseGradient { y: &mut dy, h: 0.0, p: &mut dp, v: &mut dv };
                     let sigma = noise.eval(NoiseArgs { t, y, h, p: &p, v: &v }, &mut g);
-                    if !(sigma > 0.0 && sigma.is_finite()) {
+                    // The least σ the likelihood's row √(2 ln σ + shift) holds.
+                    let floor = (-sysid_core::plan::NOISE_ROW_SHIFT / 2.0).exp();
+                    if !(sigma >= floor && sigma.is_finite()) {
                         let name = match series.observable {
                             Observable::State(i) => &self.file.states[i],
                             Observable::Output(o) => &self.file.outputs[o].name,
@@ -587,11 +603,21 @@ impl Model {
                                     _ => o.at,
                                 }
                             });
+                        let must = match sigma > 0.0 {
+                            true => format!(
+                                "σ must be at least e^{} ≈ {floor:.1e}, the least σ a noise expression may take (the likelihood's row for ln σ is √(2 ln σ + {}))",
+                                -sysid_core::plan::NOISE_ROW_SHIFT / 2.0,
+                                sysid_core::plan::NOISE_ROW_SHIFT
+                            ),
+                            false => "σ must be positive".to_string(),
+                        };
                         return Err(self.file.err(
                             at,
                             format!(
-                                "the σ of `{name}`, {}, is {sigma} at t = {t} in experiment `{}` at the start: σ must be positive",
+                                "the σ of `{name}`, {}, is {} at t = {} in experiment `{}` at the start: {must}",
                                 noise.describe(),
+                                sysid_core::format::shortest(sigma),
+                                sysid_core::format::shortest(t),
                                 e.name()
                             ),
                         ));

@@ -606,5 +606,14 @@ fn a_sigma_that_is_not_positive_at_the_start_is_refused() {
             "{message}"
         );
     }
+    // Below the likelihood's floor e^-25 it is refused the same way, where it is written (it
+    // was refused as "the starting guess cannot be used", with no file, line or experiment).
+    let model = TWO.replace("sigma = \"s\"", "sigma = \"1e-13 * s\"");
+    let message = problem_error(&dir, &model);
+    assert!(
+        message.contains("the σ of `Bm`, 1e-13 * s, is 1.0000000000000002e-14 at t = 1 ")
+            && message.contains("in experiment `low` at the start: σ must be at least e^-25"),
+        "{message}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
