@@ -260,7 +260,7 @@ impl MethodArgs {
         }
         if !(self.log_every >= 0.0 && self.log_every.is_finite()) {
             anyhow::bail!(
-                "--log-every must be a non-negative number of seconds (0: never), got {}",
+                "--log-every must be a finite non-negative number of seconds (0: never), got {}",
                 self.log_every
             );
         }
@@ -366,7 +366,7 @@ impl StartsArgs {
                 std::time::Duration::try_from_secs_f64(seconds).map_err(|_| {
                     refused(
                         "budget",
-                        format!("must be a positive number of seconds, got {seconds:?}"),
+                        format!("must be a finite positive number of seconds, got {seconds:?}"),
                     )
                 })
             })

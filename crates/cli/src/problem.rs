@@ -269,25 +269,9 @@ pub fn with_starts(record: FitRecord<'_>, starts: Option<&Starts>) -> serde_json
     value
 }
 
-/// "k1 = 1e300, k2 = 0.5": the values of the unknowns at `at`, the ten farthest from 1 in
-/// magnitude when there are more (where a start that cannot be integrated usually goes wrong).
+/// The values of the unknowns at `at` ([`named_point`](sysid_core::format::named_point)).
 fn point(problem: &AnyProblem, at: &[f64]) -> String {
-    let names = problem.names();
-    let mut order: Vec<usize> = (0..at.len()).collect();
-    if at.len() > 10 {
-        let far = |v: f64| v.abs().ln().abs();
-        order.sort_by(|&a, &b| far(at[b]).total_cmp(&far(at[a])));
-        order.truncate(10);
-        order.sort_unstable();
-    }
-    let list: Vec<String> = order
-        .iter()
-        .map(|&i| format!("{} = {}", names[i], sysid_core::format::shortest(at[i])))
-        .collect();
-    match at.len() > 10 {
-        true => format!("{}, … ({} unknowns)", list.join(", "), at.len()),
-        false => list.join(", "),
-    }
+    sysid_core::format::named_point(&problem.names(), at)
 }
 
 /// Why the start cannot be used, if it cannot; `start_point` is what the method integrates

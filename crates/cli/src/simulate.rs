@@ -45,7 +45,7 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
         writable(out, "--out")?;
     }
     if !(args.step > 0.0 && args.step.is_finite()) {
-        bail!("--step must be a positive number, got {}", args.step);
+        bail!("--step must be a finite positive number, got {}", args.step);
     }
     args.integrator.validate()?;
     let text = match (&args.source.system, args.source.file()) {

@@ -30,6 +30,24 @@ pub fn significant(v: f64, digits: usize) -> String {
 /// [1e-4, 1e9) (the integrators' messages write their times so).
 pub use sysid_ode::shortest;
 
+/// "k1 = 1e300, k2 = 0.5": the values `at` of the unknowns `names`, the ten farthest from 1
+/// in magnitude when there are more (where a start that cannot be used usually goes wrong).
+pub fn named_point(names: &[String], at: &[f64]) -> String {
+    let mut order: Vec<usize> = (0..at.len()).collect();
+    if at.len() > 10 {
+        let far = |v: f64| v.abs().ln().abs();
+        order.sort_by(|&a, &b| far(at[b]).total_cmp(&far(at[a])));
+        order.truncate(10);
+        order.sort_unstable();
+    }
+    let list: Vec<String> =
+        order.iter().map(|&i| format!("{} = {}", names[i], shortest(at[i]))).collect();
+    match at.len() > 10 {
+        true => format!("{}, … ({} unknowns)", list.join(", "), at.len()),
+        false => list.join(", "),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

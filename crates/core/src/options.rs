@@ -8,7 +8,7 @@ use thiserror::Error;
 #[derive(Clone, Debug, Error, PartialEq)]
 pub enum OptionsError {
     /// A tolerance or constant must be a non-negative finite number.
-    #[error("{name} must be a non-negative number, got {value}")]
+    #[error("{name} must be a finite non-negative number, got {value}")]
     Negative {
         /// The option.
         name: &'static str,
@@ -16,7 +16,7 @@ pub enum OptionsError {
         value: f64,
     },
     /// A tolerance or constant must be a positive finite number.
-    #[error("{name} must be a positive number, got {value}")]
+    #[error("{name} must be a finite positive number, got {value}")]
     NotPositive {
         /// The option.
         name: &'static str,
@@ -41,6 +41,16 @@ pub enum OptionsError {
         /// The option.
         name: &'static str,
     },
+    /// A count must be at most `most`.
+    #[error("{name} must be at most {most}, got {value}")]
+    TooMany {
+        /// The option.
+        name: &'static str,
+        /// Its value.
+        value: usize,
+        /// The largest allowed.
+        most: usize,
+    },
 }
 
 impl OptionsError {
@@ -51,7 +61,8 @@ impl OptionsError {
             Self::Negative { name, .. }
             | Self::NotPositive { name, .. }
             | Self::OutOfRange { name, .. }
-            | Self::Zero { name } => name,
+            | Self::Zero { name }
+            | Self::TooMany { name, .. } => name,
         }
     }
 

@@ -694,7 +694,7 @@ fn integrator() {
         ),
         (
             format!("{OK}[integrator]\natol = -1\n"),
-            "models/m.toml:11:1: [integrator] atol must be a non-negative number, got -1",
+            "models/m.toml:11:1: [integrator] atol must be a finite non-negative number, got -1",
         ),
         (
             format!("{OK}[integrator]\nmethod = \"rk4\"\n"),

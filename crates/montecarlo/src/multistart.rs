@@ -58,6 +58,11 @@ pub const MAX_REDRAWS: usize = 10;
 /// al., Bioinformatics 2019; Fröhlich and Sorger, PLoS Comput. Biol. 2022).
 pub const REACHED: f64 = 0.1;
 
+/// The most starts one multistart takes: a million, far beyond what the field draws (tens to
+/// thousands), and a bound on the memory of their draws and outcomes (a count of 10¹² asked
+/// for 8 TB and aborted the process).
+pub const MAX_STARTS: usize = 1_000_000;
+
 /// How the starts after the guess are drawn.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -117,6 +122,10 @@ impl MultistartOptions {
     pub fn validate(&self) -> Result<(), sysid_core::OptionsError> {
         if self.starts == 0 {
             return Err(sysid_core::OptionsError::Zero { name: "starts" });
+        }
+        if self.starts > MAX_STARTS {
+            let (value, most) = (self.starts, MAX_STARTS);
+            return Err(sysid_core::OptionsError::TooMany { name: "starts", value, most });
         }
         if let Some(budget) = self.budget {
             sysid_core::OptionsError::positive("budget", budget.as_secs_f64())?;

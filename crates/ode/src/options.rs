@@ -174,7 +174,7 @@ impl Integrator {
         if !(self.atol >= 0.0 && self.atol.is_finite()) {
             return bad(
                 "atol",
-                format!("must be a non-negative number, got {}", shortest(self.atol)),
+                format!("must be a finite non-negative number, got {}", shortest(self.atol)),
             );
         }
         if let Some(h) = self.fixed_step

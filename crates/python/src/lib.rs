@@ -40,6 +40,19 @@ fn sysid_error(message: impl std::fmt::Display) -> PyErr {
     SysidError::new_err(message.to_string())
 }
 
+/// `SysidError` where the fit could not begin at its start, as the command line says it:
+/// the values there and why.
+fn unusable_start(problem: &Problem<AnySystem>, e: &sysid_core::Estimate) -> PyResult<()> {
+    let sysid_core::Termination::StartFailed(failure) = &e.termination else { return Ok(()) };
+    Err(sysid_error(match failure.at() {
+        Some(at) => format!(
+            "the starting guess cannot be used ({}): {failure}",
+            sysid_core::format::named_point(&problem.names(), at)
+        ),
+        None => format!("the starting guess cannot be used: {failure}"),
+    }))
+}
+
 /// A numpy vector.
 type Array1<'py> = Bound<'py, PyArray1<f64>>;
 /// A vector argument: a numpy array, or anything numpy's `asarray` makes a 1-D array of
@@ -53,11 +66,13 @@ fn entries(v: &Vector<'_>) -> Vec<f64> {
 
 /// A whole number argument that must be at least `least`, taken as a Python int of any sign
 /// so that a negative one is named (pyo3 would raise `OverflowError` without the name).
-fn whole(name: &str, value: i64, least: i64) -> PyResult<u64> {
+fn whole(name: &str, value: i128, least: i128) -> PyResult<u64> {
     if value < least {
         return Err(PyValueError::new_err(format!("{name} must be at least {least}, got {value}")));
     }
-    Ok(value.unsigned_abs())
+    u64::try_from(value).map_err(|_| {
+        PyValueError::new_err(format!("{name} must be at most {}, got {value}", u64::MAX))
+    })
 }
 
 /// A seed: any non-negative int below 2⁶⁴.
@@ -257,7 +272,7 @@ impl Evaluated<'_> {
     /// The Fisher information of the objective on `scale`: JᵀJ (or the exact information
     /// where σ depends on the unknowns) for the free unknowns, 2·n_s/s² for a noise scale s
     /// of n_s samples (a normal's information about its σ), 0 between the two.
-    fn fisher(&self, scale: Scale) -> DMatrix<f64> {
+    fn fisher(&self, scale: Scale) -> PyResult<DMatrix<f64>> {
         let k = self.lin.normal.nrows();
         let sigma = self.problem.scale_values();
         let mut f = DMatrix::zeros(k + sigma.len(), k + sigma.len());
@@ -267,13 +282,28 @@ impl Evaluated<'_> {
             f[(k + g, k + g)] = 2.0 * *n as f64 * (c / sigma[g]).powi(2);
         }
         if scale == Scale::Linear {
+            // On the parameter scale an unknown's information is c² times its own (c = dθ/dz,
+            // θ itself on a log scale): where that underflowed, the value cannot be had back
+            // from it (it was NaN at θ = 1e-200).
+            if let Some(rows) = self.lin.residuals.as_ref() {
+                for i in 0..k {
+                    let seen = rows.jacobian.column(i).iter().any(|v| *v != 0.0);
+                    if seen && f[(i, i)].abs() < f64::MIN_POSITIVE {
+                        return Err(PyValueError::new_err(format!(
+                            "the Fisher information about `{}` cannot be had on the linear scale here: on the parameter scale it is (dθ/dz)² times as large, dθ/dz = {}, and underflows (scale=\"parameter\" gives it as it is)",
+                            self.problem.names()[i],
+                            sysid_core::format::shortest(self.chain[i]),
+                        )));
+                    }
+                }
+            }
             for i in 0..f.nrows() {
                 for j in 0..f.ncols() {
-                    f[(i, j)] /= self.chain[i] * self.chain[j];
+                    f[(i, j)] = f[(i, j)] / self.chain[i] / self.chain[j];
                 }
             }
         }
-        f
+        Ok(f)
     }
 
     /// The weighted residuals and their Jacobian on `scale`: ∂r/∂s = −r/s for a noise
@@ -367,13 +397,16 @@ impl PyProblem {
         Ok(Self { problem: Arc::new(problem), name: name.to_string() })
     }
 
-    /// The same problem integrated with other tolerances or another scheme.
-    #[pyo3(signature = (rtol=None, atol=None, scheme=None))]
+    /// The same problem integrated with other tolerances or another scheme (`fixed_step`: a
+    /// fixed step size, which `rk4` needs, and which turns error control off for `dopri5` and
+    /// `dop853`).
+    #[pyo3(signature = (rtol=None, atol=None, scheme=None, fixed_step=None))]
     fn with_integrator(
         &self,
         rtol: Option<f64>,
         atol: Option<f64>,
         scheme: Option<&str>,
+        fixed_step: Option<f64>,
     ) -> PyResult<Self> {
         let mut integrator = *self.problem.integrator();
         if let Some(rtol) = rtol {
@@ -389,6 +422,11 @@ impl PyProblem {
                         "unknown scheme {scheme:?} (schemes: dopri5, dop853, rk4, rodas4, rodas5p, bdf, auto)"
                     ))
                 })?;
+            // A fixed step belongs to the scheme it was given for.
+            integrator.fixed_step = None;
+        }
+        if fixed_step.is_some() {
+            integrator.fixed_step = fixed_step;
         }
         integrator.validate().map_err(|e| PyValueError::new_err(e.to_string()))?;
         let problem = (*self.problem)
@@ -417,11 +455,13 @@ impl PyProblem {
         self.parameters().iter().map(|u| u.guess).collect::<Vec<_>>().into_pyarray(py)
     }
 
-    /// (lower, upper) on the linear scale; ±inf where there is no bound.
+    /// (lower, upper) on the linear scale; ±inf where there is no bound, but 0 below a
+    /// log-scaled parameter without one (its value is positive: −inf on the parameter scale).
     #[getter]
     fn bounds<'py>(&self, py: Python<'py>) -> (Array1<'py>, Array1<'py>) {
         let list = self.parameters();
-        let lo: Vec<f64> = list.iter().map(|u| u.min.unwrap_or(f64::NEG_INFINITY)).collect();
+        let least = |u: &Unknown| if u.log { 0.0 } else { f64::NEG_INFINITY };
+        let lo: Vec<f64> = list.iter().map(|u| u.min.unwrap_or_else(|| least(u))).collect();
         let hi: Vec<f64> = list.iter().map(|u| u.max.unwrap_or(f64::INFINITY)).collect();
         (lo.into_pyarray(py), hi.into_pyarray(py))
     }
@@ -511,7 +551,7 @@ impl PyProblem {
         scale: &str,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let scale = Scale::parse(scale)?;
-        Ok(matrix(py, &self.evaluate(py, &entries(&x), scale)?.fisher(scale)))
+        Ok(matrix(py, &self.evaluate(py, &entries(&x), scale)?.fisher(scale)?))
     }
 
     /// The weighted residuals r and their Jacobian ∂r/∂x on `scale`: a row per measurement,
@@ -603,13 +643,13 @@ impl PyProblem {
         &self,
         py: Python<'py>,
         method: Option<&str>,
-        starts: Option<i64>,
+        starts: Option<i128>,
         seed: i128,
         sampling: &str,
         include_nominal: bool,
-        max_iterations: Option<i64>,
+        max_iterations: Option<i128>,
         gtol: Option<f64>,
-        max_integrations: Option<i64>,
+        max_integrations: Option<i128>,
         max_seconds: Option<f64>,
         fix: Option<std::collections::BTreeMap<String, f64>>,
         start: Option<std::collections::BTreeMap<String, f64>>,
@@ -650,18 +690,28 @@ impl PyProblem {
             ),
             true => Arc::clone(&self.problem),
         };
+        let sampling = match sampling {
+            "uniform" => Sampling::Uniform,
+            "latin-hypercube" => Sampling::LatinHypercube,
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "sampling must be \"uniform\" or \"latin-hypercube\", not {sampling:?}"
+                )));
+            }
+        };
+        if starts.is_none() && !include_nominal {
+            return Err(PyValueError::new_err(
+                "include_nominal=False is for a multistart: give starts=N (one fit begins at the nominal point or at start=)",
+            ));
+        }
+        if starts.is_some() && !include_nominal && !start.is_empty() {
+            return Err(PyValueError::new_err(
+                "start sets the first start of the multistart, which include_nominal=False draws instead: give one of them",
+            ));
+        }
         let options = match starts {
             None => None,
             Some(n) => {
-                let sampling = match sampling {
-                    "uniform" => Sampling::Uniform,
-                    "latin-hypercube" => Sampling::LatinHypercube,
-                    _ => {
-                        return Err(PyValueError::new_err(format!(
-                            "sampling must be \"uniform\" or \"latin-hypercube\", not {sampling:?}"
-                        )));
-                    }
-                };
                 let options = MultistartOptions {
                     starts: n,
                     seed,
@@ -696,9 +746,7 @@ impl PyProblem {
             return Err(error);
         }
         let (estimate, starts) = outcome.map_err(sysid_error)?;
-        if estimate.start_failed() {
-            return Err(sysid_error(format!("the start cannot be used: {}", estimate.termination)));
-        }
+        unusable_start(&problem, &estimate)?;
         let mut value =
             serde_json::to_value(estimate.record(&self.name)).expect("a fit record serialises");
         if let (Some(s), Some(map)) = (starts, value.as_object_mut()) {
@@ -726,8 +774,8 @@ impl PyProblem {
         method: Option<&str>,
         only: Option<Vec<String>>,
         simultaneous: bool,
-        max_points: i64,
-        max_iterations: Option<i64>,
+        max_points: i128,
+        max_iterations: Option<i128>,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
         if let Some(p) = &progress
@@ -764,8 +812,16 @@ impl PyProblem {
         let problem = &self.problem;
         let raised = Arc::new(Mutex::new(None));
         let hears_optimum = progress.as_ref().map(|p| p.clone_ref(py));
+        let optimum = py.allow_threads(|| {
+            heard(hears_optimum, &raised, Some("optimum"), || method.fit(problem))
+        });
+        if let Some(error) = raised.lock().unwrap_or_else(|e| e.into_inner()).take() {
+            return Err(error);
+        }
+        let optimum = optimum.map_err(sysid_error)?;
+        // No profile from a start every fit fails from (its NLLs were all NaN).
+        unusable_start(problem, &optimum)?;
         let profiled = py.allow_threads(|| {
-            let optimum = heard(hears_optimum, &raised, Some("optimum"), || method.fit(problem))?;
             let told = |p: sysid_profile::Progress<'_>| {
                 let Some(callback) = &progress else { return };
                 tell(callback, &raised, |d| match p {
@@ -818,11 +874,17 @@ impl PyProblem {
     }
 
     fn __repr__(&self) -> String {
+        // The parameters are the unknowns and the noise scales, as `parameter_names` has them.
+        let scales = self.problem.scales().len();
         format!(
-            "sysid.Problem({:?}: {} unknowns, {} experiments)",
+            "sysid.Problem({:?}: {} parameters ({} unknowns, {} noise scale{}), {} experiment{})",
             self.name,
+            self.parameters().len(),
             self.problem.unknowns().len(),
-            self.problem.experiments().len()
+            scales,
+            if scales == 1 { "" } else { "s" },
+            self.problem.experiments().len(),
+            if self.problem.experiments().len() == 1 { "" } else { "s" }
         )
     }
 }

@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import subprocess
+import tempfile
 import unittest
 
 import numpy as np
@@ -431,6 +432,78 @@ class FallingBody(unittest.TestCase):
         _, jac = p.residuals_and_jacobian(p.nominal)
         t = np.arange(4.0)
         np.testing.assert_allclose(jac, np.column_stack([np.ones(4), t, t**2 / 2]), atol=1e-9)
+
+
+class Probed(unittest.TestCase):
+    """What a probe of the package found: each once returned a false number, aborted the
+    interpreter or ignored what it was given."""
+
+    def test_a_count_too_large_is_refused_by_name(self):
+        p = sysid.Problem.from_model(FALLING)
+        # 10**12 starts asked for 8 TB and aborted the process.
+        with self.assertRaisesRegex(ValueError, "starts must be at most 1000000, got 1000000000000"):
+            p.fit(starts=10**12)
+        # 2**63 raised OverflowError without the argument's name.
+        with self.assertRaisesRegex(ValueError, "max_iterations must be at most"):
+            p.fit(max_iterations=2**64)
+
+    def test_a_start_no_fit_can_use_raises_once_said(self):
+        path = os.path.join(self.scratch(), "blow.toml")
+        with open(path, "w") as f:
+            f.write('states = ["x"]\nparameters = ["k"]\n[equations]\nx = "k * x * x"\n'
+                    '[initial]\nx = 1.0\n[unknowns]\nk = { guess = 3, min = 2, max = 100, log = true }\n'
+                    '[data]\nfile = "blow.csv"\n')
+        with open(os.path.join(self.scratch(), "blow.csv"), "w") as f:
+            f.write("t,x\n0,1\n1,2\n2,3\n3,4\n")
+        p = sysid.Problem.from_model(path)
+        for call in (p.fit, p.profile):
+            with self.assertRaises(sysid.SysidError) as raised:
+                call()
+            message = str(raised.exception)
+            # The profile returned NaN everywhere; the fit said "the start cannot be used" twice.
+            self.assertTrue(message.startswith("the starting guess cannot be used (k = 3"), message)
+            self.assertIn("): the solution blows up: state x reaches", message)
+            self.assertEqual(message.count("cannot be used"), 1, message)
+
+    def test_keywords_are_not_ignored(self):
+        p = sysid.Problem.from_model(FALLING)
+        with self.assertRaisesRegex(ValueError, 'sampling must be "uniform" or "latin-hypercube"'):
+            p.fit(sampling="bogus")
+        with self.assertRaisesRegex(ValueError, "include_nominal=False is for a multistart"):
+            p.fit(include_nominal=False)
+        with self.assertRaisesRegex(ValueError, "start sets the first start of the multistart"):
+            p.fit(starts=3, include_nominal=False, start={"g": 30.0})
+        with self.assertRaisesRegex(ValueError, "max_seconds must be a finite non-negative number"):
+            p.fit(max_seconds=float("inf"))
+
+    def test_rk4_takes_its_fixed_step(self):
+        # y = y0 + v0 t + g t²/2 is a cubic-free polynomial: RK4 integrates it exactly.
+        p = sysid.Problem.from_model(FALLING)
+        rk4 = p.with_integrator(scheme="rk4", fixed_step=0.5)
+        x = np.array([-0.25, -0.25, 32.5])
+        self.assertLessEqual(abs(rk4.objective(x) - p.objective(x)), 1e-12)
+        with self.assertRaisesRegex(ValueError, "fixed_step is needed by RK4"):
+            p.with_integrator(scheme="rk4")
+
+    def test_a_log_scaled_parameter_is_positive_in_its_bounds(self):
+        p = sysid.Problem.from_model(os.path.join(ROOT, "examples", "kinetics", "model.toml"))
+        lo, hi = p.bounds
+        self.assertEqual(list(lo), [0.0, 0.0])
+        self.assertEqual(list(hi), [np.inf, np.inf])
+        self.assertIn("2 parameters (2 unknowns, 0 noise scales), 1 experiment", repr(p))
+
+    def test_the_fisher_information_is_never_nan(self):
+        p = sysid.Problem.from_petab(BOEHM)
+        x = np.array(p.nominal)
+        x[0] = 1e-200
+        with self.assertRaisesRegex(ValueError, "cannot be had on the linear scale here"):
+            p.fisher(x)
+        self.assertTrue(np.all(np.isfinite(p.fisher(p.to_parameter_scale(x), scale="parameter"))))
+
+    def scratch(self):
+        if not hasattr(self, "_scratch"):
+            self._scratch = tempfile.mkdtemp(prefix="sysid-python-")
+        return self._scratch
 
 
 class Catalogue(unittest.TestCase):

@@ -101,12 +101,14 @@ impl ReportOptions {
         }
         if !(self.petab_budget > 0.0 && self.petab_budget <= 1e9) {
             anyhow::bail!(
-                "--petab-budget must be a positive number of seconds, got {}",
+                "--petab-budget must be a finite positive number of seconds, got {}",
                 self.petab_budget
             );
         }
         if let Some(s) = self.petab_start_seconds.filter(|s| !(*s > 0.0 && *s <= 1e9)) {
-            anyhow::bail!("--petab-start-seconds must be a positive number of seconds, got {s}");
+            anyhow::bail!(
+                "--petab-start-seconds must be a finite positive number of seconds, got {s}"
+            );
         }
         if self.grid < 2 {
             anyhow::bail!("--grid must be at least 2, got {}", self.grid);

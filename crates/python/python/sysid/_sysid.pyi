@@ -32,6 +32,7 @@ class Problem:
         rtol: Optional[float] = None,
         atol: Optional[float] = None,
         scheme: Optional[Literal["dopri5", "dop853", "rk4", "rodas4", "rodas5p", "bdf", "auto"]] = None,
+        fixed_step: Optional[float] = None,
     ) -> "Problem": ...
     @property
     def name(self) -> str: ...

@@ -48,8 +48,15 @@ def problem(p, **kwargs):
 
     lo, hi = p.bounds
     scales = p.scales
-    lb = np.array([np.log(v) if s == "log" else v for v, s in zip(lo, scales)])
-    ub = np.array([np.log(v) if s == "log" else v for v, s in zip(hi, scales)])
+
+    def on_scale(v, s):
+        # A log-scaled parameter without a lower bound has 0 there: -inf on its scale.
+        if s != "log":
+            return v
+        return -np.inf if v == 0 else np.log(v)
+
+    lb = np.array([on_scale(v, s) for v, s in zip(lo, scales)])
+    ub = np.array([on_scale(v, s) for v, s in zip(hi, scales)])
     return pypesto.Problem(
         objective=objective(p), lb=lb, ub=ub, x_names=list(p.parameter_names), **kwargs
     )
