@@ -278,7 +278,11 @@ fn a_negative_number_reaches_the_options_own_check() {
             [&fitting[..], &["--step", "--until"]].concat(),
         ),
         ("simulate", vec!["--system", "falling-body-continuous"], vec!["--seed", "--step"]),
-        ("simulate", vec!["--model", model, "--times", "0:1:1"], vec!["--times", "--set"]),
+        (
+            "simulate",
+            vec!["--model", model, "--times", "0:1:1"],
+            vec!["--times", "--set", "--rtol", "--atol", "--fixed-step", "--max-steps"],
+        ),
         ("study", vec!["--system", "falling-body", "--out", &out], study_options.clone()),
         (
             "study",
