@@ -17,9 +17,9 @@ use std::sync::{Arc, Mutex};
 
 use nalgebra::DMatrix;
 use numpy::ndarray::Array2;
-use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1};
 use pyo3::create_exception;
-use pyo3::exceptions::{PyException, PyValueError};
+use pyo3::exceptions::{PyException, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use sysid_core::observer::{IterateReport, observe};
@@ -56,12 +56,40 @@ fn unusable_start(problem: &Problem<AnySystem>, e: &sysid_core::Estimate) -> PyR
 /// A numpy vector.
 type Array1<'py> = Bound<'py, PyArray1<f64>>;
 /// A vector argument: a numpy array, or anything numpy's `asarray` makes a 1-D array of
-/// floats of (a list, a tuple, integers, a strided view such as a matrix's column).
-type Vector<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
+/// floats of (a list, a tuple, integers, a strided view such as a matrix's column). Anything
+/// else is refused by what it is (pyo3's own refusal named its Rust type, `PyArray<T, D>`).
+struct Vector(Vec<f64>);
+
+impl<'py> FromPyObject<'py> for Vector {
+    fn extract_bound(ob: &Bound<'py, PyAny>) -> PyResult<Self> {
+        let refuse = |got: String| {
+            PyTypeError::new_err(format!(
+                "expected a 1-D array of numbers (a numpy array, a list or a tuple), got {got}"
+            ))
+        };
+        let kind = || ob.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        if ob.is_none() {
+            return Err(refuse("None".into()));
+        }
+        let numpy = ob.py().import("numpy")?;
+        let array = numpy
+            .call_method1("asarray", (ob, numpy.getattr("float64")?))
+            .map_err(|_| refuse(format!("a {} that is not numbers", kind())))?;
+        let ndim: usize = array.getattr("ndim")?.extract()?;
+        if ndim != 1 {
+            return Err(refuse(match ndim {
+                0 => format!("a single {}", kind()),
+                _ => format!("a {ndim}-D array of shape {}", array.getattr("shape")?.str()?),
+            }));
+        }
+        let array: PyReadonlyArray1<'py, f64> = array.extract()?;
+        Ok(Vector(array.as_array().to_vec()))
+    }
+}
 
 /// A vector argument's values.
-fn entries(v: &Vector<'_>) -> Vec<f64> {
-    v.as_array().to_vec()
+fn entries(v: &Vector) -> Vec<f64> {
+    v.0.clone()
 }
 
 /// A whole number argument that must be at least `least`, taken as a Python int of any sign
@@ -202,7 +230,7 @@ impl PyProblem {
     fn value_and_gradient<'py>(
         &self,
         py: Python<'py>,
-        x: Vector<'py>,
+        x: Vector,
         (scale, sensitivities): (&str, &str),
         priors: bool,
     ) -> PyResult<(f64, Array1<'py>)> {
@@ -483,7 +511,7 @@ impl PyProblem {
     fn to_parameter_scale<'py>(
         &self,
         py: Python<'py>,
-        x: Vector<'py>,
+        x: Vector,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         Ok(self.coordinates(&entries(&x), Scale::Linear)?.into_pyarray(py))
     }
@@ -492,7 +520,7 @@ impl PyProblem {
     fn to_linear_scale<'py>(
         &self,
         py: Python<'py>,
-        z: Vector<'py>,
+        z: Vector,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let z = self.coordinates(&entries(&z), Scale::Parameter)?;
         Ok(self.values(&z).into_pyarray(py))
@@ -500,7 +528,7 @@ impl PyProblem {
 
     /// The negative log-likelihood at x (priors excluded, as the fit JSON's `nll`).
     #[pyo3(signature = (x, scale="linear"))]
-    fn nll(&self, py: Python<'_>, x: Vector<'_>, scale: &str) -> PyResult<f64> {
+    fn nll(&self, py: Python<'_>, x: Vector, scale: &str) -> PyResult<f64> {
         self.evaluate(py, &entries(&x), Scale::parse(scale)?)?.nll()
     }
 
@@ -511,7 +539,7 @@ impl PyProblem {
     fn nll_and_gradient<'py>(
         &self,
         py: Python<'py>,
-        x: Vector<'py>,
+        x: Vector,
         scale: &str,
         sensitivities: &str,
     ) -> PyResult<(f64, Array1<'py>)> {
@@ -521,7 +549,7 @@ impl PyProblem {
     /// The objective the fits minimise at x: the NLL plus the priors' negative log-density
     /// where the problem has priors (what pyPESTO minimises), the NLL otherwise.
     #[pyo3(signature = (x, scale="linear"))]
-    fn objective(&self, py: Python<'_>, x: Vector<'_>, scale: &str) -> PyResult<f64> {
+    fn objective(&self, py: Python<'_>, x: Vector, scale: &str) -> PyResult<f64> {
         self.evaluate(py, &entries(&x), Scale::parse(scale)?)?.objective()
     }
 
@@ -532,7 +560,7 @@ impl PyProblem {
     fn objective_and_gradient<'py>(
         &self,
         py: Python<'py>,
-        x: Vector<'py>,
+        x: Vector,
         scale: &str,
         sensitivities: &str,
     ) -> PyResult<(f64, Array1<'py>)> {
@@ -547,7 +575,7 @@ impl PyProblem {
     fn fisher<'py>(
         &self,
         py: Python<'py>,
-        x: Vector<'py>,
+        x: Vector,
         scale: &str,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let scale = Scale::parse(scale)?;
@@ -562,7 +590,7 @@ impl PyProblem {
     fn residuals_and_jacobian<'py>(
         &self,
         py: Python<'py>,
-        x: Vector<'py>,
+        x: Vector,
         scale: &str,
     ) -> PyResult<(Array1<'py>, Array2Py<'py>)> {
         let scale = Scale::parse(scale)?;
@@ -577,8 +605,8 @@ impl PyProblem {
     fn simulate<'py>(
         &self,
         py: Python<'py>,
-        times: Vector<'py>,
-        x: Option<Vector<'py>>,
+        times: Vector,
+        x: Option<Vector>,
         experiment: Option<Bound<'py, PyAny>>,
         scale: &str,
     ) -> PyResult<Bound<'py, PyDict>> {
@@ -592,7 +620,7 @@ impl PyProblem {
         let names = self.experiments();
         let index = match experiment {
             None => 0,
-            Some(e) => match e.extract::<i64>() {
+            Some(e) => match e.extract::<i128>() {
                 Ok(i) if usize::try_from(i).is_ok_and(|i| i < names.len()) => i as usize,
                 Ok(i) => {
                     return Err(PyValueError::new_err(format!(
@@ -601,7 +629,13 @@ impl PyProblem {
                     )));
                 }
                 Err(_) => {
-                    let name: String = e.extract()?;
+                    let name: String = e.extract().map_err(|_| {
+                        let kind = e.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+                        PyTypeError::new_err(format!(
+                            "experiment is an index or a name, got a {kind}: {}",
+                            e.repr().map(|r| r.to_string()).unwrap_or_default()
+                        ))
+                    })?;
                     names.iter().position(|n| *n == name).ok_or_else(|| {
                         PyValueError::new_err(format!(
                             "no experiment {name:?} (experiments: {})",
@@ -772,7 +806,7 @@ impl PyProblem {
         &self,
         py: Python<'py>,
         method: Option<&str>,
-        only: Option<Vec<String>>,
+        only: Option<Bound<'py, PyAny>>,
         simultaneous: bool,
         max_points: i128,
         max_iterations: Option<i128>,
@@ -791,7 +825,23 @@ impl PyProblem {
         let method = build(method, &settings)?;
         let names = self.problem.names();
         let mut which = Vec::new();
-        for n in only.unwrap_or_default() {
+        let only: Vec<String> = match only {
+            None => Vec::new(),
+            Some(o) if o.is_instance_of::<pyo3::types::PyString>() => {
+                return Err(PyTypeError::new_err(format!(
+                    "only takes a list of names, got the name {}: write only=[{}]",
+                    o.repr()?,
+                    o.repr()?
+                )));
+            }
+            Some(o) => o.extract().map_err(|_| {
+                PyTypeError::new_err(format!(
+                    "only takes a list of names, got {}",
+                    o.repr().map(|r| r.to_string()).unwrap_or_default()
+                ))
+            })?,
+        };
+        for n in only {
             let i = names.iter().position(|x| *x == n).ok_or_else(|| {
                 PyValueError::new_err(format!(
                     "only: {n:?} is not a profiled unknown (unknowns: {}; noise scales set in closed form are not profiled)",
@@ -856,7 +906,7 @@ impl PyProblem {
     fn _rust_seconds_per_evaluation(
         &self,
         py: Python<'_>,
-        z: Vector<'_>,
+        z: Vector,
         repeat: usize,
     ) -> PyResult<f64> {
         let mut z = self.coordinates(&entries(&z), Scale::Parameter)?;

@@ -315,6 +315,21 @@ class Boehm(unittest.TestCase):
             self.p.profile(only=["k_phos"], max_points=0)
         with self.assertRaisesRegex(TypeError, "argument 'x'"):
             self.p.nll(np.ones((2, 9)))
+        # What was given, not the Rust type it could not become (`PyArray<T, D>`).
+        for x, got in [
+            (np.ones((1, 9)), r"got a 2-D array of shape \(1, 9\)"),
+            (3.0, "got a single float"),
+            (None, "got None"),
+            ("abc", "got a str that is not numbers"),
+        ]:
+            with self.assertRaisesRegex(TypeError, "expected a 1-D array of numbers.*" + got):
+                self.p.nll(x)
+        with self.assertRaisesRegex(TypeError, "experiment is an index or a name, got a float: 0.5"):
+            self.p.simulate([1.0], experiment=0.5)
+        with self.assertRaisesRegex(ValueError, "experiment 1180591620717411303424: the problem has 1 experiments"):
+            self.p.simulate([1.0], experiment=2**70)
+        with self.assertRaisesRegex(TypeError, r"only takes a list of names, got the name 'k_phos': write only=\['k_phos'\]"):
+            self.p.profile(only="k_phos")
         with self.assertRaisesRegex(ValueError, "experiment -1: the problem has 1 experiments"):
             self.p.simulate([1.0], experiment=-1)
         # A noise scale of 0 (its ln far below any bound) names the residual it made infinite.
