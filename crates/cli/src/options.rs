@@ -304,7 +304,7 @@ pub struct StartsArgs {
     /// fit, how many starts reached it (converged within 0.1 of its objective), the
     /// distinct minima and every start's outcome (the waterfall, in the JSON). Each start
     /// may take 1000 iterations (--max-iterations); the start that ran out of them lowest,
-    /// below every converged start, may be fitted on once more at the end.
+    /// below every converged start, may be fitted on once more at the end. At most a million.
     #[arg(long, value_name = "N", value_parser = count, allow_hyphen_values = true)]
     pub starts: Option<usize>,
     /// Seed of the starts' draws (default 1).
