@@ -435,8 +435,23 @@ impl<S: System> Problem<S> {
         self.scales.iter().map(|&j| self.held[j]).collect()
     }
 
-    /// The value of every declared unknown at the free unknowns' coordinates z.
+    /// The value of every declared unknown at the free unknowns' coordinates z. Every
+    /// evaluation of the problem at z (cost, residuals, linearization, predictions) goes
+    /// through it.
+    ///
+    /// # Panics
+    ///
+    /// Where z has not one coordinate per free unknown: a shorter z took the guess for the
+    /// unknowns it lacked, and a cost came back for a point never asked for.
     pub fn values_at(&self, z: &[f64]) -> Vec<f64> {
+        assert_eq!(
+            z.len(),
+            self.free.len(),
+            "a point of {} coordinates for {} free unknowns ({})",
+            z.len(),
+            self.free.len(),
+            self.unknowns.names().join(", ")
+        );
         let mut v = self.held.clone();
         for ((u, &j), &zi) in self.unknowns.list().iter().zip(&self.free).zip(z) {
             v[j] = u.value(zi);

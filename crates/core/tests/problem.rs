@@ -369,3 +369,19 @@ fn a_flat_unknown_a_hair_from_its_bound_is_moved_onto_it() {
         assert_eq!(sysid_core::method::onto_bounds(&p, &lin, 1e-6), None);
     }
 }
+
+/// A point with one coordinate too few took the guess for the missing unknown and gave a cost
+/// for a point never asked for (found by a probe of the library): it panics, naming the
+/// counts, as its `# Panics` says.
+#[test]
+#[should_panic(expected = "a point of 1 coordinates for 3 free unknowns (y, v, g)")]
+fn a_point_of_the_wrong_length_is_not_evaluated() {
+    let p = Problem::builder(fall())
+        .data(table())
+        .unknown("y", 0.0)
+        .unknown("v", 0.0)
+        .unknown("g", 32.0)
+        .build()
+        .unwrap();
+    let _ = p.cost(&[1.0]);
+}

@@ -394,7 +394,8 @@ pub struct StartDone {
     pub done: usize,
     /// How many starts there are (those the budget leaves out included).
     pub total: usize,
-    /// Its final objective ([`objective`]), as the waterfall gives it.
+    /// Its final objective (the negative log-likelihood plus the priors' term, or ε/2 without
+    /// a likelihood), as the waterfall gives it.
     pub objective: Option<f64>,
     /// Whether its certificate holds.
     pub converged: bool,

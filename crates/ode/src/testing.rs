@@ -55,7 +55,7 @@ pub fn assert_close_abs(actual: f64, expected: f64, tol: f64) {
     assert!(err <= tol, "{actual:e} differs from {expected:e} by {err:.3e}, allowed {tol:.1e}");
 }
 
-/// max over m, c of |a_m[c] − b_m[c]| / max_m |b_m[c]|, m over `count` output times: the
+/// max over m, c of |a_m(c) − b_m(c)| / max_m |b_m(c)|, m over `count` output times: the
 /// largest difference of two solutions, each component scaled by its largest magnitude in b
 /// (so a sensitivity of 1e5 and one of 1e-3 are judged alike).
 pub fn scaled_difference(
