@@ -63,6 +63,10 @@ pub enum ProfileError {
     /// the fit again from a better point.
     #[error("a fit panicked, a defect in sysid (please report it with the command): {0}")]
     Panicked(String),
+    /// What the profiles were asked for cannot be traced: an option out of its range, an
+    /// unknown the problem does not have, an optimum of another problem.
+    #[error("{0}")]
+    Invalid(String),
 }
 
 /// How many times [`profile_from_optimum`] fits again from a better point a profile found.
@@ -179,6 +183,28 @@ pub struct ProfileOptions {
 impl Default for ProfileOptions {
     fn default() -> Self {
         Self { threshold: POINTWISE_95, max_steps: 60, locate: 1e-6 }
+    }
+}
+
+impl ProfileOptions {
+    /// Checks the options: a threshold that is finite and positive (at −1 every profile was
+    /// "identifiable" with a zero-width interval), at least one point a side, and a locating
+    /// fraction in (0, 1).
+    pub fn validate(&self) -> Result<(), ProfileError> {
+        let invalid = |what: String| Err(ProfileError::Invalid(what));
+        if !(self.threshold > 0.0 && self.threshold.is_finite()) {
+            return invalid(format!(
+                "the threshold must be a finite positive ΔNLL, got {}",
+                self.threshold
+            ));
+        }
+        if self.max_steps == 0 {
+            return invalid("max_steps must be at least 1".into());
+        }
+        if !(self.locate > 0.0 && self.locate < 1.0) {
+            return invalid(format!("locate must lie in (0, 1), got {}", self.locate));
+        }
+        Ok(())
     }
 }
 
@@ -352,7 +378,21 @@ where
     S: System + Sync,
     M: Method<S> + Sync + ?Sized,
 {
+    options.validate()?;
     let k = problem.unknowns().len();
+    if let Some(&i) = only.iter().find(|&&i| i >= k) {
+        return Err(ProfileError::Invalid(format!(
+            "unknown {i} to profile: the problem has {k} ({})",
+            problem.unknowns().names().join(", ")
+        )));
+    }
+    if optimum.names != problem.unknowns().names() || optimum.values.len() != k {
+        return Err(ProfileError::Invalid(format!(
+            "the optimum is a fit of other unknowns ({}) than the problem's ({})",
+            optimum.names.join(", "),
+            problem.unknowns().names().join(", ")
+        )));
+    }
     let which: Vec<usize> = if only.is_empty() { (0..k).collect() } else { only.to_vec() };
     let done = std::sync::atomic::AtomicUsize::new(0);
     let results: Vec<Result<Result<Profile, Point>, ProfileError>> = which

@@ -210,3 +210,33 @@ fn a_budget_too_short_to_walk_is_undecided() {
         }
     }
 }
+
+/// What cannot be traced is refused, not traced into a verdict (found by a probe of the
+/// library): a threshold of −1 made every profile "identifiable" with a zero-width interval,
+/// an index beyond the unknowns panicked, and the optimum of another problem gave zero-width
+/// intervals (here a fit with g held).
+#[test]
+fn what_cannot_be_traced_is_refused() {
+    let case = sysid_systems::falling_body::falling_body();
+    let problem = case.problem(1).unwrap();
+    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
+    let optimum = goodman.fit(&problem).unwrap();
+    let refused =
+        |only: &[usize], options: ProfileOptions, optimum: &sysid_core::Estimate| match profile(
+            &*goodman, &problem, optimum, only, &options,
+        ) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("traced: {only:?}"),
+        };
+    let options = |threshold: f64| ProfileOptions { threshold, ..ProfileOptions::default() };
+    for threshold in [-1.0, 0.0, f64::NAN, f64::INFINITY] {
+        let e = refused(&[], options(threshold), &optimum);
+        assert!(e.starts_with("the threshold must be a finite positive ΔNLL"), "{e}");
+    }
+    let e = refused(&[5], ProfileOptions::default(), &optimum);
+    assert_eq!(e, "unknown 5 to profile: the problem has 3 (y, v, g)");
+    let other = problem.clone().with_fixed(&[("g".to_string(), 32.0)]).unwrap();
+    let elsewhere = goodman.fit(&other).unwrap();
+    let e = refused(&[], ProfileOptions::default(), &elsewhere);
+    assert!(e.starts_with("the optimum is a fit of other unknowns ("), "{e}");
+}
