@@ -455,6 +455,19 @@ impl<'a, S: System> Ivp<'a, S> {
         Ok(())
     }
 
+    /// Checks that the weights given to [`weighted`](Self::weighted), if any, are one per
+    /// column of `wrt` (an empty list panicked inside the integration).
+    fn check_weights(&self, wrt: &[Wrt]) -> Result<(), OdeError> {
+        match self.weights {
+            Some(w) if w.len() != wrt.len() => Err(OdeError::Dimension {
+                what: "the sensitivity columns' weights",
+                actual: w.len(),
+                expected: wrt.len(),
+            }),
+            _ => Ok(()),
+        }
+    }
+
     /// The state at `times` (non-decreasing; any side of t0).
     pub fn solve(&self, integrator: &Integrator, times: &[f64]) -> Result<Trajectory, OdeError> {
         self.check()?;
@@ -475,6 +488,7 @@ impl<'a, S: System> Ivp<'a, S> {
     ) -> Result<SensitivityTrajectory, OdeError> {
         self.check()?;
         check_wrt(self.system, wrt)?;
+        self.check_weights(wrt)?;
         let n = self.y0.len();
         // Columns of parameters the right-hand side does not depend on are zero for all t
         // (their initial values are 0): only the others are integrated.
@@ -507,8 +521,11 @@ impl<'a, S: System> Ivp<'a, S> {
     ) -> Result<SensitivityTrajectory, OdeError> {
         self.check()?;
         check_wrt(self.system, wrt)?;
+        self.check_weights(wrt)?;
         let (n, k) = (self.y0.len(), wrt.len());
-        assert_eq!(s0.len(), n * k, "a sensitivity per state and column");
+        if s0.len() != n * k {
+            return Err(OdeError::Dimension { what: "s0", actual: s0.len(), expected: n * k });
+        }
         let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
         if let Some(weights) = self.weights {
             rhs = rhs.weighted(weights);

@@ -182,6 +182,11 @@ impl Integrator {
         {
             return bad("fixed_step", format!("must be positive, got {}", shortest(h)));
         }
+        if let Some(h) = self.initial_step
+            && !(h > 0.0 && h.is_finite())
+        {
+            return bad("initial_step", format!("must be positive, got {}", shortest(h)));
+        }
         if self.scheme == Scheme::Auto && self.fixed_step.is_some() {
             return bad(
                 "fixed_step",

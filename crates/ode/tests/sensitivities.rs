@@ -313,3 +313,28 @@ fn many_columns_in_chunks_match_one_column_at_a_time() {
         }
     }
 }
+
+/// Inputs of the wrong size are errors, as the crate's docs promise (found by a probe of the
+/// library, where they panicked): weights not one per column, an s0 not one per state and
+/// column; and a first step that is not positive is an invalid setting.
+#[test]
+fn inputs_of_the_wrong_size_are_errors() {
+    let sys = Decay::new();
+    let wrt = [Wrt::InitialValue(0), Wrt::Parameter(0)];
+    let ivp = Ivp::new(&sys, 0.0, &[2.0], &[0.3]);
+    let weighted = Ivp::new(&sys, 0.0, &[2.0], &[0.3]).weighted(&[]);
+    let e = weighted.solve_sensitivities(&tight(), &wrt, &[1.0]).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        "dimension mismatch: the sensitivity columns' weights has length 0, expected 2"
+    );
+    let e = ivp.solve_sensitivities_from(&tight(), &wrt, &[1.0], &[1.0]).unwrap_err();
+    assert_eq!(e.to_string(), "dimension mismatch: s0 has length 1, expected 2");
+    let from = ivp.solve_sensitivities_from(&tight(), &wrt, &[1.0, 0.0], &[1.0]).unwrap();
+    let (x, dx0, dk) = Decay::exact(2.0, 0.3, 1.0);
+    assert_close(from.state(0)[0], x, 1e-9);
+    assert_close(from.sensitivity(0)[(0, 0)], dx0, 1e-9);
+    assert_close(from.sensitivity(0)[(0, 1)], dk, 1e-9);
+    let first = Integrator { initial_step: Some(-1.0), ..tight() };
+    assert!(first.validate().unwrap_err().to_string().contains("initial_step"));
+}
