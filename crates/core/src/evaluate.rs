@@ -1169,10 +1169,9 @@ pub(crate) fn sample_rows<'s, S: System>(
                 return Err(OdeError::Unrepresentable {
                     t: times[m],
                     what: format!(
-                        "σ = {sigma:e} of `{}` lies below e^{} ≈ {:.1e}, the least σ a noise expression may take (the likelihood's row for ln σ is √(2 ln σ + {NOISE_ROW_SHIFT}))",
+                        "σ = {sigma:e} of `{}` lies below {}",
                         s.observable_name(e.system()),
-                        -NOISE_ROW_SHIFT / 2.0,
-                        (-NOISE_ROW_SHIFT / 2.0).exp()
+                        crate::noise::least_sigma().1
                     ),
                 });
             }

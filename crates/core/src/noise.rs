@@ -202,6 +202,17 @@ impl fmt::Debug for Noise {
 /// e^{−25} ≈ 1.4e-11. The certificate and the reported likelihood do not depend on it.
 pub const NOISE_ROW_SHIFT: f64 = 50.0;
 
+/// The least σ a noise expression may take, e^{−c/2} with c = [`NOISE_ROW_SHIFT`], and why,
+/// as the errors that refuse a smaller one say it: "e^-25 ≈ 1.4e-11, the least σ …".
+pub fn least_sigma() -> (f64, String) {
+    let floor = (-NOISE_ROW_SHIFT / 2.0).exp();
+    let why = format!(
+        "e^{} ≈ {floor:.1e}, the least σ a noise expression may take (the likelihood's row for ln σ is √(2 ln σ + {NOISE_ROW_SHIFT}))",
+        -NOISE_ROW_SHIFT / 2.0
+    );
+    (floor, why)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -18,7 +18,9 @@ use crate::error::ProblemError;
 use crate::noise::{Noise, NoiseDistribution, Transform};
 
 pub use crate::experiment::{Planned, SettingFunction, SlotJacobian};
-pub use crate::noise::{LN_2PI, NOISE_ROW_SHIFT, NoiseArgs, NoiseFunction, NoiseGradient};
+pub use crate::noise::{
+    LN_2PI, NOISE_ROW_SHIFT, NoiseArgs, NoiseFunction, NoiseGradient, least_sigma,
+};
 pub use crate::problem::{QUADRATURE_RTOL, SINGLE_EXPERIMENT};
 
 /// The measurements resolved against the system.

@@ -311,16 +311,7 @@ impl<S: System> Problem<S> {
             // Within the bounds, as a start must be: a few units in the last place are
             // allowed, for a value mapped back from a bound's coordinate (a profile's last
             // point, exp(ln hi)).
-            let slack = |b: f64| 8.0 * f64::EPSILON * b.abs();
-            let below = u
-                .min
-                .filter(|&lo| *value < lo - slack(lo))
-                .map(|lo| format!("below its min {}", crate::format::shortest(lo)));
-            let above = u
-                .max
-                .filter(|&hi| *value > hi + slack(hi))
-                .map(|hi| format!("above its max {}", crate::format::shortest(hi)));
-            if let Some(wrong) = below.or(above) {
+            if let Some(wrong) = outside_bounds(u, *value, 8.0 * f64::EPSILON) {
                 return Err(ProblemError::InvalidUnknown {
                     name: name.clone(),
                     message: format!(
@@ -347,18 +338,10 @@ impl<S: System> Problem<S> {
         for (i, (name, value)) in start.iter().enumerate() {
             let j = self.movable(start, i, "started")?;
             let u = &mut self.declared[j];
-            let below = u
-                .min
-                .filter(|lo| value < lo)
-                .map(|lo| format!("below its min {}", crate::format::shortest(lo)));
-            let above = u
-                .max
-                .filter(|hi| value > hi)
-                .map(|hi| format!("above its max {}", crate::format::shortest(hi)));
             let wrong = match (value.is_finite(), u.log && *value <= 0.0) {
                 (false, _) => Some("it must be finite".to_string()),
                 (_, true) => Some("it is on a log scale, so it must be positive".to_string()),
-                _ => below.or(above),
+                _ => outside_bounds(u, *value, 0.0),
             };
             if let Some(wrong) = wrong {
                 return Err(ProblemError::InvalidUnknown {
@@ -857,4 +840,17 @@ fn roles<S: System>(
         )));
     }
     Ok(((0..k).filter(|&j| model[j]).collect(), (0..k).filter(|&j| scale[j]).collect()))
+}
+
+/// "below its min 1e-5" or "above its max 2" where `value` lies outside `u`'s bounds by more
+/// than `slack` of the bound (relative), else None.
+fn outside_bounds(u: &Unknown, value: f64, slack: f64) -> Option<String> {
+    let beyond = |b: f64| slack * b.abs();
+    let below = u.min.filter(|&lo| value < lo - beyond(lo));
+    let above = u.max.filter(|&hi| value > hi + beyond(hi));
+    match (below, above) {
+        (Some(lo), _) => Some(format!("below its min {}", crate::format::shortest(lo))),
+        (_, Some(hi)) => Some(format!("above its max {}", crate::format::shortest(hi))),
+        _ => None,
+    }
 }

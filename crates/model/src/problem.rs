@@ -533,9 +533,10 @@ impl Model {
         Ok(())
     }
 
-    /// Refuses a σ that is not positive and finite at the start, naming the output, the
-    /// experiment and the time.
+    /// Refuses a σ that is not finite and at least the likelihood's least σ at the start,
+    /// naming the output, the experiment and the time.
     fn check_sigma_at_start(&self, problem: &Problem<ModelSystem>) -> Result<(), ModelError> {
+        let (floor, why) = sysid_core::plan::least_sigma();
         let v = problem.values_at(&problem.unknowns().coordinates(&problem.guesses()));
         for e in problem.experiments() {
             let functions: Vec<_> = e
@@ -588,8 +589,6 @@ impl Model {
                         (vec![0.0; n], vec![0.0; np], vec![0.0; v.len()]);
                     let mut g = NoiseGradient { y: &mut dy, h: 0.0, p: &mut dp, v: &mut dv };
                     let sigma = noise.eval(NoiseArgs { t, y, h, p: &p, v: &v }, &mut g);
-                    // The least σ the likelihood's row √(2 ln σ + shift) holds.
-                    let floor = (-sysid_core::plan::NOISE_ROW_SHIFT / 2.0).exp();
                     if !(sigma >= floor && sigma.is_finite()) {
                         let name = match series.observable {
                             Observable::State(i) => &self.file.states[i],
@@ -604,11 +603,7 @@ impl Model {
                                 }
                             });
                         let must = match sigma > 0.0 {
-                            true => format!(
-                                "σ must be at least e^{} ≈ {floor:.1e}, the least σ a noise expression may take (the likelihood's row for ln σ is √(2 ln σ + {}))",
-                                -sysid_core::plan::NOISE_ROW_SHIFT / 2.0,
-                                sysid_core::plan::NOISE_ROW_SHIFT
-                            ),
+                            true => format!("σ must be at least {why}"),
                             false => "σ must be positive".to_string(),
                         };
                         return Err(self.file.err(

@@ -164,11 +164,7 @@ impl Builder<'_> {
         unused.sort_by_key(|(id, _)| *id);
         for (id, o) in unused {
             let placeholder = |n: &str| {
-                ["observableParameter", "noiseParameter"].iter().any(|kind| {
-                    n.strip_prefix(kind)
-                        .and_then(|rest| rest.strip_suffix(&format!("_{id}")))
-                        .is_some_and(|k| k.parse::<usize>().is_ok())
-                })
+                ["observable", "noise"].iter().any(|kind| placeholder_index(n, kind, id).is_some())
             };
             for (m, at, own) in
                 [(&o.formula, &o.formula_at, None), (&o.noise, &o.noise_at, Some(id))]
@@ -215,8 +211,7 @@ pub(crate) fn placeholders<const N: usize>(
     };
     let prefix = format!("{kind}Parameter");
     let suffix = format!("_{}", observable.text);
-    let index =
-        |n: &str| -> Option<usize> { n.strip_prefix(&prefix)?.strip_suffix(&suffix)?.parse().ok() };
+    let index = |n: &str| placeholder_index(n, kind, observable.text);
     let replaced = formulas.map(|f| {
         f.substitute(&|n| {
             list.get(index(n)?.checked_sub(1)?).map(|v| match tsv::parse_number(v) {
@@ -245,6 +240,13 @@ pub(crate) fn placeholders<const N: usize>(
         )));
     }
     Ok(replaced)
+}
+
+/// n, where `name` is observable `id`'s `{kind}Parameter{n}_{id}` (`kind` "observable" or
+/// "noise").
+fn placeholder_index(name: &str, kind: &str, id: &str) -> Option<usize> {
+    let rest = name.strip_prefix(kind)?.strip_prefix("Parameter")?;
+    rest.strip_suffix(id)?.strip_suffix('_')?.parse().ok()
 }
 
 /// `text` as an error quotes it: at most 60 characters, the rest replaced by `…`.

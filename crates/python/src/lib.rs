@@ -87,11 +87,6 @@ impl<'py> FromPyObject<'py> for Vector {
     }
 }
 
-/// A vector argument's values.
-fn entries(v: &Vector) -> Vec<f64> {
-    v.0.clone()
-}
-
 /// A whole number argument that must be at least `least`, taken as a Python int of any sign
 /// so that a negative one is named (pyo3 would raise `OverflowError` without the name).
 fn whole(name: &str, value: i128, least: i128) -> PyResult<u64> {
@@ -237,7 +232,7 @@ impl PyProblem {
         let scale = Scale::parse(scale)?;
         let how = match sensitivities {
             "forward" => {
-                let e = self.evaluate(py, &entries(&x), scale)?;
+                let e = self.evaluate(py, &x.0, scale)?;
                 let value = if priors { e.objective()? } else { e.nll()? };
                 return Ok((value, e.gradient(priors, scale).into_pyarray(py)));
             }
@@ -249,7 +244,7 @@ impl PyProblem {
                 )));
             }
         };
-        let z = self.coordinates(&entries(&x), scale)?;
+        let z = self.coordinates(&x.0, scale)?;
         let k = self.problem.unknowns().len();
         let problem = self.at_scales(&z);
         let e = py
@@ -513,7 +508,7 @@ impl PyProblem {
         py: Python<'py>,
         x: Vector,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        Ok(self.coordinates(&entries(&x), Scale::Linear)?.into_pyarray(py))
+        Ok(self.coordinates(&x.0, Scale::Linear)?.into_pyarray(py))
     }
 
     /// The point `z` (on the parameter scale) on the linear scale.
@@ -522,14 +517,14 @@ impl PyProblem {
         py: Python<'py>,
         z: Vector,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-        let z = self.coordinates(&entries(&z), Scale::Parameter)?;
+        let z = self.coordinates(&z.0, Scale::Parameter)?;
         Ok(self.values(&z).into_pyarray(py))
     }
 
     /// The negative log-likelihood at x (priors excluded, as the fit JSON's `nll`).
     #[pyo3(signature = (x, scale="linear"))]
     fn nll(&self, py: Python<'_>, x: Vector, scale: &str) -> PyResult<f64> {
-        self.evaluate(py, &entries(&x), Scale::parse(scale)?)?.nll()
+        self.evaluate(py, &x.0, Scale::parse(scale)?)?.nll()
     }
 
     /// The negative log-likelihood at x and its gradient on `scale`. `sensitivities`: "auto" (each experiment by whichever of forward
@@ -550,7 +545,7 @@ impl PyProblem {
     /// where the problem has priors (what pyPESTO minimises), the NLL otherwise.
     #[pyo3(signature = (x, scale="linear"))]
     fn objective(&self, py: Python<'_>, x: Vector, scale: &str) -> PyResult<f64> {
-        self.evaluate(py, &entries(&x), Scale::parse(scale)?)?.objective()
+        self.evaluate(py, &x.0, Scale::parse(scale)?)?.objective()
     }
 
     /// The objective and its gradient on `scale`. `sensitivities`: "auto" (each experiment by whichever of forward
@@ -579,7 +574,7 @@ impl PyProblem {
         scale: &str,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let scale = Scale::parse(scale)?;
-        Ok(matrix(py, &self.evaluate(py, &entries(&x), scale)?.fisher(scale)?))
+        Ok(matrix(py, &self.evaluate(py, &x.0, scale)?.fisher(scale)?))
     }
 
     /// The weighted residuals r and their Jacobian ∂r/∂x on `scale`: a row per measurement,
@@ -594,7 +589,7 @@ impl PyProblem {
         scale: &str,
     ) -> PyResult<(Array1<'py>, Array2Py<'py>)> {
         let scale = Scale::parse(scale)?;
-        let e = self.evaluate(py, &entries(&x), scale)?;
+        let e = self.evaluate(py, &x.0, scale)?;
         let r: Vec<f64> = e.rows().r.iter().copied().collect();
         Ok((r.into_pyarray(py), matrix(py, &e.jacobian(scale))))
     }
@@ -612,7 +607,7 @@ impl PyProblem {
     ) -> PyResult<Bound<'py, PyDict>> {
         let scale = Scale::parse(scale)?;
         let z = match &x {
-            Some(x) => self.coordinates(&entries(x), scale)?,
+            Some(x) => self.coordinates(&x.0, scale)?,
             None => self.parameters().iter().map(|u| u.coordinate(u.guess)).collect(),
         };
         let k = self.problem.unknowns().len();
@@ -645,7 +640,7 @@ impl PyProblem {
                 }
             },
         };
-        let times = entries(&times);
+        let times = times.0;
         if let Some(t) = times.iter().find(|t| !t.is_finite()) {
             return Err(PyValueError::new_err(format!("times: {t} is not finite")));
         }
@@ -909,7 +904,7 @@ impl PyProblem {
         z: Vector,
         repeat: usize,
     ) -> PyResult<f64> {
-        let mut z = self.coordinates(&entries(&z), Scale::Parameter)?;
+        let mut z = self.coordinates(&z.0, Scale::Parameter)?;
         z.truncate(self.problem.unknowns().len());
         let problem = &self.problem;
         py.allow_threads(|| {
