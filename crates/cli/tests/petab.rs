@@ -872,8 +872,11 @@ fn the_uncertified_best_points_evaluate_to_their_values_at_tight_tolerances() {
 /// there with the defaults, the run used to stop at iteration 0 (`stalled_step`: every trial
 /// was judged on cost differences the integration does not resolve); now it refines the
 /// integration and certifies, and its NLL is the one a tight integration (Rodas5P, rtol
-/// 1e-12) gives at its point to 1e-6; levenberg-marquardt on Rodas5P at rtol 1e-11, whose
-/// certificate carries a measured error (3.1e-8 when written), certifies the same point.
+/// 1e-12) gives at its point to 1e-6; the certificate of that point on Rodas5P at rtol
+/// 1e-11, which carries a measured error (2.7e-8 when written), holds too. (A second method
+/// from the point may still walk on down the valley: first-order optimality within gtol
+/// there allows it. levenberg-marquardt on Rodas5P from the point certified once took it
+/// 7e-3 lower — Borghans' long flat valley, docs/methods.md.)
 #[test]
 fn a_fit_whose_progress_the_integration_cannot_resolve_goes_on_finer() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/petab");
@@ -895,10 +898,9 @@ fn a_fit_whose_progress_the_integration_cannot_resolve_goes_on_finer() {
     let (reported, there) = (fit["nll"].as_f64().unwrap(), tight["nll"].as_f64().unwrap());
     assert!((reported - there).abs() <= 1e-6, "{reported} against {there}");
     assert!(reported <= -123.386990, "{reported}: above the stall");
-    // The claim checked by a second method with another scheme: levenberg-marquardt on
-    // Rodas5P at rtol 1e-11 (where the measure's error is measured) certifies the point
-    // at the same NLL.
-    let mut args = vec!["fit", "--petab", &yaml, "--method", "levenberg-marquardt"];
+    // The claim checked with another scheme: on Rodas5P at rtol 1e-11 (where the measure's
+    // error is measured) the point is certified as it stands, at the same NLL.
+    let mut args = vec!["fit", "--petab", &yaml, "--max-iterations", "0"];
     args.extend(["--integrator", "rodas5p", "--rtol", "1e-11", "--atol", "1e-15"]);
     args.extend(["--format", "json"]);
     for start in &sets {

@@ -198,6 +198,7 @@ impl Record<'_> {
                     && certificate.optimality.is_finite()
                     && let Some(finer) = ev.reference()
                 {
+                    certificate.error_measured = true;
                     match finer.linearize(&point.z) {
                         Ok(fine) => {
                             ev.add(fine.counts);

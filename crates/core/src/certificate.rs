@@ -125,6 +125,11 @@ pub struct Certificate {
     /// again at a tenth of the tolerance (0 where `error` is not measured, ∞ where that
     /// integration fails).
     pub cost_error: f64,
+    /// Whether `error` was measured: false for an exact fit, a point that failed, and an
+    /// integration already within a factor 10 of the finest rtol
+    /// ([`FINEST_RTOL`](crate::method::FINEST_RTOL)), where there is no finer one to measure
+    /// it against (its 0 is then not a measured 0).
+    pub error_measured: bool,
     /// The tolerance it was held to.
     pub gtol: f64,
     /// The model passes through the data (ε = 0 to rounding).
@@ -198,6 +203,7 @@ impl Certificate {
             optimality: f64::INFINITY,
             error: 0.0,
             cost_error: 0.0,
+            error_measured: false,
             gtol,
             exact_fit: false,
             active: vec![None; k],
@@ -414,6 +420,7 @@ pub fn certify<S: System>(
         optimality: if exact_fit { 0.0 } else { value },
         error: 0.0,
         cost_error: 0.0,
+        error_measured: false,
         gtol,
         exact_fit,
         active,
@@ -458,6 +465,7 @@ mod tests {
             optimality: 1e-9,
             error: 0.0,
             cost_error: 0.0,
+            error_measured: false,
             gtol: 1e-6,
             exact_fit: false,
             active,

@@ -525,13 +525,19 @@ impl Estimate {
             "yes (the model passes through the data: ε = 0 to rounding)".into()
         } else if c.holds() && c.corner() {
             format!(
-                "yes (first-order optimality {:.2e} ± {:.0e} ≤ gtol {:.0e}), at a corner of the box: every unknown on a bound",
-                c.optimality, c.error, c.gtol
+                "yes (first-order optimality {:.2e}{} ≤ gtol {:.0e}{}), at a corner of the box: every unknown on a bound",
+                c.optimality,
+                plus_error(c),
+                c.gtol,
+                unmeasured(c)
             )
         } else if c.holds() {
             format!(
-                "yes (first-order optimality {:.2e} ± {:.0e} ≤ gtol {:.0e})",
-                c.optimality, c.error, c.gtol
+                "yes (first-order optimality {:.2e}{} ≤ gtol {:.0e}{})",
+                c.optimality,
+                plus_error(c),
+                c.gtol,
+                unmeasured(c)
             )
         } else if c.error.is_infinite() {
             format!(
@@ -540,8 +546,11 @@ impl Estimate {
             )
         } else {
             format!(
-                "no (first-order optimality {:.2e} ± {:.0e} > gtol {:.0e})",
-                c.optimality, c.error, c.gtol
+                "no (first-order optimality {:.2e}{} > gtol {:.0e}{})",
+                c.optimality,
+                plus_error(c),
+                c.gtol,
+                unmeasured(c)
             )
         }
     }
@@ -557,5 +566,26 @@ impl Estimate {
                 .collect::<Vec<_>>()
                 .join(", "),
         )
+    }
+}
+
+/// " ± e" after an optimality whose integration error `e` was measured; nothing where it
+/// was not ([`Certificate::error_measured`]): a 0 there is not a measured 0.
+fn plus_error(c: &Certificate) -> String {
+    match c.error_measured {
+        true => format!(" ± {:.0e}", c.error),
+        false => String::new(),
+    }
+}
+
+/// Where the optimality's integration error was not measured because the integration is
+/// already the finest ([`Certificate::error_measured`]), the words that say so.
+fn unmeasured(c: &Certificate) -> String {
+    match c.error_measured {
+        true => String::new(),
+        false => format!(
+            "; its integration error unmeasured: integrated within a factor 10 of the finest rtol, {:.0e}",
+            crate::evaluations::FINEST_RTOL
+        ),
     }
 }

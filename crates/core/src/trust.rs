@@ -312,7 +312,7 @@ impl Curve {
 }
 
 /// The actual decrease ε(z) − ε(z⁺) of a step from `from` to `to` (both linearized) whose
-/// predicted decrease is `predicted`. Below ε's accuracy (`resolution`, about rtol·ε) the
+/// predicted decrease is `predicted`. Below ε's accuracy (`resolution`, [`Problem::cost_resolution`]) the
 /// difference of two integrated costs is noise, while the gradients from the sensitivities
 /// are still accurate: where both the predicted decrease and the difference are that small,
 /// the trapezoidal rule along the step, exact for a quadratic,
@@ -378,7 +378,7 @@ pub fn halve_along_curve<S: System>(
     let step_tolerance = problem.resolvable_step(step_tolerance);
     let z_norm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
     let negligible = step_tolerance * (z_norm + step_tolerance);
-    let resolution = problem.integrator().rtol * lin.cost;
+    let resolution = problem.cost_resolution(lin.cost, lin.norm);
     for halving in 0..=max_halvings {
         if halving > 0 && step.delta.norm() <= negligible {
             // Shrunk below the step tolerance without reducing the cost.

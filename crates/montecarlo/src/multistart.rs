@@ -691,6 +691,7 @@ mod tests {
                 optimality: if converged { 0.0 } else { 0.5 },
                 error: 0.0,
                 cost_error: 0.0,
+                error_measured: false,
                 gtol: 1e-6,
                 exact_fit: false,
                 active: vec![None],

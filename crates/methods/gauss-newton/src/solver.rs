@@ -368,6 +368,11 @@ impl Adapter<'_> {
     /// decrease of ½‖r‖² no larger than its accuracy (`resolution`, rtol relative), an
     /// Armijo search can only halve to nothing; the step is taken when the cost changes by
     /// no more than that accuracy, as Goodman's halving does. `None`: search as usual.
+    /// (rtol·cost, not the bound of [`Problem::cost_resolution`] that Levenberg–Marquardt's
+    /// ratio test uses: this rule takes steps whose cost rises within it, and that bound,
+    /// far above the error an integration makes on Boehm's problem, let ε rise by 4e-6 there
+    /// in one step. Near an exact fit the rule then misses steps below the noise, and the
+    /// run may stop on argmin's cost-change rule short of certified.)
     fn within_resolution<S: System>(
         &self,
         op: &Residuals<'_, S>,

@@ -19,7 +19,8 @@
 //! recomputed in the smaller region from the same point; while that gives the same step (the
 //! Gauss–Newton step, still inside the region), the radius halves again without integrating
 //! it twice. Near the minimum, where the model
-//! predicts a decrease below ε's accuracy (rtol·ε), the difference of two integrated costs is
+//! predicts a decrease below ε's accuracy (rtol·(|ε| + 2‖r‖·‖W^½ b‖),
+//! [`Problem::cost_resolution`]), the difference of two integrated costs is
 //! noise: the actual decrease is then measured from the gradients at both ends (the
 //! trapezoidal rule along the step, exact for a quadratic), which the sensitivities give as
 //! accurately as the certificate needs. (Accepting any step whose cost stays within the noise
@@ -477,7 +478,10 @@ impl<S: System> Step<S> for TrustRegion<'_> {
     ) -> Result<Advance, Failure> {
         let problem = ev.problem();
         let lin = current.linearization.as_ref().expect("the iterates are linearized");
-        let resolution = problem.integrator().rtol * lin.cost;
+        let resolution = problem.cost_resolution(lin.cost, lin.norm);
+        // The plain and the sensitivities' cost of one point agree to rtol·ε where they
+        // take one path (the check that keeps a run screened).
+        let agreement = SCREEN_AGREEMENT * problem.integrator().rtol * lin.cost.abs();
         let negligible = negligible_step(problem, &current.z, self.options.driver.step_tolerance);
         let crawling = self.options.correct && self.crawls(current.cost, lin.cost);
         let mut trial = match self.proposed.take() {
@@ -513,9 +517,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                             // two would take different paths, and the run is not screened
                             // again.
                             let plain = r.norm_squared();
-                            if l.as_ref().is_some_and(|l| {
-                                (l.cost - plain).abs() > SCREEN_AGREEMENT * resolution
-                            }) {
+                            if l.as_ref().is_some_and(|l| (l.cost - plain).abs() > agreement) {
                                 self.unscreened = true;
                             }
                             (l, decrease)
