@@ -794,7 +794,8 @@ impl<S: System> Problem<S> {
     /// `band`, the covariance of the values and the t quantile of the fit's degrees of
     /// freedom ([`Estimate::band`](crate::Estimate::band)): t √(g Cov gᵀ), g = ∂h/∂(values)
     /// from the sensitivities. What a fit predicts for the measurements, with its
-    /// uncertainty.
+    /// uncertainty. Values that are not one per unknown, or a covariance that is not k × k
+    /// (k unknowns), are an error ([`OdeError::Dimension`]).
     pub fn observed(
         &self,
         values: &[f64],
@@ -805,6 +806,10 @@ impl<S: System> Problem<S> {
     }
 
     /// [`observed`](Self::observed) for experiment `experiment`.
+    ///
+    /// # Panics
+    ///
+    /// Where `experiment` is not an index of [`experiments`](Self::experiments).
     pub fn observed_in(
         &self,
         experiment: usize,
@@ -832,6 +837,10 @@ impl<S: System> Problem<S> {
     /// Every state of experiment `experiment` at `values` of the unknowns, at `times`, with
     /// the half-width of its 95 % band, as [`observed`](Self::observed) gives the measured
     /// quantities: the trajectory a fit predicts.
+    ///
+    /// # Panics
+    ///
+    /// Where `experiment` is not an index of [`experiments`](Self::experiments).
     pub fn trajectory(
         &self,
         experiment: usize,
@@ -854,9 +863,22 @@ impl<S: System> Problem<S> {
         quantities: &[(String, Observable)],
     ) -> Result<Vec<Observed>, OdeError> {
         let e = &self.experiments[experiment];
+        let k = self.unknowns.len();
+        let dimension = |what, actual| Err(OdeError::Dimension { what, actual, expected: k });
+        if values.len() != k {
+            return dimension("the values of the unknowns", values.len());
+        }
+        if let Some((cov, _)) = band {
+            for (what, actual) in
+                [("the covariance (rows)", cov.nrows()), ("the covariance (columns)", cov.ncols())]
+            {
+                if actual != k {
+                    return dimension(what, actual);
+                }
+            }
+        }
         let z = self.unknowns.coordinates(values);
         let v = self.values_at(&z);
-        let k = self.unknowns.len();
         let (y0, p) = e.start(&v)?;
         let sol = Ivp::new(e.system(), e.t0, &y0, &p).solve_sensitivities(
             &self.integrator,

@@ -277,6 +277,13 @@ fn observed_values_and_bands_of_a_linear_model() {
     }
     let plain = problem.observed(&values, None, &times).unwrap();
     assert!(plain[0].half_width.is_none());
+    // Values or a covariance of the wrong size are errors that say which, not panics.
+    let error = problem.observed(&values[..2], None, &times).unwrap_err().to_string();
+    assert!(error.contains("the values of the unknowns has length 2, expected 3"), "{error}");
+    let small = cov.view((0, 0), (2, 3)).into_owned();
+    let error = problem.trajectory(0, &values, Some((&small, quantile)), &times);
+    let error = error.unwrap_err().to_string();
+    assert!(error.contains("the covariance (rows) has length 2, expected 3"), "{error}");
 }
 
 /// Half the Hessian of ε by differences of the sensitivities' gradient, against its closed
