@@ -443,3 +443,36 @@ fn a_prior_is_a_row_of_its_own() {
     assert!(e.converged() && (e.values[0] - lo).abs() <= 1e-8, "{} vs {lo}", e.values[0]);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A σ scale (σ = s, s unknown) of a problem built from one data table, without
+/// experiments: the builder took only states and parameters as unknowns and refused `s`
+/// ("not a state or parameter"), so a scale needed `.experiment(..)`. Its fit is ordinary
+/// least squares, y = y0 + v0 t + g t²/2 through four points (normal equations in closed
+/// form), with ŝ² = RSS/N, the normal MLE.
+#[test]
+fn a_noise_scale_of_a_single_data_table_is_estimated_in_closed_form() {
+    use sysid::core::{Data, Noise, Transform};
+    let (t, b) = ([0.0, 1.0, 2.0, 3.0], [0.0, 15.0, 65.0, 145.0]);
+    let noise = Noise::Scale { unknown: "s".into(), factors: vec![1.0; 4] };
+    let problem = Problem::builder(sysid::systems::FallingBody::default())
+        .unknown("y", 1.0)
+        .unknown("v", 1.0)
+        .unknown("g", 1.0)
+        .unknown("s", 1.0)
+        .data(Data::discrete().series_with_noise("y", &t, &b, noise, Transform::Lin))
+        .build()
+        .unwrap();
+    let design = nalgebra::DMatrix::from_fn(4, 3, |i, j| t[i].powi(j as i32) / [1.0, 1.0, 2.0][j]);
+    let data = nalgebra::DVector::from_column_slice(&b);
+    let ols = (design.transpose() * &design).lu().solve(&(design.transpose() * &data)).unwrap();
+    let rss = (&design * &ols - &data).norm_squared();
+    let e =
+        Registry::standard().build("nl2sol", &Settings::default()).unwrap().fit(&problem).unwrap();
+    assert!(e.converged(), "{}", e.termination);
+    let got = estimates(&e);
+    for (name, want) in [("y", ols[0]), ("v", ols[1]), ("g", ols[2]), ("s", (rss / 4.0).sqrt())] {
+        let value = got.iter().find(|(n, _)| n == name).unwrap().1;
+        // 1e-8: the fit's rtol; the model is quadratic in t, which DOPRI5 integrates exactly.
+        assert!((value - want).abs() <= 1e-8 * want.abs().max(1.0), "{name}: {value} vs {want}");
+    }
+}

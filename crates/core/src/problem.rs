@@ -9,6 +9,7 @@ use sysid_ode::{Integrator, Observable, Ode, OdeSystem, System};
 use crate::data::Data;
 use crate::error::ProblemError;
 use crate::experiment::{Experiment, Planned, Resolved, Setting, slots};
+use crate::noise::Noise;
 use crate::plan::{Plan, PlannedNoise, plan};
 use crate::unknowns::{Unknown, Unknowns};
 
@@ -572,7 +573,9 @@ impl<S: System> ProblemBuilder<S> {
         self.unknown_with(Unknown::new(name, guess))
     }
     /// An unknown with bounds or a log scale. With experiments, any name their settings and
-    /// noise models use; without, a state (its initial value) or a parameter.
+    /// noise models use; without, a state (its initial value), a parameter, or an unknown of
+    /// the data's noise models (the s of a [`Noise::Scale`], an unknown a noise function
+    /// uses).
     pub fn unknown_with(mut self, unknown: Unknown) -> Self {
         self.unknowns.push(unknown);
         self
@@ -700,7 +703,20 @@ fn single<S: System>(
         })
     };
     let given = values.iter().map(|(name, v)| (name, Setting::Value(*v), "known"));
-    let unknown = unknowns.iter().map(|u| (&u.name, Setting::Unknown(u.name.clone()), "unknown"));
+    // An unknown of the data's noise models (a σ scale's s, an unknown a noise function
+    // uses) that is no state or parameter has no slot: the noise model resolves it.
+    let of_noise = |i: usize, name: &str| {
+        data.iter().flat_map(|d| &d.series).any(|s| match &s.noise {
+            Some(Noise::Scale { unknown, .. }) => unknown == name,
+            Some(Noise::Function(f)) => f.uses().contains(&i),
+            _ => false,
+        })
+    };
+    let unknown = unknowns
+        .iter()
+        .enumerate()
+        .filter(|(i, u)| slot(&u.name).is_ok() || !of_noise(*i, &u.name))
+        .map(|(_, u)| (&u.name, Setting::Unknown(u.name.clone()), "unknown"));
     for (name, setting, how) in given.chain(unknown) {
         let i = slot(name)?;
         if let Some((_, first)) = &settings[i] {
