@@ -228,9 +228,22 @@ impl<S: System> Problem<S> {
     /// four points given to five digits, at its minimum (ε = 5.6e-9), has ε wrong by 7.2e-14
     /// at rtol 1e-8 (against rtol 1e-12; the bound 2.7e-12, rtol·ε 5.6e-17), and nl2sol's
     /// last trials there, whose predicted decreases were near 1e-17, were judged by that
-    /// noise, rejected, and the run stopped on the step rule short of certified.
+    /// noise, rejected, and the run stopped on the step rule short of certified. Where a
+    /// series' σ is a function of the model ([`data_norm`](Self::data_norm) is then of the
+    /// data unweighted, not in the residuals' units), or the data's norm overflows, it is
+    /// rtol·|ε|.
     pub fn cost_resolution(&self, cost: f64, norm: f64) -> f64 {
-        self.integrator().rtol * (cost.abs() + 2.0 * norm * self.data_norm())
+        let function_noise = self
+            .experiments
+            .iter()
+            .flat_map(|e| &e.sampled().series)
+            .any(|s| matches!(s.noise, PlannedNoise::Function(_)));
+        let data = self.data_norm();
+        let near = match function_noise || !data.is_finite() {
+            true => 0.0,
+            false => 2.0 * norm * data,
+        };
+        self.integrator().rtol * (cost.abs() + near)
     }
 
     /// ‖W^½ b‖: the weighted data's norm (the record's for continuous data, by the
