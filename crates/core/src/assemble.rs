@@ -24,6 +24,8 @@ pub(crate) enum Ending {
     MaxIterations,
     /// The wall-clock limit of this many seconds ran out.
     TimeLimit(f64),
+    /// The caller asked the fit to stop ([`stop_when`](crate::observer::stop_when)).
+    Interrupted,
     Failed {
         iteration: usize,
         failure: Failure,
@@ -140,6 +142,7 @@ impl Record<'_> {
                 moving: moving(ev.problem(), &history),
             },
             Ending::TimeLimit(seconds) => Termination::TimeLimit { seconds },
+            Ending::Interrupted => Termination::Interrupted,
             Ending::Failed { failure: Failure::Budget { integrations }, .. } => {
                 Termination::IntegrationBudget { integrations }
             }

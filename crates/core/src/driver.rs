@@ -119,7 +119,10 @@ pub fn drive<S: System>(
             || !(estimate.converged() || handed_over)
             || moved <= 1e-3 * gtol
             || out_of_iterations
-            || matches!(estimate.termination, crate::Termination::TimeLimit { .. })
+            || matches!(
+                estimate.termination,
+                crate::Termination::TimeLimit { .. } | crate::Termination::Interrupted
+            )
             || rounds.len() + 1 >= MAX_ROUNDS;
         rounds.push(estimate);
         if last {
@@ -526,6 +529,12 @@ fn drive_once<S: System>(
                 break Ending::Failed { iteration, failure };
             }
             break Ending::TimeLimit(limit);
+        }
+        if crate::observer::stop_requested() {
+            if coarse && let Some(failure) = end_coarse!(final) {
+                break Ending::Failed { iteration, failure };
+            }
+            break Ending::Interrupted;
         }
         let proposal = match proposal {
             Some(p) => p,

@@ -19,6 +19,8 @@
 
 use std::cell::RefCell;
 use std::rc::Rc;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// An iterate of a running fit, as the driver records it.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,6 +52,70 @@ type Observer = Rc<dyn Fn(&IterateReport<'_>)>;
 
 thread_local! {
     static OBSERVER: RefCell<Option<Observer>> = const { RefCell::new(None) };
+    static STOP: RefCell<Option<Stop>> = const { RefCell::new(None) };
+}
+
+/// The stop flags that apply to the work on a thread: the one [`stop_when`] set, and those of
+/// the runs it was called from (a fit that a progress callback starts stops with the run
+/// that called it). Carried to other threads with [`stop_within`].
+#[derive(Clone, Debug)]
+pub struct Stop(Arc<StopNode>);
+
+#[derive(Debug)]
+struct StopNode {
+    flag: Arc<AtomicBool>,
+    outer: Option<Stop>,
+}
+
+impl Stop {
+    /// Whether any of its flags is set.
+    pub fn requested(&self) -> bool {
+        let mut node = Some(self);
+        while let Some(Stop(n)) = node {
+            if n.flag.load(Ordering::Relaxed) {
+                return true;
+            }
+            node = n.outer.as_ref();
+        }
+        false
+    }
+}
+
+/// Runs `f` with the fits on this thread stopping at their next iteration once `flag` (or a
+/// flag of the work this runs within) is set: termination `interrupted`, each with its best
+/// point so far, as any stopped fit. Set from another thread: a program's Ctrl-C, a progress
+/// callback that raised. A multistart's and a profile's fits, which run on other threads,
+/// are handed the same flags ([`current_stop`], [`stop_within`]), and the starts or
+/// profiles not yet begun are not begun. Returns what `f` returns.
+pub fn stop_when<R>(flag: Arc<AtomicBool>, f: impl FnOnce() -> R) -> R {
+    let stop = Stop(Arc::new(StopNode { flag, outer: current_stop() }));
+    stop_within(Some(stop), f)
+}
+
+/// Runs `f` with `stop` (from [`current_stop`] on the thread that handed out the work) as
+/// this thread's stop flags, and puts the thread's own back after it (also when `f` panics).
+pub fn stop_within<R>(stop: Option<Stop>, f: impl FnOnce() -> R) -> R {
+    /// Puts the outer flags back when dropped.
+    struct Restore(Option<Stop>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let outer = self.0.take();
+            STOP.with(|s| *s.borrow_mut() = outer);
+        }
+    }
+    let outer = STOP.with(|s| std::mem::replace(&mut *s.borrow_mut(), stop));
+    let _restore = Restore(outer);
+    f()
+}
+
+/// The stop flags of the work on this thread, to hand to the threads it spreads to.
+pub fn current_stop() -> Option<Stop> {
+    STOP.with(|s| s.borrow().clone())
+}
+
+/// Whether the work on this thread was asked to stop ([`stop_when`]).
+pub fn stop_requested() -> bool {
+    STOP.with(|s| s.borrow().as_ref().is_some_and(Stop::requested))
 }
 
 /// Runs `f` with `observer` hearing of every iterate that fits on this thread record, and
@@ -81,5 +147,35 @@ pub(crate) fn report(iterate: &IterateReport<'_>) {
     let observer = OBSERVER.with(|o| o.borrow().clone());
     if let Some(observer) = observer {
         observer(iterate);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Work within work stops with either's flag; the flags travel to another thread with
+    /// [`stop_within`], and each thread's own are back after the work.
+    #[test]
+    fn a_stop_applies_to_the_work_within_it_and_where_it_is_carried() {
+        let (outer, inner) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+        assert!(!stop_requested());
+        stop_when(Arc::clone(&outer), || {
+            stop_when(Arc::clone(&inner), || {
+                assert!(!stop_requested());
+                outer.store(true, Ordering::Relaxed);
+                assert!(stop_requested(), "the outer run's flag stops the inner run");
+                let carried = current_stop();
+                let elsewhere = std::thread::spawn(move || {
+                    let before = stop_requested();
+                    (before, stop_within(carried, stop_requested), stop_requested())
+                });
+                assert_eq!(elsewhere.join().unwrap(), (false, true, false));
+            });
+            outer.store(false, Ordering::Relaxed);
+            inner.store(true, Ordering::Relaxed);
+            assert!(!stop_requested(), "the inner run's flag does not stop the outer run");
+        });
+        assert!(current_stop().is_none());
     }
 }

@@ -238,6 +238,10 @@ pub enum Termination {
         /// The limit, in seconds.
         seconds: f64,
     },
+    /// The caller asked the fit to stop ([`stop_when`](crate::observer::stop_when): Python's
+    /// Ctrl-C, a progress callback that raised); it is read between iterations, as the time
+    /// limit is.
+    Interrupted,
     /// Stepping from iterate `iteration` failed; the best iterate so far is reported.
     Failed {
         /// The iterate the step started from.
@@ -265,6 +269,7 @@ impl Termination {
             Termination::MaxIterations { .. } => "max_iterations".into(),
             Termination::IntegrationBudget { .. } => "integration_budget".into(),
             Termination::TimeLimit { .. } => "time_limit".into(),
+            Termination::Interrupted => "interrupted".into(),
             Termination::Failed { failure, .. } => failure.code().into(),
             Termination::StartFailed(_) => "start_failed".into(),
             Termination::Panicked(_) => "panicked".into(),
@@ -350,6 +355,7 @@ impl Termination {
             Termination::TimeLimit { seconds } => {
                 write!(f, "the time limit of {seconds} s ran out")
             }
+            Termination::Interrupted => write!(f, "interrupted: the caller asked the fit to stop"),
             Termination::Failed {
                 iteration,
                 failure: Failure::Singular { unknowns, condition },
@@ -436,6 +442,7 @@ mod tests {
             Termination::MaxIterations { fell: None, moving: vec![] },
             Termination::IntegrationBudget { integrations: 3 },
             Termination::TimeLimit { seconds: 1.0 },
+            Termination::Interrupted,
             failure(Failure::NonFinite { what: "ε is not finite".into(), at: vec![] }),
             failure(Failure::Singular { unknowns: vec![], condition: 1e13 }),
             failure(Failure::Solver("argmin".into())),

@@ -146,10 +146,16 @@ pub struct Multistart {
 /// What the starts found: the `starts` object of the fit JSON.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Starts {
-    /// The starts fitted: N, unless the time budget left some out.
+    /// The starts fitted: N, unless the time budget (or the caller's stop) left some out.
     pub count: usize,
-    /// Starts drawn but not fitted because the time budget had run out (0 without one).
+    /// Starts drawn but not fitted because the time budget had run out (0 without one), or
+    /// because the caller stopped the run ([`stopped`](Self::stopped)).
     pub not_started: usize,
+    /// Whether the caller stopped the run ([`stop_when`](sysid_core::observer::stop_when)):
+    /// its running fits ended `interrupted`, and `not_started` counts the starts it did not
+    /// begin. Not in the JSON: a run of the command line is never stopped so.
+    #[serde(skip)]
+    pub stopped: bool,
     /// The draws' seed.
     pub seed: u64,
     /// ρ.
@@ -247,7 +253,9 @@ impl std::fmt::Display for Starts {
             write!(f, "; {} redrawn where the fit could not begin", plural(self.redrawn, "start"))?;
         }
         if self.not_started > 0 {
-            write!(f, "; {} more drawn, not begun within the time budget", self.not_started)?;
+            let why =
+                if self.stopped { ": the run was stopped" } else { " within the time budget" };
+            write!(f, "; {} more drawn, not begun{why}", self.not_started)?;
         }
         if let Some(o) = self.waterfall.iter().find(|o| o.continued) {
             write!(f, "; start {} fitted on from the iteration limit", o.start)?;
@@ -431,7 +439,10 @@ where
         if j > 0 || !options.guess {
             let mut rng = ChaCha8Rng::seed_from_u64(options.seed);
             rng.set_stream(j as u64);
-            while redrawn < MAX_REDRAWS && matches!(fit.termination, Termination::StartFailed(_)) {
+            while redrawn < MAX_REDRAWS
+                && matches!(fit.termination, Termination::StartFailed(_))
+                && !sysid_core::observer::stop_requested()
+            {
                 from = problem
                     .unknowns()
                     .list()
@@ -444,7 +455,11 @@ where
         }
         Ok(Run { fit, redrawn, ms: began.elapsed().as_secs_f64() * 1e3, from })
     };
-    let spent = || options.budget.is_some_and(|b| started.elapsed() >= b);
+    // The caller's stop flag (sysid_core::observer::stop_when), handed to each start's fit:
+    // once set, the fits running stop at their next iteration and no start is begun.
+    let stop = sysid_core::observer::current_stop();
+    let stopped = || stop.as_ref().is_some_and(|s| s.requested());
+    let spent = || options.budget.is_some_and(|b| started.elapsed() >= b) || stopped();
     let mut runs: Vec<(usize, Run)> = (0..rayon::current_num_threads())
         .into_par_iter()
         .map(|_| {
@@ -457,7 +472,7 @@ where
                 if j >= starts.len() {
                     break;
                 }
-                let run = fit_start(j)?;
+                let run = sysid_core::observer::stop_within(stop.clone(), || fit_start(j))?;
                 observer(StartDone {
                     start: j,
                     done: done.fetch_add(1, Ordering::SeqCst) + 1,
@@ -504,6 +519,7 @@ where
     let mut summary = summarise(&fits, options);
     summary.redrawn = redrawn;
     summary.not_started = not_started;
+    summary.stopped = stopped();
     summary.elapsed_ms = started.elapsed().as_secs_f64() * 1e3;
     summary.converged_per_minute = summary.converged as f64 / (summary.elapsed_ms / 6e4);
     for row in &mut summary.waterfall {
@@ -630,6 +646,7 @@ fn summarise(fits: &[Estimate], options: &MultistartOptions) -> Starts {
     Starts {
         count: fits.len(),
         not_started: 0,
+        stopped: false,
         seed: options.seed,
         spread: options.spread,
         sampling: options.sampling,

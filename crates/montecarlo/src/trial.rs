@@ -356,6 +356,7 @@ fn failure(e: &Estimate) -> String {
         },
         Termination::IntegrationBudget { .. } => "integration_budget",
         Termination::TimeLimit { .. } => "time_limit",
+        Termination::Interrupted => "interrupted",
         Termination::Panicked(_) => "panicked",
         Termination::MaxIterations { .. } => match (first, last) {
             (Some(a), Some(b)) if b > a || b.is_nan() => "diverged",

@@ -357,3 +357,36 @@ fn the_lowest_start_at_the_limit_is_fitted_on_once() {
     );
     assert_eq!(best.counts.integrations, f.counts.integrations + on.counts.integrations);
 }
+
+/// A run asked to stop (`sysid_core::observer::stop_when`, Python's Ctrl-C) ends its running
+/// fits at their next iteration, `interrupted`, each with its best point so far, and begins
+/// no other start; a fit asked before it begins stops at its start, which it returns as it
+/// stands. A flag never set changes nothing.
+#[test]
+fn a_stopped_run_ends_its_fits_and_begins_no_other_start() {
+    use std::sync::Arc;
+    use std::sync::atomic::AtomicBool;
+    use sysid_core::observer::stop_when;
+    let case = sysid_systems::lotka_volterra::lotka_volterra();
+    let problem = case.problem(1).unwrap();
+    let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
+    let unset = Arc::new(AtomicBool::new(false));
+    let alone = method.fit(&problem).unwrap();
+    let beside = stop_when(unset, || method.fit(&problem)).unwrap();
+    assert_eq!((beside.values, beside.iterations), (alone.values.clone(), alone.iterations));
+    let set = Arc::new(AtomicBool::new(true));
+    let stopped = stop_when(set.clone(), || method.fit(&problem)).unwrap();
+    assert_eq!(stopped.termination.code(), "interrupted");
+    assert_eq!(stopped.iterations, 0);
+    for (got, want) in stopped.values.iter().zip(problem.guesses()) {
+        assert_close(*got, want, 1e-15);
+    }
+    assert!(!stopped.converged());
+    let options = MultistartOptions { starts: 12, seed: 4, ..Default::default() };
+    let run = stop_when(set, || multistart(&*method, &problem, &options)).unwrap();
+    let s = &run.starts;
+    assert!(s.count >= 1 && s.count <= rayon::current_num_threads(), "{} fitted", s.count);
+    assert_eq!(s.count + s.not_started, 12);
+    assert!(s.waterfall.iter().all(|o| o.termination_code == "interrupted"));
+    assert!(s.to_string().contains("not begun: the run was stopped"), "{s}");
+}

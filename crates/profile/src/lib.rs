@@ -67,6 +67,11 @@ pub enum ProfileError {
     /// unknown the problem does not have, an optimum of another problem.
     #[error("{0}")]
     Invalid(String),
+    /// The caller asked the profiles to stop
+    /// ([`stop_when`](sysid_core::observer::stop_when)): the fits running stopped at their
+    /// next iteration, and no further point was fitted.
+    #[error("interrupted: the caller asked the profiles to stop")]
+    Interrupted,
 }
 
 /// How many times [`profile_from_optimum`] fits again from a better point a profile found.
@@ -395,10 +400,13 @@ where
     }
     let which: Vec<usize> = if only.is_empty() { (0..k).collect() } else { only.to_vec() };
     let done = std::sync::atomic::AtomicUsize::new(0);
+    // The caller's stop flag, handed to the threads that trace.
+    let stop = sysid_core::observer::current_stop();
     let results: Vec<Result<Result<Profile, Point>, ProfileError>> = which
         .par_iter()
         .map(|&i| {
-            let profile = Tracer { method, problem, optimum, i, options }.profile();
+            let tracer = Tracer { method, problem, optimum, i, options };
+            let profile = sysid_core::observer::stop_within(stop.clone(), || tracer.profile());
             let count = done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
             traced(i, count, which.len());
             profile
@@ -474,8 +482,19 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
 
     /// The fit with θ_i held at the coordinate `z`, from the point `from`; a panic in it
     /// becomes [`ProfileError::Panicked`], which ends the side ([`End::Failed`]).
+    /// The profile's point at coordinate `z`, fitted from `from`; `Interrupted` where the
+    /// caller asked the run to stop (before the fit, or while it ran: its point is not the
+    /// profile's then).
     fn fit_at(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {
-        sysid_core::caught(|| self.fit_at_unguarded(z, from)).map_err(ProfileError::Panicked)?
+        if sysid_core::observer::stop_requested() {
+            return Err(ProfileError::Interrupted);
+        }
+        let point = sysid_core::caught(|| self.fit_at_unguarded(z, from))
+            .map_err(ProfileError::Panicked)?;
+        match sysid_core::observer::stop_requested() {
+            true => Err(ProfileError::Interrupted),
+            false => point,
+        }
     }
 
     fn fit_at_unguarded(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {

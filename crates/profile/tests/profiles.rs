@@ -240,3 +240,21 @@ fn what_cannot_be_traced_is_refused() {
     let e = refused(&[], ProfileOptions::default(), &elsewhere);
     assert!(e.starts_with("the optimum is a fit of other unknowns ("), "{e}");
 }
+
+/// Profiles asked to stop (`sysid_core::observer::stop_when`, Python's Ctrl-C) fit no
+/// further point: the run ends with `ProfileError::Interrupted`, on every thread that traces.
+#[test]
+fn profiles_asked_to_stop_fit_no_further_point() {
+    use std::sync::Arc;
+    use std::sync::atomic::AtomicBool;
+    let case = sysid_systems::falling_body::falling_body();
+    let problem = case.problem(1).unwrap();
+    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
+    let optimum = goodman.fit(&problem).unwrap();
+    let options = ProfileOptions::default();
+    let stop = Arc::new(AtomicBool::new(true));
+    let stopped = sysid_core::observer::stop_when(stop, || {
+        profile(&*goodman, &problem, &optimum, &[], &options)
+    });
+    assert!(matches!(stopped, Err(sysid_profile::ProfileError::Interrupted)), "{stopped:?}");
+}

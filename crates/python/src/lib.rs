@@ -13,7 +13,9 @@
 
 use std::borrow::Cow;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use nalgebra::DMatrix;
 use numpy::ndarray::Array2;
@@ -665,7 +667,9 @@ impl PyProblem {
     /// `progress`, a callable, is called while the fit runs with a dict: for a single fit
     /// at each iterate (`iteration`, `objective`, `cost`, `optimality`, `coarse`), with
     /// `starts` as each start ends (`start`, `done`, `total`, `objective`, `converged`).
-    /// An exception it raises ends its calls, and the fit raises it when it returns.
+    /// An exception it raises stops the fit at its next iteration (a multistart's running
+    /// starts so, and begins no other), and the fit raises it then. Ctrl-C
+    /// (KeyboardInterrupt) stops it the same way.
     #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None, coarse_first=true, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
@@ -752,8 +756,8 @@ impl PyProblem {
                 Some(options)
             }
         };
-        let raised = Arc::new(Mutex::new(None));
-        let outcome = py.allow_threads(|| match &options {
+        let raised = Arc::new(Raised::default());
+        let outcome = interruptible(py, &raised, || match &options {
             None => heard(progress, &raised, None, || method.fit(&problem)).map(|e| (e, None)),
             Some(options) => {
                 let told = |s: StartDone| {
@@ -771,7 +775,7 @@ impl PyProblem {
                     .map(|run| (run.best, Some(run.starts)))
             }
         });
-        if let Some(error) = raised.lock().unwrap_or_else(|e| e.into_inner()).take() {
+        if let Some(error) = raised.take() {
             return Err(error);
         }
         let (estimate, starts) = outcome.map_err(sysid_error)?;
@@ -855,18 +859,18 @@ impl PyProblem {
             ..Default::default()
         };
         let problem = &self.problem;
-        let raised = Arc::new(Mutex::new(None));
+        let raised = Arc::new(Raised::default());
         let hears_optimum = progress.as_ref().map(|p| p.clone_ref(py));
-        let optimum = py.allow_threads(|| {
+        let optimum = interruptible(py, &raised, || {
             heard(hears_optimum, &raised, Some("optimum"), || method.fit(problem))
         });
-        if let Some(error) = raised.lock().unwrap_or_else(|e| e.into_inner()).take() {
+        if let Some(error) = raised.take() {
             return Err(error);
         }
         let optimum = optimum.map_err(sysid_error)?;
         // No profile from a start every fit fails from (its NLLs were all NaN).
         unusable_start(problem, &optimum)?;
-        let profiled = py.allow_threads(|| {
+        let profiled = interruptible(py, &raised, || {
             let told = |p: sysid_profile::Progress<'_>| {
                 let Some(callback) = &progress else { return };
                 tell(callback, &raised, |d| match p {
@@ -885,7 +889,7 @@ impl PyProblem {
             };
             sysid_profile::profile_from_optimum(&*method, problem, optimum, &which, &options, &told)
         });
-        if let Some(error) = raised.lock().unwrap_or_else(|e| e.into_inner()).take() {
+        if let Some(error) = raised.take() {
             return Err(error);
         }
         let profiled = profiled.map_err(sysid_error)?;
@@ -934,16 +938,112 @@ impl PyProblem {
     }
 }
 
+/// The first exception a run met (its progress callback's, or a signal's such as Ctrl-C's
+/// KeyboardInterrupt), raised once the run returns, and the flag that asks the run to stop at
+/// its next iteration ([`sysid_core::observer::stop_when`]), set with it.
+#[derive(Default)]
+struct Raised {
+    error: Mutex<Option<PyErr>>,
+    stop: Arc<AtomicBool>,
+}
+
+impl Raised {
+    /// Keeps `e` (unless an earlier exception is kept) and asks the run to stop.
+    fn keep(&self, e: PyErr) {
+        self.lock().get_or_insert(e);
+        self.stop.store(true, Ordering::Relaxed);
+    }
+
+    /// Whether an exception is kept.
+    fn is_set(&self) -> bool {
+        self.lock().is_some()
+    }
+
+    /// The exception kept, if any.
+    fn take(&self) -> Option<PyErr> {
+        self.lock().take()
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<PyErr>> {
+        self.error.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// How often the Python thread looks for signals while a run works.
+const SIGNAL_POLL: Duration = Duration::from_millis(50);
+
+/// The stack of the thread a run works on: the main thread's usual 8 MiB, not a spawned
+/// thread's 2 MiB.
+const RUN_STACK: usize = 8 << 20;
+
+/// Runs `work` (a fit, a multistart, profiles) on a thread of its own while this thread,
+/// Python's main one, waits for it without the GIL and looks for signals every
+/// [`SIGNAL_POLL`]: a signal handler's exception (Ctrl-C's KeyboardInterrupt) is kept in
+/// `raised`, which asks the work to stop at its next iteration; the caller raises it once
+/// `work` has returned. (Run on Python's thread, the work heard Ctrl-C only when it returned:
+/// the handlers run only there, between Python's own instructions.) Called from any other
+/// thread (a fit that a progress callback starts runs on the calling run's threads), `work`
+/// runs in place, where signals are not heard: it stops with the run that called it, and
+/// on `raised`'s flag.
+fn interruptible<R: Send>(py: Python<'_>, raised: &Raised, work: impl FnOnce() -> R + Send) -> R {
+    let flag = Arc::clone(&raised.stop);
+    if !on_main_thread(py) {
+        return py.allow_threads(|| sysid_core::observer::stop_when(flag, work));
+    }
+    let outer = sysid_core::observer::current_stop();
+    std::thread::scope(|scope| {
+        let (done, finished) = std::sync::mpsc::channel::<()>();
+        // In a mutex only so that the wait, made without the GIL, may borrow it.
+        let finished = Mutex::new(finished);
+        let worker = std::thread::Builder::new()
+            .name("sysid-run".into())
+            .stack_size(RUN_STACK)
+            .spawn_scoped(scope, move || {
+                let out = sysid_core::observer::stop_within(outer, || {
+                    sysid_core::observer::stop_when(flag, work)
+                });
+                // The receiver may be gone only if this thread outlives the wait, which it
+                // does not.
+                let _ = done.send(());
+                out
+            })
+            .expect("a thread for the run");
+        loop {
+            let waited = py.allow_threads(|| {
+                finished.lock().unwrap_or_else(|e| e.into_inner()).recv_timeout(SIGNAL_POLL)
+            });
+            match waited {
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                // Done, or the worker panicked (its sender dropped): join says which.
+                _ => break,
+            }
+            if let Err(e) = py.check_signals() {
+                raised.keep(e);
+            }
+        }
+        worker.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
+}
+
+/// Whether this is Python's main thread, the one its signal handlers run on.
+fn on_main_thread(py: Python<'_>) -> bool {
+    let main = || -> PyResult<bool> {
+        let threading = py.import("threading")?;
+        Ok(threading.call_method0("current_thread")?.is(&threading.call_method0("main_thread")?))
+    };
+    main().unwrap_or(false)
+}
+
 /// Calls `callback` with a dict that `fill` fills, unless an earlier call raised; the
-/// first exception is kept in `raised` for the fit to raise when it returns. The lock is
-/// not held while the callback runs (a callback may itself fit, on these threads).
+/// first exception is kept in `raised`, which stops the run at its next iteration, for the
+/// run to raise when it returns. The lock is not held while the callback runs (a callback
+/// may itself fit, on these threads).
 fn tell(
     callback: &Py<PyAny>,
-    raised: &Mutex<Option<PyErr>>,
+    raised: &Raised,
     fill: impl FnOnce(&Bound<'_, PyDict>) -> PyResult<()>,
 ) {
-    let lock = || raised.lock().unwrap_or_else(|e| e.into_inner());
-    if lock().is_some() {
+    if raised.is_set() {
         return;
     }
     let outcome = Python::with_gil(|py| {
@@ -951,7 +1051,7 @@ fn tell(
         fill(&d).and_then(|()| callback.call1(py, (d,)).map(drop))
     });
     if let Err(e) = outcome {
-        lock().get_or_insert(e);
+        raised.keep(e);
     }
 }
 
@@ -960,7 +1060,7 @@ fn tell(
 /// `coarse`.
 fn heard<R>(
     callback: Option<Py<PyAny>>,
-    raised: &Arc<Mutex<Option<PyErr>>>,
+    raised: &Arc<Raised>,
     stage: Option<&'static str>,
     fit: impl FnOnce() -> R,
 ) -> R {
