@@ -518,23 +518,21 @@ fn drive_once<S: System>(
                 extra += 1;
             }
         }
-        if iteration >= options.max_iterations {
+        // The budgets and the caller's stop end the run where it is (the coarse stage ended
+        // first, at the problem's tolerances).
+        let limit = options.max_seconds.filter(|&s| started.elapsed().as_secs_f64() >= s);
+        let ended = if iteration >= options.max_iterations {
+            Some(Ending::MaxIterations)
+        } else if let Some(limit) = limit {
+            Some(Ending::TimeLimit(limit))
+        } else {
+            crate::observer::stop_requested().then_some(Ending::Interrupted)
+        };
+        if let Some(ending) = ended {
             if coarse && let Some(failure) = end_coarse!(final) {
                 break Ending::Failed { iteration, failure };
             }
-            break Ending::MaxIterations;
-        }
-        if let Some(limit) = options.max_seconds.filter(|&s| started.elapsed().as_secs_f64() >= s) {
-            if coarse && let Some(failure) = end_coarse!(final) {
-                break Ending::Failed { iteration, failure };
-            }
-            break Ending::TimeLimit(limit);
-        }
-        if crate::observer::stop_requested() {
-            if coarse && let Some(failure) = end_coarse!(final) {
-                break Ending::Failed { iteration, failure };
-            }
-            break Ending::Interrupted;
+            break ending;
         }
         let proposal = match proposal {
             Some(p) => p,

@@ -8,12 +8,22 @@ use sysid_ode::{Scalar, Signature, System};
 use sysid_profile::{Label, Outcome, POINTWISE_95, ProfileOptions, profile, threshold_95};
 use sysid_registry::{Registry, Settings};
 
-#[test]
-fn a_linear_model_has_the_exact_parabola() {
-    let case = sysid_systems::falling_body::falling_body();
-    let problem = case.problem(1).unwrap();
+/// The catalogue's falling body (data of seed 1), Goodman's method and its fit there: a
+/// model linear in its unknowns, whose optimum the one Newton step reaches.
+fn falling_body_fitted() -> (
+    Problem<sysid_systems::FallingBody>,
+    sysid_registry::Boxed<sysid_systems::FallingBody>,
+    sysid_core::Estimate,
+) {
+    let problem = sysid_systems::falling_body::falling_body().problem(1).unwrap();
     let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
     let optimum = goodman.fit(&problem).unwrap();
+    (problem, goodman, optimum)
+}
+
+#[test]
+fn a_linear_model_has_the_exact_parabola() {
+    let (problem, goodman, optimum) = falling_body_fitted();
     assert!(optimum.converged());
     let z = problem.unknowns().coordinates(&optimum.values);
     let a = problem.linearize(&z).unwrap().normal;
@@ -149,10 +159,7 @@ impl<S: System> sysid_core::Method<S> for Panics<'_, S> {
 /// ones traced without the panics, and the JSON says `failed` (null for the others).
 #[test]
 fn a_fit_that_panics_fails_its_profile_and_the_others_stand() {
-    let case = sysid_systems::falling_body::falling_body();
-    let problem = case.problem(1).unwrap();
-    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
-    let optimum = goodman.fit(&problem).unwrap();
+    let (problem, goodman, optimum) = falling_body_fitted();
     let options = ProfileOptions::default();
     let Outcome::Profiles(plain) = profile(&*goodman, &problem, &optimum, &[], &options).unwrap()
     else {
@@ -194,10 +201,7 @@ fn a_fit_that_panics_fails_its_profile_and_the_others_stand() {
 /// non-identifiable. With the budget that crosses (the test above), they are identifiable.
 #[test]
 fn a_budget_too_short_to_walk_is_undecided() {
-    let case = sysid_systems::falling_body::falling_body();
-    let problem = case.problem(1).unwrap();
-    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
-    let optimum = goodman.fit(&problem).unwrap();
+    let (problem, goodman, optimum) = falling_body_fitted();
     for max_steps in [1, 2] {
         let options = ProfileOptions { max_steps, ..ProfileOptions::default() };
         let Outcome::Profiles(profiles) =
@@ -217,10 +221,7 @@ fn a_budget_too_short_to_walk_is_undecided() {
 /// intervals (here a fit with g held).
 #[test]
 fn what_cannot_be_traced_is_refused() {
-    let case = sysid_systems::falling_body::falling_body();
-    let problem = case.problem(1).unwrap();
-    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
-    let optimum = goodman.fit(&problem).unwrap();
+    let (problem, goodman, optimum) = falling_body_fitted();
     let refused =
         |only: &[usize], options: ProfileOptions, optimum: &sysid_core::Estimate| match profile(
             &*goodman, &problem, optimum, only, &options,
@@ -247,10 +248,7 @@ fn what_cannot_be_traced_is_refused() {
 fn profiles_asked_to_stop_fit_no_further_point() {
     use std::sync::Arc;
     use std::sync::atomic::AtomicBool;
-    let case = sysid_systems::falling_body::falling_body();
-    let problem = case.problem(1).unwrap();
-    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
-    let optimum = goodman.fit(&problem).unwrap();
+    let (problem, goodman, optimum) = falling_body_fitted();
     let options = ProfileOptions::default();
     let stop = Arc::new(AtomicBool::new(true));
     let stopped = sysid_core::observer::stop_when(stop, || {
