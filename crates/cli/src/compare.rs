@@ -81,6 +81,12 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         let (problem, context) = problem(source, &args.integrator, &args.options)?;
         let mut rows = Vec::with_capacity(methods.len());
         for name in &methods {
+            // Stopped (Ctrl-C): the methods not yet begun are listed, not run.
+            if sysid_core::observer::stop_requested() {
+                let result = Err("not begun: the run was stopped".to_string());
+                rows.push(Row { method: name.clone(), result });
+                continue;
+            }
             let m = method(name, &settings)?;
             let watch = context.watch(name, args.options.log_every);
             let result = match &starts {
@@ -101,6 +107,9 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         }));
         tables.push(text(&problem, &context, &rows, args.verbose));
         summaries.push(Summary { system: context.name, rows });
+        if sysid_core::observer::stop_requested() {
+            break;
+        }
     }
     match args.format {
         Format::Json => emit(&format!("{}\n", serde_json::to_string_pretty(&json)?))?,

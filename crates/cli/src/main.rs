@@ -2,6 +2,8 @@
 //!
 //! Exit codes: 0 success, 1 the method did not converge (its report is still printed),
 //! 2 bad input (one line on stderr, nothing on stdout); docs/terminations.md has them all.
+//! A long command stopped by Ctrl-C or SIGTERM prints what it has, then ends by the signal
+//! ([`signals`]).
 
 mod compare;
 mod evaluate;
@@ -12,6 +14,7 @@ mod predict;
 mod problem;
 mod profile;
 mod report;
+mod signals;
 mod simulate;
 mod study;
 
@@ -92,7 +95,38 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let result = match cli.command {
+    // The long commands stop at the first Ctrl-C or SIGTERM with what they have done.
+    let stoppable = matches!(
+        cli.command,
+        Command::Fit(_)
+            | Command::Compare(_)
+            | Command::Predict(_)
+            | Command::Study(_)
+            | Command::Profile(_)
+            | Command::Report(_)
+    );
+    let signals = if stoppable { signals::Signals::install() } else { None };
+    let result = match &signals {
+        Some(s) => sysid_core::observer::stop_when(s.flag(), || run(cli.command)),
+        None => run(cli.command),
+    };
+    let code = match result {
+        Ok(Outcome::Success) => ExitCode::SUCCESS,
+        Ok(Outcome::NotConverged) => ExitCode::from(1),
+        Err(e) => {
+            eprintln!("error: {}", one_line(&format!("{e:#}")));
+            ExitCode::from(2)
+        }
+    };
+    if let Some(signal) = signals.as_ref().and_then(signals::Signals::received) {
+        signals::Signals::end_by(signal);
+    }
+    code
+}
+
+/// Runs a command.
+fn run(command: Command) -> anyhow::Result<Outcome> {
+    match command {
         Command::Fit(args) => fit::run(&args),
         Command::Compare(args) => compare::run(&args),
         Command::Evaluate(args) => evaluate::run(&args),
@@ -108,14 +142,6 @@ fn main() -> ExitCode {
                 .map(|(name, summary)| format!("{name:<26} {summary}\n"))
                 .collect();
             output::emit(&lines.concat()).map(|()| Outcome::Success)
-        }
-    };
-    match result {
-        Ok(Outcome::Success) => ExitCode::SUCCESS,
-        Ok(Outcome::NotConverged) => ExitCode::from(1),
-        Err(e) => {
-            eprintln!("error: {}", one_line(&format!("{e:#}")));
-            ExitCode::from(2)
         }
     }
 }

@@ -113,9 +113,21 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
             point.nll
         ),
     };
-    let profiled = profile_from_optimum(&*m, &problem, optimum, &only, &options, &told);
+    let profiled = profile_from_optimum(&*m, &problem, optimum.clone(), &only, &options, &told);
     traces.finish();
-    let profiled = profiled?;
+    let profiled = match profiled {
+        // Ctrl-C or SIGTERM: the point the profiles began from is not lost.
+        Err(sysid_profile::ProfileError::Interrupted) => {
+            eprintln!(
+                "stopped: the profiles were not finished and are not printed; the fit they began from ({}, NLL {}): {}",
+                optimum.termination,
+                nll(&optimum),
+                sysid_core::format::named_point(&optimum.names, &optimum.values)
+            );
+            return Ok(Outcome::NotConverged);
+        }
+        profiled => profiled?,
+    };
     match args.format {
         Format::Json => {
             let record = profiled.record(&context.name, options.threshold);

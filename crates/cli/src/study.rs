@@ -7,7 +7,7 @@ use std::rc::Rc;
 use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
 use sysid_montecarlo::files::{self, RunOptions, Shard};
-use sysid_montecarlo::{Scenario, Study, StudySpec, basin};
+use sysid_montecarlo::{Scenario, Study, StudyError, StudySpec, basin};
 use sysid_registry::Role;
 
 use crate::Outcome;
@@ -278,8 +278,12 @@ fn run_scenario(
             if done < total {
                 log.log(&format!("{done}/{total} starts done"));
             }
-        })?;
+        });
         bar.finish_and_clear();
+        let map = match map {
+            Err(StudyError::Interrupted(message)) => return Ok(stopped(&message)),
+            map => map?,
+        };
         map.write(&args.out, args.force)?;
         emit(&map.markdown())?;
         return Ok(Outcome::Success);
@@ -298,11 +302,22 @@ fn run_scenario(
         if done > 0 && done < todo {
             log.log(&format!("{done}/{todo} trials done"));
         }
-    })?;
+    });
     bar.finish_and_clear();
+    let summary = match summary {
+        Err(StudyError::Interrupted(message)) => return Ok(stopped(&message)),
+        summary => summary?,
+    };
     emit(&summary.markdown())?;
     eprintln!("{}: {} trials written to {}", system, summary.trials, args.out.display());
     Ok(Outcome::Success)
+}
+
+/// A study or basin map that Ctrl-C or SIGTERM stopped: what was kept, on stderr (nothing on
+/// stdout: there is no summary).
+fn stopped(message: &str) -> Outcome {
+    eprintln!("{message}");
+    Outcome::NotConverged
 }
 
 /// Runs `sysid merge`.

@@ -6,4 +6,5 @@ mod contract;
 mod edges;
 mod model_files;
 mod petab;
+mod signals;
 mod study;

@@ -355,7 +355,9 @@ impl Termination {
             Termination::TimeLimit { seconds } => {
                 write!(f, "the time limit of {seconds} s ran out")
             }
-            Termination::Interrupted => write!(f, "interrupted: the caller asked the fit to stop"),
+            Termination::Interrupted => {
+                write!(f, "interrupted: the run was asked to stop (Ctrl-C, a signal or the caller)")
+            }
             Termination::Failed {
                 iteration,
                 failure: Failure::Singular { unknowns, condition },

@@ -87,17 +87,34 @@ pub fn basin<S: System + Clone + Send + Sync>(
     let problem = scenario.with_data(data)?;
     let reference = study.reference_fit(&problem);
     let finished = AtomicUsize::new(0);
-    let results: Vec<Vec<TrialRecord>> = points
+    // The caller's stop flag: once set, no start is begun, and the map is not made (a fit of
+    // the starts running may have been cut short).
+    let stop = sysid_core::observer::current_stop();
+    let stopped = || stop.as_ref().is_some_and(|s| s.requested());
+    let results: Vec<Option<Vec<TrialRecord>>> = points
         .par_iter()
         .map(|&(i, j)| {
+            if stopped() {
+                return None;
+            }
             let mut start = truth.to_vec();
             start[axes.0] = x[i];
             start[axes.1] = y[j];
-            let fits = study.fit_methods(&problem, 0, &start, reference);
+            let fits = sysid_core::observer::stop_within(stop.clone(), || {
+                study.fit_methods(&problem, 0, &start, reference)
+            });
             progress(finished.fetch_add(1, Ordering::Relaxed) + 1, points.len());
-            fits
+            Some(fits)
         })
         .collect();
+    if stopped() {
+        return Err(StudyError::Interrupted(format!(
+            "stopped: {} of the {} starts of the basin map were fitted; no map is written",
+            finished.load(Ordering::Relaxed),
+            points.len()
+        )));
+    }
+    let results: Vec<Vec<TrialRecord>> = results.into_iter().flatten().collect();
     let maps = spec
         .methods
         .iter()

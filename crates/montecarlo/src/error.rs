@@ -60,6 +60,12 @@ pub enum StudyError {
         /// Who holds it.
         holder: String,
     },
+    /// The caller stopped the run ([`stop_when`](sysid_core::observer::stop_when)): no trial
+    /// or start was begun after it, and those running when it came are not kept (their fits
+    /// were cut short). A study's complete trials stay in its `trials.jsonl` for `--resume`;
+    /// no summary is written.
+    #[error("{0}")]
+    Interrupted(String),
 }
 
 /// "a, b, c and 4 more".

@@ -205,10 +205,20 @@ pub fn run<S: System + Clone + Send + Sync>(
     let out = Mutex::new(file);
     let finished = AtomicUsize::new(0);
     progress(0, todo.len());
-    let new: Vec<Vec<TrialRecord>> = todo
+    // The caller's stop flag: once set, no trial is begun, and a trial that ends after it is
+    // not written (a fit of it may have been cut short); --resume runs those again.
+    let stop = sysid_core::observer::current_stop();
+    let stopped = || stop.as_ref().is_some_and(|s| s.requested());
+    let new: Vec<Option<Vec<TrialRecord>>> = todo
         .par_iter()
         .map(|&t| {
-            let lines = study.trial(t)?;
+            if stopped() {
+                return Ok(None);
+            }
+            let lines = sysid_core::observer::stop_within(stop.clone(), || study.trial(t))?;
+            if stopped() {
+                return Ok(None);
+            }
             let mut text = String::new();
             for r in &lines {
                 text += &serde_json::to_string(r).expect("records serialise");
@@ -220,10 +230,22 @@ pub fn run<S: System + Clone + Send + Sync>(
             file.flush().map_err(StudyError::io(&trials_path))?;
             drop(file);
             progress(finished.fetch_add(1, Ordering::Relaxed) + 1, todo.len());
-            Ok(lines)
+            Ok(Some(lines))
         })
         .collect::<Result<_, StudyError>>()?;
-    records.extend(new.into_iter().flatten());
+    if new.iter().any(Option::is_none) {
+        let kept = new.iter().flatten().count();
+        return Err(StudyError::Interrupted(format!(
+            "stopped: {} of the {} trials{} are complete in {} ({kept} of them this run); \
+             the same command with --resume runs the other {}",
+            done.len() + kept,
+            header.trials().len(),
+            if header.shard.is_some() { " of this shard" } else { "" },
+            trials_path.display(),
+            todo.len() - kept
+        )));
+    }
+    records.extend(new.into_iter().flatten().flatten());
     finish(dir, &header, records)
 }
 

@@ -151,10 +151,9 @@ pub struct Starts {
     /// Starts drawn but not fitted because the time budget had run out (0 without one), or
     /// because the caller stopped the run ([`stopped`](Self::stopped)).
     pub not_started: usize,
-    /// Whether the caller stopped the run ([`stop_when`](sysid_core::observer::stop_when)):
-    /// its running fits ended `interrupted`, and `not_started` counts the starts it did not
-    /// begin. Not in the JSON: a run of the command line is never stopped so.
-    #[serde(skip)]
+    /// Whether the caller stopped the run ([`stop_when`](sysid_core::observer::stop_when);
+    /// Ctrl-C or SIGTERM in the command line): its running fits ended `interrupted`, and
+    /// `not_started` counts the starts it did not begin.
     pub stopped: bool,
     /// The draws' seed.
     pub seed: u64,

@@ -168,6 +168,32 @@ fn results_do_not_depend_on_threads_shards_or_interruptions() {
     files::run(&study, &killed, resume(), &count).unwrap();
     assert_eq!(done.into_inner(), 12 - 4, "only the trials not complete run again");
     assert_eq!(results(&killed), reference);
+
+    // A stopped run (Ctrl-C in the command line): the flag set once 3 trials are written, on
+    // two threads. No trial is begun after it, the trial running then is not written, no
+    // summary is written, and a resumed run ends where the uninterrupted one did.
+    let stopped = scratch.join("stopped");
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let stop = |n: usize, _: usize| {
+        if n >= 3 {
+            flag.store(true, std::sync::atomic::Ordering::Relaxed);
+        }
+    };
+    let run = || files::run(&study, &stopped, fresh(), &stop);
+    let e = pool(2).install(|| sysid_core::observer::stop_when(flag.clone(), run)).unwrap_err();
+    assert!(matches!(e, sysid_montecarlo::StudyError::Interrupted(_)), "{e:?}");
+    let kept = std::fs::read_to_string(stopped.join("trials.jsonl")).unwrap();
+    let kept: Vec<Value> =
+        kept.lines().map(|l| untimed(serde_json::from_str(l).unwrap())).collect();
+    // The third trial written set the flag; the other thread's trial then running is dropped
+    // (or, where it was written between the third's write and its count, kept whole).
+    let n = kept.len() / 3;
+    assert!(kept.len() % 3 == 0 && (3..=4).contains(&n), "{kept:?}");
+    assert!(kept.iter().all(|r| reference.0.contains(r)), "a kept trial differs");
+    assert!(e.to_string().contains(&format!("stopped: {n} of the 12 trials are complete")), "{e}");
+    assert!(!stopped.join("summary.json").exists());
+    files::run(&study, &stopped, resume(), &quiet).unwrap();
+    assert_eq!(results(&stopped), reference);
 }
 
 #[test]

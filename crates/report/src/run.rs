@@ -75,6 +75,7 @@ fn write_sections(
         let section = report.visit(case)?;
         observer.note(&format!("{name}: done in {:.1} s", t.elapsed().as_secs_f64()));
         sections.push(section);
+        stop_here(&format!("after {} of the {} systems", sections.len(), systems.len()))?;
     }
     let petab = match &args.petab {
         Some(dir) => {
@@ -91,6 +92,7 @@ fn write_sections(
                 crate::petab::Starting { options: &multistart, seconds: args.petab_start_seconds };
             let md = crate::petab::section(dir, &args.out, &starts, &args.settings(), observer)?;
             observer.note(&format!("PEtab problems: done in {:.1} s", t.elapsed().as_secs_f64()));
+            stop_here("in the PEtab problems")?;
             md
         }
         None => String::new(),
@@ -99,6 +101,17 @@ fn write_sections(
     let path = args.out.join(README);
     write(&path, &readme)?;
     Ok(path)
+}
+
+/// An error where the caller stopped the run ([`sysid_core::observer::stop_when`]; Ctrl-C in
+/// the command line): what the sections wrote stays, README.md is not written.
+fn stop_here(when: &str) -> anyhow::Result<()> {
+    if sysid_core::observer::stop_requested() {
+        anyhow::bail!(
+            "stopped {when}: README.md is not written (the figures and data written so far stay)"
+        );
+    }
+    Ok(())
 }
 
 struct SystemReport<'a> {
