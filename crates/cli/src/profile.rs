@@ -2,7 +2,9 @@
 
 use anyhow::bail;
 use clap::Args;
-use sysid_profile::{ProfileOptions, Profiled, Progress, nll, profile_from_optimum, threshold_95};
+use sysid_profile::{
+    Label, ProfileOptions, Profiled, Progress, nll, profile_from_optimum, threshold_95,
+};
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
@@ -116,7 +118,8 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     let profiled = profile_from_optimum(&*m, &problem, optimum.clone(), &only, &options, &told);
     traces.finish();
     let profiled = match profiled {
-        // Ctrl-C or SIGTERM: the point the profiles began from is not lost.
+        // Ctrl-C or SIGTERM while the optimum was fitted again: the point the profiles began
+        // from is not lost. (Stopped elsewhere, the profiles come back labelled `stopped`.)
         Err(sysid_profile::ProfileError::Interrupted) => {
             eprintln!(
                 "stopped: the profiles were not finished and are not printed; the fit they began from ({}, NLL {}): {}",
@@ -171,6 +174,13 @@ fn table(context: &Context, profiled: &Profiled) -> String {
     // Each profile holds the optimum too, which has its own warning above.
     let points = profiles.iter().flat_map(|p| &p.points).filter(|q| q.estimates != optimum.values);
     let (short, all) = (points.clone().filter(|q| !q.converged).count(), points.count());
+    let stopped = profiles.iter().filter(|p| p.label == Label::Stopped).count();
+    if stopped > 0 {
+        text += &format!(
+            "  warning: the run was stopped: {stopped} of the {} profiles are not done (their verdict `stopped`, a bound not reached shown as —; the JSON keeps the points fitted)\n",
+            profiles.len()
+        );
+    }
     if short > 0 {
         text += &format!(
             "  warning: {short} of the {all} points' fits did not converge: their NLL may lie above the profile's, and the intervals may be too narrow (the JSON's `converged` says which)\n"
@@ -180,8 +190,9 @@ fn table(context: &Context, profiled: &Profiled) -> String {
         "\n  {:<22} {:>14} {:>14} {:>14}  {}\n",
         "unknown", "estimate", "95 % low", "95 % high", "verdict"
     );
-    let bound = |v: Option<f64>| v.map_or("open".to_string(), |v| format!("{v:.6e}"));
     for p in profiles {
+        let none = if p.label == Label::Stopped { "—" } else { "open" };
+        let bound = |v: Option<f64>| v.map_or(none.to_string(), |v| format!("{v:.6e}"));
         let i = optimum.names.iter().position(|n| n == &p.name).unwrap_or(0);
         let label = p.label.words();
         text += &format!(

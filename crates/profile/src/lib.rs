@@ -27,6 +27,11 @@
 //! when a side's budget ran out before either (its steps still shorter: the profile was
 //! rising, and more points may cross), which a larger budget decides.
 //!
+//! **A stopped run** ([`stop_when`](sysid_core::observer::stop_when); Ctrl-C in the command
+//! line and in Python) fits no further point: each profile keeps the points fitted before
+//! the stop, and those not finished are labelled `stopped` (no verdict; an interval bound
+//! that was not reached is None, as on a side that did not cross).
+//!
 //! **A fit that panics** (a defect in sysid) ends its side there: the profile keeps the points
 //! walked before it, its other side is still traced, its verdict is `failed` with the panic's
 //! message ([`Profile::failed`]), and the other unknowns' profiles stand.
@@ -68,9 +73,11 @@ pub enum ProfileError {
     #[error("{0}")]
     Invalid(String),
     /// The caller asked the profiles to stop
-    /// ([`stop_when`](sysid_core::observer::stop_when)): the fits running stopped at their
-    /// next iteration, and no further point was fitted.
-    #[error("interrupted: the caller asked the profiles to stop")]
+    /// ([`stop_when`](sysid_core::observer::stop_when)) where no profile could keep its
+    /// points: while the optimum was being fitted again from a better point a profile
+    /// found. (Elsewhere the profiles stop with the points they have, labelled
+    /// [`Label::Stopped`].)
+    #[error("interrupted: the run was asked to stop while the optimum was fitted again")]
     Interrupted,
 }
 
@@ -137,6 +144,10 @@ where
         match profile_observed(method, problem, &optimum, only, options, &traced)? {
             Outcome::Profiles(profiles) => {
                 return Ok(Profiled { certified, optimum, better, profiles });
+            }
+            // Stopped: the profiles that found it are gone, and the fit from it would stop.
+            Outcome::BetterOptimum(_) if sysid_core::observer::stop_requested() => {
+                return Err(ProfileError::Interrupted);
             }
             Outcome::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
                 on_progress(Progress::Better { point: &point, was: nll(&optimum) });
@@ -244,6 +255,10 @@ pub enum Label {
     /// A fit along the profile panicked (a defect in sysid): no verdict
     /// ([`Profile::failed`] holds the message).
     Failed,
+    /// The run was stopped before the profile was done
+    /// ([`stop_when`](sysid_core::observer::stop_when)): no verdict; its points are those
+    /// fitted before the stop.
+    Stopped,
 }
 
 impl Label {
@@ -255,6 +270,7 @@ impl Label {
             Label::Undecided => "undecided (the point budget ran out before the threshold)",
             Label::StructurallyNonIdentifiable => "structurally non-identifiable",
             Label::Failed => "failed (a fit along it panicked)",
+            Label::Stopped => "stopped (the run was stopped before the profile was done)",
         }
     }
 }
@@ -346,6 +362,8 @@ enum End {
     Better(Point),
     /// A fit panicked, with this message.
     Failed(String),
+    /// The caller asked the run to stop.
+    Stopped,
 }
 
 /// The NLL of a fit: its likelihood, or ε/2 where it has none.
@@ -442,7 +460,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         };
         let mut points = vec![at.clone()];
         let mut interval = [None, None];
-        let (mut open, mut budget, mut failed) = (false, false, None);
+        let (mut open, mut budget, mut failed, mut stopped) = (false, false, None, false);
         for (side, direction) in [-1.0, 1.0].into_iter().enumerate() {
             let (walked, end) = self.side(&at, direction)?;
             points.extend(walked);
@@ -452,6 +470,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
                 End::Budget => budget = true,
                 End::Better(point) => return Ok(Err(point)),
                 End::Failed(message) => failed = failed.or(Some(message)),
+                End::Stopped => stopped = true,
             }
         }
         points.sort_by(|a, b| a.value.total_cmp(&b.value));
@@ -461,6 +480,8 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         // unknown was called structurally non-identifiable.
         let label = if failed.is_some() {
             Label::Failed
+        } else if stopped {
+            Label::Stopped
         } else if budget {
             Label::Undecided
         } else if rise < 1e-3 * self.options.threshold {
@@ -560,6 +581,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             }
             let point = match self.fit_at(next_z, &previous) {
                 Err(ProfileError::Panicked(message)) => return Ok((points, End::Failed(message))),
+                Err(ProfileError::Interrupted) => return Ok((points, End::Stopped)),
                 other => other?,
             };
             if self.below_optimum(&point) {
@@ -577,6 +599,8 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
                     Err(ProfileError::Panicked(message)) => {
                         return Ok((points, End::Failed(message)));
                     }
+                    // Bracketed, not located.
+                    Err(ProfileError::Interrupted) => return Ok((points, End::Stopped)),
                     other => other?,
                 };
                 return Ok(match crossing {

@@ -242,8 +242,9 @@ fn what_cannot_be_traced_is_refused() {
     assert!(e.starts_with("the optimum is a fit of other unknowns ("), "{e}");
 }
 
-/// Profiles asked to stop (`sysid_core::observer::stop_when`, Python's Ctrl-C) fit no
-/// further point: the run ends with `ProfileError::Interrupted`, on every thread that traces.
+/// Profiles asked to stop (`sysid_core::observer::stop_when`; Ctrl-C in the command line and
+/// Python) fit no further point: asked before they begin, every profile is labelled
+/// `stopped` and holds the optimum alone.
 #[test]
 fn profiles_asked_to_stop_fit_no_further_point() {
     use std::sync::Arc;
@@ -254,5 +255,53 @@ fn profiles_asked_to_stop_fit_no_further_point() {
     let stopped = sysid_core::observer::stop_when(stop, || {
         profile(&*goodman, &problem, &optimum, &[], &options)
     });
-    assert!(matches!(stopped, Err(sysid_profile::ProfileError::Interrupted)), "{stopped:?}");
+    let Ok(Outcome::Profiles(profiles)) = stopped else { panic!("{stopped:?}") };
+    assert_eq!(profiles.len(), 3);
+    for p in &profiles {
+        assert_eq!((p.label, p.points.len(), p.interval), (Label::Stopped, 1, [None, None]));
+    }
+}
+
+/// Stopped part-way, on one thread: the first profile keeps the points fitted before the stop
+/// (each one a fit that ended before it: at or above the optimum's NLL, converged) under the
+/// verdict `stopped`, the others hold the optimum alone; the JSON's label is "stopped".
+#[test]
+fn a_stopped_profile_keeps_the_points_fitted_before_the_stop() {
+    use std::cell::Cell;
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let (problem, goodman, optimum) = falling_body_fitted();
+    let options = ProfileOptions::default();
+    let flag = Arc::new(AtomicBool::new(false));
+    let set = Arc::clone(&flag);
+    let heard = Cell::new(0);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    // Every fit along the profiles is heard of on the one thread; the stop comes at the 40th
+    // iterate, within the first profile (y's: the assertions below fail otherwise).
+    let traced = pool.install(|| {
+        sysid_core::observer::observe(
+            move |_| {
+                heard.set(heard.get() + 1);
+                if heard.get() == 40 {
+                    set.store(true, Ordering::Relaxed);
+                }
+            },
+            || {
+                sysid_core::observer::stop_when(flag, || {
+                    profile(&*goodman, &problem, &optimum, &[], &options)
+                })
+            },
+        )
+    });
+    let Ok(Outcome::Profiles(profiles)) = traced else { panic!("{traced:?}") };
+    let first = &profiles[0];
+    assert_eq!(first.label, Label::Stopped);
+    assert!(first.points.len() > 2, "{} points", first.points.len());
+    let base = sysid_profile::nll(&optimum);
+    for p in &first.points {
+        assert!(p.converged && p.nll >= base - 1e-9 * base.abs(), "{p:?}");
+    }
+    assert!(profiles[1..].iter().all(|p| p.label == Label::Stopped && p.points.len() == 1));
+    let record = serde_json::to_value(first.record()).unwrap();
+    assert_eq!(record["label"], "stopped");
 }
