@@ -188,7 +188,7 @@ fn results_do_not_depend_on_threads_shards_or_interruptions() {
     // The third trial written set the flag; the other thread's trial then running is dropped
     // (or, where it was written between the third's write and its count, kept whole).
     let n = kept.len() / 3;
-    assert!(kept.len() % 3 == 0 && (3..=4).contains(&n), "{kept:?}");
+    assert!(kept.len().is_multiple_of(3) && (3..=4).contains(&n), "{kept:?}");
     assert!(kept.iter().all(|r| reference.0.contains(r)), "a kept trial differs");
     assert!(e.to_string().contains(&format!("stopped: {n} of the 12 trials are complete")), "{e}");
     assert!(!stopped.join("summary.json").exists());
