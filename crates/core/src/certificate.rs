@@ -118,17 +118,18 @@ pub struct Certificate {
     /// max_i m_i (module docs); 0 for an exact fit, ∞ when r, g or A is not finite.
     pub optimality: f64,
     /// The integration error of `optimality`, measured by integrating again at a tenth of
-    /// the tolerance (0 where not measured: an exact fit, a point that failed; ∞ where that
-    /// integration fails, [`unchecked`](Self::unchecked)).
+    /// the tolerance, or, within a factor 10 of the finest rtol
+    /// ([`FINEST_RTOL`](crate::method::FINEST_RTOL)), at the same tolerances with another
+    /// scheme ([`other_scheme`](crate::method::other_scheme)) (0 where not measured: an exact
+    /// fit, a point that failed; ∞ where that integration fails,
+    /// [`unchecked`](Self::unchecked)).
     pub error: f64,
-    /// The integration error of ε at the point, |ε − ε′| with ε′ from the same integration
-    /// again at a tenth of the tolerance (0 where `error` is not measured, ∞ where that
-    /// integration fails).
+    /// The integration error of ε at the point, |ε − ε′| with ε′ from the same reference
+    /// integration as `error` (0 where `error` is not measured, ∞ where that integration
+    /// fails).
     pub cost_error: f64,
-    /// Whether `error` was measured: false for an exact fit, a point that failed, and an
-    /// integration already within a factor 10 of the finest rtol
-    /// ([`FINEST_RTOL`](crate::method::FINEST_RTOL)), where there is no finer one to measure
-    /// it against (its 0 is then not a measured 0).
+    /// Whether `error` was measured: false for an exact fit and a point that failed (its 0
+    /// is then not a measured 0).
     pub error_measured: bool,
     /// The tolerance it was held to.
     pub gtol: f64,

@@ -83,6 +83,21 @@ pub fn finer(integrator: &Integrator) -> Option<Integrator> {
     Some(finer)
 }
 
+/// The scheme an integration at the finest tolerances is compared with
+/// ([`Evaluations::reference`]): one of another order and construction that integrates the
+/// same models. `auto`, which steps with DOP853 at such tolerances and with Rodas5P where
+/// the model is stiff, against Rodas5P throughout; DOPRI5 and DOP853 against each other
+/// (explicit, as the user chose them); a Rosenbrock scheme against the other; BDF against
+/// Rodas5P.
+pub fn other_scheme(scheme: Scheme) -> Scheme {
+    match scheme {
+        Scheme::Auto | Scheme::Rodas4 | Scheme::Bdf => Scheme::Rodas5p,
+        Scheme::Dopri5 | Scheme::Rk4 => Scheme::Dop853,
+        Scheme::Dop853 => Scheme::Dopri5,
+        Scheme::Rodas5p => Scheme::Rodas4,
+    }
+}
+
 /// The relative tolerance of the error-controlled integration a fixed-step run's
 /// certificate is measured against ([`Evaluations::reference`]).
 pub const REFERENCE_RTOL: f64 = 1e-10;
@@ -124,17 +139,25 @@ impl<'p, S: System> Evaluations<'p, S> {
     }
 
     /// The problem as the certificate measures its integration error against: [`finer`]
-    /// for an error-controlled integration; for a fixed step, the same model integrated
-    /// with error control at rtol [`REFERENCE_RTOL`](crate::method::REFERENCE_RTOL) (DOPRI5, or the Rosenbrock scheme of a
-    /// fixed-step Rosenbrock run), so that a step too coarse to resolve the model shows in
-    /// the error instead of passing as exact.
+    /// for an error-controlled integration; where rtol is already within a factor 10 of
+    /// [`FINEST_RTOL`], so that nothing is finer, the same tolerances with another scheme
+    /// ([`other_scheme`]: their difference is the larger of the two errors, unless they
+    /// happen to cancel); for a fixed step, the same model integrated with error control at
+    /// rtol [`REFERENCE_RTOL`](crate::method::REFERENCE_RTOL) (DOPRI5, or the Rosenbrock
+    /// scheme of a fixed-step Rosenbrock run), so that a step too coarse to resolve the
+    /// model shows in the error instead of passing as exact.
     ///
     /// [`finer`]: Self::finer
     pub fn reference(&self) -> Option<Problem<S>> {
         let problem = self.problem();
         let integrator = problem.integrator();
         if integrator.fixed_step.is_none() {
-            return self.finer();
+            if let Some(finer) = self.finer() {
+                return Some(finer);
+            }
+            let mut other = *integrator;
+            other.scheme = other_scheme(integrator.scheme);
+            return problem.clone().with_integrator(other).ok();
         }
         let mut reference = *integrator;
         reference.fixed_step = None;
@@ -357,6 +380,36 @@ mod tests {
             .integrator(integrator)
             .build()
             .expect("a valid problem")
+    }
+
+    /// The certificate's reference: a tenth of the tolerances while there is one; at the
+    /// finest rtol the same tolerances with another scheme, whose cost differs from the
+    /// working integration's by the size of the larger of their errors (each measured
+    /// against the closed form x(t) = e^{−kt}).
+    #[test]
+    fn at_the_finest_rtol_the_reference_is_another_scheme() {
+        let problem = decay();
+        let ev = Evaluations::new(&problem, 100);
+        let reference = ev.reference().expect("a finer integration");
+        assert_eq!(reference.integrator().scheme, Scheme::Dopri5);
+        assert!((reference.integrator().rtol - 0.1 * problem.integrator().rtol).abs() < 1e-20);
+        let tight = Integrator { rtol: 5e-12, atol: 5e-16, ..*problem.integrator() };
+        let finest = problem.clone().with_integrator(tight).expect("valid tolerances");
+        let ev = Evaluations::new(&finest, 100);
+        let reference = ev.reference().expect("another scheme");
+        assert_eq!(reference.integrator().scheme, Scheme::Dop853);
+        assert_eq!((reference.integrator().rtol, reference.integrator().atol), (5e-12, 5e-16));
+        let exact: f64 = [(1.0, 0.6), (2.0, 0.4)]
+            .iter()
+            .map(|&(t, b): &(f64, f64)| ((-0.5 * t).exp() - b).powi(2))
+            .sum();
+        let cost = |p: &Problem<Decay>| p.cost(&[0.5]).expect("integrates").0;
+        let (working, other) = (cost(&finest), cost(&reference));
+        let errors = ((working - exact).abs(), (other - exact).abs());
+        let measured = (working - other).abs();
+        // Here 3.1e-15 against errors of 1.7e-15 and 4.8e-15 (4.5e-12 of ε).
+        let larger = errors.0.max(errors.1);
+        assert!(measured >= 0.25 * larger && larger < 1e-11 * exact, "{measured:e}, {errors:?}");
     }
 
     #[test]

@@ -125,7 +125,7 @@ pub mod method {
     };
     pub use crate::driver::drive;
     pub use crate::evaluations::{
-        COARSE_RTOL, Evaluations, FINEST_RTOL, REFERENCE_RTOL, coarser, finer,
+        COARSE_RTOL, Evaluations, FINEST_RTOL, REFERENCE_RTOL, coarser, finer, other_scheme,
     };
     pub use crate::fit::start_coordinates;
     pub use crate::geodesic::{Accelerated, GEODESIC_H, GEODESIC_RATIO, Geodesic};
