@@ -135,12 +135,14 @@ const SAME_MINIMUM: f64 = 1e-6;
 /// Several systems at a glance: a row per method, a column per system (numbered, named
 /// below with the least cost and how many methods reached it), each cell ✓ and the
 /// iterations of a converged fit, ✗ and the iterations of one that did not converge, ! for a
-/// method that refused the problem; then every fit that did not converge, with why.
+/// method that refused the problem or was not begun (Ctrl-C); then every fit that did not
+/// converge, with why.
 fn matrix(methods: &[String], systems: &[Summary]) -> String {
     let width = methods.iter().map(String::len).max().unwrap_or(6).max(6);
     let mut out = format!(
         "{} methods on {} systems, each from the system's default start.\n✓ n: converged (the \
-         certificate holds) after n iterations; ✗ n: did not; !: refused the problem.\n\
+         certificate holds) after n iterations; ✗ n: did not; !: refused the problem (or not \
+         begun: the run was stopped).\n\
          `--verbose` prints every fit in full, `--format json` as JSON.\n\n{:width$}",
         methods.len(),
         systems.len(),

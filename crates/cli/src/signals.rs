@@ -1,4 +1,4 @@
-//! Ctrl-C (SIGINT), SIGTERM (a batch job's time limit) and SIGHUP in the long commands.
+//! Ctrl-C (SIGINT) and SIGTERM (a batch job's time limit) in the long commands.
 //!
 //! `fit`, `compare`, `predict`, `profile`, `study` and `report` run within a stop flag
 //! ([`sysid_core::observer::stop_when`]) that the first of these signals sets: the fits
@@ -8,7 +8,10 @@
 //! comes. A second signal ends the process at once, as the signal's default action would,
 //! printing nothing more. After the output the process ends by the first signal, so that a
 //! shell reports it (130 for Ctrl-C, 143 for SIGTERM) and a shell loop around sysid stops
-//! too. Elsewhere than on Unix the signals keep their default actions.
+//! too. A signal ignored as sysid starts (SIGINT in a shell script's background job) stays
+//! ignored; SIGHUP keeps its default action (a closed terminal takes the output with it, and
+//! `nohup` still protects a run). Elsewhere than on Unix the signals keep their default
+//! actions.
 
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -27,11 +30,14 @@ impl Signals {
     /// Installs the handlers (None where the system refuses them: the signals then keep
     /// their default actions).
     pub fn install() -> Option<Self> {
-        use signal_hook::consts::signal::{SIGHUP, SIGINT, SIGTERM};
+        use signal_hook::consts::signal::{SIGINT, SIGTERM};
         use signal_hook::flag;
         let stop = Arc::new(AtomicBool::new(false));
         let first = Arc::new(AtomicUsize::new(0));
-        let signals = [SIGINT, SIGTERM, SIGHUP];
+        let signals: Vec<i32> = [SIGINT, SIGTERM].into_iter().filter(|&s| !ignored(s)).collect();
+        if signals.is_empty() {
+            return None;
+        }
         for &signal in &signals {
             // In this order: a signal that finds the flag set (the second) takes the default
             // action; the first only records itself and sets the flag.
@@ -103,11 +109,24 @@ impl Signals {
 /// The signal as a user knows it.
 #[cfg(unix)]
 fn name(signal: i32) -> &'static str {
-    use signal_hook::consts::signal::{SIGHUP, SIGINT, SIGTERM};
+    use signal_hook::consts::signal::{SIGINT, SIGTERM};
     match signal {
         SIGINT => "Ctrl-C (SIGINT)",
         SIGTERM => "SIGTERM",
-        SIGHUP => "SIGHUP",
         _ => "a signal",
+    }
+}
+
+/// Whether `signal` was ignored (SIG_IGN) as the process started: a shell starts a script's
+/// background jobs with SIGINT ignored, and such a job must not stop on it.
+#[cfg(unix)]
+#[allow(unsafe_code)]
+fn ignored(signal: i32) -> bool {
+    // SAFETY: sigaction with a null new action only reads the current one into `old`, a
+    // plain C struct for which all zeroes is a valid value.
+    unsafe {
+        let mut old: libc::sigaction = std::mem::zeroed();
+        libc::sigaction(signal, std::ptr::null(), &mut old) == 0
+            && old.sa_sigaction == libc::SIG_IGN
     }
 }

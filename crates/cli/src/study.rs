@@ -6,6 +6,7 @@ use std::rc::Rc;
 
 use anyhow::{Context as _, anyhow, bail};
 use clap::Args;
+use sysid_core::Termination;
 use sysid_montecarlo::files::{self, RunOptions, Shard};
 use sysid_montecarlo::{Scenario, Study, StudyError, StudySpec, basin};
 use sysid_registry::Role;
@@ -204,6 +205,12 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
             ));
             let fitted =
                 watching(&watch, || fit(&problem, &args.reference, &args.options.settings()))?;
+            if fitted.termination == Termination::Interrupted {
+                return Ok(stopped(&format!(
+                    "stopped during the fit to {}'s data that gives the study its truth: no trial was run",
+                    path.display()
+                )));
+            }
             if !fitted.converged() {
                 bail!(
                     "{}: the fit to the data that gives the study its truth did not converge ({})",
@@ -305,7 +312,9 @@ fn run_scenario(
     });
     bar.finish_and_clear();
     let summary = match summary {
-        Err(StudyError::Interrupted(message)) => return Ok(stopped(&message)),
+        Err(StudyError::Interrupted(message)) => {
+            return Ok(stopped(&format!("{message}: the same command with --resume runs them")));
+        }
         summary => summary?,
     };
     emit(&summary.markdown())?;

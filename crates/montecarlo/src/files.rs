@@ -236,8 +236,8 @@ pub fn run<S: System + Clone + Send + Sync>(
     if new.iter().any(Option::is_none) {
         let kept = new.iter().flatten().count();
         return Err(StudyError::Interrupted(format!(
-            "stopped: {} of the {} trials{} are complete in {} ({kept} of them this run); \
-             the same command with --resume runs the other {}",
+            "stopped: {} of the {} trials{} are complete in {} ({kept} of them this run), {} \
+             not run",
             done.len() + kept,
             header.trials().len(),
             if header.shard.is_some() { " of this shard" } else { "" },

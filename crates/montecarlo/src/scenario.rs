@@ -195,7 +195,9 @@ impl<S: System + Clone> Scenario<S> {
 
     /// The Cramér–Rao bound at the truth for noise `noise`·σ: the inverse Fisher information
     /// F = Σ_m ∇h_m ∇h_mᵀ / (noise σ_m)², as a covariance of the values of the unknowns (the
-    /// smallest covariance any unbiased estimator can have, to first order).
+    /// smallest covariance any unbiased estimator can have, to first order). With priors on
+    /// the unknowns, their information is added (Σ ∇r_p ∇r_pᵀ of their standardised rows, not
+    /// scaled by the noise): van Trees' bound for an estimate that uses them.
     pub fn cramer_rao(&self, noise: f64) -> Result<DMatrix<f64>, StudyError> {
         let problem = self.with_data(self.clean_data())?;
         let z = problem.unknowns().coordinates(&self.truth);
@@ -212,8 +214,11 @@ impl<S: System + Clone> Scenario<S> {
                 .flat_map(|e| &e.sampled().series)
                 .flat_map(|s| s.samples.iter().map(|m| m.sqrt_weight))
                 .collect();
+            // The priors' rows, after the data's, are standardised already, (T(θ) − mean)/sd,
+            // and the noise does not scale them: F adds the prior's information (the van
+            // Trees bound of an estimate that uses the prior, as the fits do).
             let mut g = jac.clone();
-            for (m, mut row) in g.row_iter_mut().enumerate() {
+            for (m, mut row) in g.row_iter_mut().enumerate().take(sqrt_w.len()) {
                 row /= sqrt_w[m] * noise * self.sigma[m];
             }
             g.tr_mul(&g)

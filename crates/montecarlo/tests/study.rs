@@ -296,6 +296,39 @@ fn cramer_rao_bound_of_the_falling_body_is_the_regression_covariance() {
     }
 }
 
+/// With a normal prior on g (mean 30, sd 0.5), the bound adds the prior's information, not
+/// scaled by the noise: (ΦᵀΦ/(noise² σ²) + e_g e_gᵀ/sd²)⁻¹, σ² = 1.25 the data's own. (Before,
+/// the prior's row, after the data's, was read past the data's weights: a panic.)
+#[test]
+fn cramer_rao_bound_with_a_prior_adds_its_information() {
+    use sysid_core::{Prior, Problem, Transform, Unknown};
+    let case = sysid_systems::falling_body::falling_body();
+    let (t, y) = sysid_systems::falling_body::TABLE_I;
+    let problem = Problem::builder(case.system.clone())
+        .unknown_with(Unknown::new("y", -0.25))
+        .unknown_with(Unknown::new("v", -0.25))
+        .unknown_with(Unknown::new("g", 32.5).prior(Prior::normal(30.0, 0.5, Transform::Lin)))
+        .data(sysid_core::Data::discrete().series("y", &t, &y))
+        .build()
+        .unwrap();
+    let scenario =
+        Scenario::new(problem, vec![-0.25, -0.25, 32.5], vec![1.25f64.sqrt(); 4]).unwrap();
+    let phi = DMatrix::from_fn(4, 3, |m, j| [1.0, m as f64, (m * m) as f64 / 2.0][j]);
+    for noise in [1.0, 3.0] {
+        let mut fisher = phi.transpose() * &phi / (1.25 * noise * noise);
+        fisher[(2, 2)] += 1.0 / (0.5 * 0.5);
+        let expected = fisher.try_inverse().unwrap();
+        let crb = scenario.cramer_rao(noise).unwrap();
+        for i in 0..3 {
+            for j in 0..3 {
+                let e = expected[(i, j)];
+                let tol = 1e-9 * e.abs().max(1e-3);
+                assert!((crb[(i, j)] - e).abs() <= tol, "({i}, {j}): {} vs {e}", crb[(i, j)]);
+            }
+        }
+    }
+}
+
 #[test]
 fn goodman_is_efficient_for_mu_on_van_der_pol() {
     // 200 trials at ρ = 0.1: the spread of Goodman's μ against the Cramér–Rao bound. With
