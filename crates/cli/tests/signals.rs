@@ -9,8 +9,11 @@ use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 fn spawn(args: &[&str]) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_sysid"))
-        .args(args)
+    spawn_from(Command::new(env!("CARGO_BIN_EXE_sysid")).args(args))
+}
+
+fn spawn_from(command: &mut Command) -> Child {
+    command
         .env("RAYON_NUM_THREADS", "2")
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -47,8 +50,12 @@ fn petab(name: &str) -> String {
 /// The fit's progress line on stderr (`--log-every`), read as it comes: the signal is sent
 /// once the fit is iterating, not while the problem is being imported.
 fn stopped_after_a_progress_line(args: &[&str], signal: &str) -> Output {
+    stopped_after_a_progress_line_of(spawn(args), &[signal])
+}
+
+/// As above, for a child already started; the signals sent in turn, a second apart.
+fn stopped_after_a_progress_line_of(mut child: Child, signals: &[&str]) -> Output {
     use std::io::{BufRead, BufReader};
-    let mut child = spawn(args);
     let stderr = child.stderr.take().expect("stderr piped");
     let mut lines = BufReader::new(stderr).lines().map_while(Result::ok);
     let mut seen: Vec<String> = Vec::new();
@@ -59,7 +66,13 @@ fn stopped_after_a_progress_line(args: &[&str], signal: &str) -> Output {
             break;
         }
     }
-    send(&child, signal);
+    for (k, signal) in signals.iter().enumerate() {
+        if k > 0 {
+            std::thread::sleep(Duration::from_secs(1));
+            assert!(child.try_wait().expect("the child").is_none(), "ended on {}", signals[k - 1]);
+        }
+        send(&child, signal);
+    }
     seen.extend(lines);
     let mut out = child.wait_with_output().expect("the run ends");
     out.stderr = seen.join("\n").into_bytes();
@@ -92,6 +105,25 @@ fn ctrl_c_ends_a_fit_with_its_best_point_printed() {
     assert!(
         !estimates.is_empty() && estimates.values().all(|v| v.as_f64().is_some_and(f64::is_finite))
     );
+}
+
+/// A SIGINT ignored as sysid starts (as a shell starts a script's background job) stays
+/// ignored: the fit goes on past it, and SIGTERM then stops it as usual.
+#[test]
+fn an_ignored_sigint_stays_ignored() {
+    let problem = petab("Borghans_BiophysChem1997");
+    let child = spawn_from(Command::new("sh").args([
+        "-c",
+        "trap '' INT; exec \"$0\" fit --petab \"$1\" --format json --log-every 0.2",
+        env!("CARGO_BIN_EXE_sysid"),
+        &problem,
+    ]));
+    let out = stopped_after_a_progress_line_of(child, &["-INT", "-TERM"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.signal(), Some(15), "{:?}: {stderr}", out.status);
+    assert!(!stderr.contains("SIGINT") && stderr.contains("SIGTERM received"), "{stderr}");
+    let record: serde_json::Value = serde_json::from_slice(&out.stdout).expect("the fit's JSON");
+    assert_eq!(record["termination_code"], "interrupted", "{record}");
 }
 
 /// SIGTERM (a batch job's time limit) stops a multistart: no start is begun after it, the
