@@ -3,7 +3,7 @@
 use anyhow::bail;
 use clap::Args;
 use sysid_profile::{
-    Label, ProfileOptions, Profiled, Progress, nll, profile_from_optimum, threshold_95,
+    Label, ProfileOptions, Profiled, Progress, objective, profile_from_optimum, threshold_95,
 };
 
 use crate::Outcome;
@@ -124,7 +124,7 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
             eprintln!(
                 "stopped: the profiles were not finished and are not printed; the fit they began from ({}, NLL {}): {}",
                 optimum.termination,
-                nll(&optimum),
+                objective(&optimum),
                 sysid_core::format::named_point(&optimum.names, &optimum.values)
             );
             return Ok(Outcome::NotConverged);
@@ -154,11 +154,12 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
 /// The readable report: the optimum's NLL, then a line per unknown.
 fn table(context: &Context, profiled: &Profiled) -> String {
     let Profiled { certified, optimum, better, profiles } = profiled;
+    let what = if optimum.prior.is_some() { "NLL plus the priors' term" } else { "NLL" };
     let mut text = format!(
-        "{}: profile likelihoods ({}), NLL at the optimum {}\n",
+        "{}: profile likelihoods ({}), {what} at the optimum {}\n",
         context.name,
         optimum.method,
-        nll(optimum)
+        objective(optimum)
     );
     if !*certified {
         text += "  warning: the fit did not certify its optimum; the profiles start from its best point\n";

@@ -150,7 +150,7 @@ where
                 return Err(ProfileError::Interrupted);
             }
             Outcome::BetterOptimum(point) if better.len() < MAX_RESTARTS => {
-                on_progress(Progress::Better { point: &point, was: nll(&optimum) });
+                on_progress(Progress::Better { point: &point, was: objective(&optimum) });
                 optimum = sysid_core::caught(|| method.fit_from(problem, &point.estimates))
                     .map_err(ProfileError::Panicked)??;
                 better.push(point);
@@ -366,9 +366,13 @@ enum End {
     Stopped,
 }
 
-/// The NLL of a fit: its likelihood, or ε/2 where it has none.
-pub fn nll(e: &Estimate) -> f64 {
-    e.nll.unwrap_or(e.cost / 2.0)
+/// What a profile traces of a fit: the objective it minimises, the negative log-likelihood
+/// plus the priors' term where there are priors (the profile posterior, as pyPESTO traces
+/// it), or ε/2 where there is no likelihood ([`Estimate::objective`]). The likelihood alone
+/// would put a fit with an informative prior above points the prior pulls less, and every
+/// profile would find a "better optimum" there.
+pub fn objective(e: &Estimate) -> f64 {
+    e.objective()
 }
 
 /// Profiles the unknowns `only` (indices; every unknown when empty) of `problem` around
@@ -451,7 +455,7 @@ struct Tracer<'a, S, M: ?Sized> {
 
 impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
     fn profile(&self) -> Result<Result<Profile, Point>, ProfileError> {
-        let base = nll(self.optimum);
+        let base = objective(self.optimum);
         let at = Point {
             value: self.optimum.values[self.i],
             nll: base,
@@ -497,7 +501,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
 
     /// Whether `p` lies below the optimum by more than 1e-6 relative: the fit was not at it.
     fn below_optimum(&self, p: &Point) -> bool {
-        let base = nll(self.optimum);
+        let base = objective(self.optimum);
         p.nll < base - 1e-6 * base.abs().max(1.0)
     }
 
@@ -536,7 +540,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         let e = self.method.fit_from(&fixed, &start)?;
         let mut estimates = e.values.clone();
         estimates.insert(self.i, value);
-        Ok(Point { value, nll: nll(&e), converged: e.converged(), estimates })
+        Ok(Point { value, nll: objective(&e), converged: e.converged(), estimates })
     }
 
     /// The profile of the only unknown: nothing is re-optimised (but the noise scales set in
@@ -548,11 +552,11 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             true => Some(self.problem.clone()),
             false => self.problem.optimal_scales(&[value]).map(|s| self.problem.with_scales(&s)),
         };
-        // As [`nll`] has it: the likelihood, or ε/2 where there is none (a continuous
-        // record).
+        // As [`objective`] has it: the likelihood plus the priors' term, or ε/2 where there
+        // is no likelihood (a continuous record).
         let nll = problem
             .and_then(|p| match p.nll_at(&[z]) {
-                Ok(Some(v)) => Some(v),
+                Ok(Some(v)) => Some(v + p.prior_nll_at(&[z]).unwrap_or(0.0)),
                 Ok(None) => p.cost(&[z]).ok().map(|(cost, _)| 0.5 * cost),
                 Err(_) => None,
             })
@@ -633,7 +637,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         (mut zb, b): (f64, &Point),
         z0: f64,
     ) -> Result<Result<(f64, Vec<Point>), Point>, ProfileError> {
-        let level = nll(self.optimum) + self.options.threshold;
+        let level = objective(self.optimum) + self.options.threshold;
         let (mut fa, mut fb) = (a.nll - level, b.nll - level);
         let (mut from, mut side) = (a.clone(), 0i8);
         let mut located = Vec::new();

@@ -64,6 +64,47 @@ fn a_linear_model_has_the_exact_parabola() {
     }
 }
 
+/// With a normal prior on g (mean 30, sd 0.5) the profiles trace what the fit minimises, the
+/// NLL plus the prior's term: the posterior's exact parabola, curvature A = ΦᵀΦ + e_g e_gᵀ/sd²
+/// (rows (1, t, t²/2), unit weights), around the fit's estimate. (Traced on the NLL alone,
+/// every profile found a "better optimum" the prior pulled the fit from, and failed.)
+#[test]
+fn a_prior_pulls_the_profile_as_it_pulls_the_fit() {
+    use sysid_core::{Prior, Transform, Unknown};
+    let case = sysid_systems::falling_body::falling_body();
+    let (t, y) = sysid_systems::falling_body::TABLE_I;
+    let problem = Problem::builder(case.system.clone())
+        .unknown_with(Unknown::new("y", 0.0))
+        .unknown_with(Unknown::new("v", 0.0))
+        .unknown_with(Unknown::new("g", 30.0).prior(Prior::normal(30.0, 0.5, Transform::Lin)))
+        .data(Data::discrete().series("y", &t, &y))
+        .build()
+        .unwrap();
+    let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
+    let optimum = goodman.fit(&problem).unwrap();
+    assert!(optimum.converged() && optimum.prior.is_some(), "{}", optimum.termination);
+    let phi = nalgebra::DMatrix::from_fn(4, 3, |m, j| [1.0, m as f64, (m * m) as f64 / 2.0][j]);
+    let mut a = phi.transpose() * &phi;
+    a[(2, 2)] += 1.0 / (0.5 * 0.5);
+    let inverse = a.try_inverse().unwrap();
+    let options = ProfileOptions::default();
+    let traced = profile(&*goodman, &problem, &optimum, &[], &options).unwrap();
+    let Outcome::Profiles(profiles) = traced else { panic!("{traced:?}") };
+    for (i, p) in profiles.iter().enumerate() {
+        let half = (2.0 * options.threshold * inverse[(i, i)]).sqrt();
+        let theta = optimum.values[i];
+        assert_eq!(p.label, Label::Identifiable, "{}", p.name);
+        let (lo, hi) = (p.interval[0].unwrap(), p.interval[1].unwrap());
+        assert!((lo - (theta - half)).abs() <= 1e-6 * half, "{}: {lo} vs {}", p.name, theta - half);
+        assert!((hi - (theta + half)).abs() <= 1e-6 * half, "{}: {hi} vs {}", p.name, theta + half);
+        for q in &p.points {
+            let expected = (q.value - theta).powi(2) / (2.0 * inverse[(i, i)]);
+            let rise = q.nll - optimum.objective();
+            assert!((rise - expected).abs() <= 1e-8 * (1.0 + expected), "{}", p.name);
+        }
+    }
+}
+
 /// y′ = −k1·k2·y.
 #[derive(Clone)]
 struct Product(Signature);
@@ -297,7 +338,7 @@ fn a_stopped_profile_keeps_the_points_fitted_before_the_stop() {
     let first = &profiles[0];
     assert_eq!(first.label, Label::Stopped);
     assert!(first.points.len() > 2, "{} points", first.points.len());
-    let base = sysid_profile::nll(&optimum);
+    let base = sysid_profile::objective(&optimum);
     for p in &first.points {
         assert!(p.converged && p.nll >= base - 1e-9 * base.abs(), "{p:?}");
     }

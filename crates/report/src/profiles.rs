@@ -61,7 +61,7 @@ impl Profiles {
         profiles: &[Profile],
     ) -> Self {
         let names = problem.names();
-        let base = sysid_profile::nll(optimum);
+        let base = sysid_profile::objective(optimum);
         let unknowns = problem.unknowns();
         let at = unknowns.coordinates(&optimum.values);
         let panels = profiles
