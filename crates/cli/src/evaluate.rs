@@ -34,7 +34,7 @@ pub struct EvaluateArgs {
     /// for scripts that evaluate many points and need only the values.
     #[arg(long)]
     no_integration_error: bool,
-    /// Evaluate N times and report the median time of one evaluation.
+    /// Evaluate N times (at most 1 000 000) and report the median time of one evaluation.
     #[arg(long, default_value_t = 1, value_name = "N", value_parser = count)]
     repeat: usize,
     /// Set a parameter (an unknown or a noise scale) to a value instead of its nominal
@@ -97,11 +97,17 @@ struct Evaluation {
     counts: sysid_ode::Counts,
 }
 
+/// The most evaluations `--repeat` times (their times are kept for the median).
+const MAX_REPEAT: usize = 1_000_000;
+
 /// Runs `sysid evaluate`.
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
     args.integrator.validate()?;
     if args.repeat == 0 {
         bail!("--repeat must be at least 1");
+    }
+    if args.repeat > MAX_REPEAT {
+        bail!("--repeat {}: at most {MAX_REPEAT} evaluations are timed", args.repeat);
     }
     let started = Instant::now();
     let (problem, context) = args.source.problem()?;

@@ -7,7 +7,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail};
 use indicatif::{ProgressBar, ProgressFinish, ProgressStyle};
-use sysid_model::simulate::decimal;
+use sysid_core::format::shortest;
+use sysid_model::simulate::decimal_within;
 
 /// Writes `text` to standard output. A reader that has gone away (`sysid ... | head`) is not
 /// an error: there is nobody left to tell.
@@ -185,11 +186,20 @@ pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
 }
 
 /// The times a, a + h, …, up to b (inclusive within rounding), for a ≤ b and h > 0; `what`
-/// names the options that asked for them in the error when they are more than [`MAX_TIMES`].
-/// Each time is the decimal a user would write ([`decimal`]): 0 + 3·0.1 is 0.3.
+/// names the options that asked for them in the error when they are more than [`MAX_TIMES`],
+/// or when h is too small for a float to tell a time from the next. Each time is the decimal
+/// a user would write where that moves it by at most a millionth of h ([`decimal_within`]):
+/// 0 + 3·0.1 is 0.3, and 1.7e9 + 1e-6 is not 1.7e9.
 pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
     let n = intervals((b - a) / h + 1e-9, what)?;
-    Ok((0..=n).map(|i| decimal(a + h * i as f64)).collect())
+    let last = a + h * n as f64;
+    if n > 0 && (last - h == last || a + h == a) {
+        bail!(
+            "{what}: a step of {h:e} is below the resolution of a float near {}: the times would repeat",
+            shortest(last.abs().max(a.abs()))
+        );
+    }
+    Ok((0..=n).map(|i| decimal_within(a + h * i as f64, h)).collect())
 }
 
 /// The number of intervals `count` (rounded down), refused when the times would be more

@@ -50,6 +50,19 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<Outcome> {
     args.integrator.validate()?;
     let text = match (&args.source.system, args.source.file()) {
         (Some(name), _) => {
+            // A catalogue system's data are its own: options of model files are refused,
+            // not ignored.
+            for (given, option) in [
+                (args.times.is_some(), "--times"),
+                (!args.set.is_empty(), "--set"),
+                (args.experiment.is_some(), "--experiment"),
+            ] {
+                if given {
+                    bail!(
+                        "{option} is for a model file's trajectory: `--system {name}` writes the system's data as the catalogue has them"
+                    );
+                }
+            }
             let mut case = case(name)?;
             case.integrator = args.integrator.apply_to(case.integrator)?;
             let data = case.data(args.source.seed)?;

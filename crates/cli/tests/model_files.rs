@@ -1114,3 +1114,53 @@ fn evaluate_reports_the_integration_error_of_its_numbers() {
     let skipped = evaluate(&["--no-integration-error"]);
     assert!(skipped["nll_error"].is_null() && skipped["gradient_error"].is_null(), "{skipped}");
 }
+
+/// `simulate --times` keeps times that 15 significant digits would merge (1.7e9 + 1e-6 is not
+/// 1.7e9) and still writes 0 + 3·0.1 as 0.3; a step below a float's resolution there, an
+/// experiment the file does not have, a catalogue system given a model file's options and an
+/// `evaluate --repeat` beyond its limit are refused (exit 2, one line), not ignored.
+#[test]
+fn simulated_times_keep_their_digits_and_options_are_not_ignored() {
+    // x′ = 0: nothing to integrate, whatever the times.
+    let constant = "states = [\"x\"]\n[equations]\nx = \"0\"\n[unknowns]\nx = 0.1\n[data]\nfile = \"data.csv\"\n";
+    let case = Case::new("digits", constant, "t,x\n0,0.1\n");
+    let times = |spec: &str| -> Vec<String> {
+        let out = sysid(&["simulate", "--model", &case.model(), "--times", spec]);
+        assert!(out.status.success(), "{spec}: {}", text(&out.stderr));
+        let csv = text(&out.stdout);
+        csv.lines().skip(1).map(|l| l.split(',').next().unwrap().to_string()).collect()
+    };
+    let late = times("1700000000:1700000000.000003:0.000001");
+    assert_eq!(late.len(), 4);
+    let parsed: Vec<f64> = late.iter().map(|t| t.parse().unwrap()).collect();
+    for (k, t) in parsed.iter().enumerate() {
+        // Within the float's spacing there (2.4e-7) of 1.7e9 + k·1e-6.
+        assert!((t - 1.7e9 - k as f64 * 1e-6).abs() <= 2.4e-7, "{late:?}");
+    }
+    assert_eq!(times("0:0.3:0.1"), ["0", "0.1", "0.2", "0.3"]);
+    for (args, needle) in [
+        (vec!["--times", "1e17:1.0000000000000002e17:1"], "below the resolution of a float"),
+        (
+            vec!["--times", "0:1:0.5", "--experiment", "other"],
+            "--experiment other: no such experiment",
+        ),
+    ] {
+        let model = case.model();
+        let mut all = vec!["simulate", "--model", &model];
+        all.extend(args);
+        let out = sysid(&all);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{all:?}: {stderr}");
+        assert!(stderr.contains(needle) && stderr.trim_end().lines().count() == 1, "{stderr}");
+    }
+    // More timed evaluations than are kept is refused before any (it aborted allocating).
+    let out = sysid(&["evaluate", "--model", &case.model(), "--repeat", "1000000000000"]);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("at most 1000000 evaluations"));
+    for option in [["--times", "0:1:0.1"], ["--set", "mu=2"], ["--experiment", "data"]] {
+        let out = sysid(&["simulate", "--system", "van-der-pol", option[0], option[1]]);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{option:?}: {stderr}");
+        assert!(stderr.contains(&format!("{} is for a model file's", option[0])), "{stderr}");
+    }
+}

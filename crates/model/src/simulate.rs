@@ -18,6 +18,16 @@ pub fn decimal(t: f64) -> f64 {
     format!("{t:.14e}").parse().unwrap_or(t)
 }
 
+/// `t`, one of times spaced `h` apart, as a person wrote it ([`decimal`]) where that moves it
+/// by at most a millionth of `h`; else `t` itself: 1.7e9 + 1e-6 is not 1.7e9, and distinct
+/// times stay distinct.
+pub fn decimal_within(t: f64, h: f64) -> f64 {
+    match decimal(t) {
+        d if (d - t).abs() <= 1e-6 * h => d,
+        _ => t,
+    }
+}
+
 impl Model {
     /// The model's states and outputs at `times` (from each experiment's t0), as CSV, with
     /// every unknown at its guess unless `set` gives it (or a known value, or an initial
@@ -40,6 +50,15 @@ impl Model {
             && f.initial.is_empty()
             && f.extras.is_empty();
         let runs = if plain {
+            if let Some(name) = experiment.filter(|&n| n != sysid_core::plan::SINGLE_EXPERIMENT) {
+                return Err(ModelError::file(
+                    &path,
+                    format!(
+                        "--experiment {name}: no such experiment (experiments: {})",
+                        sysid_core::plan::SINGLE_EXPERIMENT
+                    ),
+                ));
+            }
             let mut v = Vec::new();
             let known = f.known.iter().map(|(n, v)| (n, *v));
             for (name, value) in known.chain(f.unknowns.iter().map(|u| (&u.name, u.guess))) {
@@ -132,7 +151,7 @@ impl Model {
                 if several {
                     text += &format!("{name},");
                 }
-                text += &shortest(decimal(t));
+                text += &shortest(t);
                 for v in sol.state(m) {
                     text += &format!(",{}", shortest(*v));
                 }
@@ -171,10 +190,13 @@ pub fn data_csv(data: &Data, intervals: usize) -> String {
                 (Samples::Points { times, values }, _) => {
                     times.iter().copied().zip(values.iter().copied()).collect()
                 }
-                (Samples::Function(f), Record::Continuous { t_lo, t_hi }) => (0..=intervals)
-                    .map(|i| t_lo + (t_hi - t_lo) * i as f64 / intervals.max(1) as f64)
-                    .map(|t| (t, f(t)))
-                    .collect(),
+                (Samples::Function(f), Record::Continuous { t_lo, t_hi }) => {
+                    let h = (t_hi - t_lo) / intervals.max(1) as f64;
+                    (0..=intervals)
+                        .map(|i| decimal_within(t_lo + h * i as f64, h))
+                        .map(|t| (t, f(t)))
+                        .collect()
+                }
                 (Samples::Function(_), Record::Discrete) => Vec::new(),
             };
             (s.name.as_str(), points)
@@ -190,7 +212,7 @@ pub fn data_csv(data: &Data, intervals: usize) -> String {
     out += "\n";
     let mut cursor = vec![0; columns.len()];
     for &t in &times {
-        out += &shortest(decimal(t));
+        out += &shortest(t);
         for (c, (_, points)) in columns.iter().enumerate() {
             out += ",";
             if points.get(cursor[c]).is_some_and(|p| p.0.total_cmp(&t).is_eq()) {
