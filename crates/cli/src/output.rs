@@ -192,11 +192,12 @@ pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
 /// 0 + 3·0.1 is 0.3, and 1.7e9 + 1e-6 is not 1.7e9.
 pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
     let n = intervals((b - a) / h + 1e-9, what)?;
-    let last = a + h * n as f64;
-    if n > 0 && (last - h == last || a + h == a) {
+    // Within a few units in the last place the times would repeat or be spaced unevenly.
+    let largest = a.abs().max((a + h * n as f64).abs());
+    if n > 0 && h <= largest * f64::EPSILON {
         bail!(
             "{what}: a step of {h:e} is below the resolution of a float near {}: the times would repeat",
-            shortest(last.abs().max(a.abs()))
+            shortest(largest)
         );
     }
     Ok((0..=n).map(|i| decimal_within(a + h * i as f64, h)).collect())
