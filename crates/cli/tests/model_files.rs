@@ -1164,3 +1164,28 @@ fn simulated_times_keep_their_digits_and_options_are_not_ignored() {
         assert!(stderr.contains(&format!("{} is for a model file's", option[0])), "{stderr}");
     }
 }
+
+/// A σ column that is the measured column itself (or a state's or input's name) is refused
+/// at the `column` key: model-files.md says the σ column names nothing else, and the fit
+/// would otherwise weigh each value by itself.
+#[test]
+fn a_sigma_column_that_names_something_else_is_refused() {
+    let model = |column: &str| {
+        format!(
+            "states = [\"x\"]\nparameters = [\"k\"]\n[equations]\nx = \"-k * x\"\n[initial]\nx = 2.0\n\
+             [unknowns]\nk = 0.5\n[outputs]\nxm = {{ value = \"x\", sigma = {{ column = \"{column}\" }} }}\n\
+             [data]\nfile = \"data.csv\"\n"
+        )
+    };
+    let data = "t,xm,s\n0,2,0.1\n1,0.9,0.1\n2,0.4,0.1\n";
+    bad(
+        "sigma-self",
+        &model("xm"),
+        data,
+        "10:40: [outputs] xm.sigma.column `xm` is an output's name",
+    );
+    bad("sigma-state", &model("x"), data, "xm.sigma.column `x` is a state's name");
+    let case = Case::new("sigma-own", &model("s"), data);
+    let out = sysid(&["fit", "--model", &case.model()]);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+}

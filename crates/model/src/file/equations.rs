@@ -79,7 +79,7 @@ pub(super) fn read_outputs(
             for (k, v) in t.iter() {
                 match k.name.as_str() {
                     "value" => {}
-                    "sigma" => output.noise = read_sigma(r, &name, v, scope)?,
+                    "sigma" => output.noise = read_sigma(r, &name, v, scope, names)?,
                     "transform" => {
                         output.transform = match r.string(v, &format!("[outputs] {name}.transform"))? {
                             "lin" => Transform::Lin,
@@ -126,12 +126,14 @@ pub(super) fn read_outputs(
         .collect()
 }
 
-/// Reads an output's `sigma`: a positive number, an expression, or `{ column = "NAME" }`.
+/// Reads an output's `sigma`: a positive number, an expression, or `{ column = "NAME" }` (a
+/// column that names nothing else: not a state's, an output's or an input's).
 fn read_sigma(
     r: &Reader<'_>,
     output: &str,
     v: &Node,
     scope: &Scope,
+    names: &Names<'_>,
 ) -> Result<NoiseSpec, ModelError> {
     let what = format!("[outputs] {output}.sigma");
     match &v.value {
@@ -155,7 +157,21 @@ fn read_sigma(
             if let Some((k, _)) = t.iter().find(|(k, _)| k.name != "column") {
                 return Err(r.err(k.at, format!("{what}: unknown key `{}` (keys: column)", k.name)));
             }
-            Ok(NoiseSpec::Column(r.string(column, &format!("{what}.column"))?.to_string()))
+            let name = r.string(column, &format!("{what}.column"))?;
+            let taken = [
+                ("a state", names.states.iter().any(|(n, _)| n == name)),
+                ("an output", names.outputs.iter().any(|(k, _)| k.name == name)),
+                ("an input", names.inputs.iter().any(|(n, _)| n == name)),
+            ];
+            if let Some((what_else, _)) = taken.iter().find(|(_, taken)| *taken) {
+                return Err(r.err(
+                    column.at,
+                    format!(
+                        "{what}.column `{name}` is {what_else}'s name: the σ column must name nothing else (a column of its own, such as `{output}_sigma`)"
+                    ),
+                ));
+            }
+            Ok(NoiseSpec::Column(name.to_string()))
         }
         _ => {
             let sigma = r.number(v, &what)?;
