@@ -108,7 +108,9 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     let line: &Watch = &traces;
     let told = |progress: Progress<'_>| match progress {
         Progress::Traced { unknown, done, total } => {
-            line.say(&format!("{done}/{total} traced (the last: {})", names[unknown]))
+            // After Ctrl-C the profiles end stopped, not traced.
+            let how = if sysid_core::observer::stop_requested() { "ended" } else { "traced" };
+            line.say(&format!("{done}/{total} {how} (the last: {})", names[unknown]))
         }
         Progress::Better { point, was } => eprintln!(
             "better optimum found along a profile (NLL {} against {was}): fitting again from there",
