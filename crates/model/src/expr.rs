@@ -47,7 +47,8 @@ impl fmt::Display for ExprError {
 
 /// The deepest an expression may nest: parentheses, signs, function calls and exponents
 /// nest at most this deep, and so do the operations of the parsed tree (a sum or a product
-/// is a chain, `a + b + c` being `(a + b) + c`: 2 deep). Parsing, compiling, evaluating,
+/// is a chain, `a + b + c` being `(a + b) + c`: 2 deep; a chain longer than this limit is
+/// parsed as a balanced tree, log₂ n deep, instead of refused). Parsing, compiling, evaluating,
 /// printing and dropping an expression each recurse once per level. At 200 levels the
 /// deepest of them, parsing nested calls, takes about 0.2 MiB of stack in the workspace's
 /// debug build (opt-level 1) and 1.4 MiB unoptimised: inside the 2 MiB of a worker thread,
@@ -322,6 +323,14 @@ struct Parser {
 /// A parsed subexpression and the depth of its tree (a name or number is 0 deep).
 type Parsed = (Expr, usize);
 
+/// An operand of a chain of sums or products after the first: its operator's position,
+/// whether the operator is the inverse one (− or /), and the operand.
+struct Link {
+    position: usize,
+    inverse: bool,
+    operand: Parsed,
+}
+
 impl Parser {
     fn peek(&self) -> Option<&Token> {
         self.tokens.get(self.at).map(|t| &t.0)
@@ -354,29 +363,80 @@ impl Parser {
     }
 
     fn expr(&mut self) -> Result<Parsed, ExprError> {
-        let (mut left, mut depth) = self.term()?;
+        let first = self.term()?;
+        let mut rest = Vec::new();
         while let Some(Token::Op(c @ ('+' | '-'))) = self.peek() {
-            let op = if *c == '+' { Op::Add } else { Op::Sub };
+            let inverse = *c == '-';
             let position = self.position();
             self.at += 1;
-            let (right, d) = self.term()?;
-            depth = self.nest(depth.max(d), position)?;
-            left = checked(Expr::Bin(op, Box::new(left), Box::new(right)), position)?;
+            rest.push(Link { position, inverse, operand: self.term()? });
         }
-        Ok((left, depth))
+        self.chain(first, rest, Op::Add)
     }
 
     fn term(&mut self) -> Result<Parsed, ExprError> {
-        let (mut left, mut depth) = self.unary()?;
+        let first = self.unary()?;
+        let mut rest = Vec::new();
         while let Some(Token::Op(c @ ('*' | '/'))) = self.peek() {
-            let op = if *c == '*' { Op::Mul } else { Op::Div };
+            let inverse = *c == '/';
             let position = self.position();
             self.at += 1;
-            let (right, d) = self.unary()?;
-            depth = self.nest(depth.max(d), position)?;
-            left = checked(Expr::Bin(op, Box::new(left), Box::new(right)), position)?;
+            rest.push(Link { position, inverse, operand: self.unary()? });
         }
-        Ok((left, depth))
+        self.chain(first, rest, Op::Mul)
+    }
+
+    /// `first` joined with the `rest` by `op` (Add or Mul) and its inverse (Sub or Div):
+    /// left to right as written, `(a + b) + c`, where that nests within [`MAX_DEPTH`]; a
+    /// longer chain (a flat sum of 300 terms is no nesting a user wrote) as a balanced tree,
+    /// log₂ n deep, whose operations group the terms in pairs (its rounding differs from
+    /// the written order's in the last bits).
+    fn chain(&self, first: Parsed, rest: Vec<Link>, op: Op) -> Result<Parsed, ExprError> {
+        let inverse_of = |op: Op| if op == Op::Add { Op::Sub } else { Op::Div };
+        let written = rest.iter().try_fold(first.1, |depth, link| {
+            Some(depth.max(link.operand.1) + 1).filter(|&d| d <= MAX_DEPTH)
+        });
+        if written.is_some() {
+            let (mut left, mut depth) = first;
+            for Link { position, inverse, operand: (right, d) } in rest {
+                let op = if inverse { inverse_of(op) } else { op };
+                depth = self.nest(depth.max(d), position)?;
+                left = checked(Expr::Bin(op, Box::new(left), Box::new(right)), position)?;
+            }
+            return Ok((left, depth));
+        }
+        // Balanced: each term with whether it is subtracted (divided by), joined in pairs;
+        // a pair of two such terms is one such term (−a − b = −(a + b)).
+        let mut terms: Vec<(bool, Parsed, usize)> = vec![(false, first, rest[0].position)];
+        terms.extend(rest.into_iter().map(|l| (l.inverse, l.operand, l.position)));
+        while terms.len() > 1 {
+            let mut paired = Vec::with_capacity(terms.len().div_ceil(2));
+            let mut items = terms.into_iter();
+            while let Some((inv_a, (a, da), position)) = items.next() {
+                let Some((inv_b, (b, db), _)) = items.next() else {
+                    paired.push((inv_a, (a, da), position));
+                    break;
+                };
+                let depth = self.nest(da.max(db), position)?;
+                let (inverted, node) = match (inv_a, inv_b) {
+                    (false, false) | (true, true) => (inv_a, Expr::Bin(op, a.into(), b.into())),
+                    (false, true) => (false, Expr::Bin(inverse_of(op), a.into(), b.into())),
+                    (true, false) => (false, Expr::Bin(inverse_of(op), b.into(), a.into())),
+                };
+                paired.push((inverted, (checked(node, position)?, depth), position));
+            }
+            terms = paired;
+        }
+        let (inverted, (e, depth), position) = terms.pop().expect("a chain has a term");
+        if !inverted {
+            return Ok((e, depth));
+        }
+        let depth = self.nest(depth, position)?;
+        let e = match op {
+            Op::Add => Expr::Neg(e.into()),
+            _ => checked(Expr::Bin(Op::Div, Expr::Num(1.0).into(), e.into()), position)?,
+        };
+        Ok((e, depth))
     }
 
     /// A signed operand. Every recursion of the grammar (parentheses, calls, signs,
@@ -1289,6 +1349,33 @@ mod tests {
         };
         let program = Program::compile(&parse(text).unwrap(), &resolve).unwrap();
         program.eval(0.5, &[2.0], &[3.0], &[-1.0])
+    }
+
+    /// Sums and products longer than the depth limit are balanced trees of the same value
+    /// (integers here, exact in any order), with every sign and inverse where it was
+    /// written; chains within the limit keep their written order (the tree's shape).
+    #[test]
+    fn chains_longer_than_the_depth_limit_are_balanced() {
+        let n = 1001;
+        let alternating: String =
+            (1..=n).map(|i| format!("{}{i}", if i % 2 == 0 { " - " } else { " + " })).collect();
+        // 1 − 2 + 3 − … + 1001 = 501.
+        assert_close(value(&alternating), 501.0, 0.0);
+        assert_close(value(&format!("-x{}", " - x".repeat(n - 1))), -2.0 * n as f64, 0.0);
+        assert_close(value(&format!("x{}", " - k + x".repeat(300))), 2.0 - 300.0, 0.0);
+        // x·x/x·x/… with 300 of each: x = 2.
+        assert_close(value(&format!("x{}", " * x / x".repeat(300))), 2.0, 0.0);
+        assert_close(value(&format!("1{}", " / x".repeat(10))), 1.0 / 1024.0, 0.0);
+        assert_close(value(&format!("1{}", " / k / x * k".repeat(100))), 0.5f64.powi(100), 0.0);
+        // log₂ 1001 ≈ 10 levels: inside 185 parentheses it still parses.
+        let wrapped = format!("{}x{}{}", "(".repeat(185), " + x".repeat(n - 1), ")".repeat(185));
+        assert_close(value(&wrapped), 2.0 * n as f64, 0.0);
+        // Within the limit, the written order: ((x + x) + x)…
+        let Expr::Bin(Op::Add, left, _) = parse(&format!("x{}", " + x".repeat(199))).unwrap()
+        else {
+            panic!("a sum")
+        };
+        assert!(matches!(*left, Expr::Bin(Op::Add, ..)));
     }
 
     #[test]
