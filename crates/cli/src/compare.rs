@@ -108,6 +108,13 @@ pub fn run(args: &CompareArgs) -> anyhow::Result<Outcome> {
         tables.push(text(&problem, &context, &rows, args.verbose));
         summaries.push(Summary { system: context.name, rows });
         if sysid_core::observer::stop_requested() {
+            if summaries.len() < sources.len() {
+                eprintln!(
+                    "stopped: {} of the {} systems compared, the rest not begun",
+                    summaries.len(),
+                    sources.len()
+                );
+            }
             break;
         }
     }

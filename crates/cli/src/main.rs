@@ -95,16 +95,19 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    // The long commands stop at the first Ctrl-C or SIGTERM with what they have done.
-    let stoppable = matches!(
-        cli.command,
-        Command::Fit(_)
-            | Command::Compare(_)
-            | Command::Predict(_)
-            | Command::Study(_)
-            | Command::Profile(_)
-            | Command::Report(_)
-    );
+    // The long commands stop at the first Ctrl-C or SIGTERM with what they have done (the
+    // report's scaling figure times evaluations, which hear no stop: it ends at once).
+    let stoppable = match &cli.command {
+        Command::Report(args) => args.scaling.is_none(),
+        command => matches!(
+            command,
+            Command::Fit(_)
+                | Command::Compare(_)
+                | Command::Predict(_)
+                | Command::Study(_)
+                | Command::Profile(_)
+        ),
+    };
     let signals = if stoppable { signals::Signals::install() } else { None };
     let result = match &signals {
         Some(s) => sysid_core::observer::stop_when(s.flag(), || run(cli.command)),

@@ -108,12 +108,13 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     let line: &Watch = &traces;
     let told = |progress: Progress<'_>| match progress {
         Progress::Traced { unknown, done, total } => {
-            // After Ctrl-C the profiles end stopped, not traced.
-            let how = if sysid_core::observer::stop_requested() { "ended" } else { "traced" };
+            // After Ctrl-C the profiles end stopped, not traced (told on a rayon worker,
+            // which does not carry the run's stop flags: the signal's own).
+            let how = if crate::signals::requested() { "ended" } else { "traced" };
             line.say(&format!("{done}/{total} {how} (the last: {})", names[unknown]))
         }
         Progress::Better { point, was } => eprintln!(
-            "better optimum found along a profile (NLL {} against {was}): fitting again from there",
+            "better optimum found along a profile (objective {} against {was}): fitting again from there",
             point.nll
         ),
     };
@@ -124,7 +125,7 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
         // from is not lost. (Stopped elsewhere, the profiles come back labelled `stopped`.)
         Err(sysid_profile::ProfileError::Interrupted) => {
             eprintln!(
-                "stopped: the profiles were not finished and are not printed; the fit they began from ({}, NLL {}): {}",
+                "stopped after a profile found a better point than the optimum: the profiles are not printed; the fit they began from ({}, objective {}): {}",
                 optimum.termination,
                 objective(&optimum),
                 sysid_core::format::named_point(&optimum.names, &optimum.values)
@@ -165,6 +166,9 @@ fn table(context: &Context, profiled: &Profiled) -> String {
     );
     if !*certified {
         text += "  warning: the fit did not certify its optimum; the profiles start from its best point\n";
+    }
+    if optimum.termination == sysid_core::Termination::Interrupted && !better.is_empty() {
+        text += "  warning: the run was stopped while the optimum was fitted again from a better point; the profiles start from that fit's best point, not a certified optimum\n";
     }
     if !better.is_empty() {
         text += &format!(

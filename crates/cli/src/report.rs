@@ -74,7 +74,7 @@ pub struct ReportArgs {
     /// parameters on log–log axes with the least-squares power law, into OUT/scaling
     /// (README.md with the table, scaling.png and .svg, scaling.csv).
     #[arg(long, value_name = "DIR")]
-    scaling: Option<PathBuf>,
+    pub scaling: Option<PathBuf>,
     /// With --scaling: timed evaluations per problem, at most (the median is reported).
     #[arg(long, default_value_t = 5, value_name = "N", value_parser = crate::options::count, allow_hyphen_values = true)]
     scaling_repeat: usize,

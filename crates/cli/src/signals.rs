@@ -18,6 +18,19 @@ use std::sync::atomic::AtomicBool;
 #[cfg(unix)]
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+/// The flag the signals set, for [`requested`] on any thread.
+static FLAG: std::sync::OnceLock<Arc<AtomicBool>> = std::sync::OnceLock::new();
+
+/// Whether a signal asked the run to stop, from any thread (the observer's flags are the
+/// threads' own: a rayon worker reporting progress does not see them).
+pub fn requested() -> bool {
+    FLAG.get().is_some_and(|f| f.load(std::sync::atomic::Ordering::Relaxed))
+}
+
+/// Whether the notice of the first signal was printed.
+#[cfg(unix)]
+static NOTICED: AtomicBool = AtomicBool::new(false);
+
 /// The stop flag the signals set, and which signal came first.
 pub struct Signals {
     flag: Arc<AtomicBool>,
@@ -46,19 +59,20 @@ impl Signals {
             flag::register_usize(signal, Arc::clone(&first), signal as usize).ok()?;
             flag::register(signal, Arc::clone(&stop)).ok()?;
         }
-        // The notice, printed from a thread of its own (a handler cannot print safely).
-        let mut heard = signal_hook::iterator::Signals::new(signals).ok()?;
-        std::thread::Builder::new()
-            .name("sysid-signals".into())
-            .spawn(move || {
+        // The notice, printed from a thread of its own (a handler cannot print safely); the
+        // handlers above stand without it.
+        if let Ok(mut heard) = signal_hook::iterator::Signals::new(&signals) {
+            let _ = std::thread::Builder::new().name("sysid-signals".into()).spawn(move || {
                 if let Some(signal) = heard.forever().next() {
                     eprintln!(
                         "\nsysid: {} received: stopping at the next iteration and printing what is done (a second signal ends sysid at once)",
                         name(signal)
                     );
+                    NOTICED.store(true, Ordering::SeqCst);
                 }
-            })
-            .ok()?;
+            });
+        }
+        let _ = FLAG.set(Arc::clone(&stop));
         Some(Signals { flag: stop, first })
     }
 
@@ -74,6 +88,13 @@ impl Signals {
     /// flushed (exit status 128 + signal where the default action cannot be emulated).
     pub fn end_by(signal: i32) -> ! {
         use std::io::Write;
+        // The notice first, where its thread has not printed it yet (a tenth of a second).
+        for _ in 0..100 {
+            if NOTICED.load(Ordering::SeqCst) {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
         let _ = std::io::stdout().flush();
         let _ = std::io::stderr().flush();
         let _ = signal_hook::low_level::emulate_default_handler(signal);

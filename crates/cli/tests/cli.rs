@@ -541,6 +541,12 @@ fn simulate_writes_reproducible_csv() {
     assert_eq!(lines[0], "t,x");
     assert_eq!(lines.len(), 1 + 101);
     assert!(lines[1].starts_with("0,"));
+    // The grid's times as a person writes them: every one with at most a few decimals (the
+    // grid 0.2·i computed is 0.6000000000000001 at i = 3).
+    for line in &lines[1..] {
+        let t = line.split(',').next().unwrap();
+        assert!(t.len() <= 6, "{t}");
+    }
     let dir = std::env::temp_dir().join(format!("sysid-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("sp.csv");

@@ -107,6 +107,25 @@ fn ctrl_c_ends_a_fit_with_its_best_point_printed() {
     );
 }
 
+/// A second Ctrl-C ends the process at once, by SIGINT, printing nothing more (the first's
+/// stop would print the fit after its iteration and the certificate's reference
+/// integration, tens of milliseconds; the second comes a few milliseconds after it).
+#[test]
+fn a_second_ctrl_c_quits_at_once() {
+    use std::io::{BufRead, BufReader};
+    let problem = petab("Borghans_BiophysChem1997");
+    let mut child = spawn(&["fit", "--petab", &problem, "--format", "json", "--log-every", "0.2"]);
+    let stderr = child.stderr.take().expect("stderr piped");
+    let mut lines = BufReader::new(stderr).lines().map_while(Result::ok);
+    assert!(lines.by_ref().any(|l| l.contains(": iteration ")), "no progress line");
+    send(&child, "-INT");
+    send(&child, "-INT");
+    let _rest: Vec<String> = lines.collect();
+    let out = child.wait_with_output().expect("the run ends");
+    assert_eq!(out.status.signal(), Some(2), "{:?}", out.status);
+    assert!(out.stdout.is_empty(), "{}", text(&out.stdout));
+}
+
 /// A SIGINT ignored as sysid starts (as a shell starts a script's background job) stays
 /// ignored: the fit goes on past it, and SIGTERM then stops it as usual.
 #[test]

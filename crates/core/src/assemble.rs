@@ -227,6 +227,13 @@ impl Record<'_> {
                                 certificate.cost_error = (lin.cost - fine.cost).abs();
                             }
                         }
+                        // Another scheme at the same tolerances that fails (out of steps,
+                        // a Rosenbrock scheme slow on a large model) says nothing of the
+                        // working integration's error, as a finer one meeting a
+                        // singularity would: the error is unmeasured.
+                        Err(_) if ev.reference_is_another_scheme() => {
+                            certificate.error_measured = false;
+                        }
                         Err(e) => {
                             (certificate.error, certificate.cost_error) =
                                 (f64::INFINITY, f64::INFINITY);

@@ -128,8 +128,9 @@ pub struct Certificate {
     /// integration as `error` (0 where `error` is not measured, ∞ where that integration
     /// fails).
     pub cost_error: f64,
-    /// Whether `error` was measured: false for an exact fit and a point that failed (its 0
-    /// is then not a measured 0).
+    /// Whether `error` was measured: false for an exact fit, a point that failed, and where
+    /// at the finest rtol the other scheme it is measured against could not integrate the
+    /// model (its 0 is then not a measured 0).
     pub error_measured: bool,
     /// The tolerance it was held to.
     pub gtol: f64,

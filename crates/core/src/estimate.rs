@@ -579,11 +579,14 @@ fn plus_error(c: &Certificate) -> String {
 }
 
 /// Where the optimality's integration error was not measured
-/// ([`Certificate::error_measured`]: no reference integration could be set up for the
-/// problem), the words that say so.
+/// ([`Certificate::error_measured`]: at the finest rtol, the other scheme it is measured
+/// against could not integrate the model), the words that say so.
 fn unmeasured(c: &Certificate) -> String {
     match c.error_measured {
         true => String::new(),
-        false => "; its integration error unmeasured".to_string(),
+        false => format!(
+            "; its integration error unmeasured: at the finest rtol, {:.0e}, another scheme could not integrate the model to compare",
+            crate::evaluations::FINEST_RTOL
+        ),
     }
 }

@@ -109,7 +109,7 @@ pub fn basin<S: System + Clone + Send + Sync>(
         .collect();
     if stopped() {
         return Err(StudyError::Interrupted(format!(
-            "stopped: {} of the {} starts of the basin map were fitted; no map is written",
+            "stopped: {} of the {} starts of the basin map were begun; no map is written",
             finished.load(Ordering::Relaxed),
             points.len()
         )));

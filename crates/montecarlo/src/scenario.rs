@@ -203,8 +203,16 @@ impl<S: System + Clone> Scenario<S> {
         let z = problem.unknowns().coordinates(&self.truth);
         let lin = problem.residuals_and_jacobian(&z).map_err(at_truth)?;
         let fisher = if problem.has_noise_model() {
-            // The noise model's own Fisher information, for noise `noise` times its σ.
-            lin.normal.clone() / (noise * noise)
+            // The noise model's own Fisher information, for noise `noise` times its σ; the
+            // priors' rows, in it too, are not scaled by the noise (as below).
+            let prior = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
+                z.len(),
+                problem.unknowns().list().iter().zip(&z).map(|(u, &zi)| {
+                    let slope = u.prior.as_ref().map_or(0.0, |p| p.residual(u.value(zi)).1);
+                    (slope * u.scale(zi)).powi(2)
+                }),
+            ));
+            (&lin.normal - &prior) / (noise * noise) + prior
         } else {
             let jac = &lin.residuals.as_ref().expect("discrete data give residuals").jacobian;
             // Row m of the weighted Jacobian is √w_m ∇h_m (in coordinates z).

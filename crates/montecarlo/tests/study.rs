@@ -304,26 +304,35 @@ fn cramer_rao_bound_with_a_prior_adds_its_information() {
     use sysid_core::{Prior, Problem, Transform, Unknown};
     let case = sysid_systems::falling_body::falling_body();
     let (t, y) = sysid_systems::falling_body::TABLE_I;
-    let problem = Problem::builder(case.system.clone())
-        .unknown_with(Unknown::new("y", -0.25))
-        .unknown_with(Unknown::new("v", -0.25))
-        .unknown_with(Unknown::new("g", 32.5).prior(Prior::normal(30.0, 0.5, Transform::Lin)))
-        .data(sysid_core::Data::discrete().series("y", &t, &y))
-        .build()
-        .unwrap();
-    let scenario =
-        Scenario::new(problem, vec![-0.25, -0.25, 32.5], vec![1.25f64.sqrt(); 4]).unwrap();
+    let sigma = 1.25f64.sqrt();
+    // Weights (σ² = 1.25 of the data) and a noise model of known σ: the two ways the bound
+    // is formed.
+    let weighted = sysid_core::Data::discrete().series("y", &t, &y);
+    let known = sysid_core::Noise::Known(vec![sigma; 4]);
+    let modelled =
+        sysid_core::Data::discrete().series_with_noise("y", &t, &y, known, Transform::Lin);
     let phi = DMatrix::from_fn(4, 3, |m, j| [1.0, m as f64, (m * m) as f64 / 2.0][j]);
-    for noise in [1.0, 3.0] {
-        let mut fisher = phi.transpose() * &phi / (1.25 * noise * noise);
-        fisher[(2, 2)] += 1.0 / (0.5 * 0.5);
-        let expected = fisher.try_inverse().unwrap();
-        let crb = scenario.cramer_rao(noise).unwrap();
-        for i in 0..3 {
-            for j in 0..3 {
-                let e = expected[(i, j)];
-                let tol = 1e-9 * e.abs().max(1e-3);
-                assert!((crb[(i, j)] - e).abs() <= tol, "({i}, {j}): {} vs {e}", crb[(i, j)]);
+    for data in [weighted, modelled] {
+        let prior = Prior::normal(30.0, 0.5, Transform::Lin);
+        let problem = Problem::builder(case.system.clone())
+            .unknown_with(Unknown::new("y", -0.25))
+            .unknown_with(Unknown::new("v", -0.25))
+            .unknown_with(Unknown::new("g", 32.5).prior(prior))
+            .data(data)
+            .build()
+            .unwrap();
+        let scenario = Scenario::new(problem, vec![-0.25, -0.25, 32.5], vec![sigma; 4]).unwrap();
+        for noise in [1.0, 3.0] {
+            let mut fisher = phi.transpose() * &phi / (1.25 * noise * noise);
+            fisher[(2, 2)] += 1.0 / (0.5 * 0.5);
+            let expected = fisher.try_inverse().unwrap();
+            let crb = scenario.cramer_rao(noise).unwrap();
+            for i in 0..3 {
+                for j in 0..3 {
+                    let (got, e) = (crb[(i, j)], expected[(i, j)]);
+                    let tol = 1e-9 * e.abs().max(1e-3);
+                    assert!((got - e).abs() <= tol, "({i}, {j}): {got} vs {e}");
+                }
             }
         }
     }

@@ -73,11 +73,14 @@ pub enum ProfileError {
     #[error("{0}")]
     Invalid(String),
     /// The caller asked the profiles to stop
-    /// ([`stop_when`](sysid_core::observer::stop_when)) where no profile could keep its
-    /// points: while the optimum was being fitted again from a better point a profile
-    /// found. (Elsewhere the profiles stop with the points they have, labelled
-    /// [`Label::Stopped`].)
-    #[error("interrupted: the run was asked to stop while the optimum was fitted again")]
+    /// ([`stop_when`](sysid_core::observer::stop_when)) in a round whose profiles found a
+    /// better point than the optimum: that round's profiles are not kept, and the fit from
+    /// the point is not made. (Elsewhere the profiles stop with the points they have,
+    /// labelled [`Label::Stopped`]; stopped during the fit from a better point, they are
+    /// traced around that fit's best point, its termination `interrupted`.)
+    #[error(
+        "interrupted: the run was asked to stop after a profile found a better point than the optimum"
+    )]
     Interrupted,
 }
 

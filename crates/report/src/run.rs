@@ -75,7 +75,7 @@ fn write_sections(
         let section = report.visit(case)?;
         observer.note(&format!("{name}: done in {:.1} s", t.elapsed().as_secs_f64()));
         sections.push(section);
-        stop_here(&format!("after {} of the {} systems", sections.len(), systems.len()))?;
+        stop_here(&format!("at system {} of {} ({name})", sections.len(), systems.len()))?;
     }
     let petab = match &args.petab {
         Some(dir) => {
