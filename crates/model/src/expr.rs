@@ -427,16 +427,10 @@ impl Parser {
             }
             terms = paired;
         }
-        let (inverted, (e, depth), position) = terms.pop().expect("a chain has a term");
-        if !inverted {
-            return Ok((e, depth));
-        }
-        let depth = self.nest(depth, position)?;
-        let e = match op {
-            Op::Add => Expr::Neg(e.into()),
-            _ => checked(Expr::Bin(Op::Div, Expr::Num(1.0).into(), e.into()), position)?,
-        };
-        Ok((e, depth))
+        // The pair holding the first term, never subtracted, is never one: nor is the root.
+        let (inverted, parsed, _) = terms.pop().expect("a chain has a term");
+        debug_assert!(!inverted, "the first term of a chain is not inverted");
+        Ok(parsed)
     }
 
     /// A signed operand. Every recursion of the grammar (parentheses, calls, signs,

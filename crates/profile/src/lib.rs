@@ -508,11 +508,11 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         p.nll < base - 1e-6 * base.abs().max(1.0)
     }
 
-    /// The fit with θ_i held at the coordinate `z`, from the point `from`; a panic in it
-    /// becomes [`ProfileError::Panicked`], which ends the side ([`End::Failed`]).
-    /// The profile's point at coordinate `z`, fitted from `from`; `Interrupted` where the
-    /// caller asked the run to stop (before the fit, or while it ran: its point is not the
-    /// profile's then).
+    /// The profile's point at coordinate `z`: the fit with θ_i held there, from the point
+    /// `from`. A panic in it becomes [`ProfileError::Panicked`], which ends the side
+    /// ([`End::Failed`]); `Interrupted` where the caller asked the run to stop, before the
+    /// fit or while it ran (its point is not the profile's then), which ends it
+    /// ([`End::Stopped`]).
     fn fit_at(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {
         if sysid_core::observer::stop_requested() {
             return Err(ProfileError::Interrupted);
