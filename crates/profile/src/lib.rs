@@ -600,8 +600,10 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
                 continue;
             }
             if point.nll - at.nll > threshold {
-                let crossing = self.locate((z, &previous), (next_z, &point), z0);
-                points.push(point);
+                points.push(point.clone());
+                // The points fitted while locating go into `points` as they are fitted: a
+                // panic or a stop keeps those before it.
+                let crossing = self.locate((z, &previous), (next_z, &point), z0, &mut points);
                 let crossing = match crossing {
                     Err(ProfileError::Panicked(message)) => {
                         return Ok((points, End::Failed(message)));
@@ -611,10 +613,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
                     other => other?,
                 };
                 return Ok(match crossing {
-                    Ok((value, located)) => {
-                        points.extend(located);
-                        (points, End::Crossed(value))
-                    }
+                    Ok(value) => (points, End::Crossed(value)),
                     Err(better) => (points, End::Better(better)),
                 });
             }
@@ -632,18 +631,18 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
     }
 
     /// The value where the profile crosses the threshold between `a` (below) and `b`
-    /// (above), with the points evaluated on the way; or a point below the optimum.
-    #[allow(clippy::type_complexity)]
+    /// (above), the points evaluated on the way pushed onto `located` as they come; or a
+    /// point below the optimum.
     fn locate(
         &self,
         (mut za, a): (f64, &Point),
         (mut zb, b): (f64, &Point),
         z0: f64,
-    ) -> Result<Result<(f64, Vec<Point>), Point>, ProfileError> {
+        located: &mut Vec<Point>,
+    ) -> Result<Result<f64, Point>, ProfileError> {
         let level = objective(self.optimum) + self.options.threshold;
         let (mut fa, mut fb) = (a.nll - level, b.nll - level);
         let (mut from, mut side) = (a.clone(), 0i8);
-        let mut located = Vec::new();
         let unknown = &self.problem.unknowns().list()[self.i];
         for _ in 0..100 {
             if (zb - za).abs() <= self.options.locate * (0.5 * (za + zb) - z0).abs() {
@@ -678,6 +677,6 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         }
         let z = zb - fb * (zb - za) / (fb - fa);
         let z = if z.is_finite() && (z - za) * (z - zb) <= 0.0 { z } else { 0.5 * (za + zb) };
-        Ok(Ok((unknown.value(z), located)))
+        Ok(Ok(unknown.value(z)))
     }
 }
