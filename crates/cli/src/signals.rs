@@ -31,9 +31,8 @@ pub fn requested() -> bool {
 #[cfg(unix)]
 static NOTICED: AtomicBool = AtomicBool::new(false);
 
-/// The stop flag the signals set, and which signal came first.
+/// Which signal came first (the flag they set is [`FLAG`]).
 pub struct Signals {
-    flag: Arc<AtomicBool>,
     #[cfg(unix)]
     first: Arc<AtomicUsize>,
 }
@@ -72,8 +71,8 @@ impl Signals {
                 }
             });
         }
-        let _ = FLAG.set(Arc::clone(&stop));
-        Some(Signals { flag: stop, first })
+        FLAG.set(stop).ok()?;
+        Some(Signals { first })
     }
 
     /// The first signal received, if any.
@@ -123,7 +122,7 @@ impl Signals {
 impl Signals {
     /// The flag the first signal sets, for [`sysid_core::observer::stop_when`].
     pub fn flag(&self) -> Arc<AtomicBool> {
-        Arc::clone(&self.flag)
+        Arc::clone(FLAG.get().expect("set where the handlers are installed"))
     }
 }
 
