@@ -668,8 +668,8 @@ impl PyProblem {
     /// at each iterate (`iteration`, `objective`, `cost`, `optimality`, `coarse`), with
     /// `starts` as each start ends (`start`, `done`, `total`, `objective`, `converged`).
     /// An exception it raises stops the fit at its next iteration (a multistart's running
-    /// starts so, and begins no other), and the fit raises it then. Ctrl-C
-    /// (KeyboardInterrupt) stops it the same way.
+    /// starts so, and begins no other), and the fit raises it then, with the fit as it
+    /// stood as the exception's `result`. Ctrl-C (KeyboardInterrupt) stops it the same way.
     #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None, coarse_first=true, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
@@ -775,17 +775,19 @@ impl PyProblem {
                     .map(|run| (run.best, Some(run.starts)))
             }
         });
+        let result = |(estimate, starts): (sysid_core::Estimate, Option<_>)| {
+            unusable_start(&problem, &estimate)?;
+            let mut value =
+                serde_json::to_value(estimate.record(&self.name)).expect("a fit record serialises");
+            if let (Some(s), Some(map)) = (starts, value.as_object_mut()) {
+                map.insert("starts".into(), serde_json::to_value(s).expect("starts serialise"));
+            }
+            py.import("sysid._result")?.getattr("FitResult")?.call1((value.to_string(),))
+        };
         if let Some(error) = raised.take() {
-            return Err(error);
+            return Err(with_result(py, error, outcome.ok().map(result)));
         }
-        let (estimate, starts) = outcome.map_err(sysid_error)?;
-        unusable_start(&problem, &estimate)?;
-        let mut value =
-            serde_json::to_value(estimate.record(&self.name)).expect("a fit record serialises");
-        if let (Some(s), Some(map)) = (starts, value.as_object_mut()) {
-            map.insert("starts".into(), serde_json::to_value(s).expect("starts serialise"));
-        }
-        py.import("sysid._result")?.getattr("FitResult")?.call1((value.to_string(),))
+        result(outcome.map_err(sysid_error)?)
     }
 
     /// Profile likelihoods around the fit `method` reaches from the nominal point: each
@@ -798,7 +800,8 @@ impl PyProblem {
     /// the fit's iterates (as `fit` tells them), then `stage` "traced" as each profile is
     /// traced (`unknown`, `done`, `total`), and `stage` "better" where a profile found a
     /// lower point (`objective`, the NLL there, and `was`). Traced profiles are told from
-    /// the threads that traced them.
+    /// the threads that traced them. An exception it raises, or Ctrl-C, stops the run and is
+    /// raised with what it had as its `result` (profiles not done labelled `stopped`).
     #[pyo3(signature = (method=None, only=None, simultaneous=false, max_points=60, max_iterations=None, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn profile<'py>(
@@ -865,7 +868,14 @@ impl PyProblem {
             heard(hears_optimum, &raised, Some("optimum"), || method.fit(problem))
         });
         if let Some(error) = raised.take() {
-            return Err(error);
+            // Stopped while the optimum was fitted: no profile yet, but the fit so far.
+            let fit = |optimum: sysid_core::Estimate| {
+                unusable_start(problem, &optimum)?;
+                let json = serde_json::to_string(&optimum.record(&self.name))
+                    .expect("a fit record serialises");
+                py.import("sysid._result")?.getattr("FitResult")?.call1((json,))
+            };
+            return Err(with_result(py, error, optimum.ok().map(fit)));
         }
         let optimum = optimum.map_err(sysid_error)?;
         // No profile from a start every fit fails from (its NLLs were all NaN).
@@ -889,13 +899,15 @@ impl PyProblem {
             };
             sysid_profile::profile_from_optimum(&*method, problem, optimum, &which, &options, &told)
         });
+        let result = |profiled: sysid_profile::Profiled| {
+            let json = serde_json::to_string(&profiled.record(&self.name, threshold))
+                .expect("a profile record serialises");
+            py.import("sysid._result")?.getattr("ProfileResult")?.call1((json,))
+        };
         if let Some(error) = raised.take() {
-            return Err(error);
+            return Err(with_result(py, error, profiled.ok().map(result)));
         }
-        let profiled = profiled.map_err(sysid_error)?;
-        let json = serde_json::to_string(&profiled.record(&self.name, threshold))
-            .expect("a profile record serialises");
-        py.import("sysid._result")?.getattr("ProfileResult")?.call1((json,))
+        result(profiled.map_err(sysid_error)?)
     }
 
     /// For scripts/python/overhead.py: the seconds per evaluation of what a Rust program calls
@@ -967,6 +979,30 @@ impl Raised {
     fn lock(&self) -> std::sync::MutexGuard<'_, Option<PyErr>> {
         self.error.lock().unwrap_or_else(|e| e.into_inner())
     }
+}
+
+/// `error`, the exception that stopped a run (Ctrl-C's KeyboardInterrupt, or one its
+/// `progress` callback raised), with what the run had when it stopped as its `result`
+/// attribute: a fit's best point (termination `interrupted`), a multistart's starts, the
+/// profiles with the points traced before the stop. Where the run returned nothing usable
+/// (`result` None, or an error building it) `error` is raised as it was. A note added to the
+/// exception says where the result is, so a traceback tells the user.
+fn with_result<'py>(
+    py: Python<'py>,
+    error: PyErr,
+    result: Option<PyResult<Bound<'py, PyAny>>>,
+) -> PyErr {
+    let Some(Ok(result)) = result else { return error };
+    let value = error.value(py);
+    // An exception whose class refuses attributes (__slots__) is raised without it.
+    if value.setattr("result", &result).is_ok() {
+        let kind = result.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        let _ = value.call_method1(
+            "add_note",
+            (format!("sysid: the run stopped here; what it had is this exception's .result (a sysid.{kind})"),),
+        );
+    }
+    error
 }
 
 /// How often the Python thread looks for signals while a run works.

@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import subprocess
+import sys
 import tempfile
 import unittest
 
@@ -235,9 +236,17 @@ class Boehm(unittest.TestCase):
             calls.append(d)
             raise KeyError("stop")
 
-        with self.assertRaises(KeyError):
+        with self.assertRaises(KeyError) as caught:
             self.p.fit(progress=fails)
         self.assertEqual(len(calls), 1)
+        # The fit it stopped comes with the exception: its best point, `interrupted`.
+        stopped = caught.exception.result
+        self.assertIsInstance(stopped, sysid.FitResult)
+        self.assertEqual(stopped.record["termination_code"], "interrupted")
+        self.assertLessEqual(stopped.record["iterations"], 1)
+        self.assertEqual(len(stopped.x), len(self.p.parameter_names))
+        if sys.version_info >= (3, 11):
+            self.assertIn("this exception's .result", caught.exception.__notes__[0])
         with self.assertRaises(ValueError):
             self.p.fit(progress=3)
 
@@ -257,11 +266,17 @@ class Boehm(unittest.TestCase):
         began = time.perf_counter()
         timer.start()
         try:
-            with self.assertRaises(KeyboardInterrupt):
+            with self.assertRaises(KeyboardInterrupt) as caught:
                 self.p.fit(starts=400, seed=1)
         finally:
             timer.cancel()
         self.assertLess(time.perf_counter() - began, 5 * forty)
+        # What the run had is the exception's `result`: the starts that ended, the rest
+        # counted as not begun.
+        starts = caught.exception.result.record["starts"]
+        self.assertTrue(starts["stopped"])
+        self.assertGreater(starts["not_started"], 0)
+        self.assertEqual(starts["count"] + starts["not_started"], 400)
 
     def test_scipy_minimises_it(self):
         from scipy.optimize import minimize
@@ -456,8 +471,25 @@ class FallingBody(unittest.TestCase):
         def fails(d):
             raise KeyError("stop")
 
-        with self.assertRaises(KeyError):
+        # Stopped while the optimum is fitted, the exception holds that fit so far; stopped
+        # at the first profile traced, the profiles, each done or `stopped` with its points.
+        with self.assertRaises(KeyError) as caught:
             p.profile(progress=fails)
+        self.assertEqual(caught.exception.result.record["termination_code"], "interrupted")
+
+        def fails_when_traced(d):
+            if d["stage"] == "traced":
+                raise KeyError("stop")
+
+        with self.assertRaises(KeyError) as caught:
+            p.profile(progress=fails_when_traced)
+        stopped = caught.exception.result
+        self.assertIsInstance(stopped, sysid.ProfileResult)
+        self.assertTrue(stopped.from_certified_optimum)
+        self.assertEqual(sorted(stopped.profiles), sorted(p.parameter_names))
+        labels = [profile.label for profile in stopped.profiles.values()]
+        self.assertIn("identifiable", labels)
+        self.assertLessEqual(set(labels), {"identifiable", "stopped"})
         with self.assertRaises(ValueError):
             p.profile(progress=3)
         with self.assertRaisesRegex(ValueError, 'only: "h" is not a profiled unknown'):
