@@ -204,8 +204,9 @@ pub struct MethodArgs {
     pub start: Vec<(String, f64)>,
     /// When stderr is not a terminal (a batch job's log), print a plain progress line every
     /// this many seconds (0: never): the iterate of a single fit, the starts done of
-    /// --starts, the profiles traced of profile, the reference fit and the trials done of a
-    /// study, the starts done of a basin map. On a terminal the line is redrawn in place.
+    /// --starts, the points fitted and the profiles traced of profile, the reference fit and
+    /// the trials done of a study, the starts done of a basin map. On a terminal the line is
+    /// redrawn in place.
     #[arg(long, default_value_t = 60.0, value_name = "SECONDS", value_parser = number, allow_hyphen_values = true)]
     pub log_every: f64,
 }

@@ -1,5 +1,7 @@
 //! `sysid profile`.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
+
 use anyhow::bail;
 use clap::Args;
 use sysid_profile::{
@@ -106,17 +108,39 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
         ProfileOptions { max_steps: args.max_points, threshold, ..ProfileOptions::default() };
     let traces = context.watch(&format!("{} profiles", args.method.method), args.options.log_every);
     let line: &Watch = &traces;
+    // The points fitted on each unknown's profile and the profiles ended, for the line
+    // (a profile is tens of fits, and one fit of a large model can take a minute).
+    let fitted: Vec<AtomicUsize> = names.iter().map(|_| AtomicUsize::new(0)).collect();
+    let ended = AtomicUsize::new(0);
+    let total = if only.is_empty() { names.len() } else { only.len() };
     let told = |progress: Progress<'_>| match progress {
+        Progress::Point { unknown, point, rise } => {
+            let n = fitted[unknown].fetch_add(1, Ordering::Relaxed) + 1;
+            line.say(&format!(
+                "{}/{total} ended; {} = {} (point {n}), ΔNLL {} of {}",
+                ended.load(Ordering::Relaxed),
+                names[unknown],
+                sysid_core::format::significant(point.value, 6),
+                sysid_core::format::significant(rise, 3),
+                sysid_core::format::significant(threshold, 3),
+            ))
+        }
         Progress::Traced { unknown, done, total } => {
+            ended.store(done, Ordering::Relaxed);
             // After Ctrl-C the profiles end stopped, not traced (told on a rayon worker,
             // which does not carry the run's stop flags: the signal's own).
             let how = if crate::signals::requested() { "ended" } else { "traced" };
             line.say(&format!("{done}/{total} {how} (the last: {})", names[unknown]))
         }
-        Progress::Better { point, was } => eprintln!(
-            "better optimum found along a profile (objective {} against {was}): fitting again from there",
-            point.nll
-        ),
+        Progress::Better { point, was } => {
+            // The profiles are traced again from the new optimum: their counts begin anew.
+            fitted.iter().for_each(|n| n.store(0, Ordering::Relaxed));
+            ended.store(0, Ordering::Relaxed);
+            eprintln!(
+                "better optimum found along a profile (objective {} against {was}): fitting again from there",
+                point.nll
+            )
+        }
     };
     let profiled = profile_from_optimum(&*m, &problem, optimum.clone(), &only, &options, &told);
     traces.finish();

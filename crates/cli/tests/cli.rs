@@ -49,7 +49,8 @@ fn a_fit_in_a_batch_log_says_where_it_is_while_it_runs() {
         sysid(&["fit", "--system", "lotka-volterra", "--starts", "3", "--log-every", "1e-9"]);
     let lines = text(&starts.stderr);
     assert!(lines.contains("lotka-volterra nl2sol: 3/3 starts done, "), "{lines}");
-    // A profile's traces after its optimum: a line per profile traced.
+    // A profile's traces after its optimum: a line per point fitted, counted by unknown,
+    // and one per profile traced.
     let profile = sysid(&["profile", "--system", "falling-body", "--log-every", "1e-9"]);
     let lines = text(&profile.stderr);
     for done in 1..=3 {
@@ -57,6 +58,15 @@ fn a_fit_in_a_batch_log_says_where_it_is_while_it_runs() {
             lines.contains(&format!("falling-body nl2sol profiles: {done}/3 traced (the last: ")),
             "{lines}"
         );
+    }
+    for name in ["y", "v", "g"] {
+        let points: Vec<&str> =
+            lines.lines().filter(|l| l.contains(&format!(" ended; {name} = "))).collect();
+        assert!(points.len() > 2, "{lines}");
+        for (n, line) in points.iter().enumerate() {
+            assert!(line.contains(&format!("(point {}), ΔNLL ", n + 1)), "{line}");
+            assert!(line.contains(" of 1.92, "), "{line}");
+        }
     }
     // A study of a model file: its reference fit, then its trials; a basin map: its starts.
     let model =

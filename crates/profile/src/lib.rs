@@ -114,6 +114,18 @@ pub enum Progress<'a> {
         /// The profiles of the round.
         total: usize,
     },
+    /// A point of a profile is fitted (from the thread that traces it): the unknown's
+    /// index, the point, and its rise above the optimum's objective (ΔNLL), which the
+    /// profile's side walks up to the threshold. A profile takes tens of fits; a long one
+    /// is seen moving by these.
+    Point {
+        /// The unknown's index.
+        unknown: usize,
+        /// The point fitted.
+        point: &'a Point,
+        /// Its objective less the optimum's.
+        rise: f64,
+    },
     /// A profile found a point below the optimum, with the NLL it improves on; a fit from
     /// there follows, and the profiles are traced again from its end.
     Better {
@@ -126,7 +138,8 @@ pub enum Progress<'a> {
 
 /// [`profile`], fitting again with `method` from any point a profile finds below the
 /// optimum (at most [`MAX_RESTARTS`] times), until the profiles start from the lowest point
-/// they see. `on_progress` hears of each profile traced and each better point.
+/// they see. `on_progress` hears of each point fitted, each profile traced and each better
+/// point.
 pub fn profile_from_optimum<S, M>(
     method: &M,
     problem: &Problem<S>,
@@ -143,8 +156,7 @@ where
     let mut optimum = optimum;
     let mut better = Vec::new();
     loop {
-        let traced = |unknown, done, total| on_progress(Progress::Traced { unknown, done, total });
-        match profile_observed(method, problem, &optimum, only, options, &traced)? {
+        match profile_observed(method, problem, &optimum, only, options, on_progress)? {
             Outcome::Profiles(profiles) => {
                 return Ok(Profiled { certified, optimum, better, profiles });
             }
@@ -391,18 +403,18 @@ where
     S: System + Sync,
     M: Method<S> + Sync + ?Sized,
 {
-    profile_observed(method, problem, optimum, only, options, &|_, _, _| {})
+    profile_observed(method, problem, optimum, only, options, &|_| {})
 }
 
-/// [`profile`], telling `traced` of each profile as it ends: the unknown's index, the
-/// profiles done (this one included) and their number.
+/// [`profile`], telling `on_progress` of each point fitted ([`Progress::Point`]) and each
+/// profile as it ends ([`Progress::Traced`]), from the threads that trace them.
 pub fn profile_observed<S, M>(
     method: &M,
     problem: &Problem<S>,
     optimum: &Estimate,
     only: &[usize],
     options: &ProfileOptions,
-    traced: &(dyn Fn(usize, usize, usize) + Sync),
+    on_progress: &(dyn Fn(Progress<'_>) + Sync),
 ) -> Result<Outcome, ProfileError>
 where
     S: System + Sync,
@@ -430,10 +442,10 @@ where
     let results: Vec<Result<Result<Profile, Point>, ProfileError>> = which
         .par_iter()
         .map(|&i| {
-            let tracer = Tracer { method, problem, optimum, i, options };
+            let tracer = Tracer { method, problem, optimum, i, options, on_progress };
             let profile = sysid_core::observer::stop_within(stop.clone(), || tracer.profile());
             let count = done.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
-            traced(i, count, which.len());
+            on_progress(Progress::Traced { unknown: i, done: count, total: which.len() });
             profile
         })
         .collect();
@@ -454,6 +466,7 @@ struct Tracer<'a, S, M: ?Sized> {
     optimum: &'a Estimate,
     i: usize,
     options: &'a ProfileOptions,
+    on_progress: &'a (dyn Fn(Progress<'_>) + Sync),
 }
 
 impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
@@ -519,10 +532,14 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         }
         let point = sysid_core::caught(|| self.fit_at_unguarded(z, from))
             .map_err(ProfileError::Panicked)?;
-        match sysid_core::observer::stop_requested() {
-            true => Err(ProfileError::Interrupted),
-            false => point,
+        if sysid_core::observer::stop_requested() {
+            return Err(ProfileError::Interrupted);
         }
+        if let Ok(point) = &point {
+            let rise = point.nll - objective(self.optimum);
+            (self.on_progress)(Progress::Point { unknown: self.i, point, rise });
+        }
+        point
     }
 
     fn fit_at_unguarded(&self, z: f64, from: &Point) -> Result<Point, ProfileError> {

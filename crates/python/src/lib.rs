@@ -797,9 +797,11 @@ impl PyProblem {
     /// --format json` (docs/json.md).
     ///
     /// `progress`, a callable, is called while it runs with a dict: `stage` "optimum" with
-    /// the fit's iterates (as `fit` tells them), then `stage` "traced" as each profile is
-    /// traced (`unknown`, `done`, `total`), and `stage` "better" where a profile found a
-    /// lower point (`objective`, the NLL there, and `was`). Traced profiles are told from
+    /// the fit's iterates (as `fit` tells them), then `stage` "point" as each point of a
+    /// profile is fitted (`unknown`, `value`, `objective` and `rise`, ΔNLL from the
+    /// optimum), `stage` "traced" as each profile is traced (`unknown`, `done`, `total`),
+    /// and `stage` "better" where a profile found a lower point (`objective`, the NLL
+    /// there, and `was`). Traced profiles are told from
     /// the threads that traced them. An exception it raises, or Ctrl-C, stops the run and is
     /// raised with what it had as its `result` (profiles not done labelled `stopped`).
     #[pyo3(signature = (method=None, only=None, simultaneous=false, max_points=60, max_iterations=None, progress=None))]
@@ -884,6 +886,13 @@ impl PyProblem {
             let told = |p: sysid_profile::Progress<'_>| {
                 let Some(callback) = &progress else { return };
                 tell(callback, &raised, |d| match p {
+                    sysid_profile::Progress::Point { unknown, point, rise } => {
+                        d.set_item("stage", "point")?;
+                        d.set_item("unknown", &names[unknown])?;
+                        d.set_item("value", point.value)?;
+                        d.set_item("objective", point.nll)?;
+                        d.set_item("rise", rise)
+                    }
                     sysid_profile::Progress::Traced { unknown, done, total } => {
                         d.set_item("stage", "traced")?;
                         d.set_item("unknown", &names[unknown])?;

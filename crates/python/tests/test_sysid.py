@@ -456,7 +456,21 @@ class FallingBody(unittest.TestCase):
         only = p.profile(only=["g"], progress=heard.append)
         self.assertEqual(list(only.profiles), ["g"])
         stages = [h["stage"] for h in heard]
-        self.assertEqual(stages, ["optimum"] * (len(stages) - 1) + ["traced"])
+        fits = stages.count("optimum")
+        points = stages.count("point")
+        self.assertEqual(stages, ["optimum"] * fits + ["point"] * points + ["traced"])
+        # Every point of the profile was told (the optimum is its one point not fitted;
+        # a fit the step control refits closer is told and not kept), with its rise from
+        # the optimum's objective.
+        told = [(h["value"], h["objective"], h["rise"]) for h in heard[fits:-1]]
+        g = only.profiles["g"]
+        kept = list(zip(g.values, g.nll))
+        kept.remove((only.optimum.estimates["g"], only.optimum.objective))
+        self.assertLessEqual(set(kept), {(v, nll) for v, nll, _ in told})
+        for _, nll, rise in told:
+            self.assertEqual(rise, nll - only.optimum.objective)
+            self.assertGreater(rise, 0)
+        heard = heard[:fits] + heard[-1:]
         # (the iterate where the coarse stage ends is told again at the fine tolerances)
         iterations = [h["iteration"] for h in heard[:-1]]
         self.assertEqual(iterations, sorted(iterations))
