@@ -208,6 +208,48 @@ fn weights_are_relative() {
     }
 }
 
+/// Weights far from 1 either way: every method fits the falling body (linear in its
+/// unknowns, so one Gauss–Newton step is exact) to Goodman's answer with the same standard
+/// errors as at weight 1. argmin's Gauss–Newton step, which inverts JᵀJ by its cofactors
+/// for three unknowns, overflowed from a weight of 1e150 and stepped to ∞ (all three
+/// `gauss-newton` methods failed or stalled).
+#[test]
+fn every_method_fits_with_weights_far_from_one() {
+    let s = Scratch::new("far-weights");
+    let example = root().join("examples/falling-body");
+    let read = |f: &str| std::fs::read_to_string(example.join(f)).expect("the example");
+    s.write("data.csv", &read("data.csv"));
+    // σ² = ε/dof = 1.25 at weight 1: each standard error is √(1.25·[(ΦᵀΦ)⁻¹]_ii), Φ's rows
+    // (1, t, t²/2) at t = 0, 1, 2, 3 ((ΦᵀΦ)⁻¹ diagonal 0.95, 2.45, 1).
+    let expected = [
+        ("y", -0.25, (1.25f64 * 0.95).sqrt()),
+        ("v", -0.25, (1.25f64 * 2.45).sqrt()),
+        ("g", 32.5, 1.25f64.sqrt()),
+    ];
+    for weight in ["1e-250", "1e250"] {
+        let model = s.write(
+            &format!("model-{weight}.toml"),
+            &read("model.toml").replace(
+                "file = \"data.csv\"",
+                &format!("file = \"data.csv\"\n[data.weights]\ny = {weight}"),
+            ),
+        );
+        for entry in &sysid_registry::ENTRIES {
+            let fit = json(&["fit", "--model", &model, "--method", entry.name]);
+            let at = format!("{} at weight {weight}: {fit}", entry.name);
+            assert_eq!(fit["converged"], true, "{at}");
+            // Forward differences (gauss-newton-fd) stop where the cost stops changing.
+            let tolerance = if entry.name == "gauss-newton-fd" { 1e-5 } else { 1e-9 };
+            for (name, value, std_error) in expected {
+                let estimate = fit["estimates"][name].as_f64().unwrap();
+                assert!((estimate - value).abs() <= tolerance * value.abs(), "{name}: {at}");
+                let se = fit["std_errors"][name].as_f64().unwrap();
+                assert!((se / std_error - 1.0).abs() <= 1e-9, "{name}'s standard error: {at}");
+            }
+        }
+    }
+}
+
 /// Nothing is written over a file the command reads, by any name.
 #[test]
 fn no_command_writes_over_its_inputs() {

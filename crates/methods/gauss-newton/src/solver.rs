@@ -194,6 +194,42 @@ impl Adapter<'_> {
     }
 }
 
+/// The residual operator as argmin's Gauss–Newton step sees it: r and J divided by one power
+/// of two c, the largest not above J's largest entry. The step (JᵀJ)⁻¹Jᵀr is the same to the
+/// bit (a power of two scales every operation exactly), but JᵀJ's entries are near 1:
+/// nalgebra inverts a matrix of up to 3 × 3 by its cofactors, whose determinant, a product
+/// of three entries, overflows once they pass about 1e102 (a weight of 1e150 on the falling
+/// body's data), and the step came back infinite ("the initial value of `y` became
+/// non-finite") where a weight is documented to be as large as a float holds.
+struct Scaled<'a, 'b, S> {
+    op: &'b Residuals<'a, S>,
+    c: f64,
+}
+
+impl<'a, 'b, S: System> Scaled<'a, 'b, S> {
+    fn new(op: &'b Residuals<'a, S>, jacobian: &Matrix) -> Self {
+        let largest = jacobian.amax();
+        let c = if largest.is_normal() { 2f64.powi(largest.log2().floor() as i32) } else { 1.0 };
+        Self { op, c }
+    }
+}
+
+impl<S: System> Operator for &Scaled<'_, '_, S> {
+    type Param = Vector;
+    type Output = Vector;
+    fn apply(&self, w: &Vector) -> Result<Vector, argmin::core::Error> {
+        Operator::apply(&self.op, w).map(|r| r / self.c)
+    }
+}
+
+impl<S: System> Jacobian for &Scaled<'_, '_, S> {
+    type Param = Vector;
+    type Jacobian = Matrix;
+    fn jacobian(&self, w: &Vector) -> Result<Matrix, argmin::core::Error> {
+        Jacobian::jacobian(&self.op, w).map(|j| j / self.c)
+    }
+}
+
 /// One `next_iter` of an argmin solver from `state` on `operator`: the new parameters.
 fn next<O, Sv, G, R>(
     solver: &mut Sv,
@@ -318,9 +354,10 @@ impl Adapter<'_> {
         let condition = NormalFactor::new(&jacobian.tr_mul(&jacobian), f64::INFINITY)
             .ok()
             .map(|f| f.condition());
-        let full =
-            next(&mut ArgminGn::new(), &op, IterState::new().param(w.clone()).residuals(r.clone()))
-                .map_err(|message| self.failure(ev.problem(), &jacobian, message))?;
+        let scaled = Scaled::new(&op, &jacobian);
+        let state = IterState::new().param(w.clone()).residuals(&r / scaled.c);
+        let full = next(&mut ArgminGn::new(), &scaled, state)
+            .map_err(|message| self.failure(ev.problem(), &jacobian, message))?;
         let w_new = if self.options.line_search {
             let direction = Vector::from_vec(full) - &w;
             let first = self.first_step(&w, &direction);
