@@ -250,6 +250,39 @@ fn every_method_fits_with_weights_far_from_one() {
     }
 }
 
+/// A fit stopped by its integration budget reports what a fit stopped otherwise does: the
+/// point at the problem's own tolerances and the budget the user set. Boehm's fit with
+/// `--max-integrations 1` ends at its start inside the coarse stage (rtol 1e-6); its NLL was
+/// the coarse integration's, 8.0e-6 from the problem's, with an `nll_error` of 6.9e-6, and
+/// its message named the budget left to its last round ("1" of 10). An evaluation integrates
+/// every experiment once: with two experiments a budget of 7 allows three (6
+/// integrations), where a fourth was made (8).
+#[test]
+fn a_fit_stopped_by_its_budget_reports_at_the_problems_tolerances() {
+    let boehm = root().join("tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml");
+    let boehm = boehm.to_str().unwrap();
+    let at_start = json(&["fit", "--petab", boehm, "--max-iterations", "0"]);
+    let budget = json(&["fit", "--petab", boehm, "--max-integrations", "1"]);
+    assert_eq!(budget["termination_code"], "integration_budget", "{budget}");
+    assert_eq!(budget["iterations"], 0, "{budget}");
+    for key in ["nll", "cost", "nll_error", "optimality", "estimates"] {
+        assert_eq!(budget[key], at_start[key], "{key}");
+    }
+    for n in ["1", "10"] {
+        let fit = json(&["fit", "--petab", boehm, "--max-integrations", n]);
+        let text = fit["termination"].as_str().unwrap();
+        assert!(text.contains(&format!("the budget of {n} model integrations")), "{text}");
+    }
+    let two = root().join("examples/two-doses/model.toml");
+    let two = two.to_str().unwrap();
+    let fit = |n: &str| json(&["fit", "--model", two, "--max-integrations", n]);
+    let (six, seven) = (fit("6"), fit("7"));
+    assert!(seven["termination"].as_str().unwrap().contains("budget of 7 "), "{seven}");
+    for key in ["estimates", "nll", "iterations", "counts"] {
+        assert_eq!(six[key], seven[key], "{key}");
+    }
+}
+
 /// Nothing is written over a file the command reads, by any name.
 #[test]
 fn no_command_writes_over_its_inputs() {

@@ -46,7 +46,9 @@ use crate::method::start_coordinates;
 use crate::options::DriverOptions;
 use crate::problem::Problem;
 use crate::step::{Advance, Iterate, Step};
-use crate::termination::{Failure, PROGRESS, PROGRESS_WINDOW, Rule, SETTLE, SETTLE_WINDOW};
+use crate::termination::{
+    Failure, PROGRESS, PROGRESS_WINDOW, Rule, SETTLE, SETTLE_WINDOW, Termination,
+};
 
 /// Runs `step` from `start` (values of the free unknowns) on `problem` and returns the
 /// estimate of method `method`. `Err` only for misuse: invalid options or start.
@@ -66,6 +68,8 @@ pub fn drive<S: System>(
     let mut sigma = problem.scale_values();
     let mut z = start.to_vec();
     let mut rounds: Vec<Estimate> = Vec::new();
+    // The hard budget of the whole fit, which its rounds share.
+    let budget = options.integration_budget(problem.unknowns().len(), problem.experiments().len());
     // The fit's first scales, which every round's history is measured on.
     let first = Profile::new(problem, true);
     let started = Instant::now();
@@ -74,12 +78,7 @@ pub fn drive<S: System>(
         let spent: u64 = rounds.iter().map(|e| e.counts.integrations).sum();
         let round_options = DriverOptions {
             max_iterations: options.max_iterations.saturating_sub(used),
-            max_integrations: Some(
-                options
-                    .integration_budget(problem.unknowns().len(), problem.experiments().len())
-                    .saturating_sub(spent)
-                    .max(1),
-            ),
+            max_integrations: Some(budget.saturating_sub(spent).max(1)),
             max_seconds: options
                 .max_seconds
                 .map(|s| (s - started.elapsed().as_secs_f64()).max(0.0)),
@@ -99,6 +98,10 @@ pub fn drive<S: System>(
             !profiles && rounds.len() + 1 < MAX_ROUNDS,
         )?;
         on_first_scales(&first, &sigma, &mut estimate);
+        // A round that ran out of integrations names the fit's budget, not what was left of it.
+        if let Termination::IntegrationBudget { integrations } = &mut estimate.termination {
+            *integrations = budget;
+        }
         if let Some(moved) = profiled {
             // Hierarchical optimisation: one run, at the closed form of the point it returns.
             let held = problem.with_scales(&ended);
@@ -121,8 +124,12 @@ pub fn drive<S: System>(
             || out_of_iterations
             || matches!(
                 estimate.termination,
-                crate::Termination::TimeLimit { .. } | crate::Termination::Interrupted
+                Termination::TimeLimit { .. }
+                    | Termination::Interrupted
+                    | Termination::IntegrationBudget { .. }
             )
+            // The budget has no room for another round's first evaluation.
+            || spent + estimate.counts.integrations + problem.experiments().len() as u64 > budget
             || rounds.len() + 1 >= MAX_ROUNDS;
         rounds.push(estimate);
         if last {
@@ -586,6 +593,20 @@ fn drive_once<S: System>(
         }
         iteration += 1;
     };
+    // A run that ended within the coarse stage (its integration budget used up there, or a
+    // failure the stage could not hand over) reports its point at the problem's own
+    // tolerances, as every other run does: the coarse figures (rtol 1e-6) are not the
+    // problem's, and their error, measured at a tenth of the coarse tolerances, did not
+    // cover the difference (Boehm stopped by `--max-integrations 1`: an NLL 8.0e-6 from the
+    // problem's, its error given as 6.9e-6). The point is integrated again outside the
+    // budget, as the certificate's own integrations are.
+    if coarse {
+        ev.refine(problem.with_scales(&ev.problem().scale_values()));
+        current.linearization = None;
+        if let Some((_, b)) = &mut best {
+            b.linearization = None;
+        }
+    }
     // The estimate is assembled at the scales of the point it returns, which is chosen here
     // as `finish` chooses it: a rule's iterate is judged at its own scales (those `ev` holds
     // now) before any switch to the best iterate's.

@@ -242,9 +242,13 @@ impl<'p, S: System> Evaluations<'p, S> {
         z: &[f64],
         integrate: impl FnOnce() -> Result<(T, Counts), OdeError>,
     ) -> Result<T, Failure> {
+        // An evaluation integrates every experiment once, each counting as one: it is made
+        // only where all of them fit in the budget (with two experiments and a budget of 7,
+        // the fourth evaluation had made 8).
         let used = self.counts.get().integrations;
-        if used >= self.budget {
-            return Err(Failure::Budget { integrations: used });
+        let cost = self.problem().experiments().len().max(1) as u64;
+        if used.saturating_add(cost) > self.budget {
+            return Err(Failure::Budget { integrations: self.budget });
         }
         match integrate() {
             Ok((value, counts)) => {

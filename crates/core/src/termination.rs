@@ -111,9 +111,10 @@ pub enum Failure {
         /// Condition number of the Jacobi-scaled matrix.
         condition: f64,
     },
-    /// The hard budget of model integrations is used up.
+    /// The hard budget of model integrations is used up: another evaluation, which
+    /// integrates every experiment once, would exceed it.
     Budget {
-        /// Integrations made.
+        /// The budget.
         integrations: u64,
     },
     /// The optimisation library stopped with an error of its own.
@@ -229,7 +230,7 @@ pub enum Termination {
     },
     /// The hard budget of model integrations ran out.
     IntegrationBudget {
-        /// Integrations made.
+        /// The budget (the fit's whole `max_integrations`).
         integrations: u64,
     },
     /// The wall-clock limit ([`DriverOptions::max_seconds`](crate::DriverOptions::max_seconds))
