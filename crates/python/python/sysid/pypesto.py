@@ -20,23 +20,41 @@ import numpy as np
 
 def objective(p):
     """A ``pypesto.Objective`` giving fun, grad and the Fisher information as hess, on the
-    parameter scale; the model is integrated once per point asked for."""
+    parameter scale; the model is integrated once per point asked for. Where the model
+    cannot be integrated (or its NLL overflows: :class:`sysid.SysidError`), fun is inf and
+    grad and hess are NaN, as pyPESTO's own objectives give for a failed simulation, so that
+    an optimiser backs off instead of ending the start. Bad input (a point of the wrong
+    length) still raises."""
     import pypesto
 
+    from . import SysidError
+
     cache = {}
+    n = len(p.parameter_names)
 
     def at(x):
         key = np.asarray(x, dtype=float).tobytes()
         if key not in cache:
             cache.clear()
-            value, gradient = p.objective_and_gradient(np.asarray(x, dtype=float), scale="parameter")
+            try:
+                value, gradient = p.objective_and_gradient(
+                    np.asarray(x, dtype=float), scale="parameter"
+                )
+            except SysidError:
+                value, gradient = np.inf, np.full(n, np.nan)
             cache[key] = (value, gradient)
         return cache[key]
+
+    def hess(x):
+        try:
+            return p.fisher(np.asarray(x, dtype=float), scale="parameter")
+        except SysidError:
+            return np.full((n, n), np.nan)
 
     return pypesto.Objective(
         fun=lambda x: at(x)[0],
         grad=lambda x: at(x)[1],
-        hess=lambda x: p.fisher(np.asarray(x, dtype=float), scale="parameter"),
+        hess=hess,
         x_names=list(p.parameter_names),
     )
 
