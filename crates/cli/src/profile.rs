@@ -24,8 +24,9 @@ pub struct ProfileArgs {
     /// Profile only these unknowns (comma-separated names; default: every unknown).
     #[arg(long, value_name = "A,B")]
     only: Option<String>,
-    /// Simultaneous 95 % intervals: the threshold χ²ₖ(0.95)/2 for the k free unknowns
-    /// instead of the pointwise χ²₁(0.95)/2 = 1.92.
+    /// Simultaneous 95 % intervals: the threshold χ²ₖ(0.95)/2 for the k unknowns (those held
+    /// on a bound at the optimum included; the noise scales set in closed form are not
+    /// counted) instead of the pointwise χ²₁(0.95)/2 = 1.92.
     #[arg(long)]
     simultaneous: bool,
     /// Most points per side of a profile (a side that runs out of them while still rising is

@@ -163,7 +163,15 @@ fn thresholds_are_half_the_chi_square_quantiles() {
     assert!((POINTWISE_95 - 1.959_963_984_540_054_f64.powi(2) / 2.0).abs() < 1e-14);
     assert_eq!(threshold_95(None).to_bits(), POINTWISE_95.to_bits());
     assert_eq!(threshold_95(Some(1)).to_bits(), POINTWISE_95.to_bits());
-    assert!((threshold_95(Some(3)) - 7.814_727_903_251_178 / 2.0).abs() < 1e-12);
+    assert!((threshold_95(Some(3)) - 7.814_727_903_251_178 / 2.0).abs() < 1e-14);
+    // χ²₂'s CDF is 1 − e^(−x/2): its quantile is −2 ln 0.05 in closed form (cdflib's own
+    // inverse was 2.1e-9 off, relative).
+    let two = -(0.05f64.ln());
+    assert!(
+        (threshold_95(Some(2)) - two).abs() <= 4.0 * f64::EPSILON * two,
+        "{}",
+        threshold_95(Some(2))
+    );
 }
 
 /// Goodman's method, except that the fits along `name`'s profile panic from the `after`-th
