@@ -276,7 +276,10 @@ fn a_file_that_cannot_be_read_says_why_once() {
     let model_path = elsewhere.model();
     for (args, named) in [
         (vec!["fit", "--model", &model_path], format!("that `[data] file` in {model_path} names")),
-        (vec!["fit", "--model", &model, "--data", &nowhere], "given by --data".to_string()),
+        (
+            vec!["fit", "--model", &model, "--data", &nowhere],
+            "given by --data (in Python, data=)".to_string(),
+        ),
     ] {
         let out = sysid(&args);
         let stderr = text(&out.stderr);

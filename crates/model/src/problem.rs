@@ -225,7 +225,7 @@ impl Model {
         let f = &self.file;
         let model = f.path.display();
         let named: Vec<String> = match data {
-            Some(_) => vec!["given by --data".into()],
+            Some(_) => vec!["given by --data (in Python, data=)".into()],
             None if f.experiments.is_empty() => {
                 vec![format!("that `[data] file` in {model} names")]
             }
@@ -255,7 +255,7 @@ impl Model {
         } else {
             if data.is_some() {
                 return Err(self.located(
-                    "--data replaces the [data] file, and this model has [[experiments]], each with its own file".into(),
+                    "--data (in Python, data=) replaces the [data] file, and this model has [[experiments]], each with its own file".into(),
                 ));
             }
             f.experiments
