@@ -276,7 +276,8 @@ fn drive_once<S: System>(
     // coarse tolerances, is recorded again); where it cannot be integrated
     // there (a blow-up near the end that the coarse integration did not see), the run
     // begins again from its start; `Some` failure where that fails too. (`final`: the run
-    // ends there, and only the point and the best are of use.)
+    // ends there, and only the point and the best are of use.) The stage is over where it
+    // succeeds.
     macro_rules! end_coarse {
         (final) => {{
             ev.refine(problem.with_scales(&ev.problem().scale_values()));
@@ -291,14 +292,16 @@ fn drive_once<S: System>(
                     current = profile.apply(&mut ev, again);
                     scales = ev.problem().scale_values();
                     best = None;
+                    coarse = false;
                     None
                 }
                 Err(failure) => Some(failure),
             }
         }};
         () => {{
-            coarse = false;
             history.pop();
+            // (Where it fails, `coarse` stays: the run ends, and its point is judged at the
+            // problem's tolerances below.)
             let failed = end_coarse!(final);
             window_from = history.len();
             settle_from = iteration + SETTLE_WINDOW;
