@@ -199,7 +199,9 @@ pub struct MethodArgs {
     #[arg(long = "fix", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
     pub fix: Vec<(String, f64)>,
     /// Start the fit from this value of an unknown instead of its guess (within its bounds;
-    /// with --starts, the first start). Repeatable.
+    /// with --starts, the first start, and the centre the others are drawn around for an
+    /// unknown without two bounds). Repeatable. Not on study, whose trials draw their starts
+    /// (refused there).
     #[arg(long = "start", value_name = "NAME=VALUE", value_parser = parse_fix, allow_hyphen_values = true)]
     pub start: Vec<(String, f64)>,
     /// When stderr is not a terminal (a batch job's log), print a plain progress line every

@@ -31,7 +31,8 @@ pub struct ReportArgs {
     /// Points per axis of the basin maps.
     #[arg(long, default_value_t = 25, value_name = "G", value_parser = crate::options::count, allow_hyphen_values = true)]
     grid: usize,
-    /// Spread of the basin maps: starts from truth·(1 − s) to truth·(1 + s).
+    /// Spread of the basin maps: starts from truth·(1 − s) to truth·(1 + s), and from
+    /// truth/(1 + s) to truth·(1 + s) for a log-scale unknown.
     #[arg(long, default_value_t = 0.9, value_name = "S", value_parser = crate::options::number, allow_hyphen_values = true)]
     basin_spread: f64,
     /// Starts of each method's multistart on the default data.
@@ -166,9 +167,27 @@ pub fn run(args: &ReportArgs) -> anyhow::Result<Outcome> {
         petab_budget: args.petab_budget,
         petab_start_seconds: args.petab_start_seconds,
         max_iterations: args.max_iterations,
+        command: command_line(),
     };
     write_report(&options, &Bars::default())?;
     Ok(Outcome::Success)
+}
+
+/// The command as it was run, `sysid report …`, each argument quoted for a shell where it
+/// needs to be, for the report's README to name.
+fn command_line() -> String {
+    let quoted = |a: String| {
+        let plain = !a.is_empty()
+            && a.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c));
+        match plain {
+            true => a,
+            false => format!("'{}'", a.replace('\'', r"'\''")),
+        }
+    };
+    std::iter::once("sysid".to_string())
+        .chain(std::env::args().skip(1).map(quoted))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// Progress bars on stderr for the report's studies and basin maps.

@@ -237,19 +237,43 @@ impl Summary {
         for m in &self.methods {
             let outcomes: Vec<String> =
                 m.outcomes.iter().map(|c| format!("{} {}", c.outcome, c.count)).collect();
+            // No trial judged: no rate (the JSON's 0 is a placeholder, json.md).
+            let (rate, interval) = match m.trials {
+                0 => ("—".to_string(), "—".to_string()),
+                _ => (
+                    format!("{:.1} %", 100.0 * m.success_rate),
+                    format!(
+                        "{:.1}–{:.1} %",
+                        100.0 * m.success_interval[0],
+                        100.0 * m.success_interval[1]
+                    ),
+                ),
+            };
             out += &format!(
-                "| {} | {}/{} ({:.1} %) | {:.1}–{:.1} % | {} | {} / {} | {} / {} |\n",
+                "| {} | {}/{} ({rate}) | {interval} | {} | {} / {} | {} / {} |\n",
                 m.method,
                 m.successes,
                 m.trials,
-                100.0 * m.success_rate,
-                100.0 * m.success_interval[0],
-                100.0 * m.success_interval[1],
                 outcomes.join(", "),
                 number(m.iterations.median, 1),
                 number(m.iterations.p90, 1),
                 number(m.time_ms.median, 3),
                 number(m.time_ms.p90, 3),
+            );
+        }
+        // A method is judged only on the trials whose reference fit converged.
+        let judged = self.methods.iter().find(|m| m.method == REFERENCE).map(|r| r.successes);
+        if let Some(judged) = judged.filter(|&j| j < self.trials) {
+            out += &format!(
+                "\nThe other methods are judged on the {judged} of {} trials whose reference fit \
+                 converged{}.\n",
+                self.trials,
+                match judged {
+                    0 =>
+                        ": none, so nothing is measured (a larger --max-iterations lets the \
+                          reference fit converge)",
+                    _ => "",
+                }
             );
         }
         for (i, name) in self.unknowns.iter().enumerate() {

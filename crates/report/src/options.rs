@@ -21,7 +21,8 @@ pub struct ReportOptions {
     pub perturb: f64,
     /// Points per axis of the basin maps.
     pub grid: usize,
-    /// Spread of the basin maps: starts from truth·(1 − s) to truth·(1 + s).
+    /// Spread of the basin maps: starts from truth·(1 − s) to truth·(1 + s), and from
+    /// truth/(1 + s) to truth·(1 + s) for a log-scale unknown.
     pub basin_spread: f64,
     /// Starts of each method's multistart on the default data.
     pub starts: usize,
@@ -45,6 +46,9 @@ pub struct ReportOptions {
     /// budget ([`sysid_core::MAX_ITERATIONS`]) and its multistarts a start's
     /// ([`sysid_core::START_MAX_ITERATIONS`]).
     pub max_iterations: usize,
+    /// The command that makes the report, as its README names it (`sysid report --out
+    /// reports` by default): every number in it comes from that one command.
+    pub command: String,
 }
 
 /// The catalogue sections' iteration budget, the one the report has always been drawn with
@@ -73,6 +77,7 @@ impl Default for ReportOptions {
             petab_budget: 120.0,
             petab_start_seconds: None,
             max_iterations: CATALOGUE_ITERATIONS,
+            command: "sysid report --out reports".into(),
         }
     }
 }
