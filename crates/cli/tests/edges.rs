@@ -1277,6 +1277,22 @@ fn the_reports_readme_says_how_it_was_made() {
     assert!((x[0] - 0.04 / 1.9).abs() < 1e-12 && (x[2] - 0.04 * 1.9).abs() < 1e-12, "{x:?}");
 }
 
+/// `simulate --times` before t0 is refused by name: the kinetics model was integrated
+/// backwards to B = −2.14 at t = −1 (a negative concentration), and Boehm's failed with a
+/// blow-up that did not say why.
+#[test]
+fn a_trajectory_runs_forward_from_t0() {
+    refused(
+        &["simulate", "--model", "examples/kinetics/model.toml", "--times", "-1:1:0.5"],
+        &["--times: -1 is before the model's t0 = 0"],
+    );
+    let boehm = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
+    refused(
+        &["simulate", "--petab", boehm, "--times", "-10:10:5"],
+        &["--times: -10 is before experiment `model1_data1`'s t0 = 0"],
+    );
+}
+
 /// A study whose reference fit converges on no trial measures nothing, and says so: its
 /// methods showed "0/0 (0.0 %)" with an interval of 0–100 %, as if judged and failed.
 #[test]

@@ -135,6 +135,21 @@ impl Model {
                     }
                 }
             }
+            // A trajectory runs forward from its t0 (data before it are refused as well):
+            // earlier times were integrated backwards, to negative concentrations, or failed
+            // with a blow-up that did not say the times began before t0.
+            if let Some(first) = times.iter().copied().find(|&t| t < t0) {
+                let whose = match several || name != sysid_core::plan::SINGLE_EXPERIMENT {
+                    true => format!("experiment `{name}`'s"),
+                    false => "the model's".into(),
+                };
+                return Err(ModelError::file(
+                    &path,
+                    format!(
+                        "--times: {first} is before {whose} t0 = {t0}: a trajectory runs forward from t0"
+                    ),
+                ));
+            }
             let sol = Ivp::new(&system, t0, &y0, &p)
                 .solve(&f.integrator, times)
                 .map_err(|e| ModelError::file(&path, format!("cannot be simulated: {e}")))?;
