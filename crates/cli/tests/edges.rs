@@ -1277,6 +1277,22 @@ fn the_reports_readme_says_how_it_was_made() {
     assert!((x[0] - 0.04 / 1.9).abs() < 1e-12 && (x[2] - 0.04 * 1.9).abs() < 1e-12, "{x:?}");
 }
 
+/// `compare --verbose` shows every estimate `fit` reports, the noise scales set in closed
+/// form included (two-doses' sigma_B was left out).
+#[test]
+fn compare_shows_the_noise_scales_it_estimates() {
+    let model = "examples/two-doses/model.toml";
+    let out = sysid(&["compare", "--model", model, "--verbose", "--methods", "nl2sol"]);
+    let table = text(&out.stdout);
+    let header = table.lines().find(|l| l.trim_start().starts_with("method")).unwrap();
+    assert!(header.trim_end().ends_with("sigma_B"), "{table}");
+    let row = table.lines().find(|l| l.trim_start().starts_with("nl2sol")).unwrap();
+    let shown: f64 = row.split_whitespace().last().unwrap().parse().unwrap();
+    let fit = json(&["fit", "--model", model, "--method", "nl2sol"]);
+    let sigma = fit["estimates"]["sigma_B"].as_f64().unwrap();
+    assert!((shown / sigma - 1.0).abs() < 1e-7, "{shown} against {sigma}");
+}
+
 /// `simulate --times` before t0 is refused by name: the kinetics model was integrated
 /// backwards to B = −2.14 at t = −1 (a negative concentration), and Boehm's failed with a
 /// blow-up that did not say why.

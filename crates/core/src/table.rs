@@ -287,14 +287,21 @@ pub fn comparison(
     let lead = |a: &str, b: &str, c: &str, d: &str, e: &str| {
         format!("  {a:<24} {b:>5} {c:>5} {d:>18} {e:>10}")
     };
+    // The noise scales set in closed form are estimated with the rest: columns after the
+    // unknowns (they were left out, though `fit` and the JSON list them).
+    let scales: Vec<&str> = rows
+        .iter()
+        .find_map(|r| r.fit.ok().filter(|e| !e.scales.is_empty()))
+        .map(|e| e.scales.iter().map(|s| s.name.as_str()).collect())
+        .unwrap_or_default();
     let mut out = lead("method", "conv", "iter", "cost ε", "time ms");
-    for name in unknowns {
+    for name in unknowns.iter().map(String::as_str).chain(scales.iter().copied()) {
         out += &format!(" {name:>16}");
     }
     out += "\n";
     if let Some(expected) = expected {
         out += &lead(expected.label, "", "", "", "");
-        for name in unknowns {
+        for name in unknowns.iter().map(String::as_str).chain(scales.iter().copied()) {
             let v = expected.value(name).map_or(String::new(), |v| significant(v, 8));
             out += &format!(" {v:>16}");
         }
@@ -313,6 +320,11 @@ pub fn comparison(
                 );
                 for v in &e.values {
                     out += &format!(" {:>16}", significant(*v, 8));
+                }
+                for name in &scales {
+                    let v = e.scales.iter().find(|s| s.name == *name);
+                    let v = v.map_or(String::new(), |s| significant(s.value, 8));
+                    out += &format!(" {v:>16}");
                 }
                 out += "\n";
                 if !e.converged() {
