@@ -68,21 +68,13 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
     // The results are out before the figure is drawn: a figure that cannot be written
     // loses nothing.
     if let (Some(stem), Some(s)) = (&args.waterfall, &starts) {
-        let figure = sysid_report::Waterfall {
-            title: format!(
-                "{}: {} starts of {}",
-                std::path::Path::new(&context.name)
-                    .file_name()
-                    .map_or(context.name.clone(), |n| n.to_string_lossy().into_owned()),
-                s.count,
-                estimate.method
-            ),
-            starts: s
-                .waterfall
-                .iter()
-                .filter_map(|o| o.objective.map(|v| (v, o.converged)))
-                .collect(),
-        };
+        let subject = std::path::Path::new(&context.name)
+            .file_name()
+            .map_or(context.name.clone(), |n| n.to_string_lossy().into_owned());
+        let objectives =
+            s.waterfall.iter().filter_map(|o| o.objective.map(|v| (v, o.converged))).collect();
+        let figure =
+            sysid_report::Waterfall::of_starts(&subject, s.count, &estimate.method, objectives);
         let [png, svg] = sysid_report::save(&figure, stem)?;
         eprintln!("wrote {} and {}", png.display(), svg.display());
     }

@@ -277,10 +277,7 @@ fn starts<S: sysid_ode::System + Sync>(
     let median_seconds = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
     std::fs::create_dir_all(out).map_err(|e| e.to_string())?;
     let problem_name = yaml.file_stem().map_or(String::new(), |s| s.to_string_lossy().to_string());
-    let figure = crate::Waterfall {
-        title: format!("{problem_name}: {} starts of {name}", s.count),
-        starts: objectives,
-    };
+    let figure = crate::Waterfall::of_starts(&problem_name, s.count, name, objectives);
     crate::save(&figure, &out.join("waterfall")).map_err(|e| format!("waterfall: {e}"))?;
     observer.note(&format!(
         "{}: {} starts ({} left out by the time budget) in {:.1} s, {} converged, {reached} reached the best",

@@ -20,6 +20,19 @@ pub struct Waterfall {
 }
 
 impl Waterfall {
+    /// The waterfall of `count` starts of `method` on `subject`, from the (objective,
+    /// converged) of those that have one: the title says how many are not drawn (a start that
+    /// could not begin, or whose objective is not finite), where the count alone said "3
+    /// starts" over one point.
+    pub fn of_starts(subject: &str, count: usize, method: &str, starts: Vec<(f64, bool)>) -> Self {
+        let drawn = starts.iter().filter(|s| s.0.is_finite()).count();
+        let missing = match count.saturating_sub(drawn) {
+            0 => String::new(),
+            n => format!(" ({n} without a finite objective, not drawn)"),
+        };
+        Self { title: format!("{subject}: {count} starts of {method}{missing}"), starts }
+    }
+
     /// The points: (rank from 1, objective − best + 1, converged), least objective first.
     fn points(&self) -> Vec<(f64, f64, bool)> {
         let mut finite: Vec<(f64, bool)> =
@@ -111,5 +124,16 @@ mod tests {
         assert_eq!(p[0], (1.0, 1.0, true));
         assert!((p[1].1 - 1.05).abs() < 1e-12 && p[1].2);
         assert_eq!(p[2], (3.0, 4.0, false));
+    }
+
+    #[test]
+    fn the_title_says_how_many_starts_are_not_drawn() {
+        let all = Waterfall::of_starts("m", 2, "nl2sol", vec![(1.0, true), (2.0, false)]);
+        assert_eq!(all.title, "m: 2 starts of nl2sol");
+        // Three starts, one with an objective that is not finite and one without any.
+        let some =
+            Waterfall::of_starts("m", 3, "nl2sol", vec![(1.0, true), (f64::INFINITY, false)]);
+        assert_eq!(some.title, "m: 3 starts of nl2sol (2 without a finite objective, not drawn)");
+        assert_eq!(some.points().len(), 1);
     }
 }
