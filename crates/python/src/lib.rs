@@ -801,9 +801,9 @@ impl PyProblem {
     /// profile is fitted (`unknown`, `value`, `objective` and `rise`, ΔNLL from the
     /// optimum), `stage` "traced" as each profile is traced (`unknown`, `done`, `total`),
     /// and `stage` "better" where a profile found a lower point (`objective`, the NLL
-    /// there, and `was`). Traced profiles are told from
-    /// the threads that traced them. An exception it raises, or Ctrl-C, stops the run and is
-    /// raised with what it had as its `result` (profiles not done labelled `stopped`).
+    /// there, and `was`). Points and profiles are told from the threads that fit them. An
+    /// exception it raises, or Ctrl-C, stops the run and is raised with what it had as its
+    /// `result` (profiles not done labelled `stopped`).
     #[pyo3(signature = (method=None, only=None, simultaneous=false, max_points=60, max_iterations=None, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn profile<'py>(
@@ -994,7 +994,8 @@ impl Raised {
 /// `progress` callback raised), with what the run had when it stopped as its `result`
 /// attribute: a fit's best point (termination `interrupted`), a multistart's starts, the
 /// profiles with the points traced before the stop. Where the run returned nothing usable
-/// (`result` None, or an error building it) `error` is raised as it was. A note added to the
+/// (`result` None, or an error building it), or where the exception has a `result` of its
+/// own (a user's exception class), `error` is raised as it was. A note added to the
 /// exception says where the result is, so a traceback tells the user.
 fn with_result<'py>(
     py: Python<'py>,
@@ -1004,7 +1005,7 @@ fn with_result<'py>(
     let Some(Ok(result)) = result else { return error };
     let value = error.value(py);
     // An exception whose class refuses attributes (__slots__) is raised without it.
-    if value.setattr("result", &result).is_ok() {
+    if !value.hasattr("result").unwrap_or(true) && value.setattr("result", &result).is_ok() {
         let kind = result.get_type().name().map(|n| n.to_string()).unwrap_or_default();
         let _ = value.call_method1(
             "add_note",
