@@ -259,7 +259,7 @@ fn every_method_fits_with_weights_far_from_one() {
 /// integrations), where a fourth was made (8).
 #[test]
 fn a_fit_stopped_by_its_budget_reports_at_the_problems_tolerances() {
-    let boehm = root().join("tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml");
+    let boehm = root().join(BOEHM);
     let boehm = boehm.to_str().unwrap();
     let at_start = json(&["fit", "--petab", boehm, "--max-iterations", "0"]);
     let budget = json(&["fit", "--petab", boehm, "--max-integrations", "1"]);
@@ -497,6 +497,8 @@ fn boehm_with(s: &Scratch, file: &str, edit: impl Fn(&str) -> Vec<u8>) -> String
 /// A change to a file's text, giving its new bytes.
 type Edit = Box<dyn Fn(&str) -> Vec<u8>>;
 
+/// Boehm's PEtab problem, from the repository's root (where the commands run).
+const BOEHM: &str = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
 const OBSERVABLES: &str = "observables_Boehm_JProteomeRes2014.tsv";
 const PARAMETERS: &str = "parameters_Boehm_JProteomeRes2014.tsv";
 const MEASUREMENTS: &str = "measurementData_Boehm_JProteomeRes2014.tsv";
@@ -1186,7 +1188,7 @@ fn a_profile_cut_short_by_its_point_budget_is_undecided() {
 /// digits (`--start k_phos=1e300` printed 1 and 300 zeros).
 #[test]
 fn a_start_off_its_bounds_is_refused_in_few_digits() {
-    let yaml = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
+    let yaml = BOEHM;
     refused(
         &["fit", "--petab", yaml, "--start", "k_phos=1e300"],
         &["unknown `k_phos`: start 1e300: above its max 100000"],
@@ -1302,7 +1304,7 @@ fn a_trajectory_runs_forward_from_t0() {
         &["simulate", "--model", "examples/kinetics/model.toml", "--times", "-1:1:0.5"],
         &["--times: -1 is before the model's t0 = 0"],
     );
-    let boehm = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
+    let boehm = BOEHM;
     refused(
         &["simulate", "--petab", boehm, "--times", "-10:10:5"],
         &["--times: -10 is before experiment `model1_data1`'s t0 = 0"],
@@ -1385,7 +1387,7 @@ fn the_gauss_newton_line_searches_never_raise_the_cost() {
 /// number, in exponent form (it was 303 digits).
 #[test]
 fn an_nll_that_overflows_is_refused_with_its_reason() {
-    let yaml = "tests/data/petab/Boehm_JProteomeRes2014/Boehm_JProteomeRes2014.yaml";
+    let yaml = BOEHM;
     let square = "the NLL cannot be evaluated at this point: the square of the residual of the observable `pSTAT5A_rel` of experiment `model1_data1` (-7.90107299873911e300: the square root of its weight";
     for gradient in [&[][..], &["--gradient"], &["--format", "json"]] {
         let set = ["evaluate", "--petab", yaml, "--set", "sd_pSTAT5A_rel=1e-300"];

@@ -775,15 +775,7 @@ impl PyProblem {
                     .map(|run| (run.best, Some(run.starts)))
             }
         });
-        let result = |(estimate, starts): (sysid_core::Estimate, Option<_>)| {
-            unusable_start(&problem, &estimate)?;
-            let mut value =
-                serde_json::to_value(estimate.record(&self.name)).expect("a fit record serialises");
-            if let (Some(s), Some(map)) = (starts, value.as_object_mut()) {
-                map.insert("starts".into(), serde_json::to_value(s).expect("starts serialise"));
-            }
-            py.import("sysid._result")?.getattr("FitResult")?.call1((value.to_string(),))
-        };
+        let result = |(estimate, starts)| fit_result(py, &problem, &self.name, estimate, starts);
         if let Some(error) = raised.take() {
             return Err(with_result(py, error, outcome.ok().map(result)));
         }
@@ -871,12 +863,7 @@ impl PyProblem {
         });
         if let Some(error) = raised.take() {
             // Stopped while the optimum was fitted: no profile yet, but the fit so far.
-            let fit = |optimum: sysid_core::Estimate| {
-                unusable_start(problem, &optimum)?;
-                let json = serde_json::to_string(&optimum.record(&self.name))
-                    .expect("a fit record serialises");
-                py.import("sysid._result")?.getattr("FitResult")?.call1((json,))
-            };
+            let fit = |optimum| fit_result(py, problem, &self.name, optimum, None);
             return Err(with_result(py, error, optimum.ok().map(fit)));
         }
         let optimum = optimum.map_err(sysid_error)?;
@@ -988,6 +975,23 @@ impl Raised {
     fn lock(&self) -> std::sync::MutexGuard<'_, Option<PyErr>> {
         self.error.lock().unwrap_or_else(|e| e.into_inner())
     }
+}
+
+/// The `sysid.FitResult` of `estimate`, a fit of `problem` called `name`, with a
+/// multistart's `starts` where there are some; an error where the start was unusable.
+fn fit_result<'py>(
+    py: Python<'py>,
+    problem: &Problem<AnySystem>,
+    name: &str,
+    estimate: sysid_core::Estimate,
+    starts: Option<sysid_montecarlo::multistart::Starts>,
+) -> PyResult<Bound<'py, PyAny>> {
+    unusable_start(problem, &estimate)?;
+    let mut value = serde_json::to_value(estimate.record(name)).expect("a fit record serialises");
+    if let (Some(s), Some(map)) = (starts, value.as_object_mut()) {
+        map.insert("starts".into(), serde_json::to_value(s).expect("starts serialise"));
+    }
+    py.import("sysid._result")?.getattr("FitResult")?.call1((value.to_string(),))
 }
 
 /// `error`, the exception that stopped a run (Ctrl-C's KeyboardInterrupt, or one its
