@@ -74,8 +74,24 @@ impl<'py> FromPyObject<'py> for Vector {
             return Err(refuse("None".into()));
         }
         let numpy = ob.py().import("numpy")?;
+        // First as it comes, so that what numpy would convert quietly is named: None (NaN
+        // as a float) and complex numbers (their imaginary part dropped, with a warning).
+        let raw = numpy
+            .call_method1("asarray", (ob,))
+            .map_err(|_| refuse(format!("a {} that numpy makes no array of", kind())))?;
+        match raw.getattr("dtype")?.getattr("kind")?.extract::<String>()?.as_str() {
+            "c" => return Err(refuse(format!("a {} of complex numbers", kind()))),
+            "O" if raw.getattr("ndim")?.extract::<usize>()? == 1 => {
+                for (i, entry) in raw.try_iter()?.enumerate() {
+                    if entry?.is_none() {
+                        return Err(refuse(format!("a {} whose entry {i} is None", kind())));
+                    }
+                }
+            }
+            _ => {}
+        }
         let array = numpy
-            .call_method1("asarray", (ob, numpy.getattr("float64")?))
+            .call_method1("asarray", (&raw, numpy.getattr("float64")?))
             .map_err(|_| refuse(format!("a {} that is not numbers", kind())))?;
         let ndim: usize = array.getattr("ndim")?.extract()?;
         if ndim != 1 {
@@ -692,7 +708,7 @@ impl PyProblem {
         if let Some(p) = &progress
             && !p.bind(py).is_callable()
         {
-            return Err(PyValueError::new_err("progress must be a callable (or None)"));
+            return Err(PyTypeError::new_err("progress must be a callable (or None)"));
         }
         let starts = starts.map(|n| whole("starts", n, 1)).transpose()?.map(|n| n as usize);
         let seed = self::seed(seed)?;
@@ -811,7 +827,7 @@ impl PyProblem {
         if let Some(p) = &progress
             && !p.bind(py).is_callable()
         {
-            return Err(PyValueError::new_err("progress must be a callable (or None)"));
+            return Err(PyTypeError::new_err("progress must be a callable (or None)"));
         }
         // A profile re-optimises the others at every point: at least one of each.
         let max_points = whole("max_points", max_points, 1)? as usize;
