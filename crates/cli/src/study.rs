@@ -233,9 +233,21 @@ fn method_settings(args: &StudyArgs) -> BTreeMap<String, String> {
     let ql_start = format!("{:?}", args.options.ql_start).to_lowercase();
     let intervals = args.options.shooting_intervals.map_or("data".to_string(), |m| m.to_string());
     BTreeMap::from([
+        ("build".to_string(), this_build()),
         ("ql_start".to_string(), ql_start),
         ("shooting_intervals".to_string(), intervals),
     ])
+}
+
+/// The build running the study: its version and the SHA-256 of its executable, so that
+/// `--resume` and `merge` refuse to mix two builds' trials (another build may integrate with
+/// other steps, and its counts and last digits differ). Read once per study.
+fn this_build() -> String {
+    let version = env!("CARGO_PKG_VERSION");
+    match std::env::current_exe().and_then(std::fs::read) {
+        Ok(bytes) => format!("sysid {version}, executable {}", sha256_of(&bytes)),
+        Err(e) => format!("sysid {version}, executable not read ({e})"),
+    }
 }
 
 /// "sha256:…" of a file's contents.

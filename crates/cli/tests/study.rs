@@ -207,6 +207,27 @@ fn settings_that_change_results_travel_with_the_study() {
         );
     }
 
+    // Another build's trials are not mixed in: the study records the executable's SHA-256.
+    let header_path = Path::new(&out).join("study.json");
+    let header = std::fs::read_to_string(&header_path).unwrap();
+    let recorded = "\"build\": \"sysid ";
+    let at = header.find(recorded).expect("study.json records the build") + recorded.len();
+    let (version, rest) = header[at..].split_once(", executable sha256:").unwrap();
+    assert_eq!(version, env!("CARGO_PKG_VERSION"));
+    let digest = &rest[..64];
+    assert!(digest.bytes().all(|b| b.is_ascii_hexdigit()), "{header}");
+    std::fs::write(&header_path, header.replace(digest, &"0".repeat(64))).unwrap();
+    let mut args = short.to_vec();
+    args.push("--resume");
+    let other = sysid(&args);
+    assert_eq!(other.status.code(), Some(2));
+    assert!(
+        text(&other.stderr)
+            .contains(&format!("settings.build sysid {version}, executable sha256:000")),
+        "{}",
+        text(&other.stderr)
+    );
+
     // A model file's study records the model's and the data's SHA-256.
     let dir = Path::new(&scratch.0).join("model");
     std::fs::create_dir_all(&dir).unwrap();
