@@ -323,7 +323,7 @@ impl<'a> Builder<'a> {
     fn build(self) -> Result<Imported, ModelError> {
         let dynamics = self.dynamics()?;
         let measured = self.measured(&dynamics.states)?;
-        let (parameters, extras) = self.split_parameters(&dynamics, &measured);
+        let (parameters, extras) = self.split_parameters(&dynamics, &measured)?;
         let outputs = self.output_names(&measured.outputs, &dynamics.states, &parameters);
         let (measured, experiments) =
             self.merge_same_simulations(measured, &parameters, &dynamics.states)?;

@@ -158,14 +158,21 @@ impl Builder<'_> {
     }
 
     /// The model's parameters (the SBML's parameters and compartments that are no rule or
-    /// state, and the estimated PEtab parameters an output uses or nothing uses) and the
-    /// unknowns of their own (estimated PEtab parameters only σ and settings use). A PEtab
-    /// parameter that is not estimated is its nominal value wherever it appears.
+    /// state, and the estimated PEtab parameters an output uses) and the unknowns of their
+    /// own (estimated PEtab parameters only σ and settings use). A PEtab parameter that is
+    /// not estimated is its nominal value wherever it appears.
+    ///
+    /// A row of the parameter table that names no parameter is refused at its line, as
+    /// PEtab's linter refuses it: a state of the model (a species, or a rate rule's
+    /// variable), whose row gave the outputs a constant where the equations kept the state;
+    /// the variable of an assignment rule, which the rule gives; and an estimated id that
+    /// nothing uses (the model, a formula, a measurement's parameters, a condition), which
+    /// the data cannot determine.
     pub(crate) fn split_parameters(
         &self,
         d: &Dynamics,
         m: &Measured,
-    ) -> (Vec<String>, Vec<String>) {
+    ) -> Result<(Vec<String>, Vec<String>), ModelError> {
         let s = self.sbml;
         let mut parameters: Vec<String> = s
             .parameters
@@ -196,17 +203,36 @@ impl Builder<'_> {
             .collect();
         let mut extras = Vec::new();
         for (id, (p, _)) in &self.parameters {
+            let refuse = |message: String| {
+                let mut e = self.parameter_origin(id).expect("a row of the parameter table");
+                e.message = message;
+                e
+            };
+            if d.states.contains(&self.name(id)) {
+                return Err(refuse(format!(
+                    "`{id}` is a state of the model (a species, or a rate rule's variable), not a parameter: the parameter table lists parameters, and a condition table's column of `{id}` sets its initial value"
+                )));
+            }
+            if s.assignment_rules.iter().any(|(variable, _)| variable == id) {
+                return Err(refuse(format!(
+                    "`{id}` is the variable of an assignment rule of the model, which gives its value: it is not a parameter the table can set"
+                )));
+            }
             if sbml_id(id) || !p.estimate {
                 continue;
             }
             let n = self.name(id);
-            if in_outputs.contains(&n) || !elsewhere.contains(&n) {
+            if in_outputs.contains(&n) {
                 parameters.push(id.clone());
-            } else {
+            } else if elsewhere.contains(&n) {
                 extras.push(id.clone());
+            } else {
+                return Err(refuse(format!(
+                    "`{id}` is estimated but used nowhere (not in the model, an observable's or noise formula, a measurement's parameters or a condition): the data cannot determine it"
+                )));
             }
         }
-        (parameters, extras)
+        Ok((parameters, extras))
     }
 
     /// The known value of a model parameter that the parameter table does not estimate:

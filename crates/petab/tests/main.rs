@@ -282,6 +282,32 @@ fn bad_input_is_located() {
     );
     import(&path).expect("an unused observable's placeholders are left to the rows");
 
+    // Rows of the parameter table that name no parameter (line 13, after the 11 of the
+    // table): a species, an assignment rule's variable, an estimated id nothing uses. Read as
+    // a parameter, the species' row had given the outputs the constant 10 where the equations
+    // kept the state (NLL 420.9 instead of 138.2).
+    for (test, row, message) in [
+        ("species", "STAT5A\tSTAT5A\tlin\t0\t1000\t10\t0", "`STAT5A` is a state of the model"),
+        (
+            "rule",
+            "BaF3_Epo\tBaF3_Epo\tlin\t0\t1000\t1\t1",
+            "`BaF3_Epo` is the variable of an assignment rule",
+        ),
+        ("nowhere", "bogus\tbogus\tlin\t0\t1\t0.5\t1", "`bogus` is estimated but used nowhere"),
+    ] {
+        let path = edited(test, "parameters", |t| format!("{}\n{row}\n", t.trim_end()));
+        let e = error_of(&path);
+        assert!(
+            e.contains("parameters_Boehm_JProteomeRes2014.tsv:13:1:") && e.contains(message),
+            "{e}"
+        );
+    }
+    // One that nothing uses and nothing estimates is its nominal value nowhere: harmless.
+    let path = edited("unused-known", "parameters", |t| {
+        format!("{}\nbogus\tbogus\tlin\t0\t1\t0.5\t0\n", t.trim_end())
+    });
+    import(&path).expect("a known parameter nothing uses is left alone");
+
     let path = edited("sbml", "model_", |t| t.replacen("<listOfReactions>", "<listOfReactions", 1));
     let e = error_of(&path);
     assert!(e.contains("model_Boehm_JProteomeRes2014.xml:") && e.contains("not valid XML"), "{e}");
