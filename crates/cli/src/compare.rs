@@ -145,7 +145,7 @@ const SAME_MINIMUM: f64 = 1e-6;
 /// method that refused the problem or was not begun (Ctrl-C); then every fit that did not
 /// converge, with why.
 fn matrix(methods: &[String], systems: &[Summary]) -> String {
-    let width = methods.iter().map(String::len).max().unwrap_or(6).max(6);
+    let width = sysid_core::format::column_width(methods.iter().map(String::as_str), 6);
     let mut out = format!(
         "{} methods on {} systems, each from the system's default start.\n✓ n: converged (the \
          certificate holds) after n iterations; ✗ n: did not; !: refused the problem (or not \
@@ -173,7 +173,7 @@ fn matrix(methods: &[String], systems: &[Summary]) -> String {
         out.push('\n');
     }
     out.push('\n');
-    let name_width = systems.iter().map(|s| s.system.len()).max().unwrap_or(6);
+    let name_width = sysid_core::format::column_width(systems.iter().map(|s| s.system.as_str()), 0);
     let mut failures = Vec::new();
     for (j, s) in systems.iter().enumerate() {
         let fits: Vec<&Estimate> =

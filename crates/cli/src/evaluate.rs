@@ -390,7 +390,7 @@ fn table(
             list(names)
         );
     }
-    let width = names.iter().map(|n| n.chars().count()).max().unwrap_or(0).max(9);
+    let width = sysid_core::format::column_width(names.iter().map(String::as_str), 9);
     out += &format!("\n  {:<width$}  {:>16}", "parameter", "value");
     let gradient_error = error.and_then(|x| x.gradient.as_ref());
     if e.gradient.is_some() {

@@ -4,6 +4,14 @@
 
 pub use crate::table::{Compared, Expected, compact, compact_header, comparison};
 
+/// The width of a column that holds `names`: the longest's characters, at least `least`, at
+/// most what Rust's formatting takes as a width (65 535; a longer name is printed whole, out of
+/// line, where a wider width panicked).
+pub fn column_width<'a>(names: impl IntoIterator<Item = &'a str>, least: usize) -> usize {
+    let longest = names.into_iter().map(|n| n.chars().count()).max().unwrap_or(0);
+    longest.max(least).min(u16::MAX as usize)
+}
+
 /// `v` in `digits` significant digits: fixed-point in [1e-3, 1e5), exponent form outside
 /// (3.000e7 rather than 30000000), "—" for NaN. Tables print ten digits where estimates are
 /// compared with published values and four where numbers are only read; JSON output keeps

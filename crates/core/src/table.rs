@@ -36,14 +36,8 @@ impl Estimate {
         // A column of expected values only where there are some.
         let column = |v: &str| expected.map_or(String::new(), |_| format!(" {v:>24}"));
         // The names' column as wide as the longest name (PEtab's run to 30 characters).
-        let w = self
-            .names
-            .iter()
-            .chain(self.scales.iter().map(|s| &s.name))
-            .map(|n| n.chars().count())
-            .max()
-            .unwrap_or(0)
-            .max(10);
+        let names = self.names.iter().chain(self.scales.iter().map(|s| &s.name));
+        let w = crate::format::column_width(names.map(String::as_str), 10);
         out += &format!(
             "  {:<w$} {:>24} {:>14} {:>34}{}\n",
             "unknown",
@@ -247,7 +241,7 @@ pub fn compact_header(system: &str) -> String {
 /// The width of [`compact`]'s first column: the problem's name (a PEtab problem's is its YAML
 /// file's path), at least 24.
 fn system_width(system: &str) -> usize {
-    system.chars().count().max(24)
+    crate::format::column_width([system], 24)
 }
 
 /// A comparison in one line per method: system, method, converged, iterations, cost, time,
