@@ -64,8 +64,17 @@ fn same_file(a: &Path, b: &Path) -> bool {
 
 /// Checks that a file can be written at `path` before the work that produces it: its folder
 /// exists, is a folder and takes a new file (one is made and removed), and `path` is not a
-/// folder. `option` names the option that gave it.
+/// folder. `option` names the option that gave it. Errors name the path as given, or the
+/// link's target where `path` is a link.
 pub fn writable(path: &Path, option: &str) -> anyhow::Result<()> {
+    // A device, a FIFO or a terminal is written into, not replaced: its folder need not take
+    // a file (`/dev/stdout`'s is /proc/self/fd).
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        return Ok(());
+    }
+    // Through a link, the folder its target is made in.
+    let target = sysid_montecarlo::files::link_target(path);
+    let path = target.as_path();
     let folder = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -191,7 +200,10 @@ pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
 /// a user would write where that moves it by at most a millionth of h ([`decimal_within`]):
 /// 0 + 3·0.1 is 0.3, and 1.7e9 + 1e-6 is not 1.7e9.
 pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
-    let n = intervals((b - a) / h + 1e-9, what)?;
+    // "Within rounding" is the division's: a few units in the last place of the count. (A
+    // slack of 1e-9 intervals had put a time 1e-10 past b = 0.9999999999 at h = 0.1.)
+    let count = (b - a) / h;
+    let n = intervals(count + 8.0 * f64::EPSILON * count.max(1.0), what)?;
     // Within a few units in the last place the times would repeat or be spaced unevenly.
     let largest = a.abs().max((a + h * n as f64).abs());
     if n > 0 && h <= largest * f64::EPSILON {
@@ -200,7 +212,8 @@ pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
             shortest(largest)
         );
     }
-    Ok((0..=n).map(|i| decimal_within(a + h * i as f64, h)).collect())
+    // No time past b: a + n·h may round above it (0 + 3·0.1).
+    Ok((0..=n).map(|i| decimal_within(a + h * i as f64, h).min(b)).collect())
 }
 
 /// The number of intervals `count` (rounded down), refused when the times would be more

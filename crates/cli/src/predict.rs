@@ -30,7 +30,8 @@ pub struct PredictArgs {
     /// experiment).
     #[arg(long, value_name = "NAME")]
     experiment: Option<String>,
-    /// Write to this file instead of standard output.
+    /// Write to this file instead of standard output: whole, through a temporary file beside
+    /// it and a rename; through a symbolic link to its target; into a device or a FIFO.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
     #[command(flatten)]
@@ -72,9 +73,25 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
         }
         let step = args.step.unwrap_or((args.until - t0) / 200.0);
         if !(step > 0.0 && step.is_finite()) {
-            bail!("--step must be positive, got {step}");
+            match args.step {
+                Some(_) => bail!("--step must be positive, got {step}"),
+                // The default step, a 200th of the span, is no number (the span overflows)
+                // or no step (it underflows): the span is what to change.
+                None => bail!(
+                    "--until {} and t0 = {} (experiment `{name}`) are too {} for 200 steps between them: give --step, or another --until",
+                    shortest(args.until),
+                    shortest(t0),
+                    if step > 0.0 { "far apart" } else { "close together" }
+                ),
+            }
         }
-        let what = format!("--step {step:e} from t0 = {t0} to --until {}", args.until);
+        let what = match args.step {
+            Some(_) => format!("--step {step:e} from t0 = {t0} to --until {}", args.until),
+            None => format!(
+                "the default step {step:e} (a 200th of t0 = {t0} to --until {})",
+                args.until
+            ),
+        };
         let mut times = spaced(t0, args.until, step, &what)?;
         if times.last().is_some_and(|&t| t < args.until) {
             times.push(args.until);

@@ -32,7 +32,8 @@ pub struct SimulateArgs {
     /// Sample spacing for a catalogue record given as a function (continuous systems).
     #[arg(long, default_value_t = 0.001, value_name = "DT", value_parser = crate::options::number, allow_hyphen_values = true)]
     step: f64,
-    /// Write to this file instead of standard output.
+    /// Write to this file instead of standard output: whole, through a temporary file beside
+    /// it and a rename; through a symbolic link to its target; into a device or a FIFO.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
     #[command(flatten)]

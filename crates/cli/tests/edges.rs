@@ -314,6 +314,65 @@ fn no_command_writes_over_its_inputs() {
     );
 }
 
+/// `--out` through a symbolic link writes the link's target and keeps the link; into a FIFO
+/// (as into a device such as /dev/null, or /dev/stdout) it writes, where the rename of a
+/// temporary file had put a regular file in its place.
+#[test]
+fn out_writes_through_links_and_into_fifos() {
+    let s = Scratch::new("out-special");
+    let model = s.kinetics(|d| d);
+    let simulate = |out: &str| {
+        let run = sysid(&["simulate", "--model", &model, "--times", "0:1:0.5", "--out", out]);
+        assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    };
+    // A link to an existing file, and a dangling one (its target is made), relative.
+    std::fs::write(s.0.join("target.csv"), "old\n").unwrap();
+    std::os::unix::fs::symlink("target.csv", s.0.join("link.csv")).unwrap();
+    std::os::unix::fs::symlink("made.csv", s.0.join("dangling.csv")).unwrap();
+    simulate(&s.path("link.csv"));
+    simulate(&s.path("dangling.csv"));
+    for (link, target) in [("link.csv", "target.csv"), ("dangling.csv", "made.csv")] {
+        assert!(s.0.join(link).is_symlink(), "{link} was replaced");
+        let written = std::fs::read_to_string(s.0.join(target)).unwrap();
+        assert!(written.starts_with("t,A,B,C"), "{target}: {written}");
+    }
+    // A FIFO, read while it is written.
+    let fifo = s.path("fifo");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
+    assert!(made.success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    simulate(&fifo);
+    // Before the reader is joined: a FIFO replaced by a file leaves it waiting for a writer.
+    use std::os::unix::fs::FileTypeExt;
+    let kind = std::fs::symlink_metadata(&fifo).unwrap().file_type();
+    assert!(kind.is_fifo(), "the FIFO was replaced");
+    let read = reader.join().unwrap();
+    assert!(read.starts_with("t,A,B,C") && read.lines().count() == 4, "{read}");
+}
+
+/// A name longer than a formatting width may be (65 535 characters) is printed whole: the
+/// tables' columns sized to it panicked ("Formatting argument out of range").
+#[test]
+fn a_name_of_any_length_is_printed() {
+    let s = Scratch::new("long-name");
+    let model = s.kinetics(|d| d);
+    let long = "k".repeat(70_000);
+    let text_model = std::fs::read_to_string(&model).unwrap();
+    s.write("model.toml", &text_model.replace("k1", &long));
+    for args in [
+        vec!["fit", "--model", &model],
+        vec!["evaluate", "--model", &model, "--gradient"],
+        vec!["compare", "--model", &model, "--methods", "nl2sol", "--verbose"],
+    ] {
+        let run = sysid(&args);
+        assert_eq!(run.status.code(), Some(0), "{}: {}", args[0], text(&run.stderr));
+        assert!(text(&run.stdout).contains(&long), "{}", args[0]);
+    }
+}
+
 /// Merging shards into one of them is refused, not blamed on "another sysid".
 #[test]
 fn merging_into_a_shard_is_refused() {
@@ -1209,6 +1268,13 @@ fn predict_refuses_its_times_before_it_fits() {
         &["predict", "--petab", yaml, "--until", "1e9", "--step", "1e-3"],
         &["more than the 10000000"],
     );
+    // Without --step the default, a 200th of the span, is named, not an absent --step.
+    let kinetics = "examples/kinetics/model.toml";
+    let message = refused(
+        &["predict", "--model", kinetics, "--until", "5e-324"],
+        &["--until 5e-324 and t0 = 0", "too close together for 200 steps", "give --step"],
+    );
+    assert!(!message.contains("--step must be positive"), "{message}");
 }
 
 /// A study's numbers are checked before its reference fit, which on a PEtab problem comes
@@ -1433,6 +1499,28 @@ fn the_csvs_times_are_in_exponent_form_where_their_values_are() {
             assert!(t.contains('e') && t.len() <= 24, "{args:?}: the time `{t}` ({value})");
         }
     }
+}
+
+/// No time is written past the end asked for: `--times 0:0.9999999999:0.1` and `predict
+/// --until 0.9999999999 --step 0.1` wrote t = 1 (a slack of 1e-9 intervals, 1e-10 here, taken
+/// for rounding); a b that the steps reach within rounding is still written, as b.
+#[test]
+fn no_time_is_written_past_the_end() {
+    let model = "examples/kinetics/model.toml";
+    let times = |args: &[&str]| -> Vec<String> {
+        let out = sysid(args);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {}", text(&out.stderr));
+        let csv = text(&out.stdout);
+        csv.lines().skip(1).map(|l| l.split(',').next().unwrap().to_string()).collect()
+    };
+    let cut = times(&["simulate", "--model", model, "--times", "0:0.9999999999:0.1"]);
+    assert_eq!(cut.len(), 10, "{cut:?}");
+    assert_eq!(cut.last().unwrap(), "0.9");
+    let reached = times(&["simulate", "--model", model, "--times", "0:0.3:0.1"]);
+    assert_eq!(reached, ["0", "0.1", "0.2", "0.3"]);
+    let until = ["predict", "--model", model, "--until", "0.9999999999", "--step", "0.1"];
+    let predicted = times(&until);
+    assert_eq!(predicted[predicted.len() - 2..], ["0.9", "0.9999999999"], "{predicted:?}");
 }
 
 /// A figure into a folder that exists but cannot be written is refused before the work (the

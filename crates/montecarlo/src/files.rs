@@ -693,7 +693,21 @@ fn write_lines(path: &Path, records: &[TrialRecord]) -> Result<(), StudyError> {
 
 /// Writes through a temporary file and a rename: the file is either old or new, never half.
 /// The temporary file's name carries the process id, and errors name `path`.
+///
+/// A symbolic link is written through, as the shell's `>` writes: its target takes the text
+/// (made where the link points, if it does not exist yet) and the link stays. A path that is
+/// not a regular file (a device such as `/dev/null` or a terminal, a FIFO, `/dev/stdout`) is
+/// written into directly: a rename would put a file in its place.
 pub fn write_atomically(path: &Path, text: &str) -> Result<(), StudyError> {
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        return std::fs::OpenOptions::new()
+            .write(true)
+            .open(path)
+            .and_then(|mut file| file.write_all(text.as_bytes()))
+            .map_err(StudyError::io(path));
+    }
+    let target = link_target(path);
+    let path = target.as_path();
     let name = path.file_name().map_or_else(Default::default, |n| n.to_string_lossy());
     let tmp = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
     let written = File::create(&tmp).and_then(|mut file| {
@@ -705,6 +719,21 @@ pub fn write_atomically(path: &Path, text: &str) -> Result<(), StudyError> {
         let _ = std::fs::remove_file(&tmp);
     }
     renamed.map_err(StudyError::io(path))
+}
+
+/// Where a path's symbolic links lead (the path itself where it is none): the file a write
+/// through it reaches, existing or not. At most 40 links are followed, as the kernel does.
+pub fn link_target(path: &Path) -> PathBuf {
+    let mut at = path.to_path_buf();
+    for _ in 0..40 {
+        let Ok(link) = std::fs::read_link(&at) else { break };
+        // A relative link is read from the folder holding it; an absolute one replaces it.
+        at = match at.parent() {
+            Some(folder) => folder.join(link),
+            None => link,
+        };
+    }
+    at
 }
 
 /// Which settings differ between two headers, for messages: "perturb 0.3 vs 0.5,
