@@ -492,7 +492,7 @@ fn absurd_options_are_refused_by_name() {
         &["simulate", "--model", &model, "--times", "0:1:1", "--set", "k1=1", "--set", "k1=2"],
         &["--set k1: given twice"],
     );
-    refused(&["profile", "--petab", &model], &["not a PEtab problem file: line"]);
+    refused(&["profile", "--petab", &model], &["not a PEtab problem file: "]);
     // The last of two was kept.
     refused(
         &["evaluate", "--model", &model, "--set", "k1=1", "--set", "k1=2"],

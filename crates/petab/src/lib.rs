@@ -122,17 +122,44 @@ const RESERVED: &[&str] = &[
     "gt", "ge", "eq", "ne", "and", "or", "not",
 ];
 
+/// The YAML reader's error as the user's: at its line and column where it gives them, in
+/// words rather than the reader's types ("cannot deserialize null into string; use
+/// Option<String>" is a missing value where a text was expected).
+fn yaml_error(file: &str, message: &str) -> ModelError {
+    let reason = first_line(message);
+    let reason = reason.strip_prefix("error: ").unwrap_or(reason);
+    // The reader's advice to its programmer, not to the user.
+    let reason = reason.split("; use Option<").next().unwrap_or(reason);
+    let reason = match reason.split_once("cannot deserialize ") {
+        Some((before, what)) => match what.split_once(" into ") {
+            Some((found, expected)) => format!("{before}expected {expected}, found {found}"),
+            None => reason.to_string(),
+        },
+        None => reason.to_string(),
+    };
+    let place = reason.strip_prefix("line ").and_then(|rest| {
+        let (line, rest) = rest.split_once(" column ")?;
+        let (column, rest) = rest.split_once(": ")?;
+        Some((line.parse().ok()?, column.parse().ok()?, rest.to_string()))
+    });
+    match place {
+        Some((line, column, rest)) => ModelError {
+            file: file.to_string(),
+            line: Some(line),
+            column: Some(column),
+            message: format!("not a PEtab problem file: {rest}"),
+        },
+        None => ModelError::file(file, format!("not a PEtab problem file: {reason}")),
+    }
+}
+
 /// Imports the PEtab problem of the YAML file `yaml`.
 pub fn import(yaml: &Path) -> Result<Imported, ModelError> {
     let name = yaml.display().to_string();
     let text = std::fs::read_to_string(yaml)
         .map_err(|e| ModelError::file(&name, format!("cannot be read: {e}")))?;
-    let problem: ProblemFile = serde_saphyr::from_str(&text).map_err(|e| {
-        let reason = e.to_string();
-        let reason = first_line(&reason);
-        let reason = reason.strip_prefix("error: ").unwrap_or(reason);
-        ModelError::file(&name, format!("not a PEtab problem file: {reason}"))
-    })?;
+    let problem: ProblemFile =
+        serde_saphyr::from_str(&text).map_err(|e| yaml_error(&name, &e.to_string()))?;
     if !problem.format_version.is_one() {
         return Err(ModelError::file(&name, "only PEtab format version 1 is supported"));
     }

@@ -222,6 +222,14 @@ fn error_of(path: &Path) -> String {
 fn bad_input_is_located() {
     let e = error_of(&data().join("missing/none.yaml"));
     assert!(e.contains("none.yaml: cannot be read"), "{e}");
+    // The YAML reader's complaint at its line and column, in words, not its types ("cannot
+    // deserialize null into string; use Option<String>").
+    let path = edited("yaml", "Boehm_JProteomeRes2014.yaml", |t| {
+        t.replacen("parameter_file: parameters_Boehm_JProteomeRes2014.tsv", "parameter_file:", 1)
+    });
+    let e = error_of(&path);
+    assert!(e.contains("Boehm_JProteomeRes2014.yaml:"), "{e}");
+    assert!(e.contains("not a PEtab problem file: ") && !e.contains("Option<"), "{e}");
 
     let path =
         edited("observable", "measurementData", |t| t.replacen("pSTAT5A_rel\t", "pSTAT5X\t", 1));
