@@ -79,6 +79,10 @@ impl<'py> FromPyObject<'py> for Vector {
         let raw = numpy
             .call_method1("asarray", (ob,))
             .map_err(|_| refuse(format!("a {} that numpy makes no array of", kind())))?;
+        // A masked array's masked entries would be taken at whatever value lies under them.
+        if numpy.getattr("ma")?.call_method1("is_masked", (ob,))?.extract::<bool>()? {
+            return Err(refuse(format!("a {} with masked entries", kind())));
+        }
         match raw.getattr("dtype")?.getattr("kind")?.extract::<String>()?.as_str() {
             "c" => return Err(refuse(format!("a {} of complex numbers", kind()))),
             "O" if raw.getattr("ndim")?.extract::<usize>()? == 1 => {
@@ -99,6 +103,13 @@ impl<'py> FromPyObject<'py> for Vector {
                 0 => format!("a single {}", kind()),
                 _ => format!("a {ndim}-D array of shape {}", array.getattr("shape")?.str()?),
             }));
+        }
+        // Numbers as text and dates convert too: numpy reads "1.0" as 1.0, and a date as its
+        // days since 1970.
+        match raw.getattr("dtype")?.getattr("kind")?.extract::<String>()?.as_str() {
+            "U" | "S" => return Err(refuse(format!("a {} of text, not numbers", kind()))),
+            "M" | "m" => return Err(refuse(format!("a {} of dates or times", kind()))),
+            _ => {}
         }
         let array: PyReadonlyArray1<'py, f64> = array.extract()?;
         Ok(Vector(array.as_array().to_vec()))
@@ -633,6 +644,13 @@ impl PyProblem {
         let names = self.experiments();
         let index = match experiment {
             None => 0,
+            // A bool is an int to Python (True was experiment 1): refused as neither.
+            Some(e) if e.is_instance_of::<pyo3::types::PyBool>() => {
+                return Err(PyTypeError::new_err(format!(
+                    "experiment is an index or a name, got a bool: {}",
+                    e.str().map(|s| s.to_string()).unwrap_or_default()
+                )));
+            }
             Some(e) => match e.extract::<i128>() {
                 Ok(i) if usize::try_from(i).is_ok_and(|i| i < names.len()) => i as usize,
                 Ok(i) => {

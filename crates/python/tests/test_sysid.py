@@ -364,11 +364,19 @@ class Boehm(unittest.TestCase):
             (np.ones(9) * (1 + 1j), "got a ndarray of complex numbers"),
             ([1.0 + 0j] * 9, "got a list of complex numbers"),
             ([[1.0], [1.0, 2.0]], "got a list that numpy makes no array of"),
+            # Numbers written as text, dates, and masked entries are no point either (numpy
+            # read "1.0" as 1.0 and a date as its days since 1970; a mask was dropped).
+            (["1.0"] * 9, "got a list of text, not numbers"),
+            (np.array([b"1"] * 9), "got a ndarray of text, not numbers"),
+            (np.array(["2020-01-01"] * 9, dtype="datetime64[D]"), "got a ndarray of dates or times"),
+            (np.ma.array(np.ones(9), mask=[True] + [False] * 8), "got a MaskedArray with masked entries"),
         ]:
             with self.assertRaisesRegex(TypeError, "expected a 1-D array of numbers.*" + got):
                 self.p.nll(x)
         with self.assertRaisesRegex(TypeError, "experiment is an index or a name, got a float: 0.5"):
             self.p.simulate([1.0], experiment=0.5)
+        with self.assertRaisesRegex(TypeError, "experiment is an index or a name, got a bool: True"):
+            self.p.simulate([1.0], experiment=True)
         with self.assertRaisesRegex(ValueError, "experiment 1180591620717411303424: the problem has 1 experiments"):
             self.p.simulate([1.0], experiment=2**70)
         with self.assertRaisesRegex(TypeError, r"only takes a list of names, got the name 'k_phos': write only=\['k_phos'\]"):
