@@ -5,7 +5,7 @@ use sysid_core::Estimate;
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
-use crate::output::{emit, not_an_input, writable};
+use crate::output::{emit, figure_writable};
 use crate::problem::{Context, fit_from_starts, problem, with_starts};
 
 /// Arguments of `sysid fit`.
@@ -44,10 +44,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
         if args.starts.starts.is_none() {
             anyhow::bail!("--waterfall needs --starts N");
         }
-        for path in sysid_report::figure_paths(stem) {
-            writable(&path, "--waterfall")?;
-            not_an_input(&path, &context.inputs, "--waterfall")?;
-        }
+        figure_writable(stem, &context.inputs, "--waterfall")?;
     }
     let watch = context.watch(&args.method.method, args.options.log_every);
     let (estimate, starts) =

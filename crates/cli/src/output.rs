@@ -106,6 +106,26 @@ pub fn writable(path: &Path, option: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Checks a figure's stem (`--figure`, `--waterfall`) before the work: its two files
+/// ([`sysid_report::figure_paths`]) can be written and are none of `inputs`. A stem that names
+/// a folder (`figs/`, or an existing folder) is refused: its figures were `figs/.png` and
+/// `figs/.svg`, hidden files that the drawing then failed to write, after the whole run.
+pub fn figure_writable(stem: &Path, inputs: &[PathBuf], option: &str) -> anyhow::Result<()> {
+    let text = stem.as_os_str().to_string_lossy();
+    if text.ends_with(std::path::MAIN_SEPARATOR) || text.ends_with('/') || stem.is_dir() {
+        bail!(
+            "{option} {}: that is a folder; give the figures' name in it (`{}`), and .png and .svg are added",
+            stem.display(),
+            stem.join("figure").display()
+        );
+    }
+    for path in sysid_report::figure_paths(stem) {
+        writable(&path, option)?;
+        not_an_input(&path, inputs, option)?;
+    }
+    Ok(())
+}
+
 /// A progress bar on stderr (hidden when stderr is not a terminal).
 pub fn progress_bar(total: u64, unit: &str) -> ProgressBar {
     let bar = ProgressBar::new(total);

@@ -11,7 +11,7 @@ use sysid_profile::{
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
 use crate::output::Watch;
-use crate::output::{emit, not_an_input, writable};
+use crate::output::{emit, figure_writable};
 use crate::problem::{Context, fit_from_starts, method, problem};
 
 /// Arguments of `sysid profile`.
@@ -29,8 +29,9 @@ pub struct ProfileArgs {
     /// counted) instead of the pointwise χ²₁(0.95)/2 = 1.92.
     #[arg(long)]
     simultaneous: bool,
-    /// Most points per side of a profile (a side that runs out of them while still rising is
-    /// `undecided`).
+    /// Most points each side of a profile walks (a step retried at half its length is the same
+    /// point; the points fitted while locating a crossing come on top). A side that runs out of
+    /// them while still rising is `undecided`, unless the other side stayed below the threshold.
     #[arg(
         long,
         default_value_t = 60,
@@ -72,10 +73,7 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     let (problem, context) = problem(&args.source, &args.integrator, &args.options)?;
     // Where the figure goes is checked before the work, not after it.
     if let Some(stem) = &args.figure {
-        for path in sysid_report::figure_paths(stem) {
-            writable(&path, "--figure")?;
-            not_an_input(&path, &context.inputs, "--figure")?;
-        }
+        figure_writable(stem, &context.inputs, "--figure")?;
     }
     let names = problem.names();
     let only = match &args.only {
@@ -100,7 +98,7 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
         bail!("--only: `{}` is named twice", names[*twice.1]);
     }
     let watch = context.watch(&args.method.method, args.options.log_every);
-    let (optimum, _) =
+    let (optimum, starts) =
         fit_from_starts(&problem, &args.method.method, &args.options, &args.starts, &watch)?;
     let settings = args.options.settings();
     let m = method(&args.method.method, &settings)?;
@@ -162,7 +160,13 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     match args.format {
         Format::Json => {
             let record = profiled.record(&context.name, options.threshold);
-            emit(&format!("{}\n", serde_json::to_string_pretty(&record)?))?
+            let mut value = serde_json::to_value(&record)?;
+            // The multistart the optimum came from, as `fit --starts` prints it; not where a
+            // profile found a better point and the optimum is the fit made from there.
+            if let (Some(starts), true) = (&starts, profiled.better.is_empty()) {
+                value["optimum"]["starts"] = serde_json::to_value(starts)?;
+            }
+            emit(&format!("{}\n", serde_json::to_string_pretty(&value)?))?
         }
         Format::Table => emit(&table(&context, &profiled))?,
     }

@@ -373,6 +373,30 @@ fn a_name_of_any_length_is_printed() {
     }
 }
 
+/// A figure's stem that names a folder is refused before the work: `--figure figs/` ran the
+/// whole profile, printed it, then failed to draw `figs/.png` and left two empty hidden
+/// files. And `profile --starts` keeps its multistart in the optimum's JSON, as `fit` does.
+#[test]
+fn profile_figures_in_a_folder_and_starts() {
+    let s = Scratch::new("profile-figure");
+    let model = s.kinetics(|d| d);
+    let folder = format!("{}/", s.path("figs"));
+    std::fs::create_dir_all(&folder).unwrap();
+    refused(
+        &["profile", "--model", &model, "--figure", &folder],
+        &["--figure", "that is a folder"],
+    );
+    refused(
+        &["fit", "--model", &model, "--starts", "2", "--waterfall", &s.path("figs")],
+        &["--waterfall", "that is a folder"],
+    );
+    assert_eq!(std::fs::read_dir(&folder).unwrap().count(), 0, "files left in {folder}");
+    let v = json(&["profile", "--model", &model, "--starts", "3", "--max-points", "2"]);
+    let starts = &v["optimum"]["starts"];
+    assert!(starts.is_object(), "{}", v["optimum"]);
+    assert_eq!(v["optimum"]["starts"]["waterfall"].as_array().map(Vec::len), Some(3), "{starts}");
+}
+
 /// Merging shards into one of them is refused, not blamed on "another sysid".
 #[test]
 fn merging_into_a_shard_is_refused() {

@@ -22,10 +22,13 @@
 //! the profile rises by less than 1e-3 of the threshold over the whole range walked, each
 //! side to the unknown's bound or with its steps at their longest;
 //! `practically_non_identifiable` when a side stays below the threshold up to the unknown's
-//! bound, or until the step budget ran out with its steps at their longest ([`MAX_STEP`]:
-//! the profile too flat for them to reach a rise of a tenth of the threshold); `undecided`
-//! when a side's budget ran out before either (its steps still shorter: the profile was
-//! rising, and more points may cross), which a larger budget decides.
+//! bound (a side from an optimum on the bound is there at once, and walks no point), or until
+//! the point budget ran out with its steps at their longest ([`MAX_STEP`]: the profile too
+//! flat for them to reach a rise of a tenth of the threshold), whatever the other side did;
+//! `undecided` when a side's budget ran out before either (its steps still shorter: the
+//! profile was rising, and more points may cross) and the other side decided nothing
+//! either, which a larger budget decides. The budget counts points walked: a step retried at
+//! half its length is the same point.
 //!
 //! **A stopped run** ([`stop_when`](sysid_core::observer::stop_when); Ctrl-C in the command
 //! line and in Python) fits no further point: each profile keeps the points fitted before
@@ -447,7 +450,9 @@ where
             problem.unknowns().names().join(", ")
         )));
     }
-    let which: Vec<usize> = if only.is_empty() { (0..k).collect() } else { only.to_vec() };
+    // In the problem's order, whatever the order asked for (the JSON's objects keyed by
+    // unknown list the unknowns so).
+    let which: Vec<usize> = (0..k).filter(|i| only.is_empty() || only.contains(i)).collect();
     let done = std::sync::atomic::AtomicUsize::new(0);
     // The caller's stop flag, handed to the threads that trace.
     let stop = sysid_core::observer::current_stop();
@@ -510,16 +515,19 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         // A side whose budget ran out with its steps still short decides nothing, flat or
         // not: with `--max-points 2` no point was walked, the rise was 0, and an identifiable
         // unknown was called structurally non-identifiable.
+        // A side open at a bound or flat decides practical non-identifiability whatever the
+        // other side's budget left undecided (it said `undecided` where --max-points 5 ran
+        // out on the side away from the bound).
         let label = if failed.is_some() {
             Label::Failed
         } else if stopped {
             Label::Stopped
-        } else if budget {
-            Label::Undecided
-        } else if rise < 1e-3 * self.options.threshold {
+        } else if !budget && rise < 1e-3 * self.options.threshold {
             Label::StructurallyNonIdentifiable
         } else if open {
             Label::PracticallyNonIdentifiable
+        } else if budget {
+            Label::Undecided
         } else {
             Label::Identifiable
         };
@@ -607,9 +615,17 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         let target = 0.1 * threshold;
         let mut points: Vec<Point> = Vec::new();
         let (mut z, mut previous) = (z0, at.clone());
+        let limit = if direction > 0.0 { hi } else { lo };
+        // An optimum on the bound this side walks to: the side is open there, and a fit
+        // held at the bound would repeat the optimum's point (with the last digits of a new
+        // fit, a hair below it as often as above).
+        if if direction > 0.0 { z0 >= limit } else { z0 <= limit } {
+            return Ok((points, End::Open));
+        }
         let mut h = 0.01 * scale;
-        for _ in 0..self.options.max_steps {
-            let limit = if direction > 0.0 { hi } else { lo };
+        // The budget counts the points walked: a step retried at half its length is the same
+        // point (counting it had left a side of `--max-points 1` with none).
+        while points.len() < self.options.max_steps {
             let mut next_z = z + direction * h;
             let at_bound = if direction > 0.0 { next_z >= limit } else { next_z <= limit };
             if at_bound {

@@ -260,6 +260,65 @@ fn a_budget_too_short_to_walk_is_undecided() {
         };
         for p in &profiles {
             assert_eq!(p.label, Label::Undecided, "{max_steps}: {}: {:?}", p.name, p.points);
+            // The budget counts points walked, the optimum's aside: a step retried at half
+            // its length had used it up, and left a side of one point with none.
+            assert_eq!(
+                p.points.len(),
+                1 + 2 * max_steps,
+                "{max_steps}: {}: {:?}",
+                p.name,
+                p.points
+            );
+        }
+    }
+    // Profiles asked for in another order come in the problem's.
+    let options = ProfileOptions { max_steps: 1, ..ProfileOptions::default() };
+    let Outcome::Profiles(profiles) =
+        profile(&*goodman, &problem, &optimum, &[2, 0], &options).unwrap()
+    else {
+        panic!("a better optimum");
+    };
+    let names: Vec<&str> = profiles.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["y", "g"]);
+}
+
+/// An optimum on a bound (the falling body with g ≤ 32, its free optimum 32.5): the side
+/// toward the bound is open there at once, walks no point (a fit held at the bound repeated
+/// the optimum's value with another last digit, a hair below it), and decides the verdict
+/// whatever the other side's budget left: `practically_non_identifiable`, where a budget of
+/// one point had said `undecided`.
+#[test]
+fn a_side_from_an_optimum_on_its_bound_is_open_at_once() {
+    let case = sysid_systems::falling_body::falling_body();
+    let (t, y) = sysid_systems::falling_body::TABLE_I;
+    let problem = Problem::builder(case.system.clone())
+        .unknown_with(Unknown::new("y", 0.0))
+        .unknown_with(Unknown::new("v", 0.0))
+        .unknown_with(Unknown::new("g", 30.0).max(32.0))
+        .data(Data::discrete().series("y", &t, &y))
+        .build()
+        .unwrap();
+    let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
+    let optimum = method.fit(&problem).unwrap();
+    assert!(optimum.converged(), "{}", optimum.termination);
+    assert_eq!(
+        optimum.values[2].to_bits(),
+        32f64.to_bits(),
+        "g on its bound: {}",
+        optimum.values[2]
+    );
+    for max_steps in [1, 60] {
+        let options = ProfileOptions { max_steps, ..ProfileOptions::default() };
+        let traced = profile(&*method, &problem, &optimum, &[2], &options).unwrap();
+        let Outcome::Profiles(profiles) = traced else { panic!("{traced:?}") };
+        let g = &profiles[0];
+        assert_eq!(g.label, Label::PracticallyNonIdentifiable, "{max_steps}: {:?}", g.points);
+        assert!(g.interval[1].is_none(), "{:?}", g.interval);
+        assert!(g.points.iter().all(|q| q.value <= 32.0), "{:?}", g.points);
+        let at_bound = g.points.iter().filter(|q| q.value.to_bits() == 32f64.to_bits()).count();
+        assert_eq!(at_bound, 1, "{max_steps}: the optimum's point once: {:?}", g.points);
+        if max_steps == 60 {
+            assert!(g.interval[0].is_some_and(|lo| lo < 32.0), "{:?}", g.interval);
         }
     }
 }
