@@ -21,9 +21,12 @@ pub fn emit(text: &str) -> anyhow::Result<()> {
     }
 }
 
-/// Writes CSV `text` to standard output, or to `out` (through a temporary file of our own
-/// beside it, never a user's `out.partial`, renamed: the file is old or new, never half;
-/// errors name the user's path) and then says on stderr what was written where.
+/// Writes CSV `text` to standard output, or to `out` ([`write_atomically`]: through a
+/// temporary file of our own beside it, never a user's `out.partial`, renamed, so that the
+/// file is old or new, never half; into a device, a FIFO or an open descriptor such as
+/// `/dev/stdout`) and then says on stderr what was written where.
+///
+/// [`write_atomically`]: sysid_montecarlo::files::write_atomically
 pub fn write_output(out: Option<&Path>, text: &str) -> anyhow::Result<()> {
     let Some(path) = out else { return emit(text) };
     sysid_montecarlo::files::write_atomically(path, text)?;
@@ -67,13 +70,14 @@ fn same_file(a: &Path, b: &Path) -> bool {
 /// folder. `option` names the option that gave it. Errors name the path as given, or the
 /// link's target where `path` is a link.
 pub fn writable(path: &Path, option: &str) -> anyhow::Result<()> {
-    // A device, a FIFO or a terminal is written into, not replaced: its folder need not take
-    // a file (`/dev/stdout`'s is /proc/self/fd).
-    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+    // A device, a FIFO, a terminal or an open descriptor (`/dev/stdout`) is written into, not
+    // replaced: its folder need not take a file (`/dev/stdout`'s is /proc/self/fd).
+    if sysid_montecarlo::files::written_into(path) {
         return Ok(());
     }
     // Through a link, the folder its target is made in.
-    let target = sysid_montecarlo::files::link_target(path);
+    let target = sysid_montecarlo::files::link_target(path)
+        .map_err(|e| anyhow!("{option} {}: {e}", path.display()))?;
     let path = target.as_path();
     let folder = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
@@ -107,12 +111,13 @@ pub fn writable(path: &Path, option: &str) -> anyhow::Result<()> {
 }
 
 /// Checks a figure's stem (`--figure`, `--waterfall`) before the work: its two files
-/// ([`sysid_report::figure_paths`]) can be written and are none of `inputs`. A stem that names
-/// a folder (`figs/`, or an existing folder) is refused: its figures were `figs/.png` and
-/// `figs/.svg`, hidden files that the drawing then failed to write, after the whole run.
+/// ([`sysid_report::figure_paths`]) can be written and are none of `inputs`. A stem that ends
+/// in a folder's separator (`figs/`) names no figure and is refused: its figures
+/// were `figs/.png` and `figs/.svg`, hidden files that the drawing then failed to write, after
+/// the whole run. (`figs` beside a folder `figs` is `figs.png` and `figs.svg`.)
 pub fn figure_writable(stem: &Path, inputs: &[PathBuf], option: &str) -> anyhow::Result<()> {
     let text = stem.as_os_str().to_string_lossy();
-    if text.ends_with(std::path::MAIN_SEPARATOR) || text.ends_with('/') || stem.is_dir() {
+    if text.ends_with(std::path::MAIN_SEPARATOR) || text.ends_with('/') {
         bail!(
             "{option} {}: that is a folder; give the figures' name in it (`{}`), and .png and .svg are added",
             stem.display(),
@@ -220,10 +225,13 @@ pub fn parse_times(spec: &str) -> anyhow::Result<Vec<f64>> {
 /// a user would write where that moves it by at most a millionth of h ([`decimal_within`]):
 /// 0 + 3·0.1 is 0.3, and 1.7e9 + 1e-6 is not 1.7e9.
 pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
-    // "Within rounding" is the division's: a few units in the last place of the count. (A
-    // slack of 1e-9 intervals had put a time 1e-10 past b = 0.9999999999 at h = 0.1.)
+    // "Within rounding" is the rounding of b − a (a few units in the last place of |a| + |b|)
+    // and of the division, counted in steps: 2.3 − 2.2 is 0.0999999999999996, and
+    // 2.2:2.3:0.1 still ends at 2.3. (A slack of 1e-9 steps had put a time 1e-10 past b =
+    // 0.9999999999 at h = 0.1.)
     let count = (b - a) / h;
-    let n = intervals(count + 8.0 * f64::EPSILON * count.max(1.0), what)?;
+    let slack = 4.0 * f64::EPSILON * ((a.abs() + b.abs()) / h + count + 1.0);
+    let n = intervals(count + slack, what)?;
     // Within a few units in the last place the times would repeat or be spaced unevenly.
     let largest = a.abs().max((a + h * n as f64).abs());
     if n > 0 && h <= largest * f64::EPSILON {

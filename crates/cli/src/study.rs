@@ -134,8 +134,8 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
         None => Role::Study.methods().into_iter().map(String::from).collect(),
     };
     // One method listed twice under two names is refused; the names stay as given, as
-    // study.json has recorded them (with `settings.ql_start`), so that a study begun before
-    // resumes and merges.
+    // study.json records them (with `settings.ql_start`), so that a study's shards and
+    // resumed runs compare equal.
     crate::problem::as_run(&methods, &args.options.settings())?;
     sysid_registry::parse_list(&args.reference)?;
     // The numbers checked before any work: a model file's reference fit comes first and can
@@ -244,9 +244,22 @@ fn method_settings(args: &StudyArgs) -> BTreeMap<String, String> {
 /// other steps, and its counts and last digits differ). Read once per study.
 fn this_build() -> String {
     let version = env!("CARGO_PKG_VERSION");
-    match std::env::current_exe().and_then(std::fs::read) {
+    // The running image (/proc/self/exe, readable where the file itself is execute-only),
+    // else the file at the executable's path.
+    let read = std::fs::read("/proc/self/exe")
+        .or_else(|_| std::env::current_exe().and_then(std::fs::read));
+    match read {
         Ok(bytes) => format!("sysid {version}, executable {}", sha256_of(&bytes)),
-        Err(e) => format!("sysid {version}, executable not read ({e})"),
+        // Unreadable: its size and time tell builds apart where its bytes cannot.
+        Err(e) => {
+            let meta = std::env::current_exe().and_then(std::fs::metadata);
+            let stamp = meta.map_or(String::new(), |m| {
+                let modified =
+                    m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());
+                format!(", {} bytes, modified {}", m.len(), modified.map_or(0, |d| d.as_secs()))
+            });
+            format!("sysid {version}, executable not read ({e}){stamp}")
+        }
     }
 }
 

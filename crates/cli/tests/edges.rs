@@ -336,6 +336,28 @@ fn out_writes_through_links_and_into_fifos() {
         let written = std::fs::read_to_string(s.0.join(target)).unwrap();
         assert!(written.starts_with("t,A,B,C"), "{target}: {written}");
     }
+    // Links in a loop are refused, and stay links (the rename had replaced one with a file).
+    std::os::unix::fs::symlink("loop-b", s.0.join("loop-a")).unwrap();
+    std::os::unix::fs::symlink("loop-a", s.0.join("loop-b")).unwrap();
+    refused(
+        &["simulate", "--model", &model, "--times", "0:1:0.5", "--out", &s.path("loop-a")],
+        &["--out", "too many levels of symbolic links"],
+    );
+    assert!(s.0.join("loop-a").is_symlink());
+    // /dev/stdout sent to a file already written: the CSV follows what is there (a rename had
+    // replaced the file, and what the shell had written to it was lost).
+    let log = s.0.join("log.csv");
+    std::fs::write(&log, "before\n").unwrap();
+    let stdout = std::fs::OpenOptions::new().append(true).open(&log).unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_sysid"))
+        .current_dir(root())
+        .args(["simulate", "--model", &model, "--times", "0:1:0.5", "--out", "/dev/stdout"])
+        .stdout(stdout)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(0), "{}", text(&run.stderr));
+    let logged = std::fs::read_to_string(&log).unwrap();
+    assert!(logged.starts_with("before\nt,A,B,C\n") && logged.lines().count() == 5, "{logged}");
     // A FIFO, read while it is written.
     let fifo = s.path("fifo");
     let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo runs");
@@ -387,7 +409,7 @@ fn profile_figures_in_a_folder_and_starts() {
         &["--figure", "that is a folder"],
     );
     refused(
-        &["fit", "--model", &model, "--starts", "2", "--waterfall", &s.path("figs")],
+        &["fit", "--model", &model, "--starts", "2", "--waterfall", &folder],
         &["--waterfall", "that is a folder"],
     );
     assert_eq!(std::fs::read_dir(&folder).unwrap().count(), 0, "files left in {folder}");
@@ -1542,6 +1564,11 @@ fn no_time_is_written_past_the_end() {
     assert_eq!(cut.last().unwrap(), "0.9");
     let reached = times(&["simulate", "--model", model, "--times", "0:0.3:0.1"]);
     assert_eq!(reached, ["0", "0.1", "0.2", "0.3"]);
+    // b − a rounded below the step: 2.3 − 2.2 = 0.0999999999999996.
+    let reached = times(&["simulate", "--model", model, "--times", "2.2:2.3:0.1"]);
+    assert_eq!(reached, ["2.2", "2.3"]);
+    let reached = times(&["simulate", "--model", model, "--times", "1000:1000.3:0.1"]);
+    assert_eq!(reached.last().unwrap(), "1000.3", "{reached:?}");
     let until = ["predict", "--model", model, "--until", "0.9999999999", "--step", "0.1"];
     let predicted = times(&until);
     assert_eq!(predicted[predicted.len() - 2..], ["0.9", "0.9999999999"], "{predicted:?}");

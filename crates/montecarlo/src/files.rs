@@ -692,21 +692,24 @@ fn write_lines(path: &Path, records: &[TrialRecord]) -> Result<(), StudyError> {
 }
 
 /// Writes through a temporary file and a rename: the file is either old or new, never half.
-/// The temporary file's name carries the process id, and errors name `path`.
+/// The temporary file's name carries the process id, and errors name the file written (a
+/// link's target).
 ///
 /// A symbolic link is written through, as the shell's `>` writes: its target takes the text
 /// (made where the link points, if it does not exist yet) and the link stays. A path that is
-/// not a regular file (a device such as `/dev/null` or a terminal, a FIFO, `/dev/stdout`) is
-/// written into directly: a rename would put a file in its place.
+/// not a regular file (a device such as `/dev/null` or a terminal, a FIFO) or that reaches an
+/// open file descriptor (`/dev/stdout`, `/dev/fd/N`, `/proc/self/fd/N`, whatever they lead to)
+/// is written into, appending as the descriptor's own writes would: a rename would put a file
+/// in its place, or replace the file standard output was sent to.
 pub fn write_atomically(path: &Path, text: &str) -> Result<(), StudyError> {
-    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+    if written_into(path) {
         return std::fs::OpenOptions::new()
-            .write(true)
+            .append(true)
             .open(path)
             .and_then(|mut file| file.write_all(text.as_bytes()))
             .map_err(StudyError::io(path));
     }
-    let target = link_target(path);
+    let target = link_target(path).map_err(|e| StudyError::io(path)(std::io::Error::other(e)))?;
     let path = target.as_path();
     let name = path.file_name().map_or_else(Default::default, |n| n.to_string_lossy());
     let tmp = path.with_file_name(format!(".{name}.{}.partial", std::process::id()));
@@ -721,19 +724,47 @@ pub fn write_atomically(path: &Path, text: &str) -> Result<(), StudyError> {
     renamed.map_err(StudyError::io(path))
 }
 
-/// Where a path's symbolic links lead (the path itself where it is none): the file a write
-/// through it reaches, existing or not. At most 40 links are followed, as the kernel does.
-pub fn link_target(path: &Path) -> PathBuf {
-    let mut at = path.to_path_buf();
-    for _ in 0..40 {
-        let Ok(link) = std::fs::read_link(&at) else { break };
+/// The hops of a path's symbolic links: the path, then where each link leads, until one is
+/// not a link (at most 40 links, as the kernel follows).
+fn link_chain(path: &Path) -> Vec<PathBuf> {
+    let mut chain = vec![path.to_path_buf()];
+    while chain.len() <= 40 {
+        let at = chain.last().expect("the path");
+        let Ok(link) = std::fs::read_link(at) else { break };
         // A relative link is read from the folder holding it; an absolute one replaces it.
-        at = match at.parent() {
+        let next = match at.parent() {
             Some(folder) => folder.join(link),
             None => link,
         };
+        chain.push(next);
     }
-    at
+    chain
+}
+
+/// Where a path's symbolic links lead (the path itself where it is none): the file a write
+/// through it reaches, existing or not; an error where the links do not end (a loop, or more
+/// than 40).
+pub fn link_target(path: &Path) -> Result<PathBuf, String> {
+    let chain = link_chain(path);
+    let last = chain.last().expect("the path").clone();
+    if std::fs::symlink_metadata(&last).is_ok_and(|m| m.file_type().is_symlink()) {
+        return Err("too many levels of symbolic links".into());
+    }
+    Ok(last)
+}
+
+/// Whether a write to `path` goes into what is there rather than through a new file and a
+/// rename ([`write_atomically`]): a device, a FIFO or a socket, or an open file descriptor
+/// reached by name (`/dev/stdout`, `/dev/fd/N`, `/proc/…/fd/N`, any hop of the links).
+pub fn written_into(path: &Path) -> bool {
+    let descriptor = |p: &Path| {
+        let p = p.to_string_lossy();
+        ["/dev/stdout", "/dev/stderr", "/dev/stdin"].contains(&p.as_ref())
+            || p.starts_with("/dev/fd/")
+            || (p.starts_with("/proc/") && p.contains("/fd/"))
+    };
+    link_chain(path).iter().any(|p| descriptor(p))
+        || std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
 /// Which settings differ between two headers, for messages: "perturb 0.3 vs 0.5,

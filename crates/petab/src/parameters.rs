@@ -166,8 +166,8 @@ impl Builder<'_> {
     /// PEtab's linter refuses it: a state of the model (a species, or a rate rule's
     /// variable), whose row gave the outputs a constant where the equations kept the state;
     /// the variable of an assignment rule, which the rule gives; and an estimated id that
-    /// nothing uses (the model, a formula, a measurement's parameters, a condition), which
-    /// the data cannot determine.
+    /// nothing uses (the model, an observable's formula or noise formula, measured or not, a
+    /// measurement's parameters, a condition), which the data cannot determine.
     pub(crate) fn split_parameters(
         &self,
         d: &Dynamics,
@@ -222,10 +222,21 @@ impl Builder<'_> {
                 continue;
             }
             let n = self.name(id);
+            // An observable that no measurement uses still names its parameters, and PEtab
+            // requires them in the table: such a one stays a parameter of the model, which
+            // the data do not determine.
+            let unmeasured = || {
+                self.observables
+                    .values()
+                    .flat_map(|o| o.formula.names().into_iter().chain(o.noise.names()))
+                    .any(|name| self.name(&name) == n)
+            };
             if in_outputs.contains(&n) {
                 parameters.push(id.clone());
             } else if elsewhere.contains(&n) {
                 extras.push(id.clone());
+            } else if unmeasured() {
+                parameters.push(id.clone());
             } else {
                 return Err(refuse(format!(
                     "`{id}` is estimated but used nowhere (not in the model, an observable's or noise formula, a measurement's parameters or a condition): the data cannot determine it"

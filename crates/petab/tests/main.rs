@@ -310,6 +310,20 @@ fn bad_input_is_located() {
             "{e}"
         );
     }
+    // An estimated parameter that only an observable no measurement uses names is PEtab's
+    // to require in the table, and is kept.
+    let path = edited_files(
+        "unmeasured-parameter",
+        &[
+            ("observables", &|t: String| {
+                format!("{}\nunused\t\tscale_x * STAT5A\t1\tlin\tnormal\n", t.trim_end())
+            }),
+            ("parameters", &|t: String| {
+                format!("{}\nscale_x\tscale_x\tlin\t0\t10\t1\t1\n", t.trim_end())
+            }),
+        ],
+    );
+    import(&path).expect("a parameter of an observable no measurement uses");
     // One that nothing uses and nothing estimates is its nominal value nowhere: harmless.
     let path = edited("unused-known", "parameters", |t| {
         format!("{}\nbogus\tbogus\tlin\t0\t1\t0.5\t0\n", t.trim_end())

@@ -26,8 +26,8 @@
 //! the point budget ran out with its steps at their longest ([`MAX_STEP`]: the profile too
 //! flat for them to reach a rise of a tenth of the threshold), whatever the other side did;
 //! `undecided` when a side's budget ran out before either (its steps still shorter: the
-//! profile was rising, and more points may cross) and the other side decided nothing
-//! either, which a larger budget decides. The budget counts points walked: a step retried at
+//! profile was rising, and more points may cross) and the other side did not stay below the
+//! threshold either, which a larger budget decides. The budget counts points walked: a step retried at
 //! half its length is the same point.
 //!
 //! **A stopped run** ([`stop_when`](sysid_core::observer::stop_when); Ctrl-C in the command

@@ -87,8 +87,15 @@ impl<'py> FromPyObject<'py> for Vector {
             "c" => return Err(refuse(format!("a {} of complex numbers", kind()))),
             "O" if raw.getattr("ndim")?.extract::<usize>()? == 1 => {
                 for (i, entry) in raw.try_iter()?.enumerate() {
-                    if entry?.is_none() {
+                    let entry = entry?;
+                    if entry.is_none() {
                         return Err(refuse(format!("a {} whose entry {i} is None", kind())));
+                    }
+                    // Text held as objects (a pandas Series of str): numpy reads "1.0" as 1.0.
+                    if entry.is_instance_of::<pyo3::types::PyString>()
+                        || entry.is_instance_of::<pyo3::types::PyBytes>()
+                    {
+                        return Err(refuse(format!("a {} of text, not numbers", kind())));
                     }
                 }
             }
@@ -107,7 +114,7 @@ impl<'py> FromPyObject<'py> for Vector {
         // Numbers as text and dates convert too: numpy reads "1.0" as 1.0, and a date as its
         // days since 1970.
         match raw.getattr("dtype")?.getattr("kind")?.extract::<String>()?.as_str() {
-            "U" | "S" => return Err(refuse(format!("a {} of text, not numbers", kind()))),
+            "U" | "S" | "T" => return Err(refuse(format!("a {} of text, not numbers", kind()))),
             "M" | "m" => return Err(refuse(format!("a {} of dates or times", kind()))),
             _ => {}
         }

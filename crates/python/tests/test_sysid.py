@@ -367,6 +367,7 @@ class Boehm(unittest.TestCase):
             # Numbers written as text, dates, and masked entries are no point either (numpy
             # read "1.0" as 1.0 and a date as its days since 1970; a mask was dropped).
             (["1.0"] * 9, "got a list of text, not numbers"),
+            (np.array(["1.0"] * 9, dtype=object), "got a ndarray of text, not numbers"),
             (np.array([b"1"] * 9), "got a ndarray of text, not numbers"),
             (np.array(["2020-01-01"] * 9, dtype="datetime64[D]"), "got a ndarray of dates or times"),
             (np.ma.array(np.ones(9), mask=[True] + [False] * 8), "got a MaskedArray with masked entries"),
