@@ -230,7 +230,9 @@ pub fn spaced(a: f64, b: f64, h: f64, what: &str) -> anyhow::Result<Vec<f64>> {
     // 2.2:2.3:0.1 still ends at 2.3. (A slack of 1e-9 steps had put a time 1e-10 past b =
     // 0.9999999999 at h = 0.1.)
     let count = (b - a) / h;
-    let slack = 4.0 * f64::EPSILON * ((a.abs() + b.abs()) / h + count + 1.0);
+    // (Near the float's resolution, a step of a few units in the last place of a, the first
+    // term is a good part of a step: 1.7e9:1.7e9 + 3e-6:1e-6 has 0.75.)
+    let slack = f64::EPSILON * (a.abs() + b.abs()) / h + 4.0 * f64::EPSILON * (count + 1.0);
     let n = intervals(count + slack, what)?;
     // Within a few units in the last place the times would repeat or be spaced unevenly.
     let largest = a.abs().max((a + h * n as f64).abs());
