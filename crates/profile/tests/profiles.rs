@@ -21,6 +21,19 @@ fn falling_body_fitted() -> (
     (problem, goodman, optimum)
 }
 
+/// The falling body on Goodman's Table I, y and v starting at 0, with `g` as given.
+fn table_i_with(g: Unknown) -> Problem<sysid_systems::FallingBody> {
+    let case = sysid_systems::falling_body::falling_body();
+    let (t, y) = sysid_systems::falling_body::TABLE_I;
+    Problem::builder(case.system.clone())
+        .unknown_with(Unknown::new("y", 0.0))
+        .unknown_with(Unknown::new("v", 0.0))
+        .unknown_with(g)
+        .data(Data::discrete().series("y", &t, &y))
+        .build()
+        .unwrap()
+}
+
 #[test]
 fn a_linear_model_has_the_exact_parabola() {
     let (problem, goodman, optimum) = falling_body_fitted();
@@ -70,16 +83,9 @@ fn a_linear_model_has_the_exact_parabola() {
 /// every profile found a "better optimum" the prior pulled the fit from, and failed.)
 #[test]
 fn a_prior_pulls_the_profile_as_it_pulls_the_fit() {
-    use sysid_core::{Prior, Transform, Unknown};
-    let case = sysid_systems::falling_body::falling_body();
-    let (t, y) = sysid_systems::falling_body::TABLE_I;
-    let problem = Problem::builder(case.system.clone())
-        .unknown_with(Unknown::new("y", 0.0))
-        .unknown_with(Unknown::new("v", 0.0))
-        .unknown_with(Unknown::new("g", 30.0).prior(Prior::normal(30.0, 0.5, Transform::Lin)))
-        .data(Data::discrete().series("y", &t, &y))
-        .build()
-        .unwrap();
+    use sysid_core::{Prior, Transform};
+    let problem =
+        table_i_with(Unknown::new("g", 30.0).prior(Prior::normal(30.0, 0.5, Transform::Lin)));
     let goodman = Registry::standard().build("goodman", &Settings::default()).unwrap();
     let optimum = goodman.fit(&problem).unwrap();
     assert!(optimum.converged() && optimum.prior.is_some(), "{}", optimum.termination);
@@ -289,15 +295,7 @@ fn a_budget_too_short_to_walk_is_undecided() {
 /// one point had said `undecided`.
 #[test]
 fn a_side_from_an_optimum_on_its_bound_is_open_at_once() {
-    let case = sysid_systems::falling_body::falling_body();
-    let (t, y) = sysid_systems::falling_body::TABLE_I;
-    let problem = Problem::builder(case.system.clone())
-        .unknown_with(Unknown::new("y", 0.0))
-        .unknown_with(Unknown::new("v", 0.0))
-        .unknown_with(Unknown::new("g", 30.0).max(32.0))
-        .data(Data::discrete().series("y", &t, &y))
-        .build()
-        .unwrap();
+    let problem = table_i_with(Unknown::new("g", 30.0).max(32.0));
     let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
     let optimum = method.fit(&problem).unwrap();
     assert!(optimum.converged(), "{}", optimum.termination);

@@ -83,7 +83,8 @@ impl<'py> FromPyObject<'py> for Vector {
         if numpy.getattr("ma")?.call_method1("is_masked", (ob,))?.extract::<bool>()? {
             return Err(refuse(format!("a {} with masked entries", kind())));
         }
-        match raw.getattr("dtype")?.getattr("kind")?.extract::<String>()?.as_str() {
+        let dtype: String = raw.getattr("dtype")?.getattr("kind")?.extract()?;
+        match dtype.as_str() {
             "c" => return Err(refuse(format!("a {} of complex numbers", kind()))),
             "O" if raw.getattr("ndim")?.extract::<usize>()? == 1 => {
                 for (i, entry) in raw.try_iter()?.enumerate() {
@@ -113,7 +114,7 @@ impl<'py> FromPyObject<'py> for Vector {
         }
         // Numbers as text and dates convert too: numpy reads "1.0" as 1.0, and a date as its
         // days since 1970.
-        match raw.getattr("dtype")?.getattr("kind")?.extract::<String>()?.as_str() {
+        match dtype.as_str() {
             "U" | "S" | "T" => return Err(refuse(format!("a {} of text, not numbers", kind()))),
             "M" | "m" => return Err(refuse(format!("a {} of dates or times", kind()))),
             _ => {}
