@@ -128,7 +128,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
     let how = args.gradient.then_some(args.sensitivities);
     // `auto` measures both ways at its first gradient: that evaluation is not timed.
     if how == Some(How::Auto) {
-        evaluate(&held, &z, &parameters, &values, Some(How::Auto))?;
+        evaluate(&held, &z, &parameters, &values, Some(How::Auto)).map_err(|e| context.blame(e))?;
     }
     let mut times = Vec::with_capacity(args.repeat);
     let mut result = None;
@@ -136,7 +136,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<Outcome> {
         // Each evaluation solves what it needs (a steady state) afresh, not from the last.
         held.forget_cached();
         let t = Instant::now();
-        let e = evaluate(&held, &z, &parameters, &values, how)?;
+        let e = evaluate(&held, &z, &parameters, &values, how).map_err(|e| context.blame(e))?;
         times.push(t.elapsed().as_secs_f64() * 1e3);
         result = Some(e);
     }

@@ -48,7 +48,8 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
     }
     let watch = context.watch(&args.method.method, args.options.log_every);
     let (estimate, starts) =
-        fit_from_starts(&problem, &args.method.method, &args.options, &args.starts, &watch)?;
+        fit_from_starts(&problem, &args.method.method, &args.options, &args.starts, &watch)
+            .map_err(|e| context.blame(e))?;
     match args.format {
         Format::Json => {
             let record = with_starts(estimate.record(&context.name), starts.as_ref());

@@ -100,7 +100,8 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
     }
     let watch = context.watch(&args.method.method, args.options.log_every);
     let estimate =
-        watching(&watch, || fit(&problem, &args.method.method, &args.options.settings()))?;
+        watching(&watch, || fit(&problem, &args.method.method, &args.options.settings()))
+            .map_err(|e| context.blame(e))?;
     if !estimate.converged() {
         eprintln!(
             "{}: {} did not converge (converged: {}; {}): no prediction written",
@@ -123,7 +124,16 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
     let mut text = String::new();
     for (i, times) in experiments.into_iter().zip(times_of) {
         let e = &problem.experiments()[i];
-        let states = problem.trajectory(i, &estimate.values, band, &times)?;
+        let states = problem.trajectory(i, &estimate.values, band, &times).map_err(|error| {
+            let experiment = match several {
+                true => format!(" (experiment `{}`)", e.name()),
+                false => String::new(),
+            };
+            context.blame(anyhow::anyhow!(
+                "the fitted model cannot be integrated to --until {}{experiment}: {error}",
+                shortest(args.until)
+            ))
+        })?;
         if text.is_empty() {
             text += if several { "experiment,t" } else { "t" };
             for s in &states {

@@ -191,6 +191,16 @@ pub fn fit_from_starts(
 }
 
 impl Context {
+    /// `e` with the problem's file (or catalogue system) before its message, where the
+    /// message does not begin with it: the errors found at run time (a model that cannot be
+    /// integrated from the start, an NLL that cannot be evaluated) otherwise name no file.
+    pub fn blame(&self, e: anyhow::Error) -> anyhow::Error {
+        match format!("{e:#}").starts_with(&self.name) {
+            true => e,
+            false => e.context(self.name.clone()),
+        }
+    }
+
     /// The progress lines of a fit of this problem with `method`, every `every` seconds in a
     /// log ([`Watch`]), labelled by the problem's file name (or the system's) and the method.
     pub fn watch(&self, method: &str, every: f64) -> Rc<Watch> {

@@ -99,7 +99,8 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     }
     let watch = context.watch(&args.method.method, args.options.log_every);
     let (optimum, starts) =
-        fit_from_starts(&problem, &args.method.method, &args.options, &args.starts, &watch)?;
+        fit_from_starts(&problem, &args.method.method, &args.options, &args.starts, &watch)
+            .map_err(|e| context.blame(e))?;
     let settings = args.options.settings();
     let m = method(&args.method.method, &settings)?;
     let threshold = threshold_95(args.simultaneous.then_some(problem.unknowns().len()));

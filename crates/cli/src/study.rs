@@ -204,7 +204,8 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
                 args.options.log_every,
             ));
             let fitted =
-                watching(&watch, || fit(&problem, &args.reference, &args.options.settings()))?;
+                watching(&watch, || fit(&problem, &args.reference, &args.options.settings()))
+                    .with_context(|| path.display().to_string())?;
             if fitted.termination == Termination::Interrupted {
                 return Ok(stopped(&format!(
                     "stopped during the fit to {}'s data that gives the study its truth: no trial was run",

@@ -529,6 +529,44 @@ fn a_model_that_blows_up() {
     );
 }
 
+/// Errors found at run time, past the file's reading, begin with the model file: which of a
+/// user's files could not be integrated (they had said only "the model cannot be integrated").
+#[test]
+fn run_time_errors_name_the_model_file() {
+    let case = Case::new("run-time", &DECAY.replace("-k * x", "k * x^2"), DECAY_DATA);
+    let model = case.model();
+    let starts = ["fit", "--model", &model, "--starts", "2", "--starts-without-guess"];
+    let cannot =
+        "the model cannot be integrated from the starting guess (k = 0.5): the solution blows up";
+    for (args, message) in [
+        (vec!["fit", "--model", &model], cannot),
+        (starts.to_vec(), "every start fails; the best: the model cannot be integrated"),
+        (vec!["profile", "--model", &model], cannot),
+        (vec!["predict", "--model", &model, "--until", "5"], cannot),
+        (vec!["evaluate", "--model", &model], "the NLL cannot be evaluated at this point"),
+    ] {
+        let out = sysid(&args);
+        let stderr = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.starts_with(&format!("error: {model}: {message}")), "{args:?}: {stderr}");
+    }
+    // x′ = k x fits k ≈ 0.5 and grows past f64 long before t = 2000: the prediction, after
+    // the fit, says what it was asked and of which file.
+    let growth = Case::new(
+        "run-time-growth",
+        &DECAY.replace("-k * x", "k * x"),
+        "t,x\n0,2\n1,3.3\n2,5.4\n3,9\n",
+    );
+    let model = growth.model();
+    let out = sysid(&["predict", "--model", &model, "--until", "2000"]);
+    let stderr = text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    let message =
+        format!("error: {model}: the fitted model cannot be integrated to --until 2000: ");
+    assert!(stderr.starts_with(&message), "{stderr}");
+    assert!(out.stdout.is_empty(), "{}", text(&out.stdout));
+}
+
 /// x′ = k x² from x(0) = 0.1 blows up at t = 20 for the guess k = 0.5, after the data end;
 /// from the datum x(5) = 2, multiple shooting's node for its second interval, it blows up at
 /// t = 6. Multiple shooting says where it started, not "from the starting guess", which
