@@ -125,8 +125,16 @@ fn sparse_and_dense_implicit_steps_integrate_alike() {
     let sparse = model.system(Inputs::new(Vec::new()));
     let dense = sparse.with_dual_numbers();
     let p: Vec<f64> = model.file.unknowns.iter().map(|u| u.guess).collect();
-    assert!(IterationMatrix::new(&sparse, &p, 1).is_sparse());
-    assert!(!IterationMatrix::new(&dense, &p, 1).is_sparse());
+    let (mut s, mut d) =
+        (IterationMatrix::new(&sparse, &p, 1), IterationMatrix::new(&dense, &p, 1));
+    assert!(s.is_sparse() && !d.is_sparse());
+    // The sparse factors hold J by its entries alone; spread out, it is the dense J.
+    let y: Vec<f64> = (0..n).map(|i| 0.3 + 0.01 * i as f64).collect();
+    s.factor(&sparse, (0.5, &y, &p, &[]), 10.0).unwrap();
+    d.factor(&dense, (0.5, &y, &p, &[]), 10.0).unwrap();
+    for (x, z) in s.jacobian().iter().zip(d.jacobian()) {
+        assert!((x - z).abs() <= 4.0 * f64::EPSILON * z.abs(), "{x} against {z}");
+    }
     let y0: Vec<f64> = (0..n).map(|i| if i == 0 { 1.0 } else { 0.0 }).collect();
     let wrt: Vec<Wrt> = [0, 7, 119].into_iter().map(Wrt::Parameter).collect();
     let times = [0.1, 1.0, 10.0, 100.0];
