@@ -284,8 +284,10 @@ impl Entries {
 /// not), and J's entries at that point for the μ block.
 struct Implicit {
     factors: Factors,
-    /// −J_y, n × n row by row (only the pattern's places are ever written).
+    /// −J_y as the factors read it ([`Factors::places`]), and where each entry of the
+    /// pattern goes in it.
     jac: Vec<f64>,
+    places: Vec<(usize, usize)>,
     values: Vec<f64>,
     inv_gamma_h: f64,
 }
@@ -474,22 +476,27 @@ impl<S: System> Rhs for AdjointRhs<'_, S> {
         self.jacobian_at(t, side);
         let n = self.n;
         let implicit = self.implicit.get_or_insert_with(|| {
+            let factors = match (&self.entries.source, self.sys.sparse_jacobian(Function::Rhs)) {
+                // Entries from the system's sparse Jacobian are in its pattern, the forward
+                // integration's: its plan.
+                (Source::Sparse(_), Some(jacobian)) => Factors::of(n, Some(jacobian), 1),
+                _ => Factors::new(n, Some(&self.entries.pattern), 1),
+            };
+            let places = factors.places(
+                (self.entries.pattern.iter().enumerate())
+                    .map(|(e, &(i, c))| (i as usize, c as usize, e))
+                    .filter(|&(_, c, _)| c < n),
+            );
             Box::new(Implicit {
-                factors: match (&self.entries.source, self.sys.sparse_jacobian(Function::Rhs)) {
-                    // Entries from the system's sparse Jacobian are in its pattern, the forward
-                    // integration's: its plan.
-                    (Source::Sparse(_), Some(jacobian)) => Factors::of(n, Some(jacobian), 1),
-                    _ => Factors::new(n, Some(&self.entries.pattern), 1),
-                },
-                jac: vec![0.0; n * n],
+                jac: vec![0.0; factors.placed_len()],
+                factors,
+                places,
                 values: vec![0.0; self.entries.values.len()],
                 inv_gamma_h,
             })
         });
-        for (&(i, c), &v) in self.entries.pattern.iter().zip(&self.entries.values) {
-            if (c as usize) < n {
-                implicit.jac[i as usize * n + c as usize] = -v;
-            }
+        for &(e, place) in &implicit.places {
+            implicit.jac[place] = -self.entries.values[e];
         }
         implicit.values.copy_from_slice(&self.entries.values);
         implicit.inv_gamma_h = inv_gamma_h;

@@ -21,8 +21,12 @@ use crate::wrt::{Wrt, parameter_seeds};
 pub struct IterationMatrix {
     n: usize,
     lu: Factors,
-    /// ∂g/∂y row by row.
+    /// ∂g/∂y: row by row, or, for sparse factors, its entries in their places
+    /// ([`Factors::places`]): never n² values where the factors are sparse.
     jac: Vec<f64>,
+    /// Where each entry of a state column of the system's sparse Jacobian goes in `jac`
+    /// (its index in the Jacobian's work space, the place), where it has one.
+    places: Vec<(usize, usize)>,
     /// Dual numbers seeded with the identity: the Jacobian in one evaluation per chunk.
     products: JacobianProducts,
     identity: Vec<f64>,
@@ -44,6 +48,15 @@ impl IterationMatrix {
         // The system's sparse Jacobian gives J's entries for either factors; products with
         // the identity (n dual directions) give it where the system has none.
         let entries = sparse.map(|j| j.for_state_columns().workspace()).unwrap_or_default();
+        let places = match sparse.map(|j| j.for_state_columns()) {
+            Some(jacobian) => lu.places(
+                (jacobian.pattern().iter().zip(jacobian.entries()))
+                    .map(|(&(i, c), &at)| (i as usize, c as usize, at as usize))
+                    .filter(|&(_, c, _)| c < n),
+            ),
+            None => Vec::new(),
+        };
+        let size = if lu.is_sparse() { lu.placed_len() } else { n * n };
         let directions = if analytic || sparse.is_some() { 0 } else { n };
         let mut identity = vec![0.0; n * directions];
         for i in 0..directions {
@@ -52,7 +65,8 @@ impl IterationMatrix {
         Self {
             n,
             lu,
-            jac: vec![0.0; n * n],
+            jac: vec![0.0; size],
+            places,
             products: JacobianProducts::new(n, p, &vec![0.0; np * n], n, directions),
             identity,
             value: vec![0.0; n],
@@ -79,12 +93,9 @@ impl IterationMatrix {
             // J's entries where the system's sparse Jacobian gives them (by the program of
             // its state columns, where it has one); the others stay 0.
             None if let Some(jacobian) = sys.sparse_jacobian(Function::Rhs) => {
-                let jacobian = jacobian.for_state_columns();
-                jacobian.eval(t, y, p, u, &mut self.entries);
-                for (&(i, c), &at) in jacobian.pattern().iter().zip(jacobian.entries()) {
-                    if (c as usize) < n {
-                        self.jac[i as usize * n + c as usize] = self.entries[at as usize];
-                    }
+                jacobian.for_state_columns().eval(t, y, p, u, &mut self.entries);
+                for &(at, place) in &self.places {
+                    self.jac[place] = self.entries[at];
                 }
             }
             Some((jy, jp)) => {
@@ -111,8 +122,8 @@ impl IterationMatrix {
     }
 
     /// The Jacobian ∂g/∂y of the last factorisation, row by row.
-    pub fn jacobian(&self) -> &[f64] {
-        &self.jac
+    pub fn jacobian(&self) -> Vec<f64> {
+        self.lu.dense(&self.jac)
     }
 
     /// Overwrites r with E⁻¹ r.
@@ -268,8 +279,8 @@ impl Factors {
         }
     }
 
-    /// Factorises E = I·`inv_gamma_h` − J, J dense row by row (the sparse factors read only
-    /// its entries in their pattern).
+    /// Factorises E = I·`inv_gamma_h` − J, J row by row for dense factors and its entries
+    /// in their places for sparse ones ([`places`](Self::places)).
     pub(crate) fn factor(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<(), FactorError> {
         match self {
             Self::Dense(lu) => {
@@ -277,6 +288,38 @@ impl Factors {
                 lu.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
             }
             Self::Sparse(lu) => lu.factor(inv_gamma_h, jac),
+        }
+    }
+
+    /// Where J's entries (i, j, k) go in the J that [`factor`](Self::factor) reads, as
+    /// (k, place): i·n + j for dense factors, the entry's place in the plan for sparse ones
+    /// (an entry outside the plan's pattern, which the factors would not read, is left out).
+    pub(crate) fn places(
+        &self,
+        entries: impl Iterator<Item = (usize, usize, usize)>,
+    ) -> Vec<(usize, usize)> {
+        match self {
+            Self::Dense(lu) => entries.map(|(i, j, k)| (k, i * lu.dim() + j)).collect(),
+            Self::Sparse(lu) => {
+                entries.filter_map(|(i, j, k)| Some((k, lu.plan().place(i, j)?))).collect()
+            }
+        }
+    }
+
+    /// The length of the J that [`factor`](Self::factor) reads: n² for dense factors, the
+    /// plan's entries for sparse ones.
+    pub(crate) fn placed_len(&self) -> usize {
+        match self {
+            Self::Dense(lu) => lu.dim() * lu.dim(),
+            Self::Sparse(lu) => lu.plan().entries(),
+        }
+    }
+
+    /// J row by row from what [`factor`](Self::factor) reads.
+    pub(crate) fn dense(&self, jac: &[f64]) -> Vec<f64> {
+        match self {
+            Self::Dense(_) => jac.to_vec(),
+            Self::Sparse(lu) => lu.plan().spread(jac),
         }
     }
 

@@ -72,8 +72,10 @@ pub struct SparseLu {
     /// The right-hand sides in the order, row by row.
     work: Vec<f64>,
     /// The dense factorisation of the steps where the diagonal pivots are refused, formed
-    /// at the first refusal (n² values that most integrations never touch).
+    /// at the first refusal (n² values that most integrations never touch), and J made
+    /// dense for it where it is given by its entries.
     dense: Option<Lu>,
+    spread: Vec<f64>,
     /// The most right-hand sides solved at once.
     width: usize,
     use_dense: bool,
@@ -131,6 +133,29 @@ impl Plan {
     pub fn entries_of_factors(&self) -> usize {
         self.columns.len()
     }
+
+    /// E's entries: J's pattern (columns below n) and the diagonal, each once.
+    pub fn entries(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// J row by row from its values in the plan's places.
+    pub fn spread(&self, placed: &[f64]) -> Vec<f64> {
+        let mut jac = vec![0.0; self.n * self.n];
+        for (&(_, at, _), &v) in self.entries.iter().zip(placed) {
+            jac[at] = v;
+        }
+        jac
+    }
+
+    /// Where J's entry (i, j) is among the plan's entries ([`SparseLu::factor`]): `None`
+    /// for a place outside the pattern the plan was made for.
+    pub fn place(&self, i: usize, j: usize) -> Option<usize> {
+        let n = self.n;
+        // The entries are in column order, rows ascending within a column: at = i·n + j.
+        let key = |e: &(usize, usize, bool)| (e.1 % n, e.1 / n);
+        self.entries.binary_search_by_key(&(j, i), key).ok()
+    }
 }
 
 impl SparseLu {
@@ -151,6 +176,7 @@ impl SparseLu {
             work: vec![0.0; n * columns.max(1)],
             plan,
             dense: None,
+            spread: Vec::new(),
             width: columns,
             use_dense: false,
             skip: 0,
@@ -168,14 +194,21 @@ impl SparseLu {
         self.plan.n
     }
 
+    /// The plan the factors follow.
+    pub fn plan(&self) -> &Plan {
+        &self.plan
+    }
+
     /// Whether the last factorisation fell back to the dense LU.
     pub fn fell_back(&self) -> bool {
         self.use_dense
     }
 
-    /// Factorises E = I·`inv_gamma_h` − J, J the dense Jacobian row by row (only its entries
-    /// in the pattern are read): along the pattern with diagonal pivots, or dense where they
-    /// are refused, or were refused lately ([`MAX_SKIP`]).
+    /// Factorises E = I·`inv_gamma_h` − J, J given by its values in the plan's places
+    /// ([`Plan::place`]; a place of the plan's that J lacks, on the diagonal, holds 0): along
+    /// the pattern with diagonal pivots, or dense where they are refused, or were refused
+    /// lately ([`MAX_SKIP`]). J is never held as n² values but there (a system of 20 000
+    /// states held 3.2 GB of them, nearly all zero, where its factors are sparse).
     pub fn factor(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<(), FactorError> {
         self.use_dense = false;
         if self.skip > 0 {
@@ -189,7 +222,11 @@ impl SparseLu {
         }
         self.use_dense = true;
         let (n, width) = (self.plan.n, self.width);
-        let dense = self.dense.get_or_insert_with(|| Lu::new(n, width));
+        self.spread.resize(n * n, 0.0);
+        for (&(_, at, _), &v) in self.plan.entries.iter().zip(jac) {
+            self.spread[at] = v;
+        }
+        let (dense, jac) = (self.dense.get_or_insert_with(|| Lu::new(n, width)), &self.spread);
         dense.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
     }
 
@@ -197,8 +234,8 @@ impl SparseLu {
     /// the pivots were accepted ([`eliminate`](Self::eliminate)).
     fn factor_along_pattern(&mut self, inv_gamma_h: f64, jac: &[f64]) -> Result<bool, FactorError> {
         self.values.fill(0.0);
-        for &(slot, at, diagonal) in &self.plan.entries {
-            self.values[slot] = if diagonal { inv_gamma_h } else { 0.0 } - jac[at];
+        for (&(slot, _, diagonal), &j) in self.plan.entries.iter().zip(jac) {
+            self.values[slot] = if diagonal { inv_gamma_h } else { 0.0 } - j;
         }
         if self.values.iter().any(|v| !v.is_finite()) {
             return Err(FactorError::Singular);
@@ -518,9 +555,40 @@ mod tests {
         // The cycle fills in: more than E's 2n entries, far fewer than n².
         assert!(sparse.entries_of_factors() > 2 * n, "{}", sparse.entries_of_factors());
         assert!(sparse.entries_of_factors() < 4 * n, "{}", sparse.entries_of_factors());
-        sparse.factor(10.0, &jac).expect("regular");
+        sparse.factor(10.0, &placed(&sparse, &jac)).expect("regular");
         assert!(!sparse.fell_back());
         agree(&mut sparse, &mut dense_of(n, &jac, 10.0), n);
+    }
+
+    /// The dense J's values in the plan's places, as the factors read J.
+    fn placed(lu: &SparseLu, jac: &[f64]) -> Vec<f64> {
+        lu.plan().entries.iter().map(|&(_, at, _)| jac[at]).collect()
+    }
+
+    /// Every entry of the pattern has its place, and J spread from its places is J, but
+    /// for the entry outside the pattern, which has none; and the fallback to dense
+    /// factors solves with the J spread (1/(γh) = 1e-3: the first pivot is 1e-3, J₀₀
+    /// being 0, and row 1's multiplier 1.1e3 is refused).
+    #[test]
+    fn the_places_hold_the_pattern() {
+        let n = 40;
+        let (pattern, jac) = chain(n);
+        let mut lu = SparseLu::new(n, &pattern, 3).expect("ordered");
+        let mut values = vec![0.0; lu.plan().entries()];
+        for &(i, j) in &pattern {
+            let (i, j) = (i as usize, j as usize);
+            values[lu.plan().place(i, j).expect("in the pattern")] = jac[i * n + j];
+        }
+        assert_eq!(values, placed(&lu, &jac));
+        assert_eq!(lu.plan().place(5, 30), None);
+        let spread = lu.plan().spread(&values);
+        for (at, (&a, &b)) in spread.iter().zip(&jac).enumerate() {
+            let outside = at == 5 * n + 30;
+            assert_eq!(a.to_bits(), if outside { 0.0 } else { b }.to_bits(), "entry {at}");
+        }
+        lu.factor(1e-3, &values).expect("regular");
+        assert!(lu.fell_back());
+        agree(&mut lu, &mut dense_of(n, &jac, 1e-3), n);
     }
 
     /// A system's plan is found once: every later call of its cell hands out the same one,
@@ -537,7 +605,7 @@ mod tests {
         let (mut one, mut other) = (SparseLu::with_plan(first, 3), SparseLu::with_plan(again, 3));
         let mut own = SparseLu::new(n, &pattern, 3).expect("ordered");
         for (lu, h) in [(&mut one, 10.0), (&mut other, 20.0), (&mut own, 10.0)] {
-            lu.factor(h, &jac).expect("regular");
+            lu.factor(h, &placed(lu, &jac)).expect("regular");
         }
         let r: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
         let solved = |lu: &mut SparseLu| {
@@ -559,7 +627,7 @@ mod tests {
         let (pattern, jac) = chain(n);
         for k in [1, 2, 7, 16, 17, 32, 33, 70] {
             let mut sparse = SparseLu::new(n, &pattern, k).expect("ordered");
-            sparse.factor(10.0, &jac).expect("regular");
+            sparse.factor(10.0, &placed(&sparse, &jac)).expect("regular");
             assert!(!sparse.fell_back());
             let b = |i: usize, j: usize| (i as f64 * 0.7 - j as f64 * 1.3).cos();
             let mut rows: Vec<f64> = (0..n).flat_map(|i| (0..k).map(move |j| b(i, j))).collect();
@@ -584,7 +652,7 @@ mod tests {
             // E = [[d, 1], [1, d]]: J = −E off the diagonal, and d on it with 1/(γh) = 2d.
             let jac = [-diagonal, -1.0, -1.0, -diagonal];
             let mut sparse = SparseLu::new(n, &pattern, 3).expect("ordered");
-            sparse.factor(0.0, &jac).expect("regular");
+            sparse.factor(0.0, &placed(&sparse, &jac)).expect("regular");
             assert_eq!(sparse.fell_back(), falls_back, "d = {diagonal}");
             let mut dense = Lu::new(n, 3);
             dense.factor(|i, j| -jac[i * n + j]).expect("regular");
@@ -613,7 +681,7 @@ mod tests {
         ];
         for (step, (diagonal, falls_back)) in steps.into_iter().enumerate() {
             let jac = [-diagonal, -1.0, -1.0, -diagonal];
-            sparse.factor(0.0, &jac).expect("regular");
+            sparse.factor(0.0, &placed(&sparse, &jac)).expect("regular");
             assert_eq!(sparse.fell_back(), falls_back, "step {step}");
             let mut dense = Lu::new(n, 3);
             dense.factor(|i, j| -jac[i * n + j]).expect("regular");
@@ -629,7 +697,7 @@ mod tests {
         let (pattern, mut jac) = chain(n);
         let mut sparse = SparseLu::new(n, &pattern, 3).expect("ordered");
         jac[n - 1] = f64::INFINITY;
-        assert_eq!(sparse.factor(1.0, &jac), Err(FactorError::Singular));
+        assert_eq!(sparse.factor(1.0, &placed(&sparse, &jac)), Err(FactorError::Singular));
     }
 
     /// The fill of an arrow matrix: eliminating the hub first fills everything, last fills
