@@ -37,7 +37,7 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
     args.integrator.validate()?;
     args.starts.options()?;
     args.starts.check_start(&args.options.start)?;
-    sysid_registry::parse_list(&args.method.method)?;
+    args.method.check()?;
     let (problem, context) = problem(&args.source, &args.integrator, &args.options)?;
     // Where the figure goes is checked before the work, not after it.
     if let Some(stem) = &args.waterfall {

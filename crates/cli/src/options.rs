@@ -148,6 +148,25 @@ pub struct MethodArg {
     pub method: String,
 }
 
+impl MethodArg {
+    /// The method named, checked before any work ([`one_method`]).
+    pub fn check(&self) -> anyhow::Result<()> {
+        one_method(&self.method, "--method")
+    }
+}
+
+/// `name`, given to `flag`, is one method of the registry, exactly: a list, or a name with
+/// spaces around it, was let through by the check of lists and refused only once the
+/// problem was loaded, as if the problem were at fault.
+pub fn one_method(name: &str, flag: &str) -> anyhow::Result<()> {
+    if name.contains(',') {
+        anyhow::bail!(
+            "{flag} `{name}`: one method here (`sysid compare --methods A,B` compares several)"
+        );
+    }
+    sysid_registry::entry(name).map(|_| ()).map_err(|e| anyhow::anyhow!("{flag}: {e}"))
+}
+
 /// `--ql-start`: the first trajectory of quasilinearization.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ValueEnum)]
 pub enum QlStart {

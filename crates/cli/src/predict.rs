@@ -45,7 +45,7 @@ pub fn run(args: &PredictArgs) -> anyhow::Result<Outcome> {
     }
     args.options.validate()?;
     args.integrator.validate()?;
-    sysid_registry::parse_list(&args.method.method)?;
+    args.method.check()?;
     let (problem, context) = problem(&args.source, &args.integrator, &args.options)?;
     if let Some(out) = &args.out {
         not_an_input(out, &context.inputs, "--out")?;

@@ -195,10 +195,7 @@ impl Context {
     /// message does not begin with it: the errors found at run time (a model that cannot be
     /// integrated from the start, an NLL that cannot be evaluated) otherwise name no file.
     pub fn blame(&self, e: anyhow::Error) -> anyhow::Error {
-        match format!("{e:#}").starts_with(&self.name) {
-            true => e,
-            false => e.context(self.name.clone()),
-        }
+        blame(&self.name, e)
     }
 
     /// The progress lines of a fit of this problem with `method`, every `every` seconds in a
@@ -277,6 +274,15 @@ pub fn with_starts(record: FitRecord<'_>, starts: Option<&Starts>) -> serde_json
         map.insert("starts".into(), serde_json::to_value(s).expect("starts serialise"));
     }
     value
+}
+
+/// `e` with `source` (a file, or a catalogue system) before its message, where the message
+/// does not begin with it ([`Context::blame`]).
+pub fn blame(source: &str, e: anyhow::Error) -> anyhow::Error {
+    match format!("{e:#}").starts_with(&format!("{source}: ")) {
+        true => e,
+        false => e.context(source.to_string()),
+    }
 }
 
 /// The values of the unknowns at `at` ([`named_point`](sysid_core::format::named_point)).

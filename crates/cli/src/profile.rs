@@ -61,7 +61,7 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
     args.integrator.validate()?;
     args.starts.options()?;
     args.starts.check_start(&args.options.start)?;
-    sysid_registry::parse_list(&args.method.method)?;
+    args.method.check()?;
     if args.max_points == 0 {
         bail!("--max-points must be at least 1");
     }
@@ -156,7 +156,7 @@ pub fn run(args: &ProfileArgs) -> anyhow::Result<Outcome> {
             );
             return Ok(Outcome::NotConverged);
         }
-        profiled => profiled?,
+        profiled => profiled.map_err(|e| context.blame(e.into()))?,
     };
     match args.format {
         Format::Json => {

@@ -14,7 +14,7 @@ use sysid_registry::Role;
 use crate::Outcome;
 use crate::options::{IntegratorArgs, MethodArgs, SourceArgs};
 use crate::output::{Watch, emit, not_an_input, progress_bar};
-use crate::problem::{case, fit, method, no_source, prepare, watching};
+use crate::problem::{blame, case, fit, method, no_source, prepare, watching};
 use sysid_registry::any::{AnySystem, model_problem};
 
 /// The help of `--methods`: the registry's study methods.
@@ -137,7 +137,7 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
     // study.json records them (with `settings.ql_start`), so that a study's shards and
     // resumed runs compare equal.
     crate::problem::as_run(&methods, &args.options.settings())?;
-    sysid_registry::parse_list(&args.reference)?;
+    crate::options::one_method(&args.reference, "--reference")?;
     // The numbers checked before any work: a model file's reference fit comes first and can
     // take minutes (`--trials 0` on Fujita was refused only after it).
     spec(args, "", methods.clone(), BTreeMap::new()).validate()?;
@@ -205,7 +205,7 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
             ));
             let fitted =
                 watching(&watch, || fit(&problem, &args.reference, &args.options.settings()))
-                    .with_context(|| path.display().to_string())?;
+                    .map_err(|e| blame(&path.display().to_string(), e))?;
             if fitted.termination == Termination::Interrupted {
                 return Ok(stopped(&format!(
                     "stopped during the fit to {}'s data that gives the study its truth: no trial was run",
@@ -222,7 +222,8 @@ pub fn run(args: &StudyArgs) -> anyhow::Result<Outcome> {
             // The noise scales at the values the fit estimated them at.
             let scales: Vec<f64> = fitted.scales.iter().map(|s| s.value).collect();
             let problem = problem.with_scales(&scales);
-            let scenario = Scenario::from_residuals(problem, fitted.values)?;
+            let scenario = Scenario::from_residuals(problem, fitted.values)
+                .map_err(|e| blame(&path.display().to_string(), e.into()))?;
             run_scenario(args, &path.display().to_string(), scenario, methods, settings)
         }
         (None, None) => Err(no_source()),
@@ -287,7 +288,8 @@ fn run_scenario(
     let spec = spec(args, system, methods.clone(), settings);
     let build = |m: &str| method(m, &method_settings);
     let fits = methods.iter().map(|m| build(m)).collect::<anyhow::Result<Vec<_>>>()?;
-    let study = Study::new(spec, scenario, fits, build(&args.reference)?)?;
+    let study = Study::new(spec, scenario, fits, build(&args.reference)?)
+        .map_err(|e| blame(system, e.into()))?;
     if let Some(axes) = &args.basin {
         let names = study.scenario().problem().names();
         let index = |n: &str| {

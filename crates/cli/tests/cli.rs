@@ -180,6 +180,28 @@ fn bad_input_exits_2_with_one_line() {
             &["fit", "--system", "falling-body", "--method", "nope"][..],
             "unknown method `nope` (methods: goodman",
         ),
+        // A list, or a name with a space, got past the check and was refused only once the
+        // problem was loaded, in the problem's name: `falling-body: unknown method …`.
+        (
+            &["fit", "--system", "falling-body", "--method", "goodman,nl2sol"][..],
+            "error: --method `goodman,nl2sol`: one method here (`sysid compare --methods A,B`",
+        ),
+        (
+            &["predict", "--model", "no.toml", "--until", "9", "--method", " goodman"][..],
+            "error: --method: unknown method ` goodman` (methods: goodman",
+        ),
+        (
+            &[
+                "study",
+                "--system",
+                "falling-body",
+                "--out",
+                "/nonexistent/s",
+                "--reference",
+                "goodman,nl2sol",
+            ][..],
+            "error: --reference `goodman,nl2sol`: one method here",
+        ),
         (&["fit", "--system", "falling-body", "--format", "xml"][..], "invalid value 'xml'"),
         (&["fit"][..], "--system"),
         (&["frobnicate"][..], "unrecognized subcommand"),

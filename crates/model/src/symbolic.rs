@@ -508,12 +508,11 @@ impl Graph {
     }
 }
 
-/// The children of a term.
 /// What forward mode walks over the terms `roots` reach ([`Graph::columns`]): each term's
 /// users, the rows each root is, and the work space of one column at a time.
 struct Walk {
-    /// The users of term `reachable[k]`'s id are `users[starts[id]..starts[id + 1]]`
-    /// (indexed by id, for the ids below the graph's length at the start).
+    /// The users of term `id` among the reachable terms are `users[starts[id]..starts[id +
+    /// 1]]` (indexed by id, for the ids below the graph's length at the start).
     starts: Vec<u32>,
     users: Vec<Id>,
     /// The rows whose root is the term: `rows[row_starts[id]..row_starts[id + 1]]`.
@@ -592,6 +591,7 @@ impl Walk {
     }
 }
 
+/// The children of a term.
 fn children(term: Term) -> impl Iterator<Item = Id> {
     let (list, len): ([Id; 4], usize) = match term {
         Term::Const(_) | Term::Var(_) => ([0; 4], 0),
