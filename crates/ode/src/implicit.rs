@@ -56,7 +56,6 @@ impl IterationMatrix {
             ),
             None => Vec::new(),
         };
-        let size = if lu.is_sparse() { lu.placed_len() } else { n * n };
         let directions = if analytic || sparse.is_some() { 0 } else { n };
         let mut identity = vec![0.0; n * directions];
         for i in 0..directions {
@@ -64,8 +63,8 @@ impl IterationMatrix {
         }
         Self {
             n,
+            jac: vec![0.0; lu.placed_len()],
             lu,
-            jac: vec![0.0; size],
             places,
             products: JacobianProducts::new(n, p, &vec![0.0; np * n], n, directions),
             identity,

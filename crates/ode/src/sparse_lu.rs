@@ -142,10 +142,16 @@ impl Plan {
     /// J row by row from its values in the plan's places.
     pub fn spread(&self, placed: &[f64]) -> Vec<f64> {
         let mut jac = vec![0.0; self.n * self.n];
+        self.spread_into(placed, &mut jac);
+        jac
+    }
+
+    /// Puts J's values in the plan's places into `jac` (n × n, row by row), leaving its
+    /// other entries as they are.
+    fn spread_into(&self, placed: &[f64], jac: &mut [f64]) {
         for (&(_, at, _), &v) in self.entries.iter().zip(placed) {
             jac[at] = v;
         }
-        jac
     }
 
     /// Where J's entry (i, j) is among the plan's entries ([`SparseLu::factor`]): `None`
@@ -222,10 +228,9 @@ impl SparseLu {
         }
         self.use_dense = true;
         let (n, width) = (self.plan.n, self.width);
+        // The places outside the plan are never written: they stay 0.
         self.spread.resize(n * n, 0.0);
-        for (&(_, at, _), &v) in self.plan.entries.iter().zip(jac) {
-            self.spread[at] = v;
-        }
+        self.plan.spread_into(jac, &mut self.spread);
         let (dense, jac) = (self.dense.get_or_insert_with(|| Lu::new(n, width)), &self.spread);
         dense.factor(|i, j| if i == j { inv_gamma_h } else { 0.0 } - jac[i * n + j])
     }
