@@ -1230,3 +1230,60 @@ fn a_sigma_column_that_names_something_else_is_refused() {
     let out = sysid(&["fit", "--model", &case.model()]);
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
 }
+
+/// Logistic growth from 1e-14, x′ = b x (1 − x): below atol the integration controls nothing
+/// of x, so where the start is far below it the cost is an artefact of the integration. A fit
+/// there says so instead of naming a minimum, a flat direction or a sloppy one; at an atol
+/// below the start it finds the start and the rate that made the data (the closed form).
+#[test]
+fn a_fit_the_integration_does_not_resolve_says_so() {
+    let model = r#"states = ["x"]
+parameters = ["b", "x0"]
+[equations]
+x = "b * x * (1 - x)"
+[initial]
+x = "x0"
+[unknowns]
+b = { guess = 1.0, log = true }
+x0 = { guess = 1e-14, log = true, min = 1e-30, max = 1 }
+[data]
+file = "data.csv"
+[data.weights]
+x = 10000.0
+"#;
+    let mut data = String::from("t,x\n");
+    for i in 0..=40 {
+        let t = f64::from(i);
+        data += &format!("{t},{:e}\n", 1.0 / (1.0 + (1e14 - 1.0) * (-t).exp()));
+    }
+    let case = Case::new("unresolved", model, &data);
+    let path = case.model();
+    let fit = |extra: &[&str]| {
+        let mut args = vec!["fit", "--model", &path, "--format", "json"];
+        args.extend_from_slice(extra);
+        let out = sysid(&args);
+        let json = serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap();
+        // 0 where the fit converged, 1 where it did not.
+        let code = if json["converged"] == true { 0 } else { 1 };
+        assert_eq!(out.status.code(), Some(code), "{}", text(&out.stderr));
+        json
+    };
+    // At the model file's atol 1e-10.
+    let json = fit(&[]);
+    let said = json["termination"].as_str().unwrap();
+    assert_eq!(json["converged"], false, "{said}");
+    assert!(said.contains("the integration does not resolve the model"), "{said}");
+    assert!(!said.contains("x0") && !said.contains("not a minimum"), "{said}");
+    assert_eq!(json["undetermined"], serde_json::json!([]));
+    let (cost, error) = (json["cost"].as_f64().unwrap(), json["cost_error"].as_f64().unwrap());
+    assert!(error > 0.1 * cost, "ε {cost}, its error {error}");
+    // At atol 1e-22 the start and the rate are found: x0 to 1e-4 and b to 1e-6 relative
+    // (the data are printed to 6 digits).
+    let json = fit(&["--atol", "1e-22"]);
+    let said = json["termination"].as_str().unwrap();
+    assert!(!said.contains("does not resolve"), "{said}");
+    let x0 = json["estimates"]["x0"].as_f64().unwrap();
+    let b = json["estimates"]["b"].as_f64().unwrap();
+    assert!((x0 / 1e-14 - 1.0).abs() < 1e-4 && (b - 1.0).abs() < 1e-6, "x0 {x0}, b {b}: {said}");
+    assert!(json["nll_error"].as_f64().unwrap() < 1e-9, "{}", json["nll_error"]);
+}

@@ -128,7 +128,7 @@ pub struct Certificate {
     /// integration as `error` (0 where `error` is not measured, ∞ where that integration
     /// fails).
     pub cost_error: f64,
-    /// Whether `error` was measured: false for an exact fit, a point that failed, and where
+    /// Whether `error` was measured: false for a point that failed, and where
     /// at the finest rtol the other scheme it is measured against could not integrate the
     /// model (its 0 is then not a measured 0).
     pub error_measured: bool,
@@ -152,15 +152,26 @@ pub struct Certificate {
     /// relative change |ln(ŝ/s)| their closed form would still make at the point; it must be
     /// at most gtol too. `None` without noise scales.
     pub scales: Option<f64>,
+    /// Whether the integration does not resolve the model at the point: ε, integrated again
+    /// as `cost_error` measures it, moves by more than a tenth of itself and by more than ten
+    /// times what the tolerances allow there
+    /// ([`cost_resolution`](crate::Problem::cost_resolution)). Nothing the point's
+    /// sensitivities say holds then: no unknown is flat there (the flags are withdrawn, with the
+    /// null space), and the point is not certified. (A state that starts far below atol is not
+    /// controlled at all: Beer's bacteria from 1e-14 at atol 1e-12 gave ε = 1.1e8, 4.2e15 at a
+    /// tenth of the tolerances.)
+    pub unresolved: bool,
 }
 
 impl Certificate {
     /// Whether the point is certified: the first-order test holds (or ε = 0 to rounding),
-    /// its integration error could be measured where it is due, no unknown is undetermined
-    /// and not every unknown is flat.
+    /// its integration error could be measured where it is due and resolves the model
+    /// ([`unresolved`](Self::unresolved)), no unknown is undetermined and not every unknown
+    /// is flat.
     pub fn holds(&self) -> bool {
         (self.exact_fit || self.optimality + self.error <= self.gtol)
             && self.unchecked.is_none()
+            && !self.unresolved
             && self.scales.is_none_or(|m| m <= self.gtol)
             && !self.plateau()
             && !self.has_undetermined()
@@ -213,6 +224,7 @@ impl Certificate {
             null_space: None,
             scales: None,
             unchecked: None,
+            unresolved: false,
         }
     }
 }
@@ -430,6 +442,7 @@ pub fn certify<S: System>(
         null_space,
         scales: None,
         unchecked: None,
+        unresolved: false,
     }
 }
 
@@ -475,6 +488,7 @@ mod tests {
             null_space: None,
             scales: None,
             unchecked: None,
+            unresolved: false,
         }
     }
 

@@ -491,6 +491,11 @@ impl Estimate {
         let c = &self.certificate;
         if !c.optimality.is_finite() {
             "no (the reported point could not be evaluated)".into()
+        } else if c.unresolved {
+            format!(
+                "no (the integration does not resolve the model there: ε moves by {:.2e} in the integration that checks it)",
+                c.cost_error
+            )
         } else if c.plateau() {
             let names = self.undetermined();
             if names.is_empty() {

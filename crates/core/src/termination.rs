@@ -198,6 +198,9 @@ pub enum Termination {
         iteration: usize,
         /// The certificate's measure there.
         optimality: f64,
+        /// The measure's integration error there (the certificate's `error`; 0 where not
+        /// measured).
+        error: f64,
         /// Whether the point is a plateau: the model responds to no unknown there.
         plateau: bool,
         /// The unknowns the model does not respond to there, off their bounds: the data do
@@ -211,6 +214,10 @@ pub enum Termination {
         /// step, with error control) fails there: that failure
         /// ([`Certificate::unchecked`](crate::Certificate::unchecked)).
         unchecked: Option<String>,
+        /// Where the integration does not resolve the model at the point
+        /// ([`Certificate::unresolved`](crate::Certificate::unresolved)): ε's integration
+        /// error and ε. The unknowns are then named neither undetermined nor moving.
+        unresolved: Option<(f64, f64)>,
         /// Where the method's last trial before the stop could not be integrated: its
         /// error. A trust region that shrinks to nothing because every step towards a lower
         /// cost fails to integrate has stopped at the edge of where the model has a solution
@@ -306,6 +313,12 @@ impl Termination {
     fn sentence(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Termination::Converged(rule) => write!(f, "converged: {rule}"),
+            Termination::Stalled { rule, iteration, unresolved: Some((error, cost)), .. } => {
+                write!(
+                    f,
+                    "stalled at iteration {iteration}: {rule}, where the integration does not resolve the model: ε = {cost:.3e} there moves by {error:.3e} in the integration that checks it, so nothing the point's sensitivities say holds (no minimum, no flat direction); a finer integration (smaller --rtol and --atol: a state far below --atol is not controlled) may go on from it"
+                )
+            }
             Termination::Stalled { rule, iteration, plateau: true, .. } => write!(
                 f,
                 "stalled at iteration {iteration}: {rule}, on a plateau: the model responds to no unknown there, so no test can tell it from a minimum"
@@ -336,6 +349,15 @@ impl Termination {
                     "stalled at iteration {iteration}: {rule}, along a sloppy direction: {} still {} (first-order optimality {optimality:.2e}: not a certified minimum)",
                     moving.join(", "),
                     if moving.len() == 1 { "moves" } else { "move" }
+                )
+            }
+            // A measure within its own integration error says nothing either way.
+            Termination::Stalled { rule, iteration, optimality, error, .. }
+                if error > optimality =>
+            {
+                write!(
+                    f,
+                    "stalled at iteration {iteration}: {rule}, but the point is not certified: its first-order optimality {optimality:.2e} is within its integration error {error:.2e}, so the test cannot tell"
                 )
             }
             Termination::Stalled { rule, iteration, optimality, .. } => write!(
@@ -393,10 +415,12 @@ mod tests {
             rule: Rule::Step,
             iteration: 6,
             optimality: 7.8e-9,
+            error: 0.0,
             plateau: false,
             undetermined: vec![],
             moving: vec!["k1".into()],
             unchecked: Some("too many steps: 120 steps taken".into()),
+            unresolved: None,
             blocked: None,
         };
         assert_eq!(t.code(), "stalled_step");
@@ -415,10 +439,12 @@ mod tests {
             rule: Rule::Step,
             iteration: 13,
             optimality: 0.3,
+            error: 0.0,
             plateau: false,
             undetermined: vec!["rho_E".into()],
             moving: vec![],
             unchecked: None,
+            unresolved: None,
             blocked: Some("the solution blows up".into()),
         };
         let said = t.to_string();
@@ -426,6 +452,51 @@ mod tests {
         let end =
             "(the solution blows up): it stopped at the edge of where the model can be integrated";
         assert!(said.ends_with(end), "{said}");
+    }
+
+    /// A stall where the integration does not resolve the model says that first, with ε and
+    /// its error, and names no unknown undetermined or moving, whatever the lists hold.
+    #[test]
+    fn an_unresolved_stall_claims_nothing_of_the_unknowns() {
+        let t = Termination::Stalled {
+            rule: Rule::Step,
+            iteration: 41,
+            optimality: 0.96,
+            error: 0.04,
+            plateau: false,
+            undetermined: vec![],
+            moving: vec!["init_Bac".into()],
+            unchecked: None,
+            unresolved: Some((4.19e15, 1.09e8)),
+            blocked: None,
+        };
+        assert_eq!(t.code(), "stalled_step");
+        let said = t.to_string();
+        for needle in ["does not resolve the model", "ε = 1.090e8", "moves by 4.190e15", "--atol"]
+        {
+            assert!(said.contains(needle), "`{needle}` not in {said}");
+        }
+        assert!(!said.contains("init_Bac"), "{said}");
+        // A measure below its own integration error is not said to show a point that is not
+        // a minimum.
+        let t = Termination::Stalled {
+            rule: Rule::Step,
+            iteration: 3,
+            optimality: 1.34e-9,
+            error: 3.17e-6,
+            plateau: false,
+            undetermined: vec![],
+            moving: vec![],
+            unchecked: None,
+            unresolved: None,
+            blocked: None,
+        };
+        let said = t.to_string();
+        assert!(
+            said.contains("optimality 1.34e-9 is within its integration error 3.17e-6"),
+            "{said}"
+        );
+        assert!(!said.contains("not a minimum"), "{said}");
     }
 
     /// docs/terminations.md is the contract: every code the driver can form has its row
@@ -481,10 +552,12 @@ mod tests {
                 rule,
                 iteration: 1,
                 optimality: 1.0,
+                error: 0.0,
                 plateau: false,
                 undetermined: vec![],
                 moving: vec![],
                 unchecked: None,
+                unresolved: None,
                 blocked: None,
             });
         }

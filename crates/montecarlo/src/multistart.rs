@@ -715,6 +715,7 @@ mod tests {
                 null_space: None,
                 scales: None,
                 unchecked: None,
+                unresolved: false,
             },
             history: Vec::new(),
             elapsed: Duration::ZERO,
