@@ -270,6 +270,42 @@ impl Builder<'_> {
                 })
                 .unwrap_or(f64::NAN),
         };
+        // A compartment's size divides the amounts of its species into their
+        // concentrations: 0 made them non-finite at the first integration, named by a
+        // species (perhaps one in another compartment) rather than by the size.
+        let sets = |t: &Tsv| t.headers().iter().any(|h| h == p);
+        if s.compartments.iter().any(|c| c.0 == p)
+            && !(value.is_finite() && value > 0.0)
+            && !self.tables.conditions.iter().any(sets)
+        {
+            let within: Vec<&str> = s
+                .species
+                .iter()
+                .filter(|x| x.compartment == p && !x.amount)
+                .map(|x| x.id.as_str())
+                .collect();
+            if !within.is_empty() || !value.is_finite() {
+                let origin =
+                    self.sbml_origin(p).unwrap_or_else(|| ModelError::file(&self.sbml_file, ""));
+                let species = match within.len() {
+                    0 => String::new(),
+                    1 => format!(
+                        ": the concentration of its species `{}` is its amount divided by it",
+                        within[0]
+                    ),
+                    _ => format!(
+                        ": the concentrations of its species ({}) are their amounts divided by it",
+                        within.join(", ")
+                    ),
+                };
+                return Err(crate::at(
+                    &origin,
+                    format!(
+                        "compartment `{p}` has size {value}, where a size must be a positive number{species}"
+                    ),
+                ));
+            }
+        }
         match value.is_finite() {
             true => Ok(value),
             false => Err(ModelError::file(

@@ -333,6 +333,27 @@ fn bad_input_is_located() {
     let path = edited("sbml", "model_", |t| t.replacen("<listOfReactions>", "<listOfReactions", 1));
     let e = error_of(&path);
     assert!(e.contains("model_Boehm_JProteomeRes2014.xml:") && e.contains("not valid XML"), "{e}");
+
+    // A compartment whose size is not a positive number, at its element (line 45), with the
+    // species whose concentrations it makes meaningless: at 0 the first integration had
+    // failed on a species of the other compartment ("state STAT5A became non-finite at t =
+    // 0"), and NaN or INF were "parameter `nuc` has no value".
+    for size in ["0", "-0.45", "NaN", "INF"] {
+        let path = edited(&format!("compartment{size}"), "model_", |t| {
+            t.replacen(
+                r#"id="nuc" spatialDimensions="3" size="0.45""#,
+                &format!(r#"id="nuc" spatialDimensions="3" size="{size}""#),
+                1,
+            )
+        });
+        let e = error_of(&path);
+        assert!(
+            e.contains("model_Boehm_JProteomeRes2014.xml:45:")
+                && e.contains("compartment `nuc` has size ")
+                && e.contains("a size must be a positive number: the concentrations of its species (nucpApA, nucpApB, nucpBpB)"),
+            "{size}: {e}"
+        );
+    }
 }
 
 /// Bachmann's one prior (parameterScaleNormal on log10 init_EpoRJAK2) is a row of the
