@@ -39,7 +39,7 @@ pub struct ReportOptions {
     /// (the starts fitted are the first ones; the report says how many).
     pub petab_budget: f64,
     /// Wall-clock seconds after which one start of a PEtab multistart stops with its best
-    /// point (termination `time_limit`, not converged); none: no limit.
+    /// point (termination `time_limit`, not converged); none: no limit. Default 120.
     pub petab_start_seconds: Option<f64>,
     /// Most iterations of every fit of the catalogue's sections and of every profile point
     /// (default [`CATALOGUE_ITERATIONS`]); the PEtab section's fits have one fit's default
@@ -75,7 +75,7 @@ impl Default for ReportOptions {
             petab: None,
             petab_starts: 20,
             petab_budget: 120.0,
-            petab_start_seconds: None,
+            petab_start_seconds: Some(120.0),
             max_iterations: CATALOGUE_ITERATIONS,
             command: "sysid report --out reports".into(),
         }
@@ -112,7 +112,7 @@ impl ReportOptions {
         }
         if let Some(s) = self.petab_start_seconds.filter(|s| !(*s > 0.0 && *s <= 1e9)) {
             anyhow::bail!(
-                "--petab-start-seconds must be a finite positive number of seconds, got {s}"
+                "--petab-start-seconds must be a finite positive number of seconds (or 0: no limit), got {s}"
             );
         }
         if self.grid < 2 {
