@@ -20,7 +20,9 @@
 //!
 //! **Verdicts**: `identifiable` when both sides cross; `structurally_non_identifiable` when
 //! the profile rises by less than 1e-3 of the threshold over the whole range walked, each
-//! side to the unknown's bound or with its steps at their longest;
+//! side to the unknown's bound or with its steps at their longest, from an optimum whose
+//! certificate holds (from one whose certificate fails, such a profile is
+//! `practically_non_identifiable`);
 //! `practically_non_identifiable` when a side stays below the threshold up to the unknown's
 //! bound (a side from an optimum on the bound is there at once, and walks no point), or until
 //! the point budget ran out with its steps at their longest ([`MAX_STEP`]: the profile too
@@ -280,7 +282,7 @@ pub enum Label {
     /// the profile was rising and had not crossed; more points decide.
     Undecided,
     /// The profile is flat: it rises by less than 1e-3 of the threshold over the range
-    /// walked.
+    /// walked, from a certified optimum.
     StructurallyNonIdentifiable,
     /// A fit along the profile panicked (a defect in sysid): no verdict
     /// ([`Profile::failed`] holds the message).
@@ -522,7 +524,11 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             Label::Failed
         } else if stopped {
             Label::Stopped
-        } else if !budget && rise < 1e-3 * self.options.threshold {
+        } else if !budget && rise < 1e-3 * self.options.threshold && self.optimum.converged() {
+            // Flat from a certified minimum: a property of the model there. From a point
+            // that is not one (a plateau where the model responds to nothing, a fit stopped
+            // short), flatness says only that the data do not constrain the unknown over
+            // the range walked: practically non-identifiable, below.
             Label::StructurallyNonIdentifiable
         } else if open {
             Label::PracticallyNonIdentifiable

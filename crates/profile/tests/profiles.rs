@@ -163,6 +163,43 @@ fn only_a_product_identifiable_is_structurally_non_identifiable() {
     }
 }
 
+/// The same flat profiles from an optimum whose certificate fails (a gtol of 1e-15, which
+/// the minimum cannot meet) are not called structural: that is a property of the model at a
+/// minimum, and the point is not known to be one.
+#[test]
+fn a_flat_profile_from_an_uncertified_optimum_is_not_called_structural() {
+    let sys = Product(Signature::new(&["y"], &["k1", "k2"]));
+    let times: Vec<f64> = (1..=8).map(|i| 0.5 * i as f64).collect();
+    let values: Vec<f64> = times
+        .iter()
+        .enumerate()
+        .map(|(m, t)| (-0.5 * t).exp() * (1.0 + 0.01 * if m % 2 == 0 { 1.0 } else { -1.0 }))
+        .collect();
+    let problem = Problem::builder(sys)
+        .known("y", 1.0)
+        .unknown_with(Unknown::new("k1", 1.0).log())
+        .unknown_with(Unknown::new("k2", 0.4).log())
+        .data(Data::discrete().series("y", &times, &values))
+        .build()
+        .unwrap();
+    let mut settings = Settings::default();
+    settings.driver.gtol = Some(1e-15);
+    settings.driver.max_iterations = 30;
+    let method = Registry::standard().build("levenberg-marquardt", &settings).unwrap();
+    let optimum = method.fit(&problem).unwrap();
+    assert!(!optimum.converged(), "{}", optimum.termination);
+    let options = ProfileOptions { max_steps: 20, ..ProfileOptions::default() };
+    let Outcome::Profiles(profiles) = profile(&*method, &problem, &optimum, &[], &options).unwrap()
+    else {
+        panic!("a better optimum");
+    };
+    for p in &profiles {
+        let rise = p.points.iter().map(|q| q.nll - optimum.objective()).fold(0.0, f64::max);
+        assert!(rise < 1e-3 * options.threshold, "{}: flat, rise {rise}", p.name);
+        assert_eq!(p.label, Label::PracticallyNonIdentifiable, "{}", p.name);
+    }
+}
+
 #[test]
 fn thresholds_are_half_the_chi_square_quantiles() {
     // χ²₁(0.95) = 1.959963984540054², χ²₃(0.95) = 7.814727903251178 (tables).
