@@ -90,6 +90,24 @@ fn a_study_writes_its_files_and_prints_the_table() {
     assert_eq!(text(&run.stderr).lines().count(), 1, "{}", text(&run.stderr));
     // The table on stdout is summary.md.
     assert_eq!(table, std::fs::read_to_string(Path::new(&out).join("summary.md")).unwrap());
+    // The settings as given, however small: the noise at the least the study takes was
+    // printed as 150 decimal places ("noise 0.000…0001·σ").
+    let tiny = sysid(&[
+        "study",
+        "--system",
+        "falling-body",
+        "--methods",
+        "goodman",
+        "--trials",
+        "2",
+        "--noise",
+        "1e-150",
+        "--out",
+        &scratch.path("tiny"),
+    ]);
+    assert_eq!(tiny.status.code(), Some(0), "{}", text(&tiny.stderr));
+    let table = text(&tiny.stdout);
+    assert!(table.contains("2 trials, noise 1e-150·σ, starts perturbed by ρ = 0.2,"), "{table}");
 }
 
 #[test]

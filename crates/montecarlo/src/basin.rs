@@ -167,7 +167,7 @@ impl Basin {
             self.axes[1],
             significant(self.y[self.y.len() - 1]),
             significant(self.y[0]),
-            s.noise,
+            sysid_core::format::shortest(s.noise),
             s.seed
         );
         for map in &self.maps {

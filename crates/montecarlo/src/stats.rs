@@ -6,6 +6,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::trial::{REFERENCE, StudySpec, TrialRecord};
+use sysid_core::format::shortest;
 
 pub use sysid_core::confidence::Z95;
 
@@ -230,7 +231,12 @@ impl Summary {
             "# Study: {}\n\n{} trials, noise {}·σ, starts perturbed by ρ = {}, seed {}; reference: \
              {} from the truth. A method succeeds on a trial when it converges to the reference \
              fit's cost (within 1e-6 relative).\n\n",
-            s.system, self.trials, s.noise, s.perturb, s.seed, s.reference
+            s.system,
+            self.trials,
+            shortest(s.noise),
+            shortest(s.perturb),
+            s.seed,
+            s.reference
         );
         out += "| method | success | 95 % interval | outcomes | iterations (median / 90 %) | time ms (median / 90 %) |\n";
         out += "|---|---|---|---|---|---|\n";
