@@ -275,11 +275,34 @@ impl<'a> Builder<'a> {
         b.read_parameters()?;
         b.read_observables()?;
         b.check_conditions()?;
+        b.warn_sizeless();
         b.name_ids();
         b.name_overrides();
         b.resolve_rules()?;
         b.resolve_events()?;
         Ok(b)
+    }
+
+    /// A warning for each compartment whose element gives no size, where neither the
+    /// tables nor an initial assignment give one and a species in it is in concentration:
+    /// SBML Level 2 and 3 leave such a size undefined, and the import takes it as 1 (as Level
+    /// 1 did, and most tools do), which scales those species' rates.
+    fn warn_sizeless(&mut self) {
+        let s = self.sbml;
+        for c in &s.sizeless {
+            let given = self.parameters.contains_key(c)
+                || self.tables.conditions.iter().any(|t| t.headers().iter().any(|h| h == c))
+                || s.initial_assignments.iter().any(|a| &a.0 == c);
+            let concentration = s.species.iter().any(|x| &x.compartment == c && !x.amount);
+            if !given && concentration {
+                let origin =
+                    self.sbml_origin(c).unwrap_or_else(|| ModelError::file(&self.sbml_file, ""));
+                self.warnings.push(
+                    at(&origin, format!("compartment `{c}` has no size: it is taken as 1"))
+                        .to_string(),
+                );
+            }
+        }
     }
 
     /// Gives every SBML and PEtab id its model-file name: itself, or with trailing `_`s

@@ -72,6 +72,8 @@ pub struct Event {
 pub struct Sbml {
     /// (id, size) of each compartment (size 1 when not given).
     pub compartments: Vec<(String, f64)>,
+    /// The compartments whose element gives no size (nor `volume`): taken as size 1.
+    pub sizeless: Vec<String>,
     /// The species.
     pub species: Vec<Species>,
     /// (id, value) of each global parameter (NaN when not given).
@@ -519,8 +521,11 @@ impl Sbml {
         }
         for c in list(model, "listOfCompartments") {
             r.declare(c, "compartment", &mut out)?;
-            let size = r.number(c, "size")?.or(r.number(c, "volume")?).unwrap_or(1.0);
-            out.compartments.push((id(c).to_string(), size));
+            let size = r.number(c, "size")?.or(r.number(c, "volume")?);
+            if size.is_none() {
+                out.sizeless.push(id(c).to_string());
+            }
+            out.compartments.push((id(c).to_string(), size.unwrap_or(1.0)));
         }
         for s in list(model, "listOfSpecies") {
             r.declare(s, "species", &mut out)?;
