@@ -128,7 +128,9 @@ pub struct Certificate {
     /// integration as `error` (0 where `error` is not measured, ∞ where that integration
     /// fails).
     pub cost_error: f64,
-    /// Whether `error` was measured: false for a point that failed, and where
+    /// Whether `error` was measured (for an exact fit, whose measure is 0 by definition,
+    /// whether the integration that checks it was made: `error` stays 0): false for a point
+    /// that failed, and where
     /// at the finest rtol the other scheme it is measured against could not integrate the
     /// model (its 0 is then not a measured 0).
     pub error_measured: bool,

@@ -472,6 +472,7 @@ fn drive_once<S: System>(
             // cost does not rise beyond what the move's size allows.
             if !judged.1.holds()
                 && !onto_bound
+                && !judged.1.unresolved
                 && let Some(lin) = &current.linearization
                 && let Some(z) = onto_bounds(ev.problem(), lin, gtol)
             {
@@ -710,12 +711,15 @@ const ACCURATE: f64 = 0.1;
 /// −123.387, a certified minimum at −123.685 beyond it).
 fn unresolved(c: &crate::Certificate, gtol: f64, epsilon: f64) -> bool {
     // A check that could not be integrated resolves nothing: its cost error is ∞, and a
-    // finer integration fails at the same point.
+    // finer integration fails at the same point. Where the integration does not resolve the
+    // model at all ([`Certificate::unresolved`](crate::Certificate::unresolved)), a finer
+    // one is the only way on.
     c.unchecked.is_none()
-        && !c.has_undetermined()
-        && c.optimality > gtol
-        && c.optimality.is_finite()
-        && c.cost_error > ACCURATE * c.optimality.powi(2) * epsilon.abs()
+        && (c.unresolved
+            || (!c.has_undetermined()
+                && c.optimality > gtol
+                && c.optimality.is_finite()
+                && c.cost_error > ACCURATE * c.optimality.powi(2) * epsilon.abs()))
 }
 
 /// The measure counts as closing in below this multiple of gtol.

@@ -353,7 +353,7 @@ impl Termination {
             }
             // A measure within its own integration error says nothing either way.
             Termination::Stalled { rule, iteration, optimality, error, .. }
-                if error > optimality =>
+                if error > optimality && error.is_finite() =>
             {
                 write!(
                     f,

@@ -285,8 +285,11 @@ impl Builder<'_> {
                 .map(|x| x.id.as_str())
                 .collect();
             if !within.is_empty() || !value.is_finite() {
-                let origin =
-                    self.sbml_origin(p).unwrap_or_else(|| ModelError::file(&self.sbml_file, ""));
+                // The parameter table's row where it gives the size, else the element.
+                let origin = self
+                    .parameter_origin(p)
+                    .or_else(|| self.sbml_origin(p))
+                    .unwrap_or_else(|| ModelError::file(&self.sbml_file, ""));
                 let species = match within.len() {
                     0 => String::new(),
                     1 => format!(

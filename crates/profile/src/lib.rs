@@ -21,8 +21,8 @@
 //! **Verdicts**: `identifiable` when both sides cross; `structurally_non_identifiable` when
 //! the profile rises by less than 1e-3 of the threshold over the whole range walked, each
 //! side to the unknown's bound or with its steps at their longest, from an optimum whose
-//! certificate holds (from one whose certificate fails, such a profile is
-//! `practically_non_identifiable`);
+//! certificate holds but for undetermined unknowns (from one whose first-order test fails,
+//! or a plateau, such a profile is `practically_non_identifiable`);
 //! `practically_non_identifiable` when a side stays below the threshold up to the unknown's
 //! bound (a side from an optimum on the bound is there at once, and walks no point), or until
 //! the point budget ran out with its steps at their longest ([`MAX_STEP`]: the profile too
@@ -282,7 +282,7 @@ pub enum Label {
     /// the profile was rising and had not crossed; more points decide.
     Undecided,
     /// The profile is flat: it rises by less than 1e-3 of the threshold over the range
-    /// walked, from a certified optimum.
+    /// walked, from an optimum whose certificate holds but for undetermined unknowns.
     StructurallyNonIdentifiable,
     /// A fit along the profile panicked (a defect in sysid): no verdict
     /// ([`Profile::failed`] holds the message).
@@ -524,11 +524,11 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
             Label::Failed
         } else if stopped {
             Label::Stopped
-        } else if !budget && rise < 1e-3 * self.options.threshold && self.optimum.converged() {
-            // Flat from a certified minimum: a property of the model there. From a point
-            // that is not one (a plateau where the model responds to nothing, a fit stopped
-            // short), flatness says only that the data do not constrain the unknown over
-            // the range walked: practically non-identifiable, below.
+        } else if !budget && rise < 1e-3 * self.options.threshold && self.at_a_minimum() {
+            // Flat from a minimum: a property of the model there. From a point that is not
+            // one (a plateau where the model responds to nothing, a fit stopped short),
+            // flatness says only that the data do not constrain the unknown over the range
+            // walked: practically non-identifiable, below.
             Label::StructurallyNonIdentifiable
         } else if open {
             Label::PracticallyNonIdentifiable
@@ -539,6 +539,19 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
         };
         let name = self.problem.names()[self.i].clone();
         Ok(Ok(Profile { name, interval, label, points, failed }))
+    }
+
+    /// Whether the optimum passes the certificate but for unknowns it finds undetermined
+    /// (the model does not respond to them there, the clearest structural case): the
+    /// first-order test holds, checked by an integration that resolves the model, the noise
+    /// scales have settled, and the point is no plateau.
+    fn at_a_minimum(&self) -> bool {
+        let c = &self.optimum.certificate;
+        (c.exact_fit || c.optimality + c.error <= c.gtol)
+            && c.unchecked.is_none()
+            && !c.unresolved
+            && c.scales.is_none_or(|m| m <= c.gtol)
+            && !c.plateau()
     }
 
     /// Whether `p` lies below the optimum by more than 1e-6 relative: the fit was not at it.
