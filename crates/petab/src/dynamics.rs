@@ -32,14 +32,12 @@ impl Builder<'_> {
         let species = |n: &str| s.species.iter().any(|x| x.id == n);
         // A parameter's initial assignment gives way to the parameter table and to the
         // condition table where they set it (PEtab: their values override the model's).
-        let set_by_conditions =
-            |v: &str| self.tables.conditions.iter().any(|t| t.headers().iter().any(|h| h == v));
         let mut raw: HashMap<String, Math> = HashMap::new();
         for (v, m) in &s.initial_assignments {
             if !species(v)
                 && !self.parameters.contains_key(v)
                 && !s.rate_rules.iter().any(|r| &r.0 == v)
-                && !set_by_conditions(v)
+                && !self.set_by_conditions(v)
             {
                 raw.insert(v.clone(), m.clone());
             }

@@ -291,12 +291,11 @@ impl<'a> Builder<'a> {
         let s = self.sbml;
         for c in &s.sizeless {
             let given = self.parameters.contains_key(c)
-                || self.tables.conditions.iter().any(|t| t.headers().iter().any(|h| h == c))
+                || self.set_by_conditions(c)
                 || s.initial_assignments.iter().any(|a| &a.0 == c);
             let concentration = s.species.iter().any(|x| &x.compartment == c && !x.amount);
             if !given && concentration {
-                let origin =
-                    self.sbml_origin(c).unwrap_or_else(|| ModelError::file(&self.sbml_file, ""));
+                let origin = self.sbml_origin_or_file(c);
                 self.warnings.push(
                     at(&origin, format!("compartment `{c}` has no size: it is taken as 1"))
                         .to_string(),
@@ -391,6 +390,17 @@ impl<'a> Builder<'a> {
             warnings: self.warnings.clone(),
             nominal: self.outside.clone(),
         })
+    }
+
+    /// Whether a column of the condition table sets `id` (its values override the model's
+    /// and the parameter table's, per condition).
+    fn set_by_conditions(&self, id: &str) -> bool {
+        self.tables.conditions.iter().any(|t| t.headers().iter().any(|h| h == id))
+    }
+
+    /// [`sbml_origin`](Self::sbml_origin), or the SBML file where it does not declare `id`.
+    fn sbml_origin_or_file(&self, id: &str) -> ModelError {
+        self.sbml_origin(id).unwrap_or_else(|| ModelError::file(&self.sbml_file, ""))
     }
 
     /// Where the SBML declares `id`, as an error there begins.

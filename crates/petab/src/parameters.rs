@@ -273,10 +273,9 @@ impl Builder<'_> {
         // A compartment's size divides the amounts of its species into their
         // concentrations: 0 made them non-finite at the first integration, named by a
         // species (perhaps one in another compartment) rather than by the size.
-        let sets = |t: &Tsv| t.headers().iter().any(|h| h == p);
         if s.compartments.iter().any(|c| c.0 == p)
             && !(value.is_finite() && value > 0.0)
-            && !self.tables.conditions.iter().any(sets)
+            && !self.set_by_conditions(p)
         {
             let within: Vec<&str> = s
                 .species
@@ -286,10 +285,8 @@ impl Builder<'_> {
                 .collect();
             if !within.is_empty() || !value.is_finite() {
                 // The parameter table's row where it gives the size, else the element.
-                let origin = self
-                    .parameter_origin(p)
-                    .or_else(|| self.sbml_origin(p))
-                    .unwrap_or_else(|| ModelError::file(&self.sbml_file, ""));
+                let origin =
+                    self.parameter_origin(p).unwrap_or_else(|| self.sbml_origin_or_file(p));
                 let species = match within.len() {
                     0 => String::new(),
                     1 => format!(

@@ -124,23 +124,28 @@ impl System for Product {
     }
 }
 
-#[test]
-fn only_a_product_identifiable_is_structurally_non_identifiable() {
+/// y′ = −k1·k2·y, y(0) = 1, sampled at 0.5 … 4: k1·k2 = 0.5, with a little deterministic
+/// scatter so that the minimum is not exact.
+fn product_problem() -> Problem<Product> {
     let sys = Product(Signature::new(&["y"], &["k1", "k2"]));
     let times: Vec<f64> = (1..=8).map(|i| 0.5 * i as f64).collect();
-    // k1·k2 = 0.5, with a little deterministic scatter so that the minimum is not exact.
     let values: Vec<f64> = times
         .iter()
         .enumerate()
         .map(|(m, t)| (-0.5 * t).exp() * (1.0 + 0.01 * if m % 2 == 0 { 1.0 } else { -1.0 }))
         .collect();
-    let problem = Problem::builder(sys)
+    Problem::builder(sys)
         .known("y", 1.0)
         .unknown_with(Unknown::new("k1", 1.0).log())
         .unknown_with(Unknown::new("k2", 0.4).log())
         .data(Data::discrete().series("y", &times, &values))
         .build()
-        .unwrap();
+        .unwrap()
+}
+
+#[test]
+fn only_a_product_identifiable_is_structurally_non_identifiable() {
+    let problem = product_problem();
     let method = Registry::standard().build("levenberg-marquardt", &Settings::default()).unwrap();
     let optimum = method.fit(&problem).unwrap();
     let options = ProfileOptions { max_steps: 20, ..ProfileOptions::default() };
@@ -168,20 +173,7 @@ fn only_a_product_identifiable_is_structurally_non_identifiable() {
 /// minimum, and the point is not known to be one.
 #[test]
 fn a_flat_profile_from_an_uncertified_optimum_is_not_called_structural() {
-    let sys = Product(Signature::new(&["y"], &["k1", "k2"]));
-    let times: Vec<f64> = (1..=8).map(|i| 0.5 * i as f64).collect();
-    let values: Vec<f64> = times
-        .iter()
-        .enumerate()
-        .map(|(m, t)| (-0.5 * t).exp() * (1.0 + 0.01 * if m % 2 == 0 { 1.0 } else { -1.0 }))
-        .collect();
-    let problem = Problem::builder(sys)
-        .known("y", 1.0)
-        .unknown_with(Unknown::new("k1", 1.0).log())
-        .unknown_with(Unknown::new("k2", 0.4).log())
-        .data(Data::discrete().series("y", &times, &values))
-        .build()
-        .unwrap();
+    let problem = product_problem();
     let mut settings = Settings::default();
     settings.driver.gtol = Some(1e-15);
     settings.driver.max_iterations = 30;
