@@ -63,7 +63,7 @@ pub struct ReportArgs {
     /// its best point (termination `time_limit`, not converged), so that one problem's
     /// multistart takes at most about --petab-budget plus this; 0: no limit (a start begun
     /// runs to its end: two random starts of Raimundez_PCB2020 took 1 652 s).
-    #[arg(long, default_value_t = 120.0, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = sysid_report::PETAB_START_SECONDS, value_name = "SECONDS", value_parser = crate::options::number, allow_hyphen_values = true)]
     petab_start_seconds: f64,
     /// Most iterations of every fit in the catalogue's sections (studies, basin maps,
     /// multistarts, profiles) and of every PEtab profile point; the PEtab section's fits have

@@ -171,12 +171,18 @@ impl Certificate {
     /// ([`unresolved`](Self::unresolved)), no unknown is undetermined and not every unknown
     /// is flat.
     pub fn holds(&self) -> bool {
+        self.holds_but_for_undetermined() && !self.has_undetermined()
+    }
+
+    /// [`holds`](Self::holds), unknowns the point finds undetermined allowed: a minimum
+    /// where the model does not respond to some unknowns (a structurally flat direction),
+    /// as a profile asks of its optimum.
+    pub fn holds_but_for_undetermined(&self) -> bool {
         (self.exact_fit || self.optimality + self.error <= self.gtol)
             && self.unchecked.is_none()
             && !self.unresolved
             && self.scales.is_none_or(|m| m <= self.gtol)
             && !self.plateau()
-            && !self.has_undetermined()
     }
 
     /// Whether the point passes the first-order test (or is an exact fit) at the working

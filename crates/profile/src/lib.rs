@@ -546,12 +546,7 @@ impl<S: System + Sync, M: Method<S> + Sync + ?Sized> Tracer<'_, S, M> {
     /// first-order test holds, checked by an integration that resolves the model, the noise
     /// scales have settled, and the point is no plateau.
     fn at_a_minimum(&self) -> bool {
-        let c = &self.optimum.certificate;
-        (c.exact_fit || c.optimality + c.error <= c.gtol)
-            && c.unchecked.is_none()
-            && !c.unresolved
-            && c.scales.is_none_or(|m| m <= c.gtol)
-            && !c.plateau()
+        self.optimum.certificate.holds_but_for_undetermined()
     }
 
     /// Whether `p` lies below the optimum by more than 1e-6 relative: the fit was not at it.

@@ -49,7 +49,7 @@ pub use convergence::{Convergence, History};
 pub use cost::{Cost, CostBar};
 pub use look::{Look, look};
 pub use minima::{MethodMinima, Minima};
-pub use options::{CATALOGUE_ITERATIONS, Observer, Quiet, ReportOptions};
+pub use options::{CATALOGUE_ITERATIONS, Observer, PETAB_START_SECONDS, Quiet, ReportOptions};
 pub use prediction::{Prediction, PredictionPanel};
 pub use profiles::{ProfilePanel, Profiles};
 pub use run::write_report;
