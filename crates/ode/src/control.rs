@@ -58,8 +58,10 @@ pub(crate) fn initial_step_of_order<R: Rhs>(
     let (mut dnf, mut dny) = (0.0, 0.0);
     // A component without a scale yet (0 under a purely relative tolerance, atol = 0)
     // says nothing about the first step's size.
-    for (x, f) in w.x.iter().zip(&w.k[0]) {
-        let sk = atol + rtol * x.abs();
+    // Each state's own floor where it has one (see `state_floors`), else atol.
+    let floor = |own: &[f64], i: usize| own.get(i).copied().unwrap_or(atol);
+    for (i, (x, f)) in w.x.iter().zip(&w.k[0]).enumerate() {
+        let sk = floor(&ev.state_floors, i) + rtol * x.abs();
         if sk > 0.0 {
             dnf += (f / sk) * (f / sk);
             dny += (x / sk) * (x / sk);
@@ -81,7 +83,7 @@ pub(crate) fn initial_step_of_order<R: Rhs>(
     ev.f(t + dir * h, &w.tmp, &mut w.k[1]);
     let mut der2 = 0.0;
     for i in 0..w.x.len() {
-        let sk = atol + rtol * w.x[i].abs();
+        let sk = floor(&ev.state_floors, i) + rtol * w.x[i].abs();
         if sk > 0.0 {
             der2 += ((w.k[1][i] - w.k[0][i]) / sk).powi(2);
         }

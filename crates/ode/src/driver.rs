@@ -21,7 +21,7 @@ use crate::stiffness::{
     EXPLICIT_H_LAMBDA, EXPLICIT_REFRESHES, SPECTRAL_EVERY, SPECTRAL_STIFF_H_LAMBDA, STIFF_H_LAMBDA,
     SpectralRadius, Stiffness,
 };
-use crate::work::{Evaluator, Work};
+use crate::work::{Evaluator, Work, state_floors};
 
 /// Integrates dx/dt = f(t, x) from (t0, x0) to t_end (either direction), stopping exactly on
 /// every time in `stops` strictly between them, and calls `on_step` with the interpolant of
@@ -302,6 +302,7 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
         let counts = Counts { integrations: 1, ..Counts::default() };
         let events = rhs.n_events();
         let states = if events > 0 { rhs.states() } else { 0 };
+        let own = state_floors(cfg, rhs, x0);
         Self {
             conditions: vec![0.0; events],
             conditions_next: vec![0.0; events],
@@ -314,6 +315,8 @@ impl<'r, R: Rhs, W: FnMut(f64, f64) -> bool, O: FnMut(&Interpolant)> Run<'r, R, 
                 seg: (t0, t_end),
                 stops: (false, false),
                 floors: Vec::new(),
+                relative: Vec::new(),
+                state_floors: own,
             },
             work,
             stepper,

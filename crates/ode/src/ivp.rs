@@ -33,6 +33,8 @@ pub struct Ivp<'a, S> {
     /// Per sensitivity column of [`solve_sensitivities`](Self::solve_sensitivities), the
     /// factor w_j of the units its error is controlled in (see [`weighted`](Self::weighted)).
     weights: Option<&'a [f64]>,
+    /// The states' sizes their absolute floors are taken from ([`sized`](Self::sized)).
+    sizes: Option<&'a [f64]>,
 }
 
 /// The state at a list of times.
@@ -116,6 +118,8 @@ pub struct ModelRhs<'a, S> {
     /// that evaluation (compiled for a model file) rather than from `rhs`.
     work: Vec<f64>,
     structure: Structure,
+    /// The states' sizes for their floors ([`Ivp::sized`]).
+    sizes: Option<&'a [f64]>,
 }
 
 impl<'a, S: System> ModelRhs<'a, S> {
@@ -123,7 +127,12 @@ impl<'a, S: System> ModelRhs<'a, S> {
     pub fn new(sys: &'a S, p: &'a [f64]) -> Self {
         let work = functions_alone(sys).map(|f| f.workspace()).unwrap_or_default();
         let u = vec![0.0; sys.signature().n_inputs()];
-        Self { sys, p, u, implicit: None, work, structure: Structure::of(sys) }
+        Self { sys, p, u, implicit: None, work, structure: Structure::of(sys), sizes: None }
+    }
+
+    /// The states' sizes for their absolute floors (see [`Ivp::sized`]).
+    pub fn sized(self, sizes: Option<&'a [f64]>) -> Self {
+        Self { sizes, ..self }
     }
 }
 
@@ -156,6 +165,9 @@ fn rhs_of<S: System>(
 impl<S: System> Rhs for ModelRhs<'_, S> {
     fn dim(&self) -> usize {
         self.sys.signature().n_states()
+    }
+    fn state_sizes(&self) -> Option<&[f64]> {
+        self.sizes
     }
     fn eval(&mut self, t: f64, side: Side, x: &[f64], dx: &mut [f64]) {
         self.sys.input_values(t, side, &mut self.u);
@@ -229,6 +241,8 @@ pub struct SensitivityRhs<'a, S> {
     /// The state events fired so far, in order: (event, τ, the state before it).
     fired: Vec<Fired>,
     structure: Structure,
+    /// The states' sizes for their floors ([`Ivp::sized`]).
+    sizes: Option<&'a [f64]>,
 }
 
 impl<'a, S: System> SensitivityRhs<'a, S> {
@@ -262,7 +276,13 @@ impl<'a, S: System> SensitivityRhs<'a, S> {
                 .map(|f| f.workspace())
                 .unwrap_or_default(),
             structure: Structure::of(sys),
+            sizes: None,
         }
+    }
+
+    /// The states' sizes for their absolute floors (see [`Ivp::sized`]).
+    pub fn sized(self, sizes: Option<&'a [f64]>) -> Self {
+        Self { sizes, ..self }
     }
 
     /// Column j's error controlled as w_j·S_j: the atol factor 1/w_j (1 for a weight that
@@ -298,6 +318,10 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
 
     fn column_atol(&self) -> Option<&[f64]> {
         Some(&self.atol)
+    }
+
+    fn state_sizes(&self) -> Option<&[f64]> {
+        self.sizes
     }
 
     // The sensitivities' right-hand side J·S + ∂g/∂α is as free of t as g is.
@@ -416,7 +440,7 @@ impl<S: System> Rhs for SensitivityRhs<'_, S> {
 impl<'a, S: System> Ivp<'a, S> {
     /// The problem y' = g(t, y, α, u(t)), y(t0) = y0.
     pub fn new(system: &'a S, t0: f64, y0: &'a [f64], p: &'a [f64]) -> Self {
-        Self { system, t0, y0, p, weights: None }
+        Self { system, t0, y0, p, weights: None, sizes: None }
     }
 
     /// Error control of the sensitivities in the units they are used in: column j of
@@ -430,12 +454,29 @@ impl<'a, S: System> Ivp<'a, S> {
         Self { weights: Some(weights), ..self }
     }
 
+    /// Each state's absolute tolerance at most STATE_FLOOR·rtol·|size_i| (its sensitivities
+    /// alike): for states whose initial value is the model's own, `sizes` their initial
+    /// values, 0 for a state whose initial value was computed (a steady state, where a
+    /// value of 1e-20 may be rounding, which no floor can hold). An absolute tolerance above
+    /// a state's size controls nothing of it. Without it (the default) every state is held
+    /// to atol. One size per state.
+    pub fn sized(self, sizes: &'a [f64]) -> Self {
+        Self { sizes: Some(sizes), ..self }
+    }
+
     pub(crate) fn check(&self) -> Result<(), OdeError> {
         let sig = self.system.signature();
         if self.y0.len() != sig.n_states() {
             return Err(OdeError::Dimension {
                 what: "initial state",
                 actual: self.y0.len(),
+                expected: sig.n_states(),
+            });
+        }
+        if let Some(sizes) = self.sizes.filter(|s| s.len() != sig.n_states()) {
+            return Err(OdeError::Dimension {
+                what: "state sizes",
+                actual: sizes.len(),
                 expected: sig.n_states(),
             });
         }
@@ -472,7 +513,7 @@ impl<'a, S: System> Ivp<'a, S> {
     pub fn solve(&self, integrator: &Integrator, times: &[f64]) -> Result<Trajectory, OdeError> {
         self.check()?;
         let n = self.y0.len();
-        let mut rhs = ModelRhs::new(self.system, self.p);
+        let mut rhs = ModelRhs::new(self.system, self.p).sized(self.sizes);
         let mut values = vec![0.0; times.len() * n];
         let counts =
             sample(integrator, &mut rhs, self.t0, self.y0, times, &self.stops(), &mut values)?;
@@ -494,7 +535,7 @@ impl<'a, S: System> Ivp<'a, S> {
         // (their initial values are 0): only the others are integrated.
         let moving = moving_columns(self.system, self.p, wrt);
         let integrated: Vec<Wrt> = moving.iter().map(|&j| wrt[j]).collect();
-        let mut rhs = SensitivityRhs::new(self.system, self.p, &integrated);
+        let mut rhs = SensitivityRhs::new(self.system, self.p, &integrated).sized(self.sizes);
         if let Some(weights) = self.weights {
             let moving_weights: Vec<f64> = moving.iter().map(|&j| weights[j]).collect();
             rhs = rhs.weighted(&moving_weights);
@@ -526,7 +567,7 @@ impl<'a, S: System> Ivp<'a, S> {
         if s0.len() != n * k {
             return Err(OdeError::Dimension { what: "s0", actual: s0.len(), expected: n * k });
         }
-        let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
+        let mut rhs = SensitivityRhs::new(self.system, self.p, wrt).sized(self.sizes);
         if let Some(weights) = self.weights {
             rhs = rhs.weighted(weights);
         }
@@ -560,7 +601,7 @@ impl<'a, S: System> Ivp<'a, S> {
     ) -> Result<(Counts, Vec<Fired>), OdeError> {
         self.check()?;
         check_wrt(self.system, wrt)?;
-        let mut rhs = SensitivityRhs::new(self.system, self.p, wrt);
+        let mut rhs = SensitivityRhs::new(self.system, self.p, wrt).sized(self.sizes);
         let x0 = rhs.initial_state(self.y0);
         let stops = self.stops();
         let mut counts = Counts::default();

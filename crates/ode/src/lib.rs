@@ -121,7 +121,7 @@ pub use ivp::{
 };
 pub use jacobian::JacobianProducts;
 pub use lu::{FactorError, Lu};
-pub use options::{AUTO_DOP853_RTOL, Integrator, InvalidSetting, MIN_RTOL, Scheme};
+pub use options::{AUTO_DOP853_RTOL, Integrator, InvalidSetting, MIN_RTOL, STATE_FLOOR, Scheme};
 pub use quadrature::{GaussKronrod, LeastSquaresIntegrals, Record, RecordedOutput};
 pub use rhs::Rhs;
 pub use signal::{Inputs, Interpolation, Side, Signal};

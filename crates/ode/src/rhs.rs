@@ -29,6 +29,12 @@ pub trait Rhs {
     fn column_atol(&self) -> Option<&[f64]> {
         None
     }
+    /// The states' own sizes, from which each state's absolute floor is taken in place of
+    /// atol (see [`Ivp::sized`](crate::Ivp::sized)): one per leading state. None (the
+    /// default): every state is held to atol.
+    fn state_sizes(&self) -> Option<&[f64]> {
+        None
+    }
     /// Whether the error control measures the leading [`states`](Self::states) components
     /// as one vector and the others as another: a component is then held to
     /// max(atol, rtol·m) + rtol·|x_i|, m the largest entry of its vector at either end of the

@@ -4,7 +4,7 @@
 use crate::counts::{Costs, Counts};
 use crate::interpolant::Interpolant;
 use crate::lu::FactorError;
-use crate::options::Integrator;
+use crate::options::{Integrator, STATE_FLOOR};
 use crate::rhs::Rhs;
 use crate::signal::Side;
 
@@ -63,6 +63,12 @@ pub(crate) struct Evaluator<'r, R: Rhs> {
     pub(crate) stops: (bool, bool),
     /// The error norm's per-column floors, allocated once.
     pub(crate) floors: Vec<f64>,
+    /// Per column, rtol·m_j (m_j its largest entry): the relative part of its floor, for the
+    /// rows of states with a [floor of their own](state_floors); allocated once.
+    pub(crate) relative: Vec<f64>,
+    /// The absolute floor of each state where one state's is below atol ([`state_floors`]);
+    /// empty where every state's is atol.
+    pub(crate) state_floors: Vec<f64>,
 }
 
 impl<R: Rhs> Evaluator<'_, R> {
@@ -146,14 +152,15 @@ impl<R: Rhs> Evaluator<'_, R> {
         Ok(())
     }
 
-    /// The error norm sqrt(mean((e_i / sk_i)²)), sk_i = atol + rtol·max(|x_i|, |x̂_i|).
+    /// The error norm sqrt(mean((e_i / sk_i)²)), sk_i = atol_i + rtol·max(|x_i|, |x̂_i|),
+    /// atol_i the state's [own floor](state_floors) where it has one, else atol.
     ///
     /// Where the right-hand side [measures its errors as vectors](Rhs::errors_as_vectors),
     /// atol is max(atol, rtol·m), m the largest entry of the component's vector.
     ///
     /// For an augmented state [y; S] whose right-hand side gives its [columns](Rhs::column_atol),
     /// a sensitivity S_ij is measured as a component of its column, a vector:
-    /// sk_ij = max(atol·c_j, rtol·m_j) + rtol·max(|S_ij|, |Ŝ_ij|), m_j the column's largest
+    /// sk_ij = max(atol_i·c_j, rtol·m_j) + rtol·max(|S_ij|, |Ŝ_ij|), m_j the column's largest
     /// entry at either end of the step. An entry 1e-8 of its column's largest (a state the
     /// parameter hardly moves) is then held to rtol of the column, as the column is used,
     /// not to atol on its own: held to atol, such entries set the step on Weber's problem,
@@ -192,8 +199,14 @@ impl<R: Rhs> Evaluator<'_, R> {
         let columns = self.rhs.column_atol().unwrap_or(&[]);
         let k = columns.len();
         let n = len / (1 + k);
+        let own = &self.state_floors;
         for (sum, e) in sums.iter_mut().zip(es) {
-            add_squares(sum, (&e[..n], &x[..n], &xn[..n]), rtol, |_| atol);
+            let states = (&e[..n], &x[..n], &xn[..n]);
+            if own.is_empty() {
+                add_squares(sum, states, rtol, |_| atol);
+            } else {
+                add_squares(sum, states, rtol, |i| own[i]);
+            }
         }
         if k > 0 {
             // Each column's floor max(atol·c_j, rtol·m_j), its largest entry m_j found in one
@@ -209,19 +222,62 @@ impl<R: Rhs> Evaluator<'_, R> {
                     *m = m.max(a.abs()).max(b.abs());
                 }
             }
+            let relative = &mut self.relative;
+            relative.clear();
+            if !own.is_empty() {
+                relative.extend(floors.iter().map(|m| rtol * m));
+            }
             for (m, &c) in floors.iter_mut().zip(columns) {
                 *m = (atol * c).max(rtol * *m);
             }
             let floors = &floors[..k];
             for (sum, e) in sums.iter_mut().zip(es) {
                 let ends = rows(x, n, k).zip(rows(xn, n, k));
-                for (row_e, (row, row_new)) in rows(e, n, k).zip(ends) {
-                    add_squares(sum, (row_e, row, row_new), rtol, |j| floors[j]);
+                for (i, (row_e, (row, row_new))) in rows(e, n, k).zip(ends).enumerate() {
+                    let entries = (row_e, row, row_new);
+                    // A state held below atol holds its sensitivities alike, in each
+                    // column's units: its floor in place of atol.
+                    match own.get(i) {
+                        Some(&f) if f < atol => {
+                            let floor = |j: usize| (f * columns[j]).max(relative[j]);
+                            add_squares(sum, entries, rtol, floor);
+                        }
+                        _ => add_squares(sum, entries, rtol, |j| floors[j]),
+                    }
                 }
             }
         }
         norms(&sums)
     }
+}
+
+/// The absolute floor of each state of an integration from x0 (states and sensitivities),
+/// in place of atol: min(atol, [`STATE_FLOOR`]·rtol·|size_i|), the sizes the right-hand side
+/// [gives](Rhs::state_sizes) (the model's own initial values, [`Ivp::sized`](crate::Ivp::sized)),
+/// and atol for every state where it gives none. An absolute tolerance above a state's size
+/// controls nothing of it: a population that starts at 1e-14 under atol 1e-12 is integrated
+/// as if it were 0 until it has grown past atol, and wherever it grows (Beer_MolBioSystems2014's
+/// bacteria, started at 1e-14 from its bounds, reach 1 with an error of orders of magnitude).
+/// Scaled by rtol, so that an integration at a tenth of the tolerances (the certificate's)
+/// holds such a state ten times as tightly and measures its error. A state of size 0,
+/// or of atol/(STATE_FLOOR·rtol) or above, keeps atol. Empty where every state keeps it, and
+/// for right-hand sides that [measure their errors as vectors](Rhs::errors_as_vectors) (an
+/// adjoint's λ, not states).
+pub(crate) fn state_floors<R: Rhs>(cfg: &Integrator, rhs: &R, x0: &[f64]) -> Vec<f64> {
+    if rhs.errors_as_vectors() {
+        return Vec::new();
+    }
+    let k = rhs.column_atol().map_or(0, <[f64]>::len);
+    let n = x0.len() / (1 + k);
+    let Some(sizes) = rhs.state_sizes().filter(|s| s.len() == n) else { return Vec::new() };
+    let floor = |v: f64| {
+        let own = STATE_FLOOR * cfg.rtol * v.abs();
+        if own > 0.0 && own < cfg.atol { own.max(f64::MIN_POSITIVE) } else { cfg.atol }
+    };
+    if sizes.iter().all(|&v| floor(v) >= cfg.atol) {
+        return Vec::new();
+    }
+    sizes.iter().map(|&v| floor(v)).collect()
 }
 
 /// Adds to the four partial sums `sum` the squared scaled errors (e_i / sk_i)², sk_i =
