@@ -168,7 +168,9 @@ fn integrator_settings_cannot_fake_a_convergence() {
                 let c = fit["cost"].as_f64().unwrap();
                 assert!((c / cost - 1.0).abs() < 1e-7, "{method} {settings:?}: {fit}");
             }
-            if method == "goodman" {
+            // Under --atol 1e300, A (from 1) is still held to a thousandth of its initial
+            // size, which resolves this model: Goodman's claim there is the minimum's (above).
+            if method == "goodman" && settings[0] == "--fixed-step" {
                 assert_eq!(fit["converged"], false, "{settings:?}: {fit}");
             }
         }

@@ -248,7 +248,8 @@ fn experiment_gradient<S: System>(
     }
     let (y0, p) = e.start(at.v)?;
     let times = &e.sampled().times;
-    let ivp = Ivp::new(e.system(), e.t0, &y0, &p);
+    let sizes = e.sizes(&y0);
+    let ivp = Ivp::new(e.system(), e.t0, &y0, &p).sized(&sizes);
     let (n, ns) = (y0.len(), e.slots.len());
     let (trajectory, forward) = ivp.solve_dense(at.integrator, times)?;
     let dz = slot_matrix(e, at.v, at.free_index, at.chain, k);

@@ -173,13 +173,15 @@ impl<S: System> Problem<S> {
             let (cost, gradient, normal, counts) = match &e.plan {
                 Plan::Continuous { span, outputs, .. } => {
                     let (y0, p) = e.start(&v)?;
-                    let q = Ivp::new(e.system(), e.t0, &y0, &p).least_squares_integrals(
-                        integrator,
-                        &e.slots,
-                        outputs,
-                        *span,
-                        self.quadrature_rtol,
-                    )?;
+                    let sizes = e.sizes(&y0);
+                    let q =
+                        Ivp::new(e.system(), e.t0, &y0, &p).sized(&sizes).least_squares_integrals(
+                            integrator,
+                            &e.slots,
+                            outputs,
+                            *span,
+                            self.quadrature_rtol,
+                        )?;
                     let dz = slot_matrix(e, &v, &free_index, &chain, k);
                     (q.cost, dz.tr_mul(&q.gradient), dz.tr_mul(&(&q.normal * &dz)), q.counts)
                 }
@@ -443,13 +445,15 @@ impl<S: System> Problem<S> {
             match &e.plan {
                 Plan::Continuous { span, outputs, .. } => {
                     let (y0, p) = e.start(&v)?;
-                    let q = Ivp::new(e.system(), e.t0, &y0, &p).least_squares_integrals(
-                        &self.cost_integrator(),
-                        &[],
-                        outputs,
-                        *span,
-                        self.quadrature_rtol,
-                    )?;
+                    let sizes = e.sizes(&y0);
+                    let q =
+                        Ivp::new(e.system(), e.t0, &y0, &p).sized(&sizes).least_squares_integrals(
+                            &self.cost_integrator(),
+                            &[],
+                            outputs,
+                            *span,
+                            self.quadrature_rtol,
+                        )?;
                     cost += q.cost;
                     counts += q.counts;
                 }
@@ -761,7 +765,9 @@ impl<S: System> Problem<S> {
         for e in &self.experiments {
             let (y0, p) = e.start(&v)?;
             let sampled = e.sampled();
+            let sizes = e.sizes(&y0);
             let sol = Ivp::new(e.system(), e.t0, &y0, &p)
+                .sized(&sizes)
                 .solve(&self.cost_integrator(), &sampled.times)?;
             let mut og = ObservableGradient::new(e.system(), &p, &[]);
             let (n, np) = (y0.len(), p.len());
@@ -880,7 +886,8 @@ impl<S: System> Problem<S> {
         let z = self.unknowns.coordinates(values);
         let v = self.values_at(&z);
         let (y0, p) = e.start(&v)?;
-        let sol = Ivp::new(e.system(), e.t0, &y0, &p).solve_sensitivities(
+        let sizes = e.sizes(&y0);
+        let sol = Ivp::new(e.system(), e.t0, &y0, &p).sized(&sizes).solve_sensitivities(
             &self.integrator,
             &e.slots,
             times,
@@ -995,7 +1002,8 @@ pub(crate) fn experiment_rows<S: System>(
 ) -> Result<Rows, OdeError> {
     let (y0, p) = e.start(at.v)?;
     let times = &e.sampled().times;
-    let ivp = Ivp::new(e.system(), e.t0, &y0, &p);
+    let sizes = e.sizes(&y0);
+    let ivp = Ivp::new(e.system(), e.t0, &y0, &p).sized(&sizes);
     let slots: &[sysid_ode::Wrt] = if at.jacobian { &e.slots } else { &[] };
     // ∂slot/∂z; the identity (slot j is free unknown j) leaves the gradients as they are.
     let dz = at.jacobian.then(|| slot_matrix(e, at.v, at.free_index, at.chain, k));

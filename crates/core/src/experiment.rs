@@ -34,6 +34,12 @@ pub trait SettingFunction: Send + Sync {
         let _ = integrator;
         None
     }
+    /// Whether its value is computed by integrating the system (a preequilibration's steady
+    /// state) rather than given by the model: such a value may be rounding (1e-20 beside
+    /// states of 10), and is no size to hold a state to ([`Planned::sizes`]). Default: false.
+    fn computed(&self) -> bool {
+        false
+    }
     /// Drops what it keeps of earlier points (a steady state solved there), so that the next
     /// evaluation computes afresh: for timing one evaluation
     /// ([`Problem::forget_cached`](crate::Problem::forget_cached)). Default: nothing kept.
@@ -270,6 +276,15 @@ impl<S: System> Planned<S> {
             self.initial.iter().map(|s| s.value(v)).collect(),
             self.parameters.iter().map(|s| s.value(v)).collect(),
         )
+    }
+
+    /// The states' sizes their absolute tolerances are taken from
+    /// ([`Ivp::sized`](sysid_ode::Ivp::sized)): `y0`, the initial values at a point, with a
+    /// state whose initial value is [computed](SettingFunction::computed) (a steady state) at
+    /// 0, which holds it to atol.
+    pub fn sizes(&self, y0: &[f64]) -> Vec<f64> {
+        let computed = |s: &Resolved| matches!(s, Resolved::Function(g) if g.computed());
+        self.initial.iter().zip(y0).map(|(s, &y)| if computed(s) { 0.0 } else { y }).collect()
     }
 
     /// [`point`](Self::point), or the error that names the first setting that is not finite

@@ -316,7 +316,7 @@ impl Termination {
             Termination::Stalled { rule, iteration, unresolved: Some((error, cost)), .. } => {
                 write!(
                     f,
-                    "stalled at iteration {iteration}: {rule}, where the integration does not resolve the model: ε = {cost:.3e} there moves by {error:.3e} in the integration that checks it, so nothing the point's sensitivities say holds (no minimum, no flat direction); a finer integration (smaller --rtol and --atol: a state far below --atol is not controlled) may go on from it"
+                    "stalled at iteration {iteration}: {rule}, where the integration does not resolve the model: ε = {cost:.3e} there moves by {error:.3e} in the integration that checks it, so nothing the point's sensitivities say holds (no minimum, no flat direction); a finer integration (smaller --rtol and --atol: a state far below --atol is controlled only where the model starts it there, not where it starts at 0 or at a steady state) may go on from it"
                 )
             }
             Termination::Stalled { rule, iteration, plateau: true, .. } => write!(

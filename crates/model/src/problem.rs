@@ -567,6 +567,7 @@ impl Model {
             let sol = match model_free {
                 true => None,
                 false => match Ivp::new(e.system(), e.t0(), &y0, &p)
+                    .sized(&e.sizes(&y0))
                     .solve(problem.integrator(), &sampled.times)
                 {
                     Ok(sol) => Some(sol),

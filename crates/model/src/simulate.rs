@@ -70,6 +70,9 @@ impl Model {
                 f.data.t0,
                 self.point_from(&v)?,
             )]
+            .into_iter()
+            .map(|(name, system, t0, (y0, p))| (name, system, t0, y0.clone(), (y0, p)))
+            .collect::<Vec<_>>()
         } else {
             let problem = self.problem(data)?;
             let mut values: Vec<f64> = problem.declared().iter().map(|u| u.guess).collect();
@@ -116,16 +119,22 @@ impl Model {
                 .experiments()
                 .iter()
                 .filter(|e| experiment.is_none_or(|n| e.answers_to(n)))
-                .map(|e| (e.name().to_string(), e.system().clone(), e.t0(), e.point(&values)))
+                .map(|e| {
+                    let (y0, p) = e.point(&values);
+                    (e.name().to_string(), e.system().clone(), e.t0(), e.sizes(&y0), (y0, p))
+                })
                 .collect()
         };
         let several = runs.len() > 1;
         let mut text = String::new();
-        for (name, system, t0, (mut y0, mut p)) in runs {
+        // The states' sizes for their tolerances: their initial values, but for a steady
+        // state's ([`Planned::sizes`](sysid_core::Planned::sizes)); a value `--set` gives is
+        // given too.
+        for (name, system, t0, mut sizes, (mut y0, mut p)) in runs {
             let sig = system.signature().clone();
             for (key, value) in set {
                 match (sig.state(key), sig.parameter(key)) {
-                    (Some(i), _) => y0[i] = *value,
+                    (Some(i), _) => (y0[i], sizes[i]) = (*value, *value),
                     (None, Some(k)) => p[k] = *value,
                     (None, None) if f.unknowns.iter().any(|u| &u.name == key) => {}
                     (None, None) => {
@@ -151,6 +160,7 @@ impl Model {
                 ));
             }
             let sol = Ivp::new(&system, t0, &y0, &p)
+                .sized(&sizes)
                 .solve(&f.integrator, times)
                 .map_err(|e| ModelError::file(&path, format!("cannot be simulated: {e}")))?;
             if text.is_empty() {

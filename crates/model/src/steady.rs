@@ -421,6 +421,9 @@ impl SettingFunction for Component {
     fn describe(&self) -> String {
         self.text.clone()
     }
+    fn computed(&self) -> bool {
+        true
+    }
     fn forget(&self) {
         self.steady.cache.lock().unwrap_or_else(|e| e.into_inner()).clear();
     }

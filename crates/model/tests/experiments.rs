@@ -269,6 +269,18 @@ atol = 1e-12
             });
         }
     });
+    // A steady state's values are no sizes for the states' tolerances (rounding may leave
+    // 1e-20 there): each is held to atol; a value the experiment gives after the
+    // preequilibration is a size.
+    let v = problem.values_at(&z);
+    let e = &problem.experiments()[0];
+    assert_eq!(e.sizes(&e.point(&v).0), [0.0; 3]);
+    let given = model.replace("preequilibrate =", "initial = { x = 0.25 }\npreequilibrate =");
+    std::fs::write(&path, given).unwrap();
+    let problem = Model::load(&path).unwrap().problem(None).unwrap();
+    let e = &problem.experiments()[0];
+    let y0 = e.point(&v).0;
+    assert_eq!((y0[0], e.sizes(&y0)), (0.25, vec![0.25, 0.0, 0.0]));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

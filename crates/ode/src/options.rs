@@ -59,12 +59,14 @@ pub const AUTO_DOP853_RTOL: f64 = 1e-11;
 /// [`Integrator`].
 ///
 /// Not smaller: the floor is a remedy for states that atol does not control at all (Beer's
-/// bacteria from 1e-14 under atol 1e-12), not a tolerance of its own. At 1 (every state held
-/// to rtol of its initial size) it moved the NLL at nominal of five of the collection's
-/// problems by up to 3e-7 and cost Giordano_Nature2020 (a state at 1.7e-8) 25 % of an
-/// evaluation's time; at 100 it still moved Brannmark_JBC2010's (a state at 1.8e-9), whose
-/// default fit from nominal then stalled at NLL 141.889 instead of certifying 141.82485.
-/// At 1e5 only Raimundez_PCB2020's nominal NLL moves (1.3e-7), at no cost (2026-12-07).
+/// bacteria from 1e-14 under atol 1e-12), not a tolerance of its own. Measured with the
+/// floors taken from every integration's start (steady states included) on the PEtab
+/// collection at nominal: at 1 (every state held to rtol of its initial size) it moved the
+/// NLL of five problems by up to 3e-7 and cost Giordano_Nature2020 (a state at 1.7e-8) 25 %
+/// of an evaluation's time; at 100 it still moved Brannmark_JBC2010's (a state at 1.8e-9),
+/// whose default fit from nominal then stalled at NLL 141.889 instead of certifying
+/// 141.82485; at 1e5 only Raimundez_PCB2020's (1.3e-7), at no cost. With the sizes the
+/// model's own initial values, none moves (2026-12-07).
 pub const STATE_FLOOR: f64 = 1e5;
 
 /// How to integrate: scheme, tolerances and limits. Plain data with documented defaults.
