@@ -337,6 +337,9 @@ fn inputs_of_the_wrong_size_are_errors() {
     assert_close(from.sensitivity(0)[(0, 1)], dk, 1e-9);
     let first = Integrator { initial_step: Some(-1.0), ..tight() };
     assert!(first.validate().unwrap_err().to_string().contains("initial_step"));
+    let sized = Ivp::new(&sys, 0.0, &[2.0], &[0.3]).sized(&[2.0, 1.0]);
+    let e = sized.solve(&tight(), &[1.0]).unwrap_err();
+    assert_eq!(e.to_string(), "dimension mismatch: state sizes has length 2, expected 1");
 }
 
 /// A state that starts far below atol, its size given ([`Ivp::sized`]), holds its
