@@ -162,6 +162,8 @@ impl Record<'_> {
             Ending::MaxIterations => Termination::MaxIterations {
                 fell: fell(&history, current.epsilon()),
                 moving: moving(ev.problem(), &history),
+                // Set below, from the point returned.
+                unresolved_gradient: None,
             },
             Ending::TimeLimit(seconds) => Termination::TimeLimit { seconds },
             Ending::Interrupted => Termination::Interrupted,
@@ -199,6 +201,13 @@ impl Record<'_> {
                 *unresolved =
                     Some((certificate.cost_error, lin.as_ref().map_or(f64::NAN, |l| l.cost)));
             }
+        }
+        if let Termination::MaxIterations { unresolved_gradient, .. } = &mut termination
+            && !certificate.holds()
+            && certificate.optimality.is_finite()
+            && certificate.error > certificate.optimality
+        {
+            *unresolved_gradient = Some((certificate.optimality, certificate.error));
         }
         self.estimate(ev, point, lin.as_ref(), certificate, termination, (at, iterations), history)
     }
@@ -399,7 +408,7 @@ pub(crate) fn with_scales<S: System>(
         // The fit of the last round was certified, but the scales would still move: the
         // iteration budget ran out before they could, or the rounds stalled.
         e.termination = if out_of_iterations {
-            Termination::MaxIterations { fell: None, moving: Vec::new() }
+            Termination::MaxIterations { fell: None, moving: Vec::new(), unresolved_gradient: None }
         } else {
             Termination::Stalled {
                 rule,

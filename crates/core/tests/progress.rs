@@ -83,7 +83,7 @@ fn the_iteration_limit_says_what_the_cost_still_gained_and_what_moved() {
     };
     let expected = epsilon(30.5) - epsilon(31.5);
     match &e.termination {
-        Termination::MaxIterations { fell: Some(fell), moving } => {
+        Termination::MaxIterations { fell: Some(fell), moving, .. } => {
             assert!((fell - expected).abs() <= 1e-9 * expected, "{fell} against {expected}");
             assert_eq!(moving, &["g"]);
         }
@@ -95,6 +95,9 @@ fn the_iteration_limit_says_what_the_cost_still_gained_and_what_moved() {
     // Ten iterations are too few for the window: the limit says only that.
     let options = DriverOptions { max_iterations: 10, ..Default::default() };
     let e = drive(&problem, "walk", &options, &mut crawl(1e-2), &[30.0]).unwrap();
-    assert_eq!(e.termination, Termination::MaxIterations { fell: None, moving: vec![] });
+    assert_eq!(
+        e.termination,
+        Termination::MaxIterations { fell: None, moving: vec![], unresolved_gradient: None }
+    );
     assert_eq!(e.termination.to_string(), "iteration limit reached");
 }

@@ -701,7 +701,7 @@ mod tests {
             termination: if converged {
                 Termination::Converged(Rule::Step)
             } else {
-                Termination::MaxIterations { fell: None, moving: vec![] }
+                Termination::MaxIterations { fell: None, moving: vec![], unresolved_gradient: None }
             },
             certificate: Certificate {
                 optimality: if converged { 0.0 } else { 0.5 },

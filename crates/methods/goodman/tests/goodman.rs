@@ -70,7 +70,10 @@ fn iteration_limit_is_a_result_not_an_error() {
     let estimate =
         Goodman::new(GoodmanOptions::default().with_max_iterations(1)).fit(&problem).unwrap();
     // One iteration: too few for the window over which the fall is measured.
-    assert_eq!(estimate.termination, Termination::MaxIterations { fell: None, moving: vec![] });
+    assert_eq!(
+        estimate.termination,
+        Termination::MaxIterations { fell: None, moving: vec![], unresolved_gradient: None }
+    );
     assert_eq!(estimate.iterations, 1);
     assert!(!estimate.converged());
     assert_eq!(estimate.history.len(), 2);
