@@ -239,10 +239,9 @@ pub enum Termination {
         /// moved at least a tenth of the most any did, at most 5), as after [`Rule::Progress`].
         moving: Vec<String>,
         /// Where the point returned is not certified and its measure is within the measure's
-        /// integration error: the measure and that error. The gradient the method steered by
-        /// is then mostly the integration's error, and a finer integration steers better than
-        /// more iterations (Crauste_CellSystems2017 from a random start: ∂NLL/∂ln δ_NE 9.1e3
-        /// at rtol 1e-8, 1.16e6 at 1e-10).
+        /// integration error: the measure and that error. The gradient there is then mostly
+        /// the integration's error (Crauste_CellSystems2017 from a random start: ∂NLL/∂ln δ_NE
+        /// 9.1e3 at rtol 1e-8, 1.16e6 at 1e-10), and says nothing of how far a minimum is.
         unresolved_gradient: Option<(f64, f64)>,
     },
     /// The hard budget of model integrations ran out.
@@ -386,7 +385,7 @@ impl Termination {
                 match (unresolved_gradient, fell) {
                     (Some((optimality, error)), _) => write!(
                         f,
-                        "; its first-order optimality {optimality:.2e} is within its integration error {error:.2e}: the gradient the method steers by is mostly the integration's error there, and a finer integration (smaller --rtol and --atol) steers better than more iterations"
+                        "; its first-order optimality {optimality:.2e} is within its integration error {error:.2e}: the gradient there is mostly the integration's error, which a finer integration (smaller --rtol and --atol) resolves"
                     ),
                     (None, Some(_)) if !moving.is_empty() => {
                         write!(f, " (a larger iteration budget goes on from there)")
@@ -522,7 +521,7 @@ mod tests {
     }
 
     /// An iteration limit names the falling cost and where it went, or, where the gradient at
-    /// the point is mostly integration error, that a finer integration is the way on.
+    /// the point is mostly integration error, says so.
     #[test]
     fn an_iteration_limit_says_when_the_gradient_is_integration_error() {
         let moving = vec!["k".to_string()];
