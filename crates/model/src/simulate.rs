@@ -64,15 +64,15 @@ impl Model {
             for (name, value) in known.chain(f.unknowns.iter().map(|u| (&u.name, u.guess))) {
                 v.push((name.clone(), value));
             }
+            // A plain model's initial values are all its own: each is its state's size.
+            let (y0, p) = self.point_from(&v)?;
             vec![(
                 sysid_core::plan::SINGLE_EXPERIMENT.to_string(),
                 self.system(Inputs::default()),
                 f.data.t0,
-                self.point_from(&v)?,
+                y0.clone(),
+                (y0, p),
             )]
-            .into_iter()
-            .map(|(name, system, t0, (y0, p))| (name, system, t0, y0.clone(), (y0, p)))
-            .collect::<Vec<_>>()
         } else {
             let problem = self.problem(data)?;
             let mut values: Vec<f64> = problem.declared().iter().map(|u| u.guess).collect();
