@@ -5,7 +5,7 @@ use sysid_core::Estimate;
 
 use crate::Outcome;
 use crate::options::{Format, IntegratorArgs, MethodArg, MethodArgs, SourceArgs, StartsArgs};
-use crate::output::{emit, figure_writable};
+use crate::output::{Trace, emit, figure_writable};
 use crate::problem::{Context, fit_from_starts, problem, with_starts};
 
 /// Arguments of `sysid fit`.
@@ -29,6 +29,12 @@ pub struct FitArgs {
     /// STEM.png and STEM.svg.
     #[arg(long, value_name = "STEM")]
     waterfall: Option<std::path::PathBuf>,
+    /// Write the fit's every iterate and every trial step to FILE as it runs, one JSON
+    /// object a line (docs/json.md, "The trace"): for the trust-region methods each trial's
+    /// model, radius, λ, predicted and actual decrease, and whether it was taken. One fit:
+    /// not with --starts (fit a start alone from its start values instead).
+    #[arg(long, value_name = "FILE")]
+    trace: Option<std::path::PathBuf>,
 }
 
 /// Runs `sysid fit`.
@@ -47,6 +53,16 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
         figure_writable(stem, &context.inputs, "--waterfall")?;
     }
     let watch = context.watch(&args.method.method, args.options.log_every);
+    if let Some(path) = &args.trace {
+        if args.starts.starts.is_some() {
+            anyhow::bail!(
+                "--trace follows one fit, and the starts of --starts run side by side: trace a \
+                 start alone, fitted from its start values (--start NAME=VALUE for each unknown; \
+                 the JSON's waterfall lists them)"
+            );
+        }
+        watch.set_trace(Trace::create(path, &context.inputs)?)?;
+    }
     let (estimate, starts) =
         fit_from_starts(&problem, &args.method.method, &args.options, &args.starts, &watch)
             .map_err(|e| context.blame(e))?;
@@ -63,8 +79,12 @@ pub fn run(args: &FitArgs) -> anyhow::Result<Outcome> {
             emit(&text)?
         }
     }
-    // The results are out before the figure is drawn: a figure that cannot be written
-    // loses nothing.
+    // The results are out before the trace is closed and the figure drawn: a file that
+    // cannot be written loses nothing.
+    if let Some(trace) = watch.trace() {
+        trace.finish()?;
+        eprintln!("wrote {}", trace.path().display());
+    }
     if let (Some(stem), Some(s)) = (&args.waterfall, &starts) {
         let subject = std::path::Path::new(&context.name)
             .file_name()

@@ -2,12 +2,13 @@
 //! whole and announced, progress bars and lines, the times of CSV rows, and the multistart line.
 
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail};
 use indicatif::{ProgressBar, ProgressFinish, ProgressStyle};
 use sysid_core::format::shortest;
+use sysid_core::observer::{IterateReport, TrialReport};
 use sysid_model::simulate::decimal_within;
 
 /// Writes `text` to standard output. A reader that has gone away (`sysid ... | head`) is not
@@ -149,6 +150,8 @@ pub struct Watch {
     every: Option<Duration>,
     started: Instant,
     last: Mutex<Instant>,
+    /// Where the fit's iterates and trials are written as they come (`fit --trace`).
+    trace: OnceLock<Trace>,
 }
 
 impl Watch {
@@ -166,7 +169,19 @@ impl Watch {
             every: on.then(|| Duration::try_from_secs_f64(every).ok()).flatten(),
             started: now,
             last: Mutex::new(now),
+            trace: OnceLock::new(),
         }
+    }
+
+    /// Writes the iterates and trials of the fits watched from now on to `trace` (a watch
+    /// has one trace at most; a second is refused).
+    pub fn set_trace(&self, trace: Trace) -> anyhow::Result<()> {
+        self.trace.set(trace).map_err(|t| anyhow!("--trace {}: already traced", t.path.display()))
+    }
+
+    /// The trace, where one was set.
+    pub fn trace(&self) -> Option<&Trace> {
+        self.trace.get()
     }
 
     /// `text` on the terminal's line, and in the log where `every` seconds have passed since
@@ -194,6 +209,91 @@ impl Watch {
     /// Clears the terminal's line.
     pub fn finish(&self) {
         self.line.finish_and_clear();
+    }
+}
+
+/// The trace of one fit (`fit --trace`): every iterate the driver records and every trial
+/// step a trust-region method judges, one JSON object a line, written as the fit runs (a
+/// fit that is stopped keeps what it wrote). The keys: docs/json.md, "The trace".
+pub struct Trace {
+    path: PathBuf,
+    /// The writer, and the first error writing to it (reported by [`Trace::finish`]).
+    out: Mutex<(std::io::BufWriter<std::fs::File>, Option<std::io::Error>)>,
+}
+
+impl Trace {
+    /// A new trace at `path`, checked before the work: its folder takes a file, and it is
+    /// none of `inputs`.
+    pub fn create(path: &Path, inputs: &[PathBuf]) -> anyhow::Result<Self> {
+        writable(path, "--trace")?;
+        not_an_input(path, inputs, "--trace")?;
+        let file =
+            std::fs::File::create(path).map_err(|e| anyhow!("--trace {}: {e}", path.display()))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            out: Mutex::new((std::io::BufWriter::new(file), None)),
+        })
+    }
+
+    /// The file it writes.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// One line: `value` as compact JSON (non-finite numbers as null).
+    fn line(&self, value: &serde_json::Value) {
+        use std::io::Write;
+        let mut out = self.out.lock().unwrap_or_else(|e| e.into_inner());
+        let (writer, error) = &mut *out;
+        if error.is_none()
+            && let Err(e) = writeln!(writer, "{value}")
+        {
+            *error = Some(e);
+        }
+    }
+
+    /// An iterate: `{"event": "iterate", "iteration", "cost", "objective", "optimality",
+    /// "coarse"}`.
+    pub fn iterate(&self, p: &IterateReport<'_>) {
+        self.line(&serde_json::json!({
+            "event": "iterate",
+            "method": p.method,
+            "iteration": p.iteration,
+            "cost": p.cost,
+            "objective": p.objective,
+            "optimality": p.optimality,
+            "coarse": p.coarse,
+        }));
+    }
+
+    /// A trial: `{"event": "trial", "method", "model", "from", "radius", "step", "lambda",
+    /// "predicted", "actual", "ratio", "accepted"}`.
+    pub fn trial(&self, t: &TrialReport<'_>) {
+        self.line(&serde_json::json!({
+            "event": "trial",
+            "method": t.method,
+            "model": t.model,
+            "from": t.from,
+            "radius": t.radius,
+            "step": t.step,
+            "lambda": t.lambda,
+            "predicted": t.predicted,
+            "actual": t.actual,
+            "ratio": t.ratio,
+            "accepted": t.accepted,
+        }));
+    }
+
+    /// Flushes the file; the first error writing it, naming the file.
+    pub fn finish(&self) -> anyhow::Result<()> {
+        use std::io::Write;
+        let mut out = self.out.lock().unwrap_or_else(|e| e.into_inner());
+        let (writer, error) = &mut *out;
+        let result = match error.take() {
+            Some(e) => Err(e),
+            None => writer.flush(),
+        };
+        result.map_err(|e| anyhow!("--trace {}: {e}", self.path.display()))
     }
 }
 

@@ -8,7 +8,7 @@ use std::sync::Mutex;
 
 use anyhow::Context as _;
 use sysid_core::format::significant;
-use sysid_core::observer::{self, IterateReport};
+use sysid_core::observer::{self, IterateReport, TrialReport};
 use sysid_core::{
     Estimate, Failure, FitRecord, Method, Problem, ProblemError, Termination, format::Expected,
 };
@@ -211,7 +211,24 @@ impl Context {
 /// `f`, with the iterates of the fit it runs on this thread told to `watch`.
 pub fn watching<R>(watch: &Rc<Watch>, f: impl FnOnce() -> R) -> R {
     let w = Rc::clone(watch);
-    let out = observer::observe(move |p| w.say(&iterate_line(p)), f);
+    let said = move |p: &IterateReport<'_>| {
+        w.say(&iterate_line(p));
+        if let Some(trace) = w.trace() {
+            trace.iterate(p);
+        }
+    };
+    let out = match watch.trace() {
+        Some(_) => {
+            let w = Rc::clone(watch);
+            let trial = move |t: &TrialReport<'_>| {
+                if let Some(trace) = w.trace() {
+                    trace.trial(t);
+                }
+            };
+            observer::observe(said, || observer::observe_trials(trial, f))
+        }
+        None => observer::observe(said, f),
+    };
     watch.finish();
     out
 }

@@ -1039,3 +1039,29 @@ fn starts_are_drawn_as_asked_and_their_waterfall_is_drawn() {
     assert!(text(&alone.stderr).contains("--waterfall needs --starts"), "{}", text(&alone.stderr));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--trace` is checked before the work: one fit only, a file its folder can take.
+#[test]
+fn a_trace_is_refused_where_it_cannot_be_written_or_follow_one_fit() {
+    let dir = std::env::temp_dir().join(format!("sysid-cli-trace-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("t.jsonl");
+    let file = path.to_str().unwrap();
+    let fit = ["fit", "--system", "lotka-volterra", "--method", "nl2sol"];
+    let starts = sysid(&[&fit[..], &["--trace", file, "--starts", "3"]].concat());
+    assert_eq!(starts.status.code(), Some(2));
+    assert!(text(&starts.stderr).contains("--trace follows one fit"), "{}", text(&starts.stderr));
+    assert!(!path.exists(), "nothing written for a refused run");
+    let missing = dir.join("no-such-folder").join("t.jsonl");
+    let nowhere = sysid(&[&fit[..], &["--trace", missing.to_str().unwrap()]].concat());
+    assert_eq!(nowhere.status.code(), Some(2));
+    let said = text(&nowhere.stderr);
+    assert!(said.contains("--trace") && said.contains("does not exist"), "{said}");
+    assert!(nowhere.stdout.is_empty(), "refused before the work");
+    let traced = sysid(&[&fit[..], &["--trace", file]].concat());
+    assert_eq!(traced.status.code(), Some(0), "{}", text(&traced.stderr));
+    assert!(text(&traced.stderr).contains(&format!("wrote {file}")), "{}", text(&traced.stderr));
+    let lines = std::fs::read_to_string(&path).unwrap();
+    assert!(lines.lines().any(|l| l.contains(r#""event":"trial""#)), "{lines}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

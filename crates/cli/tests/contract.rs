@@ -600,3 +600,96 @@ fn documented_types_are_read_as_written() {
     assert!(conforms(&json!(["a", 1]), "array of strings").is_err());
     assert!(conforms(&json!(1), "a type nobody wrote").is_err());
 }
+
+/// `fit --trace`: every line is an iterate or a trial of docs/json.md's tables, key by key,
+/// and the trials say what the fit did. Checked against the fit's own record, not the
+/// method's: a trial starts from the ε of the iterate line before it; ρ is actual /
+/// predicted, and a trial is taken exactly where ρ ≥ ¼; an accepted trial's actual decrease
+/// is what the next iterate's ε shows (to ε's accuracy); and the fit's iterations are its
+/// accepted trials.
+#[test]
+fn the_trace_follows_the_contract() {
+    let docs = Contract::new();
+    let mut contract = docs;
+    let dir = std::env::temp_dir().join(format!("sysid-trace-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut models = BTreeSet::new();
+    for (system, method) in [
+        ("lotka-volterra", "nl2sol"),
+        ("lotka-volterra", "hybrid-newton"),
+        ("falling-body", "goodman"),
+    ] {
+        let path = dir.join(format!("{system}-{method}.jsonl"));
+        let fit = json(&[
+            "fit",
+            "--system",
+            system,
+            "--method",
+            method,
+            "--trace",
+            path.to_str().unwrap(),
+        ]);
+        let what = format!("{system} {method}");
+        let text = std::fs::read_to_string(&path).expect("the trace is written");
+        let lines: Vec<Value> =
+            text.lines().map(|l| serde_json::from_str(l).expect("a JSON line")).collect();
+        let mut last_cost: Option<f64> = None;
+        let mut moved: Option<f64> = None;
+        let (mut accepted, mut trials) = (0, 0);
+        for (i, line) in lines.iter().enumerate() {
+            let at = format!("{what}, line {}", i + 1);
+            assert_eq!(line["method"], method, "{at}");
+            match line["event"].as_str() {
+                Some("iterate") => {
+                    contract.object(line, "Iterate lines", &at);
+                    let cost = line["cost"].as_f64().unwrap();
+                    // To ε's accuracy at the coarse stage's rtol 1e-6: where two costs differ
+                    // by less than that, the trial measured its decrease on the gradients.
+                    if let Some(expected) = moved.take() {
+                        assert!(
+                            (cost - expected).abs() <= 1e-6 * cost.abs(),
+                            "{at}: ε {cost} after a trial that measured it at {expected}"
+                        );
+                    }
+                    last_cost = Some(cost);
+                }
+                Some("trial") => {
+                    contract.object(line, "Trial lines", &at);
+                    trials += 1;
+                    models.insert(line["model"].as_str().unwrap().to_string());
+                    let from = line["from"].as_f64().unwrap();
+                    assert_eq!(Some(from), last_cost, "{at}: from the iterate line before it");
+                    let taken = line["accepted"].as_bool().unwrap();
+                    match (line["actual"].as_f64(), line["ratio"].as_f64()) {
+                        (Some(actual), Some(ratio)) => {
+                            let predicted = line["predicted"].as_f64().unwrap();
+                            assert!(
+                                (ratio - actual / predicted).abs() <= 1e-12 * ratio.abs(),
+                                "{at}"
+                            );
+                            assert_eq!(taken, ratio >= 0.25, "{at}: ρ {ratio}");
+                            if taken {
+                                moved = Some(from - actual);
+                            }
+                        }
+                        _ => assert!(!taken, "{at}: taken without being integrated"),
+                    }
+                    accepted += usize::from(taken);
+                }
+                other => panic!("{at}: event {other:?}"),
+            }
+        }
+        assert!(moved.is_none(), "{what}: an accepted trial with no iterate after it");
+        let iterations = fit["iterations"].as_u64().unwrap() as usize;
+        if method == "goodman" {
+            assert_eq!(trials, 0, "{what}: Goodman's steps are not trials");
+            assert!(lines.len() > iterations, "{what}: an iterate line for each iterate");
+        } else {
+            assert_eq!(accepted, iterations, "{what}: a move per accepted trial");
+            assert!(trials > accepted, "{what}: the run rejected none; pick a harder case");
+        }
+    }
+    assert!(models.contains("newton") && models.contains("gauss-newton"), "{models:?}");
+    contract.all_seen(&["Iterate lines", "Trial lines"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -48,10 +48,40 @@ pub struct IterateReport<'a> {
     pub coarse: bool,
 }
 
+/// A trial step of a trust-region method, as the method judged it: one per point it
+/// integrated to decide whether to move there (an accepted trial moves the fit; the iterate
+/// it moves to is the next one the driver records).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrialReport<'a> {
+    /// The method's name.
+    pub method: &'a str,
+    /// The model the step was found on: "gauss-newton" (A = JᵀWJ), "augmented" (NL2SOL's
+    /// A + S) or "newton" (the hybrid's differenced Hessian).
+    pub model: &'a str,
+    /// ε at the iterate the trial is taken from (at its noise scales).
+    pub from: f64,
+    /// The trust region's radius Δ the step was sought for (in the scaled norm ‖Dδ‖).
+    pub radius: f64,
+    /// The step's scaled length ‖Dδ‖.
+    pub step: f64,
+    /// The Levenberg–Marquardt parameter λ of the step (0: the model's own minimiser).
+    pub lambda: f64,
+    /// The decrease of ε the model predicted.
+    pub predicted: f64,
+    /// The decrease the method measured (NaN where the trial could not be integrated).
+    pub actual: f64,
+    /// actual / predicted, the ratio ρ the step is judged by.
+    pub ratio: f64,
+    /// Whether the fit moved to the trial.
+    pub accepted: bool,
+}
+
 type Observer = Rc<dyn Fn(&IterateReport<'_>)>;
+type TrialObserver = Rc<dyn Fn(&TrialReport<'_>)>;
 
 thread_local! {
     static OBSERVER: RefCell<Option<Observer>> = const { RefCell::new(None) };
+    static TRIALS: RefCell<Option<TrialObserver>> = const { RefCell::new(None) };
     static STOP: RefCell<Option<Stop>> = const { RefCell::new(None) };
 }
 
@@ -150,9 +180,81 @@ pub(crate) fn report(iterate: &IterateReport<'_>) {
     }
 }
 
+/// Runs `f` with `observer` hearing of every trial step that the trust-region methods
+/// (`levenberg-marquardt`, `hybrid-newton`, `nl2sol`, `geodesic-lm`) judge in fits on this
+/// thread, and returns what `f` returns. Nests as [`observe`] does.
+pub fn observe_trials<R>(
+    observer: impl Fn(&TrialReport<'_>) + 'static,
+    f: impl FnOnce() -> R,
+) -> R {
+    /// Puts the outer observer back when dropped.
+    struct Restore(Option<TrialObserver>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            let outer = self.0.take();
+            TRIALS.with(|o| *o.borrow_mut() = outer);
+        }
+    }
+    let outer = TRIALS.with(|o| o.borrow_mut().replace(Rc::new(observer)));
+    let _restore = Restore(outer);
+    f()
+}
+
+/// Whether a trial observer is listening on this thread (a method forms a [`TrialReport`]
+/// only then).
+pub fn trials_listening() -> bool {
+    TRIALS.with(|o| o.borrow().is_some())
+}
+
+/// Tells this thread's trial observer, if any, of `trial`.
+pub fn report_trial(trial: &TrialReport<'_>) {
+    let observer = TRIALS.with(|o| o.borrow().clone());
+    if let Some(observer) = observer {
+        observer(trial);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A trial reaches the innermost trial observer only, and the outer one is back after
+    /// its span; outside every span no one listens.
+    #[test]
+    fn trials_reach_the_innermost_observer() {
+        use std::cell::Cell;
+        let trial = TrialReport {
+            method: "nl2sol",
+            model: "gauss-newton",
+            from: 2.0,
+            radius: 1.0,
+            step: 0.5,
+            lambda: 0.0,
+            predicted: 1.0,
+            actual: 0.5,
+            ratio: 0.5,
+            accepted: true,
+        };
+        let (outer, inner) = (Rc::new(Cell::new(0)), Rc::new(Cell::new(0)));
+        assert!(!trials_listening());
+        let (o, i) = (Rc::clone(&outer), Rc::clone(&inner));
+        observe_trials(
+            move |_| o.set(o.get() + 1),
+            || {
+                report_trial(&trial);
+                observe_trials(
+                    move |t| i.set(i.get() + usize::from(t.accepted)),
+                    || report_trial(&trial),
+                );
+                assert!(trials_listening());
+                report_trial(&trial);
+            },
+        );
+        assert_eq!((outer.get(), inner.get()), (2, 1));
+        assert!(!trials_listening());
+        report_trial(&trial);
+        assert_eq!(outer.get(), 2, "no one listens outside");
+    }
 
     /// Work within work stops with either's flag; the flags travel to another thread with
     /// [`stop_within`], and each thread's own are back after the work.

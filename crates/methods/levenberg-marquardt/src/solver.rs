@@ -51,6 +51,7 @@ use sysid_core::{
         Accelerated, Advance, Curve, CurveStep, Evaluations, Geodesic, Iterate, Proposal, Step,
         actual_decrease, differenced_hessian, drive,
     },
+    observer::{self, TrialReport},
 };
 use sysid_ode::System;
 
@@ -113,6 +114,16 @@ pub const CRAWL_FALL: f64 = 1e-3;
 /// radius, 100‖D z₀‖, to any Gauss–Newton step it is tens.
 const MAX_SAME: usize = 200;
 
+/// The name of the method `options` make ([`Method::name`]).
+fn method_name(options: &LevenbergMarquardtOptions) -> &'static str {
+    match options.hessian {
+        Hessian::GaussNewton if options.geodesic => "geodesic-lm",
+        Hessian::GaussNewton => "levenberg-marquardt",
+        Hessian::Hybrid => "hybrid-newton",
+        Hessian::Adaptive => "nl2sol",
+    }
+}
+
 /// Levenberg–Marquardt with its options.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct LevenbergMarquardt {
@@ -162,12 +173,7 @@ impl LevenbergMarquardt {
 
 impl<S: System> Method<S> for LevenbergMarquardt {
     fn name(&self) -> &str {
-        match self.options.hessian {
-            Hessian::GaussNewton if self.options.geodesic => "geodesic-lm",
-            Hessian::GaussNewton => "levenberg-marquardt",
-            Hessian::Hybrid => "hybrid-newton",
-            Hessian::Adaptive => "nl2sol",
-        }
+        method_name(&self.options)
     }
 
     /// A run from `start`; where it stalls on flat ground (a plateau, or unknowns the model
@@ -544,6 +550,21 @@ impl<S: System> Step<S> for TrustRegion<'_> {
             }
             let rho = ratio(decrease);
             let rejected = !(evaluated.is_some() && rho >= ACCEPT);
+            if observer::trials_listening() {
+                observer::report_trial(&TrialReport {
+                    method: method_name(self.options),
+                    model: self.model_name(lin),
+                    from: lin.cost,
+                    radius: self.radius,
+                    step: trial.scaled_norm,
+                    lambda: trial.lambda,
+                    predicted: trial.predicted,
+                    // (−∞ where the trial could not be integrated: not a decrease.)
+                    actual: if decrease.is_finite() { decrease } else { f64::NAN },
+                    ratio: if decrease.is_finite() { rho } else { f64::NAN },
+                    accepted: !rejected,
+                });
+            }
             self.rejections = (1.0 - SCREEN_MEMORY) * self.rejections
                 + SCREEN_MEMORY * f64::from(u8::from(rejected));
             // A rejected trial that went over a kink where a switch time passes a sample
@@ -601,6 +622,21 @@ impl<S: System> Step<S> for TrustRegion<'_> {
 }
 
 impl TrustRegion<'_> {
+    /// The model the steps from the iterate `lin` are found on now: Newton's where there is
+    /// one at `lin` (the hybrid's differenced Hessian, or NL2SOL's augmented A + S), else
+    /// Gauss–Newton's.
+    fn model_name(&self, lin: &Linearization) -> &'static str {
+        let newton = self
+            .newton
+            .as_ref()
+            .is_some_and(|n| n.z == lin.z && n.cost.to_bits() == lin.cost.to_bits());
+        match (newton, self.options.hessian) {
+            (true, Hessian::Adaptive) => "augmented",
+            (true, _) => "newton",
+            (false, _) => "gauss-newton",
+        }
+    }
+
     /// Records the cost of the iterate an advance starts from, and whether the run crawls
     /// there: its cost fell by less than [`CRAWL_FALL`] of ε over the last [`CRAWL_WINDOW`]
     /// iterations. `cost` is the iterate's as the driver records it, `epsilon` its ε: under
