@@ -24,7 +24,7 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyException, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use sysid_core::observer::{IterateReport, observe};
+use sysid_core::observer::{IterateReport, TrialReport, observe, observe_trials};
 use sysid_core::{Linearization, Problem, Sensitivities, Unknown};
 use sysid_montecarlo::{MultistartOptions, Sampling, StartDone};
 use sysid_registry::any::{self, AnySystem};
@@ -712,7 +712,13 @@ impl PyProblem {
     /// An exception it raises stops the fit at its next iteration (a multistart's running
     /// starts so, and begins no other), and the fit raises it then, with the fit as it
     /// stood as the exception's `result`. Ctrl-C (KeyboardInterrupt) stops it the same way.
-    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None, coarse_first=true, progress=None))]
+    ///
+    /// `trials`, a callable, is called with a dict for every trial step a trust-region
+    /// method judges in a single fit (the keys of docs/json.md's trial lines: `method`,
+    /// `model`, `from`, `radius`, `step`, `lambda`, `predicted`, `actual`, `ratio`,
+    /// `accepted`); an exception it raises stops the fit as `progress`'s does. Not with
+    /// `starts`.
+    #[pyo3(signature = (method=None, starts=None, seed=1, sampling="uniform", include_nominal=true, max_iterations=None, gtol=None, max_integrations=None, max_seconds=None, fix=None, start=None, coarse_first=true, progress=None, trials=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit<'py>(
         &self,
@@ -730,13 +736,21 @@ impl PyProblem {
         start: Option<std::collections::BTreeMap<String, f64>>,
         coarse_first: bool,
         progress: Option<Py<PyAny>>,
+        trials: Option<Py<PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
-        if let Some(p) = &progress
-            && !p.bind(py).is_callable()
-        {
-            return Err(PyTypeError::new_err("progress must be a callable (or None)"));
+        for (name, callback) in [("progress", &progress), ("trials", &trials)] {
+            if let Some(c) = callback
+                && !c.bind(py).is_callable()
+            {
+                return Err(PyTypeError::new_err(format!("{name} must be a callable (or None)")));
+            }
         }
         let starts = starts.map(|n| whole("starts", n, 1)).transpose()?.map(|n| n as usize);
+        if trials.is_some() && starts.is_some() {
+            return Err(PyValueError::new_err(
+                "trials hears one fit, and the starts of a multistart run side by side: fit a start alone from its start values (start=)",
+            ));
+        }
         let seed = self::seed(seed)?;
         let max_iterations =
             max_iterations.map(|n| whole("max_iterations", n, 0)).transpose()?.map(|n| n as usize);
@@ -800,7 +814,10 @@ impl PyProblem {
         };
         let raised = Arc::new(Raised::default());
         let outcome = interruptible(py, &raised, || match &options {
-            None => heard(progress, &raised, None, || method.fit(&problem)).map(|e| (e, None)),
+            None => {
+                heard(progress, &raised, None, || traced(trials, &raised, || method.fit(&problem)))
+                    .map(|e| (e, None))
+            }
             Some(options) => {
                 let told = |s: StartDone| {
                     if let Some(callback) = &progress {
@@ -1171,6 +1188,29 @@ fn heard<R>(
         })
     };
     observe(told, fit)
+}
+
+/// `fit`, run on this thread with each trial step a trust-region method judges in it told
+/// to `callback` (where there is one) as a dict of the keys of docs/json.md's trial lines
+/// (`actual` and `ratio` None where the trial could not be integrated).
+fn traced<R>(callback: Option<Py<PyAny>>, raised: &Arc<Raised>, fit: impl FnOnce() -> R) -> R {
+    let Some(callback) = callback else { return fit() };
+    let raised = Arc::clone(raised);
+    let told = move |t: &TrialReport<'_>| {
+        tell(&callback, &raised, |d| {
+            d.set_item("method", t.method)?;
+            d.set_item("model", t.model)?;
+            d.set_item("from", t.from)?;
+            d.set_item("radius", t.radius)?;
+            d.set_item("step", t.step)?;
+            d.set_item("lambda", t.lambda)?;
+            d.set_item("predicted", t.predicted)?;
+            d.set_item("actual", t.actual.is_finite().then_some(t.actual))?;
+            d.set_item("ratio", t.ratio.is_finite().then_some(t.ratio))?;
+            d.set_item("accepted", t.accepted)
+        })
+    };
+    observe_trials(told, fit)
 }
 
 /// The method names `fit` accepts, in the registry's order, the default first.

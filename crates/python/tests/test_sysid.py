@@ -250,6 +250,27 @@ class Boehm(unittest.TestCase):
         with self.assertRaisesRegex(TypeError, "progress must be a callable"):
             self.p.fit(progress=3)
 
+    def test_trials_hear_every_trial_step(self):
+        # Checked against the fit's own record: a move per accepted trial, rho = actual /
+        # predicted, and a trial taken exactly where rho >= 1/4.
+        trials = []
+        fit = self.p.fit(trials=trials.append)
+        self.assertTrue(fit.converged, fit.termination)
+        self.assertGreater(len(trials), 0)
+        self.assertEqual(sum(t["accepted"] for t in trials), fit.record["iterations"])
+        for t in trials:
+            self.assertEqual(t["method"], fit.record["method"])
+            self.assertIn(t["model"], ("gauss-newton", "augmented", "newton"))
+            if t["ratio"] is None:
+                self.assertFalse(t["accepted"])
+                continue
+            self.assertLessEqual(abs(t["ratio"] - t["actual"] / t["predicted"]), 1e-12 * abs(t["ratio"]))
+            self.assertEqual(t["accepted"], t["ratio"] >= 0.25)
+        with self.assertRaisesRegex(ValueError, "trials hears one fit"):
+            self.p.fit(starts=2, trials=trials.append)
+        with self.assertRaisesRegex(TypeError, "trials must be a callable"):
+            self.p.fit(trials=3)
+
     def test_ctrl_c_stops_a_multistart(self):
         # KeyboardInterrupt, as Ctrl-C raises it, during 400 starts: the starts running end
         # their iteration, no other begins, and the fit raises it. Heard of only when the run

@@ -82,6 +82,7 @@ class Problem:
         start: Optional[Dict[str, float]] = None,
         coarse_first: bool = True,
         progress: Optional[Callable[[Dict[str, Any]], Any]] = None,
+        trials: Optional[Callable[[Dict[str, Any]], Any]] = None,
     ) -> FitResult: ...
     def profile(
         self,
