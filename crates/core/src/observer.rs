@@ -21,6 +21,7 @@ use std::cell::RefCell;
 use std::rc::Rc;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::LocalKey;
 
 /// An iterate of a running fit, as the driver records it.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,16 +126,26 @@ pub fn stop_when<R>(flag: Arc<AtomicBool>, f: impl FnOnce() -> R) -> R {
 /// Runs `f` with `stop` (from [`current_stop`] on the thread that handed out the work) as
 /// this thread's stop flags, and puts the thread's own back after it (also when `f` panics).
 pub fn stop_within<R>(stop: Option<Stop>, f: impl FnOnce() -> R) -> R {
-    /// Puts the outer flags back when dropped.
-    struct Restore(Option<Stop>);
-    impl Drop for Restore {
+    within(&STOP, stop, f)
+}
+
+/// Runs `f` with `value` in the thread-local `cell`, and puts the value it replaced back
+/// after it (also when `f` panics).
+fn within<T: 'static, R>(
+    cell: &'static LocalKey<RefCell<Option<T>>>,
+    value: Option<T>,
+    f: impl FnOnce() -> R,
+) -> R {
+    /// Puts the outer value back when dropped.
+    struct Restore<T: 'static>(&'static LocalKey<RefCell<Option<T>>>, Option<T>);
+    impl<T: 'static> Drop for Restore<T> {
         fn drop(&mut self) {
-            let outer = self.0.take();
-            STOP.with(|s| *s.borrow_mut() = outer);
+            let outer = self.1.take();
+            self.0.with(|c| *c.borrow_mut() = outer);
         }
     }
-    let outer = STOP.with(|s| std::mem::replace(&mut *s.borrow_mut(), stop));
-    let _restore = Restore(outer);
+    let outer = cell.with(|c| std::mem::replace(&mut *c.borrow_mut(), value));
+    let _restore = Restore(cell, outer);
     f()
 }
 
@@ -152,17 +163,7 @@ pub fn stop_requested() -> bool {
 /// returns what `f` returns. Observers nest: an inner one replaces the outer for its span,
 /// which is restored after it (also when `f` panics).
 pub fn observe<R>(observer: impl Fn(&IterateReport<'_>) + 'static, f: impl FnOnce() -> R) -> R {
-    /// Puts the outer observer back when dropped.
-    struct Restore(Option<Observer>);
-    impl Drop for Restore {
-        fn drop(&mut self) {
-            let outer = self.0.take();
-            OBSERVER.with(|o| *o.borrow_mut() = outer);
-        }
-    }
-    let outer = OBSERVER.with(|o| o.borrow_mut().replace(Rc::new(observer)));
-    let _restore = Restore(outer);
-    f()
+    within(&OBSERVER, Some(Rc::new(observer) as Observer), f)
 }
 
 /// Whether an observer is listening on this thread (the driver forms a [`IterateReport`] only
@@ -187,17 +188,7 @@ pub fn observe_trials<R>(
     observer: impl Fn(&TrialReport<'_>) + 'static,
     f: impl FnOnce() -> R,
 ) -> R {
-    /// Puts the outer observer back when dropped.
-    struct Restore(Option<TrialObserver>);
-    impl Drop for Restore {
-        fn drop(&mut self) {
-            let outer = self.0.take();
-            TRIALS.with(|o| *o.borrow_mut() = outer);
-        }
-    }
-    let outer = TRIALS.with(|o| o.borrow_mut().replace(Rc::new(observer)));
-    let _restore = Restore(outer);
-    f()
+    within(&TRIALS, Some(Rc::new(observer) as TrialObserver), f)
 }
 
 /// Whether a trial observer is listening on this thread (a method forms a [`TrialReport`]
