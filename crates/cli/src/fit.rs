@@ -30,9 +30,9 @@ pub struct FitArgs {
     #[arg(long, value_name = "STEM")]
     waterfall: Option<std::path::PathBuf>,
     /// Write the fit's every iterate and every trial step to FILE as it runs, one JSON
-    /// object a line (docs/json.md, "The trace"): for the trust-region methods each trial's
-    /// model, radius, λ, predicted and actual decrease, and whether it was taken. One fit:
-    /// not with --starts (fit a start alone from its start values instead).
+    /// object a line (docs/json.md, "sysid fit --trace FILE"): for the trust-region methods
+    /// each trial's model, radius, λ, predicted and actual decrease, and whether it was
+    /// taken. One fit: not with --starts (fit a start alone from its start values instead).
     #[arg(long, value_name = "FILE")]
     trace: Option<std::path::PathBuf>,
 }

@@ -214,7 +214,8 @@ impl Watch {
 
 /// The trace of one fit (`fit --trace`): every iterate the driver records and every trial
 /// step a trust-region method judges, one JSON object a line, written as the fit runs (a
-/// fit that is stopped keeps what it wrote). The keys: docs/json.md, "The trace".
+/// fit that is stopped keeps what it wrote). The keys: docs/json.md, "sysid fit --trace
+/// FILE".
 pub struct Trace {
     path: PathBuf,
     /// The writer, and the first error writing to it (reported by [`Trace::finish`]).
@@ -252,8 +253,8 @@ impl Trace {
         }
     }
 
-    /// An iterate: `{"event": "iterate", "iteration", "cost", "objective", "optimality",
-    /// "coarse"}`.
+    /// An iterate: `{"event": "iterate", "method", "iteration", "cost", "objective",
+    /// "optimality", "coarse"}`.
     pub fn iterate(&self, p: &IterateReport<'_>) {
         self.line(&serde_json::json!({
             "event": "iterate",

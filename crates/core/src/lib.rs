@@ -29,7 +29,7 @@
 //!   (samples, residual rows, noise layouts), and the traits behind [`Noise::Function`] and
 //!   [`Setting::Function`] (σ or a setting as a function of the unknowns).
 //! * [`confidence`]: Student's t and the intervals it gives.
-//! * [`observer`]: an observer of a running fit's iterates.
+//! * [`observer`]: observers of a running fit: its iterates, and its trust-region trials.
 //! * [`format`](mod@format): numbers and tables for people.
 //!
 //! ```

@@ -1,5 +1,6 @@
 //! A fit's progress while it runs: an observer, set on the calling thread around the fit
-//! ([`observe`]), hears of every iterate the driver records.
+//! ([`observe`]), hears of every iterate the driver records; a trial observer
+//! ([`observe_trials`]) of every trial step a trust-region method judges.
 //!
 //! A fit of a large problem runs for hours (Chen's 155 unknowns take about a minute an
 //! iteration); the observer is how a program shows where it is. The driver runs on the
