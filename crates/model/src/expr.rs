@@ -1213,13 +1213,19 @@ fn operand<T: Scalar>(o: Operand, slots: &[T], t: f64, y: &[T], p: &[T], u: &[f6
     }
 }
 
-/// x^c for a constant c that is not an integer. At x = 0 with c > 1 the value and every
-/// first derivative c·x^(c−1)·dx are 0; num-dual's powf computes them as x^(c−3)·x³, which is
-/// ∞·0 = NaN there (a Hill term x^2.75 of a species that starts at 0), so that case is 0 here
-/// as it is in the compiled derivatives.
+/// x^c for a constant c that is not an integer. num-dual's powf computes x^c as
+/// x^(c−3)·x³, which is ∞·0 = NaN at x = 0 for any 0 < c < 3, in the value as well. There
+/// the value is 0; with c > 1 every first derivative c·x^(c−1)·dx is 0 (a Hill term x^2.75
+/// of a species that starts at 0), as in the compiled derivatives; with 0 < c < 1 it is
+/// infinite, c·0^(c−1)·dx, and √x gives the same value there with a derivative that is not
+/// a number (num-dual's √x at 0): a rate k^0.5 of a parameter on its bound 0 has its value.
 #[inline(always)]
 fn power<T: Scalar>(x: T, c: f64) -> T {
-    if c > 1.0 && x.re() == 0.0 { x * 0.0 + 0.0 } else { x.powf(c) }
+    match x.re() == 0.0 {
+        true if c > 1.0 => x * 0.0 + 0.0,
+        true if c > 0.0 && c < 1.0 => x.sqrt(),
+        _ => x.powf(c),
+    }
 }
 
 /// tanh x. num-dual's is sinh x / cosh x, ∞/∞ = NaN beyond |x| ≈ 710, where tanh is ±1
@@ -1332,6 +1338,22 @@ impl fmt::Display for Expr {
 mod tests {
     use super::*;
     use sysid_ode::testing::assert_close;
+
+    /// A fractional power of 0 through the dual numbers: the value 0, as powf and the
+    /// compiled program have it (num-dual's powf gave NaN); the derivative 0 above 1, and
+    /// below 1, where c·0^(c−1) is infinite, not a number.
+    #[test]
+    fn a_fractional_power_of_zero_is_zero_through_the_dual_numbers() {
+        use num_dual::Dual64;
+        let resolve = |name: &str| (name == "x").then_some(Slot::State(0));
+        for (text, derivative) in [("x^0.75", f64::NAN), ("x^0.5", f64::NAN), ("x^2.75", 0.0)] {
+            let program = Program::compile(&parse(text).unwrap(), &resolve).unwrap();
+            let at = program.eval::<Dual64>(0.0, &[Dual64::new(0.0, 1.0)], &[], &[]);
+            let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+            assert!(same(at.re, 0.0) && same(at.eps, derivative), "{text}: {at}");
+            assert!(same(program.eval::<f64>(0.0, &[0.0], &[], &[]), 0.0), "{text}");
+        }
+    }
 
     fn value(text: &str) -> f64 {
         let resolve = |name: &str| match name {
