@@ -374,23 +374,24 @@ impl Termination {
                 "stalled at iteration {iteration}: {rule}, but the point is not a minimum (first-order optimality {optimality:.2e})"
             ),
             Termination::MaxIterations { fell, moving, unresolved_gradient } => {
-                match fell {
-                    Some(fell) if !moving.is_empty() => write!(
+                let falling = fell.filter(|_| !moving.is_empty());
+                match falling {
+                    Some(fell) => write!(
                         f,
                         "iteration limit reached while the cost still falls: by {fell:.3e} over the last {PROGRESS_WINDOW} iterations, most along {}",
                         moving.join(", ")
                     )?,
-                    _ => write!(f, "iteration limit reached")?,
+                    None => write!(f, "iteration limit reached")?,
                 }
-                match (unresolved_gradient, fell) {
-                    (Some((optimality, error)), _) => write!(
+                match unresolved_gradient {
+                    Some((optimality, error)) => write!(
                         f,
                         "; its first-order optimality {optimality:.2e} is within its integration error {error:.2e}: the gradient there is mostly the integration's error, which a finer integration (smaller --rtol and --atol) resolves"
                     ),
-                    (None, Some(_)) if !moving.is_empty() => {
+                    None if falling.is_some() => {
                         write!(f, " (a larger iteration budget goes on from there)")
                     }
-                    _ => Ok(()),
+                    None => Ok(()),
                 }
             }
             Termination::IntegrationBudget { integrations } => {

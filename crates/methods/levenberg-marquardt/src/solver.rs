@@ -364,11 +364,7 @@ impl TrustRegion<'_> {
         let max_condition = self.options.driver.max_condition;
         let negligible = negligible_step(problem, &lin.z, self.options.driver.step_tolerance);
         loop {
-            let model = self
-                .newton
-                .as_ref()
-                .filter(|n| n.z == lin.z && n.cost.to_bits() == lin.cost.to_bits())
-                .unwrap_or(lin);
+            let model = self.newton.as_ref().filter(|n| same_iterate(n, lin)).unwrap_or(lin);
             let profiled = self.profiled(model);
             let model = profiled.as_ref().unwrap_or(model);
             let v = self.curve.within(problem, model, self.radius, max_condition)?;
@@ -402,11 +398,7 @@ impl TrustRegion<'_> {
         let fast = self.fall.is_none_or(|f| f >= FAST_FALL || f.is_nan());
         if self.options.hessian == Hessian::GaussNewton || fast {
             self.newton = None;
-        } else if !self
-            .newton
-            .as_ref()
-            .is_some_and(|n| n.z == lin.z && n.cost.to_bits() == lin.cost.to_bits())
-        {
+        } else if !self.newton.as_ref().is_some_and(|n| same_iterate(n, lin)) {
             self.newton =
                 differenced_hessian(ev, lin)?.map(|normal| Linearization { normal, ..lin.clone() });
         }
@@ -626,10 +618,7 @@ impl TrustRegion<'_> {
     /// one at `lin` (the hybrid's differenced Hessian, or NL2SOL's augmented A + S), else
     /// Gauss–Newton's.
     fn model_name(&self, lin: &Linearization) -> &'static str {
-        let newton = self
-            .newton
-            .as_ref()
-            .is_some_and(|n| n.z == lin.z && n.cost.to_bits() == lin.cost.to_bits());
+        let newton = self.newton.as_ref().is_some_and(|n| same_iterate(n, lin));
         match (newton, self.options.hessian) {
             (true, Hessian::Adaptive) => "augmented",
             (true, _) => "newton",
@@ -747,6 +736,12 @@ impl TrustRegion<'_> {
             Err(_) => Ok((None, f64::NEG_INFINITY)),
         }
     }
+}
+
+/// Whether the model `n` (Newton's, kept from an earlier call) is the one at the iterate
+/// `lin`: the same point and the same ε to the bit.
+fn same_iterate(n: &Linearization, lin: &Linearization) -> bool {
+    n.z == lin.z && n.cost.to_bits() == lin.cost.to_bits()
 }
 
 /// Whether `costs`, the last [`CRAWL_WINDOW`] + 1 iterates' oldest first, fell by less than
