@@ -100,8 +100,7 @@ impl Geodesic {
         }
         let second = bend * (2.0 / (GEODESIC_H * GEODESIC_H));
         let force = rows.jacobian.tr_mul(&second);
-        let guarded = |i: usize| curve.guarded.get(i).copied().unwrap_or(false);
-        let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &guarded);
+        let (lo, hi) = curve.step_box(problem, lin, true);
         let k = v.delta.len();
         let Some(a) = curve.correction(lin, v, &-force, (&lo, &hi), max_condition) else {
             return Ok(Accelerated::Unavailable);

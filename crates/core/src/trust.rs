@@ -126,6 +126,18 @@ pub const SCALE_MEMORY: f64 = 0.9;
 /// Boehm's to its best: it also charges the sloppy directions A does resolve.
 pub const SCALE_FLOOR: f64 = 1e-6;
 
+/// The share of the way to its bounds that a step may take an unknown held off them
+/// ([`Curve::held_off`]): the gap to the bound shrinks tenfold a step at most, as an interior
+/// trust region's steps stay inside the box (fides' θ ≥ 0.95, Coleman and Li's).
+///
+/// A bound can lie where the model cannot be integrated, though it can on either side of
+/// it: x^n with n < 1 has an infinite slope at x = 0, so an initial amount put on its lower
+/// bound 0 makes the sensitivities' first derivative ∞·0 (Borghans' Z_state^n_par, whose
+/// random starts stopped on that bound's edge at NLL 1.9e3 to 2.5e5 after 11 to 30
+/// iterations: every trial that put Z_state(0) on 0 failed, and the radius shrank for every
+/// unknown until the steps were too short to count).
+pub const HELD_OFF_SHARE: f64 = 0.9;
+
 /// The curve's scaling and its last λ, kept from iterate to iterate.
 #[derive(Clone, Debug, Default)]
 pub struct Curve {
@@ -136,9 +148,31 @@ pub struct Curve {
     /// Per unknown, whether its steps keep to the kinks next to it where a switch time
     /// passes a sample time ([`Problem::kinks`](crate::Problem::kinks)); none when empty.
     pub guarded: Vec<bool>,
+    /// Per unknown, whether it is held off its bounds: a trial that put it on one could not
+    /// be integrated, so its steps go at most [`HELD_OFF_SHARE`] of the way to either bound;
+    /// none when empty.
+    pub held_off: Vec<bool>,
 }
 
 impl Curve {
+    /// The box of the steps from z (corrections, as [`Problem::step_box`] gives them, with the
+    /// [`guarded`](Self::guarded) unknowns kept to their kinks where `kinks`), narrowed for the
+    /// unknowns [`held_off`](Self::held_off) their bounds.
+    pub fn step_box<S: System>(
+        &self,
+        problem: &Problem<S>,
+        lin: &Linearization,
+        kinks: bool,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let guarded = |i: usize| kinks && self.guarded.get(i).copied().unwrap_or(false);
+        let (mut lo, mut hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &guarded);
+        for (i, _) in self.held_off.iter().enumerate().filter(|(_, held)| **held) {
+            lo[i] *= HELD_OFF_SHARE;
+            hi[i] *= HELD_OFF_SHARE;
+        }
+        (lo, hi)
+    }
+
     /// d_i ← max(√A_ii, [`SCALE_MEMORY`]·d_i); a zero column keeps its scale (1 at first);
     /// then every d_i at least [`SCALE_FLOOR`] of the largest.
     pub fn rescale(&mut self, lin: &Linearization) {
@@ -243,8 +277,7 @@ impl Curve {
         radius: f64,
         max_condition: f64,
     ) -> Result<CurveStep, Failure> {
-        let guarded = |i: usize| self.guarded.get(i).copied().unwrap_or(false);
-        let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &guarded);
+        let (lo, hi) = self.step_box(problem, lin, true);
         let bounds = (lo.as_slice(), hi.as_slice());
         // Off the kink of a Laplace prior the model's gradient is the one-sided one, so that
         // its predicted decrease counts the prior's growth.

@@ -240,6 +240,8 @@ impl LevenbergMarquardt {
             rejections: 0.0,
             unscreened: false,
             costs: VecDeque::new(),
+            held: None,
+            cleared: Vec::new(),
         };
         let name = Method::<S>::name(self);
         drive(problem, name, &options.driver, &mut step, start)
@@ -275,6 +277,19 @@ struct TrustRegion<'o> {
     /// The costs of this run's last [`CRAWL_WINDOW`] + 1 iterates, oldest first, which tell
     /// whether it crawls ([`CRAWL_FALL`]).
     costs: VecDeque<f64>,
+    /// The unknowns the last trial that could not be integrated held off their bounds, until
+    /// its retry is taken (they stay held) or is not (they are released).
+    held: Option<Held>,
+    /// The unknowns released at this iterate, which its trials do not hold off again.
+    cleared: Vec<usize>,
+}
+
+/// Unknowns held off their bounds by a trial that could not be integrated, until its retry
+/// decides, with that trial and the radius its failure would leave.
+struct Held {
+    unknowns: Vec<usize>,
+    radius: f64,
+    trial: CurveStep,
 }
 
 /// NL2SOL's S ≈ Σ rᵢ∇²rᵢ (half of it, in the units of A = JᵀWJ: the model is
@@ -432,6 +447,8 @@ impl<S: System> Step<S> for TrustRegion<'_> {
         (self.rejections, self.unscreened) = (0.0, false);
         self.costs.clear();
         self.curve.guarded.clear();
+        self.curve.held_off.clear();
+        (self.held, self.cleared) = (None, Vec::new());
         let lin = ev.linearize(&z)?;
         self.curve.rescale(&lin);
         let scaled = self.curve.scaled_norm(&z);
@@ -487,7 +504,11 @@ impl<S: System> Step<S> for TrustRegion<'_> {
             None => self.step(ev, lin)?,
         };
         let mut z = proposal.z;
-        for _ in 0..=self.options.max_rejections {
+        self.held = None;
+        // Trials left; a trial blamed on the bounds it put unknowns on does not count (its
+        // retry does).
+        let mut left = self.options.max_rejections + 1;
+        while left > 0 {
             let ratio = |decrease: f64| match trial.predicted > 0.0 {
                 true => decrease / trial.predicted,
                 false => f64::NEG_INFINITY,
@@ -557,23 +578,50 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                     accepted: !rejected,
                 });
             }
-            self.rejections = (1.0 - SCREEN_MEMORY) * self.rejections
-                + SCREEN_MEMORY * f64::from(u8::from(rejected));
             // A rejected trial that went over a kink where a switch time passes a sample
             // time is blamed on the kink: the unknowns it took over one keep to their kinks
             // from now on, and the radius stays for the retry.
             let crossed = rejected && self.guard_crossed(problem, &current.z, &z);
-            if rho < 0.25 && !crossed {
+            // A trial that could not be integrated after it put unknowns on bounds they were
+            // not on is blamed on those bounds (where the model may not be integrable though
+            // it is on either side): the unknowns are held off them from now on, and the
+            // same step is tried with them held off. Where that retry is not taken either,
+            // the bounds are not shown to be to blame (a step too long fails on either side
+            // of them): they are released, not suspected again from this iterate, and the
+            // run goes on from the first trial as if they had never been suspected.
+            let failed = evaluated.is_none() && decrease == f64::NEG_INFINITY;
+            let released = match self.held.take() {
+                Some(held) if rejected => {
+                    for &i in &held.unknowns {
+                        self.curve.held_off[i] = false;
+                    }
+                    self.cleared.extend(&held.unknowns);
+                    (self.radius, trial) = (held.radius, held.trial);
+                    true
+                }
+                _ => false,
+            };
+            let walled =
+                failed && !crossed && !released && self.hold_off(problem, &current.z, &z, &trial);
+            if !walled {
+                self.rejections = (1.0 - SCREEN_MEMORY) * self.rejections
+                    + SCREEN_MEMORY * f64::from(u8::from(rejected));
+                left -= 1;
+            }
+            if released || walled {
+                // The radius is the first failure's (held, or set when it was blamed).
+            } else if rho < 0.25 && !crossed {
                 self.radius = 0.5 * self.radius.min(10.0 * trial.scaled_norm);
             } else if !crossed && (rho >= 0.75 || trial.lambda == 0.0) {
                 self.radius = 2.0 * trial.scaled_norm;
             }
-            if self.options.hessian == Hessian::Adaptive && decrease.is_finite() {
+            if self.options.hessian == Hessian::Adaptive && decrease.is_finite() && !released {
                 let profiled = self.profiled(lin);
                 self.secant.choose(profiled.as_ref().unwrap_or(lin), &trial.delta, decrease);
             }
             if let Some(l) = evaluated.filter(|_| rho >= ACCEPT) {
                 self.release_kinks(problem, &l);
+                self.cleared.clear();
                 self.fall = Some((lin.cost - l.cost) / lin.cost);
                 // Not over a kink of a switch time: the secant's premise, a smooth objective
                 // along the step, fails there (a to-and-fro step of two slivers would teach it
@@ -665,7 +713,7 @@ impl TrustRegion<'_> {
         }
         let bend = &at.r - &rows.r - &rows.jacobian * &trial.delta;
         let force = -rows.jacobian.tr_mul(&bend);
-        let (lo, hi) = problem.step_box(&lin.z, lin.gradient.as_slice(), &|_| false);
+        let (lo, hi) = self.curve.step_box(problem, lin, false);
         let max_condition = self.options.driver.max_condition;
         let Some(c) = self.curve.correction(lin, trial, &force, (&lo, &hi), max_condition) else {
             return Ok(None);
@@ -699,6 +747,38 @@ impl TrustRegion<'_> {
             }
         }
         any
+    }
+
+    /// Holds off their bounds ([`Curve::held_off`](sysid_core::method::Curve)) the unknowns
+    /// that the trial `trial` from `from` to `to` put on a bound they were not on (to
+    /// rounding), but for those cleared of it at this iterate, and keeps the trial and the
+    /// radius its failure would leave until the retry decides. Whether any was held off.
+    fn hold_off<S: System>(
+        &mut self,
+        problem: &Problem<S>,
+        from: &[f64],
+        to: &[f64],
+        trial: &CurveStep,
+    ) -> bool {
+        let held = &mut self.curve.held_off;
+        held.resize(from.len(), false);
+        let mut unknowns = Vec::new();
+        for (i, u) in problem.unknowns().list().iter().enumerate() {
+            let (lo, hi) = u.coordinate_bounds();
+            let on =
+                |z: f64, b: f64| (z - b).abs() <= 4.0 * f64::EPSILON * (from[i].abs() + b.abs());
+            let onto = |b: f64| b.is_finite() && on(to[i], b) && !on(from[i], b);
+            if !held[i] && !self.cleared.contains(&i) && (onto(lo) || onto(hi)) {
+                held[i] = true;
+                unknowns.push(i);
+            }
+        }
+        if unknowns.is_empty() {
+            return false;
+        }
+        let radius = 0.5 * self.radius.min(10.0 * trial.scaled_norm);
+        self.held = Some(Held { unknowns, radius, trial: trial.clone() });
+        true
     }
 
     /// Releases the guarded unknowns of the new iterate `lin` that are no longer held by a
