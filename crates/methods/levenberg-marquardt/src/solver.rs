@@ -609,7 +609,8 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 left -= 1;
             }
             if released || walled {
-                // The radius is the first failure's (held, or set when it was blamed).
+                // Blamed: the retry keeps the radius; released: the first failure's radius
+                // is back (above).
             } else if rho < 0.25 && !crossed {
                 self.radius = 0.5 * self.radius.min(10.0 * trial.scaled_norm);
             } else if !crossed && (rho >= 0.75 || trial.lambda == 0.0) {
