@@ -612,7 +612,7 @@ impl<S: System> Step<S> for TrustRegion<'_> {
                 // Blamed: the retry keeps the radius; released: the first failure's radius
                 // is back (above).
             } else if rho < 0.25 && !crossed {
-                self.radius = 0.5 * self.radius.min(10.0 * trial.scaled_norm);
+                self.radius = self.shrunk(&trial);
             } else if !crossed && (rho >= 0.75 || trial.lambda == 0.0) {
                 self.radius = 2.0 * trial.scaled_norm;
             }
@@ -750,6 +750,11 @@ impl TrustRegion<'_> {
         any
     }
 
+    /// The radius after the rejected trial `trial`: ½·min(Δ, 10‖Dδ‖), MINPACK's.
+    fn shrunk(&self, trial: &CurveStep) -> f64 {
+        0.5 * self.radius.min(10.0 * trial.scaled_norm)
+    }
+
     /// Holds off their bounds ([`Curve::held_off`](sysid_core::method::Curve)) the unknowns
     /// that the trial `trial` from `from` to `to` put on a bound they were not on (to
     /// rounding), but for those cleared of it at this iterate, and keeps the trial and the
@@ -777,8 +782,7 @@ impl TrustRegion<'_> {
         if unknowns.is_empty() {
             return false;
         }
-        let radius = 0.5 * self.radius.min(10.0 * trial.scaled_norm);
-        self.held = Some(Held { unknowns, radius, trial: trial.clone() });
+        self.held = Some(Held { unknowns, radius: self.shrunk(trial), trial: trial.clone() });
         true
     }
 
